@@ -1,0 +1,1 @@
+"""Pluggable fusion estimators (issue 4)."""

@@ -1,0 +1,199 @@
+"""The ``gyroarray`` command line.
+
+Every subcommand takes ``--json``: then stdout carries exactly one JSON
+object and nothing else. Bad input gives one line on stderr naming the
+file/line/column and the problem, and exit code 2 — never a traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import sys
+from pathlib import Path
+from typing import Callable
+
+from .errors import InputError
+
+EXIT_OK, EXIT_FAIL, EXIT_USAGE = 0, 1, 2
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse that reports a usage error as one line and exit code 2."""
+
+    def error(self, message: str):  # noqa: D401 - argparse API
+        raise InputError(f"{message} (see '{self.prog} --help')")
+
+
+def _finite_float(name: str) -> Callable[[str], float]:
+    def parse(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{name} must be a number, got {text!r}") from None
+        if not math.isfinite(value):
+            raise argparse.ArgumentTypeError(f"{name} must be finite, got {text!r}")
+        return value
+    return parse
+
+
+def _json_safe(obj):
+    """Replace non-finite floats by None so the output is strict JSON."""
+    if isinstance(obj, float):
+        return obj if math.isfinite(obj) else None
+    if isinstance(obj, dict):
+        return {k: _json_safe(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_json_safe(v) for v in obj]
+    return obj
+
+
+# -- gdop / design ------------------------------------------------------------
+
+def _add_layout_args(p: argparse.ArgumentParser, *, alpha: bool, required: bool):
+    p.add_argument("--scheme", type=int, choices=(1, 2), required=required,
+                   help="conical scheme: 1 all gyros on the cone, 2 gyro 1 on +z")
+    p.add_argument("--n", type=int, required=required, metavar="N", help="number of gyros (>= 3)")
+    if alpha:
+        p.add_argument("--alpha", type=_finite_float("--alpha"), required=True, metavar="DEG",
+                       help="cone angle from +z [deg]")
+    p.add_argument("--rho", type=_finite_float("--rho"), default=0.0, metavar="R",
+                   help="common ARW correlation factor [-] (default 0)")
+
+
+def cmd_gdop(args) -> tuple[dict, str]:
+    from .design import gdop
+    from .layout import Layout
+    from .units import deg_to_rad
+    layout = Layout.conical(args.scheme, args.n, deg_to_rad(args.alpha))
+    g = gdop(layout, args.rho)
+    text = f"GDOP = {g:.6f}  (scheme {args.scheme}, N = {args.n}, alpha = {args.alpha:g} deg, rho = {args.rho:g})"
+    return {"gdop": g}, text
+
+
+def cmd_design(args) -> tuple[dict, str]:
+    from . import design
+    from .units import rad_to_deg
+    out: dict = {}
+    lines: list[str] = []
+    if args.scheme is not None or args.n is not None:
+        if args.scheme is None or args.n is None:
+            raise InputError("gyroarray design: --scheme and --n go together")
+        opt = design.optimal_alpha(args.scheme, args.n, args.rho)
+        out.update({"alpha_opt_deg": rad_to_deg(opt.alpha_rad), "gdop_min": opt.gdop})
+        lines.append(f"scheme {args.scheme}, N = {args.n}, rho = {args.rho:g}: "
+                     f"optimal alpha = {rad_to_deg(opt.alpha_rad):.4f} deg, GDOP min = {opt.gdop:.6f}")
+    if args.paper_tables:
+        cells = design.paper003_cells()
+        out["paper_tables"] = [c.to_dict() for c in cells]
+        out["cells_not_reproduced"] = sum(not c.reproduces for c in cells)
+        lines.append(_format_paper_cells(cells))
+    if args.plot is not None:
+        from .reports.design_plots import design_figure
+        path = design_figure(args.plot)
+        out["plot"] = str(path)
+        lines.append(f"wrote {path}")
+    if not out:
+        table = design.optimum_table()
+        out["optima"] = table
+        lines.append(_format_optimum_table(table))
+    return out, "\n".join(lines)
+
+
+def _format_optimum_table(rows: list[dict]) -> str:
+    head = f"{'scheme':>6} {'N':>3} {'rho':>6} {'alpha_opt_deg':>14} {'gdop_min':>9} {'3/sqrt(N)':>9}"
+    body = [f"{r['scheme']:>6} {r['n']:>3} {r['rho']:>6g} {r['alpha_opt_deg']:>14.4f} "
+            f"{r['gdop_min']:>9.4f} {3 / math.sqrt(r['n']):>9.4f}" for r in rows]
+    return "Optimal cone angles (GDOP = sqrt(trace((H' C^-1 H)^-1)))\n" + "\n".join([head, *body])
+
+
+def _format_paper_cells(cells) -> str:
+    head = f"{'table':<10} {'cell':<40} {'quantity':<9} {'paper':>9} {'computed':>10}  reproduces"
+    body = []
+    for c in cells:
+        mark = "yes" if c.reproduces else f"NO  (computed {c.computed:.4f}, diff {c.computed - c.paper_value:+.4f})"
+        body.append(f"{c.table:<10} {c.label:<40} {c.quantity:<9} {c.paper:>9} {c.computed:>10.4f}  {mark}")
+    bad = sum(not c.reproduces for c in cells)
+    foot = (f"{bad} of {len(cells)} printed cells do not reproduce within one unit of their last "
+            "printed digit (the paper has errata; computed values are gyroarray's).")
+    return "Paper 003 Tables 1, 2 and the Section 3 optima beside gyroarray\n" + "\n".join([head, *body, foot])
+
+
+# -- allan --------------------------------------------------------------------
+
+def cmd_allan(args) -> tuple[dict, str]:
+    from .allan_cli import run_allan
+    return run_allan(args)
+
+
+# -- entry point --------------------------------------------------------------
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = _Parser(prog="gyroarray", description=__doc__.splitlines()[0])
+    parser.add_argument("--version", action="version", version=f"gyroarray {_version()}")
+    sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
+
+    p = sub.add_parser("gdop", help="GDOP of a conical layout")
+    _add_layout_args(p, alpha=True, required=True)
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(func=cmd_gdop)
+
+    p = sub.add_parser("design", help="optimal cone angle, paper 003 tables, GDOP plots")
+    _add_layout_args(p, alpha=False, required=False)
+    p.add_argument("--paper-tables", action="store_true",
+                   help="paper 003 Tables 1-2 beside the computed values, cell by cell")
+    p.add_argument("--plot", type=Path, metavar="OUT.png",
+                   help="write GDOP vs alpha and vs rho (paper 003 Figs. 8-10)")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(func=cmd_design)
+
+    p = sub.add_parser("allan", help="Allan deviation with confidence intervals and noise fit")
+    p.add_argument("measurement", type=Path, metavar="MEAS.csv")
+    p.add_argument("--gyro", type=int, metavar="K", help="only gyro K (1-based)")
+    p.add_argument("--taus", default="octave", metavar="octave|N",
+                   help="octave taus (default) or N log-spaced taus")
+    p.add_argument("--kind", choices=("oadev", "ohdev"), default="oadev",
+                   help="overlapping Allan (default) or Hadamard deviation")
+    p.add_argument("--repair", action="store_true",
+                   help="repair short gaps and isolated NaNs (reported) instead of refusing them")
+    p.add_argument("--plot", type=Path, metavar="OUT.png", help="write the ADEV plot")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(func=cmd_allan)
+    return parser
+
+
+def _version() -> str:
+    from . import __version__
+    return __version__
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run the CLI; returns the exit code (0 ok, 1 failure, 2 bad input)."""
+    parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+        result, text = args.func(args)
+    except InputError as err:
+        print(f"gyroarray: {err}", file=sys.stderr)
+        return EXIT_USAGE
+    except KeyboardInterrupt:
+        print("gyroarray: interrupted", file=sys.stderr)
+        return 130
+    except Exception as err:  # an internal bug, not bad input: keep stderr to one line
+        if os.environ.get("GYROARRAY_DEBUG"):
+            raise
+        print(f"gyroarray: internal error: {type(err).__name__}: {err} "
+              "(set GYROARRAY_DEBUG=1 for the traceback)", file=sys.stderr)
+        return EXIT_FAIL
+    if getattr(args, "json", False):
+        json.dump(_json_safe(result), sys.stdout, allow_nan=False)
+        sys.stdout.write("\n")
+    else:
+        print(text)
+    return EXIT_OK
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

@@ -1,0 +1,87 @@
+"""Named unit converters: the only place datasheet units meet SI.
+
+Inside gyroarray everything is SI: angles in rad, rates in rad/s, time in s.
+Files, the CLI and reports speak the units of IEEE Std 952 and of
+``shared/spec/effects.md``; they convert through these functions, never
+through magic constants.
+
+=====================  ===============  ====================
+quantity               datasheet unit   SI unit
+=====================  ===============  ====================
+angle                  deg              rad
+rate                   deg/s, deg/h     rad/s
+ARW  (N)               deg/√h           rad/√s
+bias instability (B)   deg/h            rad/s
+RRW  (K)               deg/h/√h         rad/s/√s
+rate ramp (R)          deg/h²           rad/s²
+quantization (Q)       deg              rad
+=====================  ===============  ====================
+"""
+
+from __future__ import annotations
+
+import math
+
+RAD_PER_DEG = math.pi / 180.0
+S_PER_H = 3600.0
+RT_S_PER_RT_H = 60.0  # √3600
+
+
+def deg_to_rad(x):
+    """Angle [deg] -> [rad]."""
+    return x * RAD_PER_DEG
+
+
+def rad_to_deg(x):
+    """Angle [rad] -> [deg]."""
+    return x / RAD_PER_DEG
+
+
+def deg_s_to_rad_s(x):
+    """Rate [deg/s] -> [rad/s]."""
+    return x * RAD_PER_DEG
+
+
+def rad_s_to_deg_s(x):
+    """Rate [rad/s] -> [deg/s]."""
+    return x / RAD_PER_DEG
+
+
+def deg_h_to_rad_s(x):
+    """Rate or bias instability [deg/h] -> [rad/s]."""
+    return x * RAD_PER_DEG / S_PER_H
+
+
+def rad_s_to_deg_h(x):
+    """Rate or bias instability [rad/s] -> [deg/h]."""
+    return x / RAD_PER_DEG * S_PER_H
+
+
+def arw_deg_rt_h_to_rad_rt_s(x):
+    """Angle random walk N [deg/√h] -> [rad/√s]."""
+    return x * RAD_PER_DEG / RT_S_PER_RT_H
+
+
+def arw_rad_rt_s_to_deg_rt_h(x):
+    """Angle random walk N [rad/√s] -> [deg/√h]."""
+    return x / RAD_PER_DEG * RT_S_PER_RT_H
+
+
+def rrw_deg_h_rt_h_to_rad_s_rt_s(x):
+    """Rate random walk K [deg/h/√h] -> [rad/s/√s]."""
+    return x * RAD_PER_DEG / (S_PER_H * RT_S_PER_RT_H)
+
+
+def rrw_rad_s_rt_s_to_deg_h_rt_h(x):
+    """Rate random walk K [rad/s/√s] -> [deg/h/√h]."""
+    return x / RAD_PER_DEG * (S_PER_H * RT_S_PER_RT_H)
+
+
+def ramp_deg_h2_to_rad_s2(x):
+    """Rate ramp R [deg/h²] -> [rad/s²]."""
+    return x * RAD_PER_DEG / (S_PER_H * S_PER_H)
+
+
+def ramp_rad_s2_to_deg_h2(x):
+    """Rate ramp R [rad/s²] -> [deg/h²]."""
+    return x / RAD_PER_DEG * (S_PER_H * S_PER_H)

@@ -1,0 +1,1 @@
+"""MuJoCo rate table and noise injector (issue 3)."""

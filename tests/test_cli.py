@@ -1,0 +1,97 @@
+"""The CLI contract: --json everywhere, one JSON object on stdout, bad input -> exit 2 + one line."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import subprocess
+import sys
+
+import pytest
+
+from gyroarray.cli import build_parser, main
+
+
+def run(capsys, *argv):
+    code = main(list(argv))
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def run_json(capsys, *argv):
+    code, out, err = run(capsys, *argv, "--json")
+    assert code == 0, err
+    assert out.endswith("\n") and out.count("\n") == 1  # exactly one JSON object, one line
+    return json.loads(out)
+
+
+def test_every_subcommand_takes_json():
+    parser = build_parser()
+    sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    assert set(sub.choices) >= {"gdop", "design", "allan"}
+    for name, p in sub.choices.items():
+        assert any("--json" in a.option_strings for a in p._actions), name
+
+
+def test_gdop_json(capsys):
+    out = run_json(capsys, "gdop", "--scheme", "1", "--n", "6", "--alpha", "54.7356")
+    # 54.7356 deg is the magic angle rounded to 1e-4 deg: GDOP within 1e-8 of 3/sqrt(6)
+    assert out == {"gdop": pytest.approx(3 / math.sqrt(6), abs=1e-8)}
+    out = run_json(capsys, "gdop", "--scheme", "2", "--n", "4", "--alpha", "45", "--rho", "0")
+    assert out["gdop"] == pytest.approx(1.75119, abs=1e-5)
+
+
+def test_design_json(capsys):
+    out = run_json(capsys, "design", "--scheme", "1", "--n", "8", "--rho", "0")
+    assert set(out) == {"alpha_opt_deg", "gdop_min"}
+    assert out["alpha_opt_deg"] == pytest.approx(math.degrees(math.acos(1 / math.sqrt(3))), abs=1e-6)
+    assert out["gdop_min"] == pytest.approx(3 / math.sqrt(8), rel=1e-12)
+
+
+def test_design_paper_tables_json_and_text(capsys):
+    out = run_json(capsys, "design", "--paper-tables")
+    assert out["cells_not_reproduced"] == 4
+    assert sum(not c["reproduces"] for c in out["paper_tables"]) == 4
+    code, text, _ = run(capsys, "design", "--paper-tables")
+    assert code == 0
+    assert text.count("NO  (computed") == 4
+    assert "1.5327" in text and "1.5275" in text
+
+
+def test_design_plot_writes_png(capsys, tmp_path):
+    path = tmp_path / "sub" / "gdop.png"
+    out = run_json(capsys, "design", "--plot", str(path))
+    assert out == {"plot": str(path)}
+    data = path.read_bytes()
+    assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 50_000  # a real multi-panel figure
+
+
+@pytest.mark.parametrize("argv,fragment", [
+    (["gdop", "--scheme", "1", "--n", "6", "--alpha", "54.7", "--rho", "2"], "outside"),
+    (["gdop", "--scheme", "3", "--n", "6", "--alpha", "50"], "invalid choice"),
+    (["gdop", "--scheme", "1", "--n", "six", "--alpha", "50"], "invalid int value"),
+    (["gdop", "--scheme", "1", "--n", "6", "--alpha", "nan"], "must be finite"),
+    (["gdop", "--scheme", "1", "--n", "2", "--alpha", "50"], ">= 3"),
+    (["design", "--scheme", "1"], "--scheme and --n go together"),
+    (["design", "--plot", "out.txt"], ".png, .svg or .pdf"),
+    (["design", "--scheme", "1", "--n", "6", "--rho", "-0.2"], "singular"),
+    (["nosuch"], "invalid choice"),
+    ([], "required"),
+])
+def test_bad_input_one_line_exit_2(capsys, argv, fragment):
+    code, out, err = run(capsys, *argv, "--json") if argv and argv[0] != "nosuch" else run(capsys, *argv)
+    assert code == 2
+    assert out == ""
+    assert err.count("\n") == 1 and err.startswith("gyroarray: ")
+    assert fragment in err
+    assert "Traceback" not in err
+
+
+def test_entry_point_subprocess_no_traceback():
+    proc = subprocess.run([sys.executable, "-m", "gyroarray.cli", "gdop", "--scheme", "1", "--n", "4",
+                           "--alpha", "60", "--rho", "-0.5", "--json"], capture_output=True, text=True)
+    assert proc.returncode == 2
+    assert proc.stdout == ""
+    assert proc.stderr.strip().splitlines() == [
+        "gyroarray: rho = -0.5 is outside [-1/(N-1), 1] = [-0.333333, 1] for N = 4"]
