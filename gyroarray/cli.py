@@ -123,9 +123,84 @@ def _format_paper_cells(cells) -> str:
 
 # -- allan --------------------------------------------------------------------
 
+def _parse_taus(text: str):
+    """``octave`` or a positive integer count of log-spaced taus."""
+    if text == "octave":
+        return "octave"
+    try:
+        count = int(text)
+    except ValueError:
+        raise InputError(f"--taus must be 'octave' or a whole number of log-spaced taus, got {text!r}") from None
+    if count < 2:
+        raise InputError(f"--taus needs at least 2 log-spaced taus, got {count}")
+    return count
+
+
+def allan_signal(meas, *, raw: bool = False):
+    """The rate series the Allan analysis looks at, per gyro [rad/s].
+
+    With a reference rate that moves, the gyro output minus the projected
+    reference (gyro − H·ref) is analysed, so the table's motion does not
+    swamp the noise; otherwise (static, no reference, or ``raw``) the gyro
+    output itself. Returns ``(signal (n, N), description)``.
+    """
+    gyro = meas.gyro_rad_s
+    ref = meas.ref_rad_s
+    if raw or ref is None or not ref.any():
+        return gyro, "gyro output"
+    return gyro - ref @ meas.layout.H.T, "gyro output minus layout·ref (motion removed)"
+
+
 def cmd_allan(args) -> tuple[dict, str]:
-    from .allan_cli import run_allan
-    return run_allan(args)
+    from .analysis.allan import allan_analysis, plot_allan
+    from .measurement import read_measurement
+    taus = _parse_taus(args.taus)
+    meas = read_measurement(args.measurement, repair=args.repair)
+    if args.gyro is not None and not 1 <= args.gyro <= meas.n_gyros:
+        raise InputError(f"--gyro {args.gyro} is out of range: the measurement has "
+                         f"gyros 1..{meas.n_gyros}", file=str(args.measurement))
+    gyros = [args.gyro] if args.gyro is not None else list(range(1, meas.n_gyros + 1))
+    signal, what = allan_signal(meas, raw=args.raw)
+    analyses = {}
+    for k in gyros:
+        try:
+            analyses[k] = allan_analysis(signal[:, k - 1], meas.dt_s, taus, kind=args.kind)
+        except InputError as err:
+            raise InputError(f"gyro {k}: {err.message}", file=str(args.measurement)) from None
+    out = {"gyros": {str(k): a.to_json_dict() for k, a in analyses.items()},
+           "signal": what, "notes": list(meas.notes)}
+    lines = [f"{args.measurement}: {meas.n_samples} samples at {1 / meas.dt_s:g} Hz, "
+             f"{meas.n_gyros} gyros; analysed: {what}", *[f"note: {n}" for n in meas.notes]]
+    for k, a in analyses.items():
+        lines.append(_format_allan(k, a.to_json_dict()))
+    if args.plot is not None:
+        path = plot_allan({f"gyro {k}": a for k, a in analyses.items()}, args.plot)
+        out["plot"] = str(path)
+        lines.append(f"wrote {path}")
+    return out, "\n".join(lines)
+
+
+def _format_allan(k: int, d: dict) -> str:
+    fit = d["fit"]
+
+    def val(key: str, fmt: str = ".4g") -> str:
+        v, s = fit.get(key), fit.get(key + "_sigma")
+        if v is None:
+            return "-"
+        return f"{v:{fmt}} ± {s:{fmt}}" if s is not None else f"{v:{fmt}}"
+    rows = [f"gyro {k} ({d['kind']}, {100 * d['confidence']:.1f}% CI)",
+            f"  {'tau_s':>10} {'adev_deg_h':>12} {'ci_low':>12} {'ci_high':>12}"]
+    rows += [f"  {t:>10.4g} {a:>12.5g} {lo:>12.5g} {hi:>12.5g}"
+             for t, a, lo, hi in zip(d["taus_s"], d["adev_deg_h"], d["ci_low_deg_h"], d["ci_high_deg_h"])]
+    rows.append(f"  fit: ARW {val('arw_deg_rt_h')} deg/rt(h), BI {val('bi_deg_h')} deg/h, "
+                f"RRW {val('rrw_deg_h_rt_h')} deg/h/rt(h), Q {val('q_deg')} deg, RR {val('r_deg_h2')} deg/h^2")
+    slope = [f"{name} {fit[key]:.4g}" for name, key in (("N(1 s)", "slope_arw_deg_rt_h"),
+                                                         ("K(3 s)", "slope_rrw_deg_h_rt_h"),
+                                                         ("B(min/0.664)", "slope_bi_deg_h"))
+             if fit.get(key) is not None]
+    if slope:
+        rows.append("  slope-line readings: " + ", ".join(slope))
+    return "\n".join(rows)
 
 
 # -- entry point --------------------------------------------------------------
@@ -158,6 +233,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="overlapping Allan (default) or Hadamard deviation")
     p.add_argument("--repair", action="store_true",
                    help="repair short gaps and isolated NaNs (reported) instead of refusing them")
+    p.add_argument("--raw", action="store_true",
+                   help="analyse the raw gyro output even when a moving reference is present")
     p.add_argument("--plot", type=Path, metavar="OUT.png", help="write the ADEV plot")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=cmd_allan)

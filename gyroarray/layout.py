@@ -14,6 +14,7 @@ array reads ``z = H ω`` for a body rate ``ω``.
 
 from __future__ import annotations
 
+import numbers
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -23,6 +24,9 @@ from .errors import InputError
 #: Largest accepted deviation of an axis norm from 1 (files print axes with
 #: 4–6 decimals: ``[0.8165, 0, 0.5774]`` has norm 1.00003).
 UNIT_NORM_TOL = 1e-3
+
+#: Largest number of gyros of a conical layout (a sanity bound on user input).
+MAX_GYROS = 1024
 
 
 @dataclass(frozen=True, eq=False)
@@ -70,8 +74,8 @@ class Layout:
         """
         if scheme not in (1, 2):
             raise InputError(f"scheme must be 1 or 2, got {scheme!r}")
-        if not isinstance(n, (int, np.integer)) or isinstance(n, bool) or n < 3:
-            raise InputError(f"number of gyros must be an integer >= 3, got {n!r}")
+        if not isinstance(n, (int, np.integer)) or isinstance(n, bool) or not 3 <= n <= MAX_GYROS:
+            raise InputError(f"number of gyros must be an integer in [3, {MAX_GYROS}], got {n!r}")
         alpha = float(alpha_rad)
         if not np.isfinite(alpha):
             raise InputError(f"cone angle must be finite, got {alpha_rad!r}")
@@ -99,10 +103,15 @@ class Layout:
             Largest accepted | |axis| - 1 | [-].
         """
         try:
-            a = np.array(axes, dtype=float)
-        except (TypeError, ValueError):
+            raw = np.array(axes, dtype=object)
+            numeric = all(isinstance(v, (numbers.Real, np.floating, np.integer))
+                          and not isinstance(v, (bool, np.bool_)) for v in raw.ravel())
+            a = np.array(axes, dtype=float) if numeric else None
+        except (TypeError, ValueError, OverflowError):
+            a = None
+        if a is None:
             raise InputError("axes must be a list of [x, y, z] rows of numbers",
-                             file=source, column="layout.axes") from None
+                             file=source, column="layout.axes")
         if a.ndim != 2 or a.shape[1] != 3 or a.shape[0] < 1:
             raise InputError(f"axes must be a list of [x, y, z] rows, got shape {a.shape}",
                              file=source, column="layout.axes")

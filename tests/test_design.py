@@ -63,7 +63,7 @@ def test_layout_is_frozen_and_refuses_bad_input():
     with pytest.raises(ValueError):
         lay.H[0, 0] = 1.0  # read-only array
     for args, fragment in [((3, 4, 1.0), "scheme must be 1 or 2"),
-                           ((1, 2, 1.0), ">= 3"),
+                           ((1, 2, 1.0), r"in \[3, 1024\]"),
                            ((1, 4.5, 1.0), "integer"),
                            ((1, 4, float("nan")), "finite")]:
         with pytest.raises(InputError, match=fragment):
@@ -78,6 +78,10 @@ def test_explicit_axes_checked_and_normalised():
         Layout.from_axes([[1, 0, 0], [0, 1.1, 0], [0, 0, 1]], source="run.toml")
     with pytest.raises(InputError, match="shape"):
         Layout.from_axes([[1, 0], [0, 1]])
+    # strings, booleans and huge integers are not silently turned into numbers
+    for bad in ([["1", 0, 0]], [[True, 0, 0]], [[10**400, 0, 0]]):
+        with pytest.raises(InputError, match="rows of numbers"):
+            Layout.from_axes(bad)
 
 
 # -- GDOP -----------------------------------------------------------------
