@@ -203,6 +203,49 @@ def _format_allan(k: int, d: dict) -> str:
     return "\n".join(rows)
 
 
+# -- simulate -----------------------------------------------------------------
+
+def tracking_datasheet(tracking) -> list[dict]:
+    """The rate table's tracking report per segment, in deg/s and deg (the CLI edge)."""
+    from .units import rad_s_to_deg_s, rad_to_deg
+
+    def opt(x, conv):
+        return None if x is None else conv(x)
+    return [{"segment": s.index, "kind": s.kind, "label": s.label, "start_s": s.start_s,
+             "end_s": s.end_s, "rms_error_deg_s": rad_s_to_deg_s(s.rms_error_rad_s),
+             "max_error_deg_s": rad_s_to_deg_s(s.max_error_rad_s),
+             "steady_rate_error_deg_s": [rad_s_to_deg_s(v) for v in s.steady_rate_error_rad_s],
+             "amplitude_ratio": s.amplitude_ratio,
+             "phase_lag_deg": opt(s.phase_lag_rad, rad_to_deg),
+             "hold_attitude_error_deg": opt(s.hold_attitude_error_rad, rad_to_deg)}
+            for s in tracking.segments]
+
+
+def cmd_simulate(args) -> tuple[dict, str]:
+    from .sim.scenario import load_scenario, simulate_to_files
+    scenario = load_scenario(args.scenario)
+    csv_path, toml_path, result = simulate_to_files(scenario, args.out, cache=not args.no_cache)
+    effects = [{"effect": e.effect, "gyro": e.gyro, "params": _plain_params(e.params)}
+               for e in scenario.model.entries]
+    out = {"scenario": scenario.name, "measurement": str(csv_path), "sidecar": str(toml_path),
+           "n_samples": int(result.truth.time_s.size), "n_gyros": scenario.layout.n_gyros,
+           "sample_rate_hz": scenario.sample_rate_hz, "seed": scenario.seed,
+           "effects": effects, "tracking": tracking_datasheet(result.truth.tracking)}
+    lines = [f"simulated {scenario.name}: {out['n_samples']} samples x {out['n_gyros']} gyros "
+             f"at {scenario.sample_rate_hz:g} Hz (seed {scenario.seed})",
+             f"wrote {csv_path}", f"wrote {toml_path}", "effects:"]
+    lines += [f"  {e['effect']}" + (f" (gyro {e['gyro']})" if e["gyro"] else "")
+              + ": " + ", ".join(f"{k} = {v}" for k, v in e["params"].items()) for e in effects]
+    lines += ["rate table tracking (realised vs commanded):", result.truth.tracking.table()]
+    return out, "\n".join(lines)
+
+
+def _plain_params(params) -> dict:
+    import numpy as np
+    return {k: (np.asarray(v).tolist() if isinstance(v, (list, tuple, np.ndarray)) else v)
+            for k, v in params.items()}
+
+
 # -- entry point --------------------------------------------------------------
 
 def build_parser() -> argparse.ArgumentParser:
@@ -238,6 +281,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--plot", type=Path, metavar="OUT.png", help="write the ADEV plot")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=cmd_allan)
+
+    p = sub.add_parser("simulate", help="simulate a scenario into a measurement (CSV.GZ + TOML)")
+    p.add_argument("scenario", type=Path, metavar="SCENARIO.toml")
+    p.add_argument("--out", type=Path, required=True, metavar="DIR", help="output directory")
+    p.add_argument("--no-cache", action="store_true", help="recompute the rate-table truth")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(func=cmd_simulate)
     return parser
 
 
@@ -264,11 +314,15 @@ def main(argv: list[str] | None = None) -> int:
         print(f"gyroarray: internal error: {type(err).__name__}: {err} "
               "(set GYROARRAY_DEBUG=1 for the traceback)", file=sys.stderr)
         return EXIT_FAIL
-    if getattr(args, "json", False):
-        json.dump(_json_safe(result), sys.stdout, allow_nan=False)
-        sys.stdout.write("\n")
-    else:
-        print(text)
+    try:
+        if getattr(args, "json", False):
+            json.dump(_json_safe(result), sys.stdout, allow_nan=False)
+            sys.stdout.write("\n")
+        else:
+            print(text)
+        sys.stdout.flush()
+    except BrokenPipeError:  # e.g. piped into `head`: not an error of ours
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
     return EXIT_OK
 
 

@@ -279,8 +279,17 @@ class Measurement:
 
     @property
     def dt_s(self) -> float:
-        """Nominal sample period [s]: the median step of ``time_s``."""
-        return float(np.median(np.diff(self.time_s)))
+        """Sample period [s]: the median step of ``time_s``.
+
+        When the median agrees with the sidecar's nominal period
+        1/``sample_rate_hz`` to 1e-6 relative, the nominal value is returned,
+        free of the rounding of the printed times (0.0100 − 0.0000 style
+        differences are not exactly 0.01 in binary); time_s stays the truth
+        whenever the two disagree.
+        """
+        median = float(np.median(np.diff(self.time_s)))
+        nominal = 1.0 / self.sample_rate_hz
+        return nominal if abs(median - nominal) <= 1e-6 * nominal else median
 
     @property
     def n_samples(self) -> int:

@@ -1,0 +1,340 @@
+"""Scenario files and the simulation chain: table → effects → readings → measurement.
+
+A scenario (TOML, data only: nothing in it is evaluated or imported) says
+what to simulate:
+
+.. code-block:: toml
+
+    name = "paper003_static_s1_n6"          # output stem; [A-Za-z0-9_.-]
+    description = "paper 003 §4.1, Scheme 1, N = 6"
+    sample_rate_hz = 100.0                  # gyro sample rate [Hz]
+    duration_s = 3600.0                     # optional: cut the profile short [s]
+    seed = 20230329                         # the run's numpy.random.Generator seed
+
+    [layout]                                # as in a measurement sidecar
+    scheme = 1
+    n_gyros = 6
+    alpha_deg = 54.7356                     # or: axes = [[x, y, z], ...]
+
+    [motion]
+    profile = "p003_static_1h"              # a shipped profile (scenarios/profiles/)
+    # profile = "my_profile.toml"           # or a file, relative to this scenario
+
+    [site]                                  # optional (earth_rate needs it)
+    latitude_deg = 34.25
+    heading_deg = 0.0
+
+    [temperature]                           # optional; exported as temp_c [°C]
+    points = [[0.0, 25.0], [3600.0, 31.0]]  # (time_s, temp_c), piecewise linear
+    # or: start_c = 25.0, end_c = 31.0, tau_s = 900.0   (first-order approach)
+    # or: constant_c = 25.0
+
+    effects = [                             # the noise model, one line per effect
+      { effect = "arw", n_deg_rt_h = 0.1 },
+      { effect = "rrw", k_deg_h_rt_h = 600.0 },
+    ]
+
+Unknown keys are refused with the key named. The chain (pvlib's ModelChain
+in spirit): the rate table produces the truth for the profile (cached on
+disk, layout-independent), the effects turn it into gyro readings, and the
+readings are exported in the measurement format with ``ref_*`` = the
+realised table rate and ``temp_c``, so a simulated run goes wherever a lab
+measurement goes.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+
+from gyroarray import units
+from gyroarray.errors import InputError
+from gyroarray.layout import Layout
+from gyroarray.measurement import (Measurement, Site, _load_toml, _parse_layout, _parse_site,
+                                   _toml_number, _toml_table, _toml_type, _TomlDoc,
+                                   write_measurement)
+
+from .model import NoiseModel
+from .profiles import Profile, load_profile
+from .truth import Truth, compute_truth
+
+_TOP_KEYS = {"name", "description", "sample_rate_hz", "duration_s", "seed", "layout", "motion",
+             "site", "temperature", "effects"}
+_NAME_RE = re.compile(r"^[A-Za-z0-9_.-]{1,100}$")
+
+
+@dataclass(frozen=True)
+class TemperatureProfile:
+    """Temperature at the array over time.
+
+    Exactly one form is set: ``points`` (piecewise linear in time, held
+    constant outside), ``(start_c, end_c, tau_s)`` (first-order approach
+    T(t) = end + (start − end)·exp(−t/τ)), or ``constant_c``.
+
+    Parameters
+    ----------
+    points : tuple of (float, float), optional
+        (time [s], temperature [°C]) with strictly increasing times.
+    start_c, end_c : float, optional
+        Initial and final temperature [°C].
+    tau_s : float, optional
+        Time constant [s].
+    constant_c : float, optional
+        Constant temperature [°C].
+    """
+
+    points: tuple[tuple[float, float], ...] | None = None
+    start_c: float | None = None
+    end_c: float | None = None
+    tau_s: float | None = None
+    constant_c: float | None = None
+
+    def at(self, time_s: np.ndarray) -> np.ndarray:
+        """Temperature [°C] at ``time_s`` [s]."""
+        t = np.asarray(time_s, dtype=float)
+        if self.points is not None:
+            pts = np.asarray(self.points, dtype=float)
+            return np.interp(t, pts[:, 0], pts[:, 1])
+        if self.constant_c is not None:
+            return np.full(t.shape, float(self.constant_c))
+        return self.end_c + (self.start_c - self.end_c) * np.exp(-t / self.tau_s)
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """A simulation scenario, read from TOML (see the module docstring).
+
+    Parameters
+    ----------
+    name : str
+        Output file stem.
+    layout : Layout
+    profile : Profile
+        The commanded motion.
+    sample_rate_hz : float
+        Gyro sample rate [Hz].
+    model : NoiseModel
+        The effects.
+    seed : int
+        Seed of the run's ``numpy.random.Generator``.
+    duration_s : float or None
+        Cut the profile to this duration [s] (None: the whole profile).
+    site : Site or None
+    temperature : TemperatureProfile or None
+    description : str
+    source : str or None
+        The scenario file.
+    """
+
+    name: str
+    layout: Layout
+    profile: Profile
+    sample_rate_hz: float
+    model: NoiseModel
+    seed: int
+    duration_s: float | None = None
+    site: Site | None = None
+    temperature: TemperatureProfile | None = None
+    description: str = ""
+    source: str | None = None
+
+
+def load_scenario(path) -> Scenario:
+    """Read and strictly validate a scenario file.
+
+    Raises
+    ------
+    InputError
+        Naming the file, the key and (where it can be found) the line.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise InputError("scenario file not found", file=str(path))
+    doc = _load_toml(path)
+    d = doc.data
+    unknown = sorted(set(d) - _TOP_KEYS)
+    if unknown:
+        raise doc.error(f"unknown key {unknown[0]!r} (known: {', '.join(sorted(_TOP_KEYS))})",
+                        unknown[0])
+    for table in ("layout", "motion", "site", "temperature"):
+        misplaced = sorted(set(d.get(table) or ()) & _TOP_KEYS) if isinstance(d.get(table), dict) else []
+        if misplaced:
+            raise doc.error(f"{misplaced[0]!r} landed inside [{table}]: in TOML, top-level keys "
+                            f"such as {misplaced[0]} must come before the first [table] header",
+                            f"{table}.{misplaced[0]}")
+    for key in ("name", "sample_rate_hz", "seed", "layout", "motion"):
+        if key not in d:
+            raise doc.error(f"{key} is missing", key)
+    name = d["name"]
+    if not (isinstance(name, str) and _NAME_RE.match(name)):
+        raise doc.error(f"name must be 1-100 characters of A-Z a-z 0-9 _ . - (it names the "
+                        f"output files), got {_toml_type(name)}", "name")
+    description = d.get("description", "")
+    if not isinstance(description, str):
+        raise doc.error(f"description must be a string, got {_toml_type(description)}",
+                        "description")
+    rate = _toml_number(doc, d["sample_rate_hz"], "sample_rate_hz")
+    if rate <= 0:
+        raise doc.error(f"sample_rate_hz must be > 0, got {rate!r}", "sample_rate_hz")
+    seed = d["seed"]
+    if not (isinstance(seed, int) and not isinstance(seed, bool) and 0 <= seed < 2**63):
+        raise doc.error(f"seed must be a whole number in [0, 2^63), got {_toml_type(seed)}", "seed")
+    duration = None
+    if "duration_s" in d:
+        duration = _toml_number(doc, d["duration_s"], "duration_s")
+        if duration <= 0:
+            raise doc.error(f"duration_s must be > 0, got {duration!r}", "duration_s")
+    layout, _ = _parse_layout(doc)
+    profile = _parse_motion(doc, path)
+    if duration is not None and duration > profile.duration_s + 1e-9:
+        raise doc.error(f"duration_s = {duration:g} s is longer than the motion profile "
+                        f"({profile.duration_s:g} s)", "duration_s")
+    effects = d.get("effects", [])
+    try:
+        model = NoiseModel.from_toml({"effects": effects}, n_gyros=layout.n_gyros)
+    except InputError as err:
+        key = err.column if isinstance(err.column, str) else "effects"
+        raise InputError(err.message, file=str(path), line=doc.line_of("effects"), column=key) from None
+    return Scenario(name=name, layout=layout, profile=profile, sample_rate_hz=rate, model=model,
+                    seed=seed, duration_s=duration, site=_parse_site(doc),
+                    temperature=_parse_temperature(doc), description=description,
+                    source=str(path))
+
+
+def _parse_motion(doc: _TomlDoc, path: Path) -> Profile:
+    t = _toml_table(doc, "motion", {"profile"})
+    ref = t.get("profile") if t is not None else None
+    if not isinstance(ref, str) or not ref:
+        raise doc.error("motion.profile must name a profile: a shipped one (e.g. "
+                        "'p003_static_1h') or a .toml file relative to the scenario", "motion.profile")
+    return load_profile(resolve_profile(ref, path.parent, doc))
+
+
+def shipped_profiles() -> list[str]:
+    """Names of the motion profiles shipped in ``scenarios/profiles/``."""
+    folder = resources.files("gyroarray.scenarios").joinpath("profiles")
+    return sorted(p.name[:-5] for p in folder.iterdir() if p.name.endswith(".toml"))
+
+
+def resolve_profile(ref: str, base: Path, doc: _TomlDoc | None = None) -> Path:
+    """The file of a profile reference: a path relative to ``base`` or a shipped name."""
+    candidate = base / ref
+    if ref.endswith(".toml") or "/" in ref or "\\" in ref:
+        if candidate.is_file():
+            return candidate
+        message = f"motion profile file {ref!r} not found (looked in {base})"
+    else:
+        shipped = resources.files("gyroarray.scenarios").joinpath("profiles", ref + ".toml")
+        if shipped.is_file():
+            return Path(str(shipped))
+        message = (f"unknown shipped motion profile {ref!r} (shipped: {', '.join(shipped_profiles())}; "
+                   "a file needs its .toml suffix)")
+    if doc is None:
+        raise InputError(message)
+    raise doc.error(message, "motion.profile")
+
+
+def _parse_temperature(doc: _TomlDoc) -> TemperatureProfile | None:
+    t = _toml_table(doc, "temperature", {"points", "start_c", "end_c", "tau_s", "constant_c"})
+    if t is None:
+        return None
+    forms = {"points": {"points"}, "exponential": {"start_c", "end_c", "tau_s"},
+             "constant": {"constant_c"}}
+    given = set(t)
+    match = [name for name, keys in forms.items() if given == keys]
+    if not match:
+        raise doc.error("temperature takes exactly one form: points = [[time_s, temp_c], ...], "
+                        "or start_c + end_c + tau_s, or constant_c", "temperature")
+    if match[0] == "points":
+        pts = t["points"]
+        ok = isinstance(pts, list) and len(pts) >= 1 and all(
+            isinstance(p, list) and len(p) == 2 for p in pts)
+        if not ok:
+            raise doc.error("temperature.points must be a list of [time_s, temp_c] pairs",
+                            "temperature.points")
+        values = [(_toml_number(doc, a, "temperature.points"), _toml_number(doc, b, "temperature.points"))
+                  for a, b in pts]
+        if any(b[0] <= a[0] for a, b in zip(values, values[1:])):
+            raise doc.error("temperature.points times must be strictly increasing",
+                            "temperature.points")
+        return TemperatureProfile(points=tuple(values))
+    if match[0] == "constant":
+        return TemperatureProfile(constant_c=_toml_number(doc, t["constant_c"], "temperature.constant_c"))
+    start, end, tau = (_toml_number(doc, t[k], f"temperature.{k}") for k in ("start_c", "end_c", "tau_s"))
+    if tau <= 0:
+        raise doc.error(f"temperature.tau_s must be > 0, got {tau!r}", "temperature.tau_s")
+    return TemperatureProfile(start_c=start, end_c=end, tau_s=tau)
+
+
+# -- the chain ------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class SimulationResult:
+    """What one scenario run produced.
+
+    Attributes
+    ----------
+    scenario : Scenario
+    truth : Truth
+        The table's realised motion (layout-independent).
+    readings_rad_s : ndarray, shape (n, N)
+        Gyro outputs [rad/s].
+    temp_c : ndarray, shape (n,) or None
+        Temperature [°C].
+    """
+
+    scenario: Scenario
+    truth: Truth
+    readings_rad_s: np.ndarray
+    temp_c: np.ndarray | None
+
+    def to_measurement(self) -> Measurement:
+        """The run in the measurement format (deg/s at the edge, via the named converters)."""
+        sc = self.scenario
+        desc = sc.description or f"simulated scenario {sc.name}"
+        return Measurement(
+            time_s=self.truth.time_s,
+            gyro_deg_s=units.rad_s_to_deg_s(self.readings_rad_s),
+            layout=sc.layout, sample_rate_hz=sc.sample_rate_hz,
+            ref_deg_s=units.rad_s_to_deg_s(self.truth.omega_body_rad_s),
+            temp_c=self.temp_c, site=sc.site,
+            description=f"{desc} (gyroarray simulate, seed {sc.seed})")
+
+
+def simulate(scenario: Scenario, *, cache: bool = True, rng: np.random.Generator | None = None
+             ) -> SimulationResult:
+    """Run a scenario: table truth (cached) → effects → readings.
+
+    Parameters
+    ----------
+    scenario : Scenario
+    cache : bool
+        Use the on-disk truth cache (see :func:`gyroarray.sim.truth.compute_truth`).
+    rng : numpy.random.Generator, optional
+        Overrides the scenario's seed (sweeps derive one per scenario).
+    """
+    from .effects import simulate_readings
+    truth = compute_truth(scenario.profile, scenario.sample_rate_hz,
+                          duration_s=scenario.duration_s, cache=cache)
+    temp = None if scenario.temperature is None else scenario.temperature.at(truth.time_s)
+    site = None if scenario.site is None else (scenario.site.latitude_rad, scenario.site.heading_rad)
+    rng = np.random.default_rng(scenario.seed) if rng is None else rng
+    readings = simulate_readings(scenario.model, truth.omega_body_rad_s, scenario.layout,
+                                 1.0 / scenario.sample_rate_hz, rng, time_s=truth.time_s,
+                                 attitude=truth.rotation_matrices, temp_c=temp, site=site)
+    return SimulationResult(scenario=scenario, truth=truth, readings_rad_s=readings, temp_c=temp)
+
+
+def simulate_to_files(scenario: Scenario, out_dir, *, cache: bool = True) -> tuple[Path, Path, SimulationResult]:
+    """Simulate and write ``out_dir/<name>.csv.gz`` + ``<name>.toml`` (measurement format)."""
+    out = Path(out_dir)
+    if out.exists() and not out.is_dir():
+        raise InputError("--out must be a directory", file=str(out))
+    out.mkdir(parents=True, exist_ok=True)
+    result = simulate(scenario, cache=cache)
+    csv_path, toml_path = write_measurement(result.to_measurement(), out / f"{scenario.name}.csv.gz")
+    return csv_path, toml_path, result
