@@ -32,7 +32,7 @@ from pathlib import Path
 from typing import Mapping, Sequence
 
 import numpy as np
-from scipy import special, stats
+from scipy import special
 
 from gyroarray import units
 from gyroarray.errors import InputError
@@ -765,8 +765,11 @@ def confidence_interval(dev, edf_, confidence: float = ONE_SIGMA
     if np.any(~(nu > 0)):
         raise InputError("edf must be positive")
     p = 0.5 * (1.0 - confidence)
-    low = dev * np.sqrt(nu / stats.chi2.ppf(1.0 - p, nu))
-    high = dev * np.sqrt(nu / stats.chi2.ppf(p, nu))
+    # chi-square quantiles via special.chdtri (upper-tail inverse):
+    # chi2.ppf(q, nu) = chdtri(nu, 1 - q); scipy.stats is not imported for it
+    # (half a second of CLI start-up).
+    low = dev * np.sqrt(nu / special.chdtri(nu, p))
+    high = dev * np.sqrt(nu / special.chdtri(nu, 1.0 - p))
     return low, high
 
 

@@ -760,7 +760,7 @@ def fit_noise_terms(result, edf_of_alpha: Callable[[np.ndarray], np.ndarray],
         log_eps = brentq(excess, -8.0, 2.0, xtol=1e-2)  # eps to ~2%
         model_error = 10.0 ** log_eps
         sol = iterate(start, corr, model_error)
-    a, alpha, nu, x, white = sol.a, sol.alpha, sol.nu, sol.x, sol.white
+    a, alpha, nu, x = sol.a, sol.alpha, sol.nu, sol.x
 
     active = a > 0
     cov_active = _covariance(x[:, active]) if active.any() else None

@@ -26,9 +26,10 @@ import json
 import os
 import subprocess
 import sys
-import time
 
 import numpy as np
+
+from _timing import best_of
 
 TARGET_OCTAVE = 7.0
 TARGET_LOG = 5.0
@@ -63,16 +64,6 @@ print(json.dumps({"peak_rss_growth_bytes": peak - before,
                   "tracemalloc_peak_bytes": traced_peak,
                   "input_bytes": y.nbytes}))
 """
-
-
-def _best_time(fn, repeats: int) -> float:
-    """Best wall time [s] of ``repeats`` calls."""
-    best = float("inf")
-    for _ in range(repeats):
-        start = time.perf_counter()
-        fn()
-        best = min(best, time.perf_counter() - start)
-    return best
 
 
 def _memory(n: int, seed: int) -> dict:
@@ -118,18 +109,18 @@ def main(n_octave: int = 10_000_000, n_log: int = 1_000_000,
     # warm-up (numba compile or cache load) outside the timing
     oadev(y_oct[:10_000], 1.0)
     res_oct = oadev(y_oct, 1.0)
-    t_ours_oct = _best_time(lambda: oadev(y_oct, 1.0), repeats)
+    t_ours_oct = best_of(lambda: oadev(y_oct, 1.0), repeats)[0]
     ref_oct = allantools.oadev(y_oct, rate=1.0, data_type="freq",
                                taus="octave")
-    t_at_oct = _best_time(lambda: allantools.oadev(
-        y_oct, rate=1.0, data_type="freq", taus="octave"), repeats)
+    t_at_oct = best_of(lambda: allantools.oadev(
+        y_oct, rate=1.0, data_type="freq", taus="octave"), repeats)[0]
 
     res_log = oadev(y_log, 1.0, n_log_taus)
-    t_ours_log = _best_time(lambda: oadev(y_log, 1.0, n_log_taus), repeats)
+    t_ours_log = best_of(lambda: oadev(y_log, 1.0, n_log_taus), repeats)[0]
     ref_log = allantools.oadev(y_log, rate=1.0, data_type="freq",
                                taus=res_log.taus_s)
-    t_at_log = _best_time(lambda: allantools.oadev(
-        y_log, rate=1.0, data_type="freq", taus=res_log.taus_s), repeats)
+    t_at_log = best_of(lambda: allantools.oadev(
+        y_log, rate=1.0, data_type="freq", taus=res_log.taus_s), repeats)[0]
 
     mem = _memory(n_octave, seed)
     mem_ratio_rss = mem["peak_rss_growth_bytes"] / mem["input_bytes"]

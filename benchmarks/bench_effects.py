@@ -10,9 +10,9 @@ are for comparison between versions.
 from __future__ import annotations
 
 import math
-import time
 
 import numpy as np
+from _timing import best_of
 
 from gyroarray.layout import Layout
 from gyroarray.sim.effects import simulate_readings
@@ -61,12 +61,8 @@ def _inputs(n: int):
 
 def _time(model: NoiseModel, layout: Layout, n: int, **kw) -> float:
     _, w, _, _ = _inputs(n)
-    best = math.inf
-    for seed in range(REPEATS):
-        t0 = time.perf_counter()
-        simulate_readings(model, w, layout, 1.0 / RATE_HZ, np.random.default_rng(seed), **kw)
-        best = min(best, time.perf_counter() - t0)
-    return best
+    rng = np.random.default_rng(0)
+    return best_of(lambda: simulate_readings(model, w, layout, 1.0 / RATE_HZ, rng, **kw), REPEATS)[0]
 
 
 def main() -> dict:

@@ -12,12 +12,11 @@ Run: ``python benchmarks/bench_measurement.py`` or ``make bench``.
 
 from __future__ import annotations
 
-import math
 import tempfile
-import time
 from pathlib import Path
 
 import pandas as pd
+from _timing import best_of
 
 from gyroarray.measurement import read_measurement, write_measurement
 
@@ -26,25 +25,16 @@ ADIS = (Path(__file__).resolve().parents[1].parent / "shared" / "measurements" /
 TARGET_READ_S = 3.0
 
 
-def _best(fn, repeat: int = 3) -> tuple[float, object]:
-    best, out = math.inf, None
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        out = fn()
-        best = min(best, time.perf_counter() - t0)
-    return best, out
-
-
 def main() -> dict:
     if not ADIS.is_file():
         print(f"skipped: {ADIS} not found (../shared beside the clone)")
         return {"skipped": str(ADIS)}
-    t_read, m = _best(lambda: read_measurement(ADIS))
-    t_pandas, _ = _best(lambda: pd.read_csv(ADIS, comment="#"))
+    t_read, m = best_of(lambda: read_measurement(ADIS))
+    t_pandas, _ = best_of(lambda: pd.read_csv(ADIS, comment="#"))
     with tempfile.TemporaryDirectory() as d:
-        t_write_csv, _ = _best(lambda: write_measurement(m, Path(d) / "adis.csv"), repeat=1)
-        t_write_gz, _ = _best(lambda: write_measurement(m, Path(d) / "adis.csv.gz"), repeat=1)
-        t_read_back, _ = _best(lambda: read_measurement(Path(d) / "adis.csv"))
+        t_write_csv, _ = best_of(lambda: write_measurement(m, Path(d) / "adis.csv"), repeat=1)
+        t_write_gz, _ = best_of(lambda: write_measurement(m, Path(d) / "adis.csv.gz"), repeat=1)
+        t_read_back, _ = best_of(lambda: read_measurement(Path(d) / "adis.csv"))
 
     rows = [("read_measurement (checked, exact)", t_read),
             ("pandas.read_csv(comment='#') (reference)", t_pandas),

@@ -11,12 +11,12 @@ Run: ``python benchmarks/bench_table.py`` or ``make bench``.
 
 from __future__ import annotations
 
-import math
 import tempfile
 import time
 from pathlib import Path
 
 import mujoco
+from _timing import best_of
 import numpy as np
 
 from gyroarray.layout import Layout
@@ -26,15 +26,6 @@ from gyroarray.sim.truth import compute_truth, project
 from gyroarray.units import deg_s_to_rad_s, deg_to_rad, rad_s_to_deg_s, rad_to_deg
 
 PROFILES = Path(__file__).resolve().parents[1] / "scenarios" / "profiles"
-
-
-def _time(fn, repeat=1):
-    best, out = math.inf, None
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        out = fn()
-        best = min(best, time.perf_counter() - t0)
-    return best, out
 
 
 def _python_loop_seconds(profile: Profile, fs: float, seconds: float) -> float:
@@ -68,26 +59,26 @@ def main() -> dict:
     results = {}
     rows = []
 
-    t_static, run = _time(lambda: table.run(static, fs))
+    t_static, run = best_of(lambda: table.run(static, fs), repeat=1)
     rows.append(("1 h static, 100 Hz (rest repeated)", t_static, run.stepped))
-    t_static_all, run = _time(lambda: table.run(static, fs, skip_rest=False))
+    t_static_all, run = best_of(lambda: table.run(static, fs, skip_rest=False), repeat=1)
     rows.append(("1 h static, 100 Hz (every step)", t_static_all, run.stepped))
-    t_swing, run = _time(lambda: table.run(swing, fs))
+    t_swing, run = best_of(lambda: table.run(swing, fs), repeat=1)
     rows.append(("10 min swing 20 deg/s 0.5 Hz, 100 Hz", t_swing, run.stepped))
-    t_combo, run = _time(lambda: table.run(combo, fs))
+    t_combo, run = best_of(lambda: table.run(combo, fs), repeat=1)
     rows.append(("1 h static + 10 min swing, 100 Hz", t_combo, run.stepped))
     t_loop20 = _python_loop_seconds(swing, fs, 20.0)
     t_loop = t_loop20 * 600.0 / 20.0
     rows.append(("10 min swing, Python mj_step loop (scaled from 20 s)", t_loop, 600_000))
 
     with tempfile.TemporaryDirectory() as cache:
-        t_miss, truth = _time(lambda: compute_truth(combo, fs, cache_dir=cache))
-        t_hit, _ = _time(lambda: compute_truth(combo, fs, cache_dir=cache), repeat=3)
+        t_miss, truth = best_of(lambda: compute_truth(combo, fs, cache_dir=cache), repeat=1)
+        t_hit, _ = best_of(lambda: compute_truth(combo, fs, cache_dir=cache), repeat=3)
     rows.append(("truth, 1 h static + swing: compute + write cache", t_miss, None))
     rows.append(("truth, 1 h static + swing: cache hit", t_hit, None))
     layouts = [Layout.conical(s, n, deg_to_rad(a)) for s in (1, 2) for n in (4, 5, 6, 8)
                for a in (45.0, 54.7356, 63.0)]
-    t_proj, _ = _time(lambda: [project(truth, lay) for lay in layouts], repeat=3)
+    t_proj, _ = best_of(lambda: [project(truth, lay) for lay in layouts], repeat=3)
     rows.append((f"project truth on {len(layouts)} layouts", t_proj, None))
 
     print(f"{'what':<56} {'time [s]':>9} {'steps':>10} {'µs/step':>8}")
