@@ -27,13 +27,15 @@ least 1 (below 1 the fit's σ is conservative and is used as it is):
 
 The Allan fit's σ is close to calibrated (its GLS accounts for the
 correlation between octaves); the Gauss–Markov fit treats the octaves as
-independent and is optimistic by about 1.8. K_BAND = 2.5, not 2: a 2σ band
-rejects 4.6 % of seeds by construction, so one seed in 20 failing is the
-norm and two happens for 23 % of test functions (seeds 0–19 at 2σ_true:
-ARW passes 18/20). At 2.5σ_true a seed fails with probability 1.2 %
-and every check here passes for at least 19 of the seeds 0–19 (counts in
-the report of this change). The correlation checks are exact-level tests
-(Bonferroni, stated family-wise level 0.1 %).
+independent and is optimistic by about 1.8.
+
+The band is the issue's 2σ (in σ_true). A 2σ band holds for one seed with
+probability 95.4 %, so a single-seed 2σ assertion would encode "fails for one
+seed in 22". Instead each check runs seeds 0–9 (fixed, so deterministic) and
+asserts (a) at least 8 of the 10 fits inside 2σ_true — for a correct
+simulator P(X >= 8 | n = 10, p = 0.954) = 0.99 — and (b) every fit inside
+4σ_true (a gross-error guard, P = 6e-5 per fit). The correlation checks are
+exact-level tests (Bonferroni, stated family-wise level 0.1 %).
 
 Everything runs 2 h at 100 Hz (720 000 samples) unless stated.
 """
@@ -60,7 +62,11 @@ SEED = 0
 
 #: c of σ_true = c·σ_fit for each check, and the band in σ_true (module docstring).
 C = {"n": 1.1, "k": 1.0, "r": 1.0, "b": 1.05, "q": 1.0, "gm_sigma": 1.85, "gm_tau": 1.85}
-K_BAND = 2.5
+K_BAND = 2.0
+#: Seeds of the band checks, how many of them must fall inside K_BAND, and the gross-error guard.
+SEEDS = range(10)
+MIN_INSIDE = 8
+GROSS_BAND = 4.0
 #: Family-wise level of the exact-level tests: a correct simulator fails a seed with probability
 #: <= 0.1 % (Bonferroni over the points or pairs of one test).
 ALPHA = 0.001
@@ -77,8 +83,11 @@ def fitted(rate, term, terms):
     return allan_analysis(rate, DT, terms=terms).fit.coefficient(term)
 
 
-def within(value, true, sigma, c):
-    return abs(value - true) <= K_BAND * c * sigma
+def assert_band(results, c):
+    """results: (value, true, sigma) per seed; see the module docstring for the rule."""
+    z = [(v - t) / (c * s) for v, t, s in results]
+    assert sum(abs(x) <= K_BAND for x in z) >= MIN_INSIDE, z
+    assert all(abs(x) <= GROSS_BAND for x in z), z
 
 
 # -- the IEEE 952 terms ------------------------------------------------------
@@ -141,9 +150,10 @@ def check_quantization(seed):
                                      (check_quantization, C["q"])],
                          ids=["arw_N", "rrw_K", "bias_instability_B", "rate_ramp_R", "quantization_Q"])
 def test_ieee952_term_is_reidentified(check, c):
-    value, true, sigma = check(SEED)
-    assert sigma is not None and 0 < sigma < 0.2 * true        # a meaningful uncertainty
-    assert within(value, true, sigma, c), (value / true, (value - true) / sigma)
+    results = [check(seed) for seed in SEEDS]
+    for value, true, sigma in results:
+        assert sigma is not None and 0 < sigma < 0.2 * true    # a meaningful uncertainty
+    assert_band(results, c)
 
 
 def test_white_noise_alone_does_not_dither_the_quantizer():
@@ -190,9 +200,10 @@ def check_gauss_markov(seed):
 
 
 def test_gauss_markov_sigma_and_tau_are_reidentified():
-    fit, sigma, tau_c = check_gauss_markov(SEED)
-    assert within(fit.sigma, sigma, fit.sigma_err, C["gm_sigma"]), (fit.sigma / sigma)
-    assert within(fit.tau_c_s, tau_c, fit.tau_c_err_s, C["gm_tau"]), (fit.tau_c_s / tau_c)
+    runs = [check_gauss_markov(seed) for seed in SEEDS]
+    assert_band([(f.sigma, sigma, f.sigma_err) for f, sigma, _ in runs], C["gm_sigma"])
+    assert_band([(f.tau_c_s, tau_c, f.tau_c_err_s) for f, _, tau_c in runs], C["gm_tau"])
+    fit = runs[0][0]
     # the model has the right shape: χ²/dof over 300 seeds has mean 0.8, 99 % quantile 2.3 and
     # maximum 3.4 (the octaves correlate, so it is not χ²₁₇/17); the continuous-time closed form,
     # which misses the 1/(2m²) excess of the sampled process at small τ, gives about 1000
