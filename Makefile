@@ -20,7 +20,9 @@ demo: $(STAMP)
 	$(VENV)/bin/gyroarray design
 	$(VENV)/bin/gyroarray design --paper-tables
 	$(VENV)/bin/gyroarray design --plot reports/demo/design_gdop.png
-	@echo "demo: wrote reports/demo/design_gdop.png"
+	$(VENV)/bin/gyroarray simulate scenarios/examples/tetra_swing.toml --out reports/demo
+	$(VENV)/bin/gyroarray allan reports/demo/tetra_swing.csv.gz --plot reports/demo/tetra_swing_adev.png
+	@echo "demo: wrote reports/demo/design_gdop.png, reports/demo/tetra_swing.csv.gz (+ .toml) and reports/demo/tetra_swing_adev.png"
 
 test: $(STAMP)
 	$(PY) -m pytest -q
