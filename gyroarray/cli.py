@@ -124,13 +124,19 @@ def _format_paper_cells(cells) -> str:
 # -- allan --------------------------------------------------------------------
 
 def _parse_taus(text: str):
-    """``octave`` or a positive integer count of log-spaced taus."""
+    """``octave``, a count of log-spaced taus, or a comma-separated list of taus [s]."""
     if text == "octave":
         return "octave"
+    if "," in text:
+        try:
+            return [float(v) for v in text.split(",")]
+        except ValueError:
+            raise InputError(f"--taus list must hold numbers of seconds, got {text!r}") from None
     try:
         count = int(text)
     except ValueError:
-        raise InputError(f"--taus must be 'octave' or a whole number of log-spaced taus, got {text!r}") from None
+        raise InputError("--taus must be 'octave', a whole number of log-spaced taus or a "
+                         f"comma-separated list of taus in s, got {text!r}") from None
     if count < 2:
         raise InputError(f"--taus needs at least 2 log-spaced taus, got {count}")
     return count
@@ -270,8 +276,8 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("allan", help="Allan deviation with confidence intervals and noise fit")
     p.add_argument("measurement", type=Path, metavar="MEAS.csv")
     p.add_argument("--gyro", type=int, metavar="K", help="only gyro K (1-based)")
-    p.add_argument("--taus", default="octave", metavar="octave|N",
-                   help="octave taus (default) or N log-spaced taus")
+    p.add_argument("--taus", default="octave", metavar="octave|N|T1,T2,...",
+                   help="octave taus (default), N log-spaced taus, or a list of taus [s]")
     p.add_argument("--kind", choices=("oadev", "ohdev"), default="oadev",
                    help="overlapping Allan (default) or Hadamard deviation")
     p.add_argument("--repair", action="store_true",
