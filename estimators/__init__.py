@@ -1,1 +1,34 @@
-"""Pluggable fusion estimators (issue 4)."""
+"""Pluggable fusion estimators (issue 4): gyro readings (n, N) -> body rates (n, 3).
+
+Built-in estimators (``available()`` lists them with the installed plugins):
+
+========== ================================================================
+name       method
+========== ================================================================
+kf_array   paper 003 steady-state KF on [body rate; gyro biases]
+kf_single  paper 002 single-gyro KF [rate, bias] per gyro, then OLS
+ols        ordinary least squares per sample (optional low-pass)
+gls        generalized least squares per sample (optional low-pass)
+naive      mean of the back-projected readings per axis, no model
+bound      time-varying KF + RTS smoother (offline), and the CRB
+========== ================================================================
+
+Usage::
+
+    from gyroarray.estimators import get_estimator
+    est = get_estimator("kf_array")(bandwidth_hz=10.0).fit(layout, noise_model, dt_s)
+    omega_hat = est.estimate(readings_rad_s)          # (n, 3) [rad/s]
+"""
+
+from .base import (ENTRY_POINT_GROUP, Estimator, NotFittedError, available, get_estimator, make,
+                   register)
+from .bound import OfflineBound, efficiency
+from .kf_array import ArrayKF
+from .kf_single import SingleGyroKF, bandwidth_hz, paper002_relation, single_gyro_gain
+from .noise import ArrayNoise, array_noise
+from .simple import GLS, OLS, Naive
+
+__all__ = ["ENTRY_POINT_GROUP", "Estimator", "NotFittedError", "available", "get_estimator", "make",
+           "register", "OfflineBound", "efficiency", "ArrayKF", "SingleGyroKF", "bandwidth_hz",
+           "paper002_relation", "single_gyro_gain", "ArrayNoise", "array_noise", "GLS", "OLS",
+           "Naive"]

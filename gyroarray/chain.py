@@ -31,7 +31,7 @@ Metrics (per body axis; :mod:`gyroarray.analysis.metrics`):
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import pandas as pd
@@ -184,15 +184,25 @@ def run_scenario(scenario, estimator_names=None, *, cache: bool = True) -> RunRe
     from .estimators import available, get_estimator
     from .sim.scenario import simulate
 
-    names = list(estimator_names) if estimator_names else [n for n in DEFAULT_ESTIMATORS if n in available()]
+    explicit = bool(estimator_names)
+    names = list(estimator_names) if explicit else [n for n in DEFAULT_ESTIMATORS if n in available()]
     unknown = [n for n in names if n not in available()]
     if unknown:
         raise InputError(f"unknown estimator {unknown[0]!r} (available: {', '.join(available())})")
     res = simulate(scenario, cache=cache)
     dt = 1.0 / scenario.sample_rate_hz
-    estimates = {}
+    estimates, notes = {}, []
     for name in names:
-        est = get_estimator(name)().fit(scenario.layout, scenario.model, dt)
+        try:
+            est = get_estimator(name)().fit(scenario.layout, scenario.model, dt)
+        except InputError as err:
+            # a named estimator that cannot serve this model is the user's error; a default
+            # one is skipped and said so (e.g. bias-state KFs on a model without RRW)
+            if explicit:
+                raise InputError(err.message, file=scenario.source) from None
+            notes.append(f"skipped {err.message}")
+            continue
         estimates[name] = est.estimate(res.readings_rad_s)
-    return score(estimates, res.truth.omega_body_rad_s, res.readings_rad_s, scenario.layout,
-                 res.truth.time_s, dt, swing=swing_frequency(scenario.profile), scenario=scenario.name)
+    result = score(estimates, res.truth.omega_body_rad_s, res.readings_rad_s, scenario.layout,
+                   res.truth.time_s, dt, swing=swing_frequency(scenario.profile), scenario=scenario.name)
+    return replace(result, notes=tuple(notes))

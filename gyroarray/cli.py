@@ -209,6 +209,57 @@ def _format_allan(k: int, d: dict) -> str:
     return "\n".join(rows)
 
 
+# -- davar --------------------------------------------------------------------
+
+def cmd_davar(args) -> tuple[dict, str]:
+    from .analysis import davar as dv
+    if args.paper_table1:
+        table = dv.paper_table1(tuple(range(args.seeds)))
+        return table.to_json_dict(), dv.format_paper_table1(table)
+    if args.measurement is None:
+        raise InputError("gyroarray davar: give MEAS.csv (or --paper-table1)")
+    if args.gyro is None:
+        raise InputError("gyroarray davar: --gyro K is required (one gyro at a time)")
+    if args.window is not None and args.adaptive:
+        raise InputError("gyroarray davar: --window L and --adaptive exclude each other "
+                         "(the adaptive window runs between --l-min and --l-max)")
+    from .measurement import read_measurement
+    meas = read_measurement(args.measurement, repair=args.repair)
+    if not 1 <= args.gyro <= meas.n_gyros:
+        raise InputError(f"--gyro {args.gyro} is out of range: the measurement has gyros "
+                         f"1..{meas.n_gyros}", file=str(args.measurement))
+    signal, what = allan_signal(meas)
+    adaptive = args.adaptive or args.window is None
+    params = dv.AdaptiveWindow(l_max=args.l_max, l_min=args.l_min) if adaptive else None
+    res = dv.davar(signal[:, args.gyro - 1], meas.dt_s, window=None if adaptive else args.window,
+                   adaptive=adaptive, step=args.step, params=params)
+    out = res.to_json_dict()
+    out["signal"] = what
+    arw = out["arw_deg_rt_h"]
+    finite = [v for v in arw if v is not None]
+    lines = [f"{args.measurement} gyro {args.gyro}: {'adaptive' if adaptive else 'fixed'} DAVAR, "
+             f"{len(out['time_s'])} windows of {min(out['window_length'])}-{max(out['window_length'])} "
+             f"samples, {len(out['taus_s'])} taus; analysed: {what}",
+             f"ARW track [deg/rt(h)]: min {min(finite):.4g}, median {sorted(finite)[len(finite) // 2]:.4g}, "
+             f"max {max(finite):.4g}"]
+    if args.plot is not None:
+        out["plot"] = str(dv.plot_davar(res, args.plot))
+        lines.append(f"wrote {out['plot']}")
+    return out, "\n".join(lines)
+
+
+def _positive_int(name: str) -> Callable[[str], int]:
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{name} must be a whole number, got {text!r}") from None
+        if value < 1:
+            raise argparse.ArgumentTypeError(f"{name} must be >= 1, got {value}")
+        return value
+    return parse
+
+
 # -- simulate -----------------------------------------------------------------
 
 def tracking_datasheet(tracking) -> list[dict]:
@@ -275,6 +326,7 @@ def cmd_run(args) -> tuple[dict, str]:
     for row in result.table.to_dict("records"):
         lines.append(f"{row['estimator']:<10} {row['axis']:<4} "
                      + " ".join(f"{cell(row.get(k), f):>15}" for k, _, f in _RUN_COLUMNS))
+    lines += [f"note: {n}" for n in result.notes]
     sg = out["single_gyro"]
     lines.append(f"single gyro (mean of {len(sg['gyros'])}): 1sigma {sg['sigma_1_deg_s']:.4g} deg/s, "
                  f"ARW {sg['arw_deg_rt_h']:.4g} deg/rt(h), BI {sg['bi_deg_h']:.4g} deg/h, "
@@ -317,6 +369,26 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--plot", type=Path, metavar="OUT.png", help="write the ADEV plot")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=cmd_allan)
+
+    p = sub.add_parser("davar", help="dynamic Allan deviation (fixed or adaptive window, paper 000)")
+    p.add_argument("measurement", type=Path, nargs="?", metavar="MEAS.csv")
+    p.add_argument("--gyro", type=int, metavar="K", help="gyro K (1-based)")
+    p.add_argument("--adaptive", action="store_true",
+                   help="adaptive window A-DAVAR (the default when --window is not given)")
+    p.add_argument("--window", type=_positive_int("--window"), metavar="L", help="fixed window [samples]")
+    p.add_argument("--step", type=_positive_int("--step"), metavar="S",
+                   help="samples between windows (default: 1 adaptive, L/10 fixed)")
+    p.add_argument("--l-max", type=_positive_int("--l-max"), default=600, metavar="L",
+                   help="adaptive: longest window [samples] (default 600)")
+    p.add_argument("--l-min", type=_positive_int("--l-min"), default=400, metavar="L",
+                   help="adaptive: shortest window [samples] (default 400)")
+    p.add_argument("--repair", action="store_true", help="repair short gaps and isolated NaNs")
+    p.add_argument("--plot", type=Path, metavar="OUT.png", help="heat map + ARW and window tracks")
+    p.add_argument("--paper-table1", action="store_true",
+                   help="reproduce paper 000 Table 1 (simulated) over --seeds realisations")
+    p.add_argument("--seeds", type=_positive_int("--seeds"), default=20, metavar="N")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(func=cmd_davar)
 
     p = sub.add_parser("simulate", help="simulate a scenario into a measurement (CSV.GZ + TOML)")
     p.add_argument("scenario", type=Path, metavar="SCENARIO.toml")

@@ -8,6 +8,7 @@ import math
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 
 from gyroarray.cli import build_parser, main
@@ -95,3 +96,52 @@ def test_entry_point_subprocess_no_traceback():
     assert proc.stdout == ""
     assert proc.stderr.strip().splitlines() == [
         "gyroarray: rho = -0.5 is outside [-1/(N-1), 1] = [-0.333333, 1] for N = 4"]
+
+
+def test_every_subcommand_is_listed():
+    parser = build_parser()
+    sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    assert set(sub.choices) == {"gdop", "design", "allan", "davar", "simulate", "run"}
+
+
+@pytest.mark.parametrize("argv,fragment", [
+    (["davar"], "give MEAS.csv"),
+    (["davar", "x.csv"], "--gyro K is required"),
+    (["davar", "x.csv", "--gyro", "1", "--window", "600", "--adaptive"], "exclude each other"),
+    (["davar", "x.csv", "--gyro", "1", "--window", "0"], "--window must be >= 1"),
+    (["run", "nope.toml"], "scenario file not found"),
+    (["simulate", "nope.toml", "--out", "o"], "scenario file not found"),
+])
+def test_davar_run_simulate_bad_input(capsys, argv, fragment):
+    code, out, err = run(capsys, *argv, "--json")
+    assert code == 2 and out == "" and err.count("\n") == 1 and fragment in err
+
+
+def test_davar_on_a_simulated_burst(capsys, tmp_path):
+    # ARW with variance x4 (sd x2) over 60-90 s of a 150 s run: the fixed-window ARW track
+    # inside the burst is about twice the one before it (windows of 10 s, step 1 s)
+    from gyroarray.layout import Layout
+    from gyroarray.measurement import Measurement, write_measurement
+    from gyroarray.sim.effects import simulate_readings
+    from gyroarray.sim.model import NoiseModel
+    from gyroarray.units import rad_s_to_deg_s
+    n, dt = 15000, 0.01
+    model = NoiseModel.from_toml({"effects": [
+        {"effect": "arw", "n_deg_rt_h": 1.0},
+        {"effect": "burst", "start_s": 60.0, "end_s": 90.0, "variance_ratio": 4.0}]}, n_gyros=3)
+    y = simulate_readings(model, np.zeros((n, 3)), Layout.triad(), dt, np.random.default_rng(1))
+    t = np.arange(n) * dt
+    csv, _ = write_measurement(Measurement(time_s=t, gyro_deg_s=rad_s_to_deg_s(y), layout=Layout.triad(),
+                                           sample_rate_hz=100.0), tmp_path / "burst.csv")
+    png = tmp_path / "d.png"
+    code, out, err = run(capsys, "davar", str(csv), "--gyro", "2", "--window", "1000", "--step", "100",
+                         "--plot", str(png), "--json")
+    assert code == 0, err
+    res = json.loads(out)
+    time_s, arw = np.array(res["time_s"]), np.array(res["arw_deg_rt_h"], dtype=float)
+    inside = arw[(time_s > 66) & (time_s < 84)].mean()
+    before = arw[(time_s > 10) & (time_s < 54)].mean()
+    # each window's ARW from sigma(tau0) over 1000 samples: ~2.2 % sd; means of ~18 and ~44
+    # overlapping windows (~2 and ~5 independent): ratio 2 within ~4 %; allow 10 %
+    assert inside / before == pytest.approx(2.0, rel=0.1)
+    assert png.read_bytes()[:4] == b"\x89PNG"

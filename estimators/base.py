@@ -1,0 +1,298 @@
+"""The estimator contract (scikit-learn's) and the estimator registry.
+
+An estimator turns the readings of a gyro array into body rates:
+
+* ``__init__`` only stores its keyword hyperparameters, unchanged;
+* ``fit(layout, noise_model, dt_s)`` designs the gains or weights for a
+  layout, a noise model and a sample period and returns ``self``; what it
+  learns ends in ``_`` (``gain_``, ``weights_``, ``covariance_``);
+* ``estimate(readings_rad_s)`` maps readings (n, N) [rad/s] to body rates
+  (n, 3) [rad/s] and refuses wrong shapes, NaN, inf and an unfitted
+  estimator with :class:`~gyroarray.errors.InputError`.
+
+Every estimator has a short ``name`` and a one-line ``description``. The
+registry holds the built-in estimators (registered with :func:`register`)
+and third-party ones, declared as entry points of the group
+``gyroarray.estimators`` (``name = "package.module:Class"``) and imported
+only when asked for by :func:`get_estimator`; a plugin that fails to import
+gives an :class:`~gyroarray.errors.InputError` naming it, and the other
+estimators keep working.
+
+Learned attributes shared by every estimator:
+
+``n_gyros_`` (int), ``dt_s_`` [s], ``H_`` (N, 3) [-], ``noise_``
+(:class:`~gyroarray.estimators.noise.ArrayNoise`) and ``covariance_``: the
+steady-state 3×3 covariance [rad²/s²] of the body-rate error caused by the
+white (ARW) measurement noise of the fitted model, for a known deterministic
+body rate; ``None`` where the estimator has no such steady state.
+"""
+
+from __future__ import annotations
+
+import inspect
+import math
+from importlib import metadata
+from typing import Any, Callable
+
+import numpy as np
+
+from gyroarray.errors import InputError
+from gyroarray.layout import Layout
+
+__all__ = ["Estimator", "NotFittedError", "register", "get_estimator", "available", "make",
+           "ENTRY_POINT_GROUP"]
+
+#: Entry-point group of third-party estimators.
+ENTRY_POINT_GROUP = "gyroarray.estimators"
+
+_BUILTIN: dict[str, type] = {}
+_LOADED_PLUGINS: dict[str, type] = {}
+_BUILTIN_MODULES = ("simple", "kf_array", "kf_single", "bound")
+
+
+class NotFittedError(InputError):
+    """``estimate`` was called before ``fit``."""
+
+
+class Estimator:
+    """Base of every fusion estimator (scikit-learn's estimator contract).
+
+    Subclasses declare their hyperparameters as keyword-only arguments of
+    ``__init__``, store each under its own name and do nothing else, and
+    implement ``_fit(H, noise, dt_s)`` and ``_estimate(z)``.
+    """
+
+    #: Short registry name.
+    name: str = ""
+    #: One-line description.
+    description: str = ""
+
+    # -- hyperparameters (scikit-learn) ------------------------------------
+    @classmethod
+    def _param_names(cls) -> list[str]:
+        sig = inspect.signature(cls.__init__)
+        return [p.name for p in sig.parameters.values()
+                if p.name != "self" and p.kind in (p.KEYWORD_ONLY, p.POSITIONAL_OR_KEYWORD)]
+
+    def get_params(self, deep: bool = True) -> dict[str, Any]:
+        """The hyperparameters as a dict (name -> value as passed)."""
+        return {k: getattr(self, k) for k in self._param_names()}
+
+    def set_params(self, **params) -> "Estimator":
+        """Set hyperparameters; unknown names are refused with InputError.
+
+        Returns ``self``. Learned attributes are left as they are: call
+        :meth:`fit` again.
+        """
+        names = self._param_names()
+        for key, value in params.items():
+            if key not in names:
+                raise InputError(_unknown(f"hyperparameter {key!r} of estimator {self.name!r}",
+                                          key, names))
+            setattr(self, key, value)
+        return self
+
+    def __repr__(self) -> str:
+        args = ", ".join(f"{k}={v!r}" for k, v in self.get_params().items())
+        return f"{type(self).__name__}({args})"
+
+    # -- fitting -------------------------------------------------------------
+    def fit(self, layout: Layout, noise_model, dt_s: float) -> "Estimator":
+        """Design the estimator for a layout, a noise model and a sample period.
+
+        Parameters
+        ----------
+        layout : Layout
+            Sensitive axes H (N×3) [-].
+        noise_model : NoiseModel or ArrayNoise
+            The noise of the array (only ``arw``, ``rrw`` and ``correlation``
+            are used; see :func:`~gyroarray.estimators.noise.array_noise`).
+        dt_s : float
+            Sample period [s].
+
+        Returns
+        -------
+        self
+        """
+        from .noise import ArrayNoise, array_noise
+        if not isinstance(layout, Layout):
+            raise InputError(f"layout must be a gyroarray Layout, got {type(layout).__name__}")
+        h = np.array(layout.H, dtype=float)
+        if np.linalg.matrix_rank(h) < 3:
+            raise InputError(f"the layout's axes do not span 3-D space ({layout!r}): "
+                             "no estimator can recover a 3-axis rate")
+        try:
+            dt = float(dt_s)
+        except (TypeError, ValueError):
+            raise InputError(f"dt_s must be a number [s], got {dt_s!r}") from None
+        if not (math.isfinite(dt) and dt > 0):
+            raise InputError(f"dt_s must be a finite period > 0 [s], got {dt_s!r}")
+        n = h.shape[0]
+        if isinstance(noise_model, ArrayNoise):
+            if noise_model.n_gyros != n:
+                raise InputError(f"the noise is for {noise_model.n_gyros} gyros, the layout has {n}")
+            noise = noise_model
+        else:
+            noise = array_noise(noise_model, n)
+        for key in [k for k in vars(self) if k.endswith("_") and not k.startswith("_")]:
+            delattr(self, key)
+        self._fit(h, noise, dt)
+        self.n_gyros_ = n
+        self.dt_s_ = dt
+        self.H_ = _readonly(h)
+        self.noise_ = noise
+        return self
+
+    def _fit(self, H: np.ndarray, noise, dt_s: float) -> None:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    # -- estimating ----------------------------------------------------------
+    def estimate(self, readings_rad_s) -> np.ndarray:
+        """Body rates from gyro readings.
+
+        Parameters
+        ----------
+        readings_rad_s : array_like, shape (n, N)
+            Gyro outputs [rad/s], one row per sample, one column per gyro.
+
+        Returns
+        -------
+        ndarray, shape (n, 3)
+            Body rate estimates [rad/s].
+
+        Raises
+        ------
+        NotFittedError
+            Before :meth:`fit`.
+        InputError
+            Not a 2-D (n, N) array of finite numbers with n >= 1.
+        """
+        self._check_fitted()
+        z = check_readings(readings_rad_s, self.n_gyros_)
+        return self._estimate(z)
+
+    def _estimate(self, z: np.ndarray) -> np.ndarray:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def _check_fitted(self) -> None:
+        if not hasattr(self, "n_gyros_"):
+            raise NotFittedError(f"estimator {self.name!r} is not fitted: call "
+                                 "fit(layout, noise_model, dt_s) first")
+
+
+def check_readings(readings, n_gyros: int) -> np.ndarray:
+    """Readings as a C-contiguous float (n, N) array, or InputError."""
+    try:
+        z = np.asarray(readings, dtype=float)
+    except (TypeError, ValueError):
+        raise InputError("readings must be a numeric (n, N) array [rad/s]") from None
+    if z.ndim != 2:
+        raise InputError(f"readings must be a 2-D (n, N) array, got {z.ndim}-D shape {z.shape}")
+    if z.shape[1] != n_gyros:
+        raise InputError(f"readings have {z.shape[1]} columns, the fitted layout has "
+                         f"{n_gyros} gyros")
+    if z.shape[0] < 1:
+        raise InputError("readings have no samples")
+    if not np.all(np.isfinite(z)):
+        bad = np.argwhere(~np.isfinite(z))[0]
+        raise InputError(f"readings contain a non-finite value (sample {int(bad[0])}, gyro "
+                         f"{int(bad[1]) + 1}: {z[bad[0], bad[1]]!r})")
+    return np.ascontiguousarray(z)
+
+
+def _readonly(a) -> np.ndarray:
+    a = np.array(a, dtype=float, copy=True)
+    a.setflags(write=False)
+    return a
+
+
+def _unknown(what: str, key, names) -> str:
+    from gyroarray.sim.effects import did_you_mean
+    return f"unknown {what}{did_you_mean(key, names)} (known: {', '.join(names) or 'none'})"
+
+
+# -- registry -----------------------------------------------------------------
+
+def register(name: str) -> Callable[[type], type]:
+    """Class decorator: register an estimator class under ``name``.
+
+    The class must subclass :class:`Estimator`; its ``name`` attribute is set
+    to ``name``. A name can be registered once.
+    """
+    if not isinstance(name, str) or not name.isidentifier():
+        raise ValueError(f"estimator name must be an identifier, got {name!r}")
+
+    def deco(cls: type) -> type:
+        if not (isinstance(cls, type) and issubclass(cls, Estimator)):
+            raise TypeError(f"{cls!r} is not an Estimator subclass")
+        if name in _BUILTIN and _BUILTIN[name] is not cls:
+            raise ValueError(f"estimator {name!r} is already registered "
+                             f"({_BUILTIN[name].__module__}.{_BUILTIN[name].__qualname__})")
+        if not getattr(cls, "description", ""):
+            raise ValueError(f"estimator {name!r} needs a one-line description")
+        cls.name = name
+        _BUILTIN[name] = cls
+        return cls
+    return deco
+
+
+def _load_builtins() -> None:
+    import importlib
+    for mod in _BUILTIN_MODULES:
+        importlib.import_module(f"{__package__}.{mod}")
+
+
+def _entry_points() -> dict[str, metadata.EntryPoint]:
+    try:
+        eps = metadata.entry_points(group=ENTRY_POINT_GROUP)
+    except Exception:  # broken distribution metadata must not break the built-ins
+        return {}
+    return {ep.name: ep for ep in eps}
+
+
+def available() -> list[str]:
+    """Names of the built-in estimators and of the installed plugins (sorted).
+
+    Plugins are listed from their entry points without being imported.
+    """
+    _load_builtins()
+    return sorted(set(_BUILTIN) | set(_entry_points()))
+
+
+def get_estimator(name: str) -> type:
+    """The estimator class registered as ``name``.
+
+    Raises
+    ------
+    InputError
+        Unknown name (with the closest one), or a plugin that fails to load
+        or is not an :class:`Estimator` (naming the entry point).
+    """
+    _load_builtins()
+    if name in _BUILTIN:
+        return _BUILTIN[name]
+    if name in _LOADED_PLUGINS:
+        return _LOADED_PLUGINS[name]
+    eps = _entry_points()
+    if name not in eps:
+        raise InputError(_unknown(f"estimator {name!r}", name, available()))
+    ep = eps[name]
+    try:
+        cls = ep.load()
+    except Exception as err:  # any import-time failure of a plugin
+        raise InputError(f"estimator plugin {name!r} ({ep.value}, entry point group "
+                         f"{ENTRY_POINT_GROUP!r}) failed to load: {type(err).__name__}: {err}") from err
+    if not (isinstance(cls, type) and issubclass(cls, Estimator)):
+        raise InputError(f"estimator plugin {name!r} ({ep.value}) is not a "
+                         "gyroarray.estimators.Estimator subclass")
+    if not getattr(cls, "description", ""):
+        raise InputError(f"estimator plugin {name!r} ({ep.value}) has no description")
+    cls.name = name
+    _LOADED_PLUGINS[name] = cls
+    return cls
+
+
+def make(name: str, **params) -> Estimator:
+    """An estimator by name with hyperparameters; unknown ones refused with InputError."""
+    cls = get_estimator(name)
+    return cls().set_params(**params)
