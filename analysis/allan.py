@@ -114,14 +114,14 @@ class AllanResult:
         return self.dev ** 2
 
 
-def _check_kind(kind: str) -> int:
+def check_kind(kind: str) -> int:
     if kind not in KINDS:
         raise InputError(f"unknown deviation kind {kind!r}; expected one of "
                          f"{sorted(KINDS)}")
     return KINDS[kind]
 
 
-def _check_tau0(tau0_s) -> float:
+def check_tau0(tau0_s) -> float:
     try:
         tau0 = float(tau0_s)
     except (TypeError, ValueError):
@@ -131,7 +131,7 @@ def _check_tau0(tau0_s) -> float:
     return tau0
 
 
-def _as_series(data, name: str) -> np.ndarray:
+def as_series(data, name: str) -> np.ndarray:
     """1-D float64 C-contiguous view (copy only when needed)."""
     arr = np.ascontiguousarray(data, dtype=np.float64)
     if arr.ndim != 1:
@@ -139,7 +139,7 @@ def _as_series(data, name: str) -> np.ndarray:
     return arr
 
 
-def _first_non_finite(arr: np.ndarray, name: str) -> InputError:
+def first_non_finite(arr: np.ndarray, name: str) -> InputError:
     i = int(np.flatnonzero(~np.isfinite(arr))[0])
     return InputError(f"{name} has a non-finite value ({arr[i]!r}) at index "
                       f"{i}")
@@ -184,8 +184,8 @@ def averaging_factors(n_phase: int, tau0_s: float, taus="octave",
     octaves here have few summands and wide confidence intervals, which the
     noise fit weights accordingly.
     """
-    d = _check_kind(kind)
-    tau0 = _check_tau0(tau0_s)
+    d = check_kind(kind)
+    tau0 = check_tau0(tau0_s)
     m_max = (int(n_phase) - _MIN_TERMS) // d
     if m_max < 1:
         raise InputError(f"{n_phase - 1} samples are too few for {kind}: "
@@ -290,15 +290,15 @@ def deviation(rate_rad_s, tau0_s: float, kind: str = "oadev",
     .. [3] D. W. Allan, "Statistics of atomic frequency standards",
        Proc. IEEE 54(2), 1966.
     """
-    d = _check_kind(kind)
-    tau0 = _check_tau0(tau0_s)
-    y = _as_series(rate_rad_s, "rate")
+    d = check_kind(kind)
+    tau0 = check_tau0(tau0_s)
+    y = as_series(rate_rad_s, "rate")
     if y.size < d + _MIN_TERMS - 1:
         raise InputError(f"{y.size} rate samples are too few for {kind}: "
                          f"need at least {d + _MIN_TERMS - 1}")
     mean = float(np.mean(y))
     if not math.isfinite(mean):  # any NaN/inf makes the mean non-finite
-        raise _first_non_finite(y, "rate")
+        raise first_non_finite(y, "rate")
     x = np.empty(y.size + 1)
     _kernels.integrate_rate(y, mean, x)
     # x is in rate x samples; tau0 cancels: dev = sqrt(S/(c N)) / m.
@@ -388,14 +388,14 @@ def deviation_from_angle(angle_rad, tau0_s: float, kind: str = "oadev",
     .. [1] W. J. Riley, "Handbook of Frequency Stability Analysis", NIST
        SP 1065, 2008, eqs. 11 and 20.
     """
-    d = _check_kind(kind)
-    tau0 = _check_tau0(tau0_s)
-    x = _as_series(angle_rad, "angle")
+    d = check_kind(kind)
+    tau0 = check_tau0(tau0_s)
+    x = as_series(angle_rad, "angle")
     if x.size < d + _MIN_TERMS:
         raise InputError(f"{x.size} angle samples are too few for {kind}: "
                          f"need at least {d + _MIN_TERMS}")
     if not np.all(np.isfinite(x)):
-        raise _first_non_finite(x, "angle")
+        raise first_non_finite(x, "angle")
     return _deviation_of_phase(x, tau0, tau0, kind, taus)
 
 
@@ -706,7 +706,7 @@ def edf(kind: str, n_phase: int, m, alpha, *,
     .. [2] C. A. Greenhall, W. J. Riley, "Uncertainty of stability variances
        based on finite differences", Proc. 35th PTTI Meeting, 2003.
     """
-    d = _check_kind(kind)
+    d = check_kind(kind)
     if method == "sampled":
         return edf_greenhall(n_phase, m, alpha, d, filter_factor="inf")
     if method == "stable32":

@@ -47,8 +47,8 @@ from gyroarray import units
 from gyroarray.errors import InputError
 
 from . import _kernels
-from .allan import (KINDS, ONE_SIGMA, AllanResult, _as_series, _check_kind,
-                    _check_tau0, _first_non_finite, averaging_factors,
+from .allan import (KINDS, ONE_SIGMA, AllanResult, as_series, check_kind,
+                    check_tau0, first_non_finite, averaging_factors,
                     confidence_interval, deviation, edf)
 from .noise_fit import fit_noise_terms, term_basis
 
@@ -572,12 +572,12 @@ def davar(rate_rad_s, tau0_s: float, *, window: int | None = None,
        SP 1065, 2008.
     .. [4] IEEE Std 952-1997, Annex C.
     """
-    _check_kind(kind)
-    tau0 = _check_tau0(tau0_s)
-    y = _as_series(rate_rad_s, "rate")
+    check_kind(kind)
+    tau0 = check_tau0(tau0_s)
+    y = as_series(rate_rad_s, "rate")
     n = y.size
     if not np.all(np.isfinite(y)):
-        raise _first_non_finite(y, "rate")
+        raise first_non_finite(y, "rate")
     if extension not in EXTENSIONS:
         raise InputError(f"unknown extension {extension!r}; expected one of "
                          f"{EXTENSIONS}")
