@@ -48,6 +48,8 @@ SETTLE_S = 2.0
 DEFAULT_ESTIMATORS = ("kf_array", "kf_single", "gls", "ols", "naive", "bound")
 #: A body axis "swings" when its fitted truth amplitude exceeds this share of the largest [-].
 SWING_SHARE = 0.1
+#: Whole swing periods a run must contain to report attenuation and phase.
+MIN_SWING_PERIODS = 2.0
 
 
 @dataclass(frozen=True)
@@ -141,6 +143,11 @@ def score(estimates: dict[str, np.ndarray], truth_rad_s: np.ndarray, readings_ra
     if swing is not None:
         freq, (t0, t1) = swing
         swing_sel = keep & (time_s >= t0) & (time_s <= t1)
+        span_s = np.ptp(time_s[swing_sel]) if swing_sel.any() else 0.0
+        if span_s * freq < MIN_SWING_PERIODS:
+            # the run was cut before (most of) the swing: nothing to attenuate
+            swing, swing_sel = None, None
+    if swing is not None:
         amps = np.array([np.ptp(truth_rad_s[swing_sel, a]) for a in range(3)])
         swing_axes = amps >= SWING_SHARE * amps.max() if amps.max() > 0 else np.zeros(3, bool)
 

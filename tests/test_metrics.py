@@ -84,3 +84,29 @@ def test_run_cli_on_the_paper003_swing(capsys, tmp_path, monkeypatch):
         g = res["estimators"]["gls"][axis]
         tol = 3 * math.hypot(g["arw_deg_rt_h_sigma"], res["single_gyro"]["arw_deg_rt_h_sigma"] / math.sqrt(6))
         assert abs(g["arw_deg_rt_h"] - single * math.sqrt(0.5)) <= tol, (g, single)
+
+
+def test_score_ignores_a_swing_the_run_was_cut_before():
+    # the swing segment starts at 500 s but the run ends at 60 s: no attenuation, no crash
+    from gyroarray.chain import score
+    from gyroarray.layout import Layout
+    rng = np.random.default_rng(2)
+    n, dt = 6000, 0.01
+    t = np.arange(n) * dt
+    lay = Layout.conical(1, 4, math.acos(1 / math.sqrt(3)))
+    truth = np.zeros((n, 3))
+    readings = 1e-3 * rng.standard_normal((n, 4))
+    est = {"ols": readings @ np.linalg.pinv(lay.H).T}
+    res = score(est, truth, readings, lay, t, dt, swing=(0.05, (500.0, 700.0)))
+    assert res.swing_hz is None
+    assert res.table["attenuation"].isna().all()
+    # ... and a swing that is there is scored: 0.5 Hz, 1 deg/s about z, estimate = truth + noise
+    truth[:, 2] = math.radians(1.0) * np.sin(2 * np.pi * 0.5 * t)
+    readings = truth @ lay.H.T + 1e-3 * rng.standard_normal((n, 4))
+    est = {"ols": readings @ np.linalg.pinv(lay.H).T}
+    res = score(est, truth, readings, lay, t, dt, swing=(0.5, (0.0, 60.0)))
+    z = res.table.set_index("axis").loc["z"]
+    # noise 1e-3 rad/s per gyro over ~5800 samples vs a 0.0175 rad/s amplitude: amplitude error ~1e-3
+    assert z["attenuation"] == pytest.approx(1.0, abs=5e-3)
+    assert res.table.set_index("axis").loc["x", "attenuation"] is None or \
+        np.isnan(res.table.set_index("axis").loc["x", "attenuation"])
