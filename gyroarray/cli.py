@@ -334,6 +334,14 @@ def cmd_run(args) -> tuple[dict, str]:
     return out, "\n".join(lines)
 
 
+# -- check --------------------------------------------------------------------
+
+def cmd_check(args):
+    from .check import format_check, run_check
+    result = run_check(args.thresholds, quick=not args.full)
+    return result, format_check(result), (EXIT_OK if result["passed"] else EXIT_FAIL)
+
+
 # -- entry point --------------------------------------------------------------
 
 def build_parser() -> argparse.ArgumentParser:
@@ -404,6 +412,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-cache", action="store_true", help="recompute the rate-table truth")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=cmd_run)
+
+    p = sub.add_parser("check", help="regression thresholds: run the threshold scenarios, exit 1 on a failure")
+    p.add_argument("thresholds", type=Path, nargs="?", metavar="THRESHOLDS.toml",
+                   help="default: the shipped scenarios/thresholds.toml")
+    p.add_argument("--full", action="store_true",
+                   help="run each scenario at its full length (slow; default: the quick version)")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(func=cmd_check)
     return parser
 
 
@@ -417,7 +433,7 @@ def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     try:
         args = parser.parse_args(argv)
-        result, text = args.func(args)
+        result, text, *code = args.func(args)
     except InputError as err:
         print(f"gyroarray: {err}", file=sys.stderr)
         return EXIT_USAGE
@@ -439,7 +455,7 @@ def main(argv: list[str] | None = None) -> int:
         sys.stdout.flush()
     except BrokenPipeError:  # e.g. piped into `head`: not an error of ours
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
-    return EXIT_OK
+    return code[0] if code else EXIT_OK
 
 
 if __name__ == "__main__":  # pragma: no cover

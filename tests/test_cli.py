@@ -30,7 +30,7 @@ def run_json(capsys, *argv):
 def test_every_subcommand_takes_json():
     parser = build_parser()
     sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
-    assert set(sub.choices) >= {"gdop", "design", "allan"}
+    assert set(sub.choices) >= {"gdop", "design", "allan", "check"}
     for name, p in sub.choices.items():
         assert any("--json" in a.option_strings for a in p._actions), name
 
@@ -101,7 +101,7 @@ def test_entry_point_subprocess_no_traceback():
 def test_every_subcommand_is_listed():
     parser = build_parser()
     sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
-    assert set(sub.choices) == {"gdop", "design", "allan", "davar", "simulate", "run"}
+    assert set(sub.choices) == {"gdop", "design", "allan", "davar", "simulate", "run", "check"}
 
 
 @pytest.mark.parametrize("argv,fragment", [
@@ -145,3 +145,23 @@ def test_davar_on_a_simulated_burst(capsys, tmp_path):
     # overlapping windows (~2 and ~5 independent): ratio 2 within ~4 %; allow 10 %
     assert inside / before == pytest.approx(2.0, rel=0.1)
     assert png.read_bytes()[:4] == b"\x89PNG"
+
+
+def test_check_cli_exit_codes(capsys, tmp_path):
+    # a threshold the model cannot meet -> exit 1 with passed false; a bad file -> exit 2
+    import shutil
+    from pathlib import Path
+    root = Path(__file__).resolve().parents[1] / "scenarios"
+    shutil.copy(root / "paper003" / "static_s1_n6_rhob_0.toml", tmp_path / "s1n6.toml")
+    bad_bound = tmp_path / "t.toml"
+    # GLS on 6 gyros cannot reduce ARW by 10x (theory sqrt(6/3) = 1.41)
+    bad_bound.write_text('[[check]]\nscenario = "s1n6"\nquick_duration_s = 60\nestimator = "gls"\n'
+                         'axis = "x"\nmetric = "arw_reduction"\nmin = 10.0\n')
+    code, out, err = run(capsys, "check", str(bad_bound), "--json")
+    assert code == 1, err
+    res = json.loads(out)
+    assert res["passed"] is False and res["results"][0]["pass"] is False
+    assert res["results"][0]["value"] == pytest.approx(1.414, rel=0.15)
+    bad_bound.write_text('[[check]]\nscenario = "s1n6"\ncolour = 1\n')
+    code, out, err = run(capsys, "check", str(bad_bound), "--json")
+    assert code == 2 and out == "" and "colour" in err
