@@ -553,6 +553,31 @@ class _Solution(NamedTuple):
     n_iter: int
 
 
+#: Search interval of log10 of the relative model error.
+_LOG_EPS_RANGE = (-8.0, 2.0)
+
+
+def _root_log_eps(excess: Callable[[float], float]) -> float:
+    """log10(eps) where ``excess`` (chi2 - dof, decreasing in eps) crosses zero.
+
+    ``excess`` is only piecewise monotonic (the NNLS active set can change
+    with eps), so both ends of the interval may have the same sign on short
+    records. Brent is used where the ends bracket a root; otherwise the
+    first point of a half-decade grid where the excess is <= 0 (the end of
+    the interval if there is none).
+    """
+    lo, hi = _LOG_EPS_RANGE
+    f_lo, f_hi = excess(lo), excess(hi)
+    if f_lo > 0 > f_hi:
+        return brentq(excess, lo, hi, xtol=1e-2)  # eps to ~2 %
+    if f_lo <= 0:
+        return lo
+    for log_eps in np.arange(lo + 0.5, hi + 0.25, 0.5):
+        if excess(log_eps) <= 0:
+            return float(log_eps)
+    return hi
+
+
 def fit_noise_terms(result, edf_of_alpha: Callable[[np.ndarray], np.ndarray],
                     *, terms: Sequence[str] | None = None,
                     method: str = "gls", max_iter: int = 50) -> NoiseFit:
@@ -757,8 +782,7 @@ def fit_noise_terms(result, edf_of_alpha: Callable[[np.ndarray], np.ndarray],
         def excess(log_eps):
             return iterate(start, corr, 10.0 ** log_eps).chi2 - dof
 
-        log_eps = brentq(excess, -8.0, 2.0, xtol=1e-2)  # eps to ~2%
-        model_error = 10.0 ** log_eps
+        model_error = 10.0 ** _root_log_eps(excess)
         sol = iterate(start, corr, model_error)
     a, alpha, nu, x = sol.a, sol.alpha, sol.nu, sol.x
 

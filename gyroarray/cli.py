@@ -334,6 +334,22 @@ def cmd_run(args) -> tuple[dict, str]:
     return out, "\n".join(lines)
 
 
+# -- sweep --------------------------------------------------------------------
+
+def cmd_sweep(args):
+    from .scenarios.runner import run_sweep
+    if args.workers is not None and args.scheduler is not None:
+        raise InputError("gyroarray sweep: --workers and --scheduler exclude each other")
+    summary = run_sweep(args.sweep, args.out, workers=args.workers or 1,
+                        scheduler=args.scheduler, progress=None if not args.json else False)
+    lines = [f"sweep {summary['sweep']}: {summary['scenarios']} scenarios, ran {summary['ran']}, "
+             f"skipped {summary['skipped']} (already done), failed {len(summary['failed'])}, "
+             f"{summary['rows_written']} rows in {summary['seconds']:.1f} s -> {summary['dataset']}"]
+    lines += [f"failed {f['id']}: {f['error']}" for f in summary["failed"]]
+    lines += [f"note: {n}" for n in summary.get("notes", [])]
+    return summary, "\n".join(lines), (EXIT_OK if summary["complete"] else EXIT_FAIL)
+
+
 # -- check --------------------------------------------------------------------
 
 def cmd_check(args):
@@ -412,6 +428,15 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-cache", action="store_true", help="recompute the rate-table truth")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=cmd_run)
+
+    p = sub.add_parser("sweep", help="run a sweep of scenarios in parallel into a Parquet dataset (resumable)")
+    p.add_argument("sweep", type=Path, metavar="SWEEP.toml")
+    p.add_argument("--out", type=Path, required=True, metavar="DIR", help="output directory")
+    p.add_argument("--workers", type=_positive_int("--workers"), metavar="K",
+                   help="local worker processes (default 1)")
+    p.add_argument("--scheduler", metavar="tcp://HOST:PORT", help="a Dask distributed scheduler")
+    p.add_argument("--json", action="store_true", help="print one JSON object (no progress bar)")
+    p.set_defaults(func=cmd_sweep)
 
     p = sub.add_parser("check", help="regression thresholds: run the threshold scenarios, exit 1 on a failure")
     p.add_argument("thresholds", type=Path, nargs="?", metavar="THRESHOLDS.toml",

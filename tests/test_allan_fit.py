@@ -496,3 +496,15 @@ def test_fit_input_errors():
         allan_analysis(np.full(1000, 0.5), 0.01)
     with pytest.raises(InputError, match="method"):
         term_from_curve([1.0], [1.0], "n", method="median")
+
+
+def test_model_error_root_when_the_ends_do_not_bracket():
+    # chi2 - dof is only piecewise monotonic in eps: the search must not call brentq on an
+    # interval whose ends have the same sign (it raised on some 30 s records)
+    from gyroarray.analysis.noise_fit import _root_log_eps
+    assert _root_log_eps(lambda le: le + 3.0) == -8.0          # already consistent at the low end
+    assert _root_log_eps(lambda le: 1.0) == 2.0                 # never consistent: the high end
+    # positive at both ends, dipping below zero in between: the first grid point <= 0
+    assert _root_log_eps(lambda le: abs(le + 3.2) - 0.3) == -3.5
+    # a proper bracket: Brent to xtol 1e-2
+    assert abs(_root_log_eps(lambda le: -(le + 1.234)) + 1.234) < 1e-2

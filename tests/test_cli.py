@@ -101,7 +101,7 @@ def test_entry_point_subprocess_no_traceback():
 def test_every_subcommand_is_listed():
     parser = build_parser()
     sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
-    assert set(sub.choices) == {"gdop", "design", "allan", "davar", "simulate", "run", "check"}
+    assert set(sub.choices) == {"gdop", "design", "allan", "davar", "simulate", "run", "check", "sweep"}
 
 
 @pytest.mark.parametrize("argv,fragment", [
@@ -165,3 +165,32 @@ def test_check_cli_exit_codes(capsys, tmp_path):
     bad_bound.write_text('[[check]]\nscenario = "s1n6"\ncolour = 1\n')
     code, out, err = run(capsys, "check", str(bad_bound), "--json")
     assert code == 2 and out == "" and "colour" in err
+
+
+def test_sweep_cli_runs_then_resumes(capsys, tmp_path, monkeypatch):
+    monkeypatch.setenv("GYROARRAY_CACHE", str(tmp_path / "cache"))
+    sweep = tmp_path / "tiny.toml"
+    sweep.write_text("""name = "tiny"
+seed = 7
+estimators = ["gls"]
+[base]
+sample_rate_hz = 100.0
+effects = [{ effect = "arw", n_deg_rt_h = 0.1 }]
+[base.layout]
+scheme = 1
+n_gyros = 6
+alpha_deg = 54.7356
+[base.motion]
+profile = "p003_static_1h"
+[grid]
+n_gyros = [4, 6]
+duration_s = [20.0]
+""")
+    out = tmp_path / "out"
+    code, text, err = run(capsys, "sweep", str(sweep), "--out", str(out), "--json")
+    assert code == 0, err
+    first = json.loads(text)
+    assert first["scenarios"] == 2 and first["ran"] == 2 and first["rows_written"] == 2 * 3
+    code, text, err = run(capsys, "sweep", str(sweep), "--out", str(out), "--json")
+    again = json.loads(text)
+    assert code == 0 and again["ran"] == 0 and again["skipped"] == 2 and again["complete"] is True

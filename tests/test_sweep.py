@@ -1,0 +1,293 @@
+"""Sweep files (expansion, ids, seeds, validation) and the parallel, resumable runner.
+
+Determinism is tested bit for bit: the same sweep must give identical
+Parquet rows (float bits included) with 1 or 2 local workers, on a Dask
+cluster, and after a SIGKILL + resume. Every worker runs with
+OPENBLAS_NUM_THREADS=1 (the runner sets it for its process pool; the test's
+Dask cluster sets it through ``distributed.nanny.pre-spawn-environ``).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from gyroarray.errors import InputError
+from gyroarray.scenarios.runner import load_results, run_sweep
+from gyroarray.scenarios.sweep import PARAM_KEYS, load_sweep, scenario_id, scenario_seed
+
+ROOT = Path(__file__).resolve().parents[1]
+EXAMPLE = ROOT / "scenarios" / "sweeps" / "design_quick.toml"
+
+# Tiny runs: 20 s at 100 Hz, three estimators, 3 scenarios (the runner tests).
+TINY = """\
+name = "tiny"
+seed = 7
+{extra_top}
+[base]
+sample_rate_hz = 100.0
+duration_s = 20.0
+effects = [{{ effect = "arw", n_deg_rt_h = 0.1 }}, {{ effect = "rrw", k_deg_h_rt_h = 600.0 }}]
+[base.layout]
+scheme = 1
+n_gyros = 4
+alpha_deg = 54.7356
+[base.motion]
+profile = "p003_sine_5dps_0p03hz"
+{extra}
+"""
+TINY_GRID = """\
+[grid]
+n_gyros = [4, 6]
+rho_arw = [0.0, 0.3]
+
+[[points]]
+scheme = 2
+n_gyros = 5
+alpha_deg = "optimal"
+motion = "p003_static_1h"
+"""
+
+
+def write(folder: Path, extra: str = TINY_GRID, extra_top: str = "", name="sweep.toml") -> Path:
+    if "estimators" not in extra_top:
+        extra_top = 'estimators = ["kf_array", "gls", "ols"]\n' + extra_top
+    folder.mkdir(parents=True, exist_ok=True)
+    p = folder / name
+    p.write_text(TINY.format(extra=extra, extra_top=extra_top))
+    return p
+
+
+@pytest.fixture(scope="module")
+def cache_env(tmp_path_factory):
+    """A private truth cache, inherited by every worker process the tests start."""
+    old = os.environ.get("GYROARRAY_CACHE")
+    os.environ["GYROARRAY_CACHE"] = str(tmp_path_factory.mktemp("truth_cache"))
+    yield
+    if old is None:
+        os.environ.pop("GYROARRAY_CACHE", None)
+    else:
+        os.environ["GYROARRAY_CACHE"] = old
+
+
+# -- expansion -----------------------------------------------------------------
+
+def test_expansion_ids_and_params(tmp_path):
+    sw = load_sweep(write(tmp_path))
+    assert len(sw) == 5                               # 2 x 2 grid + 1 point
+    ids = [s.id for s in sw.scenarios]
+    assert ids == sorted(ids) and len(set(ids)) == 5
+    for s in sw.scenarios:
+        assert s.id == scenario_id({k: s.params[k] for k in PARAM_KEYS})
+        assert s.seed == scenario_seed(7, s.id) and 0 <= s.seed < 2**63
+        sc = s.build()
+        assert sc.layout.n_gyros == s.params["n_gyros"] and sc.seed == s.seed
+        assert sc.duration_s == 20.0
+    point = next(s for s in sw.scenarios if s.params["scheme"] == 2)
+    assert point.params["alpha_deg"] == "optimal" and point.params["motion"] == "p003_static_1h"
+    from gyroarray.design import optimal_alpha
+    assert point.params["alpha_deg_value"] == np.degrees(optimal_alpha(2, 5, 0.0).alpha_rad)
+    # rho swept: one correlation entry with that rho, on top of the base effects
+    r3 = next(s for s in sw.scenarios if s.params["rho_arw"] == 0.3)
+    model = r3.build().model
+    assert [e.effect for e in model] == ["arw", "rrw", "correlation"]
+
+
+def test_ids_and_seeds_do_not_depend_on_order(tmp_path):
+    a = load_sweep(write(tmp_path / "a", "[grid]\nn_gyros = [4, 6, 8]\nrho_arw = [0.0, 0.3]\n"
+                                         'motion = ["p003_static_1h", "p003_sine_5dps_0p03hz"]\n'))
+    b = load_sweep(write(tmp_path / "b", '[grid]\nmotion = ["p003_sine_5dps_0p03hz", "p003_static_1h"]\n'
+                                         "rho_arw = [0.3, 0.0]\nn_gyros = [8, 4, 6]\n"))
+    key = lambda sw: {s.id: (s.seed, json.dumps(s.params, sort_keys=True)) for s in sw.scenarios}
+    assert key(a) == key(b) and len(a) == 12
+    # adding a grid value adds scenarios and leaves the others (ids and seeds) as they were
+    c = load_sweep(write(tmp_path / "c", "[grid]\nn_gyros = [4, 5, 6, 8]\nrho_arw = [0.0, 0.3]\n"
+                                         'motion = ["p003_static_1h", "p003_sine_5dps_0p03hz"]\n'))
+    assert set(key(a).items()) < set(key(c).items()) and len(c) == 16
+    # the same point given twice (grid and list) is one scenario
+    d = load_sweep(write(tmp_path / "d", "[grid]\nn_gyros = [4, 6]\n[[points]]\nn_gyros = 6\n"))
+    assert len(d) == 2
+    # another sweep seed: same ids, other seeds
+    e = load_sweep(write(tmp_path / "e", "[grid]\nn_gyros = [4, 6]\n").parent / "sweep.toml")
+    f_path = tmp_path / "f" / "sweep.toml"
+    f_path.parent.mkdir()
+    f_path.write_text((tmp_path / "e" / "sweep.toml").read_text().replace("seed = 7", "seed = 8"))
+    f = load_sweep(f_path)
+    assert [s.id for s in e.scenarios] == [s.id for s in f.scenarios]
+    assert all(s.seed != t.seed for s, t in zip(e.scenarios, f.scenarios))
+
+
+def test_example_sweep_and_base_reference(tmp_path):
+    sw = load_sweep(EXAMPLE)
+    assert len(sw) == 48 and sw.estimators == ("kf_array", "gls", "ols", "naive")
+    assert {s.params["scheme"] for s in sw.scenarios} == {1, 2}
+    assert {s.params["n_gyros"] for s in sw.scenarios} == {4, 5, 6, 8}
+    # base by reference to a shipped scenario (".toml" optional)
+    p = tmp_path / "ref.toml"
+    p.write_text('name = "ref"\nseed = 1\nbase = "paper003/swing_s1_n6"\n'
+                 "[grid]\nduration_s = [30.0, 60.0]\n")
+    ref = load_sweep(p)
+    assert len(ref) == 2 and all(s.params["n_gyros"] == 6 for s in ref.scenarios)
+    assert ref.scenarios[0].params["motion"] == "p003_sine_5dps_0p03hz"
+
+
+@pytest.mark.parametrize("extra_top, extra, key, words", [
+    ("colour = 1", TINY_GRID, "colour", "unknown key"),
+    ("", "[grid]\nn_gyro = [4]\n", "grid.n_gyro", "unknown key"),
+    ("", "[grid]\nscheme = [3]\n", "grid.scheme", "1 or 2"),
+    ("", "[grid]\nn_gyros = [4, 4]\n", "grid.n_gyros", "twice"),
+    ("", "[grid]\nn_gyros = 4\n", "grid.n_gyros", "array"),
+    ("", '[grid]\nalpha_deg = ["best"]\n', "grid.alpha_deg", "optimal"),
+    ("", "[grid]\nrho_arw = [1.5]\n", "grid.rho_arw", "(-1, 1)"),
+    ("", "[grid]\nduration_s = [-1]\n", "grid.duration_s", "> 0"),
+    ("", "[grid]\nduration_s = [1e6]\n", "grid.duration_s", "longer than the motion"),
+    ("", '[grid]\nmotion = ["no_such_profile"]\n', "grid.motion", "unknown shipped motion"),
+    ("", '[grid]\neffects = ["nope"]\n', "grid.effects", "effect set"),
+    ("", "[[points]]\nn_gyros = 4\nwidth = 3\n", "points[0].width", "unknown key"),
+    # rho = -0.2 is singular for N = 6 (bound -1/(N-1)): named at the grid keys
+    ("", '[grid]\nn_gyros = [6]\nrho_arw = [-0.2]\nalpha_deg = ["optimal"]\n', "grid.n_gyros",
+     "singular"),
+    ("", "[grid]\nn_gyros = [6]\nrho_arw = [-0.25]\n", "grid.n_gyros", "rho"),
+    ('estimators = ["ols", "kalman"]', TINY_GRID, "estimators", "unknown estimator"),
+    ("", '[effect_sets]\nbad = [{ effect = "arw", n_deg_rt_h = -1 }]\n', "effect_sets.bad",
+     "n_deg_rt_h"),
+])
+def test_invalid_sweeps_are_refused_with_file_and_key(tmp_path, extra_top, extra, key, words):
+    p = write(tmp_path, extra, extra_top)
+    with pytest.raises(InputError) as info:
+        load_sweep(p)
+    err = info.value
+    assert err.file == str(p), str(err)
+    assert key in str(err.column), str(err)
+    assert words in err.message, str(err)
+
+
+def test_invalid_top_level(tmp_path):
+    cases = {"seed": 'name = "x"\nbase = "paper003/swing_s1_n6"\n',
+             "base": 'name = "x"\nseed = 1\nbase = "no/such/scenario"\n',
+             "name": 'name = "a b"\nseed = 1\nbase = "paper003/swing_s1_n6"\n',
+             "base.layout": 'name = "x"\nseed = 1\n[base]\nsample_rate_hz = 100.0\n'
+                            '[base.motion]\nprofile = "p003_static_1h"\n'}
+    for key, text in cases.items():
+        p = tmp_path / f"{key}.toml"
+        p.write_text(text)
+        with pytest.raises(InputError) as info:
+            load_sweep(p)
+        assert info.value.file == str(p) and str(info.value.column).startswith(key), str(info.value)
+
+
+# -- the runner ----------------------------------------------------------------
+
+RUN_GRID = "[grid]\nn_gyros = [4, 6]\n[[points]]\nscheme = 2\nn_gyros = 5\nalpha_deg = \"optimal\"\n"
+
+
+def assert_same_bits(a: pd.DataFrame, b: pd.DataFrame):
+    """Equal frames, floats compared by their bits (NaN included)."""
+    assert list(a.columns) == list(b.columns) and len(a) == len(b) > 0
+    pd.testing.assert_frame_equal(a, b, check_exact=True)
+    for col in a.columns:
+        if a[col].dtype == np.float64:
+            assert np.array_equal(a[col].to_numpy().view(np.uint64),
+                                  b[col].to_numpy().view(np.uint64)), col
+
+
+@pytest.fixture(scope="module")
+def reference(tmp_path_factory, cache_env):
+    """An uninterrupted run with 2 workers."""
+    folder = tmp_path_factory.mktemp("ref")
+    sweep_file = write(folder, RUN_GRID)
+    summary = run_sweep(sweep_file, folder / "out", workers=2, progress=False)
+    return sweep_file, summary, load_results(folder / "out")
+
+
+def test_run_writes_one_file_per_scenario(reference):
+    sweep_file, summary, df = reference
+    sw = load_sweep(sweep_file)
+    assert summary["complete"] and summary["ran"] == 3 and summary["skipped"] == 0
+    out = Path(summary["out_dir"])
+    assert sorted(p.stem for p in (out / "rows").glob("*.parquet")) == [s.id for s in sw.scenarios]
+    assert len(df) == 3 * 3 * 3 == summary["rows_written"]       # scenarios x estimators x axes
+    assert not df.duplicated(["scenario_id", "estimator", "axis"]).any()
+    for col in ("scenario_id", "scenario_seed", "scheme", "n_gyros", "alpha_deg", "rho_arw",
+                "motion", "duration_s", "estimator", "axis", "sigma_1_deg_s", "reduction"):
+        assert col in df.columns
+    # the dataset as pandas/pyarrow read the folder: the same rows
+    direct = pd.read_parquet(out / "rows")
+    assert len(direct) == len(df)
+    manifest = json.loads((out / "sweep.json").read_text())
+    assert [s["id"] for s in manifest["scenarios"]] == [s.id for s in sw.scenarios]
+    # rerun: nothing left to do, the dataset unchanged
+    again = run_sweep(sweep_file, out, workers=1, progress=False)
+    assert again["ran"] == 0 and again["skipped"] == 3 and again["complete"]
+    assert_same_bits(load_results(out), df)
+
+
+def test_one_worker_equals_two_workers(reference, tmp_path):
+    sweep_file, _, df = reference
+    run_sweep(sweep_file, tmp_path / "one", workers=1, progress=False)
+    assert_same_bits(load_results(tmp_path / "one"), df)
+
+
+def test_refuses_to_resume_a_different_sweep(reference, tmp_path):
+    _, summary, _ = reference
+    other = write(tmp_path, RUN_GRID.replace("[4, 6]", "[4, 8]"))
+    with pytest.raises(InputError) as info:
+        run_sweep(other, summary["out_dir"], progress=False)
+    assert "different sweep" in info.value.message and info.value.file.endswith("sweep.json")
+
+
+def test_sigkill_and_resume_gives_the_same_dataset(reference, tmp_path):
+    sweep_file, _, df = reference
+    out = tmp_path / "killed"
+    code = ("import sys; from gyroarray.scenarios.runner import run_sweep; "
+            "run_sweep(sys.argv[1], sys.argv[2], workers=1, progress=False)")
+    proc = subprocess.Popen([sys.executable, "-c", code, str(sweep_file), str(out)],
+                            start_new_session=True, env=os.environ.copy())
+    try:
+        deadline = time.monotonic() + 120
+        while not list((out / "rows").glob("*.parquet")):
+            assert proc.poll() is None, "the sweep ended before it could be killed"
+            assert time.monotonic() < deadline, "no result file within 120 s"
+            time.sleep(0.05)
+    finally:
+        os.killpg(proc.pid, signal.SIGKILL)          # the runner and its worker processes
+        proc.wait()
+    n_before = len(list((out / "rows").glob("*.parquet")))
+    assert 1 <= n_before < 3, "killed after the first result and before the last"
+    # a partly written temporary file must not count (nor break the dataset)
+    (out / "rows" / ".garbage.999.tmp").write_bytes(b"PAR1 not a parquet file")
+    summary = run_sweep(sweep_file, out, workers=1, progress=False)
+    assert summary["complete"] and summary["skipped"] == n_before
+    assert summary["ran"] == 3 - n_before
+    assert_same_bits(load_results(out), df)
+    assert len(pd.read_parquet(out / "rows")) == len(df)
+
+
+def test_dask_cluster_equals_local(reference, tmp_path):
+    sweep_file, _, df = reference
+    try:
+        import dask
+        from distributed import LocalCluster
+    except ImportError as err:
+        pytest.skip(f"dask.distributed not importable: {err}")
+    from gyroarray.scenarios.runner import THREAD_ENV as env       # OPENBLAS_NUM_THREADS=1 etc.
+    try:
+        with dask.config.set({"distributed.nanny.pre-spawn-environ": env}):
+            cluster = LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                   dashboard_address=None, silence_logs=40)
+    except Exception as err:                              # noqa: BLE001 - any start failure
+        pytest.skip(f"a local dask.distributed cluster could not start here: {err!r}")
+    with cluster:
+        summary = run_sweep(sweep_file, tmp_path / "dask", scheduler=cluster.scheduler_address,
+                            progress=False)
+    assert summary["backend"] == "dask" and summary["complete"] and not summary["notes"]
+    assert_same_bits(load_results(tmp_path / "dask"), df)
