@@ -424,17 +424,22 @@ class _Sidecar:
 
 
 class _TomlDoc:
-    """A parsed sidecar and its text, to locate keys in error messages."""
+    """A parsed TOML file and its text, to name keys (and find their lines) in errors.
 
-    _TABLE_RE = re.compile(r"\s*\[\s*([A-Za-z0-9_.-]+)\s*\]\s*(?:#.*)?$")
+    Shared by the measurement sidecar, scenario and sweep readers. ``line_of``
+    understands ``[table]`` and ``[[array]]`` headers and ``key[i].leaf`` paths;
+    a key it cannot find points at its table's line.
+    """
+
+    _TABLE_RE = re.compile(r"\s*\[\[?\s*([A-Za-z0-9_.-]+)\s*\]\]?\s*(?:#.*)?$")
     _KEY_RE = re.compile(r"\s*([A-Za-z0-9_-]+)\s*=")
 
     def __init__(self, name: str, text: str, data: dict):
         self.name, self.text, self.data = name, text, data
 
     def line_of(self, key: str) -> int | None:
-        """Line of ``key`` (``table.key``, a table or a top-level key)."""
-        table, _, leaf = key.rpartition(".")
+        parts = re.sub(r"\[\d+\]", "", key).split(".")
+        table, leaf = ".".join(parts[:-1]), parts[-1]
         current = ""
         for number, line in enumerate(self.text.split("\n"), 1):
             header = self._TABLE_RE.match(line)
@@ -444,8 +449,10 @@ class _TomlDoc:
                     return number
                 continue
             k = self._KEY_RE.match(line)
-            if k and current == table and k.group(1) == leaf:
+            if k and k.group(1) == leaf and current == table:
                 return number
+        if table:   # a dotted key inside a table, or an inline table: the table's line
+            return self.line_of(table)
         return None
 
     def error(self, message: str, key: str) -> InputError:

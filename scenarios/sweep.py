@@ -72,6 +72,7 @@ from pathlib import Path
 import numpy as np
 
 from gyroarray.errors import InputError
+from gyroarray.measurement import _TomlDoc
 
 __all__ = ["Sweep", "ScenarioSpec", "load_sweep", "scenario_id", "scenario_seed", "PARAM_KEYS"]
 
@@ -96,35 +97,7 @@ def _is_num(v) -> bool:
     return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
 
 
-class _Doc:
-    """A parsed TOML file, to name keys (and find their lines) in errors."""
-
-    _TABLE_RE = re.compile(r"\s*\[\[?\s*([A-Za-z0-9_.-]+)\s*\]\]?\s*(?:#.*)?$")
-    _KEY_RE = re.compile(r"\s*([A-Za-z0-9_-]+)\s*=")
-
-    def __init__(self, name: str, text: str, data: dict):
-        self.name, self.text, self.data = name, text, data
-
-    def line_of(self, key: str) -> int | None:
-        parts = re.sub(r"\[\d+\]", "", key).split(".")
-        table, leaf = ".".join(parts[:-1]), parts[-1]
-        current = ""
-        for number, line in enumerate(self.text.split("\n"), 1):
-            header = self._TABLE_RE.match(line)
-            if header:
-                current = header.group(1)
-                if current == key:
-                    return number
-                continue
-            k = self._KEY_RE.match(line)
-            if k and k.group(1) == leaf and current == table:
-                return number
-        if table:   # a dotted key inside a table, or an inline table: the table's line
-            return self.line_of(table)
-        return None
-
-    def error(self, message: str, key: str) -> InputError:
-        return InputError(message, file=self.name, line=self.line_of(key), column=key)
+_Doc = _TomlDoc  # one TOML key locator for sidecars, scenarios and sweeps
 
 
 def _read_doc(path: Path, what: str) -> _Doc:
