@@ -347,6 +347,7 @@ def cmd_sweep(args):
              f"{summary['rows_written']} rows in {summary['seconds']:.1f} s -> {summary['dataset']}"]
     lines += [f"failed {f['id']}: {f['error']}" for f in summary["failed"]]
     lines += [f"note: {n}" for n in summary.get("notes", [])]
+    lines += [f"left out (skip_invalid) {x['id']}: {x['reason']}" for x in summary["excluded"]]
     return summary, "\n".join(lines), (EXIT_OK if summary["complete"] else EXIT_FAIL)
 
 

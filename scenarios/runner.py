@@ -55,7 +55,7 @@ THREAD_ENV = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THRE
               "NUMBA_NUM_THREADS": "1"}
 MANIFEST = "sweep.json"
 ROWS = "rows"
-_STR_COLS = ("estimator", "axis", "scenario_id", "motion", "effects", "sweep")
+_STR_COLS = ("estimator", "axis", "scenario_id", "motion", "effects", "sweep", "scenario")
 
 
 def run_one(spec: ScenarioSpec, estimators, sweep_name: str):
@@ -86,7 +86,7 @@ def _typed(df):
             df[col] = df[col].astype(object)
         elif col in ("scheme",):
             df[col] = pd.array(df[col], dtype="Int64")
-        elif col in ("n_gyros", "scenario_seed"):
+        elif col in ("n_gyros", "scenario_seed", "replicate"):
             df[col] = df[col].astype("int64")
         elif col == "alpha_optimal":
             df[col] = df[col].astype(bool)
@@ -188,6 +188,13 @@ class _Progress:
         self.show()
 
 
+def _cost(spec: ScenarioSpec) -> float:
+    """Rough work of a scenario: samples × gyros (for scheduling only)."""
+    sc = spec.build()
+    duration = sc.duration_s if sc.duration_s is not None else sc.profile.duration_s
+    return duration * sc.sample_rate_hz * sc.layout.n_gyros
+
+
 def _dask_client(scheduler: str):
     try:
         from distributed import Client
@@ -221,7 +228,8 @@ def run_sweep(sweep, out_dir, *, workers: int = 1, scheduler: str | None = None,
     dict
         ``sweep``, ``out_dir``, ``dataset``, ``scenarios``, ``ran``, ``skipped``,
         ``failed`` (list of {id, error}), ``complete``, ``rows_written``,
-        ``seconds``, ``workers``, ``backend``.
+        ``seconds``, ``workers``, ``backend``, ``notes``, ``excluded`` (grid
+        combinations left out by ``skip_invalid``: {id, reason}).
     """
     t0 = time.perf_counter()
     if not isinstance(sweep, Sweep):
@@ -235,6 +243,8 @@ def run_sweep(sweep, out_dir, *, workers: int = 1, scheduler: str | None = None,
     _check_manifest(out, sweep)
     rows_dir = out / ROWS
     todo = [s for s in sweep.scenarios if not (rows_dir / f"{s.id}.parquet").exists()]
+    # longest first (a better finish on few workers); results do not depend on the order
+    todo.sort(key=lambda s: (-_cost(s), s.id))
     skipped = len(sweep.scenarios) - len(todo)
     bar = _Progress(len(sweep.scenarios), skipped, progress)
     failed, rows_written = [], 0
@@ -290,4 +300,5 @@ def run_sweep(sweep, out_dir, *, workers: int = 1, scheduler: str | None = None,
             "failed": failed, "complete": complete, "rows_written": rows_written,
             "seconds": time.perf_counter() - t0,
             "workers": None if scheduler else workers, "scheduler": scheduler,
-            "backend": backend, "notes": notes}
+            "backend": backend, "notes": notes,
+            "excluded": [{"id": i, "reason": r} for i, r in sweep.excluded]}

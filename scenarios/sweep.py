@@ -43,6 +43,22 @@ A sweep file is TOML, data only (nothing in it is evaluated or imported):
     n_gyros = 6
     alpha_deg = 60.0
 
+Other top-level keys:
+
+.. code-block:: toml
+
+    replicates = 5                         # run each scenario 5 times (seeds differ;
+                                           # adds the parameter ``replicate`` = 0..4)
+    skip_invalid = true                    # grid combinations that make no valid
+                                           # scenario (e.g. rho below -1/(N-1)) are
+                                           # left out and listed (``Sweep.excluded``)
+                                           # instead of refusing the sweep
+    scenarios = ["paper003/swing_s1_n6", "paper003/swing_s1_n8"]
+                                           # instead of base/grid/points: a list of
+                                           # scenario files run as they are (resolved
+                                           # like ``base``); the ``scenario`` column
+                                           # of the results names the file
+
 Every scenario gets an id derived from its parameter values only (a short
 readable slug plus 12 hex digits of the SHA-256 of the canonical JSON of the
 parameters), never from its position, and a seed derived from the sweep seed
@@ -79,7 +95,9 @@ __all__ = ["Sweep", "ScenarioSpec", "load_sweep", "scenario_id", "scenario_seed"
 #: Keys a grid or a point may vary.
 PARAM_KEYS = ("scheme", "n_gyros", "alpha_deg", "rho_arw", "rho_rrw", "motion", "effects",
               "duration_s")
-_TOP_KEYS = {"name", "description", "seed", "estimators", "base", "grid", "points", "effect_sets"}
+_TOP_KEYS = {"name", "description", "seed", "estimators", "base", "grid", "points", "effect_sets",
+             "replicates", "skip_invalid", "scenarios"}
+MAX_REPLICATES = 1000
 _BASE_KEYS = {"description", "sample_rate_hz", "duration_s", "layout", "motion", "site",
               "temperature", "effects"}
 _REF_BASE_KEYS = _BASE_KEYS | {"name", "seed"}      # a scenario file's name/seed are ignored
@@ -134,6 +152,8 @@ def scenario_id(params: dict) -> str:
     """
     digest = hashlib.sha256(_canonical(params).encode()).hexdigest()[:12]
     parts = []
+    if params.get("scenario"):
+        parts.append(str(params["scenario"]).replace("/", "."))
     if params.get("scheme") is not None:
         parts.append(f"s{params['scheme']}")
     parts.append(f"n{params['n_gyros']}")
@@ -149,7 +169,9 @@ def scenario_id(params: dict) -> str:
         parts.append(str(params["effects"])[:16])
     if params.get("duration_s") is not None:
         parts.append(f"d{params['duration_s']:g}")
-    slug = _SLUG_BAD.sub("", "_".join(parts))[:80]
+    if params.get("replicate") is not None:
+        parts.append(f"rep{params['replicate']}")
+    slug = _SLUG_BAD.sub("", "_".join(parts))[:96]
     return f"{slug}-{digest}"
 
 
@@ -204,7 +226,8 @@ class ScenarioSpec:
                 "alpha_deg": p["alpha_deg_value"], "alpha_optimal": p["alpha_deg"] == "optimal",
                 "rho_arw": p["rho_arw"], "rho_rrw": p["rho_rrw"], "motion": p["motion"],
                 "effects": p["effects"], "duration_s": p["duration_s_value"],
-                "sample_rate_hz": float(self.data["sample_rate_hz"])}
+                "sample_rate_hz": float(self.data["sample_rate_hz"]),
+                "scenario": p.get("scenario") or "", "replicate": int(p.get("replicate") or 0)}
 
 
 @dataclass(frozen=True)
@@ -218,6 +241,8 @@ class Sweep:
     description: str = ""
     source: str | None = None
     sha256: str = ""
+    #: (id, reason) of grid combinations left out by ``skip_invalid``.
+    excluded: tuple[tuple[str, str], ...] = ()
 
     def __len__(self) -> int:
         return len(self.scenarios)
@@ -228,7 +253,8 @@ class Sweep:
                 "sweep_sha256": self.sha256,
                 "estimators": None if self.estimators is None else list(self.estimators),
                 "scenarios": [{"id": s.id, "seed": s.seed, "params": s.params}
-                              for s in self.scenarios]}
+                              for s in self.scenarios],
+                "excluded": [{"id": i, "reason": r} for i, r in self.excluded]}
 
 
 class _Prefixed:
@@ -293,17 +319,17 @@ def _shipped_dir() -> Path:
     return Path(str(resources.files("gyroarray.scenarios")))
 
 
-def _resolve_base(ref: str, here: Path, doc: _Doc) -> Path:
+def _resolve_base(ref: str, here: Path, doc: _Doc, key: str = "base") -> Path:
     if not ref or "\\" in ref:
-        raise doc.error(f"base must name a scenario file, got {ref!r}", "base")
+        raise doc.error(f"{key} must name a scenario file, got {ref!r}", key)
     names = [ref] if ref.endswith(".toml") else [ref + ".toml", ref]
     for folder in (here, _shipped_dir()):
         for n in names:
             p = folder / n
             if p.is_file():
                 return p
-    raise doc.error(f"base scenario {ref!r} not found (looked in {here} and in the shipped "
-                    f"scenarios {_shipped_dir()})", "base")
+    raise doc.error(f"{key}: scenario {ref!r} not found (looked in {here} and in the shipped "
+                    f"scenarios {_shipped_dir()})", key)
 
 
 def _check_value(key: str, v, where: str, doc: _Doc, effect_sets: dict):
@@ -426,6 +452,42 @@ def _apply(base: dict, base_params: dict, given: dict, effect_sets: dict, sweep_
     return p, data
 
 
+@dataclass(frozen=True)
+class _Base:
+    data: dict
+    params: dict
+    file: str
+
+
+_EXTRA_ID_KEYS = ("scenario", "replicate")     # in the id only when set (old ids unchanged)
+
+
+def _load_base(base, sweep_dir: Path, doc: _Doc, key: str) -> _Base:
+    """A base scenario (file reference or inline table), checked and with its parameters."""
+    if isinstance(base, str):
+        bpath = _resolve_base(base, sweep_dir, doc, key)
+        bdoc = _read_doc(bpath, "base scenario")
+        bdata, bprefix, bfile, allowed = dict(bdoc.data), "", str(bpath), _REF_BASE_KEYS
+        bdata.pop("name", None), bdata.pop("seed", None)
+        bdata["_base_dir"] = str(bpath.parent)
+    elif isinstance(base, dict) and key == "base":
+        bdoc, bprefix, bfile, allowed = doc, "base.", doc.name, _BASE_KEYS
+        bdata = dict(base)
+        bdata["_base_dir"] = str(sweep_dir)
+    else:
+        raise doc.error(f"base must be a scenario file name or a [base] table, got {_type(base)}",
+                        key)
+    unknown = sorted(set(bdata) - allowed - {"_base_dir"})
+    if unknown:
+        raise bdoc.error(f"unknown key {bprefix}{unknown[0]} (known: {', '.join(sorted(allowed))})",
+                         bprefix + unknown[0])
+    for k in ("sample_rate_hz", "layout", "motion"):
+        if k not in bdata:
+            raise bdoc.error(f"{bprefix}{k} is missing", bprefix + k)
+    _build_scenario(bdata, "base", 0, bfile, bdoc, bprefix)     # the base itself is valid
+    return _Base(data=bdata, params=_base_params(bdata), file=bfile)
+
+
 def load_sweep(path) -> Sweep:
     """Read, strictly validate and expand a sweep file (see the module docstring).
 
@@ -441,7 +503,12 @@ def load_sweep(path) -> Sweep:
     if unknown:
         raise doc.error(f"unknown key {unknown[0]!r} (known: {', '.join(sorted(_TOP_KEYS))})",
                         unknown[0])
-    for key in ("name", "seed", "base"):
+    if "scenarios" in d:
+        clash = sorted({"base", "grid", "points", "effect_sets"} & set(d))
+        if clash:
+            raise doc.error(f"scenarios (a list of scenario files) and {clash[0]} exclude each "
+                            "other", clash[0])
+    for key in ("name", "seed", "base" if "scenarios" not in d else "scenarios"):
         if key not in d:
             raise doc.error(f"{key} is missing", key)
     name = d["name"]
@@ -470,31 +537,30 @@ def load_sweep(path) -> Sweep:
             raise doc.error("estimators lists a name twice", "estimators")
         estimators = tuple(estimators)
 
-    # the base
+    replicates = d.get("replicates")
+    if replicates is not None and not (isinstance(replicates, int) and not isinstance(replicates, bool)
+                                       and 1 <= replicates <= MAX_REPLICATES):
+        raise doc.error(f"replicates must be a whole number from 1 to {MAX_REPLICATES}, got "
+                        f"{_type(replicates)} {replicates!r}", "replicates")
+    skip_invalid = d.get("skip_invalid", False)
+    if not isinstance(skip_invalid, bool):
+        raise doc.error(f"skip_invalid must be true or false, got {_type(skip_invalid)} "
+                        f"{skip_invalid!r}", "skip_invalid")
+
+    # the base (or the listed scenario files)
     sweep_dir = path.parent
-    base = d["base"]
-    if isinstance(base, str):
-        bpath = _resolve_base(base, sweep_dir, doc)
-        bdoc = _read_doc(bpath, "base scenario")
-        bdata, bprefix, bfile, allowed = dict(bdoc.data), "", str(bpath), _REF_BASE_KEYS
-        bdata.pop("name", None), bdata.pop("seed", None)
-        bdata["_base_dir"] = str(bpath.parent)
-    elif isinstance(base, dict):
-        bdoc, bprefix, bfile, allowed = doc, "base.", str(path), _BASE_KEYS
-        bdata = dict(base)
-        bdata["_base_dir"] = str(sweep_dir)
+    bases: list[tuple[_Base, str | None]] = []
+    if "scenarios" in d:
+        refs = d["scenarios"]
+        if not (isinstance(refs, list) and refs and all(isinstance(r, str) for r in refs)):
+            raise doc.error(f"scenarios must be a non-empty array of scenario file names, got "
+                            f"{_type(refs)} {refs!r}", "scenarios")
+        if len(set(refs)) != len(refs):
+            raise doc.error("scenarios lists a file twice", "scenarios")
+        for ref in refs:
+            bases.append((_load_base(ref, sweep_dir, doc, "scenarios"), ref.removesuffix(".toml")))
     else:
-        raise doc.error(f"base must be a scenario file name or a [base] table, got {_type(base)}",
-                        "base")
-    unknown = sorted(set(bdata) - allowed - {"_base_dir"})
-    if unknown:
-        raise bdoc.error(f"unknown key {bprefix}{unknown[0]} (known: {', '.join(sorted(allowed))})",
-                         bprefix + unknown[0])
-    for key in ("sample_rate_hz", "layout", "motion"):
-        if key not in bdata:
-            raise bdoc.error(f"{bprefix}{key} is missing", bprefix + key)
-    _build_scenario(bdata, "base", 0, bfile, bdoc, bprefix)     # the base itself is valid
-    base_params = _base_params(bdata)
+        bases.append((_load_base(d["base"], sweep_dir, doc, "base"), None))
 
     # effect sets
     effect_sets = d.get("effect_sets", {})
@@ -558,26 +624,52 @@ def load_sweep(path) -> Sweep:
         combos.append(({}, {k: "base" for k in PARAM_KEYS}))
 
     specs: dict[str, ScenarioSpec] = {}
-    for given, where in combos:
-        params, data = _apply(bdata, base_params, given, effect_sets, sweep_dir, doc, where)
-        id_params = {k: params[k] for k in PARAM_KEYS}
-        sid = scenario_id(id_params)
-        if sid in specs:
-            if specs[sid].params != params:      # a hash collision: never silently merge
-                raise doc.error(f"two scenarios share the id {sid}", "grid")
-            continue                             # the same scenario twice (grid ∪ points)
-        spec = ScenarioSpec(id=sid, seed=scenario_seed(seed, sid), params=params, data=data,
-                            file=bfile)
-        try:
-            spec.build()
-        except InputError as err:
-            keys = [where[k] for k in given if k in ("rho_arw", "rho_rrw", "n_gyros", "duration_s",
-                                                     "motion", "effects", "alpha_deg", "scheme")]
-            raise InputError(f"scenario {sid} ({_canonical(id_params)}): {err.message}",
-                             file=str(path), line=err.line if err.file == str(path) else None,
-                             column=(err.column if err.file == str(path) and not keys
-                                     else ", ".join(sorted(set(keys))) or err.column)) from None
-        specs[sid] = spec
+    excluded: dict[str, str] = {}
+    reps = [None] if replicates is None else list(range(replicates))
+    for b, ref in bases:
+        for given, where in combos:
+            try:
+                params, data = _apply(b.data, b.params, given, effect_sets, sweep_dir, doc, where)
+            except InputError as err:
+                if not skip_invalid:
+                    raise
+                excluded[scenario_id({k: given.get(k) for k in PARAM_KEYS})] = err.message
+                continue
+            if ref is not None:
+                params["scenario"] = ref
+            for rep in reps:
+                p = dict(params)
+                if rep is not None:
+                    p["replicate"] = rep
+                id_params = {k: p.get(k) for k in (*PARAM_KEYS, *_EXTRA_ID_KEYS)
+                             if k in PARAM_KEYS or p.get(k) is not None}
+                sid = scenario_id(id_params)
+                if sid in specs:
+                    if specs[sid].params != p:      # a hash collision: never silently merge
+                        raise doc.error(f"two scenarios share the id {sid}", "grid")
+                    continue                         # the same scenario twice (grid ∪ points)
+                spec = ScenarioSpec(id=sid, seed=scenario_seed(seed, sid), params=p, data=data,
+                                    file=b.file)
+                try:
+                    spec.build()
+                except InputError as err:
+                    if skip_invalid:
+                        excluded[sid] = err.message
+                        continue
+                    keys = [where[k] for k in given if k in ("rho_arw", "rho_rrw", "n_gyros",
+                                                             "duration_s", "motion", "effects",
+                                                             "alpha_deg", "scheme")]
+                    raise InputError(f"scenario {sid} ({_canonical(id_params)}): {err.message}",
+                                     file=str(path), line=err.line if err.file == str(path) else None,
+                                     column=(err.column if err.file == str(path) and not keys
+                                             else ", ".join(sorted(set(keys))) or err.column)
+                                     ) from None
+                specs[sid] = spec
+    if not specs:
+        raise doc.error("the sweep has no valid scenario"
+                        + (f" (first problem: {next(iter(excluded.values()))})" if excluded else ""),
+                        "grid" if "grid" in d else "base")
     return Sweep(name=name, seed=seed, estimators=estimators,
                  scenarios=tuple(specs[k] for k in sorted(specs)), description=description,
-                 source=str(path), sha256=hashlib.sha256(doc.text.encode()).hexdigest())
+                 source=str(path), sha256=hashlib.sha256(doc.text.encode()).hexdigest(),
+                 excluded=tuple(sorted(excluded.items())))

@@ -140,6 +140,51 @@ def test_example_sweep_and_base_reference(tmp_path):
     assert ref.scenarios[0].params["motion"] == "p003_sine_5dps_0p03hz"
 
 
+def test_replicates_scenario_lists_and_skip_invalid(tmp_path):
+    # replicates: K copies of each scenario, distinct ids and seeds, old ids unchanged
+    one = load_sweep(write(tmp_path / "a", "[grid]\nn_gyros = [4, 6]\n"))
+    rep = load_sweep(write(tmp_path / "b", "[grid]\nn_gyros = [4, 6]\n", "replicates = 3"))
+    assert len(rep) == 6 and len({s.seed for s in rep.scenarios}) == 6
+    assert sorted(s.params["replicate"] for s in rep.scenarios) == [0, 0, 1, 1, 2, 2]
+    assert {s.id for s in one.scenarios}.isdisjoint({s.id for s in rep.scenarios})
+    assert all("_rep" in s.id for s in rep.scenarios)
+    assert all("replicate" not in s.params for s in one.scenarios)
+    assert rep.scenarios[0].row_params()["replicate"] in (0, 1, 2)
+    # a list of scenario files, run as they are, named in the rows
+    p = tmp_path / "list.toml"
+    p.write_text('name = "papers"\nseed = 3\nreplicates = 2\n'
+                 'scenarios = ["paper003/swing_s1_n6", "paper002/constant_10dps.toml"]\n')
+    lst = load_sweep(p)
+    assert len(lst) == 4
+    assert sorted({s.row_params()["scenario"] for s in lst.scenarios}) == [
+        "paper002/constant_10dps", "paper003/swing_s1_n6"]
+    s6 = next(s for s in lst.scenarios if s.params["scenario"] == "paper003/swing_s1_n6")
+    assert s6.build().layout.n_gyros == 6 and s6.params["motion"] == "p003_sine_5dps_0p03hz"
+    # skip_invalid: N = 8 with rho_rrw = -0.19 (below -1/7) is left out and listed
+    q = write(tmp_path / "c", '[grid]\nn_gyros = [4, 8]\nrho_rrw = [-0.19, 0.0]\n',
+              "skip_invalid = true")
+    sk = load_sweep(q)
+    assert len(sk) == 3 and len(sk.excluded) == 1
+    assert "n8" in sk.excluded[0][0] and "-1/(N-1)" in sk.excluded[0][1]
+    assert sk.manifest()["excluded"][0]["id"] == sk.excluded[0][0]
+    # without it the same grid is refused
+    with pytest.raises(InputError):
+        load_sweep(write(tmp_path / "d", '[grid]\nn_gyros = [4, 8]\nrho_rrw = [-0.19, 0.0]\n'))
+    # nothing valid left: refused, saying why
+    with pytest.raises(InputError, match="no valid scenario"):
+        load_sweep(write(tmp_path / "e", '[grid]\nn_gyros = [8]\nrho_rrw = [-0.19]\n',
+                         "skip_invalid = true"))
+    # scenarios and base exclude each other; bad replicates named
+    bad = tmp_path / "bad.toml"
+    bad.write_text('name = "x"\nseed = 1\nbase = "paper003/swing_s1_n6"\n'
+                   'scenarios = ["paper003/swing_s1_n8"]\n')
+    with pytest.raises(InputError, match="exclude each other"):
+        load_sweep(bad)
+    with pytest.raises(InputError) as info:
+        load_sweep(write(tmp_path / "f", TINY_GRID, "replicates = 0"))
+    assert info.value.column == "replicates" and info.value.line is not None
+
+
 @pytest.mark.parametrize("extra_top, extra, key, words", [
     ("colour = 1", TINY_GRID, "colour", "unknown key"),
     ("", "[grid]\nn_gyro = [4]\n", "grid.n_gyro", "unknown key"),
