@@ -3,6 +3,8 @@ PYTHON ?= python3
 VENV   ?= .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
+# sweep worker processes (one per core)
+WORKERS ?= $(shell nproc 2>/dev/null || echo 2)
 
 .PHONY: demo test bench venv clean
 
@@ -22,7 +24,11 @@ demo: $(STAMP)
 	$(VENV)/bin/gyroarray design --plot reports/demo/design_gdop.png
 	$(VENV)/bin/gyroarray simulate scenarios/examples/tetra_swing.toml --out reports/demo
 	$(VENV)/bin/gyroarray allan reports/demo/tetra_swing.csv.gz --plot reports/demo/tetra_swing_adev.png
-	@echo "demo: wrote reports/demo/design_gdop.png, reports/demo/tetra_swing.csv.gz (+ .toml) and reports/demo/tetra_swing_adev.png"
+	$(VENV)/bin/gyroarray sweep scenarios/sweeps/design_quick.toml --out reports/demo/design_quick --workers $(WORKERS)
+	$(VENV)/bin/gyroarray sweep scenarios/sweeps/paper_reproduction.toml --out reports/demo/paper_reproduction --workers $(WORKERS)
+	$(VENV)/bin/gyroarray report reports/demo/design_quick reports/demo/paper_reproduction --out reports/demo/report.html --md reports/demo/report.md
+	@echo "demo: the design comparison report is reports/demo/report.html (open it in a browser; Markdown twin reports/demo/report.md)"
+	@echo "demo: also wrote reports/demo/design_gdop.png, reports/demo/tetra_swing.csv.gz (+ .toml), reports/demo/tetra_swing_adev.png"
 
 test: $(STAMP)
 	$(PY) -m pytest -q

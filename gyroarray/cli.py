@@ -351,6 +351,28 @@ def cmd_sweep(args):
     return summary, "\n".join(lines), (EXIT_OK if summary["complete"] else EXIT_FAIL)
 
 
+# -- report -------------------------------------------------------------------
+
+def cmd_report(args):
+    from .reports.report import write_report
+    if args.top < 1:
+        raise InputError("gyroarray report: --top must be >= 1")
+    res = write_report(args.dirs, args.out, args.md, paper_values=args.paper_values, top=args.top)
+    lines = [f"report: {res['html']}" + (f" (Markdown twin {res['markdown']})" if res["markdown"] else "")
+             + f", {res['figures']} figures, {res['seconds']:.1f} s"]
+    for b in res["best"]:
+        lines.append(f"best for {b['motion']}: scheme {b['scheme']}, N = {b['n_gyros']}, "
+                     f"alpha = {b['alpha_deg']:.2f} deg, rho_arw = {b['rho_arw']}, {b['estimator']}: "
+                     f"1-sigma {b['sigma_1_deg_s']:.4g} deg/s")
+    flagged = [(e["title"], v) for e in res["paper_vs_model"] for v in e["values"] if v["flag"]]
+    n_all = sum(len(e["values"]) for e in res["paper_vs_model"])
+    if n_all:
+        lines.append(f"paper vs model: {n_all - len(flagged)} of {n_all} published values inside "
+                     "the model's 95 % band")
+    lines += [f"note: {n}" for n in res["notes"]]
+    return res, "\n".join(lines)
+
+
 # -- check --------------------------------------------------------------------
 
 def cmd_check(args):
@@ -438,6 +460,16 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--scheduler", metavar="tcp://HOST:PORT", help="a Dask distributed scheduler")
     p.add_argument("--json", action="store_true", help="print one JSON object (no progress bar)")
     p.set_defaults(func=cmd_sweep)
+
+    p = sub.add_parser("report", help="design comparison report (HTML + Markdown) from sweep folders")
+    p.add_argument("dirs", type=Path, nargs="+", metavar="DIR", help="gyroarray sweep --out folders")
+    p.add_argument("--out", type=Path, required=True, metavar="REPORT.html")
+    p.add_argument("--md", type=Path, metavar="REPORT.md", help="also write a Markdown twin")
+    p.add_argument("--paper-values", type=Path, metavar="FILE",
+                   help="paper values to compare with (default: the shipped scenarios/paper_values.toml)")
+    p.add_argument("--top", type=int, default=15, metavar="K", help="designs listed per motion (15)")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(func=cmd_report)
 
     p = sub.add_parser("check", help="regression thresholds: run the threshold scenarios, exit 1 on a failure")
     p.add_argument("thresholds", type=Path, nargs="?", metavar="THRESHOLDS.toml",

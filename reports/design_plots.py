@@ -22,8 +22,7 @@ def _rho_grid(n: int, count: int = 200) -> np.ndarray:
 
 
 def design_figure(path) -> Path:
-    """Write GDOP vs α (both schemes, N = 4, 5, 6, 8, ρ = 0), GDOP vs α for
-    several ρ (Scheme 1, N = 6) and GDOP vs ρ at the ρ = 0 optimal α.
+    """Write the design figure to ``path`` (see :func:`design_fig`).
 
     Parameters
     ----------
@@ -35,18 +34,28 @@ def design_figure(path) -> Path:
     Path
         The file written.
     """
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     path = Path(path)
     if path.suffix.lower() not in (".png", ".svg", ".pdf"):
         raise InputError(f"plot must end in .png, .svg or .pdf, got {path.name!r}", file=str(path))
     path.parent.mkdir(parents=True, exist_ok=True)
+    fig = design_fig()
+    fig.savefig(path, dpi=110)
+    return path
+
+
+def design_fig():
+    """The figure: GDOP vs α (both schemes, N = 4, 5, 6, 8, ρ = 0), GDOP vs α
+    for several ρ (Scheme 1, N = 6), GDOP vs ρ at the ρ = 0 optimal α and the
+    optimal α vs ρ (a matplotlib Figure on an Agg canvas; no pyplot state).
+    """
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
 
     alphas_deg = np.linspace(5.0, 175.0, 341)
     alphas = deg_to_rad(alphas_deg)
-    fig, axs = plt.subplots(2, 3, figsize=(15, 8.5), constrained_layout=True)
+    fig = Figure(figsize=(15, 8.5), layout="constrained")
+    FigureCanvasAgg(fig)
+    axs = fig.subplots(2, 3)
     for col, scheme in enumerate((1, 2)):
         ax = axs[0, col]
         for n in NS:
@@ -93,6 +102,4 @@ def design_figure(path) -> Path:
     ax.grid(alpha=0.3)
 
     fig.suptitle("gyroarray design analysis: GDOP = sqrt(trace((Hᵀ C⁻¹ H)⁻¹))")
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return fig

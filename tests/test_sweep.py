@@ -128,7 +128,7 @@ def test_ids_and_seeds_do_not_depend_on_order(tmp_path):
 
 def test_example_sweep_and_base_reference(tmp_path):
     sw = load_sweep(EXAMPLE)
-    assert len(sw) == 48 and sw.estimators == ("kf_array", "gls", "ols", "naive")
+    assert len(sw) == 48 and sw.estimators == ("kf_array", "kf_single", "gls", "ols", "naive", "bound")
     assert {s.params["scheme"] for s in sw.scenarios} == {1, 2}
     assert {s.params["n_gyros"] for s in sw.scenarios} == {4, 5, 6, 8}
     # base by reference to a shipped scenario (".toml" optional)

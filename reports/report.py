@@ -1,0 +1,687 @@
+"""The design comparison report: one self-contained HTML file and a Markdown twin.
+
+:func:`write_report` reads one or more sweep folders (``gyroarray sweep``
+output: ``sweep.json`` + ``rows/*.parquet``) and writes
+
+* **GDOP vs α and vs ρ** (paper 003 Figs. 8–10; from the layouts, no sweep needed);
+* the **design ranking** per motion: every scheme/N/α/ρ/estimator of the
+  sweeps with its 1σ error, fused ARW and RRW (mean over the body axes and
+  the replicates), best first, and a chart of the best 1σ per design;
+* **Allan deviation of single gyros vs the fused output** with confidence
+  bands (paper 003 Figs. 14 and 22), re-simulated from the sweep's own
+  scenario (same seed, same bits) for the best static design and, when a
+  paper sweep is given, for the paper's 6-gyro and 4-gyro static arrays;
+* the **estimator comparison** per motion: 1σ, reduction, attenuation,
+  phase lag and efficiency against the offline bound (when the sweep ran
+  ``bound``);
+* **paper vs model** for each reproduced experiment of
+  ``scenarios/paper_values.toml``: the paper's value, the model's mean and
+  standard deviation over the replicates, their ratio and a flag where the
+  paper's value lies outside the model's 95 % prediction interval
+  (mean ± t₀.₉₇₅,ₙ₋₁ · sd · √(1 + 1/n): where one more run of the model
+  would fall), with the experiment's likely-reason sentence.
+
+The HTML has its figures as ``data:image/png;base64`` URIs, its style inline
+and no script: it opens anywhere, offline. The Markdown twin has the same
+tables and links the same figures, written as PNG files into
+``<md stem>_figures/`` beside it.
+
+Units are in the column names (deg/s, deg/√h, deg/h/√h: the datasheet edge).
+"""
+
+from __future__ import annotations
+
+import base64
+import html
+import io
+import json
+import math
+import time
+import tomllib
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from gyroarray import units
+from gyroarray.errors import InputError
+
+__all__ = ["SweepData", "load_sweep_dir", "design_ranking", "estimator_comparison",
+           "paper_vs_model", "load_paper_values", "write_report", "default_paper_values"]
+
+#: Two-sided level of the paper-vs-model prediction interval.
+AGREEMENT_LEVEL = 0.95
+AXES = ("x", "y", "z")
+_METRICS = ("sigma_1_deg_s", "arw_deg_rt_h", "rrw_deg_h_rt_h", "bi_deg_h",
+            "noise_density_deg_s_rt_hz", "attenuation", "phase_deg", "efficiency", "reduction")
+#: Single-gyro value of a metric: the estimator's value × the matching reduction column.
+_SINGLE_FROM = {"sigma_1_deg_s": "reduction", "arw_deg_rt_h": "arw_reduction",
+                "rrw_deg_h_rt_h": "rrw_reduction", "bi_deg_h": "bi_reduction"}
+_LABELS = {"sigma_1_deg_s": "1σ error [deg/s]", "arw_deg_rt_h": "ARW [deg/√h]",
+           "rrw_deg_h_rt_h": "RRW [deg/h/√h]", "bi_deg_h": "bias instability [deg/h]",
+           "noise_density_deg_s_rt_hz": "noise density [deg/s/√Hz]",
+           "attenuation": "amplitude ratio [-]", "phase_deg": "phase lag [deg]",
+           "efficiency": "efficiency vs bound [-]", "reduction": "1σ reduction [-]"}
+
+
+# -- reading -------------------------------------------------------------------
+
+@dataclass
+class SweepData:
+    """One sweep folder: its manifest and result rows."""
+
+    path: Path
+    name: str
+    manifest: dict
+    rows: pd.DataFrame
+    missing: int = 0          # scenarios of the manifest without results (not finished)
+
+    @property
+    def is_paper(self) -> bool:
+        """Rows that come from listed scenario files (a paper reproduction)."""
+        return "scenario" in self.rows and bool((self.rows["scenario"].astype(str) != "").any())
+
+
+def load_sweep_dir(path) -> SweepData:
+    """Read a ``gyroarray sweep`` output folder (complete scenario files only)."""
+    from gyroarray.scenarios.runner import MANIFEST, load_results
+
+    path = Path(path)
+    man = path / MANIFEST
+    if not path.is_dir():
+        raise InputError("not a folder (give the --out folder of gyroarray sweep)", file=str(path))
+    if not man.is_file():
+        raise InputError(f"no {MANIFEST}: not a gyroarray sweep folder", file=str(path))
+    try:
+        manifest = json.loads(man.read_text())
+    except (OSError, ValueError) as err:
+        raise InputError(f"unreadable sweep manifest: {err}", file=str(man)) from None
+    rows = load_results(path)
+    if rows.empty:
+        raise InputError("the sweep has no finished scenario yet (rows/ is empty)",
+                         file=str(path))
+    done = set(rows["scenario_id"])
+    missing = sum(1 for s in manifest.get("scenarios", []) if s["id"] not in done)
+    if "scenario" not in rows:
+        rows["scenario"] = ""
+    if "replicate" not in rows:
+        rows["replicate"] = 0
+    return SweepData(path=path, name=str(manifest.get("name", path.name)), manifest=manifest,
+                     rows=rows, missing=missing)
+
+
+def default_paper_values() -> Path:
+    """The shipped ``scenarios/paper_values.toml``."""
+    return Path(str(resources.files("gyroarray.scenarios"))) / "paper_values.toml"
+
+
+def load_paper_values(path=None) -> list[dict]:
+    """The experiments of a paper-values file (see the file's header), checked."""
+    path = Path(path) if path is not None else default_paper_values()
+    try:
+        data = tomllib.loads(path.read_text(encoding="utf-8"))
+    except OSError as err:
+        raise InputError(f"cannot read the paper values: {err.strerror}", file=str(path)) from None
+    except tomllib.TOMLDecodeError as err:
+        raise InputError(f"not valid TOML: {err}", file=str(path)) from None
+    exps = data.get("experiment")
+    if not isinstance(exps, list) or not exps:
+        raise InputError("no [[experiment]] tables", file=str(path))
+    for i, e in enumerate(exps):
+        where = f"experiment[{i}]"
+        for key, typ in (("title", str), ("scenario", str), ("estimator", str), ("values", list)):
+            if not isinstance(e.get(key), typ):
+                raise InputError(f"{where}.{key} is missing or not a {typ.__name__}",
+                                 file=str(path), column=f"{where}.{key}")
+        for j, v in enumerate(e["values"]):
+            ok = (isinstance(v, dict) and v.get("axis") in (*AXES, "single")
+                  and v.get("metric") in _METRICS and isinstance(v.get("value"), (int, float))
+                  and not isinstance(v.get("value"), bool))
+            if not ok or (v["axis"] == "single" and v["metric"] not in _SINGLE_FROM):
+                raise InputError(f"{where}.values[{j}] must be {{ axis = x|y|z|single, metric = "
+                                 f"one of {', '.join(_METRICS)} (single: {', '.join(_SINGLE_FROM)}),"
+                                 f" value = number }}, got {v!r}", file=str(path),
+                                 column=f"{where}.values[{j}]")
+    return exps
+
+
+# -- tables --------------------------------------------------------------------
+
+_DESIGN_KEYS = ["motion", "scheme", "n_gyros", "alpha_deg", "rho_arw", "rho_rrw", "effects",
+                "estimator"]
+
+
+def design_ranking(rows: pd.DataFrame) -> pd.DataFrame:
+    """One row per design × estimator (per motion), best 1σ first.
+
+    Means over the body axes and the replicates: ``sigma_1_deg_s``,
+    ``arw_deg_rt_h``, ``rrw_deg_h_rt_h``; ``attenuation`` is the one farthest
+    from 1 over the swinging axes; ``runs`` the number of scenario runs;
+    ``rank`` within the motion. The offline ``bound`` is not a design
+    choice and is left out.
+    """
+    df = rows[rows.estimator != "bound"].copy()
+    df = df.assign(**{k: df[k].astype(object).where(df[k].notna(), "none")
+                      for k in ("scheme", "rho_arw", "rho_rrw")})
+    g = df.groupby(_DESIGN_KEYS, sort=False, dropna=False)
+    att = g["attenuation"].agg(lambda a: np.nan if a.isna().all()
+                               else float(a.dropna().iloc[np.argmax(np.abs(a.dropna() - 1.0))]))
+    out = g.agg(sigma_1_deg_s=("sigma_1_deg_s", "mean"), arw_deg_rt_h=("arw_deg_rt_h", "mean"),
+                rrw_deg_h_rt_h=("rrw_deg_h_rt_h", "mean"), reduction=("reduction", "mean"),
+                runs=("scenario_id", "nunique")).join(att).reset_index()
+    out = out.sort_values(["motion", "sigma_1_deg_s"], kind="stable")
+    out["rank"] = out.groupby("motion").cumcount() + 1
+    return out.reset_index(drop=True)
+
+
+def estimator_comparison(rows: pd.DataFrame) -> pd.DataFrame:
+    """Per motion and estimator: medians over designs, axes and runs.
+
+    ``sigma_1_deg_s``, ``reduction``, ``attenuation`` and ``phase_deg`` (swinging
+    axes only), ``efficiency`` (1σ of the bound / 1σ of the estimator; needs
+    ``bound`` in the sweep) and its minimum.
+    """
+    g = rows.groupby(["motion", "estimator"], sort=True)
+    out = g.agg(sigma_1_deg_s=("sigma_1_deg_s", "median"), reduction=("reduction", "median"),
+                attenuation=("attenuation", "median"), phase_deg=("phase_deg", "median"),
+                efficiency=("efficiency", "median"), efficiency_min=("efficiency", "min"),
+                runs=("scenario_id", "nunique"))
+    return out.reset_index()
+
+
+def _t_quantile(dof: int) -> float:
+    from scipy import stats
+    return float(stats.t.ppf(0.5 + AGREEMENT_LEVEL / 2.0, dof))
+
+
+def paper_vs_model(rows: pd.DataFrame, experiments: list[dict]) -> list[dict]:
+    """Each experiment with its values beside the model's spread over the replicates.
+
+    Returns a list of ``{"title", "scenario", "estimator", "reason", "runs",
+    "flagged", "values": [{"axis", "metric", "paper", "model_mean", "model_sd",
+    "model_min", "model_max", "n", "ratio", "low", "high", "flag"}]}`` for the
+    experiments whose scenario is in ``rows`` (``low``/``high``: the 95 %
+    prediction interval of one more model run; ``flag``: the paper's value is
+    outside it; ``ratio`` = paper / model mean).
+    """
+    out = []
+    for e in experiments:
+        sub = rows[(rows.scenario == e["scenario"]) & (rows.estimator == e["estimator"])]
+        if sub.empty:
+            continue
+        vals = []
+        for v in e["values"]:
+            if v["axis"] == "single":
+                per_run = (sub[v["metric"]] * sub[_SINGLE_FROM[v["metric"]]]).groupby(
+                    sub.scenario_id).mean()
+            else:
+                per_run = sub[sub.axis == v["axis"]].set_index("scenario_id")[v["metric"]]
+            x = per_run.dropna().to_numpy(float)
+            n = x.size
+            mean = float(np.mean(x)) if n else math.nan
+            sd = float(np.std(x, ddof=1)) if n > 1 else math.nan
+            if n > 1:
+                half = _t_quantile(n - 1) * sd * math.sqrt(1.0 + 1.0 / n)
+                low, high = mean - half, mean + half
+                flag = not (low <= v["value"] <= high)
+            else:
+                low = high = math.nan
+                flag = n == 1 and not math.isclose(v["value"], mean, rel_tol=1e-9)
+            vals.append({"axis": v["axis"], "metric": v["metric"], "paper": float(v["value"]),
+                         "model_mean": mean, "model_sd": sd,
+                         "model_min": float(np.min(x)) if n else math.nan,
+                         "model_max": float(np.max(x)) if n else math.nan, "n": int(n),
+                         "ratio": float(v["value"]) / mean if n and mean else math.nan,
+                         "low": low, "high": high, "flag": bool(flag)})
+        flagged = any(v["flag"] for v in vals)
+        out.append({"title": e["title"], "scenario": e["scenario"], "estimator": e["estimator"],
+                    "reason": " ".join(str(e.get("reason", "")).split()) if flagged else "",
+                    "runs": int(sub.scenario_id.nunique()), "flagged": flagged, "values": vals})
+    return out
+
+
+# -- figures -------------------------------------------------------------------
+
+def _figure(w=9.0, h=5.0, ncols=1):
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+    fig = Figure(figsize=(w, h), layout="constrained")
+    FigureCanvasAgg(fig)
+    axs = fig.subplots(1, ncols, squeeze=False)[0]
+    return fig, axs
+
+
+def _png(fig, dpi=96) -> bytes:
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=dpi)
+    return buf.getvalue()
+
+
+def _ranking_fig(ranking: pd.DataFrame) -> bytes:
+    """Best 1σ (over estimators and ρ) vs N, per scheme, one panel per motion."""
+    motions = list(dict.fromkeys(ranking.motion))
+    fig, axs = _figure(5.0 * len(motions), 4.2, len(motions))
+    for ax, motion in zip(axs, motions):
+        sub = ranking[ranking.motion == motion]
+        for (scheme, est), grp in sub.groupby(["scheme", "estimator"], sort=True):
+            best = grp.groupby("n_gyros")["sigma_1_deg_s"].min()
+            ax.plot(best.index, best.to_numpy(), "o-" if scheme == 1 else "s--",
+                    label=f"scheme {scheme}, {est}")
+        ax.set(title=f"{motion}: best 1σ error per N", xlabel="gyros N [-]",
+               ylabel="1σ error [deg/s]", yscale="log")
+        ax.grid(alpha=0.3, which="both")
+        ax.legend(fontsize=7, ncol=2)
+    return _png(fig)
+
+
+def _estimator_fig(comp: pd.DataFrame) -> bytes:
+    motions = list(dict.fromkeys(comp.motion))
+    fig, axs = _figure(5.0 * len(motions), 4.0, len(motions))
+    for ax, motion in zip(axs, motions):
+        sub = comp[comp.motion == motion].sort_values("sigma_1_deg_s")
+        ax.barh(sub.estimator, sub.sigma_1_deg_s, color="C0")
+        for y, (s, e) in enumerate(zip(sub.sigma_1_deg_s, sub.efficiency)):
+            if np.isfinite(e):
+                ax.text(s, y, f"  eff {e:.2f}", va="center", fontsize=8)
+        ax.set(title=f"{motion}: median 1σ error by estimator", xlabel="1σ error [deg/s]")
+        ax.grid(alpha=0.3, axis="x")
+    return _png(fig)
+
+
+def _paper_fig(pvm: list[dict]) -> bytes:
+    """Paper / model ratio of every compared value, with the model's 95 % band."""
+    items = [(e, v) for e in pvm for v in e["values"] if np.isfinite(v["ratio"])]
+    fig, axs = _figure(9.0, max(3.0, 0.22 * len(items) + 1.2))
+    ax = axs[0]
+    labels = []
+    for i, (e, v) in enumerate(items):
+        m = v["model_mean"]
+        lo, hi = v["low"] / m, v["high"] / m
+        if np.isfinite(lo) and np.isfinite(hi) and m > 0:
+            ax.plot([max(lo, 1e-3), hi], [i, i], color="0.7", lw=5, solid_capstyle="butt")
+        ax.plot(v["ratio"], i, "o", color="C3" if v["flag"] else "C2", ms=5)
+        labels.append(f"{e['scenario'].split('/')[-1]} {v['axis']} {v['metric'].split('_')[0]}")
+    ax.axvline(1.0, color="k", lw=0.8)
+    finite = [v["ratio"] for _, v in items if v["ratio"] > 0]
+    ax.set_xlim(min([0.05, *[r / 2 for r in finite]]), max([20.0, *[2 * r for r in finite]]))
+    ax.set_yticks(range(len(items)), labels, fontsize=7)
+    ax.invert_yaxis()
+    ax.set(xscale="log", xlabel="paper / model mean [-]  (grey: model 95 % prediction band; "
+           "red: outside)", title="Paper vs model")
+    ax.grid(alpha=0.3, axis="x", which="both")
+    return _png(fig)
+
+
+@dataclass
+class _Adev:
+    title: str
+    png: bytes
+    note: str = ""
+
+
+def _adev_fig(title: str, spec, estimator: str) -> _Adev:
+    """Re-simulate one sweep scenario: ADEV of the single gyros and of the fused axes."""
+    from gyroarray.analysis.allan import allan_analysis
+    from gyroarray.chain import SETTLE_S
+    from gyroarray.estimators import get_estimator
+    from gyroarray.sim.scenario import simulate
+
+    sc = spec.build()
+    res = simulate(sc)
+    dt = 1.0 / sc.sample_rate_hz
+    est = get_estimator(estimator)().fit(sc.layout, sc.model, dt).estimate(res.readings_rad_s)
+    t = res.truth.time_s
+    keep = t >= t[0] + SETTLE_S
+    truth = res.truth.omega_body_rad_s
+    gyro_err = (res.readings_rad_s - truth @ sc.layout.H.T)[keep]
+    fused_err = (est - truth)[keep]
+    fig, axs = _figure(8.0, 5.0)
+    ax = axs[0]
+    to = units.rad_s_to_deg_h
+    curves = [(f"gyro {k + 1}", gyro_err[:, k], "0.55", 0.12) for k in range(gyro_err.shape[1])]
+    curves += [(f"fused {a}", fused_err[:, i], f"C{i}", 0.25) for i, a in enumerate(AXES)]
+    lines = []
+    for label, series, color, alpha in curves:
+        an = allan_analysis(series, dt)
+        ax.fill_between(an.taus_s, to(an.ci_low_rad_s), to(an.ci_high_rad_s), color=color,
+                        alpha=alpha, lw=0)
+        ax.loglog(an.taus_s, to(an.adev_rad_s), color=color,
+                  lw=0.8 if label.startswith("gyro") else 1.6,
+                  label=label if (not label.startswith("gyro") or label == "gyro 1") else None)
+        lines.append((label, an))
+    ax.set(title=title, xlabel="averaging time τ [s]", ylabel="Allan deviation [deg/h]")
+    ax.grid(alpha=0.3, which="both")
+    ax.legend(fontsize=8, title="(grey: every single gyro)", title_fontsize=7)
+    single = np.mean([an.fit.to_datasheet_dict()["arw_deg_rt_h"] for lab, an in lines
+                      if lab.startswith("gyro")])
+    fused = [an.fit.to_datasheet_dict()["arw_deg_rt_h"] for lab, an in lines
+             if lab.startswith("fused")]
+    note = (f"{estimator} on {sc.layout.n_gyros} gyros, seed {spec.seed}: fitted ARW single "
+            f"{single:.4g} deg/√h, fused x/y/z " + " / ".join(f"{f:.4g}" for f in fused)
+            + "; bands: 1σ confidence of each point (Greenhall EDF).")
+    return _Adev(title=title, png=_png(fig), note=note)
+
+
+def _find_spec(data: SweepData, pick):
+    """The ScenarioSpec of the sweep's own file for a chosen result row (None: not found)."""
+    from gyroarray.scenarios.sweep import load_sweep
+
+    src = data.manifest.get("source")
+    if not src or not Path(src).is_file():
+        return None, f"the sweep file {src} is not available to re-simulate from"
+    try:
+        sweep = load_sweep(src)
+    except InputError as err:
+        return None, f"the sweep file no longer loads: {err}"
+    if sweep.sha256 != data.manifest.get("sweep_sha256"):
+        return None, f"the sweep file {src} changed since the run"
+    by_id = {s.id: s for s in sweep.scenarios}
+    return by_id.get(pick), ""
+
+
+# -- rendering -----------------------------------------------------------------
+
+def _fmt(v, digits=4) -> str:
+    if v is None or (isinstance(v, float) and not np.isfinite(v)):
+        return "–"
+    if isinstance(v, (bool, np.bool_)):
+        return "yes" if v else "no"
+    if isinstance(v, (int, np.integer)):
+        return str(int(v))
+    if isinstance(v, (float, np.floating)):
+        a = abs(float(v))
+        if a != 0 and (a < 1e-3 or a >= 1e5):
+            return f"{float(v):.{digits - 1}e}"
+        return f"{float(v):.{digits}g}"
+    return str(v)
+
+
+class _Doc:
+    """Builds the HTML and the Markdown side by side."""
+
+    def __init__(self, title: str):
+        self.title = title
+        self.html: list[str] = []
+        self.md: list[str] = [f"# {title}", ""]
+        self.figures: list[tuple[str, bytes]] = []
+        self.toc: list[tuple[str, str]] = []
+
+    def h2(self, text: str):
+        anchor = "s" + str(len(self.toc) + 1)
+        self.toc.append((anchor, text))
+        self.html.append(f'<h2 id="{anchor}">{html.escape(text)}</h2>')
+        self.md += [f"## {text}", ""]
+
+    def h3(self, text: str):
+        self.html.append(f"<h3>{html.escape(text)}</h3>")
+        self.md += [f"### {text}", ""]
+
+    def p(self, text: str, cls: str = ""):
+        c = f' class="{cls}"' if cls else ""
+        self.html.append(f"<p{c}>{html.escape(text)}</p>")
+        self.md += [text, ""]
+
+    def table(self, headers: list[str], rows: list[list], flags: list[bool] | None = None):
+        h = "".join(f"<th>{html.escape(x)}</th>" for x in headers)
+        body = []
+        for i, r in enumerate(rows):
+            cls = ' class="flag"' if flags and flags[i] else ""
+            body.append(f"<tr{cls}>" + "".join(f"<td>{html.escape(_fmt(c))}</td>" for c in r)
+                        + "</tr>")
+        self.html.append(f"<table><thead><tr>{h}</tr></thead><tbody>{''.join(body)}</tbody></table>")
+        self.md.append("| " + " | ".join(headers) + " |")
+        self.md.append("|" + "---|" * len(headers))
+        for r in rows:
+            self.md.append("| " + " | ".join(_fmt(c).replace("|", "\\|") for c in r) + " |")
+        self.md.append("")
+
+    def figure(self, name: str, png: bytes, caption: str):
+        self.figures.append((name, png))
+        b64 = base64.b64encode(png).decode("ascii")
+        self.html.append(f'<figure><img src="data:image/png;base64,{b64}" alt="{html.escape(caption)}">'
+                         f"<figcaption>{html.escape(caption)}</figcaption></figure>")
+        self.md += [f"![{caption}]({{FIGDIR}}/{name}.png)", "", f"*{caption}*", ""]
+
+    def render_html(self, subtitle: str) -> str:
+        toc = "".join(f'<li><a href="#{a}">{html.escape(t)}</a></li>' for a, t in self.toc)
+        return _HTML.format(title=html.escape(self.title), subtitle=html.escape(subtitle),
+                            toc=toc, body="\n".join(self.html))
+
+    def render_md(self, figdir: str) -> str:
+        return "\n".join(self.md).replace("{FIGDIR}", figdir) + "\n"
+
+
+_HTML = """<!DOCTYPE html>
+<html lang="en"><head><meta charset="utf-8">
+<meta name="viewport" content="width=device-width, initial-scale=1">
+<title>{title}</title>
+<style>
+body {{ font-family: system-ui, -apple-system, "Segoe UI", sans-serif; margin: 2em auto;
+       max-width: 1200px; padding: 0 1em; color: #222; line-height: 1.45; }}
+h1 {{ margin-bottom: 0.1em; }} .sub {{ color: #666; margin-top: 0; }}
+h2 {{ border-bottom: 2px solid #ddd; padding-bottom: 0.2em; margin-top: 2em; }}
+table {{ border-collapse: collapse; margin: 0.6em 0 1.2em; font-size: 0.88em; }}
+th, td {{ border: 1px solid #ccc; padding: 0.25em 0.6em; text-align: right; }}
+th {{ background: #f2f2f2; }} td:first-child, th:first-child {{ text-align: left; }}
+tr.flag td {{ background: #fde8e8; }}
+figure {{ margin: 1em 0; }} figure img {{ max-width: 100%; border: 1px solid #eee; }}
+figcaption {{ color: #555; font-size: 0.9em; }}
+.note {{ color: #555; font-size: 0.92em; }} .reason {{ background: #fff6e0; padding: 0.5em;
+       border-left: 4px solid #e0a800; }}
+nav ol {{ columns: 2; }}
+</style></head>
+<body>
+<h1>{title}</h1>
+<p class="sub">{subtitle}</p>
+<nav><ol>{toc}</ol></nav>
+{body}
+</body></html>
+"""
+
+
+def _section_design(doc: _Doc):
+    from .design_plots import design_fig
+    doc.h2("Cone geometry: GDOP vs α and ρ (paper 003 Figs. 8–10)")
+    doc.p("GDOP = √trace((Hᵀ C⁻¹ H)⁻¹): the fused rate error of a unit-noise gyro array, per "
+          "layout (H) and ARW correlation (C). Dots mark each N's optimal cone angle.")
+    doc.figure("gdop", _png(design_fig(), dpi=80), "GDOP vs cone angle α and vs correlation ρ")
+
+
+def _section_ranking(doc: _Doc, design: list[SweepData], top: int) -> pd.DataFrame | None:
+    rows = pd.concat([d.rows for d in design], ignore_index=True) if design else None
+    doc.h2("Design ranking")
+    if rows is None:
+        doc.p("No design sweep given (only paper reproductions): nothing to rank.", "note")
+        return None
+    ranking = design_ranking(rows)
+    doc.p(f"{rows.scenario_id.nunique()} scenarios from {', '.join(d.name for d in design)}; "
+          "per motion, every layout × correlation × estimator, best mean 1σ error first "
+          "(means over x/y/z and the runs; amplitude ratio: the swinging axis farthest from 1).")
+    doc.figure("ranking", _ranking_fig(ranking), "Best 1σ error per N, scheme and estimator")
+    for motion, sub in ranking.groupby("motion", sort=False):
+        doc.h3(f"Motion {motion}: the {min(top, len(sub))} best of {len(sub)}")
+        doc.table(["rank", "scheme", "N", "α [deg]", "ρ_arw", "ρ_rrw", "estimator",
+                   "1σ [deg/s]", "reduction [-]", "fused ARW [deg/√h]", "fused RRW [deg/h/√h]",
+                   "amplitude ratio [-]", "runs"],
+                  [[r["rank"], r.scheme, r.n_gyros, r.alpha_deg, r.rho_arw, r.rho_rrw, r.estimator,
+                    r.sigma_1_deg_s, r.reduction, r.arw_deg_rt_h, r.rrw_deg_h_rt_h, r.attenuation,
+                    r.runs] for _, r in sub.head(top).iterrows()])
+        best = sub.groupby(["scheme", "n_gyros"], sort=True).first().reset_index()
+        doc.p(f"Best per scheme and N ({motion}):")
+        doc.table(["scheme", "N", "α [deg]", "ρ_arw", "estimator", "1σ [deg/s]", "rank"],
+                  [[r.scheme, r.n_gyros, r.alpha_deg, r.rho_arw, r.estimator, r.sigma_1_deg_s,
+                    r["rank"]] for _, r in best.iterrows()])
+    return ranking
+
+
+def _section_adev(doc: _Doc, design: list[SweepData], paper: list[SweepData],
+                  ranking: pd.DataFrame | None):
+    doc.h2("Allan deviation: single gyros vs fused output (paper 003 Figs. 14, 22)")
+    done = 0
+    if ranking is not None:
+        static = ranking[ranking.motion.str.contains("static")]
+        if not static.empty:
+            best = static.iloc[0]
+            for d in design:
+                sel = d.rows
+                for k in ("scheme", "n_gyros", "alpha_deg", "motion", "estimator"):
+                    sel = sel[sel[k].astype(object) == best[k]]
+                if sel.empty:
+                    continue
+                spec, why = _find_spec(d, sel.scenario_id.iloc[0])
+                if spec is None:
+                    doc.p(f"Best static design: not re-simulated ({why}).", "note")
+                    break
+                a = _adev_fig(f"Best static design: scheme {best.scheme}, N = {best.n_gyros}, "
+                              f"α = {best.alpha_deg:.2f}°, {best.estimator}", spec, best.estimator)
+                doc.figure("adev_best", a.png, a.note)
+                done += 1
+                break
+    for scen, fig_name, label in (("paper003/static_s1_n6_rhob_0", "adev_fig14",
+                                   "Paper 003 Fig. 14: 6-gyro Scheme 1, 1 h static, kf_array"),
+                                  ("paper003/tetra_static", "adev_fig22",
+                                   "Paper 003 Fig. 22: 4-gyro tetrahedral array (Table 8 noise), kf_array")):
+        for d in paper:
+            sel = d.rows[(d.rows.scenario == scen) & (d.rows.replicate == 0)]
+            if sel.empty:
+                continue
+            spec, why = _find_spec(d, sel.scenario_id.iloc[0])
+            if spec is None:
+                doc.p(f"{label}: not re-simulated ({why}).", "note")
+            else:
+                a = _adev_fig(label, spec, "kf_array")
+                doc.figure(fig_name, a.png, a.note)
+                done += 1
+            break
+    if not done:
+        doc.p("No static scenario in the given sweeps to draw.", "note")
+
+
+def _section_estimators(doc: _Doc, rows: pd.DataFrame):
+    doc.h2("Estimator comparison")
+    comp = estimator_comparison(rows)
+    has_bound = "bound" in set(rows.estimator)
+    doc.p("Medians over every design, axis and run of each motion. Amplitude ratio and phase "
+          "lag on the swinging axes only. " + (
+              "Efficiency = 1σ of the offline bound (KF + RTS smoother on the full model) / 1σ "
+              "of the estimator: 1 is the best any estimator can do with these data."
+              if has_bound else
+              "Efficiency needs the offline bound: add \"bound\" to the sweep's estimators."))
+    doc.figure("estimators", _estimator_fig(comp), "Median 1σ error by estimator")
+    doc.table(["motion", "estimator", "1σ [deg/s]", "reduction [-]", "amplitude ratio [-]",
+               "phase lag [deg]", "efficiency [-]", "efficiency min [-]", "runs"],
+              [[r.motion, r.estimator, r.sigma_1_deg_s, r.reduction, r.attenuation, r.phase_deg,
+                r.efficiency, r.efficiency_min, r.runs] for _, r in comp.iterrows()])
+    return comp
+
+
+def _section_paper(doc: _Doc, paper: list[SweepData], values_path) -> list[dict]:
+    doc.h2("Paper vs model")
+    if not paper:
+        doc.p("No paper reproduction sweep given (run scenarios/sweeps/paper_reproduction.toml "
+              "and pass its folder too).", "note")
+        return []
+    rows = pd.concat([d.rows for d in paper], ignore_index=True)
+    pvm = paper_vs_model(rows, load_paper_values(values_path))
+    n_flag = sum(v["flag"] for e in pvm for v in e["values"])
+    n_all = sum(len(e["values"]) for e in pvm)
+    doc.p(f"{len(pvm)} experiments, {n_all} published values; {n_flag} lie outside the model's "
+          f"{AGREEMENT_LEVEL:.0%} prediction interval for one run (mean ± t·sd·√(1 + 1/n) over "
+          "the replicates; red rows). The likely reason is given under each table that has one.")
+    if pvm:
+        doc.figure("paper_vs_model", _paper_fig(pvm), "Paper value / model mean, with the model's "
+                   "95 % band for one run")
+    for e in pvm:
+        doc.h3(e["title"])
+        doc.p(f"scenario {e['scenario']}, estimator {e['estimator']}, {e['runs']} runs", "note")
+        doc.table(["axis", "metric", "paper", "model mean", "model sd", "model min–max",
+                   "95 % band", "paper/model", "agrees"],
+                  [[v["axis"], _LABELS.get(v["metric"], v["metric"]), v["paper"], v["model_mean"],
+                    v["model_sd"], f"{_fmt(v['model_min'])} – {_fmt(v['model_max'])}",
+                    f"{_fmt(v['low'])} – {_fmt(v['high'])}", v["ratio"],
+                    "no" if v["flag"] else "yes"] for v in e["values"]],
+                  flags=[v["flag"] for v in e["values"]])
+        if e["reason"]:
+            doc.p("Likely reason: " + e["reason"], "reason")
+    return pvm
+
+
+def write_report(dirs, out_html, out_md=None, *, paper_values=None, top: int = 15) -> dict:
+    """Write the report of the sweep folders ``dirs`` (see the module docstring).
+
+    Parameters
+    ----------
+    dirs : sequence of path
+        ``gyroarray sweep`` output folders (design sweeps and/or paper reproductions).
+    out_html : path
+        The HTML file (figures embedded).
+    out_md : path, optional
+        The Markdown twin; its figures go to ``<stem>_figures/`` beside it.
+    paper_values : path, optional
+        Paper values file (default: the shipped ``scenarios/paper_values.toml``).
+    top : int
+        Designs listed per motion in the ranking.
+
+    Returns
+    -------
+    dict
+        ``html``, ``markdown``, ``figures`` (count), ``sweeps`` (name, folder,
+        scenarios, missing), ``best`` (the top design per motion),
+        ``paper_vs_model`` (see :func:`paper_vs_model`), ``seconds``.
+    """
+    t0 = time.perf_counter()
+    dirs = [Path(d) for d in dirs]
+    if not dirs:
+        raise InputError("gyroarray report: give at least one sweep folder")
+    out_html = Path(out_html)
+    if out_html.suffix.lower() not in (".html", ".htm"):
+        raise InputError("the report must end in .html", file=str(out_html))
+    if out_md is not None and Path(out_md).suffix.lower() != ".md":
+        raise InputError("the Markdown twin must end in .md", file=str(out_md))
+    data = [load_sweep_dir(d) for d in dirs]
+    paper = [d for d in data if d.is_paper]
+    design = [d for d in data if not d.is_paper]
+    doc = _Doc("gyroarray design comparison report")
+    notes = [f"{d.name}: {d.missing} scenario(s) of the sweep not finished — rerun the sweep "
+             "command to complete it" for d in data if d.missing]
+    for n in notes:
+        doc.p("Note: " + n, "note")
+    _section_design(doc)
+    ranking = _section_ranking(doc, design, top)
+    _section_adev(doc, design, paper, ranking)
+    all_rows = pd.concat([d.rows for d in (design or data)], ignore_index=True)
+    _section_estimators(doc, all_rows)
+    pvm = _section_paper(doc, paper, paper_values)
+
+    stamp = time.strftime("%Y-%m-%d %H:%M", time.localtime())
+    subtitle = (f"{stamp} · sweeps: " + ", ".join(f"{d.name} ({d.rows.scenario_id.nunique()} "
+                                                   f"scenarios)" for d in data))
+    out_html.parent.mkdir(parents=True, exist_ok=True)
+    tmp = out_html.with_name(f".{out_html.name}.tmp")
+    tmp.write_text(doc.render_html(subtitle), encoding="utf-8")
+    tmp.replace(out_html)
+    md_path = None
+    if out_md is not None:
+        md_path = Path(out_md)
+        figdir = md_path.with_name(md_path.stem + "_figures")
+        figdir.mkdir(parents=True, exist_ok=True)
+        for name, png in doc.figures:
+            (figdir / f"{name}.png").write_bytes(png)
+        md_path.write_text(f"*{subtitle}*\n\n" + doc.render_md(figdir.name), encoding="utf-8")
+    best = []
+    if ranking is not None:
+        for motion, sub in ranking.groupby("motion", sort=False):
+            r = sub.iloc[0]
+            best.append({"motion": motion, "scheme": None if r.scheme == "none" else int(r.scheme),
+                         "n_gyros": int(r.n_gyros), "alpha_deg": float(r.alpha_deg),
+                         "rho_arw": None if r.rho_arw == "none" else float(r.rho_arw),
+                         "estimator": r.estimator, "sigma_1_deg_s": float(r.sigma_1_deg_s)})
+    return {"html": str(out_html), "markdown": None if md_path is None else str(md_path),
+            "figures": len(doc.figures),
+            "sweeps": [{"name": d.name, "folder": str(d.path),
+                        "scenarios": int(d.rows.scenario_id.nunique()), "missing": d.missing,
+                        "paper": d.is_paper} for d in data],
+            "best": best, "paper_vs_model": pvm, "notes": notes,
+            "seconds": time.perf_counter() - t0}
