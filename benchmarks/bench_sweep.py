@@ -2,7 +2,7 @@
 
 The 48-scenario quick design sweep (``scenarios/sweeps/design_quick.toml``:
 both schemes, N = 4, 5, 6, 8 at the optimal α, ρ ∈ {−0.1, 0, 0.5}, static and
-swing, 30 s at 100 Hz, kf_array/gls/ols/naive) run into a fresh folder with
+swing, 90 s at 100 Hz, every estimator incl. the bound) run into a fresh folder with
 1 and with 2 local worker processes, then (``GYROARRAY_BENCH_DASK=0`` skips
 it) on a ``dask.distributed`` LocalCluster with 1 and with 2 workers. The
 rate-table truth is cached before timing (one warm-up run), so the timings
