@@ -781,13 +781,13 @@ def fit_noise_terms(result, edf_of_alpha: Callable[[np.ndarray], np.ndarray],
         a_new, x = _whitened_nnls(g, y, white)
         return a_new, alpha, nu, x, white
 
-    def iterate(a, corr, eps, fixed=None):
+    def iterate(a, corr, eps, fixed=None, rtol=1e-9, cap=max_iter):
         """Reweight until the noise types and coefficients settle."""
         alpha = None
-        for n_iter in range(1, max_iter + 1):
+        for n_iter in range(1, cap + 1):
             a_new, new_alpha, nu, x, white = solve(a, corr, eps, fixed)
             settled = (a is not None and np.array_equal(new_alpha, alpha)
-                       and np.allclose(a_new, a, rtol=1e-9, atol=0.0))
+                       and np.allclose(a_new, a, rtol=rtol, atol=0.0))
             a, alpha = a_new, new_alpha
             if settled:
                 break
@@ -815,7 +815,9 @@ def fit_noise_terms(result, edf_of_alpha: Callable[[np.ndarray], np.ndarray],
         fixed = None if corr is None else corr.matrix((g * start).T)
 
         def excess(log_eps):
-            return iterate(start, corr, 10.0 ** log_eps, fixed).chi2 - dof
+            # chi2 to ~1e-6 is plenty for eps to the search's ~2 %
+            return iterate(start, corr, 10.0 ** log_eps, fixed, rtol=1e-6,
+                           cap=min(max_iter, 20)).chi2 - dof
 
         model_error = 10.0 ** _root_log_eps(excess)
         sol = iterate(start, corr, model_error)
