@@ -16,9 +16,11 @@ Conventions
   key in ``sigma``.
 * ``z`` is the significance of the effect: a statistic that is
   approximately standard normal (|z| ≲ 2) when the effect is absent and the
-  noise model is right (for a one-parameter regression ``β/σ_β``; for a
-  multi-parameter one the χ² of the parameters turned into the normal
-  quantile of the same tail probability, :func:`chi2_to_z`).
+  noise model is right: the χ² of the fitted parameters, βᵀC⁻¹β with p
+  degrees of freedom, turned into the normal quantile of the same tail
+  probability (:func:`chi2_to_z`), so that z ≈ N(0, 1) under "absent" and
+  large positive when present, whatever the sign of β (the signed β/σ of a
+  one-parameter fit is in ``extra["t"]``).
 * ``evidence`` is one sentence a person understands, naming the gyro and the
   signature, e.g. "gyro 3 residual rises 0.41 % of the rate about its axis".
 """
