@@ -415,18 +415,23 @@ def _covariance(x: np.ndarray) -> np.ndarray | None:
 def _structure(t: np.ndarray, alpha: int) -> np.ndarray:
     """Phase structure function ``E[(x(s+t) - x(s))^2]`` up to scale.
 
-    Terms of degree <= 2 in t are dropped: the products of two differences
-    of order >= 2 annihilate them.  White FM: ``|t|`` (exact for sampled
-    white rate); flicker FM: ``t^2 ln|t|``; random-walk FM: ``|t|^3 + |t|/2``
-    (exact for a sampled random walk, ``t^3/3 + t/6`` scaled by 3).
+    Strictly: minus twice the generalised covariance of the phase, the
+    quantity whose second differences give the covariances below. Terms of
+    degree <= 2 in t are dropped: the products of two differences of order
+    >= 2 annihilate them. White FM: ``|t|`` (exact for sampled white rate);
+    flicker FM: ``-t^2 ln|t|``; random-walk FM: ``-|t|^3 + |t|`` (exact for
+    a sampled random walk: generalised covariance (|t|^3 - |t|)/6). The
+    signs matter once terms mix (each term is normalised by its own
+    zero-lag value, so a wrong sign makes two terms subtract; found by the
+    simulation check of ``analysis/stochastic_fit.py``).
     """
     a = np.abs(t)
     if alpha == 0:
         return a
     if alpha == -1:
         with np.errstate(divide="ignore", invalid="ignore"):
-            return np.where(a > 0, a * a * np.log(a), 0.0)
-    return a ** 3 + 0.5 * a  # alpha == -2
+            return np.where(a > 0, -a * a * np.log(a), 0.0)
+    return -(a ** 3) + a  # alpha == -2
 
 
 class _EstimateCorrelation:
