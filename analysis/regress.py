@@ -716,8 +716,8 @@ def fit_misalignment(e, omega_ref_rad_s, h, time_s, dt_s: float, r: float, q: fl
     Returns
     -------
     EffectFit
-        ``misalignment``: ``axis`` (true unit axis, platform frame, list of
-        3), ``tilt_deg`` (with sigma) and ``tilt_azimuth_deg`` (ψ, with sigma
+        ``misalignment``: ``tilt_deg`` (with sigma) and ``tilt_azimuth_deg``
+        (ψ; the true unit axis, platform frame, in ``extra["axis"]``), with sigma
         when the tilt exceeds 3 of its σ); z from the χ² of (c1, c2) with 2
         degrees of freedom (1 when the motion sees one direction only).
 
@@ -754,7 +754,7 @@ def fit_misalignment(e, omega_ref_rad_s, h, time_s, dt_s: float, r: float, q: fl
     g = za.T @ za
     lam, vec = np.linalg.eigh(g)
     unseen = None
-    none = {"axis": [float(v) for v in hv], "tilt_deg": 0.0, "tilt_azimuth_deg": 0.0}
+    none = {"tilt_deg": 0.0, "tilt_azimuth_deg": 0.0}
     if not lam[1] > 0:
         return _not_identifiable("misalignment", gyro, none, "there is no rate about the axes "
                                  "perpendicular to its axis", NotIdentifiableError("no rate ⟂ h"))
@@ -789,7 +789,9 @@ def fit_misalignment(e, omega_ref_rad_s, h, time_s, dt_s: float, r: float, q: fl
     if dof == 2 and cn > 3.0 * cn_sigma:                   # one direction: ψ is assumed, not measured
         gp = np.array([-c[1], c[0]]) / cn ** 2            # dψ/dc
         sigma["tilt_azimuth_deg"] = float(rad_to_deg(math.sqrt(gp @ cov @ gp)))
-    params = {"axis": [float(v) for v in axis], "tilt_deg": float(tilt), "tilt_azimuth_deg": float(psi)}
+    # tilt + azimuth (not also ``axis``: a model entry takes one form or the other);
+    # the true axis itself is in extra["axis"]
+    params = {"tilt_deg": float(tilt), "tilt_azimuth_deg": float(psi)}
     if z >= Z_EVIDENT:
         az = (f" toward azimuth {_pm(psi, sigma['tilt_azimuth_deg'])}° around it (0° = toward +z)"
               if "tilt_azimuth_deg" in sigma else "")
@@ -798,7 +800,8 @@ def fit_misalignment(e, omega_ref_rad_s, h, time_s, dt_s: float, r: float, q: fl
     else:
         ev = (f"gyro {gyro} residual shows no significant response to the rate about other axes "
               f"(tilt {_pm(tilt, sigma['tilt_deg'])}°, z = {z:.1f})")
-    extra = _extra(fit, c=[float(v) for v in c], cov_c=cov.tolist(), chi2_c=chi2, dof_c=dof)
+    extra = _extra(fit, c=[float(v) for v in c], cov_c=cov.tolist(), chi2_c=chi2, dof_c=dof,
+                   axis=[float(v) for v in axis])
     if unseen is not None:
         extra["unseen"] = [float(v) for v in unseen]
         ev += "; the motion does not show a tilt toward " + \

@@ -260,7 +260,7 @@ def test_misalignment_is_found_with_its_direction():
     assert within(f.params["tilt_deg"], tilt, f.sigma["tilt_deg"]) and f.z > 5
     assert within(f.params["tilt_azimuth_deg"], az, f.sigma["tilt_azimuth_deg"])
     true_axis = tilted_axes(CONE6.H[1:2], [deg_to_rad(tilt)], [deg_to_rad(az)])[0]
-    angle = math.acos(min(1.0, float(np.dot(f.params["axis"], true_axis))))
+    angle = math.acos(min(1.0, float(np.dot(f.extra["axis"], true_axis))))
     assert angle <= 2 * deg_to_rad(f.sigma["tilt_deg"]) + 0.1 * deg_to_rad(tilt)
     assert f.extra["dof_c"] == 2
 
