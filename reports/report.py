@@ -77,6 +77,8 @@ class SweepData:
     manifest: dict
     rows: pd.DataFrame
     missing: int = 0          # scenarios of the manifest without results (not finished)
+    _specs: dict | None = field(default=None, repr=False)   # id -> ScenarioSpec, or why not
+    _specs_why: str = field(default="", repr=False)
 
     @property
     def is_paper(self) -> bool:
@@ -368,17 +370,22 @@ def _find_spec(data: SweepData, pick):
     """The ScenarioSpec of the sweep's own file for a chosen result row (None: not found)."""
     from gyroarray.scenarios.sweep import load_sweep
 
-    src = data.manifest.get("source")
-    if not src or not Path(src).is_file():
-        return None, f"the sweep file {src} is not available to re-simulate from"
-    try:
-        sweep = load_sweep(src)
-    except InputError as err:
-        return None, f"the sweep file no longer loads: {err}"
-    if sweep.sha256 != data.manifest.get("sweep_sha256"):
-        return None, f"the sweep file {src} changed since the run"
-    by_id = {s.id: s for s in sweep.scenarios}
-    return by_id.get(pick), ""
+    if data._specs is None:
+        data._specs, data._specs_why = {}, ""
+        src = data.manifest.get("source")
+        if not src or not Path(src).is_file():
+            data._specs_why = f"the sweep file {src} is not available to re-simulate from"
+        else:
+            try:
+                sweep = load_sweep(src)
+            except InputError as err:
+                data._specs_why = f"the sweep file no longer loads: {err}"
+            else:
+                if sweep.sha256 != data.manifest.get("sweep_sha256"):
+                    data._specs_why = f"the sweep file {src} changed since the run"
+                else:
+                    data._specs = {s.id: s for s in sweep.scenarios}
+    return data._specs.get(pick), data._specs_why
 
 
 # -- rendering -----------------------------------------------------------------
