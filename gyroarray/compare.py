@@ -1,0 +1,789 @@
+"""Model vs measurement: calibrate a noise model to a recorded run, find where it fails.
+
+The chain (after pvlib's ModelChain: one object, explicit steps, every
+intermediate kept as an attribute a report can show):
+
+1. **residual** ``E = gyro − H·ref`` [rad/s] of every gyro (``H`` the
+   layout's axes, ``ref`` the table's reference rate; without a reference
+   the record is taken as static and ``E`` is the output itself);
+2. **calibrate** the model to it: the baseline (``arw`` + ``rrw`` of every
+   gyro, unknown starting biases) plus every effect the model names, each
+   refitted by its fit side (:mod:`gyroarray.analysis.regress`,
+   :mod:`~gyroarray.analysis.stochastic_fit`, :mod:`~gyroarray.analysis.earth_fit`):
+   the ARW/RRW variances ``r``, ``q`` on the longest static part, the
+   deterministic effects by GLS under that noise (backfitted, two passes),
+   the stochastic ones on the residual left by the deterministic part;
+3. **candidates**: every effect of the spec *not* in the model, on every
+   gyro it can act on, fitted the same way; each has a significance ``z``
+   (≈ N(0, 1) when the effect is absent, large positive when present);
+4. **model band**: the calibrated stochastic part of the model simulated
+   ``n_runs`` times over the same record (:func:`gyroarray.sim.effects.simulate_readings`,
+   the record's own clock), its ADEV per gyro against the measured one; a
+   per-gyro z says whether the measured ADEV leaves the band at any τ;
+5. **discrepancy**: the largest z of all those tests over the critical
+   value that keeps the family-wise false-alarm rate at ``alpha`` (1 %):
+
+       D = max_k z_k / z_crit(K),   z_crit(K) = Φ⁻¹((1 − alpha)^(1/K))
+
+   (Šidák, K tests). D <= 1: no test, candidate effect or ADEV band, says
+   the model is wrong (``consistent``); D = 3 means the worst test is three
+   times as far out as a 1 % family-wise alarm. A candidate is
+   ``significant`` when its z exceeds z_crit.
+
+Which record the stochastic tests read: the whole run when no deterministic
+test is significant (a dynamic part that the model explains adds
+information, e.g. a weak bias instability), else the longest static part
+(an unexplained scale factor would otherwise read as noise).
+
+Units: SI inside; spec units only in ``EffectFit.params`` and the model.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy import optimize, special, stats
+
+from gyroarray.analysis.allan import averaging_factors, oadev
+from gyroarray.analysis.earth_fit import attitude_from_rates, fit_earth_rate
+from gyroarray.analysis.effect_fit import EffectFit
+from gyroarray.analysis.regress import (_RWWhitener, fit_latency, fit_misalignment, fit_rate_ramp, fit_saturation,
+                                        fit_scale_factor, fit_scale_nonlinearity, fit_sinusoid,
+                                        fit_temperature_bias)
+from gyroarray.analysis.stochastic_fit import fit_burst, fit_correlation, fit_gyro_noise
+from gyroarray.errors import InputError
+from gyroarray.measurement import Measurement
+from gyroarray.sim.effects import effect_names, get_effect, simulate_readings
+from gyroarray.sim.model import ModelEntry, NoiseModel
+from gyroarray.units import (RAD_PER_DEG, arw_deg_rt_h_to_rad_rt_s, rad_s_to_deg_h,
+                             rrw_deg_h_rt_h_to_rad_s_rt_s)
+
+__all__ = ["ALPHA", "Test", "Analysis", "ModelComparison", "baseline_model", "critical_z",
+           "parse_add", "EFFECT_GROUPS"]
+
+#: Family-wise false-alarm rate of the discrepancy.
+ALPHA = 0.01
+
+#: A sample is static when every reference component is within this [rad/s] (0.01 deg/s).
+STATIC_RAD_S = 0.01 * RAD_PER_DEG
+
+#: Shortest static part that calibrates the noise [samples] (6 octaves up to n/8 and more).
+MIN_STATIC = 2048
+
+#: Monte-Carlo runs of the model band.
+N_RUNS = 40
+
+_PER_GYRO_NOISE = ("bias_instability", "quantization", "rate_ramp", "gauss_markov")
+_NEEDS_REF = ("scale_factor", "scale_nonlinearity", "misalignment", "latency", "saturation",
+              "earth_rate")
+_DETERMINISTIC = ("scale_factor", "scale_nonlinearity", "misalignment", "latency", "saturation",
+                  "temperature_bias", "earth_rate", "rate_ramp", "sinusoid", "constant_bias")
+_STOCHASTIC_SIM = ("arw", "rrw", "bias_instability", "quantization", "gauss_markov", "correlation",
+                   "burst")
+
+#: What each effect's fit reads, for the report and the "needs a reference" note.
+EFFECT_GROUPS = {
+    "stochastic": ("arw", "rrw", "bias_instability", "quantization", "rate_ramp", "gauss_markov"),
+    "deterministic": ("sinusoid", "constant_bias", "scale_factor", "scale_nonlinearity",
+                      "misalignment", "temperature_bias", "latency", "saturation"),
+    "array": ("correlation", "earth_rate", "burst"),
+}
+
+
+def critical_z(n_tests: int, alpha: float = ALPHA) -> float:
+    """One-sided normal critical value of ``n_tests`` tests at family-wise ``alpha`` (Šidák)."""
+    k = max(int(n_tests), 1)
+    # 1 − (1 − alpha)^(1/k), accurately for large k
+    p = -math.expm1(math.log1p(-alpha) / k)
+    return float(-special.ndtri(p))
+
+
+def baseline_model(n_gyros: int, *, arw_deg_rt_h: float = 0.1, rrw_deg_h_rt_h: float = 10.0) -> NoiseModel:
+    """``arw`` + ``rrw`` on every gyro (values are placeholders: calibration refits them)."""
+    entries = []
+    for g in range(1, n_gyros + 1):
+        entries.append(ModelEntry("arw", g, {"n_deg_rt_h": arw_deg_rt_h}))
+        entries.append(ModelEntry("rrw", g, {"k_deg_h_rt_h": rrw_deg_h_rt_h}))
+    return NoiseModel(tuple(entries), description="baseline: ARW + RRW on every gyro")
+
+
+def parse_add(text: str, n_gyros: int) -> tuple[str, int | None]:
+    """``EFFECT[:GYRO]`` of ``--add`` -> (effect, gyro or None); InputError when wrong."""
+    name, _, g = str(text).partition(":")
+    name = name.strip()
+    eff = get_effect(name) if name in effect_names() else None
+    if eff is None:
+        from gyroarray.sim.effects import did_you_mean
+        raise InputError(f"--add {text}: unknown effect {name!r}{did_you_mean(name, effect_names())} "
+                         f"(effects: {', '.join(effect_names())})")
+    if not g:
+        if eff.per_gyro:
+            raise InputError(f"--add {text}: {name} acts on one gyro; say which, e.g. {name}:1 "
+                             f"(gyros 1..{n_gyros})")
+        return name, None
+    if not eff.per_gyro:
+        raise InputError(f"--add {text}: {name} acts on the whole array; write just {name}")
+    try:
+        gyro = int(g)
+    except ValueError:
+        raise InputError(f"--add {text}: gyro must be a number 1..{n_gyros}, got {g!r}") from None
+    if not 1 <= gyro <= n_gyros:
+        raise InputError(f"--add {text}: gyro {gyro} is not in 1..{n_gyros}")
+    return name, gyro
+
+
+@dataclass(frozen=True)
+class Test:
+    """One test of the model against the measurement.
+
+    ``kind`` is ``"effect"`` (a candidate effect not in the model, ``fit``
+    its fit) or ``"adev_band"`` (the measured ADEV of one gyro against the
+    model's Monte-Carlo band). ``z`` ≈ N(0, 1) when the model is right.
+    """
+
+    kind: str
+    effect: str | None
+    gyro: int | None
+    z: float
+    evidence: str
+    fit: EffectFit | None = None
+    extra: dict = field(default_factory=dict)
+
+
+@dataclass
+class Analysis:
+    """Everything one calibration + diagnosis produced (arrays in SI).
+
+    Attributes
+    ----------
+    model : NoiseModel
+        The calibrated model (the input model's effects, refitted, plus the baseline).
+    fits : dict
+        (effect, gyro) -> EffectFit of every effect of the model.
+    tests : list of Test
+        Every test, candidates and ADEV bands, in no order.
+    candidates : list of Test
+        The effect tests, best (largest z) first.
+    discrepancy, z_crit : float
+        Headline number and the critical z of the family.
+    residual_rad_s : ndarray (n, N)
+        Gyro − H·ref − the model's deterministic part.
+    raw_residual_rad_s : ndarray (n, N)
+        Gyro − H·ref.
+    record : slice
+        Samples the stochastic tests used.
+    static : ndarray of bool (n,)
+        Static samples.
+    adev : dict
+        ``taus_s`` (T,), ``measured`` (N, T), ``mc`` (runs, N, T) [rad/s].
+    notes : list of str
+        Said to the user (what was skipped and why).
+    """
+
+    model: NoiseModel
+    fits: dict
+    tests: list
+    candidates: list
+    discrepancy: float
+    z_crit: float
+    residual_rad_s: np.ndarray
+    raw_residual_rad_s: np.ndarray
+    record: slice
+    static: np.ndarray
+    adev: dict
+    notes: list
+    r: np.ndarray
+    q: np.ndarray
+
+    @property
+    def consistent(self) -> bool:
+        return bool(self.discrepancy <= 1.0)
+
+    def significant(self, test: Test) -> bool:
+        return bool(np.isfinite(test.z) and test.z > self.z_crit)
+
+    def unexplained(self) -> list[str]:
+        """Plain sentences for significant ADEV-band tests on gyros without a significant candidate."""
+        explained = {t.gyro for t in self.candidates if self.significant(t)}
+        array_wide = any(t.gyro is None and self.significant(t) for t in self.candidates)
+        out = []
+        for t in self.tests:
+            if t.kind == "adev_band" and self.significant(t) and t.gyro not in explained and not array_wide:
+                out.append(t.evidence + f"; none of the {len(effect_names())} effects explains it")
+        return out
+
+    def to_json_dict(self) -> dict:
+        """The ``diagnose --json`` object."""
+        return {
+            "discrepancy": _finite(self.discrepancy),
+            "consistent": self.consistent,
+            "candidates": [{"effect": t.effect, "gyro": t.gyro, "score": _finite(t.z),
+                            "significant": self.significant(t), "evidence": t.evidence}
+                           for t in self.candidates],
+            "z_crit": self.z_crit,
+            "n_tests": len(self.tests),
+            "adev_band": [{"gyro": t.gyro, "z": _finite(t.z), "significant": self.significant(t),
+                           "evidence": t.evidence} for t in self.tests if t.kind == "adev_band"],
+            "unexplained": self.unexplained(),
+            "notes": list(self.notes),
+        }
+
+    def effects_json(self) -> list[dict]:
+        """The calibrated model's effects with params and sigma (``fit --json``)."""
+        out = []
+        for entry in self.model:
+            f = self.fits.get((entry.effect, entry.gyro))
+            out.append({"effect": entry.effect, "gyro": entry.gyro, "params": _entry_params(entry),
+                        "sigma": {} if f is None else {k: _finite(v) for k, v in f.sigma.items()}})
+        return out
+
+
+def _finite(x):
+    x = float(x)
+    return x if math.isfinite(x) else None
+
+
+def _entry_params(entry: ModelEntry) -> dict:
+    d = entry.to_dict()
+    d.pop("effect", None)
+    d.pop("gyro", None)
+    return d
+
+
+def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
+    """[start, stop) of the runs of True."""
+    m = np.concatenate(([False], np.asarray(mask, bool), [False]))
+    d = np.flatnonzero(np.diff(m.astype(np.int8)))
+    return list(zip(d[::2].tolist(), d[1::2].tolist()))
+
+
+class ModelComparison:
+    """Compare a measurement with a noise model (the chain of the module docstring).
+
+    Parameters
+    ----------
+    measurement : Measurement
+        The recorded run.
+    model : NoiseModel, optional
+        Effects to calibrate (default :func:`baseline_model`); ``arw`` and
+        ``rrw`` are added on every gyro that lacks them.
+    n_runs : int
+        Monte-Carlo runs of the model band.
+    seed : int
+        Seed of the band's ``numpy.random.Generator`` (results are bit-identical per seed).
+    alpha : float
+        Family-wise false-alarm rate of the discrepancy.
+    """
+
+    def __init__(self, measurement: Measurement, model: NoiseModel | None = None, *,
+                 n_runs: int = N_RUNS, seed: int = 0, alpha: float = ALPHA):
+        self.m = measurement
+        self.name = measurement.source or "measurement"
+        self.n_runs = int(n_runs)
+        self.seed = int(seed)
+        self.alpha = float(alpha)
+        self.H = np.asarray(measurement.layout.axes, float)
+        self.N = self.H.shape[0]
+        self.dt = float(measurement.dt_s)
+        self.t = np.asarray(measurement.time_s, float)
+        self.n = self.t.size
+        self.y = np.asarray(measurement.gyro_rad_s, float)
+        self.ref = measurement.ref_rad_s
+        self.temp = None if measurement.temp_c is None else np.asarray(measurement.temp_c, float)
+        model = baseline_model(self.N) if model is None else model
+        model.check(self.N)
+        self.model = self._with_baseline(model)
+        self._check_usable()
+        self.E0 = self.y - (self.ref @ self.H.T if self.ref is not None else 0.0)
+        if self.ref is not None:
+            self.static = np.all(np.abs(self.ref) <= STATIC_RAD_S, axis=1)
+        else:
+            self.static = np.ones(self.n, bool)
+        runs = [r for r in _runs(self.static) if r[1] - r[0] >= MIN_STATIC]
+        if not runs:
+            longest = max((b - a for a, b in _runs(self.static)), default=0)
+            raise InputError(f"no static part long enough to calibrate the noise: the longest stretch "
+                             f"with the reference rate within 0.01 deg/s is {longest} samples "
+                             f"({longest * self.dt:.1f} s), at least {MIN_STATIC} samples "
+                             f"({MIN_STATIC * self.dt:.1f} s) are needed", file=self.name)
+        self.static_runs = runs
+        self.longest = max(runs, key=lambda r: r[1] - r[0])
+        self.moving = self.ref is not None and bool(np.any(~self.static))
+        self._attitude = None
+
+    # -- set-up -----------------------------------------------------------
+    def _with_baseline(self, model: NoiseModel) -> NoiseModel:
+        have = {(e.effect, e.gyro) for e in model}
+        for e in model:
+            if e.effect in ("arw", "rrw") and e.gyro is None:
+                have |= {(e.effect, g) for g in range(1, self.N + 1)}
+        out = model
+        for g in range(1, self.N + 1):
+            for eff, key, v in (("arw", "n_deg_rt_h", 0.1), ("rrw", "k_deg_h_rt_h", 10.0)):
+                if (eff, g) not in have:
+                    out = out.with_effect(ModelEntry(eff, g, {key: v}))
+        # per-gyro entries for every effect written for "all gyros"
+        entries = []
+        for e in out:
+            if e.gyro is None and get_effect(e.effect).per_gyro:
+                entries += [ModelEntry(e.effect, g, dict(e.params)) for g in range(1, self.N + 1)
+                            if (e.effect, g) not in have]
+            else:
+                entries.append(e)
+        return NoiseModel(tuple(entries), description=model.description, source=model.source)
+
+    def _check_usable(self):
+        if self.n < MIN_STATIC:
+            raise InputError(f"too short for a diagnosis: {self.n} samples ({self.n * self.dt:.1f} s); "
+                             f"at least {MIN_STATIC} samples of a static part are needed to "
+                             f"calibrate the noise", file=self.name)
+        steps = np.diff(self.t)
+        if np.max(np.abs(steps - self.dt)) > 0.01 * self.dt:
+            raise InputError("the sample times are not uniform (the Allan and regression fits need "
+                             "a uniform step); resample or repair the record first", file=self.name)
+
+    @property
+    def attitude(self):
+        if self._attitude is None and self.ref is not None:
+            self._attitude = attitude_from_rates(self.ref, self.dt)
+        return self._attitude
+
+    def _site(self, latitude_deg=None):
+        s = self.m.site
+        lat = latitude_deg * RAD_PER_DEG if latitude_deg is not None else (
+            s.latitude_rad if s is not None else 0.0)
+        return (lat, s.heading_rad if s is not None else 0.0)
+
+    def _heading(self) -> float:
+        return self.m.site.heading_rad / RAD_PER_DEG if self.m.site is not None else 0.0
+
+    # -- the deterministic part's prediction ------------------------------
+    def _prediction(self, entry: ModelEntry) -> np.ndarray:
+        """What one deterministic effect adds to the outputs [rad/s], (n, N)."""
+        if entry.effect == "constant_bias":
+            out = np.zeros((self.n, self.N))
+            out[:, entry.gyro - 1] = entry.si_params.get("bias_rad_s", 0.0) if "bias_rad_s" in \
+                entry.si_params else float(entry.params["bias_deg_h"]) * RAD_PER_DEG / 3600.0
+            return out
+        truth = self.ref if self.ref is not None else np.zeros((self.n, 3))
+        kw = {"time_s": self.t}
+        if entry.effect == "temperature_bias":
+            kw["temp_c"] = self.temp
+        if entry.effect == "earth_rate":
+            kw["attitude"] = self.attitude
+            kw["site"] = self._site(float(entry.params["latitude_deg"]))
+        sim = simulate_readings(NoiseModel((entry,)), truth, self.H, self.dt,
+                                np.random.default_rng(0), **kw)
+        return sim - truth @ self.H.T
+
+    # -- one effect's fit ---------------------------------------------------
+    def _fit_det(self, effect: str, gyro: int | None, E: np.ndarray, r, q) -> EffectFit:
+        """Fit a deterministic effect on residual E (its own contribution included)."""
+        if gyro is None:
+            if effect == "earth_rate":
+                return fit_earth_rate(E, self.H, self.ref, self.t, self.dt, r, q, self._heading(),
+                                      None if self.m.site is None else self.m.site.latitude_rad / RAD_PER_DEG,
+                                      attitude=self.attitude)
+            raise ValueError(effect)
+        g = gyro - 1
+        e, h, rr, qq = E[:, g], self.H[g], float(r[g]), float(q[g])
+        args = (e, self.ref, h, self.t, self.dt, rr, qq, gyro)
+        if effect == "scale_factor":
+            return fit_scale_factor(*args)
+        if effect == "scale_nonlinearity":
+            return fit_scale_nonlinearity(*args)
+        if effect == "misalignment":
+            return fit_misalignment(*args)
+        if effect == "latency":
+            return fit_latency(*args)
+        if effect == "saturation":
+            u = self.ref @ h
+            return fit_saturation(u + e, u, rr, gyro)
+        if effect == "temperature_bias":
+            return fit_temperature_bias(e, self.temp, self.t, self.dt, rr, qq, gyro)
+        if effect == "rate_ramp":
+            return fit_rate_ramp(e, self.t, self.dt, rr, qq, gyro)
+        if effect == "sinusoid":
+            return fit_sinusoid(e, self.t, self.dt, rr, qq, gyro)
+        if effect == "constant_bias":
+            a, b = self.longest
+            x = e[a:b]
+            span = (b - a) * self.dt
+            var = rr / (b - a) + qq / self.dt * span / 3.0
+            v = float(np.mean(x))
+            s = math.sqrt(var)
+            return EffectFit("constant_bias", gyro, {"bias_deg_h": float(rad_s_to_deg_h(v))},
+                             {"bias_deg_h": float(rad_s_to_deg_h(s))}, z=0.0,
+                             evidence=(f"gyro {gyro} starting bias {rad_s_to_deg_h(v):.4g} ± "
+                                       f"{rad_s_to_deg_h(s):.2g} deg/h (part of the baseline's "
+                                       f"unknown starting bias, never a candidate)"))
+        raise ValueError(effect)
+
+    def _available(self, effect: str) -> str | None:
+        """None if the effect can be fitted on this measurement, else why not."""
+        if effect in _NEEDS_REF and self.ref is None:
+            return "needs the reference rate (ref_x, ref_y, ref_z)"
+        if effect in _NEEDS_REF and not self.moving:
+            return "needs a dynamic part (the table never turns)"
+        if effect == "temperature_bias":
+            if self.temp is None:
+                return "needs the temperature (temp_c)"
+            if np.ptp(self.temp) < 0.5:
+                return "needs a temperature that changes (temp_c spans less than 0.5 °C)"
+        if effect == "earth_rate" and self.m.site is None:
+            return "needs the site ([site] heading_deg) of the sidecar"
+        if effect == "correlation" and self.N < 2:
+            return "needs at least 2 gyros"
+        if effect == "constant_bias":
+            return "is the baseline's unknown starting bias (always fitted)"
+        return None
+
+    def _noise_rq(self, e: np.ndarray, gyro: int) -> tuple[float, float]:
+        """White variance r = N²/dt and random-walk increment variance q = K²·dt [rad²/s²] of one gyro.
+
+        r from the Allan fit of the longest static part (ARW is always well
+        determined). q, which decides how much slow drift the regressions
+        forgive, is the larger of (a) its maximum-likelihood value on all
+        static samples, the random walk running through the dynamic gaps
+        (exact likelihood of :class:`~gyroarray.analysis.regress._RWWhitener`),
+        and (b) the Allan fit's K + 2σ_K: a drift the Allan variance cannot
+        tell from RRW (a flicker floor, a short record where K is 0 ± σ) must
+        not make a slow regressor (temperature, ramp, Earth rate) significant.
+        """
+        a, b = self.longest
+        base = fit_gyro_noise(e[a:b], self.dt, gyro)
+        n_rad = arw_deg_rt_h_to_rad_rt_s(base[0].params["n_deg_rt_h"])
+        k_up = rrw_deg_h_rt_h_to_rad_s_rt_s(base[1].params["k_deg_h_rt_h"]
+                                            + 2.0 * base[1].sigma.get("k_deg_h_rt_h", 0.0))
+        r = max(n_rad ** 2 / self.dt, 1e-30)
+        q_up = max(k_up ** 2 * self.dt, 1e-12 * r)
+        q_ml = _ml_q(e, r, q_up, self.static)
+        return r, max(q_ml, q_up)
+
+    # -- the chain ------------------------------------------------------------
+    def analyse(self, model: NoiseModel | None = None) -> Analysis:
+        """Calibrate ``model`` (default: this comparison's) and run every test."""
+        model = self.model if model is None else self._with_baseline(model)
+        notes = []
+        in_model = {(e.effect, e.gyro) for e in model}
+        fits: dict = {}
+
+        # 1. r, q on the longest static part (deterministic model not yet known: iterate)
+        det_entries = [e for e in model if e.effect in _DETERMINISTIC]
+        preds = {(e.effect, e.gyro): np.zeros((self.n, self.N)) for e in det_entries}
+        r = np.zeros(self.N)
+        q = np.zeros(self.N)
+        a, b = self.longest
+        for it in range(2):
+            E = self.E0 - sum(preds.values(), np.zeros((self.n, self.N)))
+            for g in range(self.N):
+                r[g], q[g] = self._noise_rq(E[:, g], g + 1)
+            if not det_entries:
+                break
+            # 2. deterministic effects of the model, backfitted
+            for e in det_entries:
+                key = (e.effect, e.gyro)
+                others = sum((p for k, p in preds.items() if k != key), np.zeros((self.n, self.N)))
+                f = self._fit_det(e.effect, e.gyro, self.E0 - others, r, q)
+                fits[key] = f
+                entry = self._entry_from_fit(f, e)
+                preds[key] = self._prediction(entry)
+        E = self.E0 - sum(preds.values(), np.zeros((self.n, self.N)))
+
+        tests: list[Test] = []
+        # 3. deterministic candidates
+        det_sig = False
+        crit_guess = critical_z(12 * self.N + 4, self.alpha)
+        for effect in ("scale_factor", "scale_nonlinearity", "misalignment", "latency", "saturation",
+                       "temperature_bias"):
+            why = self._available(effect)
+            if why:
+                notes.append(f"{effect}: not tested, {why}")
+                continue
+            for g in range(1, self.N + 1):
+                if (effect, g) in in_model:
+                    continue
+                f = self._fit_det(effect, g, E, r, q)
+                tests.append(self._effect_test(f))
+                det_sig |= tests[-1].z > crit_guess
+        why = self._available("earth_rate")
+        if why:
+            notes.append(f"earth_rate: not tested, {why}")
+        elif ("earth_rate", None) not in in_model:
+            f = self._fit_det("earth_rate", None, E, r, q)
+            if f.extra.get("identifiable", True):
+                tests.append(self._effect_test(f))
+                det_sig |= tests[-1].z > crit_guess
+            else:
+                notes.append("earth_rate: not identifiable (the attitude changes too little)")
+
+        # 4. the record of the stochastic tests
+        if det_sig:
+            rec = slice(a, b)
+            notes.append(f"stochastic tests on the longest static part ({a * self.dt + self.t[0]:.0f}–"
+                         f"{b * self.dt + self.t[0]:.0f} s): a deterministic effect is unexplained")
+        else:
+            rec = slice(0, self.n)
+        Er = E[rec].copy()
+        tr = self.t[rec]
+        burst = next((e for e in model if e.effect == "burst"), None)
+        if burst is not None:
+            inside = (tr >= float(burst.params["start_s"])) & (tr < float(burst.params["end_s"]))
+            if inside.any():   # the white part inside the window back to the level outside
+                level = Er[inside].mean(axis=0)
+                Er[inside] = level + (Er[inside] - level) / math.sqrt(
+                    max(float(burst.params["variance_ratio"]), 1e-12))
+
+        # 5. per-gyro noise: baseline and stochastic candidates / model terms
+        for g in range(1, self.N + 1):
+            fl = {f.effect: f for f in fit_gyro_noise(Er[:, g - 1], self.dt, g)}
+            mine = [eff for eff in ("bias_instability", "quantization", "gauss_markov")
+                    if (eff, g) in in_model]
+            arw, rrw = fl["arw"], fl["rrw"]
+            if mine:  # ARW and RRW from the fit that has the model's term
+                x = fl[mine[0]].extra
+                arw = EffectFit("arw", g, {"n_deg_rt_h": x["n_deg_rt_h"]},
+                                {"n_deg_rt_h": x["n_deg_rt_h_sigma"]}, arw.z, arw.evidence)
+                rrw = EffectFit("rrw", g, {"k_deg_h_rt_h": x["k_deg_h_rt_h"]},
+                                {"k_deg_h_rt_h": x["k_deg_h_rt_h_sigma"]}, rrw.z, rrw.evidence)
+            fits[("arw", g)], fits[("rrw", g)] = arw, rrw
+            for eff in _PER_GYRO_NOISE:
+                if eff == "rate_ramp" and ("rate_ramp", g) in in_model:
+                    continue
+                if (eff, g) in in_model:
+                    fits[(eff, g)] = fl[eff]
+                else:
+                    tests.append(self._effect_test(fl[eff]))
+            if ("sinusoid", g) not in in_model:
+                tests.append(self._effect_test(fit_sinusoid(Er[:, g - 1], tr, self.dt, r[g - 1],
+                                                            q[g - 1], g)))
+
+        # 6. array-wide: correlation, burst
+        if self.N >= 2:
+            cf = fit_correlation(Er, self.dt)
+            merged = self._merge_correlation(cf)
+            if ("correlation", None) in in_model:
+                fits[("correlation", None)] = merged
+            else:
+                tests.append(self._effect_test(merged))
+        else:
+            notes.append("correlation: not tested, needs at least 2 gyros")
+        bf = fit_burst(Er, tr, self.dt)
+        if burst is not None:
+            fits[("burst", None)] = fit_burst(E[rec], tr, self.dt)
+        else:
+            tests.append(self._effect_test(bf))
+
+        # 7. the calibrated model
+        new_entries = []
+        for e in model:
+            f = fits.get((e.effect, e.gyro))
+            new_entries.append(e if f is None else self._entry_from_fit(f, e))
+        cal = NoiseModel(tuple(new_entries), description=model.description)
+
+        # 8. ADEV band of the calibrated stochastic part
+        adev, band_tests = self._adev_band(cal, E, rec)
+        tests += band_tests
+
+        cands = sorted((t for t in tests if t.kind == "effect"),
+                       key=lambda t: -t.z if np.isfinite(t.z) else math.inf)
+        finite = [t.z for t in tests if np.isfinite(t.z)]
+        zc = critical_z(len(finite), self.alpha)
+        worst = max(finite, default=0.0)
+        disc = max(worst, 0.0) / zc
+        if self.ref is None:
+            notes.append("no reference rate: the record is taken as static; "
+                         + ", ".join(_NEEDS_REF) + " need ref_x, ref_y, ref_z")
+        return Analysis(model=cal, fits=fits, tests=tests, candidates=cands, discrepancy=float(disc),
+                        z_crit=zc, residual_rad_s=E, raw_residual_rad_s=self.E0, record=rec,
+                        static=self.static, adev=adev, notes=notes, r=r, q=q)
+
+    # -- helpers ----------------------------------------------------------------
+    @staticmethod
+    def _effect_test(f: EffectFit) -> Test:
+        z = float(f.z) if f.z is not None else math.nan
+        if not f.extra.get("identifiable", True):
+            z = math.nan
+        return Test("effect", f.effect, f.gyro, z, f.evidence, fit=f)
+
+    @staticmethod
+    def _merge_correlation(cf: list[EffectFit]) -> EffectFit:
+        by = {next(iter(f.params)): f for f in cf}
+        fa, fr = by.get("rho_arw"), by.get("rho_rrw")
+        zs = [f.z for f in cf if f.z is not None and np.isfinite(f.z)]
+        # two tests in one candidate: the larger z, Šidák-corrected for 2
+        zmax = max(zs, default=math.nan)
+        if np.isfinite(zmax):
+            p = 1.0 - (1.0 - float(special.ndtr(-zmax))) ** len(zs)
+            z = float(-special.ndtri(min(max(p, 1e-300), 1.0)))
+        else:
+            z = math.nan
+        params = {"rho_arw": float(fa.params["rho_arw"]) if fa else 0.0,
+                  "rho_rrw": float(fr.params["rho_rrw"]) if fr else 0.0}
+        sigma = {}
+        for f in cf:
+            sigma.update(f.sigma)
+        best = max(cf, key=lambda f: f.z if f.z is not None and np.isfinite(f.z) else -math.inf)
+        return EffectFit("correlation", None, params, sigma, z, best.evidence,
+                         extra={"rho_arw_fit": fa.extra if fa else None,
+                                "rho_rrw_fit": fr.extra if fr else None})
+
+    def _entry_from_fit(self, f: EffectFit, old: ModelEntry) -> ModelEntry:
+        """A model entry with the fitted parameters (keeping what the fit does not set)."""
+        params = dict(old.params)
+        eff = get_effect(old.effect)
+        for k, v in f.params.items():
+            if k in eff.param_names and v is not None and np.isfinite(v):
+                params[k] = float(v)
+        if old.effect == "correlation":
+            n = self.N
+            lo = -1.0 / (n - 1) + 1e-6
+            for k in ("rho_arw", "rho_rrw"):
+                params[k] = float(np.clip(params.get(k, 0.0), lo, 0.999))
+        if old.effect == "misalignment":
+            params.pop("axis", None)
+        if old.effect == "gauss_markov" and params.get("sigma_deg_h", 0.0) <= 0:
+            params["sigma_deg_h"] = 0.0
+        try:
+            return ModelEntry(old.effect, old.gyro, _clip_params(old.effect, params))
+        except InputError:
+            return old
+
+    def entry_for(self, effect: str, gyro: int | None, analysis: Analysis) -> ModelEntry:
+        """The model entry of a candidate, with the parameters of its fit in ``analysis``."""
+        t = next((t for t in analysis.candidates if (t.effect, t.gyro) == (effect, gyro)), None)
+        eff = get_effect(effect)
+        if t is None or t.fit is None:
+            f = None
+            if effect == "constant_bias":
+                f = self._fit_det(effect, gyro, analysis.residual_rad_s, analysis.r, analysis.q)
+            if f is None:
+                why = self._available(effect)
+                if why and effect != "constant_bias":
+                    raise InputError(f"cannot add {effect}: it {why}", file=self.name)
+                raise InputError(f"cannot add {effect}" + (f":{gyro}" if gyro else "")
+                                 + ": it is already in the model", file=self.name)
+        else:
+            f = t.fit
+        params = {}
+        for p in eff.params:
+            if p.name in f.params and f.params[p.name] is not None and np.isfinite(f.params[p.name]):
+                params[p.name] = float(f.params[p.name])
+        params = _clip_params(effect, params, self.N)
+        return ModelEntry(effect, gyro, params)
+
+    def _adev_band(self, cal: NoiseModel, E: np.ndarray, rec: slice):
+        """Measured ADEV vs the model's Monte-Carlo band, one test per gyro."""
+        x = E[rec]
+        n = x.shape[0]
+        m = averaging_factors(n + 1, self.dt)
+        m = m[m <= n // 10]
+        sub = NoiseModel(tuple(e for e in cal if e.effect in _STOCHASTIC_SIM))
+        taus = m * self.dt
+        meas = np.array([oadev(x[:, g], self.dt, taus=taus).dev for g in range(self.N)])
+        tr = self.t[rec]
+        zeros = np.zeros((n, 3))
+        mc = np.empty((self.n_runs, self.N, taus.size))
+        for k in range(self.n_runs):
+            rng = np.random.default_rng([self.seed, k])
+            s = simulate_readings(sub, zeros, self.H, self.dt, rng, time_s=tr)
+            for g in range(self.N):
+                mc[k, g] = oadev(s[:, g], self.dt, taus=taus).dev
+        tests = []
+        M = self.n_runs
+        L = np.log(mc)
+        mu = L.mean(axis=0)
+        sd = L.std(axis=0, ddof=1) * math.sqrt(1.0 + 1.0 / M)
+        tq = stats.t.ppf(0.975, M - 1)
+        for g in range(self.N):
+            tk = (np.log(meas[g]) - mu[g]) / sd[g]
+            p = 2.0 * stats.t.sf(np.abs(tk), M - 1)
+            pmin = float(np.min(p))
+            pg = -math.expm1(taus.size * math.log1p(-min(pmin, 1 - 1e-16)))
+            z = float(-special.ndtri(max(pg, 1e-300)))
+            out = np.abs(tk) > tq
+            above = tk > tq
+            below = tk < -tq
+            if np.any(out):
+                sel = above if above.sum() >= below.sum() else below
+                i = np.flatnonzero(sel)
+                word = "above" if sel is above else "below"
+                ev = (f"gyro {g + 1} ADEV {word} the model's 95 % band for τ in "
+                      f"{taus[i[0]]:.3g}–{taus[i[-1]]:.3g} s ({rad_s_to_deg_h(meas[g, i[0]]):.3g} deg/h "
+                      f"at τ = {taus[i[0]]:.3g} s against {rad_s_to_deg_h(math.exp(mu[g, i[0]])):.3g})")
+            else:
+                ev = f"gyro {g + 1} ADEV within the model's 95 % band at every τ"
+            tests.append(Test("adev_band", None, g + 1, z, ev,
+                              extra={"t": tk.tolist(), "p_min": pmin}))
+        band = {"taus_s": taus, "measured": meas, "mc": mc,
+                "lo": np.exp(mu - tq * sd), "hi": np.exp(mu + tq * sd), "median": np.exp(mu)}
+        return band, tests
+
+    # -- the user's loop ------------------------------------------------------
+    def diagnose(self) -> Analysis:
+        return self.analyse()
+
+    def fit(self, add=()) -> tuple[Analysis, Analysis]:
+        """(before, after): the model calibrated, then with the ``add`` effects fitted in."""
+        before = self.analyse()
+        model = self.model
+        for effect, gyro in add:
+            if (effect, gyro) in {(e.effect, e.gyro) for e in model}:
+                continue
+            model = model.with_effect(self.entry_for(effect, gyro, before))
+        after = self.analyse(model) if model is not self.model else before
+        return before, after
+
+    def ladder(self, max_steps: int = 8) -> list[tuple[tuple | None, Analysis]]:
+        """[(added (effect, gyro) or None, analysis), ...]: add the best significant candidate until consistent."""
+        steps = [(None, self.analyse())]
+        model = self.model
+        for _ in range(max_steps):
+            cur = steps[-1][1]
+            if cur.consistent:
+                break
+            best = next((t for t in cur.candidates if cur.significant(t)), None)
+            if best is None:
+                break
+            model = model.with_effect(self.entry_for(best.effect, best.gyro, cur))
+            steps.append(((best.effect, best.gyro), self.analyse(model)))
+            model = steps[-1][1].model
+        return steps
+
+
+def _ml_q(e: np.ndarray, r: float, q0: float, use: np.ndarray) -> float:
+    """Maximum-likelihood random-walk increment variance q of ``e`` on the ``use`` samples, r fixed."""
+    def nll(lq):
+        w = _RWWhitener(e.size, r, math.exp(lq), use)
+        z = w.whiten(e)
+        return 0.5 * (w.logdet + float(z @ z))
+    lo, hi = math.log(1e-12 * r), math.log(r) + 3.0
+    res = optimize.minimize_scalar(nll, bounds=(lo, hi), method="bounded", options={"xatol": 0.05})
+    return float(math.exp(res.x))
+
+
+def _clip_params(effect: str, params: dict, n_gyros: int | None = None) -> dict:
+    """Keep fitted parameters inside the spec's bounds (a fit may land on the edge)."""
+    eff = get_effect(effect)
+    out = {}
+    for p in eff.params:
+        if p.name not in params:
+            continue
+        v = params[p.name]
+        if p.kind == "scalar" and isinstance(v, (int, float)) and not isinstance(v, bool):
+            # open bounds: a hair inside
+            lo = p.lo + (max(abs(p.lo), 1.0) * 1e-9 if p.lo_open else 0.0)
+            hi = p.hi - (max(abs(p.hi), 1.0) * 1e-9 if p.hi_open else 0.0)
+            v = float(min(max(v, lo), hi))
+        out[p.name] = v
+    if effect == "correlation" and n_gyros:
+        lo = -1.0 / (n_gyros - 1) + 1e-6
+        for k in ("rho_arw", "rho_rrw"):
+            if k in out:
+                out[k] = float(np.clip(out[k], lo, 0.999))
+    if effect == "burst":
+        if "variance_ratio" in out:
+            out["variance_ratio"] = max(out["variance_ratio"], 1e-6)
+    return out
