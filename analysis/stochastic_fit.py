@@ -679,36 +679,37 @@ def _gm_grid(cv: _Curve) -> np.ndarray:
     return np.geomspace(lo, hi, count)
 
 
-def _gm_stat(cv: _Curve, white: np.ndarray, tau_c: float) -> tuple[float, np.ndarray]:
-    """Standardised GM amplitude â/σ_â (columns n, k, gm at ``tau_c``, fixed
-    whitener) and its weight vector in the whitened space (unit norm)."""
-    xw = white @ _columns(cv, ("n", "k", "gm"), tau_c)
+def _gm_stat(cv: _Curve, white: np.ndarray, tau_c: float, terms: tuple = ()) -> tuple[float, np.ndarray]:
+    """Standardised GM amplitude â/σ_â (columns n, k, the model's ``terms``,
+    gm at ``tau_c``, fixed whitener) and its weight vector in the whitened
+    space (unit norm)."""
+    xw = white @ _columns(cv, ("n", "k") + tuple(terms) + ("gm",), tau_c)
     s = np.linalg.norm(xw, axis=0)
     xs = xw / s
     try:
         inv = np.linalg.inv(xs.T @ xs)
     except np.linalg.LinAlgError:
         inv = np.linalg.pinv(xs.T @ xs)
-    c = xs @ inv[:, 2]                       # â·s₂ = cᵀ ỹ, var = ‖c‖²
+    c = xs @ inv[:, -1]                      # â·s = cᵀ ỹ, var = ‖c‖²
     norm = float(np.linalg.norm(c))
     return float(c @ (white @ cv.y)) / norm, c / norm
 
 
-def _refine_tau(cv: _Curve, white: np.ndarray, lo: float, hi: float) -> float:
+def _refine_tau(cv: _Curve, white: np.ndarray, lo: float, hi: float, terms: tuple = ()) -> float:
     """τc maximising the standardised GM amplitude with a fixed whitener."""
-    sol = optimize.minimize_scalar(lambda u: -_gm_stat(cv, white, math.exp(u))[0],
+    sol = optimize.minimize_scalar(lambda u: -_gm_stat(cv, white, math.exp(u), terms)[0],
                                    bounds=(math.log(lo), math.log(hi)), method="bounded",
                                    options={"xatol": 1e-3})
     return float(math.exp(sol.x))
 
 
-def _gm_covariance(cv: _Curve, fit: _Gls, tau_c: float) -> np.ndarray:
-    """Covariance of (N², K², σ², ln τc) from the whitened Jacobian."""
+def _gm_covariance(cv: _Curve, fit: _Gls, tau_c: float, terms: tuple = ()) -> np.ndarray:
+    """Covariance of (N², K², the model's terms, σ², ln τc) from the whitened Jacobian."""
     h = 1e-4
     g_up = gauss_markov_avar(cv.taus, 1.0, tau_c * math.exp(h), cv.dt_s)
     g_dn = gauss_markov_avar(cv.taus, 1.0, tau_c * math.exp(-h), cv.dt_s)
-    jac = np.column_stack([_columns(cv, ("n", "k", "gm"), tau_c),
-                           max(fit.a[2], 0.0) * (g_up - g_dn) / (2 * h)])
+    jac = np.column_stack([_columns(cv, ("n", "k") + tuple(terms) + ("gm",), tau_c),
+                           max(fit.a[-1], 0.0) * (g_up - g_dn) / (2 * h)])
     jw = fit.white @ jac
     s = np.linalg.norm(jw, axis=0)
     s = np.where(s > 0, s, 1.0)
@@ -737,7 +738,8 @@ def _as_dt(dt_s) -> float:
     return dt
 
 
-def fit_gyro_noise(e, dt_s: float, gyro: int) -> list[EffectFit]:
+def fit_gyro_noise(e, dt_s: float, gyro: int, *, model_terms: tuple = (),
+                   gm_tau_s: float | None = None) -> list[EffectFit]:
     """Baseline noise and the non-baseline stochastic effects of one gyro.
 
     Parameters
@@ -749,6 +751,15 @@ def fit_gyro_noise(e, dt_s: float, gyro: int) -> list[EffectFit]:
         Sample step [s].
     gyro : int
         1-based gyro number (labels and ``EffectFit.gyro``).
+    model_terms : tuple of {"b", "q"}
+        Terms the noise model already has (bias instability, quantization):
+        they join ARW and RRW in the baseline every other term is tested
+        against, and the EffectFit of a model term is its fit in that
+        baseline (its z is then its own Wald ratio, not a test of absence).
+    gm_tau_s : float, optional
+        The model has a Gauss–Markov term of this correlation time [s]: it
+        joins the baseline the same way (the returned ``gauss_markov`` is
+        its own fit, τc refitted).
 
     Returns
     -------
@@ -785,7 +796,12 @@ def fit_gyro_noise(e, dt_s: float, gyro: int) -> list[EffectFit]:
     label = f"gyro {gyro}"
     n = x.size
     cv = _curve(x, dt)
-    base = _gls(cv, ("n", "k"))
+    terms = tuple(t for t in ("b", "q") if t in model_terms)
+    if set(model_terms) - {"b", "q"}:
+        raise ValueError(f"model_terms must be a subset of ('b', 'q'), got {model_terms!r}")
+    gm = () if gm_tau_s is None else ("gm",)
+    base_names = ("n", "k") + terms + gm
+    base = _gls(cv, base_names, gm_tau_s)
 
     # rate ramp first (time domain); a significant ramp is removed before the
     # Allan fits, which would otherwise read it as RRW or bias instability
@@ -794,7 +810,7 @@ def fit_gyro_noise(e, dt_s: float, gyro: int) -> list[EffectFit]:
     ramp_removed = bool(z_r > 3.0)
     if ramp_removed:
         cv = _curve(x - r * dt * np.arange(n), dt, cov=cv.cov)
-        base = _gls(cv, ("n", "k"))
+        base = _gls(cv, base_names, gm_tau_s)
     common = {"chi2_baseline": base.chi2, "dof_baseline": base.dof, "ramp_removed": ramp_removed}
 
     out = []
@@ -817,12 +833,16 @@ def fit_gyro_noise(e, dt_s: float, gyro: int) -> list[EffectFit]:
     for term, effect, key, conv, what in (
             ("b", "bias_instability", "b_deg_h", units.rad_s_to_deg_h, "flattens"),
             ("q", "quantization", "q_deg", units.rad_to_deg, "falls as τ^−1")):
-        f = _gls(cv, ("n", "k", term), a0=np.append(base.a, 0.0))
-        a, sa = float(f.a[2]), float(math.sqrt(f.cov[2, 2]))
+        names = ("n", "k") + tuple(t for t in terms if t != term) + gm + (term,)
+        if term in terms:
+            f = _gls(cv, names, gm_tau_s)
+        else:
+            f = _gls(cv, names, gm_tau_s, a0=np.append(base.a, 0.0))
+        a, sa = float(f.a[-1]), float(math.sqrt(f.cov[-1, -1]))
         z = a / sa
         p, sp = _root_sigma(a, sa)
         g = term_basis("oadev", term, cv.taus)
-        rest = _columns(cv, ("n", "k")) @ np.maximum(f.a[:2], 0.0)      # its ARW + RRW part
+        rest = _columns(cv, names[:-1], gm_tau_s) @ np.maximum(f.a[:-1], 0.0)  # the rest of the fit
         share = g * max(a, sa) / (np.maximum(rest, 0.0) + g * max(a, sa))
         idx = _band(cv, share)
         where, meas, pred = _band_text(cv, idx, rest)
@@ -846,7 +866,7 @@ def fit_gyro_noise(e, dt_s: float, gyro: int) -> list[EffectFit]:
         out.append(EffectFit(effect="rate_ramp", gyro=gyro, params={"r_deg_h2": 0.0}, z=0.0,
                              evidence=f"{label}: rate ramp not estimable (no ARW seen)",
                              extra={"lr": lr, **common}))
-        out.append(_fit_gauss_markov(cv, base, label, gyro, common))
+        out.append(_fit_gauss_markov(cv, base, label, gyro, common, terms))
         return out
     r_deg = float(units.ramp_rad_s2_to_deg_h2(r))
     sr_deg = float(units.ramp_rad_s2_to_deg_h2(sr))
@@ -862,7 +882,7 @@ def fit_gyro_noise(e, dt_s: float, gyro: int) -> list[EffectFit]:
                          sigma={"r_deg_h2": sr_deg}, z=float(z_r), evidence=ev,
                          extra={"lr": lr, **common}))
 
-    out.append(_fit_gauss_markov(cv, base, label, gyro, common))
+    out.append(_fit_gauss_markov(cv, base, label, gyro, common, terms))
     return out
 
 
@@ -879,12 +899,15 @@ def _nk_extra(f: _Gls) -> dict:
 _UNIT = {"n_deg_rt_h": "deg/√h", "k_deg_h_rt_h": "deg/h/√h", "b_deg_h": "deg/h", "q_deg": "deg"}
 
 
-def _fit_gauss_markov(cv: _Curve, base: _Gls, label: str, gyro, common: dict) -> EffectFit:
+def _fit_gauss_markov(cv: _Curve, base: _Gls, label: str, gyro, common: dict,
+                      terms: tuple = ()) -> EffectFit:
     grid = _gm_grid(cv)
     stats = np.empty(grid.size)
     vecs = np.empty((cv.taus.size, grid.size))
+    names = ("n", "k") + tuple(terms) + ("gm",)
+    j = len(names) - 1                      # index of the GM amplitude
     for i, tc in enumerate(grid):
-        stats[i], vecs[:, i] = _gm_stat(cv, base.white, tc)
+        stats[i], vecs[:, i] = _gm_stat(cv, base.white, tc, terms)
     maxima = _max_calibration(vecs)
     i = int(np.argmax(stats))
     log_p, m_eff = _scan_log_p(float(stats[i]), maxima)
@@ -893,23 +916,23 @@ def _fit_gauss_markov(cv: _Curve, base: _Gls, label: str, gyro, common: dict) ->
     # the estimate: τc refined between the neighbours of the best grid point,
     # then the covariance from the fitted model, then τc again
     lo, hi = grid[max(i - 1, 0)], grid[min(i + 1, grid.size - 1)]
-    tc = _refine_tau(cv, base.white, lo, hi)
-    f = _gls(cv, ("n", "k", "gm"), tc, n_iter=2, a0=np.append(base.a, 0.0))
-    tc = _refine_tau(cv, f.white, max(tc / 2.0, grid[0]), min(tc * 2.0, grid[-1]))
+    tc = _refine_tau(cv, base.white, lo, hi, terms)
+    f = _gls(cv, names, tc, n_iter=2, a0=np.append(base.a[:j], 0.0))
+    tc = _refine_tau(cv, f.white, max(tc / 2.0, grid[0]), min(tc * 2.0, grid[-1]), terms)
     # final coefficients at the refined τc with the same Sigma (τc moved
     # little; a new Gauss-Markov covariance profile costs 30 ms)
-    a_new, cov_a, chi2 = _solve(cv.y, _columns(cv, ("n", "k", "gm"), tc), f.white)
+    a_new, cov_a, chi2 = _solve(cv.y, _columns(cv, names, tc), f.white)
     f = _Gls(a=a_new, cov=cov_a, chi2=chi2, dof=f.dof, white=f.white,
-             model=_columns(cv, ("n", "k", "gm"), tc) @ a_new)
-    cov = _gm_covariance(cv, f, tc)
-    a, sa = float(f.a[2]), float(math.sqrt(max(cov[2, 2], 0.0)))
+             model=_columns(cv, names, tc) @ a_new)
+    cov = _gm_covariance(cv, f, tc, terms)
+    a, sa = float(f.a[j]), float(math.sqrt(max(cov[j, j], 0.0)))
     s, ss = _root_sigma(a, sa)
     params = {"sigma_deg_h": float(_deg_h(s)), "tau_s": float(tc)}
     sigma = {"sigma_deg_h": float(_deg_h(ss))}
-    if a > 0 and cov[3, 3] > 0:
-        sigma["tau_s"] = float(tc * math.sqrt(cov[3, 3]))
+    if a > 0 and cov[j + 1, j + 1] > 0:
+        sigma["tau_s"] = float(tc * math.sqrt(cov[j + 1, j + 1]))
     g = gauss_markov_avar(cv.taus, 1.0, tc, cv.dt_s)
-    rest = _columns(cv, ("n", "k")) @ np.maximum(f.a[:2], 0.0)
+    rest = _columns(cv, names[:-1]) @ np.maximum(f.a[:j], 0.0)
     share = g * max(a, sa) / (np.maximum(rest, 0.0) + g * max(a, sa))
     idx = _band(cv, share)
     where, meas, pred = _band_text(cv, idx, rest)

@@ -383,6 +383,167 @@ def cmd_check(args):
 
 # -- entry point --------------------------------------------------------------
 
+# -- model vs measurement: compare / diagnose / fit / ladder ------------------------
+
+def _comparison(args):
+    """Read the measurement (and model) of a compare-family command; build the chain."""
+    from .compare import ModelComparison
+    from .measurement import read_measurement
+    from .sim.model import NoiseModel
+    meas = read_measurement(args.measurement, repair=args.repair)
+    model = None
+    if args.model is not None:
+        model = NoiseModel.from_toml(args.model, n_gyros=meas.n_gyros)
+    return ModelComparison(meas, model, n_runs=args.runs, seed=args.seed)
+
+
+def _refuse_inputs(out: Path, args, what: str):
+    """Never write over a file the user gave."""
+    given = [args.measurement] + ([args.model] if args.model is not None else [])
+    for g in given:
+        try:
+            if out.exists() and g.exists() and out.resolve() == g.resolve():
+                raise InputError(f"{what} {out} is an input of this command; choose another path "
+                                 "(gyroarray never modifies what you gave it)", file=str(out))
+        except OSError:
+            pass
+
+
+def _model_lines(model) -> list[str]:
+    out = []
+    for e in model:
+        if e.effect in ("arw", "rrw"):
+            continue
+        params = ", ".join(f"{k} = {_short_num(v)}" for k, v in e.params.items())
+        out.append(f"  {e.label}: {params}")
+    return out
+
+
+def _short_num(v):
+    return f"{v:.6g}" if isinstance(v, float) else str(v)
+
+
+def _diagnosis_text(a, head: str) -> str:
+    lines = [head, f"discrepancy D = {a.discrepancy:.3g} ({'consistent' if a.consistent else 'NOT consistent'}"
+             f" with the model; D = max z / {a.z_crit:.2f}, the 1 % family-wise critical z of "
+             f"{len(a.tests)} tests)", "",
+             f"{'effect':<20} {'gyro':>4} {'score':>8}  sig  evidence"]
+    for t in a.candidates:
+        z = "nan" if not math.isfinite(t.z) else f"{t.z:8.2f}"
+        lines.append(f"{t.effect:<20} {'-' if t.gyro is None else t.gyro:>4} {z:>8}  "
+                     f"{'yes' if a.significant(t) else ' no'}  {t.evidence}")
+    bands = [t for t in a.tests if t.kind == "adev_band" and a.significant(t)]
+    if bands:
+        lines += ["", "ADEV outside the model band:"] + [f"  {t.evidence} (z = {t.z:.1f})" for t in bands]
+    un = a.unexplained()
+    if un:
+        lines += ["", "unexplained:"] + [f"  {u}" for u in un]
+    if a.notes:
+        lines += ["", "notes:"] + [f"  {n}" for n in a.notes]
+    return "\n".join(lines)
+
+
+def _write_report(comp, steps, args) -> dict:
+    from .reports.compare_report import write_compare_report
+    _refuse_inputs(args.out, args, "--out")
+    if args.md is not None:
+        _refuse_inputs(args.md, args, "--md")
+    return write_compare_report(comp, steps, args.out, args.md)
+
+
+def cmd_compare(args):
+    comp = _comparison(args)
+    a = comp.analyse()
+    rep = _write_report(comp, [(None, a)], args)
+    res = {"discrepancy": a.discrepancy, "consistent": a.consistent, "z_crit": a.z_crit,
+           "n_tests": len(a.tests), "report": str(args.out),
+           "adev_band": a.to_json_dict()["adev_band"],
+           "candidates": a.to_json_dict()["candidates"][:10], "notes": a.notes}
+    if args.md is not None:
+        res["markdown"] = str(args.md)
+    text = (f"{comp.name}: discrepancy D = {a.discrepancy:.3g} "
+            f"({'consistent' if a.consistent else 'NOT consistent'} with the model)\n"
+            + "\n".join(f"  {t.effect}{'' if t.gyro is None else ':' + str(t.gyro)}  z = {t.z:.1f}  {t.evidence}"
+                        for t in a.candidates[:5] if a.significant(t))
+            + f"\nreport: {args.out}" + (f" and {args.md}" if args.md is not None else ""))
+    del rep
+    return res, text
+
+
+def cmd_diagnose(args):
+    comp = _comparison(args)
+    a = comp.analyse()
+    return a.to_json_dict(), _diagnosis_text(a, f"{comp.name}: {comp.N} gyros, {comp.n * comp.dt:.0f} s")
+
+
+def cmd_fit(args):
+    from .compare import parse_add
+    comp = _comparison(args)
+    add = [parse_add(x, comp.N) for x in (args.add or [])]
+    before, after = comp.fit(add)
+    res = {"discrepancy_before": before.discrepancy, "discrepancy_after": after.discrepancy,
+           "consistent": after.consistent, "effects": after.effects_json()}
+    if args.out is not None:
+        _refuse_inputs(args.out, args, "--out")
+        model = after.model
+        from .sim.model import NoiseModel
+        model = NoiseModel(model.entries, description=f"fitted to {comp.name} by gyroarray fit")
+        args.out.parent.mkdir(parents=True, exist_ok=True)
+        args.out.write_text(model.to_toml(), encoding="utf-8")
+        res["model"] = str(args.out)
+    text = "\n".join([f"{comp.name}: discrepancy {before.discrepancy:.3g} -> {after.discrepancy:.3g} "
+                      f"({'consistent' if after.consistent else 'NOT consistent'})",
+                      "fitted model (beyond ARW + RRW):"] + (_model_lines(after.model) or ["  (baseline only)"])
+                     + ([f"written to {args.out}"] if args.out is not None else []))
+    return res, text
+
+
+def cmd_ladder(args):
+    comp = _comparison(args)
+    steps = comp.ladder(max_steps=args.max_steps)
+    rep = _write_report(comp, steps, args)
+    final = steps[-1][1]
+    res = {"steps": [{"added": None if add is None else {"effect": add[0], "gyro": add[1]},
+                      "discrepancy": a.discrepancy, "consistent": a.consistent}
+                     for add, a in steps],
+           "discrepancy": final.discrepancy, "consistent": final.consistent,
+           "effects": final.effects_json(), "unexplained": final.unexplained(),
+           "candidates_left": [{"effect": t.effect, "gyro": t.gyro, "score": t.z, "evidence": t.evidence}
+                               for t in final.candidates if final.significant(t)],
+           "report": str(args.out)}
+    if args.model_out is not None:
+        _refuse_inputs(args.model_out, args, "--model-out")
+        from .sim.model import NoiseModel
+        model = NoiseModel(final.model.entries, description=f"fitted to {comp.name} by gyroarray ladder")
+        args.model_out.parent.mkdir(parents=True, exist_ok=True)
+        args.model_out.write_text(model.to_toml(), encoding="utf-8")
+        res["model"] = str(args.model_out)
+    lines = [f"{comp.name}: the ladder"]
+    for add, a in steps:
+        what = "calibrated model" if add is None else f"+ {add[0]}{'' if add[1] is None else ':' + str(add[1])}"
+        lines.append(f"  {what:<28} D = {a.discrepancy:8.3g}  {'consistent' if a.consistent else ''}")
+    lines += ["fitted model (beyond ARW + RRW):"] + (_model_lines(final.model) or ["  (baseline only)"])
+    left = final.unexplained() + [t.evidence for t in final.candidates if final.significant(t)]
+    lines += ["still unexplained:"] + ([f"  {x}" for x in left] or ["  nothing"])
+    lines.append(f"report: {args.out}")
+    del rep
+    return res, "\n".join(lines)
+
+
+def _add_compare_args(p, *, out: bool):
+    p.add_argument("measurement", type=Path, metavar="MEAS.csv")
+    p.add_argument("--model", type=Path, metavar="MODEL.toml",
+                   help="noise model to calibrate (default: ARW + RRW on every gyro)")
+    p.add_argument("--runs", type=_positive_int("--runs"), default=40, metavar="K",
+                   help="Monte-Carlo runs of the model band (40)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the model band (0)")
+    p.add_argument("--repair", action="store_true", help="repair short gaps and isolated NaNs")
+    if out:
+        p.add_argument("--out", type=Path, required=True, metavar="REPORT.html")
+        p.add_argument("--md", type=Path, metavar="REPORT.md", help="also write a Markdown twin")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog="gyroarray", description=__doc__.splitlines()[0])
     parser.add_argument("--version", action="version", version=f"gyroarray {_version()}")
@@ -470,6 +631,28 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--top", type=int, default=15, metavar="K", help="designs listed per motion (15)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=cmd_report)
+
+    p = sub.add_parser("compare", help="measurement vs model: calibrate, model band, diagnostics report")
+    _add_compare_args(p, out=True)
+    p.set_defaults(func=cmd_compare)
+
+    p = sub.add_parser("diagnose", help="which effect is the model missing: candidates ranked by significance")
+    _add_compare_args(p, out=False)
+    p.set_defaults(func=cmd_diagnose)
+
+    p = sub.add_parser("fit", help="fit the model (plus --add EFFECT[:GYRO]) to a measurement")
+    _add_compare_args(p, out=False)
+    p.add_argument("--add", action="append", metavar="EFFECT[:GYRO]",
+                   help="effect to add before fitting (repeatable), e.g. scale_factor:2, burst")
+    p.add_argument("--out", type=Path, metavar="NEW.toml", help="write the fitted model (readable by --model)")
+    p.set_defaults(func=cmd_fit)
+
+    p = sub.add_parser("ladder", help="diagnose -> add the best effect -> fit, until consistent; report")
+    _add_compare_args(p, out=True)
+    p.add_argument("--max-steps", type=_positive_int("--max-steps"), default=8, metavar="K",
+                   help="effects added at most (8)")
+    p.add_argument("--model-out", type=Path, metavar="NEW.toml", help="write the final fitted model")
+    p.set_defaults(func=cmd_ladder)
 
     p = sub.add_parser("check", help="regression thresholds: run the threshold scenarios, exit 1 on a failure")
     p.add_argument("thresholds", type=Path, nargs="?", metavar="THRESHOLDS.toml",

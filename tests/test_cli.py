@@ -101,7 +101,8 @@ def test_entry_point_subprocess_no_traceback():
 def test_every_subcommand_is_listed():
     parser = build_parser()
     sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
-    assert set(sub.choices) == {"gdop", "design", "allan", "davar", "simulate", "run", "check", "sweep", "report"}
+    assert set(sub.choices) == {"gdop", "design", "allan", "davar", "simulate", "run", "check", "sweep", "report",
+                                "compare", "diagnose", "fit", "ladder"}
 
 
 @pytest.mark.parametrize("argv,fragment", [

