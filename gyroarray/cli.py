@@ -451,14 +451,24 @@ def _write_report(comp, steps, args) -> dict:
     return write_compare_report(comp, steps, args.out, args.md)
 
 
+def _write_model(path: Path, model, args, what: str) -> str:
+    """The fitted model as TOML at ``path`` (never over an input); returns the path."""
+    from .sim.model import NoiseModel
+    _refuse_inputs(path, args, what)
+    model = NoiseModel(model.entries, description=f"fitted to {args.measurement} by gyroarray {args.command}")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(model.to_toml(), encoding="utf-8")
+    return str(path)
+
+
 def cmd_compare(args):
     comp = _comparison(args)
     a = comp.analyse()
-    rep = _write_report(comp, [(None, a)], args)
+    _write_report(comp, [(None, a)], args)
+    d = a.to_json_dict()
     res = {"discrepancy": a.discrepancy, "consistent": a.consistent, "z_crit": a.z_crit,
            "n_tests": len(a.tests), "report": str(args.out),
-           "adev_band": a.to_json_dict()["adev_band"],
-           "candidates": a.to_json_dict()["candidates"][:10], "notes": a.notes}
+           "adev_band": d["adev_band"], "candidates": d["candidates"][:10], "notes": a.notes}
     if args.md is not None:
         res["markdown"] = str(args.md)
     text = (f"{comp.name}: discrepancy D = {a.discrepancy:.3g} "
@@ -466,7 +476,6 @@ def cmd_compare(args):
             + "\n".join(f"  {t.effect}{'' if t.gyro is None else ':' + str(t.gyro)}  z = {t.z:.1f}  {t.evidence}"
                         for t in a.candidates[:5] if a.significant(t))
             + f"\nreport: {args.out}" + (f" and {args.md}" if args.md is not None else ""))
-    del rep
     return res, text
 
 
@@ -484,13 +493,7 @@ def cmd_fit(args):
     res = {"discrepancy_before": before.discrepancy, "discrepancy_after": after.discrepancy,
            "consistent": after.consistent, "effects": after.effects_json()}
     if args.out is not None:
-        _refuse_inputs(args.out, args, "--out")
-        model = after.model
-        from .sim.model import NoiseModel
-        model = NoiseModel(model.entries, description=f"fitted to {comp.name} by gyroarray fit")
-        args.out.parent.mkdir(parents=True, exist_ok=True)
-        args.out.write_text(model.to_toml(), encoding="utf-8")
-        res["model"] = str(args.out)
+        res["model"] = _write_model(args.out, after.model, args, "--out")
     text = "\n".join([f"{comp.name}: discrepancy {before.discrepancy:.3g} -> {after.discrepancy:.3g} "
                       f"({'consistent' if after.consistent else 'NOT consistent'})",
                       "fitted model (beyond ARW + RRW):"] + (_model_lines(after.model) or ["  (baseline only)"])
@@ -501,7 +504,7 @@ def cmd_fit(args):
 def cmd_ladder(args):
     comp = _comparison(args)
     steps = comp.ladder(max_steps=args.max_steps)
-    rep = _write_report(comp, steps, args)
+    _write_report(comp, steps, args)
     final = steps[-1][1]
     res = {"steps": [{"added": None if add is None else {"effect": add[0], "gyro": add[1]},
                       "discrepancy": a.discrepancy, "consistent": a.consistent}
@@ -512,12 +515,7 @@ def cmd_ladder(args):
                                for t in final.candidates if final.significant(t)],
            "report": str(args.out)}
     if args.model_out is not None:
-        _refuse_inputs(args.model_out, args, "--model-out")
-        from .sim.model import NoiseModel
-        model = NoiseModel(final.model.entries, description=f"fitted to {comp.name} by gyroarray ladder")
-        args.model_out.parent.mkdir(parents=True, exist_ok=True)
-        args.model_out.write_text(model.to_toml(), encoding="utf-8")
-        res["model"] = str(args.model_out)
+        res["model"] = _write_model(args.model_out, final.model, args, "--model-out")
     lines = [f"{comp.name}: the ladder"]
     for add, a in steps:
         what = "calibrated model" if add is None else f"+ {add[0]}{'' if add[1] is None else ':' + str(add[1])}"
@@ -526,7 +524,6 @@ def cmd_ladder(args):
     left = final.unexplained() + [t.evidence for t in final.candidates if final.significant(t)]
     lines += ["still unexplained:"] + ([f"  {x}" for x in left] or ["  nothing"])
     lines.append(f"report: {args.out}")
-    del rep
     return res, "\n".join(lines)
 
 

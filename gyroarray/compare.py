@@ -54,7 +54,7 @@ from gyroarray.analysis.regress import (_RWWhitener, fit_latency, fit_misalignme
                                         fit_temperature_bias)
 from gyroarray.analysis.stochastic_fit import fit_burst, fit_correlation, fit_gyro_noise
 from gyroarray.errors import InputError
-from gyroarray.measurement import Measurement
+from gyroarray.measurement import Measurement, _runs
 from gyroarray.sim.effects import effect_names, get_effect, simulate_readings
 from gyroarray.sim.model import ModelEntry, NoiseModel
 from gyroarray.units import (RAD_PER_DEG, arw_deg_rt_h_to_rad_rt_s, rad_s_to_deg_h,
@@ -253,13 +253,6 @@ def _entry_params(entry: ModelEntry) -> dict:
     return d
 
 
-def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
-    """[start, stop) of the runs of True."""
-    m = np.concatenate(([False], np.asarray(mask, bool), [False]))
-    d = np.flatnonzero(np.diff(m.astype(np.int8)))
-    return list(zip(d[::2].tolist(), d[1::2].tolist()))
-
-
 class ModelComparison:
     """Compare a measurement with a noise model (the chain of the module docstring).
 
@@ -367,11 +360,6 @@ class ModelComparison:
     # -- the deterministic part's prediction ------------------------------
     def _prediction(self, entry: ModelEntry) -> np.ndarray:
         """What one deterministic effect adds to the outputs [rad/s], (n, N)."""
-        if entry.effect == "constant_bias":
-            out = np.zeros((self.n, self.N))
-            out[:, entry.gyro - 1] = entry.si_params.get("bias_rad_s", 0.0) if "bias_rad_s" in \
-                entry.si_params else float(entry.params["bias_deg_h"]) * RAD_PER_DEG / 3600.0
-            return out
         truth = self.ref if self.ref is not None else np.zeros((self.n, 3))
         kw = {"time_s": self.t_sim}
         if entry.effect == "temperature_bias":
@@ -600,11 +588,10 @@ class ModelComparison:
                 tests.append(self._effect_test(merged))
         else:
             notes.append("correlation: not tested, needs at least 2 gyros")
-        bf = fit_burst(Er, tr, self.dt)
         if burst is not None:
             fits[("burst", None)] = fit_burst(E[rec], tr, self.dt)
         else:
-            tests.append(self._effect_test(bf))
+            tests.append(self._effect_test(fit_burst(Er, tr, self.dt)))
 
         # 7. the calibrated model
         new_entries = []
@@ -667,17 +654,12 @@ class ModelComparison:
         for k, v in f.params.items():
             if k in eff.param_names and v is not None and np.isfinite(v):
                 params[k] = float(v)
-        if old.effect == "correlation":
-            n = self.N
-            lo = -1.0 / (n - 1) + 1e-6
-            for k in ("rho_arw", "rho_rrw"):
-                params[k] = float(np.clip(params.get(k, 0.0), lo, 0.999))
         if old.effect == "misalignment":
             params.pop("axis", None)
         if old.effect == "gauss_markov" and params.get("sigma_deg_h", 0.0) <= 0:
             params["sigma_deg_h"] = 0.0
         try:
-            return ModelEntry(old.effect, old.gyro, _clip_params(old.effect, params))
+            return ModelEntry(old.effect, old.gyro, _clip_params(old.effect, params, self.N))
         except InputError:
             return old
 
@@ -685,18 +667,16 @@ class ModelComparison:
         """The model entry of a candidate, with the parameters of its fit in ``analysis``."""
         t = next((t for t in analysis.candidates if (t.effect, t.gyro) == (effect, gyro)), None)
         eff = get_effect(effect)
-        if t is None or t.fit is None:
-            f = None
-            if effect == "constant_bias":
-                f = self._fit_det(effect, gyro, analysis.residual_rad_s, analysis.r, analysis.q)
-            if f is None:
-                why = self._available(effect)
-                if why and effect != "constant_bias":
-                    raise InputError(f"cannot add {effect}: it {why}", file=self.name)
-                raise InputError(f"cannot add {effect}" + (f":{gyro}" if gyro else "")
-                                 + ": it is already in the model", file=self.name)
-        else:
+        if t is not None and t.fit is not None:
             f = t.fit
+        elif effect == "constant_bias":     # never a candidate, fitted on request
+            f = self._fit_det(effect, gyro, analysis.residual_rad_s, analysis.r, analysis.q)
+        else:
+            why = self._available(effect)
+            if why:
+                raise InputError(f"cannot add {effect}: it {why}", file=self.name)
+            raise InputError(f"cannot add {effect}" + (f":{gyro}" if gyro else "")
+                             + ": it is already in the model", file=self.name)
         params = {}
         for p in eff.params:
             if p.name in f.params and f.params[p.name] is not None and np.isfinite(f.params[p.name]):

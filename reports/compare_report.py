@@ -950,19 +950,7 @@ def write_compare_report(comp, steps, out_html, out_md=None, *, title: str | Non
 
     stamp = time.strftime("%Y-%m-%d %H:%M", time.localtime())
     subtitle = f"{stamp} · {label} · {comp.N} gyros · {comp.n_runs} Monte-Carlo runs per band"
-    page = doc.render_html(subtitle).replace("</style>", _EXTRA_CSS + "</style>", 1)
-    out_html.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out_html.with_name(f".{out_html.name}.tmp")
-    tmp.write_text(page, encoding="utf-8")
-    tmp.replace(out_html)
-    md_path = None
-    if out_md is not None:
-        md_path = Path(out_md)
-        figdir = md_path.with_name(md_path.stem + "_figures")
-        figdir.mkdir(parents=True, exist_ok=True)
-        for name, png in doc.figures:
-            (figdir / f"{name}.png").write_bytes(png)
-        md_path.write_text(f"*{subtitle}*\n\n" + doc.render_md(figdir.name), encoding="utf-8")
+    md_path = doc.write(out_html, out_md, subtitle, css=_EXTRA_CSS)
     rows = [{"added": None if added is None else [added[0], added[1]],
              "discrepancy": float(a.discrepancy), "consistent": bool(a.consistent)}
             for added, a in steps]

@@ -459,6 +459,27 @@ class _Doc:
     def render_md(self, figdir: str) -> str:
         return "\n".join(self.md).replace("{FIGDIR}", figdir) + "\n"
 
+    def write(self, out_html: Path, out_md, subtitle: str, *, css: str = "") -> Path | None:
+        """Write the HTML (atomically; ``css`` appended to the page's style) and, if
+        ``out_md``, the Markdown twin with its figures as PNGs in ``<stem>_figures/``.
+        Returns the Markdown path or None."""
+        page = self.render_html(subtitle)
+        if css:
+            page = page.replace("</style>", css + "</style>", 1)
+        out_html.parent.mkdir(parents=True, exist_ok=True)
+        tmp = out_html.with_name(f".{out_html.name}.tmp")
+        tmp.write_text(page, encoding="utf-8")
+        tmp.replace(out_html)
+        if out_md is None:
+            return None
+        md_path = Path(out_md)
+        figdir = md_path.with_name(md_path.stem + "_figures")
+        figdir.mkdir(parents=True, exist_ok=True)
+        for name, png in self.figures:
+            (figdir / f"{name}.png").write_bytes(png)
+        md_path.write_text(f"*{subtitle}*\n\n" + self.render_md(figdir.name), encoding="utf-8")
+        return md_path
+
 
 _HTML = """<!DOCTYPE html>
 <html lang="en"><head><meta charset="utf-8">
@@ -665,18 +686,7 @@ def write_report(dirs, out_html, out_md=None, *, paper_values=None, top: int = 1
     stamp = time.strftime("%Y-%m-%d %H:%M", time.localtime())
     subtitle = (f"{stamp} · sweeps: " + ", ".join(f"{d.name} ({d.rows.scenario_id.nunique()} "
                                                    f"scenarios)" for d in data))
-    out_html.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out_html.with_name(f".{out_html.name}.tmp")
-    tmp.write_text(doc.render_html(subtitle), encoding="utf-8")
-    tmp.replace(out_html)
-    md_path = None
-    if out_md is not None:
-        md_path = Path(out_md)
-        figdir = md_path.with_name(md_path.stem + "_figures")
-        figdir.mkdir(parents=True, exist_ok=True)
-        for name, png in doc.figures:
-            (figdir / f"{name}.png").write_bytes(png)
-        md_path.write_text(f"*{subtitle}*\n\n" + doc.render_md(figdir.name), encoding="utf-8")
+    md_path = doc.write(out_html, out_md, subtitle)
     best = []
     if ranking is not None:
         for motion, sub in ranking.groupby("motion", sort=False):
