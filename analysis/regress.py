@@ -623,7 +623,7 @@ def fit_scale_and_nonlinearity(e, omega_ref_rad_s, h, time_s, dt_s: float, r: fl
         ev = (f"gyro {gyro} residual shows no significant curvature with the rate about its axis "
               f"(k2 = {_pm(k2, k2_s)} per deg/s, z = {z:.1f})")
     nl = EffectFit("scale_nonlinearity", gyro, {"k2_per_deg_s": k2}, {"k2_per_deg_s": k2_s}, z, ev,
-                   _extra(fit, t=t, corr=corr, ppm_joint=sf.params["ppm"]))
+                   _extra(fit, t=t, corr=corr, ppm_joint=sf.params["ppm"], ppm_joint_z=float(sf.z)))
     return sf, nl
 
 
@@ -733,8 +733,10 @@ def fit_misalignment(e, omega_ref_rad_s, h, time_s, dt_s: float, r: float, q: fl
         θ = asin|c|,  ψ = atan2(c2, c1),  a = √(1 − |c|²) h + c1 e1 + c2 e2
 
     The last term of e_t, (1 − cos θ)·u ≈ θ²/2·u, is second order (a
-    scale-factor-like −152 ppm at θ = 1°) and is not fitted. σ by the delta
-    method from cov(c1, c2). When the motion leaves one direction of the
+    scale-factor-like −152 ppm at θ = 1°, which a table run resolves to
+    ~10 ppm): it is put back with the θ of the previous fit and (c1, c2)
+    refitted, twice (the change of θ² after the second pass is below 1e-6
+    of it at θ = 1°). σ by the delta method from cov(c1, c2). When the motion leaves one direction of the
     (e1, e2) plane unseen (rotation about a single axis), the fit uses the
     seen direction only: the tilt component along it (the unseen component
     taken as 0, so ψ has no sigma), ``extra["unseen"]`` the unseen unit
@@ -749,8 +751,8 @@ def fit_misalignment(e, omega_ref_rad_s, h, time_s, dt_s: float, r: float, q: fl
     basis = np.column_stack([e1, e2])                      # (3, 2)
     x = w @ basis                                          # (n, 2)
     wh = _RWWhitener(n, r, q, use)
-    zx = wh.whiten(x, e)
-    za, zy = zx[:, :2], zx[:, 2]
+    zx = wh.whiten(x, e, w @ hv)
+    za, zy0, zu = zx[:, :2], zx[:, 2], zx[:, 3]
     g = za.T @ za
     lam, vec = np.linalg.eigh(g)
     unseen = None
@@ -758,19 +760,25 @@ def fit_misalignment(e, omega_ref_rad_s, h, time_s, dt_s: float, r: float, q: fl
     if not lam[1] > 0:
         return _not_identifiable("misalignment", gyro, none, "there is no rate about the axes "
                                  "perpendicular to its axis", NotIdentifiableError("no rate ⟂ h"))
-    if lam[0] < lam[1] / MAX_COND:
+    one_way = lam[0] < lam[1] / MAX_COND
+    if one_way:
         seen = vec[:, 1]
         unseen = basis @ vec[:, 0]
-        fit = wh.fit_whitened(zy, (za @ seen)[:, None])
-        c = seen * fit.beta[0]
-        cov = np.outer(seen, seen) * fit.cov[0, 0]
-        chi2 = float(fit.beta[0] ** 2 / fit.cov[0, 0])
-        dof = 1
-    else:
-        fit = wh.fit_whitened(zy, za)
-        c, cov = fit.beta, fit.cov
-        chi2 = float(c @ np.linalg.solve(cov, c))
-        dof = 2
+    cos_t = 1.0
+    for _ in range(3):                       # plain fit, then the θ²/2·u term put back twice
+        zy = zy0 + (1.0 - cos_t) * zu
+        if one_way:
+            fit = wh.fit_whitened(zy, (za @ seen)[:, None])
+            c = seen * fit.beta[0]
+            cov = np.outer(seen, seen) * fit.cov[0, 0]
+            chi2 = float(fit.beta[0] ** 2 / fit.cov[0, 0])
+            dof = 1
+        else:
+            fit = wh.fit_whitened(zy, za)
+            c, cov = fit.beta, fit.cov
+            chi2 = float(c @ np.linalg.solve(cov, c))
+            dof = 2
+        cos_t = math.sqrt(max(1.0 - float(c @ c), 0.0))
     z = chi2_to_z(chi2, dof)
     cn = float(np.hypot(c[0], c[1]))
     sin_t = min(cn, 1.0)

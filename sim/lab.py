@@ -18,6 +18,15 @@ repeat until ``motion_s`` is filled:
   (every gyro sees a rate about its axis and about the others, and
   ±126 deg/s² of acceleration: latency).
 
+``protocol="table"`` is instead the session of the practice measurements'
+README (``../shared/measurements/README.md``), a 3-axis rate table: after
+the static part, rate steps about z of 10, 30, 50, 80 deg/s, then +30 and
+−30 deg/s about x and about y (each 60 s: 2 s smooth ramps, 56 s hold), a
+120 s swing about z of 20 deg/s at 0.1 Hz and a 60 s one of 5 deg/s at
+0.5 Hz (``motion_s`` = 900 s of it), the static tail. It is how
+``benchmarks/diagnosis_score.py`` scores the diagnosis on records shaped
+like the held-out set's.
+
 Units: SI inside; ``gyro_deg_s``/``ref_deg_s`` of the measurement in deg/s.
 """
 
@@ -33,7 +42,7 @@ from gyroarray.sim.effects import simulate_readings
 from gyroarray.sim.model import NoiseModel
 from gyroarray.units import RAD_PER_DEG
 
-__all__ = ["lab_profile", "lab_temperature", "lab_run"]
+__all__ = ["lab_profile", "table_profile", "lab_temperature", "lab_run"]
 
 
 def _ramp_hold(t: np.ndarray, t0: float, level: float, ramp: float, hold: float) -> np.ndarray:
@@ -67,17 +76,53 @@ def lab_profile(time_s: np.ndarray, static_s: float, motion_s: float) -> np.ndar
         t0 += swing + pause
 
 
-def lab_temperature(time_s: np.ndarray, start_c: float = 25.0, rise_c: float = 10.0,
-                    tau_s: float = 900.0) -> np.ndarray:
-    """Warm-up after power-on [°C]: start + rise·(1 − exp(−t/τ))."""
+def _smooth_step(t: np.ndarray, t0: float, level: float, ramp: float, hold: float) -> np.ndarray:
+    """0 → level by a smoothstep (3x² − 2x³) of ``ramp`` s, held ``hold`` s, back to 0 the same way."""
+    up = np.clip((t - t0) / ramp, 0.0, 1.0)
+    down = np.clip((t - (t0 + ramp + hold)) / ramp, 0.0, 1.0)
+    return level * (up * up * (3.0 - 2.0 * up) - down * down * (3.0 - 2.0 * down))
+
+
+def table_profile(time_s: np.ndarray, static_s: float, motion_s: float = 900.0) -> np.ndarray:
+    """Reference rate [rad/s], shape (n, 3), of the 3-axis table session (``protocol="table"``).
+
+    Blocks (deg/s, platform frame), cut at ``static_s + motion_s``: z 10, 30,
+    50, 80; x +30, −30; y +30, −30 (60 s each: 2 s ramps, 56 s hold); z
+    swing 20 at 0.1 Hz for 120 s; z swing 5 at 0.5 Hz for 60 s (both faded in
+    and out over 2 s).
+    """
     t = np.asarray(time_s, float) - float(time_s[0])
-    return start_c + rise_c * (1.0 - np.exp(-t / tau_s))
+    out = np.zeros((t.size, 3))
+    t0, end = float(static_s), float(static_s) + float(motion_s)
+    steps = [(2, 10.0), (2, 30.0), (2, 50.0), (2, 80.0), (0, 30.0), (0, -30.0), (1, 30.0), (1, -30.0)]
+    for axis, level in steps:
+        if t0 + 60.0 > end:
+            return out
+        out[:, axis] += _smooth_step(t, t0, level * RAD_PER_DEG, 2.0, 56.0)
+        t0 += 60.0
+    for amp, f, length in ((20.0, 0.1, 120.0), (5.0, 0.5, 60.0)):
+        if t0 + length > end:
+            return out
+        # amplitude faded in and out by the same 2 s smooth ramps
+        envelope = _smooth_step(t, t0, 1.0, 2.0, length - 4.0)
+        out[:, 2] += envelope * amp * RAD_PER_DEG * np.sin(2.0 * math.pi * f * (t - t0))
+        t0 += length
+    return out
+
+
+def lab_temperature(time_s: np.ndarray, start_c: float = 25.0, rise_c: float = 10.0,
+                    tau_s: float = 900.0, wobble_c: float = 0.0, wobble_period_s: float = 1300.0) -> np.ndarray:
+    """Warm-up after power-on [°C]: start + rise·(1 − exp(−t/τ)) + wobble·sin(2πt/period)."""
+    t = np.asarray(time_s, float) - float(time_s[0])
+    return (start_c + rise_c * (1.0 - np.exp(-t / tau_s))
+            + wobble_c * np.sin(2.0 * math.pi * t / wobble_period_s))
 
 
 def lab_run(model: NoiseModel, layout: Layout, rng: np.random.Generator, *,
             rate_hz: float = 50.0, static_s: float = 600.0, motion_s: float = 300.0,
             tail_s: float = 300.0, latitude_deg: float | None = 34.25, heading_deg: float = 0.0,
-            temperature: bool = True, reference: bool = True, description: str = "") -> Measurement:
+            temperature: bool = True, reference: bool = True, protocol: str = "steps",
+            description: str = "") -> Measurement:
     """A simulated rate-table session of ``layout`` with the effects of ``model``.
 
     Parameters
@@ -96,6 +141,11 @@ def lab_run(model: NoiseModel, layout: Layout, rng: np.random.Generator, *,
         Site [deg] (``earth_rate``); latitude None = no ``[site]``.
     temperature, reference : bool
         Record ``temp_c`` / ``ref_*``.
+    protocol : {"steps", "table"}
+        The dynamic part: this module's steps and swings about x, y, z and
+        (1,1,1)/√3, or the practice set's table session (see the module
+        docstring; its natural lengths are static 1200 s, motion 900 s,
+        tail 300 s).
     description : str
         Sidecar text.
 
@@ -108,8 +158,11 @@ def lab_run(model: NoiseModel, layout: Layout, rng: np.random.Generator, *,
     dt = 1.0 / float(rate_hz)
     n = int(round((static_s + motion_s + tail_s) * rate_hz))
     t = np.arange(n) * dt
-    ref = lab_profile(t, static_s, motion_s)
-    temp = lab_temperature(t)
+    if protocol not in ("steps", "table"):
+        raise ValueError(f"protocol must be 'steps' or 'table', not {protocol!r}")
+    ref = (lab_profile if protocol == "steps" else table_profile)(t, static_s, motion_s)
+    # the table session's room: a faster, larger warm-up with a slow wobble (practice README)
+    temp = lab_temperature(t) if protocol == "steps" else lab_temperature(t, rise_c=12.0, wobble_c=0.5)
     site = None if latitude_deg is None else Site(latitude_deg * RAD_PER_DEG, heading_deg * RAD_PER_DEG)
     kw = {"time_s": t, "temp_c": temp}
     if any(e.effect == "earth_rate" for e in model):
