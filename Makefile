@@ -6,7 +6,7 @@ STAMP  := $(VENV)/.installed
 # sweep worker processes (one per core)
 WORKERS ?= $(shell nproc 2>/dev/null || echo 2)
 
-.PHONY: demo test bench venv clean
+.PHONY: demo test bench score venv clean
 
 venv: $(STAMP)
 
@@ -36,6 +36,10 @@ test: $(STAMP)
 
 bench: $(STAMP)
 	OPENBLAS_NUM_THREADS=1 $(PY) benchmarks/run.py
+
+# how often diagnose names a hidden effect right (not a speed benchmark; ~4 min)
+score: $(STAMP)
+	OPENBLAS_NUM_THREADS=1 $(PY) benchmarks/diagnosis_score.py --seeds 2 --json bench_out/diagnosis_score.json
 
 clean:
 	rm -rf $(VENV) build *.egg-info .pytest_cache .hypothesis reports/demo

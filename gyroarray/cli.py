@@ -513,7 +513,7 @@ def cmd_ladder(args):
            "effects": final.effects_json(), "unexplained": final.unexplained(),
            "candidates_left": [{"effect": t.effect, "gyro": t.gyro, "score": t.z, "evidence": t.evidence}
                                for t in final.candidates if final.significant(t)],
-           "report": str(args.out)}
+           "notes": list(final.notes), "report": str(args.out)}
     if args.model_out is not None:
         res["model"] = _write_model(args.model_out, final.model, args, "--model-out")
     lines = [f"{comp.name}: the ladder"]
@@ -523,6 +523,7 @@ def cmd_ladder(args):
     lines += ["fitted model (beyond ARW + RRW):"] + (_model_lines(final.model) or ["  (baseline only)"])
     left = final.unexplained() + [t.evidence for t in final.candidates if final.significant(t)]
     lines += ["still unexplained:"] + ([f"  {x}" for x in left] or ["  nothing"])
+    lines += [f"note: {x}" for x in final.notes if x.startswith("the ladder")]
     lines.append(f"report: {args.out}")
     return res, "\n".join(lines)
 

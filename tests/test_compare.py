@@ -16,9 +16,8 @@ temperature). Tolerances:
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 import math
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -28,6 +27,7 @@ from gyroarray.compare import ModelComparison, critical_z, parse_add
 from gyroarray.errors import InputError
 from gyroarray.layout import Layout
 from gyroarray.measurement import write_measurement
+from gyroarray.sim.cases import EFFECTS, single_effect_case
 from gyroarray.sim.lab import lab_run
 from gyroarray.sim.model import ModelEntry, NoiseModel
 from gyroarray.sim.scenario import load_scenario
@@ -35,14 +35,6 @@ from gyroarray.sim.scenario import load_scenario
 ROOT = Path(__file__).resolve().parents[1]
 BASE = (ModelEntry("arw", None, {"n_deg_rt_h": 0.15}), ModelEntry("rrw", None, {"k_deg_h_rt_h": 10.0}))
 S1N6 = Layout.conical(1, 6, math.radians(54.7356))
-
-
-def _cli(*args, check=True):
-    p = subprocess.run([sys.executable, "-m", "gyroarray.cli", *map(str, args)],
-                       capture_output=True, text=True)
-    if check:
-        assert p.returncode == 0, p.stderr
-    return p
 
 
 def test_critical_z_is_sidak():
@@ -168,6 +160,77 @@ def test_ladder_on_two_hidden_effects_finds_both():
     assert d[-1] <= 1.0 < d[0] and all(x > y for x, y in zip(d, d[1:]))
 
 
+# -- records shaped like the practice set (gyroarray.sim.cases) -----------------------
+
+# Cases of benchmarks/diagnosis_score.py that went wrong before the ranking
+# and model fixes they guard (numbers from the score run of this session):
+RIVALS = {
+    # a bias instability scored below the Gauss–Markov hump fitted to the same
+    # floor (z 11.97 vs 11.72); the AIC of the two Allan fits (9 vs 26 on 11 dof) decides
+    ("bias_instability", 100): "gauss_markov",
+    # rates mostly of one sign: k2·u² has a large linear part, the scale factor
+    # scored z 323 against the curvature's 159 (tested given a scale factor)
+    ("scale_nonlinearity", 200): "scale_factor",
+    # clipping of input + turn-on bias: with the bias left out of the
+    # prediction, D stayed at 4.6 after the fit
+    ("saturation", 100): None,
+    # a 0.92° tilt: its (1 − cos θ)·u term (−129 ppm) was left as a scale
+    # factor and curvature, D 1.72 after the fit
+    ("misalignment", 202): None,
+}
+
+
+# every effect once (seed 100) and the rival cases; the parameters are checked
+# by `make score` (benchmarks/diagnosis_score.py), which reports them per case
+SHAPED = sorted({(e, 100) for e in EFFECTS} | set(RIVALS))
+SHAPED_XFAIL = {
+    "quantization": "found (z 136), but the fitted white-angle Q does not describe a quantizer "
+                    "that the noise barely dithers: D after 1.5, the ADEV band of the gyro fails",
+}
+
+
+@pytest.mark.parametrize("effect,seed", [
+    pytest.param(e, s, marks=pytest.mark.xfail(reason=SHAPED_XFAIL[e], strict=True)) if e in SHAPED_XFAIL
+    else (e, s) for e, s in SHAPED], ids=[f"{e}-{s}" for e, s in SHAPED])
+def test_practice_shaped_case_is_found_and_explained(effect, seed):
+    c = single_effect_case(effect, seed)
+    before, after = ModelComparison(c.measurement, n_runs=20).fit([(effect, c.gyro)])
+    top = before.candidates[0]
+    assert (top.effect, top.gyro) == (effect, c.gyro), [(t.effect, t.gyro, t.z) for t in before.candidates[:3]]
+    assert before.significant(top)
+    rival = RIVALS.get((effect, seed))
+    if rival is not None:     # the rival is significant too, and says why it ranks lower
+        r = next(t for t in before.candidates if (t.effect, t.gyro) == (rival, c.gyro))
+        assert before.significant(r)
+        assert "fits this ADEV better" in r.evidence or "the nonlinearity explains it" in r.evidence
+    assert after.consistent, [(t.effect, t.gyro, t.z) for t in after.tests if after.significant(t)]
+    assert after.discrepancy <= 0.5 * before.discrepancy
+
+
+def test_ladder_keeps_only_steps_that_help(monkeypatch):
+    """A step that makes D worse is refused, the next candidate tried, the refusal noted."""
+    m = lab_run(_with("scale_factor", 2, {"ppm": 3000.0}), S1N6, np.random.default_rng(5))
+    comp = ModelComparison(m, n_runs=10)
+    real = comp.analyse
+    first = real()
+    # a wrong candidate made significant and put first; its step doubles D
+    wrong = replace(next(t for t in first.candidates if t.effect == "rate_ramp"), z=first.z_crit + 1.0)
+
+    def analyse(model=None):
+        if model is None:
+            return replace(first, candidates=[wrong] + list(first.candidates))
+        a = real(model)
+        if any(e.effect == "rate_ramp" for e in model):
+            return replace(a, discrepancy=2.0 * first.discrepancy)
+        return a
+    monkeypatch.setattr(comp, "analyse", analyse)
+    steps = comp.ladder()
+    assert [s[0] for s in steps[1:]] == [("scale_factor", 2)]
+    assert steps[-1][1].consistent
+    assert any(n.startswith(f"the ladder did not add rate_ramp on gyro {wrong.gyro}")
+               for n in steps[-1][1].notes)
+
+
 def test_same_seed_same_bits():
     m = lab_run(NoiseModel(BASE), S1N6, np.random.default_rng(1), static_s=300, motion_s=120, tail_s=60)
     a = ModelComparison(m, n_runs=5, seed=3).analyse()
@@ -187,6 +250,47 @@ def test_no_reference_gives_static_diagnoses_and_says_what_needs_one():
     assert any("need ref_x, ref_y, ref_z" in n for n in a.notes)
 
 
+def _biased(extra=()):
+    """BASE with a different turn-on bias on every gyro (300·g deg/h) and ``extra`` entries."""
+    return NoiseModel(BASE + tuple(ModelEntry("constant_bias", g, {"bias_deg_h": 300.0 * g})
+                                   for g in range(1, 7)) + tuple(extra))
+
+
+@pytest.mark.parametrize("seed", [11, 12])
+def test_no_reference_motion_is_cut_out_not_read_as_noise(seed):
+    """Without ref_*, the turns of the lab run are found in the outputs and left out.
+
+    The steps-and-swings part (600–~888 s) would otherwise read as a huge
+    bias instability / random walk; the still parts are stitched and the
+    baseline is consistent again (seed 11: D 0.82, seed 12: D 0.50)."""
+    m = lab_run(_biased(), S1N6, np.random.default_rng(seed), reference=False)
+    comp = ModelComparison(m, n_runs=20)
+    (a0, b0), (a1, b1) = comp.parts_s           # two still parts: the static head and tail
+    assert a0 == 0.0 and 597.0 < b0 <= 600.0 and 880.0 < a1 < 892.0 and b1 == pytest.approx(1200.0)
+    a = comp.analyse()
+    assert a.consistent, [(t.effect, t.gyro, t.z) for t in a.tests if a.significant(t)]
+    assert any("2 still parts" in n for n in a.notes)
+
+
+def test_no_reference_motion_still_finds_a_noise_effect():
+    m = lab_run(_biased([ModelEntry("bias_instability", 2, {"b_deg_h": 8.0})]), S1N6,
+                np.random.default_rng(11), reference=False)
+    a = ModelComparison(m, n_runs=20).analyse()
+    assert (a.candidates[0].effect, a.candidates[0].gyro) == ("bias_instability", 2)
+    assert a.significant(a.candidates[0])
+
+
+def test_no_reference_and_too_little_still_is_refused(tmp_path, cli):
+    # still: 15 s head + ~10 s after the last block (the blocks stop short of 300 s): < 2048 samples
+    m = lab_run(NoiseModel(BASE), S1N6, np.random.default_rng(2), static_s=15.0, motion_s=300.0,
+                tail_s=2.0, reference=False)
+    csv, _ = write_measurement(m, tmp_path / "moving.csv.gz")
+    p = cli("diagnose", csv, check=False)
+    assert p.returncode == 2 and "Traceback" not in p.stderr
+    assert "no reference rate" in p.stderr and "the outputs show motion" in p.stderr
+    assert len(p.stderr.strip().splitlines()) == 1
+
+
 # -- CLI: the loop a user runs, and bad input ---------------------------------------
 
 @pytest.fixture(scope="module")
@@ -197,22 +301,22 @@ def sf_files(tmp_path_factory):
     return csv
 
 
-def test_cli_diagnose_fit_and_model_round_trip(sf_files, tmp_path):
-    d = json.loads(_cli("diagnose", sf_files, "--runs", 10, "--json").stdout)
+def test_cli_diagnose_fit_and_model_round_trip(sf_files, tmp_path, cli):
+    d = json.loads(cli("diagnose", sf_files, "--runs", 10, "--json").stdout)
     assert set(d) >= {"discrepancy", "consistent", "candidates"}
     c0 = d["candidates"][0]
     assert (c0["effect"], c0["gyro"], c0["significant"]) == ("scale_factor", 2, True)
     assert d["consistent"] is False and d["discrepancy"] > 1
     assert "gyro 2" in c0["evidence"] and "%" in c0["evidence"]
     out = tmp_path / "fitted.toml"
-    f = json.loads(_cli("fit", sf_files, "--runs", 10, "--add", "scale_factor:2", "--out", out, "--json").stdout)
+    f = json.loads(cli("fit", sf_files, "--runs", 10, "--add", "scale_factor:2", "--out", out, "--json").stdout)
     assert f["discrepancy_after"] <= 0.5 * f["discrepancy_before"] and f["consistent"] is True
     sf = next(e for e in f["effects"] if e["effect"] == "scale_factor")
     assert sf["gyro"] == 2 and abs(sf["params"]["ppm"] - 2500) <= max(250, 2 * sf["sigma"]["ppm"])
-    again = json.loads(_cli("diagnose", sf_files, "--runs", 10, "--model", out, "--json").stdout)
+    again = json.loads(cli("diagnose", sf_files, "--runs", 10, "--model", out, "--json").stdout)
     assert again["consistent"] is True
     assert again["discrepancy"] == pytest.approx(f["discrepancy_after"], rel=1e-6)
-    text = _cli("diagnose", sf_files, "--runs", 10).stdout
+    text = cli("diagnose", sf_files, "--runs", 10).stdout
     assert "scale_factor" in text and "discrepancy" in text
 
 
@@ -222,17 +326,17 @@ def test_cli_diagnose_fit_and_model_round_trip(sf_files, tmp_path):
     (["--add", "scale_factor:9"], "not in 1..6"),
     (["--add", "burst:2"], "whole array"),
 ])
-def test_cli_bad_add(sf_files, args, message):
-    p = _cli("fit", sf_files, "--runs", 5, *args, check=False)
+def test_cli_bad_add(sf_files, args, message, cli):
+    p = cli("fit", sf_files, "--runs", 5, *args, check=False)
     assert p.returncode == 2 and message in p.stderr and "Traceback" not in p.stderr
     assert len(p.stderr.strip().splitlines()) == 1
 
 
-def test_cli_refuses_to_write_over_its_inputs(sf_files, tmp_path):
+def test_cli_refuses_to_write_over_its_inputs(sf_files, tmp_path, cli):
     model = tmp_path / "m.toml"
     model.write_text('effects = [{effect = "arw", n_deg_rt_h = 0.1}]\n')
     before = model.read_bytes()
-    p = _cli("fit", sf_files, "--runs", 5, "--model", model, "--out", model, check=False)
+    p = cli("fit", sf_files, "--runs", 5, "--model", model, "--out", model, check=False)
     assert p.returncode == 2 and "input of this command" in p.stderr
     assert model.read_bytes() == before
 
@@ -244,13 +348,13 @@ def _short(tmp_path, seconds, static=True):
     return csv
 
 
-def test_too_short_is_refused_clearly(tmp_path):
-    p = _cli("diagnose", _short(tmp_path, 20.0), check=False)
+def test_too_short_is_refused_clearly(tmp_path, cli):
+    p = cli("diagnose", _short(tmp_path, 20.0), check=False)
     assert p.returncode == 2 and "too short for a diagnosis" in p.stderr and "m.csv" in p.stderr
 
 
-def test_no_static_part_is_refused_clearly(tmp_path):
-    p = _cli("diagnose", _short(tmp_path, 200.0, static=False), check=False)
+def test_no_static_part_is_refused_clearly(tmp_path, cli):
+    p = cli("diagnose", _short(tmp_path, 200.0, static=False), check=False)
     assert p.returncode == 2 and "no static part long enough" in p.stderr
 
 

@@ -14,8 +14,6 @@ closing note of issue 6.
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
@@ -26,22 +24,16 @@ ANSWERS = json.loads((PRACTICE / "answers.json").read_text()) if PRACTICE.exists
 pytestmark = pytest.mark.skipif(not ANSWERS, reason="shared/measurements/practice not present")
 
 
-def _cli(*args):
-    p = subprocess.run([sys.executable, "-m", "gyroarray.cli", *map(str, args)], capture_output=True, text=True)
-    assert p.returncode == 0, p.stderr
-    return json.loads(p.stdout)
-
-
 @pytest.mark.parametrize("name", sorted(ANSWERS))
-def test_practice_file_is_diagnosed_and_fitted(name):
+def test_practice_file_is_diagnosed_and_fitted(name, cli):
     truth = ANSWERS[name][0]
     meas = PRACTICE / f"{name}.csv.gz"
-    d = _cli("diagnose", meas, "--runs", 20, "--json")
+    d = json.loads(cli("diagnose", meas, "--runs", 20, "--json").stdout)
     top = d["candidates"][0]
     assert top["effect"] == truth["effect"] and top["gyro"] == truth.get("gyro")
     assert top["significant"] and d["consistent"] is False
     add = truth["effect"] + ("" if truth.get("gyro") is None else f":{truth['gyro']}")
-    f = _cli("fit", meas, "--runs", 20, "--add", add, "--json")
+    f = json.loads(cli("fit", meas, "--runs", 20, "--add", add, "--json").stdout)
     # the error falls and the model becomes consistent (p2's bias instability is weak:
     # D 1.13 -> 0.61, so the own-simulator rule of a >= 50 % fall is not asked here)
     assert f["discrepancy_after"] < f["discrepancy_before"]

@@ -12,12 +12,9 @@ import json
 import math
 import os
 import re
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
-import pandas as pd
 import pytest
 from scipy import stats
 
@@ -176,23 +173,18 @@ def test_report_renders_in_chromium(sweeps, tmp_path):
     assert check.console_errors == [] and check.network_requests == []
 
 
-def _cli(*args):
-    return subprocess.run([sys.executable, "-m", "gyroarray.cli", *map(str, args)],
-                          capture_output=True, text=True, timeout=600)
-
-
-def test_cli_report_json_and_bad_input(sweeps, tmp_path):
-    r = _cli("report", sweeps / "design_out", "--out", tmp_path / "a.html", "--json")
+def test_cli_report_json_and_bad_input(sweeps, tmp_path, cli):
+    r = cli("report", sweeps / "design_out", "--out", tmp_path / "a.html", "--json", check=False)
     assert r.returncode == 0, r.stderr
     out = json.loads(r.stdout)
     assert out["html"] == str(tmp_path / "a.html") and out["markdown"] is None
     assert out["paper_vs_model"] == [] and out["best"]
     # not a sweep folder: one line, exit 2, nothing written
-    r = _cli("report", tmp_path, "--out", tmp_path / "b.html")
+    r = cli("report", tmp_path, "--out", tmp_path / "b.html", check=False)
     assert r.returncode == 2 and "not a gyroarray sweep folder" in r.stderr
     assert "Traceback" not in r.stderr and len(r.stderr.strip().splitlines()) == 1
     assert not (tmp_path / "b.html").exists()
-    r = _cli("report", sweeps / "design_out", "--out", tmp_path / "c.pdf")
+    r = cli("report", sweeps / "design_out", "--out", tmp_path / "c.pdf", check=False)
     assert r.returncode == 2 and "must end in .html" in r.stderr
     bad = tmp_path / "bad_values.toml"
     bad.write_text('[[experiment]]\ntitle = "t"\nscenario = "s"\nestimator = "gls"\n'
