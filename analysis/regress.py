@@ -1082,7 +1082,8 @@ def _logp_to_z(log_p: float) -> float:
     return chi2_to_z(-2.0 * log_p, 2)
 
 
-def fit_sinusoid(e, time_s, dt_s: float, r: float, q: float, gyro: int, use=None) -> EffectFit:
+def fit_sinusoid(e, time_s, dt_s: float, r: float, q: float, gyro: int, use=None, *,
+                 q_angle_rad: float = 0.0) -> EffectFit:
     """Sinusoidal rate error: the strongest line of the whitened residual.
 
     Parameters
@@ -1099,6 +1100,10 @@ def fit_sinusoid(e, time_s, dt_s: float, r: float, q: float, gyro: int, use=None
         1-based gyro number.
     use : array_like of bool, shape (n,), optional
         Samples to include (:func:`gls_rw`).
+    q_angle_rad : float
+        Angle quantization Q [rad] the noise also has (white angle noise of
+        standard deviation Q, σ² = 3Q²/τ²); 0 = none. Its blue spectrum
+        would otherwise read as lines near Nyquist.
 
     Returns
     -------
@@ -1120,7 +1125,10 @@ def fit_sinusoid(e, time_s, dt_s: float, r: float, q: float, gyro: int, use=None
     j = 1..⌈N/2⌉−1, iid Exp(1) (exact without gaps, approximate with them).
     A line at f adds ≈ m·A²|H(f)|²/4 to the bins near f, H the whitening
     filter (so a slow line competes with the random walk, as it should).
-    With P_max over the M bins,
+    With a quantization Q in the noise, the rate gets Δa/dt (a white, variance
+    Q²), and each P_j is divided by its expected level in the whitened
+    series, 1 + (Q²/dt²)(2 − 2cos ω_j)² / (2r(1 − cos ω_j) + q), ω_j = 2πj/N,
+    which keeps it Exp(1). With P_max over the M bins,
 
         FAP = 1 − (1 − e^{−P_max})^M,    z = Φ⁻¹(1 − FAP)
 
@@ -1159,6 +1167,9 @@ def fit_sinusoid(e, time_s, dt_s: float, r: float, q: float, gyro: int, use=None
     if n_bins < 1 or m_det < 1:
         raise ValueError("too few samples for a periodogram")
     tested = np.abs(sfft.rfft(series[:n_det])[1:n_bins + 1]) ** 2 / m_det
+    if q_angle_rad > 0:
+        c = 1.0 - np.cos(2.0 * np.pi * np.arange(1, n_bins + 1) / n_det)
+        tested /= 1.0 + (q_angle_rad / dt) ** 2 * (2.0 * c) ** 2 / (2.0 * r * c + q)
     j = int(np.argmax(tested)) + 1
     p_max = float(tested[j - 1])
     log_keep = n_bins * math.log1p(-math.exp(-p_max)) if p_max < 700 else -n_bins * math.exp(-p_max)

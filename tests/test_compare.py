@@ -207,6 +207,30 @@ def test_practice_shaped_case_is_found_and_explained(effect, seed):
     assert after.discrepancy <= 0.5 * before.discrepancy
 
 
+@pytest.mark.parametrize("seed", [100, 102])
+def test_quantization_as_the_spec_defines_it_is_found_fitted_and_explained(seed):
+    """White angle noise of standard deviation Q (σ² = 3Q²/τ², the spec's signature).
+
+    An independent generator may make quantization this way rather than with
+    the simulator's angle counter; the band then must not assume a counter
+    (when it did, D stayed at 2.1–3.1 after the fit). Q = 7e-4 deg on gyro 2
+    of a table run: D 49.6 -> 0.66 and 49.8 -> 0.44, Q 6.99e-4 and 6.96e-4
+    ± 2.8e-6 deg at seeds 100 and 102."""
+    layout = Layout.conical(1, 5, math.radians(54.7356))
+    rng = np.random.default_rng(seed)
+    m = lab_run(NoiseModel(BASE[:1] + (ModelEntry("rrw", None, {"k_deg_h_rt_h": 3.0}),)), layout, rng,
+                static_s=1200.0, motion_s=900.0, tail_s=300.0, protocol="table")
+    q = 7e-4
+    y = np.array(m.gyro_deg_s, copy=True)
+    y[:, 1] += np.diff(rng.normal(0.0, q, y.shape[0] + 1)) / m.dt_s
+    m = replace(m, gyro_deg_s=y)
+    before, after = ModelComparison(m, n_runs=20).fit([("quantization", 2)])
+    assert (before.candidates[0].effect, before.candidates[0].gyro) == ("quantization", 2)
+    assert after.consistent, [(t.effect, t.gyro, t.z) for t in after.tests if after.significant(t)]
+    f = after.fits[("quantization", 2)]
+    assert abs(f.params["q_deg"] - q) <= max(0.10 * q, 2.0 * f.sigma["q_deg"])
+
+
 def test_ladder_keeps_only_steps_that_help(monkeypatch):
     """A step that makes D worse is refused, the next candidate tried, the refusal noted."""
     m = lab_run(_with("scale_factor", 2, {"ppm": 3000.0}), S1N6, np.random.default_rng(5))
