@@ -687,13 +687,15 @@ class ModelComparison:
                 tests.append(self._effect_test(merged))
         else:
             notes.append("correlation: not tested, needs at least 2 gyros")
-        # the burst always on the whole record: it reads sample-to-sample
-        # differences, which a slow deterministic residual barely touches, and
-        # a burst may run on into the dynamic part
+        # the burst on the whole record unless the model clips the output (no
+        # noise on a plateau): it reads sample-to-sample differences, which a
+        # slow deterministic residual barely touches, and a burst may run on
+        # into the dynamic part
+        Eb, tb = (E[rec], tr) if clipped else (E, self.t)
         if burst is not None:
-            fits[("burst", None)] = fit_burst(E, self.t, self.dt)
+            fits[("burst", None)] = fit_burst(Eb, tb, self.dt)
         else:
-            tests.append(self._effect_test(fit_burst(E, self.t, self.dt)))
+            tests.append(self._effect_test(fit_burst(Eb, tb, self.dt)))
 
         # 7. the calibrated model
         new_entries = []
