@@ -463,16 +463,22 @@ def _write_model(path: Path, model, args, what: str) -> str:
 
 def cmd_compare(args):
     comp = _comparison(args)
-    a = comp.analyse()
-    _write_report(comp, [(None, a)], args)
+    # with a model beyond the baseline: the baseline first, then its effects one
+    # by one, so the report shows the error falling
+    steps = comp.steps_to_model()
+    a = steps[-1][1]
+    _write_report(comp, steps, args)
     d = a.to_json_dict()
     res = {"discrepancy": a.discrepancy, "consistent": a.consistent, "z_crit": a.z_crit,
            "n_tests": len(a.tests), "report": str(args.out),
+           "steps": [{"added": None if add is None else {"effect": add[0], "gyro": add[1]},
+                      "discrepancy": s.discrepancy, "consistent": s.consistent} for add, s in steps],
            "adev_band": d["adev_band"], "candidates": d["candidates"][:10], "notes": a.notes}
     if args.md is not None:
         res["markdown"] = str(args.md)
+    fall = "" if len(steps) == 1 else f" (baseline alone: D = {steps[0][1].discrepancy:.3g})"
     text = (f"{comp.name}: discrepancy D = {a.discrepancy:.3g} "
-            f"({'consistent' if a.consistent else 'NOT consistent'} with the model)\n"
+            f"({'consistent' if a.consistent else 'NOT consistent'} with the model){fall}\n"
             + "\n".join(f"  {t.effect}{'' if t.gyro is None else ':' + str(t.gyro)}  z = {t.z:.1f}  {t.evidence}"
                         for t in a.candidates[:5] if a.significant(t))
             + f"\nreport: {args.out}" + (f" and {args.md}" if args.md is not None else ""))

@@ -884,6 +884,22 @@ class ModelComparison:
     def diagnose(self) -> Analysis:
         return self.analyse()
 
+    def steps_to_model(self) -> list[tuple[tuple | None, Analysis]]:
+        """The error falling from the baseline to this comparison's model, one effect at a time.
+
+        ``[(None, baseline), ((effect, gyro), baseline + the effects so far), ...]``
+        in the model's order (what ``compare --model`` reports); just
+        ``[(None, analysis)]`` when the model is the baseline.
+        """
+        extra = [e for e in self.model if e.effect not in ("arw", "rrw")]
+        model = NoiseModel(tuple(e for e in self.model if e.effect in ("arw", "rrw")),
+                           description=self.model.description, source=self.model.source)
+        steps = [(None, self.analyse(model))]
+        for e in extra:
+            model = model.with_effect(e)
+            steps.append(((e.effect, e.gyro), self.analyse(model)))
+        return steps
+
     def fit(self, add=()) -> tuple[Analysis, Analysis]:
         """(before, after): the model calibrated, then with the ``add`` effects fitted in."""
         before = self.analyse()

@@ -719,8 +719,9 @@ def _section_headline(doc: _Doc, comp, steps, alpha: float):
 
 def _section_ladder(doc: _Doc, steps):
     doc.h2("The error falling")
-    doc.p("Each step adds the most significant candidate effect of the step before and "
-          "recalibrates the whole model; the discrepancy should fall to 1 or below.")
+    doc.p("Each step adds one effect (the ladder: the most significant candidate of the step "
+          "before; compare --model: the model's effects in their order) and recalibrates the "
+          "whole model; the discrepancy should fall to 1 or below.")
     doc.figure("ladder", _ladder_fig(steps), "Discrepancy D after each step (log scale; dashed: D = 1)")
     rows, flags = [], []
     for i, (added, a) in enumerate(steps):
@@ -907,7 +908,8 @@ def write_compare_report(comp, steps, out_html, out_md=None, *, title: str | Non
     steps : list of (tuple or None, Analysis)
         :meth:`~gyroarray.compare.ModelComparison.ladder` output: ``(None,
         analysis)`` first, then ``((effect, gyro), analysis)`` per added
-        effect; a single step for ``compare`` (or ``compare`` after a fit).
+        effect; or :meth:`~gyroarray.compare.ModelComparison.steps_to_model`
+        (``compare --model``); a single step for ``compare`` of the baseline.
     out_html : path
         The HTML file (figures embedded), must end in ``.html``.
     out_md : path, optional

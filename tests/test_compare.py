@@ -342,6 +342,13 @@ def test_cli_diagnose_fit_and_model_round_trip(sf_files, tmp_path, cli):
     assert again["discrepancy"] == pytest.approx(f["discrepancy_after"], rel=1e-6)
     text = cli("diagnose", sf_files, "--runs", 10).stdout
     assert "scale_factor" in text and "discrepancy" in text
+    # compare --model: the report of the error falling, baseline first, then the model's effect
+    c = json.loads(cli("compare", sf_files, "--runs", 10, "--model", out, "--out", tmp_path / "after.html",
+                       "--json").stdout)
+    assert [s["added"] for s in c["steps"]] == [None, {"effect": "scale_factor", "gyro": 2}]
+    assert c["steps"][0]["discrepancy"] == pytest.approx(d["discrepancy"], rel=1e-6)
+    assert c["discrepancy"] == pytest.approx(f["discrepancy_after"], rel=1e-6) and c["consistent"]
+    assert "Started at D = " in (tmp_path / "after.html").read_text()
 
 
 @pytest.mark.parametrize("args, message", [
