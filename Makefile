@@ -39,6 +39,7 @@ bench: $(STAMP)
 
 # how often diagnose names a hidden effect right (not a speed benchmark; ~4 min)
 score: $(STAMP)
+	mkdir -p bench_out
 	OPENBLAS_NUM_THREADS=1 $(PY) benchmarks/diagnosis_score.py --seeds 2 --json bench_out/diagnosis_score.json
 
 clean:
