@@ -5,7 +5,9 @@ intermediate kept as an attribute a report can show):
 
 1. **residual** ``E = gyro − H·ref`` [rad/s] of every gyro (``H`` the
    layout's axes, ``ref`` the table's reference rate; without a reference
-   the record is taken as static and ``E`` is the output itself);
+   ``E`` is the output itself, and if the outputs show the array turning
+   (:func:`gyroarray.analysis.motion.still_mask`) only their still parts,
+   stitched, are diagnosed);
 2. **calibrate** the model to it: the baseline (``arw`` + ``rrw`` of every
    gyro, unknown starting biases) plus every effect the model names, each
    refitted by its fit side (:mod:`gyroarray.analysis.regress`,
@@ -33,7 +35,16 @@ intermediate kept as an attribute a report can show):
 Which record the stochastic tests read: the whole run when no deterministic
 test is significant (a dynamic part that the model explains adds
 information, e.g. a weak bias instability), else the longest static part
-(an unexplained scale factor would otherwise read as noise).
+(an unexplained scale factor would otherwise read as noise); also the static
+part when the model clips or quantizes the output. The burst test reads the
+whole run unless the model clips (it looks at sample-to-sample differences,
+which a slow deterministic residual barely touches).
+
+Rivals: when two effects explain the same excess on one gyro, the better fit
+is named first (AIC among bias instability / quantization / Gauss–Markov and
+between scale factor and tilt; the joint fit for a curvature against a scale
+factor; χ² under the same noise for a temperature slope against a rate
+ramp), and the other says why it ranks lower.
 
 Units: SI inside; spec units only in ``EffectFit.params`` and the model.
 """
