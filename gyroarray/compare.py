@@ -581,10 +581,11 @@ class ModelComparison:
         # r, so the regressions (weighted by r) leave it out
         self._det_use = None
         burst = next((e for e in model if e.effect == "burst"), None)
+        in_burst = None
         if burst is not None:
-            inside = (self.t >= float(burst.params["start_s"])) & (self.t < float(burst.params["end_s"]))
-            if inside.any() and not inside.all():
-                self._det_use = ~inside
+            in_burst = (self.t >= float(burst.params["start_s"])) & (self.t < float(burst.params["end_s"]))
+            if in_burst.any() and not in_burst.all():
+                self._det_use = ~in_burst
                 notes.append(f"deterministic fits leave out the burst window "
                              f"({float(burst.params['start_s']):.0f}–{float(burst.params['end_s']):.0f} s)")
         in_model = {(e.effect, e.gyro) for e in model}
@@ -643,7 +644,7 @@ class ModelComparison:
         n_stoch = self.N + sum((eff, g) not in in_model for g in range(1, self.N + 1)
                                for eff in _PER_GYRO_NOISE + ("sinusoid",))
         n_stoch += int(self.N >= 2 and ("correlation", None) not in in_model)
-        n_stoch += int(not any(e.effect == "burst" for e in model))
+        n_stoch += int(burst is None)
         det_z = [t.z for t in tests if np.isfinite(t.z)]
         det_sig = max(det_z, default=-math.inf) > critical_z(len(det_z) + n_stoch, self.alpha)
         clipped = any(e.effect == "saturation" for e in model)
@@ -660,7 +661,7 @@ class ModelComparison:
         Er = E[rec].copy()
         tr = self.t[rec]
         if burst is not None:
-            inside = (tr >= float(burst.params["start_s"])) & (tr < float(burst.params["end_s"]))
+            inside = in_burst[rec]
             if inside.any():   # the white part inside the window back to the level outside
                 level = Er[inside].mean(axis=0)
                 Er[inside] = level + (Er[inside] - level) / math.sqrt(
@@ -730,10 +731,11 @@ class ModelComparison:
         disc = max(worst, 0.0) / zc
         if self.ref is None and self.parts:
             span = self.parts_s[-1][1] - self.parts_s[0][0]
+            whole = self.m.time_s[-1] - self.m.time_s[0] + self.dt
+            lengths = [(b - a) * self.dt for a, b in self.parts]
             notes.append(f"no reference rate: the outputs show motion, so only their {len(self.parts)} still "
-                         f"parts ({self.n * self.dt:.0f} s of the {self.m.time_s[-1] - self.m.time_s[0] + self.dt:.0f} s"
-                         f" record, {min(b - a for a, b in self.parts) * self.dt:.0f}–"
-                         f"{max(b - a for a, b in self.parts) * self.dt:.0f} s each, over {span:.0f} s) are "
+                         f"parts ({self.n * self.dt:.0f} s of the {whole:.0f} s record, {min(lengths):.0f}–"
+                         f"{max(lengths):.0f} s each, over {span:.0f} s) are "
                          f"diagnosed, stitched with each part's mean set to the first's: times are on the "
                          f"stitched record, τ beyond a part's length and the drift between parts are not seen; "
                          + ", ".join(_NEEDS_REF) + " need ref_x, ref_y, ref_z")
@@ -768,13 +770,10 @@ class ModelComparison:
             chi = {"temperature_bias": self._fit_det_once("temperature_bias", g, E, r, q).extra["chi2"],
                    "rate_ramp": self._fit_det_once("rate_ramp", g, E, r, q).extra["chi2"]}
             best, other = (j, i) if chi["rate_ramp"] < chi["temperature_bias"] else (i, j)
-            b, o = out[best], out[other]
-            out[other] = replace(o, evidence=o.evidence + (
-                f"; but {b.effect.replace('_', ' ')} fits this drift better under the same noise "
-                f"(χ² {chi[b.effect]:.1f} against {chi[o.effect]:.1f}; the two are nearly "
-                f"collinear on this record)"))
-            if best > other:
-                _move_first(out, best, [i, j])
+            b, o = out[best].effect, out[other].effect
+            _prefer(out, best, [i, j], lambda _: f"; but {b.replace('_', ' ')} fits this drift better under "
+                                                 f"the same noise (χ² {chi[b]:.1f} against {chi[o]:.1f}; "
+                                                 f"the two are nearly collinear on this record)")
         return out
 
     def _deflate_for_correlation(self, f: EffectFit, model: NoiseModel) -> EffectFit:
@@ -798,6 +797,7 @@ class ModelComparison:
         factor = math.sqrt(1.0 + (self.N - 1) * max(rho, 0.0))
         return replace(f, z=float(f.z) / factor, extra={**f.extra, "z_independent": float(f.z),
                                                         "correlation_deflation": factor})
+
     @staticmethod
     def _effect_test(f: EffectFit) -> Test:
         z = float(f.z) if f.z is not None else math.nan
@@ -1026,19 +1026,17 @@ def _rank_rivals(cands: list, z_crit: float, terms: dict, what: str) -> list:
             continue
         aic = {i: float(out[i].fit.extra["chi2"]) + 2.0 * k(out[i]) for i in idx}
         best = min(idx, key=aic.get)
-        for i in idx:
-            if i != best:
-                t = out[i]
-                out[i] = replace(t, evidence=t.evidence + (
-                    f"; but {out[best].effect.replace('_', ' ')} fits this {what} better "
-                    f"(AIC {aic[best]:.1f} against {aic[i]:.1f})"))
-        if best != idx[0]:
-            _move_first(out, best, idx)
+        name = out[best].effect.replace("_", " ")
+        _prefer(out, best, idx, lambda i: f"; but {name} fits this {what} better "
+                                          f"(AIC {aic[best]:.1f} against {aic[i]:.1f})")
     return out
 
 
-def _move_first(out: list, best: int, idx: list) -> None:
-    """Put out[best] where the first of out[idx] is, the others of idx after it in order."""
+def _prefer(out: list, best: int, idx: list, why) -> None:
+    """out[best] takes the place of the first of out[idx]; each other one's evidence gets ``why(i)``."""
+    for i in idx:
+        if i != best:
+            out[i] = replace(out[i], evidence=out[i].evidence + why(i))
     order = [out[best]] + [out[i] for i in idx if i != best]
     for i, t in zip(sorted(idx), order):
         out[i] = t
@@ -1062,10 +1060,9 @@ def _rank_scale_terms(cands: list, z_crit: float) -> list:
         nl, sf = out[i], out[j]
         zj = nl.fit.extra.get("ppm_joint_z", math.inf) if nl.fit is not None else math.inf
         if nl.z > z_crit and sf.z > z_crit and zj < z_crit:
-            out[j] = replace(sf, evidence=sf.evidence + (
-                f"; but with the curvature fitted the scale factor is "
-                f"{nl.fit.extra['ppm_joint']:.0f} ppm (z = {zj:.1f}): the nonlinearity explains it"))
-            _move_first(out, i, [j, i])
+            _prefer(out, i, [j, i], lambda _: f"; but with the curvature fitted the scale factor is "
+                                              f"{nl.fit.extra['ppm_joint']:.0f} ppm (z = {zj:.1f}): "
+                                              f"the nonlinearity explains it")
     return out
 
 

@@ -29,6 +29,9 @@ from gyroarray.units import RAD_PER_DEG
 
 __all__ = ["LAYOUTS", "EFFECTS", "NOT_SCORED", "draw_effect", "Case", "single_effect_case"]
 
+#: The session [s] and sample rate [Hz] of every case (the practice set's).
+STATIC_S, MOTION_S, TAIL_S, RATE_HZ = 1200.0, 900.0, 300.0, 50.0
+
 LAYOUTS = [(1, 4, 54.7356), (1, 5, 54.7356), (1, 6, 54.7356), (2, 6, 63.4349)]
 # parameters the fit does not return or cannot identify
 NOT_SCORED = {("temperature_bias", "t0_c"), ("correlation", "rho_rrw"), ("sinusoid", "phase_deg")}
@@ -92,9 +95,10 @@ def single_effect_case(effect: str, seed: int, case: int | None = None) -> Case:
         base += [ModelEntry("arw", g, {"n_deg_rt_h": _u(rng, 0.10, 0.25)}),
                  ModelEntry("rrw", g, {"k_deg_h_rt_h": _u(rng, 0.0, 8.0)}),
                  ModelEntry("constant_bias", g, {"bias_deg_h": float(rng.normal(0.0, 250.0))})]
-    t = np.arange(0.0, 2160.0, 0.02)
-    max_rate = np.abs(table_profile(t, 1200.0) @ np.asarray(layout.axes).T).max(axis=0) / RAD_PER_DEG
+    t = np.arange(0.0, STATIC_S + MOTION_S + TAIL_S, 1.0 / RATE_HZ)
+    max_rate = np.abs(table_profile(t, STATIC_S, MOTION_S) @ np.asarray(layout.axes).T).max(axis=0) / RAD_PER_DEG
     gyro, params = draw_effect(effect, rng, n, max_rate)
     model = NoiseModel(tuple(base) + (ModelEntry(effect, gyro, params),))
-    m = lab_run(model, layout, rng, static_s=1200.0, motion_s=900.0, tail_s=300.0, protocol="table")
+    m = lab_run(model, layout, rng, rate_hz=RATE_HZ, static_s=STATIC_S, motion_s=MOTION_S, tail_s=TAIL_S,
+                protocol="table")
     return Case(m, effect, gyro, params, f"S{scheme} N{n}")
