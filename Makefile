@@ -21,17 +21,17 @@ $(STAMP): pyproject.toml
 demo: $(STAMP)
 	$(VENV)/bin/gyroarray design
 	$(VENV)/bin/gyroarray design --paper-tables
-	$(VENV)/bin/gyroarray design --plot reports/demo/design_gdop.png
-	$(VENV)/bin/gyroarray simulate scenarios/examples/tetra_swing.toml --out reports/demo
-	$(VENV)/bin/gyroarray allan reports/demo/tetra_swing.csv.gz --plot reports/demo/tetra_swing_adev.png
+	$(VENV)/bin/gyroarray design --plot reports/demo/design_gdop.png --force
+	$(VENV)/bin/gyroarray simulate scenarios/examples/tetra_swing.toml --out reports/demo --force
+	$(VENV)/bin/gyroarray allan reports/demo/tetra_swing.csv.gz --plot reports/demo/tetra_swing_adev.png --force
 	$(VENV)/bin/gyroarray sweep scenarios/sweeps/design_quick.toml --out reports/demo/design_quick --workers $(WORKERS)
 	$(VENV)/bin/gyroarray sweep scenarios/sweeps/paper_reproduction.toml --out reports/demo/paper_reproduction --workers $(WORKERS)
-	$(VENV)/bin/gyroarray report reports/demo/design_quick reports/demo/paper_reproduction --out reports/demo/report.html --md reports/demo/report.md
+	$(VENV)/bin/gyroarray report reports/demo/design_quick reports/demo/paper_reproduction --out reports/demo/report.html --md reports/demo/report.md --force
 	@echo "demo: the design comparison report is reports/demo/report.html (open it in a browser; Markdown twin reports/demo/report.md)"
 	@echo "demo: also wrote reports/demo/design_gdop.png, reports/demo/tetra_swing.csv.gz (+ .toml), reports/demo/tetra_swing_adev.png"
 
 test: $(STAMP)
-	$(PY) -m pytest -q
+	$(PY) -m pytest -q -n $(WORKERS)
 	$(VENV)/bin/gyroarray check
 
 bench: $(STAMP)

@@ -923,7 +923,7 @@ def allan_analysis(rate_rad_s, tau0_s: float, taus="octave",
                          confidence=float(confidence), fit=fit)
 
 
-def plot_allan(analyses: Mapping[str, AllanAnalysis], path) -> Path:
+def plot_allan(analyses: Mapping[str, AllanAnalysis], path, *, force: bool = True) -> Path:
     """Log-log plot of deviation curves with confidence bands and fits.
 
     Parameters
@@ -932,6 +932,8 @@ def plot_allan(analyses: Mapping[str, AllanAnalysis], path) -> Path:
         Curves by legend label.
     path : str or os.PathLike
         Output image file; the format follows the suffix (png, pdf, svg).
+    force : bool
+        Replace an existing file (atomically, :mod:`gyroarray.outputs`).
 
     Returns
     -------
@@ -981,7 +983,6 @@ def plot_allan(analyses: Mapping[str, AllanAnalysis], path) -> Path:
     ax.legend(fontsize="small")
     first = next(iter(analyses.values()))
     ax.set_title(f"shaded: {first.confidence:.1%} confidence")
-    out = Path(path)
-    fig.savefig(out, dpi=120)
-    return out
+    from gyroarray.outputs import save_figure
+    return save_figure(fig, path, force=force, dpi=120)
 

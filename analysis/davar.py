@@ -1073,8 +1073,8 @@ def _cell_edges(centres: np.ndarray, result: DavarResult | None, *,
     return np.exp(edges) if exp else edges
 
 
-def plot_davar(result: DavarResult, path, *, title: str | None = None
-               ) -> Path:
+def plot_davar(result: DavarResult, path, *, title: str | None = None,
+               force: bool = True) -> Path:
     """Heat map of the dynamic deviation with the ARW and length tracks.
 
     Parameters
@@ -1085,6 +1085,8 @@ def plot_davar(result: DavarResult, path, *, title: str | None = None
         Output image; the format follows the suffix (png, pdf, svg).
     title : str, optional
         Figure title.
+    force : bool
+        Replace an existing file (atomically, :mod:`gyroarray.outputs`).
 
     Returns
     -------
@@ -1142,9 +1144,8 @@ def plot_davar(result: DavarResult, path, *, title: str | None = None
                  f"{name}: one window of {int(result.window_length[0])} "
                  "samples")
     fig.suptitle(title)
-    out = Path(path)
-    fig.savefig(out, dpi=120)
-    return out
+    from gyroarray.outputs import save_figure
+    return save_figure(fig, path, force=force, dpi=120)
 
 
 def main() -> PaperTable1:

@@ -50,6 +50,29 @@ def _json_safe(obj):
     return obj
 
 
+def _output(path, args, what: str, *, inputs=(), suffixes=None):
+    """Check an output file the user named, before any work (:mod:`gyroarray.outputs`)."""
+    from .outputs import check_output
+    if path is None:
+        return None
+    return check_output(path, inputs=inputs, force=getattr(args, "force", False), what=what,
+                        suffixes=suffixes)
+
+
+def _measurement_inputs(args) -> list:
+    """The files of a command's measurement and model arguments."""
+    from .outputs import measurement_files
+    files = measurement_files(args.measurement) if getattr(args, "measurement", None) else []
+    if getattr(args, "model", None) is not None:
+        files.append(args.model)
+    return files
+
+
+def _add_force(p):
+    p.add_argument("--force", action="store_true",
+                   help="replace output files that exist (never an input of the command)")
+
+
 # -- gdop / design ------------------------------------------------------------
 
 def _add_layout_args(p: argparse.ArgumentParser, *, alpha: bool, required: bool):
@@ -78,6 +101,8 @@ def cmd_design(args) -> tuple[dict, str]:
     from .units import rad_to_deg
     out: dict = {}
     lines: list[str] = []
+    from .outputs import PLOT_SUFFIXES
+    _output(args.plot, args, "--plot", suffixes=PLOT_SUFFIXES)
     if args.scheme is not None or args.n is not None:
         if args.scheme is None or args.n is None:
             raise InputError("gyroarray design: --scheme and --n go together")
@@ -92,7 +117,7 @@ def cmd_design(args) -> tuple[dict, str]:
         lines.append(_format_paper_cells(cells))
     if args.plot is not None:
         from .reports.design_plots import design_figure
-        path = design_figure(args.plot)
+        path = design_figure(args.plot, force=args.force)
         out["plot"] = str(path)
         lines.append(f"wrote {path}")
     if not out:
@@ -160,7 +185,9 @@ def allan_signal(meas, *, raw: bool = False):
 def cmd_allan(args) -> tuple[dict, str]:
     from .analysis.allan import allan_analysis, plot_allan
     from .measurement import read_measurement
+    from .outputs import PLOT_SUFFIXES
     taus = _parse_taus(args.taus)
+    _output(args.plot, args, "--plot", inputs=_measurement_inputs(args), suffixes=PLOT_SUFFIXES)
     meas = read_measurement(args.measurement, repair=args.repair)
     if args.gyro is not None and not 1 <= args.gyro <= meas.n_gyros:
         raise InputError(f"--gyro {args.gyro} is out of range: the measurement has "
@@ -180,7 +207,7 @@ def cmd_allan(args) -> tuple[dict, str]:
     for k, a in analyses.items():
         lines.append(_format_allan(k, a.to_json_dict()))
     if args.plot is not None:
-        path = plot_allan({f"gyro {k}": a for k, a in analyses.items()}, args.plot)
+        path = plot_allan({f"gyro {k}": a for k, a in analyses.items()}, args.plot, force=args.force)
         out["plot"] = str(path)
         lines.append(f"wrote {path}")
     return out, "\n".join(lines)
@@ -224,6 +251,8 @@ def cmd_davar(args) -> tuple[dict, str]:
         raise InputError("gyroarray davar: --window L and --adaptive exclude each other "
                          "(the adaptive window runs between --l-min and --l-max)")
     from .measurement import read_measurement
+    from .outputs import PLOT_SUFFIXES
+    _output(args.plot, args, "--plot", inputs=_measurement_inputs(args), suffixes=PLOT_SUFFIXES)
     meas = read_measurement(args.measurement, repair=args.repair)
     if not 1 <= args.gyro <= meas.n_gyros:
         raise InputError(f"--gyro {args.gyro} is out of range: the measurement has gyros "
@@ -243,7 +272,7 @@ def cmd_davar(args) -> tuple[dict, str]:
              f"ARW track [deg/rt(h)]: min {min(finite):.4g}, median {sorted(finite)[len(finite) // 2]:.4g}, "
              f"max {max(finite):.4g}"]
     if args.plot is not None:
-        out["plot"] = str(dv.plot_davar(res, args.plot))
+        out["plot"] = str(dv.plot_davar(res, args.plot, force=args.force))
         lines.append(f"wrote {out['plot']}")
     return out, "\n".join(lines)
 
@@ -281,7 +310,8 @@ def tracking_datasheet(tracking) -> list[dict]:
 def cmd_simulate(args) -> tuple[dict, str]:
     from .sim.scenario import load_scenario, simulate_to_files
     scenario = load_scenario(args.scenario)
-    csv_path, toml_path, result = simulate_to_files(scenario, args.out, cache=not args.no_cache)
+    csv_path, toml_path, result = simulate_to_files(scenario, args.out, cache=not args.no_cache,
+                                                    force=args.force)
     effects = [{"effect": e.effect, "gyro": e.gyro, "params": _plain_params(e.params)}
                for e in scenario.model.entries]
     out = {"scenario": scenario.name, "measurement": str(csv_path), "sidecar": str(toml_path),
@@ -357,7 +387,11 @@ def cmd_report(args):
     from .reports.report import write_report
     if args.top < 1:
         raise InputError("gyroarray report: --top must be >= 1")
-    res = write_report(args.dirs, args.out, args.md, paper_values=args.paper_values, top=args.top)
+    inputs = [args.paper_values] if args.paper_values is not None else []
+    _output(args.out, args, "--out", inputs=inputs, suffixes=(".html", ".htm"))
+    _output(args.md, args, "--md", inputs=inputs, suffixes=(".md",))
+    res = write_report(args.dirs, args.out, args.md, paper_values=args.paper_values, top=args.top,
+                       force=args.force)
     lines = [f"report: {res['html']}" + (f" (Markdown twin {res['markdown']})" if res["markdown"] else "")
              + f", {res['figures']} figures, {res['seconds']:.1f} s"]
     for b in res["best"]:
@@ -386,27 +420,21 @@ def cmd_check(args):
 # -- model vs measurement: compare / diagnose / fit / ladder ------------------------
 
 def _comparison(args):
-    """Read the measurement (and model) of a compare-family command; build the chain."""
+    """Check the outputs, read the measurement (and model) of a compare-family
+    command; build the chain."""
     from .compare import ModelComparison
     from .measurement import read_measurement
     from .sim.model import NoiseModel
+    inputs = _measurement_inputs(args)
+    _output(getattr(args, "out", None), args, "--out", inputs=inputs,
+            suffixes=(".toml",) if args.command == "fit" else (".html", ".htm"))
+    _output(getattr(args, "md", None), args, "--md", inputs=inputs, suffixes=(".md",))
+    _output(getattr(args, "model_out", None), args, "--model-out", inputs=inputs, suffixes=(".toml",))
     meas = read_measurement(args.measurement, repair=args.repair)
     model = None
     if args.model is not None:
         model = NoiseModel.from_toml(args.model, n_gyros=meas.n_gyros)
     return ModelComparison(meas, model, n_runs=args.runs, seed=args.seed)
-
-
-def _refuse_inputs(out: Path, args, what: str):
-    """Never write over a file the user gave."""
-    given = [args.measurement] + ([args.model] if args.model is not None else [])
-    for g in given:
-        try:
-            if out.exists() and g.exists() and out.resolve() == g.resolve():
-                raise InputError(f"{what} {out} is an input of this command; choose another path "
-                                 "(gyroarray never modifies what you gave it)", file=str(out))
-        except OSError:
-            pass
 
 
 def _model_lines(model) -> list[str]:
@@ -445,20 +473,15 @@ def _diagnosis_text(a, head: str) -> str:
 
 def _write_report(comp, steps, args) -> dict:
     from .reports.compare_report import write_compare_report
-    _refuse_inputs(args.out, args, "--out")
-    if args.md is not None:
-        _refuse_inputs(args.md, args, "--md")
-    return write_compare_report(comp, steps, args.out, args.md)
+    return write_compare_report(comp, steps, args.out, args.md, force=args.force)
 
 
-def _write_model(path: Path, model, args, what: str) -> str:
-    """The fitted model as TOML at ``path`` (never over an input); returns the path."""
+def _write_model(path: Path, model, args) -> str:
+    """The fitted model as TOML at ``path`` (checked by :func:`_comparison`); returns the path."""
+    from .outputs import write_text
     from .sim.model import NoiseModel
-    _refuse_inputs(path, args, what)
     model = NoiseModel(model.entries, description=f"fitted to {args.measurement} by gyroarray {args.command}")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(model.to_toml(), encoding="utf-8")
-    return str(path)
+    return str(write_text(path, model.to_toml(), force=args.force))
 
 
 def cmd_compare(args):
@@ -499,7 +522,7 @@ def cmd_fit(args):
     res = {"discrepancy_before": before.discrepancy, "discrepancy_after": after.discrepancy,
            "consistent": after.consistent, "effects": after.effects_json()}
     if args.out is not None:
-        res["model"] = _write_model(args.out, after.model, args, "--out")
+        res["model"] = _write_model(args.out, after.model, args)
     text = "\n".join([f"{comp.name}: discrepancy {before.discrepancy:.3g} -> {after.discrepancy:.3g} "
                       f"({'consistent' if after.consistent else 'NOT consistent'})",
                       "fitted model (beyond ARW + RRW):"] + (_model_lines(after.model) or ["  (baseline only)"])
@@ -521,7 +544,7 @@ def cmd_ladder(args):
                                for t in final.candidates if final.significant(t)],
            "notes": list(final.notes), "report": str(args.out)}
     if args.model_out is not None:
-        res["model"] = _write_model(args.model_out, final.model, args, "--model-out")
+        res["model"] = _write_model(args.model_out, final.model, args)
     lines = [f"{comp.name}: the ladder"]
     for add, a in steps:
         what = "calibrated model" if add is None else f"+ {add[0]}{'' if add[1] is None else ':' + str(add[1])}"
@@ -543,6 +566,7 @@ def _add_compare_args(p, *, out: bool):
     p.add_argument("--seed", type=int, default=0, help="seed of the model band (0)")
     p.add_argument("--repair", action="store_true", help="repair short gaps and isolated NaNs")
     if out:
+        _add_force(p)
         p.add_argument("--out", type=Path, required=True, metavar="REPORT.html")
         p.add_argument("--md", type=Path, metavar="REPORT.md", help="also write a Markdown twin")
     p.add_argument("--json", action="store_true", help="print one JSON object")
@@ -564,6 +588,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="paper 003 Tables 1-2 beside the computed values, cell by cell")
     p.add_argument("--plot", type=Path, metavar="OUT.png",
                    help="write GDOP vs alpha and vs rho (paper 003 Figs. 8-10)")
+    _add_force(p)
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=cmd_design)
 
@@ -579,6 +604,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--raw", action="store_true",
                    help="analyse the raw gyro output even when a moving reference is present")
     p.add_argument("--plot", type=Path, metavar="OUT.png", help="write the ADEV plot")
+    _add_force(p)
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=cmd_allan)
 
@@ -596,6 +622,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="adaptive: shortest window [samples] (default 400)")
     p.add_argument("--repair", action="store_true", help="repair short gaps and isolated NaNs")
     p.add_argument("--plot", type=Path, metavar="OUT.png", help="heat map + ARW and window tracks")
+    _add_force(p)
     p.add_argument("--paper-table1", action="store_true",
                    help="reproduce paper 000 Table 1 (simulated) over --seeds realisations")
     p.add_argument("--seeds", type=_positive_int("--seeds"), default=20, metavar="N")
@@ -606,6 +633,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("scenario", type=Path, metavar="SCENARIO.toml")
     p.add_argument("--out", type=Path, required=True, metavar="DIR", help="output directory")
     p.add_argument("--no-cache", action="store_true", help="recompute the rate-table truth")
+    _add_force(p)
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=cmd_simulate)
 
@@ -633,6 +661,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--paper-values", type=Path, metavar="FILE",
                    help="paper values to compare with (default: the shipped scenarios/paper_values.toml)")
     p.add_argument("--top", type=int, default=15, metavar="K", help="designs listed per motion (15)")
+    _add_force(p)
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=cmd_report)
 
@@ -649,6 +678,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--add", action="append", metavar="EFFECT[:GYRO]",
                    help="effect to add before fitting (repeatable), e.g. scale_factor:2, burst")
     p.add_argument("--out", type=Path, metavar="NEW.toml", help="write the fitted model (readable by --model)")
+    _add_force(p)
     p.set_defaults(func=cmd_fit)
 
     p = sub.add_parser("ladder", help="diagnose -> add the best effect -> fit, until consistent; report")

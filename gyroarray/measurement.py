@@ -1149,7 +1149,7 @@ def _rate_note(time_s: np.ndarray, side: _Sidecar) -> list[str]:
 # =========================================================================
 # Writing
 # =========================================================================
-def write_measurement(m: Measurement, path) -> tuple[Path, Path]:
+def write_measurement(m: Measurement, path, *, force: bool = True) -> tuple[Path, Path]:
     """Write a measurement as CSV (gzip if ``path`` ends in .gz) + TOML sidecar.
 
     Parameters
@@ -1162,6 +1162,9 @@ def write_measurement(m: Measurement, path) -> tuple[Path, Path]:
     path : str or os.PathLike
         Output CSV, ending in ``.csv`` or ``.csv.gz``; the sidecar is
         ``<stem>.toml`` beside it.
+    force : bool
+        Replace existing files (atomically, never through a symlink; see
+        :mod:`gyroarray.outputs`); False refuses an existing file.
 
     Returns
     -------
@@ -1192,28 +1195,18 @@ def write_measurement(m: Measurement, path) -> tuple[Path, Path]:
     if low.endswith(".gz"):
         text = gzip.compress(text, compresslevel=6, mtime=0)
     sidecar = tomli_w.dumps(_sidecar_dict(m)).encode("utf-8")
+    from gyroarray.outputs import write_bytes
     for target, content in ((csv_path, text), (toml_path, sidecar)):
-        try:
-            target.write_bytes(content)
-        except OSError as e:
-            raise InputError(f"cannot write: {e.strerror or e}", file=str(target)) from None
+        write_bytes(target, content, force=force)
     return csv_path, toml_path
 
 
-def _same_file(a: Path, b: Path) -> bool:
-    try:
-        return a.exists() and b.exists() and os.path.samefile(a, b)
-    except OSError:
-        return False
-
-
 def _refuse_overwriting_source(m: Measurement, targets) -> None:
+    from gyroarray.outputs import measurement_files, same_path
     if m.source is None:
         return
-    src = Path(m.source)
-    protected = (src, _sidecar_of(src))
     for target in targets:
-        if any(_same_file(target, p) or target.resolve() == p.resolve() for p in protected):
+        if any(same_path(target, p) for p in measurement_files(m.source)):
             raise InputError("refusing to overwrite the measurement's own source file "
                              f"({m.source} or its sidecar); choose another path",
                              file=str(target))

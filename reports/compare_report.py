@@ -898,7 +898,8 @@ def _check_steps(comp, steps):
 
 # -- the report ----------------------------------------------------------------------
 
-def write_compare_report(comp, steps, out_html, out_md=None, *, title: str | None = None) -> dict:
+def write_compare_report(comp, steps, out_html, out_md=None, *, title: str | None = None,
+                         force: bool = True) -> dict:
     """Write the model-vs-measurement report (see the module docstring).
 
     Parameters
@@ -917,6 +918,9 @@ def write_compare_report(comp, steps, out_html, out_md=None, *, title: str | Non
         ``<stem>_figures/`` beside it.
     title : str, optional
         Page title (default: "Model vs measurement: <measurement>").
+    force : bool
+        Replace existing output files (the CLI passes ``--force``; it has
+        checked the paths before the analysis, :mod:`gyroarray.outputs`).
 
     Returns
     -------
@@ -952,7 +956,7 @@ def write_compare_report(comp, steps, out_html, out_md=None, *, title: str | Non
 
     stamp = time.strftime("%Y-%m-%d %H:%M", time.localtime())
     subtitle = f"{stamp} · {label} · {comp.N} gyros · {comp.n_runs} Monte-Carlo runs per band"
-    md_path = doc.write(out_html, out_md, subtitle, css=_EXTRA_CSS)
+    md_path = doc.write(out_html, out_md, subtitle, css=_EXTRA_CSS, force=force)
     rows = [{"added": None if added is None else [added[0], added[1]],
              "discrepancy": float(a.discrepancy), "consistent": bool(a.consistent)}
             for added, a in steps]

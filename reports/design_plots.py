@@ -21,7 +21,7 @@ def _rho_grid(n: int, count: int = 200) -> np.ndarray:
     return np.linspace(lo + eps, 1.0 - eps, count)
 
 
-def design_figure(path) -> Path:
+def design_figure(path, *, force: bool = True) -> Path:
     """Write the design figure to ``path`` (see :func:`design_fig`).
 
     Parameters
@@ -34,13 +34,12 @@ def design_figure(path) -> Path:
     Path
         The file written.
     """
+    from gyroarray.outputs import PLOT_SUFFIXES, check_output_dir, save_figure
     path = Path(path)
-    if path.suffix.lower() not in (".png", ".svg", ".pdf"):
+    if path.suffix.lower() not in PLOT_SUFFIXES:
         raise InputError(f"plot must end in .png, .svg or .pdf, got {path.name!r}", file=str(path))
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig = design_fig()
-    fig.savefig(path, dpi=110)
-    return path
+    check_output_dir(path.parent, what="the plot's folder")
+    return save_figure(design_fig(), path, force=force, dpi=110)
 
 
 def design_fig():

@@ -46,6 +46,7 @@ import numpy as np
 import pandas as pd
 
 from gyroarray import units
+from gyroarray import outputs
 from gyroarray.errors import InputError
 
 __all__ = ["SweepData", "load_sweep_dir", "design_ranking", "estimator_comparison",
@@ -459,26 +460,31 @@ class _Doc:
     def render_md(self, figdir: str) -> str:
         return "\n".join(self.md).replace("{FIGDIR}", figdir) + "\n"
 
-    def write(self, out_html: Path, out_md, subtitle: str, *, css: str = "") -> Path | None:
-        """Write the HTML (atomically; ``css`` appended to the page's style) and, if
-        ``out_md``, the Markdown twin with its figures as PNGs in ``<stem>_figures/``.
-        Returns the Markdown path or None."""
+    def write(self, out_html: Path, out_md, subtitle: str, *, css: str = "",
+              force: bool = True) -> Path | None:
+        """Write the HTML (``css`` appended to the page's style) and, if ``out_md``,
+        the Markdown twin with its figures as PNGs in ``<stem>_figures/``, each
+        file atomically through :mod:`gyroarray.outputs` (``force``: replace
+        existing files). Returns the Markdown path or None."""
         page = self.render_html(subtitle)
         if css:
             page = page.replace("</style>", css + "</style>", 1)
-        out_html.parent.mkdir(parents=True, exist_ok=True)
-        tmp = out_html.with_name(f".{out_html.name}.tmp")
-        tmp.write_text(page, encoding="utf-8")
-        tmp.replace(out_html)
+        outputs.check_output_dir(Path(out_html).parent, what="the report's folder")
+        outputs.write_text(out_html, page, force=force)
         if out_md is None:
             return None
         md_path = Path(out_md)
-        figdir = md_path.with_name(md_path.stem + "_figures")
-        figdir.mkdir(parents=True, exist_ok=True)
+        figdir = outputs.check_output_dir(markdown_figure_dir(md_path), what="the Markdown figures' folder")
         for name, png in self.figures:
-            (figdir / f"{name}.png").write_bytes(png)
-        md_path.write_text(f"*{subtitle}*\n\n" + self.render_md(figdir.name), encoding="utf-8")
+            outputs.write_bytes(figdir / f"{name}.png", png, force=force)
+        outputs.write_text(md_path, f"*{subtitle}*\n\n" + self.render_md(figdir.name), force=force)
         return md_path
+
+
+def markdown_figure_dir(md_path) -> Path:
+    """The folder of a Markdown twin's figures: ``<stem>_figures/`` beside it."""
+    md_path = Path(md_path)
+    return md_path.with_name(md_path.stem + "_figures")
 
 
 _HTML = """<!DOCTYPE html>
@@ -636,7 +642,8 @@ def _section_paper(doc: _Doc, paper: list[SweepData], values_path) -> list[dict]
     return pvm
 
 
-def write_report(dirs, out_html, out_md=None, *, paper_values=None, top: int = 15) -> dict:
+def write_report(dirs, out_html, out_md=None, *, paper_values=None, top: int = 15,
+                 force: bool = True) -> dict:
     """Write the report of the sweep folders ``dirs`` (see the module docstring).
 
     Parameters
@@ -651,6 +658,8 @@ def write_report(dirs, out_html, out_md=None, *, paper_values=None, top: int = 1
         Paper values file (default: the shipped ``scenarios/paper_values.toml``).
     top : int
         Designs listed per motion in the ranking.
+    force : bool
+        Replace existing output files (the CLI passes ``--force``).
 
     Returns
     -------
@@ -686,7 +695,7 @@ def write_report(dirs, out_html, out_md=None, *, paper_values=None, top: int = 1
     stamp = time.strftime("%Y-%m-%d %H:%M", time.localtime())
     subtitle = (f"{stamp} · sweeps: " + ", ".join(f"{d.name} ({d.rows.scenario_id.nunique()} "
                                                    f"scenarios)" for d in data))
-    md_path = doc.write(out_html, out_md, subtitle)
+    md_path = doc.write(out_html, out_md, subtitle, force=force)
     best = []
     if ranking is not None:
         for motion, sub in ranking.groupby("motion", sort=False):

@@ -14,10 +14,20 @@ A scenario that raises (in the chain) is reported in the summary's
 ``failed`` list (id and error) and the others go on; it has no file, so a
 rerun tries it again.
 
-Resuming: rerunning into the same folder skips the ids whose file exists.
-``out_dir/sweep.json`` (the manifest: the sweep file's SHA-256 and the
-expanded scenario list with ids and seeds) refuses a folder that holds a
-different sweep.
+Resuming: rerunning into the same folder skips the ids whose file exists
+and is intact. ``out_dir/sweep.json`` (the manifest: the sweep file's
+SHA-256 and the expanded scenario list with ids and seeds) refuses a folder
+that holds a different sweep. Every finished file's SHA-256 and row count
+are appended to ``out_dir/rows.sha256`` as it is written; on resume each
+existing file is checked against that record (or, without a record, its
+Parquet footer and row count are read), and a truncated, emptied or altered
+file is run again (the summary's ``notes`` say which). :func:`load_results`
+refuses a corrupt file, naming it, instead of reading it.
+
+Workers die with the sweep: each worker process watches its parent (Linux
+``PR_SET_PDEATHSIG`` and, everywhere, a thread that polls the parent's pid
+twice a second) and exits when the parent is gone, also after a SIGKILL of
+the parent, which runs no clean-up of its own.
 
 Determinism: every scenario runs in a worker process (also with
 ``workers=1``) whose environment has ``OPENBLAS_NUM_THREADS=1`` (and
@@ -34,9 +44,12 @@ so in the summary's ``notes`` when it is not 1.
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
+import signal
 import sys
+import threading
 import time
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from contextlib import contextmanager
@@ -48,13 +61,15 @@ from gyroarray.errors import InputError
 
 from .sweep import ScenarioSpec, Sweep, load_sweep
 
-__all__ = ["run_sweep", "load_results", "run_one", "THREAD_ENV"]
+__all__ = ["run_sweep", "load_results", "run_one", "verify_rows_file", "THREAD_ENV"]
 
 #: Environment of every worker process (bitwise-reproducible BLAS).
 THREAD_ENV = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1",
               "NUMBA_NUM_THREADS": "1"}
 MANIFEST = "sweep.json"
 ROWS = "rows"
+#: Checksums of the finished result files: ``<sha256> <rows> <id>.parquet`` per line.
+CHECKSUMS = "rows.sha256"
 _STR_COLS = ("estimator", "axis", "scenario_id", "motion", "effects", "sweep", "scenario")
 
 
@@ -97,6 +112,7 @@ def _typed(df):
 
 
 def _write_rows(df, folder: Path, sid: str) -> Path:
+    """Write a scenario's rows atomically and record the file's checksum beside the folder."""
     import pyarrow as pa
     import pyarrow.parquet as pq
 
@@ -106,20 +122,104 @@ def _write_rows(df, folder: Path, sid: str) -> Path:
     pq.write_table(table, tmp)
     with open(tmp, "rb") as fh:
         os.fsync(fh.fileno())
+    digest = _sha256(tmp)
     os.replace(tmp, final)
+    with open(folder.parent / CHECKSUMS, "a", encoding="utf-8") as fh:
+        fh.write(f"{digest} {len(df)} {final.name}\n")
+        fh.flush()
+        os.fsync(fh.fileno())
     return final
 
 
+def _sha256(path: Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def _recorded_checksums(out: Path) -> dict:
+    """File name -> (sha256, rows) from ``rows.sha256``; the last record of a name wins,
+    a torn last line (a crash while appending) is ignored."""
+    path = out / CHECKSUMS
+    records = {}
+    try:
+        text = path.read_text(encoding="utf-8", errors="replace")
+    except OSError:
+        return records
+    for line in text.splitlines():
+        parts = line.split()
+        if len(parts) == 3 and len(parts[0]) == 64 and parts[1].isdigit():
+            records[parts[2]] = (parts[0], int(parts[1]))
+    return records
+
+
+def verify_rows_file(path: Path, record=None) -> str | None:
+    """Why a result file cannot be trusted, or None when it is intact.
+
+    With a ``record`` (sha256, rows) from ``rows.sha256`` the file's bytes must
+    hash to it; without one, its Parquet footer must read and hold at least
+    one row.
+    """
+    import pyarrow.parquet as pq
+
+    try:
+        if path.stat().st_size == 0:
+            return "the file is empty"
+        if record is not None:
+            return None if _sha256(path) == record[0] else "its checksum differs from the one recorded"
+        rows = pq.ParquetFile(path).metadata.num_rows
+    except OSError as err:
+        return f"cannot be read ({err.strerror or err})"
+    except Exception as err:   # pyarrow raises ArrowInvalid and others on a broken footer
+        return f"not a complete Parquet file ({type(err).__name__})"
+    return None if rows > 0 else "it holds no rows"
+
+
 def load_results(out_dir):
-    """The dataset of a sweep folder (complete scenario files only), sorted by id, estimator, axis."""
+    """The dataset of a sweep folder (complete scenario files only), sorted by id, estimator, axis.
+
+    Raises
+    ------
+    InputError
+        A result file is corrupt (truncated, emptied, altered): named, with the way out.
+    """
     import pandas as pd
 
-    folder = Path(out_dir) / ROWS
+    out = Path(out_dir)
+    folder = out / ROWS
     files = sorted(folder.glob("*.parquet")) if folder.is_dir() else []
     if not files:
         return pd.DataFrame()
+    records = _recorded_checksums(out)
+    for f in files:
+        why = verify_rows_file(f, records.get(f.name))
+        if why is not None:
+            raise InputError(f"corrupt sweep result: {why}; rerun the same `gyroarray sweep` command "
+                             "into this folder to redo that scenario", file=str(f))
     df = pd.concat([pd.read_parquet(f) for f in files], ignore_index=True)
     return df.sort_values(["scenario_id", "estimator", "axis"], kind="stable").reset_index(drop=True)
+
+
+def _watch_parent(parent_pid: int) -> None:
+    """Worker initializer: exit as soon as the sweep process is gone (module docstring)."""
+    if sys.platform.startswith("linux"):
+        try:
+            import ctypes
+            libc = ctypes.CDLL(None, use_errno=True)
+            libc.prctl(1, signal.SIGKILL, 0, 0, 0)      # PR_SET_PDEATHSIG
+        except (OSError, AttributeError):
+            pass
+    if os.getppid() != parent_pid:
+        os._exit(1)
+
+    def watch():
+        while True:
+            time.sleep(0.5)
+            if os.getppid() != parent_pid:
+                os._exit(1)
+    threading.Thread(target=watch, name="gyroarray-parent-watch", daemon=True).start()
 
 
 def _check_manifest(out: Path, sweep: Sweep) -> None:
@@ -242,13 +342,23 @@ def run_sweep(sweep, out_dir, *, workers: int = 1, scheduler: str | None = None,
     (out / ROWS).mkdir(parents=True, exist_ok=True)
     _check_manifest(out, sweep)
     rows_dir = out / ROWS
-    todo = [s for s in sweep.scenarios if not (rows_dir / f"{s.id}.parquet").exists()]
+    notes = []
+    records = _recorded_checksums(out)
+    todo = []
+    for s in sweep.scenarios:
+        f = rows_dir / f"{s.id}.parquet"
+        if not f.exists():
+            todo.append(s)
+            continue
+        why = verify_rows_file(f, records.get(f.name))
+        if why is not None:
+            notes.append(f"{f}: {why}; run again")
+            todo.append(s)
     # longest first (a better finish on few workers); results do not depend on the order
     todo.sort(key=lambda s: (-_cost(s), s.id))
     skipped = len(sweep.scenarios) - len(todo)
     bar = _Progress(len(sweep.scenarios), skipped, progress)
     failed, rows_written = [], 0
-    notes = []
 
     def done(spec, df=None, err=None):
         nonlocal rows_written
@@ -263,7 +373,8 @@ def run_sweep(sweep, out_dir, *, workers: int = 1, scheduler: str | None = None,
         backend = "processes"
         ctx = mp.get_context("spawn")
         with _env(THREAD_ENV), ProcessPoolExecutor(max_workers=min(workers, len(todo)),
-                                                   mp_context=ctx) as pool:
+                                                   mp_context=ctx, initializer=_watch_parent,
+                                                   initargs=(os.getpid(),)) as pool:
             futures = {pool.submit(run_one, s, sweep.estimators, sweep.name): s for s in todo}
             pending = set(futures)
             while pending:

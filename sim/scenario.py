@@ -329,12 +329,32 @@ def simulate(scenario: Scenario, *, cache: bool = True, rng: np.random.Generator
     return SimulationResult(scenario=scenario, truth=truth, readings_rad_s=readings, temp_c=temp)
 
 
-def simulate_to_files(scenario: Scenario, out_dir, *, cache: bool = True) -> tuple[Path, Path, SimulationResult]:
-    """Simulate and write ``out_dir/<name>.csv.gz`` + ``<name>.toml`` (measurement format)."""
+def scenario_files(scenario: Scenario) -> list[Path]:
+    """Every file a scenario was read from: the scenario, its profile and the profile's rate CSVs."""
+    files = [scenario.source, getattr(scenario.profile, "source", None)]
+    files += [getattr(seg, "file", None) for seg in getattr(scenario.profile, "segments", ())]
+    return [Path(f) for f in files if f]
+
+
+def output_files(scenario: Scenario, out_dir) -> tuple[Path, Path]:
+    """The measurement :func:`simulate_to_files` writes: ``out_dir/<name>.csv.gz`` and ``.toml``."""
     out = Path(out_dir)
-    if out.exists() and not out.is_dir():
-        raise InputError("--out must be a directory", file=str(out))
-    out.mkdir(parents=True, exist_ok=True)
+    return out / f"{scenario.name}.csv.gz", out / f"{scenario.name}.toml"
+
+
+def simulate_to_files(scenario: Scenario, out_dir, *, cache: bool = True, force: bool = False
+                      ) -> tuple[Path, Path, SimulationResult]:
+    """Simulate and write ``out_dir/<name>.csv.gz`` + ``<name>.toml`` (measurement format).
+
+    Nothing the scenario was read from is ever written over (also with
+    ``force``); an existing output is replaced only with ``force``
+    (:mod:`gyroarray.outputs`). The paths are checked before simulating.
+    """
+    from gyroarray.outputs import check_output, check_output_dir
+    out = check_output_dir(out_dir)
+    for path in output_files(scenario, out):
+        check_output(path, inputs=scenario_files(scenario), force=force)
     result = simulate(scenario, cache=cache)
-    csv_path, toml_path = write_measurement(result.to_measurement(), out / f"{scenario.name}.csv.gz")
+    csv_path, toml_path = write_measurement(result.to_measurement(), output_files(scenario, out)[0],
+                                            force=force)
     return csv_path, toml_path, result

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -336,3 +337,102 @@ def test_dask_cluster_equals_local(reference, tmp_path):
                             progress=False)
     assert summary["backend"] == "dask" and summary["complete"] and not summary["notes"]
     assert_same_bits(load_results(tmp_path / "dask"), df)
+
+
+def test_truncated_and_emptied_results_are_run_again(reference, tmp_path):
+    """A result file cut short or emptied is found on resume and redone: the same bits."""
+    sweep_file, summary, df = reference
+    out = tmp_path / "damaged"
+    shutil.copytree(summary["out_dir"], out)
+    files = sorted((out / "rows").glob("*.parquet"))
+    data = files[0].read_bytes()
+    files[0].write_bytes(data[: len(data) // 2])          # truncated
+    files[1].write_bytes(b"")                             # 0 bytes
+    with pytest.raises(InputError) as info:               # the report would refuse to read it
+        load_results(out)
+    assert info.value.file in (str(files[0]), str(files[1])) and "corrupt" in info.value.message
+    again = run_sweep(sweep_file, out, workers=1, progress=False)
+    assert again["ran"] == 2 and again["skipped"] == 1 and again["complete"]
+    assert sum(files[0].name in n or files[1].name in n for n in again["notes"]) == 2
+    assert_same_bits(load_results(out), df)
+
+
+def test_altered_result_without_a_record_is_checked_by_its_footer(reference, tmp_path):
+    """A folder whose checksum record is lost still detects a broken footer."""
+    sweep_file, summary, df = reference
+    out = tmp_path / "norecord"
+    shutil.copytree(summary["out_dir"], out)
+    (out / "rows.sha256").unlink()
+    f = sorted((out / "rows").glob("*.parquet"))[2]
+    f.write_bytes(f.read_bytes()[:-10])
+    again = run_sweep(sweep_file, out, workers=1, progress=False)
+    assert again["ran"] == 1 and any("not a complete Parquet file" in n for n in again["notes"])
+    assert_same_bits(load_results(out), df)
+
+
+def test_cli_report_refuses_a_corrupt_result_naming_it(reference, tmp_path, capsys):
+    from gyroarray.cli import main
+    _, summary, _ = reference
+    out = tmp_path / "corrupt"
+    shutil.copytree(summary["out_dir"], out)
+    f = sorted((out / "rows").glob("*.parquet"))[0]
+    f.write_bytes(f.read_bytes()[:100])
+    code = main(["report", str(out), "--out", str(tmp_path / "r.html")])
+    err = capsys.readouterr().err
+    assert code == 2 and str(f) in err and "corrupt" in err and err.count("\n") == 1
+
+
+def _descendants(pid: int) -> set[int]:
+    """Every live process below ``pid`` (Linux /proc)."""
+    kids = {}
+    for d in Path("/proc").iterdir():
+        if d.name.isdigit():
+            try:
+                ppid = int((d / "stat").read_text().rsplit(")", 1)[1].split()[1])
+            except (OSError, IndexError, ValueError):
+                continue
+            kids.setdefault(ppid, []).append(int(d.name))
+    out, todo = set(), [pid]
+    while todo:
+        for k in kids.get(todo.pop(), []):
+            out.add(k)
+            todo.append(k)
+    return out
+
+
+def _alive(pid: int) -> bool:
+    try:
+        state = (Path("/proc") / str(pid) / "stat").read_text().rsplit(")", 1)[1].split()[0]
+    except OSError:
+        return False
+    return state != "Z"
+
+
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="needs Linux /proc")
+def test_workers_die_with_a_sigkilled_sweep(reference, tmp_path):
+    sweep_file, _, _ = reference
+    code = ("import sys; from gyroarray.scenarios.runner import run_sweep; "
+            "run_sweep(sys.argv[1], sys.argv[2], workers=2, progress=False)")
+    proc = subprocess.Popen([sys.executable, "-c", code, str(sweep_file), str(tmp_path / "k")],
+                            env=os.environ.copy())
+    workers: set[int] = set()
+    try:
+        deadline = time.monotonic() + 60
+        while len(workers) < 2:                       # both workers started
+            assert proc.poll() is None and time.monotonic() < deadline, "no workers within 60 s"
+            workers = {p for p in _descendants(proc.pid)
+                       if "spawn_main" in (Path("/proc") / str(p) / "cmdline").read_bytes().decode(errors="replace")}
+            time.sleep(0.05)
+        os.kill(proc.pid, signal.SIGKILL)             # the parent alone, no clean-up of its own
+        proc.wait()
+        # the workers notice within a second (PDEATHSIG at once; the watcher polls at 0.5 s)
+        deadline = time.monotonic() + 5
+        while any(_alive(p) for p in workers) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert not any(_alive(p) for p in workers), "a worker outlived the killed sweep by 5 s"
+    finally:
+        for p in workers | _descendants(proc.pid):
+            try:
+                os.kill(p, signal.SIGKILL)
+            except OSError:
+                pass
