@@ -30,7 +30,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from gyroarray.sim.effects import EARTH_RATE_RAD_S
+from gyroarray.constants import EARTH_RATE_RAD_S
 
 from .effect_fit import EffectFit, chi2_to_z
 from .regress import NotIdentifiableError, _pm, gls_rw

@@ -47,7 +47,7 @@ import numpy as np
 from scipy.ndimage import maximum_filter1d, median_filter
 
 from gyroarray.errors import InputError
-from gyroarray.sim.effects import EARTH_RATE_RAD_S
+from gyroarray.constants import EARTH_RATE_RAD_S
 
 __all__ = ["still_mask"]
 

@@ -39,9 +39,7 @@ large positive when the effect is present whatever its sign:
   saturation plateau: see their docstrings.
 
 Units: SI inside (rad, rad/s, s); spec units only at the edge, through the
-named converters of :mod:`gyroarray.units` and :mod:`gyroarray.sim.effects`
-(inverse converters missing there are defined here: :func:`ratio_to_ppm`,
-:func:`per_rad_s_to_per_deg_s`).
+named converters of :mod:`gyroarray.units`.
 """
 
 from __future__ import annotations
@@ -55,12 +53,11 @@ from scipy import fft as sfft
 from scipy import optimize, special, stats
 
 from gyroarray.analysis.effect_fit import EffectFit, chi2_to_z
-from gyroarray.sim.effects import PPM, fractional_delay
-from gyroarray.units import (RAD_PER_DEG, rad_s_to_deg_h, rad_s_to_deg_s, rad_to_deg,
-                             ramp_rad_s2_to_deg_h2)
+from gyroarray.physics import fractional_delay, tilt_basis
+from gyroarray.units import (RAD_PER_DEG, per_rad_s_to_per_deg_s, rad_s_to_deg_h, rad_s_to_deg_s,
+                             rad_to_deg, ramp_rad_s2_to_deg_h2, ratio_to_ppm)
 
-__all__ = ["GLSFit", "NotIdentifiableError", "gls_rw", "ratio_to_ppm", "per_rad_s_to_per_deg_s",
-           "misalignment_basis", "fit_scale_factor", "fit_scale_and_nonlinearity",
+__all__ = ["GLSFit", "NotIdentifiableError", "gls_rw", "misalignment_basis", "fit_scale_factor", "fit_scale_and_nonlinearity",
            "fit_scale_nonlinearity", "fit_misalignment", "fit_latency", "fit_temperature_bias",
            "fit_rate_ramp", "fit_sinusoid", "fit_saturation"]
 
@@ -69,21 +66,6 @@ Z_EVIDENT = 3.0
 
 #: Largest accepted condition number of the column-scaled normal matrix.
 MAX_COND = 1e12
-
-
-# -- converters missing from gyroarray.units / sim.effects -------------------
-
-def ratio_to_ppm(x):
-    """Ratio [-] -> parts per million [ppm] (inverse of ``sim.effects.ppm_to_ratio``)."""
-    return x / PPM
-
-
-def per_rad_s_to_per_deg_s(x):
-    """Quadratic coefficient [1/(rad/s)] -> [1/(deg/s)].
-
-    Inverse of ``sim.effects.per_deg_s_to_per_rad_s``: k2 = k2_SI · π/180.
-    """
-    return x * RAD_PER_DEG
 
 
 # -- the engine ----------------------------------------------------------------
@@ -667,7 +649,7 @@ def fit_scale_nonlinearity(e, omega_ref_rad_s, h, time_s, dt_s: float, r: float,
 # -- misalignment ----------------------------------------------------------------
 
 def misalignment_basis(h) -> tuple[np.ndarray, np.ndarray]:
-    """The orthonormal basis (e1, e2) ⟂ h of ``sim.effects.tilted_axes``.
+    """The orthonormal basis (e1, e2) ⟂ h of :func:`gyroarray.physics.tilted_axes` (one axis).
 
     Parameters
     ----------
@@ -681,13 +663,8 @@ def misalignment_basis(h) -> tuple[np.ndarray, np.ndarray]:
         e2 = ẑ × h/|ẑ × h| (horizontal, increasing azimuth, ψ = 90°);
         for h along ±z: e1 = +x, e2 = +y.
     """
-    hv = np.asarray(h, dtype=float)
-    zhat = np.array([0.0, 0.0, 1.0])
-    cross = np.cross(zhat, hv)
-    s = float(np.linalg.norm(cross))
-    if s < 1e-12:
-        return np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0])
-    return (zhat - hv[2] * hv) / s, cross / s
+    e1, e2 = tilt_basis(np.asarray(h, dtype=float)[None, :])
+    return e1[0], e2[0]
 
 
 def fit_misalignment(e, omega_ref_rad_s, h, time_s, dt_s: float, r: float, q: float, gyro: int,
@@ -724,7 +701,7 @@ def fit_misalignment(e, omega_ref_rad_s, h, time_s, dt_s: float, r: float, q: fl
     Notes
     -----
     With the basis of :func:`misalignment_basis` (the convention of
-    ``sim.effects.tilted_axes``)::
+    ``gyroarray.physics.tilted_axes``)::
 
         a   = cos θ h + sin θ (cos ψ e1 + sin ψ e2)            (true axis)
         e_t = (a − h)·ω_t + b_t + w_t
@@ -862,7 +839,7 @@ def fit_latency(e, omega_ref_rad_s, h, time_s, dt_s: float, r: float, q: float, 
 
     Refinement (when ``refine``, d₀ > dt/2 and |d₀/σ₀| > 5): the exact model
     of the simulator, m_t(d) = D_d u_t − u_t with D_d the cubic Lagrange
-    fractional delay (``sim.effects.fractional_delay``), and
+    fractional delay (``gyroarray.physics.fractional_delay``), and
     χ²(d) = GLS χ² of e − m(d) with no regressor. A grid of 9 delays on
     [max(0, d₀/2 − dt), 2d₀ + 2dt], then a bounded Brent search between the
     neighbours of the grid minimum (the grid moves up, at most 3 times, while

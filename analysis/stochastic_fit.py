@@ -56,7 +56,7 @@ Allan variance GLS (``bias_instability``, ``quantization``, ``gauss_markov``, ba
 Overlapping Allan variance at octave τ = m·dt up to m = n/8 (the last
 octaves have a few skewed degrees of freedom). Model Σ_t P_t² g_t(τ) with
 the columns of :func:`~gyroarray.analysis.noise_fit.term_basis` (N², B², K²,
-Q²) and :func:`~gyroarray.sim.effects.gauss_markov_avar` (σ², exact sampled
+Q²) and :func:`~gyroarray.physics.gauss_markov_avar` (σ², exact sampled
 form), fitted by unconstrained GLS (coefficients may be negative, so Â/σ_Â
 is symmetric under the null), Σ recomputed from the fitted model three times.
 
@@ -220,7 +220,7 @@ from scipy import linalg, optimize, special
 
 from gyroarray import units
 from gyroarray.errors import InputError
-from gyroarray.sim.effects import gauss_markov_avar
+from gyroarray.physics import gauss_markov_avar
 
 from .allan import deviation
 from .davar import davar

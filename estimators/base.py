@@ -207,7 +207,7 @@ def _readonly(a) -> np.ndarray:
 
 
 def _unknown(what: str, key, names) -> str:
-    from gyroarray.sim.effects import did_you_mean
+    from gyroarray.effects import did_you_mean
     return f"unknown {what}{did_you_mean(key, names)} (known: {', '.join(names) or 'none'})"
 
 

@@ -68,6 +68,12 @@ def _measurement_inputs(args) -> list:
     return files
 
 
+def _add_plugin(p):
+    p.add_argument("--plugin", action="append", type=Path, metavar="PATH.py",
+                   help="load the effects defined in this Python file (repeatable); the only way "
+                        "user code runs: scenario, model and measurement files are never executed")
+
+
 def _add_force(p):
     p.add_argument("--force", action="store_true",
                    help="replace output files that exist (never an input of the command)")
@@ -565,6 +571,7 @@ def _add_compare_args(p, *, out: bool):
                    help="Monte-Carlo runs of the model band (40)")
     p.add_argument("--seed", type=int, default=0, help="seed of the model band (0)")
     p.add_argument("--repair", action="store_true", help="repair short gaps and isolated NaNs")
+    _add_plugin(p)
     if out:
         _add_force(p)
         p.add_argument("--out", type=Path, required=True, metavar="REPORT.html")
@@ -634,6 +641,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", type=Path, required=True, metavar="DIR", help="output directory")
     p.add_argument("--no-cache", action="store_true", help="recompute the rate-table truth")
     _add_force(p)
+    _add_plugin(p)
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=cmd_simulate)
 
@@ -642,6 +650,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--estimators", metavar="A,B,...",
                    help="registry names (default: kf_array, kf_single, gls, ols, naive, bound)")
     p.add_argument("--no-cache", action="store_true", help="recompute the rate-table truth")
+    _add_plugin(p)
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=cmd_run)
 
@@ -708,6 +717,9 @@ def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     try:
         args = parser.parse_args(argv)
+        if getattr(args, "plugin", None):
+            from .effects import plugin_effects
+            plugin_effects(args.plugin)
         result, text, *code = args.func(args)
     except InputError as err:
         print(f"gyroarray: {err}", file=sys.stderr)

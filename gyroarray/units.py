@@ -22,6 +22,8 @@ from __future__ import annotations
 
 import math
 
+from gyroarray.constants import G0_M_S2
+
 RAD_PER_DEG = math.pi / 180.0
 S_PER_H = 3600.0
 RT_S_PER_RT_H = 60.0  # √3600
@@ -85,3 +87,37 @@ def ramp_deg_h2_to_rad_s2(x):
 def ramp_rad_s2_to_deg_h2(x):
     """Rate ramp R [rad/s²] -> [deg/h²]."""
     return x / RAD_PER_DEG * (S_PER_H * S_PER_H)
+
+
+def ppm_to_ratio(x):
+    """Parts per million [ppm] -> ratio [-]."""
+    return x * 1e-6
+
+
+def ratio_to_ppm(x):
+    """Ratio [-] -> parts per million [ppm]."""
+    return x / 1e-6
+
+
+def per_deg_s_to_per_rad_s(x):
+    """Quadratic coefficient [1/(deg/s)] -> [1/(rad/s)].
+
+    ``y [deg/s] = k2 · u [deg/s]²`` reads ``y [rad/s] = k2_SI · u [rad/s]²``
+    in SI with ``k2_SI = k2 · (180/π)``.
+    """
+    return x / RAD_PER_DEG
+
+
+def per_rad_s_to_per_deg_s(x):
+    """Quadratic coefficient [1/(rad/s)] -> [1/(deg/s)]."""
+    return x * RAD_PER_DEG
+
+
+def deg_s_per_g_to_rad_s_per_m_s2(x):
+    """g-sensitivity [deg/s per g] -> [rad/s per m/s²] (g = g0 = 9.80665 m/s²)."""
+    return x * RAD_PER_DEG / G0_M_S2
+
+
+def rad_s_per_m_s2_to_deg_s_per_g(x):
+    """g-sensitivity [rad/s per m/s²] -> [deg/s per g]."""
+    return x / RAD_PER_DEG * G0_M_S2

@@ -49,6 +49,7 @@ from pathlib import Path
 import numpy as np
 
 from gyroarray import units
+from gyroarray.effects import REGISTRY, get_effect
 from gyroarray.errors import InputError
 from gyroarray.reports.report import _Doc, _figure, _fmt, _png
 
@@ -66,14 +67,15 @@ TOP = 15
 #: Resolution of the figures [dpi] (the HTML stays a few MB for 8 gyros).
 DPI = 88
 
-#: Regressor panels: key -> (axis label, candidate effect that reads it, needs).
+#: Regressor panels: record channel -> (axis label, what the record needs). The
+#: candidate drawn on a panel is the effect whose ``channel`` it is (``Effect.channel``).
 REGRESSORS = {
-    "rate": ("rate about its axis h·ω [deg/s]", "scale_factor", "ref"),
-    "other": ("rate about the other axes [deg/s]", "misalignment", "ref"),
-    "rate2": ("rate² (h·ω)² [deg²/s²]", "scale_nonlinearity", "ref"),
-    "accel": ("angular acceleration d(h·ω)/dt [deg/s²]", "latency", "ref"),
-    "temp": ("temperature [°C]", "temperature_bias", "temp"),
-    "time": ("time [s]", "rate_ramp", None),
+    "rate": ("rate about its axis h·ω [deg/s]", "ref"),
+    "other": ("rate about the other axes [deg/s]", "ref"),
+    "rate2": ("rate² (h·ω)² [deg²/s²]", "ref"),
+    "accel": ("angular acceleration d(h·ω)/dt [deg/s²]", "ref"),
+    "temp": ("temperature [°C]", "temp"),
+    "time": ("time [s]", None),
 }
 
 _RED, _GREEN, _GREY = "#c0392b", "#1e8449", "0.45"
@@ -97,19 +99,6 @@ def _d(x: float) -> str:
     if not math.isfinite(x):
         return "–"
     return f"{x:.3g}" if x < 1e4 else f"{x:.3e}"
-
-
-def _sig(v: float, digits: int = 3) -> str:
-    """``digits`` significant figures, without an exponent between 1e-3 and 1e5."""
-    v = float(v)
-    if not math.isfinite(v):
-        return "–"
-    a = abs(v)
-    if a == 0.0:
-        return "0"
-    if not 1e-3 <= a < 1e5:
-        return f"{v:.{digits - 1}e}"
-    return f"{v:.{max(digits - 1 - math.floor(math.log10(a)), 0)}f}"
 
 
 def _z(x) -> str:
@@ -201,30 +190,51 @@ def _header(fig, title: str, axs):
                    fontsize=7, frameon=False, bbox_to_anchor=(0.0, 1 - 0.28 / H))
 
 
+def _baseline() -> list[str]:
+    return [e.name for e in REGISTRY.values() if e.baseline]
+
+
 def _model_text(model, n_gyros: int) -> str:
     """``baseline ARW + RRW on every gyro + scale_factor (gyro 2) + ...``."""
     have = {(e.effect, e.gyro) for e in model}
-    full = all((eff, g) in have for eff in ("arw", "rrw") for g in range(1, n_gyros + 1))
-    rest = [e.label for e in model if not (full and e.effect in ("arw", "rrw"))]
-    head = ["baseline ARW + RRW on every gyro"] if full else []
+    base = _baseline()
+    full = all((eff, g) in have for eff in base for g in range(1, n_gyros + 1))
+    rest = [e.label for e in model if not (full and e.effect in base)]
+    head = [f"baseline {' + '.join(b.upper() for b in base)} on every gyro"] if full else []
     return " + ".join(head + rest)
-
-
-def _in_model(analysis, effect: str, gyro) -> bool:
-    return any(e.effect == effect and e.gyro == gyro for e in analysis.model)
 
 
 def _candidate(analysis, effect: str, gyro):
     return next((t for t in analysis.candidates if t.effect == effect and t.gyro == gyro), None)
 
 
-def _status(analysis, effect: str, gyro) -> tuple[str, str]:
-    """(text, colour) of an effect for a panel title: its candidate z, "in model" or "not tested"."""
-    if _in_model(analysis, effect, gyro):
-        return f"{effect}: in model", _GREEN
-    t = _candidate(analysis, effect, gyro)
+def _channel_effects(channel: str) -> list[str]:
+    """The effects whose residual follows ``channel`` (``Effect.channel``), registry order."""
+    return [e.name for e in REGISTRY.values() if e.channel == channel]
+
+
+def _channel_candidate(analysis, channel: str, gyro):
+    """The best candidate (first in rank) of the effects of ``channel`` on ``gyro``."""
+    names = set(_channel_effects(channel))
+    return next((t for t in analysis.candidates if t.effect in names and t.gyro == gyro), None)
+
+
+def _channel_in_model(analysis, channel: str, gyro):
+    """The model entry of an effect of ``channel`` on ``gyro``, or None."""
+    names = set(_channel_effects(channel))
+    return next((e for e in analysis.model if e.effect in names and e.gyro == gyro), None)
+
+
+def _status(analysis, channel: str, gyro) -> tuple[str, str]:
+    """(text, colour) of a channel's effect for a panel title: its candidate z, "in model" or "not tested"."""
+    e = _channel_in_model(analysis, channel, gyro)
+    if e is not None:
+        return f"{e.effect}: in model", _GREEN
+    t = _channel_candidate(analysis, channel, gyro)
     if t is None:
-        return f"{effect}: not tested", _GREY
+        names = _channel_effects(channel)
+        return f"{names[0] if names else channel}: not tested", _GREY
+    effect = t.effect
     if np.isnan(t.z):
         return f"{effect}: not identifiable here", _GREY
     if analysis.significant(t):
@@ -357,7 +367,7 @@ class _Regressors:
         self.bias = _fitted_bias(self.E, self.t, self.static)
         self.has_ref = comp.ref is not None and comp.moving     # a table that never turns: no rates
         self.has_temp = comp.temp is not None
-        self.keys = [k for k, (_, _, need) in REGRESSORS.items()
+        self.keys = [k for k, (_, need) in REGRESSORS.items()
                      if need is None or (need == "ref" and self.has_ref)
                      or (need == "temp" and self.has_temp)]
 
@@ -385,7 +395,7 @@ class _Regressors:
         return perp @ d, label.replace("[deg/s]", "(toward the tilt) [deg/s]")
 
     def _tilt_direction(self, g: int, perp: np.ndarray, analysis):
-        t = _candidate(analysis, "misalignment", g + 1)
+        t = _channel_candidate(analysis, "other", g + 1)
         h = self.comp.H[g]
         if t is not None and t.fit is not None and "axis" in t.fit.extra:
             a = np.asarray(t.fit.extra["axis"], float)
@@ -402,44 +412,24 @@ class _Regressors:
 
 
 def _fit_line(key: str, analysis, g: int, xb, yb, sb):
-    """(x, y [deg/h] or None, label) of the matching candidate's fit, or None.
+    """(x, y [deg/h] or None, label) of the panel's candidate fit, or None.
 
-    The line (y) only for a significant candidate: the fit of an absent
-    effect can be large and uncertain, and a steep line across flat points
-    would say the opposite of its z; the label (value ± 1σ) always.
+    The candidate is the effect whose ``channel`` the panel shows; its
+    ``Effect.channel_line`` gives the line. The line (y) only for a
+    significant candidate: the fit of an absent effect can be large and
+    uncertain, and a steep line across flat points would say the opposite of
+    its z; the label (value ± 1σ) always.
     """
-    t = _candidate(analysis, REGRESSORS[key][1], g + 1)
+    t = _channel_candidate(analysis, key, g + 1)
     if t is None or t.fit is None or not np.isfinite(t.z) or xb.size < 2:
         return None
-    p, sg = t.fit.params, t.fit.sigma
     x = np.linspace(xb.min(), xb.max(), 50)
     w = 1.0 / np.maximum(sb, 1e-12) ** 2
     xm, ym = float(np.average(xb, weights=w)), float(np.average(yb, weights=w))
-
-    def lab(name, scale=1.0, unit=""):
-        v = float(p[name]) * scale
-        s = sg.get(name)
-        pm = f" ± {_sig(float(s) * scale, 2)}" if s is not None and np.isfinite(s) else ""
-        return f"fit {_sig(v)}{pm}{unit}"
-
-    line = None
-    if key == "rate" and "ppm" in p:
-        line = x, p["ppm"] * 1e-6 * x * 3600.0, lab("ppm", unit=" ppm")
-    elif key == "rate2" and "k2_per_deg_s" in p:
-        line = x, p["k2_per_deg_s"] * x * 3600.0, "k2 " + lab("k2_per_deg_s", unit=" /(deg/s)")
-    elif key == "accel" and "delay_s" in p:
-        line = x, -p["delay_s"] * x * 3600.0, "delay " + lab("delay_s", 1e3, " ms")
-    elif key == "other" and "tilt_deg" in p and "axis" in t.fit.extra:
-        # the regressor is ω⊥ along the fitted tilt, so the residual (a − h)·ω = sin(tilt)·that
-        s = math.sin(math.radians(float(p["tilt_deg"])))
-        line = x, s * x * 3600.0, "tilt " + lab("tilt_deg", unit="°")
-    elif key == "temp" and "deg_h_per_c" in p:
-        line = x, ym + p["deg_h_per_c"] * (x - xm), lab("deg_h_per_c", unit=" deg/h/°C")
-    elif key == "time" and "r_deg_h2" in p:
-        line = x, ym + p["r_deg_h2"] * (x - xm) / 3600.0, lab("r_deg_h2", unit=" deg/h²")
+    line = get_effect(t.effect).channel_line(t.fit, x, xm, ym)
     if line is None:
         return None
-    return (line[0], line[1] if analysis.significant(t) else None, line[2])
+    return (x, line[0] if analysis.significant(t) else None, line[1])
 
 
 def _regressor_fig(reg: _Regressors, analysis, g: int) -> bytes:
@@ -463,7 +453,7 @@ def _regressor_fig(reg: _Regressors, analysis, g: int) -> bytes:
             ax.plot(reg.t[::thin], to(reg.bias[::thin, g] - offset), "-", color="C1", lw=1,
                     label=f"fitted bias (static samples, {BIAS_BLOCK_S:.0f} s blocks)")
         line = _fit_line(key, analysis, g, xb, yb, sb) if xb.size else None
-        text, color = _status(analysis, REGRESSORS[key][1], g + 1)
+        text, color = _status(analysis, key, g + 1)
         if line is not None:
             lc = color if color != "0.15" else _GREY
             if line[1] is not None:
@@ -521,32 +511,31 @@ def _psd_fig(comp, analysis) -> bytes:
     for g, ax in enumerate(axs):
         ax.loglog(f, to(np.sqrt(P[:, g])), color="0.72", lw=0.5, label="residual (Welch)")
         ax.loglog(fb, to(np.sqrt(Pb[:, g])), color="k", lw=1.1, label="residual, log-binned")
-        fa = analysis.fits.get(("arw", g + 1))
-        fr = analysis.fits.get(("rrw", g + 1))
-        if fa is not None:
-            n = float(fa.params["n_deg_rt_h"])
+        n, k = analysis.baseline_noise(g + 1)
+        if n is not None:
             white = float(_model_asd_deg_h(np.array([f[-1]]), n, 0.0)[0])
             ax.axhline(white, color="C0", ls="--", lw=1, label="model ARW level")
-            if fr is not None:
-                model = _model_asd_deg_h(f, n, float(fr.params["k_deg_h_rt_h"]))
+            if k is not None:
+                model = _model_asd_deg_h(f, n, k)
                 ax.loglog(f, model, color="C0", lw=1, alpha=0.7, label="model ARW + RRW")
             lo, hi = ax.get_ylim()
             if white > 0:     # at least a decade around the white level: the noise looks calm
                 ax.set_ylim(min(lo, white / 2.5) if lo > 0 else white / 2.5, max(hi, white * 2.5))
         title, color = f"gyro {g + 1}", "0.15"
-        t = _candidate(analysis, "sinusoid", g + 1)
+        t = _channel_candidate(analysis, "spectrum", g + 1)
+        e = _channel_in_model(analysis, "spectrum", g + 1)
         fq = math.nan
-        if _in_model(analysis, "sinusoid", g + 1) and ("sinusoid", g + 1) in analysis.fits:
-            fq = float(analysis.fits[("sinusoid", g + 1)].params["freq_hz"])
-            title, color = f"gyro {g + 1}: sinusoid {fq:.4g} Hz in model", _GREEN
+        if e is not None and (e.effect, g + 1) in analysis.fits:
+            fq = float(analysis.fits[(e.effect, g + 1)].params.get("freq_hz", math.nan))
+            title, color = f"gyro {g + 1}: {e.effect} {fq:.4g} Hz in model", _GREEN
         elif t is not None and t.fit is not None and np.isfinite(t.fit.params.get("freq_hz", np.nan)):
             fq = float(t.fit.params["freq_hz"])
             sig = analysis.significant(t)
-            title = f"gyro {g + 1}: sinusoid {fq:.4g} Hz, z = {_z(t.z)}"
+            title = f"gyro {g + 1}: {t.effect} {fq:.4g} Hz, z = {_z(t.z)}"
             color = _RED if sig else "0.15"
         if np.isfinite(fq) and f[0] <= fq <= f[-1]:
             ax.axvline(fq, color=color if color != "0.15" else _GREY, lw=1, ls=":",
-                       label="sinusoid candidate")
+                       label="line candidate")
         ax.set_title(title, fontsize=9, color=color, y=1.0, pad=4)
         _log_ticks(ax)
         ax.grid(alpha=0.3)
@@ -597,7 +586,7 @@ def _xcorr_fig(comp, analysis) -> tuple[bytes, str]:
         ax.set_ylabel("gyro", fontsize=8)
         ax.set_title(title, fontsize=9)
     fig.colorbar(im, ax=list(axs), shrink=0.8, label="correlation [-]")
-    text, _ = _status(analysis, "correlation", None)
+    text, _ = _status(analysis, "xcorr", None)
     sd = 1.0 / math.sqrt(max(n - 2, 1))
     spread = f"±{2 * sd:.2g} (left)" + (f" and ±{2 / math.sqrt(max(nb - 2, 1)):.2g} (right)"
                                         if slow is not None else "")
@@ -619,14 +608,16 @@ def _arw_track_fig(comp, analysis) -> tuple[bytes, str]:
     fig, axs = _grid(N, 2, 6.0, 2.5)
     rec = analysis.record
     r0, r1 = rec.start or 0, rec.stop if rec.stop is not None else n
-    burst_t = _candidate(analysis, "burst", None)
+    burst_t = _channel_candidate(analysis, "window", None)
+    burst_e = _channel_in_model(analysis, "window", None)
     shade = None
-    if _in_model(analysis, "burst", None):
-        e = next(e for e in analysis.model if e.effect == "burst")
-        shade = (float(e.params["start_s"]), float(e.params["end_s"]), _GREEN, "burst in the model")
+    if burst_e is not None:
+        shade = (float(burst_e.params["start_s"]), float(burst_e.params["end_s"]), _GREEN,
+                 f"{burst_e.effect} in the model")
     elif burst_t is not None and burst_t.fit is not None and analysis.significant(burst_t):
         p = burst_t.fit.params
-        shade = (float(p["start_s"]), float(p["end_s"]), _RED, f"burst candidate, z = {_z(burst_t.z)}")
+        shade = (float(p["start_s"]), float(p["end_s"]), _RED,
+                 f"{burst_t.effect} candidate, z = {_z(burst_t.z)}")
     for g, ax in enumerate(axs):
         res = davar(E[:, g], dt, window=window, step=step, taus=[dt], extension="mirror")
         tc = t0 + res.time_s
@@ -634,10 +625,9 @@ def _arw_track_fig(comp, analysis) -> tuple[bytes, str]:
         ax.fill_between(tc, to(res.arw_ci_low_rad_rt_s), to(res.arw_ci_high_rad_rt_s), color="k",
                         alpha=0.15, lw=0, label="1σ band")
         ax.plot(tc, arw, color="k", lw=0.9, label=f"ARW in {window * dt:.0f} s windows")
-        fa = analysis.fits.get(("arw", g + 1))
+        level, _ = analysis.baseline_noise(g + 1)
         lo, hi = float(np.min(arw)), float(np.max(arw))
-        if fa is not None:
-            level = float(fa.params["n_deg_rt_h"])
+        if level is not None:
             ax.axhline(level, color="C0", ls="--", lw=1, label="model ARW")
             lo, hi = min(lo, 0.85 * level), max(hi, 1.15 * level)   # wiggles of a few % look calm
         ax.set_ylim(lo - 0.05 * (hi - lo), hi + 0.05 * (hi - lo))
@@ -656,13 +646,13 @@ def _arw_track_fig(comp, analysis) -> tuple[bytes, str]:
         ax.grid(alpha=0.3)
     _header(fig, "Non-stationarity: ARW in sliding windows", axs)
     if burst_t is not None:
-        what = (f"burst candidate z = {_z(burst_t.z)}"
+        what = (f"{burst_t.effect} candidate z = {_z(burst_t.z)}"
                 + (" (significant, shaded)" if analysis.significant(burst_t) else "") + ": "
                 + burst_t.evidence)
-    elif _in_model(analysis, "burst", None):
-        what = "burst: in the model (shaded)"
+    elif burst_e is not None:
+        what = f"{burst_e.effect}: in the model (shaded)"
     else:
-        what = "burst: not tested"
+        what = " / ".join(_channel_effects("window")) + ": not tested"
     caption = (f"ARW of the residual in sliding {window * dt:.0f} s windows (dynamic Allan deviation "
                f"at τ₀, step {step * dt:.3g} s) against the model's ARW; {what}.")
     return _png(fig, DPI), caption
@@ -733,11 +723,10 @@ def _section_ladder(doc: _Doc, steps):
 
 
 def _section_effects(doc: _Doc, final, n_gyros: int):
-    from gyroarray.sim.effects import get_effect
     doc.h2("Effects found")
     rows = []
     for e in final.model:
-        if e.effect in ("arw", "rrw"):
+        if get_effect(e.effect).baseline:
             continue
         f = final.fits.get((e.effect, e.gyro))
         params = dict(f.params) if f is not None else dict(e.params)
@@ -758,11 +747,9 @@ def _section_effects(doc: _Doc, final, n_gyros: int):
     doc.h3("Baseline noise per gyro")
     brow, flags = [], []
     for g in range(1, n_gyros + 1):
-        fa, fr = final.fits.get(("arw", g)), final.fits.get(("rrw", g))
+        (n, sn), (k, sk) = final.baseline_noise(g, sigma=True)
         t = band.get(g)
-        brow.append([g,
-                     "–" if fa is None else _pm(fa.params["n_deg_rt_h"], fa.sigma.get("n_deg_rt_h")),
-                     "–" if fr is None else _pm(fr.params["k_deg_h_rt_h"], fr.sigma.get("k_deg_h_rt_h")),
+        brow.append([g, "–" if n is None else _pm(n, sn), "–" if k is None else _pm(k, sk),
                      _z(t.z) if t is not None else "–",
                      "–" if t is None else not final.significant(t)])
         flags.append(t is not None and final.significant(t))

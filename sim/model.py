@@ -1,7 +1,7 @@
 """Noise models: a list of effect entries, read from and written to TOML.
 
 A noise model is an ordered list of entries; each names one effect of
-``shared/spec/effects.md`` (:data:`gyroarray.sim.effects.REGISTRY`), the gyro
+``shared/spec/effects.md`` (:data:`gyroarray.effects.REGISTRY`), the gyro
 it applies to (1-based; omitted = every gyro, only for per-gyro effects) and
 its parameters in the spec's units, exactly as the user wrote them. One line
 of TOML per effect::
@@ -47,7 +47,8 @@ import numpy as np
 
 from gyroarray.errors import InputError
 from gyroarray.layout import UNIT_NORM_TOL
-from gyroarray.sim.effects import REGISTRY, Effect, Param, did_you_mean, get_effect
+from gyroarray.effects import REGISTRY, did_you_mean, get_effect
+from gyroarray.sim.protocol import Effect, Param
 
 __all__ = ["ModelEntry", "NoiseModel"]
 

@@ -8,6 +8,17 @@ import sys
 import pytest
 
 
+@pytest.fixture(autouse=True)
+def _registry_as_shipped():
+    """Effects a test registers (a plugin, a checked class) do not leak into the next test."""
+    from gyroarray import effects
+    saved = (dict(effects._EFFECTS), dict(effects._SOURCE), dict(effects._PLUGINS))
+    yield
+    for live, copy in zip((effects._EFFECTS, effects._SOURCE, effects._PLUGINS), saved):
+        live.clear()
+        live.update(copy)
+
+
 @pytest.fixture
 def cli():
     """Run ``python -m gyroarray.cli ARGS...`` as a user would; ``check`` asserts exit 0 (stderr shown)."""

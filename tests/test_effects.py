@@ -17,8 +17,11 @@ from scipy import stats
 
 from gyroarray.errors import InputError
 from gyroarray.layout import Layout
-from gyroarray.sim.effects import (EARTH_RATE_RAD_S, REGISTRY, Stage, fractional_delay,
-                                   gauss_markov_avar, resolve, simulate_readings, tilted_axes)
+from gyroarray.constants import EARTH_RATE_RAD_S
+from gyroarray.effects import REGISTRY
+from gyroarray.physics import fractional_delay, gauss_markov_avar, tilted_axes
+from gyroarray.sim.effects import resolve, simulate_readings
+from gyroarray.sim.protocol import Stage
 from gyroarray.sim.model import ModelEntry, NoiseModel
 from gyroarray.units import (deg_h_to_rad_s, deg_s_to_rad_s, deg_to_rad, rad_s_to_deg_s,
                              ramp_deg_h2_to_rad_s2)

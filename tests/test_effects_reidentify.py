@@ -6,9 +6,11 @@ rate ramp R) are fitted with the IEEE Std 952 noise fit of
 the correlation between taus, 1σ uncertainties), restricted to the terms the
 simulated model has: this checks the simulator (does the simulated process
 have the stated coefficient?), not the fit's ability to tell terms apart.
-Gauss–Markov σ and τc are fitted with
-:func:`gyroarray.sim.effects.fit_gauss_markov_avar`; the correlation of the
-white draws with the sample correlation matrix (Fisher z, Bonferroni).
+Gauss–Markov σ and τc are fitted with the noise fit the diagnosis uses
+(:func:`gyroarray.analysis.stochastic_fit.fit_gyro_noise`, the term in the
+model: GLS on the Allan variance with the covariance between taus); the
+correlation of the white draws with the sample correlation matrix (Fisher z,
+Bonferroni).
 
 Tolerances. A fitted coefficient must lie within K_BAND·σ_true of the value
 simulated, σ_true = c·σ_fit: σ_fit is the fit's own 1σ and c the RMS of
@@ -22,12 +24,11 @@ least 1 (below 1 the fit's σ is conservative and is used as it is):
     rate ramp R (terms n, r)           0.45    −0.00    0.8           1
     bias instability B (terms n, b)    1.02    −0.04    1.9           1.05
     quantization Q (terms q, n)        0.95    +0.73    1.6           1
-    Gauss–Markov σ (octave taus)       1.82    −0.03    3.5           1.85
-    Gauss–Markov τc (octave taus)      1.81    −0.06    3.5           1.85
+    Gauss–Markov σ (term in model)     0.91    +0.02    1.7           1
+    Gauss–Markov τc (term in model)    0.92    −0.00    1.7           1
 
-The Allan fit's σ is close to calibrated (its GLS accounts for the
-correlation between octaves); the Gauss–Markov fit treats the octaves as
-independent and is optimistic by about 1.8.
+Both fits' σ are close to calibrated (their GLS accounts for the
+correlation between octaves).
 
 The band is the issue's 2σ (in σ_true). A 2σ band holds for one seed with
 probability 95.4 %, so a single-seed 2σ assertion would encode "fails for one
@@ -50,7 +51,8 @@ from scipy import signal, stats
 
 from gyroarray.analysis.allan import allan_analysis, edf, oadev
 from gyroarray.layout import Layout
-from gyroarray.sim.effects import fit_gauss_markov_avar, simulate_readings
+from gyroarray.analysis.stochastic_fit import fit_gyro_noise
+from gyroarray.sim.effects import simulate_readings
 from gyroarray.sim.model import NoiseModel
 from gyroarray.units import (arw_deg_rt_h_to_rad_rt_s, deg_h_to_rad_s, deg_s_to_rad_s, deg_to_rad,
                              ramp_deg_h2_to_rad_s2, rrw_deg_h_rt_h_to_rad_s_rt_s)
@@ -61,7 +63,7 @@ TRIAD = Layout.triad()
 SEED = 0
 
 #: c of σ_true = c·σ_fit for each check, and the band in σ_true (module docstring).
-C = {"n": 1.1, "k": 1.0, "r": 1.0, "b": 1.05, "q": 1.0, "gm_sigma": 1.85, "gm_tau": 1.85}
+C = {"n": 1.1, "k": 1.0, "r": 1.0, "b": 1.05, "q": 1.0, "gm_sigma": 1.0, "gm_tau": 1.0}
 K_BAND = 2.0
 #: Seeds of the band checks, how many of them must fall inside K_BAND, and the gross-error guard.
 SEEDS = range(10)
@@ -193,21 +195,19 @@ def test_flicker_plateau_is_flat_at_0664_b():
 def check_gauss_markov(seed):
     sigma, tau_c = 20.0, 10.0   # deg/h, s: peak at 1.89 τc = 19 s, 7.5 octaves below T/2
     y = simulate([{"effect": "gauss_markov", "sigma_deg_h": sigma, "tau_s": tau_c}], seed)
-    res = oadev(y[:, 0], DT)
-    fit = fit_gauss_markov_avar(res.taus_s, res.avar, lambda a: edf("oadev", res.n_phase, res.m, a),
-                                dt_s=DT)
-    return fit, deg_h_to_rad_s(sigma), tau_c
+    fit = {f.effect: f for f in fit_gyro_noise(y[:, 0], DT, 1, gm_tau_s=tau_c)}["gauss_markov"]
+    return fit, sigma, tau_c
 
 
 def test_gauss_markov_sigma_and_tau_are_reidentified():
     runs = [check_gauss_markov(seed) for seed in SEEDS]
-    assert_band([(f.sigma, sigma, f.sigma_err) for f, sigma, _ in runs], C["gm_sigma"])
-    assert_band([(f.tau_c_s, tau_c, f.tau_c_err_s) for f, _, tau_c in runs], C["gm_tau"])
+    assert_band([(f.params["sigma_deg_h"], sigma, f.sigma["sigma_deg_h"]) for f, sigma, _ in runs],
+                C["gm_sigma"])
+    assert_band([(f.params["tau_s"], tau_c, f.sigma["tau_s"]) for f, _, tau_c in runs], C["gm_tau"])
     fit = runs[0][0]
-    # the model has the right shape: χ²/dof over 300 seeds has mean 0.8, 99 % quantile 2.3 and
-    # maximum 3.4 (the octaves correlate, so it is not χ²₁₇/17); the continuous-time closed form,
-    # which misses the 1/(2m²) excess of the sampled process at small τ, gives about 1000
-    assert fit.chi2 / fit.dof < 4.0
+    # the model has the right shape: χ²/dof over 300 seeds has mean 0.83, 99 % quantile 1.8 and
+    # maximum 2.2 (the fit's generalized χ² with the covariance between taus)
+    assert fit.extra["chi2"] / fit.extra["dof"] < 4.0
 
 
 # -- correlation of the white draws ------------------------------------------

@@ -36,10 +36,11 @@ from gyroarray.analysis.regress import (GLSFit, NotIdentifiableError, _RWWhitene
                                         fit_misalignment, fit_rate_ramp, fit_saturation,
                                         fit_scale_and_nonlinearity, fit_scale_factor,
                                         fit_scale_nonlinearity, fit_sinusoid, fit_temperature_bias,
-                                        gls_rw, misalignment_basis, per_rad_s_to_per_deg_s,
-                                        ratio_to_ppm)
+                                        gls_rw, misalignment_basis)
 from gyroarray.layout import Layout
-from gyroarray.sim.effects import per_deg_s_to_per_rad_s, ppm_to_ratio, simulate_readings, tilted_axes
+from gyroarray.physics import tilted_axes
+from gyroarray.sim.effects import simulate_readings
+from gyroarray.units import per_deg_s_to_per_rad_s, per_rad_s_to_per_deg_s, ppm_to_ratio, ratio_to_ppm
 from gyroarray.sim.model import NoiseModel
 from gyroarray.units import (arw_deg_rt_h_to_rad_rt_s, deg_s_to_rad_s, deg_to_rad,
                              rrw_deg_h_rt_h_to_rad_s_rt_s)
