@@ -15,7 +15,11 @@ bias instability (B)   deg/h            rad/s
 RRW  (K)               deg/h/√h         rad/s/√s
 rate ramp (R)          deg/h²           rad/s²
 quantization (Q)       deg              rad
+specific force         g                m/s²
+g-sensitivity          (deg/s)/g        (rad/s)/(m/s²)
 =====================  ===============  ====================
+
+One g is the standard gravity g0 = 9.80665 m/s² (``shared/spec/effects.md``).
 """
 
 from __future__ import annotations
@@ -25,6 +29,8 @@ import math
 RAD_PER_DEG = math.pi / 180.0
 S_PER_H = 3600.0
 RT_S_PER_RT_H = 60.0  # √3600
+#: Standard gravity g0 [m/s²] (CGPM 1901; the spec's g0).
+STANDARD_GRAVITY_M_S2 = 9.80665
 
 
 def deg_to_rad(x):
@@ -85,3 +91,23 @@ def ramp_deg_h2_to_rad_s2(x):
 def ramp_rad_s2_to_deg_h2(x):
     """Rate ramp R [rad/s²] -> [deg/h²]."""
     return x / RAD_PER_DEG * (S_PER_H * S_PER_H)
+
+
+def g_to_m_s2(x):
+    """Specific force [g] -> [m/s²] (g0 = 9.80665 m/s²)."""
+    return x * STANDARD_GRAVITY_M_S2
+
+
+def m_s2_to_g(x):
+    """Specific force [m/s²] -> [g]."""
+    return x / STANDARD_GRAVITY_M_S2
+
+
+def deg_s_per_g_to_rad_s_per_m_s2(x):
+    """g-sensitivity [(deg/s)/g] -> [(rad/s)/(m/s²)]."""
+    return x * RAD_PER_DEG / STANDARD_GRAVITY_M_S2
+
+
+def rad_s_per_m_s2_to_deg_s_per_g(x):
+    """g-sensitivity [(rad/s)/(m/s²)] -> [(deg/s)/g]."""
+    return x / RAD_PER_DEG * STANDARD_GRAVITY_M_S2
