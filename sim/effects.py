@@ -32,10 +32,12 @@ relative to the Earth, ω(t) (n×3, platform frame).
    RRW draws) and ``burst`` (ARW variance × ratio over a time window); then
    the terms (``Stage.ADD``): ``arw``, ``rrw``, ``bias_instability``,
    ``rate_ramp``, ``gauss_markov``, ``sinusoid``, ``constant_bias``,
-   ``temperature_bias``.
-5. ``quantization`` (``Stage.QUANTIZE``): the output angle is accumulated and
+   ``temperature_bias``, ``g_sensitivity``.
+5. ``bandwidth`` (``Stage.FILTER``): the gyro's own causal low-pass on
+   everything so far (:func:`gyroarray.sim.sensor.bandwidth_filter`).
+6. ``quantization`` (``Stage.QUANTIZE``): the output angle is accumulated and
    quantized with step q = √12·Q; output = Δ(quantized angle)/dt.
-6. ``saturation`` (``Stage.SATURATE``): clip at ±range. Last.
+7. ``saturation`` (``Stage.SATURATE``): clip at ±range. Last.
 
 Within a stage, effects run in registry order (the spec's table order). The
 additive terms commute; the order only fixes the floating-point bits.
@@ -79,6 +81,11 @@ What each effect does, precisely
 ``sinusoid`` / ``rate_ramp`` / ``temperature_bias``
     amp·sin(2π f t + phase), R·t and coeff·(temp_c − t0_c), t = ``time_s``
     (absolute: a record starting at 1000 s starts its ramp at R·1000 s).
+``g_sensitivity`` / ``bandwidth``
+    :mod:`gyroarray.sim.sensor` (definitions and discretisation there). The
+    specific force at each gyro comes from :class:`SimContext`: the truth's
+    f_0 and α when given, else gravity through the attitude and α from
+    central differences of ω.
 ``quantization``
     A real quantizer of the accumulated output angle (:func:`quantize_angle`):
     3Q²/τ² in the Allan variance only when something moves the angle across
@@ -130,6 +137,7 @@ from __future__ import annotations
 
 import difflib
 import enum
+import functools
 import math
 import zlib
 from dataclasses import dataclass, replace
@@ -144,8 +152,11 @@ from gyroarray.design import correlation_matrix
 from gyroarray.errors import InputError
 from gyroarray.layout import Layout
 from gyroarray.units import (RAD_PER_DEG, arw_deg_rt_h_to_rad_rt_s, deg_h_to_rad_s,
-                             deg_s_to_rad_s, deg_to_rad, ramp_deg_h2_to_rad_s2,
-                             rrw_deg_h_rt_h_to_rad_s_rt_s)
+                             deg_s_per_g_to_rad_s_per_m_s2, deg_s_to_rad_s, deg_to_rad,
+                             ramp_deg_h2_to_rad_s2, rrw_deg_h_rt_h_to_rad_s_rt_s)
+
+from .sensor import (bandwidth_filter, g_sensitivity_bias, gravity_specific_force,
+                     rigid_body_specific_force)
 
 __all__ = ["EARTH_RATE_RAD_S", "Stage", "Param", "Effect", "REGISTRY", "effect_names", "get_effect",
            "did_you_mean", "SimContext", "ChainState", "Active", "Mixer", "WhiteShaping", "Streams",
@@ -190,6 +201,10 @@ def _rho_si(x):
     return float(x) if np.ndim(x) == 0 else np.asarray(x, dtype=float)
 
 
+def _g_sens_si(x):
+    return deg_s_per_g_to_rad_s_per_m_s2(np.asarray(x, dtype=float))
+
+
 # -- registry types --------------------------------------------------------
 
 class Stage(enum.IntEnum):
@@ -204,6 +219,7 @@ class Stage(enum.IntEnum):
     SCALE     adds a term computed from ``state.u`` (the stage's input)
     SHAPE     ``state.white`` (mixing / gain of the ARW and RRW draws)
     ADD       adds a term to ``state.x``
+    FILTER    ``state.x`` columns (the sensor's own response)
     QUANTIZE  ``state.x`` columns (output)
     SATURATE  ``state.x`` columns (output)
     """
@@ -213,8 +229,9 @@ class Stage(enum.IntEnum):
     SCALE = 3
     SHAPE = 4
     ADD = 5
-    QUANTIZE = 6
-    SATURATE = 7
+    FILTER = 6
+    QUANTIZE = 7
+    SATURATE = 8
 
 
 @dataclass(frozen=True)
@@ -231,9 +248,9 @@ class Param:
         Key of the converted value handed to ``simulate``.
     to_si : callable
         Named converter from ``unit`` to SI.
-    kind : {"scalar", "axis", "rho", "flag"}
-        A real number; a unit 3-vector; a scalar or N×N correlation matrix;
-        a boolean.
+    kind : {"scalar", "axis", "vector", "rho", "flag"}
+        A real number; a unit 3-vector; any finite 3-vector; a scalar or N×N
+        correlation matrix; a boolean.
     lo, hi : float
         Bounds of a scalar (inclusive unless ``lo_open`` / ``hi_open``).
     required : bool
@@ -339,6 +356,19 @@ class SimContext:
         Temperature at the array [°C].
     site : tuple (latitude_rad, heading_rad) or None
         Where the table stands [rad].
+    specific_force_origin_m_s2 : ndarray, shape (n, 3)
+        Specific force at the platform origin, platform frame [m/s²]: the
+        truth's (MuJoCo accelerometer) when given, else gravity through the
+        attitude, Rᵀ[0, 0, g0] (level when ``attitude`` is None).
+    angular_accel_rad_s2 : ndarray, shape (n, 3)
+        Angular acceleration dω/dt, platform frame [rad/s²]: the truth's when
+        given, else central differences of ``omega_body_rad_s``
+        (``numpy.gradient``).
+    positions_m : ndarray, shape (N, 3)
+        Gyro positions, platform frame [m] (zero when the layout has none).
+    specific_force_m_s2 : ndarray, shape (n, N, 3)
+        (property, computed on first use) the specific force at each gyro,
+        f_k = f_0 + α × r_k + ω × (ω × r_k) [m/s²].
     """
 
     omega_body_rad_s: np.ndarray
@@ -348,6 +378,16 @@ class SimContext:
     attitude: np.ndarray | None = None
     temp_c: np.ndarray | None = None
     site: tuple[float, float] | None = None
+    specific_force_origin_m_s2: np.ndarray | None = None
+    angular_accel_rad_s2: np.ndarray | None = None
+    positions_m: np.ndarray | None = None
+
+    @functools.cached_property
+    def specific_force_m_s2(self) -> np.ndarray:
+        """Specific force at each gyro (n, N, 3) [m/s²] (see the class notes)."""
+        return _readonly(rigid_body_specific_force(
+            self.specific_force_origin_m_s2, self.omega_body_rad_s, self.angular_accel_rad_s2,
+            self.positions_m))
 
     @property
     def n(self) -> int:
@@ -1081,6 +1121,19 @@ def _sim_earth_rate(state, act, streams):
     return replace(state, frame_rate=state.frame_rate + w)
 
 
+def _sim_bandwidth(state, act, streams):
+    try:
+        y = bandwidth_filter(state.x[:, act.cols], state.ctx.dt_s, act.p["cutoff_hz"], act.p["order"])
+    except InputError as err:
+        raise InputError(f"{act.label}: {err.message}", column=err.column) from None
+    return _with_cols(state, act.cols, y)
+
+
+def _sim_g_sensitivity(state, act, streams):
+    f = state.ctx.specific_force_m_s2[:, act.cols]                    # f_k, (n, m, 3)
+    return _with_term(state, act.cols, g_sensitivity_bias(act.p["coeff_rad_s_per_m_s2"], f))
+
+
 def _sim_burst(state, act, streams):
     t = state.ctx.time_s
     inside = (t >= act.p["start_s"]) & (t < act.p["end_s"])
@@ -1128,6 +1181,12 @@ def _check_correlation(params, gyro, n_gyros):
                 correlation_matrix(n_gyros, rho)
             except InputError as err:
                 raise InputError(err.message, column=key) from None
+
+
+def _check_bandwidth(params, gyro, n_gyros):
+    if params["order"] not in (1, 2):
+        raise InputError(f"order must be 1 (first order) or 2 (Butterworth), got "
+                         f"{params['order']!r}", column="order")
 
 
 def _check_burst(params, gyro, n_gyros):
@@ -1226,6 +1285,17 @@ _EFFECTS = (
            doc="ARW variance multiplier inside the window")),
         Stage.SHAPE, _sim_burst, check=_check_burst,
         doc="ARW variance × ratio over [start_s, end_s)"),
+    Effect("bandwidth", True, (
+        _p("cutoff_hz", "Hz", "cutoff_hz", _identity, lo=0.0, lo_open=True,
+           doc="−3 dB frequency of the gyro's internal low-pass (below Nyquist)"),
+        _p("order", "-", "order", _identity, lo=1.0, hi=2.0,
+           doc="1: H(s) = 1/(1 + s/ωc); 2: Butterworth")),
+        Stage.FILTER, _sim_bandwidth, check=_check_bandwidth,
+        doc="the gyro's own causal low-pass filter"),
+    Effect("g_sensitivity", True, (
+        _p("deg_s_per_g", "(deg/s)/g", "coeff_rad_s_per_m_s2", _g_sens_si, kind="vector",
+           doc="bias = deg_s_per_g · f_k / g0, f_k the specific force at the gyro (platform frame)"),),
+        Stage.ADD, _sim_g_sensitivity, doc="bias proportional to the specific force at the gyro"),
 )
 
 #: The effects by spec name, read-only, in the spec's table order.
@@ -1277,7 +1347,8 @@ def _readonly(a: np.ndarray) -> np.ndarray:
     return a
 
 
-def _context(truth, layout, dt_s, time_s, attitude, temp_c, site) -> SimContext:
+def _context(truth, layout, dt_s, time_s, attitude, temp_c, site, specific_force=None,
+             angular_accel=None) -> SimContext:
     w = np.asarray(truth, dtype=float)
     if w.ndim != 2 or w.shape[1] != 3 or w.shape[0] < 2:
         raise InputError(f"truth_omega_body_rad_s must be (n, 3) with n >= 2, got shape {w.shape}")
@@ -1309,14 +1380,31 @@ def _context(truth, layout, dt_s, time_s, attitude, temp_c, site) -> SimContext:
         temp = np.asarray(temp_c, dtype=float)
         if temp.shape != (n,) or not np.all(np.isfinite(temp)):
             raise InputError(f"temp_c must be {n} finite values, got shape {temp.shape}")
-    axes = layout.H if isinstance(layout, Layout) else Layout.from_axes(layout).H
-    return SimContext(omega_body_rad_s=_readonly(w), axes=_readonly(axes), dt_s=dt,
+    lay = layout if isinstance(layout, Layout) else Layout.from_axes(layout)
+    f0 = _vectors("specific_force", specific_force, n)
+    alpha = _vectors("angular_accel", angular_accel, n)
+    return SimContext(omega_body_rad_s=_readonly(w), axes=_readonly(lay.H), dt_s=dt,
                       time_s=_readonly(t), attitude=None if att is None else _readonly(att),
-                      temp_c=None if temp is None else _readonly(temp), site=_as_site(site))
+                      temp_c=None if temp is None else _readonly(temp), site=_as_site(site),
+                      specific_force_origin_m_s2=_readonly(
+                          gravity_specific_force(att, n) if f0 is None else f0),
+                      angular_accel_rad_s2=_readonly(
+                          np.gradient(w, dt, axis=0) if alpha is None else alpha),
+                      positions_m=_readonly(lay.positions_or_zero))
+
+
+def _vectors(name: str, value, n: int) -> np.ndarray | None:
+    """An optional (n, 3) array of finite values, checked."""
+    if value is None:
+        return None
+    a = np.asarray(value, dtype=float)
+    if a.shape != (n, 3) or not np.all(np.isfinite(a)):
+        raise InputError(f"{name} must be ({n}, 3) finite values, got shape {a.shape}")
+    return a
 
 
 def _stack(values: list, kind: str) -> np.ndarray:
-    if kind == "axis":
+    if kind in ("axis", "vector"):
         return np.array([np.full(3, np.nan) if v is None else v for v in values], dtype=float)
     return np.array([np.nan if v is None else v for v in values], dtype=float)
 
@@ -1356,7 +1444,8 @@ def resolve(model, n_gyros: int) -> list[tuple[Effect, Active]]:
 
 def simulate_readings(model, truth_omega_body_rad_s, layout, dt_s: float,
                       rng: np.random.Generator, *, time_s=None, attitude=None,
-                      temp_c=None, site=None) -> np.ndarray:
+                      temp_c=None, site=None, specific_force=None,
+                      angular_accel=None) -> np.ndarray:
     """Gyro outputs of an array with the effects of a noise model.
 
     Parameters
@@ -1367,7 +1456,8 @@ def simulate_readings(model, truth_omega_body_rad_s, layout, dt_s: float,
         True rate of the platform relative to the Earth, platform frame
         [rad/s], at the sample times.
     layout : Layout or array_like, shape (N, 3)
-        The array's nominal unit sensitive axes [-].
+        The array's nominal unit sensitive axes [-] (and, for a Layout, the
+        gyro positions ``positions_m`` [m], zero when absent).
     dt_s : float
         Sample step [s] (uniform).
     rng : numpy.random.Generator
@@ -1384,6 +1474,14 @@ def simulate_readings(model, truth_omega_body_rad_s, layout, dt_s: float,
     site : (latitude_rad, heading_rad), optional
         Site latitude and heading of the platform x axis at t = 0 [rad]
         (``earth_rate``); an object with those two attributes also works.
+    specific_force : array_like, shape (n, 3), optional
+        Specific force at the platform origin, platform frame [m/s²] (the
+        truth's ``specific_force_m_s2``); default gravity through
+        ``attitude``, Rᵀ[0, 0, g0] (``g_sensitivity``).
+    angular_accel : array_like, shape (n, 3), optional
+        Angular acceleration dω/dt, platform frame [rad/s²] (the truth's
+        ``angular_accel_rad_s2``); default central differences of the rate
+        (``g_sensitivity`` off the origin).
 
     Returns
     -------
@@ -1401,7 +1499,8 @@ def simulate_readings(model, truth_omega_body_rad_s, layout, dt_s: float,
     -----
     The chain, the frames and the random streams are in the module docstring.
     """
-    ctx = _context(truth_omega_body_rad_s, layout, dt_s, time_s, attitude, temp_c, site)
+    ctx = _context(truth_omega_body_rad_s, layout, dt_s, time_s, attitude, temp_c, site,
+                   specific_force, angular_accel)
     plan = resolve(model, ctx.n_gyros)
     streams = Streams.from_rng(rng)
     state = ChainState(ctx=ctx, axes=ctx.axes.copy(), frame_rate=np.zeros((ctx.n, 3)))

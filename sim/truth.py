@@ -39,10 +39,11 @@ import numpy as np
 from gyroarray.errors import InputError
 
 from .profiles import Profile, load_profile
+from .sensor import rigid_body_specific_force
 from .table import RateTable, TableParams, Tracking, n_samples, rotation_matrices
 
 __all__ = ["TRUTH_SCHEMA_VERSION", "Truth", "TruthMeta", "compute_truth", "project",
-           "specific_force", "rigid_body_specific_force", "truth_key", "default_cache_dir"]
+           "specific_force", "truth_key", "default_cache_dir"]
 
 #: Bump when the meaning or layout of cached truth changes.
 TRUTH_SCHEMA_VERSION = 2
@@ -187,33 +188,6 @@ def specific_force(truth: Truth, positions_m) -> np.ndarray:
         positions_m = positions_m.positions_or_zero
     return rigid_body_specific_force(truth.specific_force_m_s2, truth.omega_body_rad_s,
                                      truth.angular_accel_rad_s2, positions_m)
-
-
-def rigid_body_specific_force(f0_m_s2, omega_rad_s, alpha_rad_s2, positions_m) -> np.ndarray:
-    """f_k = f_0 + α × r_k + ω × (ω × r_k) for every sample and point.
-
-    Parameters
-    ----------
-    f0_m_s2 : array_like, shape (n, 3)
-        Specific force at the origin [m/s²].
-    omega_rad_s, alpha_rad_s2 : array_like, shape (n, 3)
-        Angular rate [rad/s] and acceleration [rad/s²], same frame.
-    positions_m : array_like, shape (N, 3)
-        Points r_k [m].
-
-    Returns
-    -------
-    ndarray, shape (n, N, 3)
-        [m/s²].
-    """
-    f0 = np.asarray(f0_m_s2, dtype=float)
-    w = np.asarray(omega_rad_s, dtype=float)
-    a = np.asarray(alpha_rad_s2, dtype=float)
-    r = np.asarray(positions_m, dtype=float).reshape(-1, 3)
-    out = np.empty((f0.shape[0], r.shape[0], 3))
-    for k, rk in enumerate(r):               # one gyro at a time: memory (n, 3)
-        out[:, k] = f0 + np.cross(a, rk) + np.cross(w, np.cross(w, rk))
-    return out
 
 
 def default_cache_dir() -> Path:
