@@ -941,7 +941,8 @@ def _channel_findings(corrs, z_crit) -> list[Finding]:
     return out
 
 
-def _channels(n, rate, angular_accel, acc, temp_c, time_s, dt, extra) -> dict[str, np.ndarray]:
+def _channels(n, n_gyros, rate, angular_accel, acc, temp_c, time_s, dt, extra
+              ) -> dict[str, np.ndarray]:
     ch: dict[str, np.ndarray] = {"time": np.asarray(time_s, dtype=float)}
     if rate is not None:
         ch["rate"] = rate
@@ -952,6 +953,8 @@ def _channels(n, rate, angular_accel, acc, temp_c, time_s, dt, extra) -> dict[st
         ch["angular acceleration"] = np.asarray(angular_accel, dtype=float)
     if acc is not None:
         a = np.asarray(acc, dtype=float)
+        if a.shape != (n, 3):
+            raise InputError(f"acc must be ({n}, 3) [m/s²], got shape {a.shape}")
         for j, axis in enumerate("xyz"):
             ch[f"acc_{axis}"] = a[:, j]
     if temp_c is not None:
@@ -961,8 +964,10 @@ def _channels(n, rate, angular_accel, acc, temp_c, time_s, dt, extra) -> dict[st
     for name, v in (extra or {}).items():
         ch[str(name)] = np.asarray(v, dtype=float)
     for name, v in ch.items():
-        if v.shape[0] != n or not np.all(np.isfinite(v)):
-            raise InputError(f"channel {name!r} must have {n} finite samples, got shape {v.shape}")
+        if v.shape[0] != n or v.ndim > 2 or (v.ndim == 2 and v.shape[1] != n_gyros) \
+                or not np.all(np.isfinite(v)):
+            raise InputError(f"channel {name!r} must be {n} finite samples, one value or one per "
+                             f"gyro ({n_gyros}), got shape {v.shape}")
     return ch
 
 
@@ -1071,8 +1076,8 @@ def localise(residual, dt_s: float, *, time_s=None, taus_s=None, band_lo=None, b
     e, dt = _check_residual(residual, dt_s)
     n, N = e.shape
     t = np.arange(n) * dt if time_s is None else np.asarray(time_s, dtype=float)
-    u = None if rate is None else np.asarray(rate, dtype=float).reshape(n, -1)
-    channels = _channels(n, u, angular_accel, acc, temp_c, t, dt, extra_channels)
+    u = None if rate is None else np.asarray(rate, dtype=float)
+    channels = _channels(n, N, u, angular_accel, acc, temp_c, t, dt, extra_channels)
     f, P, nu = residual_psd(e, dt, nperseg)
     S = None
     if model_psd is not None:

@@ -205,3 +205,14 @@ def test_baseline_psd_is_what_welch_sees_of_arw_and_rrw():
     ratio = P[:, 1:] / S[1:]
     # mean over 4 gyros × 2048 frequencies of a χ²_ν/ν ratio: 1 within a few 1/√(ν·m)
     assert ratio.mean() == pytest.approx(1.0, abs=4 * math.sqrt(2 / (nu * ratio.size)) * 3)
+
+
+def test_bad_inputs_are_refused():
+    from gyroarray.errors import InputError
+    e = np.zeros((1000, 4))
+    with pytest.raises(InputError, match="n >= 512"):
+        localise(np.zeros((100, 4)), DT)
+    with pytest.raises(InputError, match=r"channel 'rate' must be 1000 finite samples.*\(4\)"):
+        localise(e, DT, rate=np.zeros((1000, 3)))
+    with pytest.raises(InputError, match=r"acc must be \(1000, 3\)"):
+        localise(e, DT, acc=np.zeros((1000, 4)))
