@@ -64,6 +64,7 @@ from gyroarray.measurement import Measurement, _runs
 from gyroarray.sim.effects import simulate_readings
 from gyroarray.sim.model import ModelEntry, NoiseModel
 from gyroarray.sim.protocol import Effect, FitContext, Kind
+from gyroarray.sim.sensor import gravity_specific_force, rigid_body_specific_force
 from gyroarray.units import RAD_PER_DEG, arw_deg_rt_h_to_rad_rt_s, rad_s_to_deg_h, rrw_deg_h_rt_h_to_rad_s_rt_s
 
 __all__ = ["ALPHA", "Test", "Analysis", "ModelComparison", "baseline_model", "critical_z", "parse_add"]
@@ -321,8 +322,8 @@ class ModelComparison:
         self.y = np.asarray(measurement.gyro_rad_s, float)
         self.ref = measurement.ref_rad_s
         self.temp = None if measurement.temp_c is None else np.asarray(measurement.temp_c, float)
-        self.acc = getattr(measurement, "acc_m_s2", None)
-        self.positions = getattr(measurement.layout, "positions_m", None)
+        self.acc = None if measurement.acc_m_s2 is None else np.asarray(measurement.acc_m_s2, float)
+        self.positions = measurement.layout.positions_m
         model = baseline_model(self.N) if model is None else model
         model.check(self.N)
         self.model = self._with_baseline(model)
@@ -347,6 +348,7 @@ class ModelComparison:
         self.longest = max(runs, key=lambda r: r[1] - r[0])
         self.moving = self.ref is not None and bool(np.any(~self.static))
         self._attitude = None
+        self._force = None
 
     # -- set-up -----------------------------------------------------------
     def _keep_still_parts(self) -> None:
@@ -383,6 +385,7 @@ class ModelComparison:
         idx = np.concatenate([np.arange(a, b) for a, b in runs])
         self.y = np.concatenate(pieces)
         self.temp = None if self.temp is None else self.temp[idx]
+        self.acc = None if self.acc is None else self.acc[idx]
         self.n = idx.size
         self.t = self.t_sim = self.t[0] + np.arange(self.n) * self.dt
 
@@ -449,10 +452,21 @@ class ModelComparison:
             site = (lat, s.heading_rad)
         elif "latitude_deg" in entry.params:
             site = (float(entry.params["latitude_deg"]) * RAD_PER_DEG, 0.0)
-        sim = simulate_readings(NoiseModel((entry,)), truth, self.H, self.dt, np.random.default_rng(0),
+        sim = simulate_readings(NoiseModel((entry,)), truth, self.m.layout, self.dt, np.random.default_rng(0),
                                 time_s=self.t_sim, temp_c=self.temp, site=site,
-                                attitude=self.attitude() if self.ref is not None else None)
+                                attitude=self.attitude() if self.ref is not None else None,
+                                specific_force=self.acc)
         return sim - truth @ self.H.T
+
+    def specific_force(self) -> np.ndarray:
+        """Specific force at each gyro (n, N, 3) [m/s²] (cached): ``acc`` or gravity through the
+        attitude at the origin, plus the lever-arm terms of the reference's rate and acceleration."""
+        if self._force is None:
+            omega = self.ref if self.ref is not None else np.zeros((self.n, 3))
+            f0 = self.acc if self.acc is not None else gravity_specific_force(self.attitude(), self.n)
+            pos = self.positions if self.positions is not None else np.zeros((self.N, 3))
+            self._force = rigid_body_specific_force(f0, omega, np.gradient(omega, self.dt, axis=0), pos)
+        return self._force
 
     def _context(self, model: NoiseModel) -> FitContext:
         """The fit context of one analysis of ``model`` (record fields filled, analysis fields empty)."""
@@ -876,6 +890,9 @@ class _Services:
             self._noise[gyro] = {f.effect: f for f in fl}
         return self._noise[gyro]
 
+    def specific_force(self) -> np.ndarray:
+        return self.comp.specific_force()
+
     def derive(self, ctx: FitContext) -> "_Services":
         return _Services(self.comp, ctx)
 
@@ -902,17 +919,21 @@ def _rank_rivals(ctx: FitContext, cands: list, z_crit: float) -> list:
     cache: dict = {}
 
     def beats(a: Test, b: Test) -> str | None:
-        key = (a.effect, a.gyro, b.effect)
+        key = (a.effect, a.gyro, b.effect, b.gyro)
         if key not in cache:
-            ea = get_effect(a.effect)
-            cache[key] = ea.prefer(a.fit, b.fit, ctx) if b.effect in ea.rivals else None
+            ea, eb = get_effect(a.effect), get_effect(b.effect)
+            if b.effect in ea.rivals:
+                cache[key] = ea.prefer(a.fit, b.fit, ctx)
+            elif a.effect in eb.rivals:                  # only b names a: b decides both ways
+                cache[key] = eb.concede(b.fit, a.fit, ctx)
+            else:
+                cache[key] = None
         return cache[key]
 
     def related(a: Test, b: Test) -> bool:
         return b.effect in get_effect(a.effect).rivals or a.effect in get_effect(b.effect).rivals
 
-    sig = [i for i, t in enumerate(out) if t.gyro is not None and t.fit is not None
-           and np.isfinite(t.z) and t.z > z_crit]
+    sig = [i for i, t in enumerate(out) if t.fit is not None and np.isfinite(t.z) and t.z > z_crit]
     seen: set = set()
     for i in sig:
         if i in seen:
@@ -921,7 +942,8 @@ def _rank_rivals(ctx: FitContext, cands: list, z_crit: float) -> list:
         while todo:
             k = todo.pop()
             for j in sig:
-                if j not in group and out[j].gyro == out[k].gyro and related(out[k], out[j]):
+                same = out[j].gyro == out[k].gyro or out[j].gyro is None or out[k].gyro is None
+                if j not in group and same and related(out[k], out[j]):
                     group.append(j)
                     todo.append(j)
         seen |= set(group)

@@ -10,6 +10,14 @@ Conventions (``shared/spec/measurement-format.md``, paper 003 §2.2):
 
 The measurement matrix ``H`` (N×3) has one unit axis per row, so a gyro
 array reads ``z = H ω`` for a body rate ``ω``.
+
+Positions (optional, ``positions_m`` of a measurement's ``[layout]``): where
+each gyro sits on the platform, metres from the platform origin (the
+intersection of the table's axes), platform frame. They matter only for what
+depends on the specific force at a gyro (``g_sensitivity``: centripetal and
+tangential terms). Absent means zero, as the spec says: every gyro at the
+origin. A layout without positions and one with all-zero positions describe
+the same array; only the second writes ``positions_m`` to a sidecar.
 """
 
 from __future__ import annotations
@@ -28,6 +36,10 @@ UNIT_NORM_TOL = 1e-3
 #: Largest number of gyros of a conical layout (a sanity bound on user input).
 MAX_GYROS = 1024
 
+#: Largest accepted distance of a gyro from the platform origin [m]: a rate
+#: table platform is well under a metre; 20 (mm written as m) is refused.
+MAX_POSITION_M = 10.0
+
 
 @dataclass(frozen=True, eq=False)
 class Layout:
@@ -45,17 +57,44 @@ class Layout:
         layouts.
     name : str
         A short human-readable label.
+    positions_m : ndarray, shape (N, 3), or None
+        Where each gyro sits, platform frame, from the platform origin [m];
+        None: not given (zero, every gyro at the origin). Stored read-only;
+        checked with :func:`check_positions`.
     """
 
     axes: np.ndarray
     scheme: int | None = None
     alpha_rad: float | None = None
     name: str = field(default="explicit axes")
+    positions_m: np.ndarray | None = None
 
     def __post_init__(self):
         a = np.array(self.axes, dtype=float, copy=True)
         a.setflags(write=False)
         object.__setattr__(self, "axes", a)
+        if self.positions_m is not None:
+            object.__setattr__(self, "positions_m", check_positions(self.positions_m, a.shape[0]))
+
+    def with_positions(self, positions_m, *, source: str | None = None) -> "Layout":
+        """The same axes with gyro positions (None removes them).
+
+        Parameters
+        ----------
+        positions_m : array_like, shape (N, 3), or None
+            Position of each gyro, platform frame [m].
+        source : str, optional
+            File the positions came from, for error messages.
+        """
+        pos = None if positions_m is None else check_positions(positions_m, self.n_gyros,
+                                                                 source=source)
+        return Layout(axes=self.axes, scheme=self.scheme, alpha_rad=self.alpha_rad,
+                      name=self.name, positions_m=pos)
+
+    @property
+    def positions_or_zero(self) -> np.ndarray:
+        """Positions [m], shape (N, 3); zeros when not given (the spec's default)."""
+        return np.zeros((self.n_gyros, 3)) if self.positions_m is None else self.positions_m
 
     # -- constructors -------------------------------------------------------
     @classmethod
@@ -141,6 +180,58 @@ class Layout:
 
     def __repr__(self) -> str:
         return f"Layout({self.name})"
+
+
+def check_positions(positions_m, n_gyros: int, *, source: str | None = None) -> np.ndarray:
+    """Gyro positions checked: N rows of 3 finite numbers, each within ``MAX_POSITION_M``.
+
+    Parameters
+    ----------
+    positions_m : array_like, shape (N, 3)
+        Position of each gyro in the platform frame [m].
+    n_gyros : int
+        Number of gyros N of the layout.
+    source : str, optional
+        File the positions came from, for error messages.
+
+    Returns
+    -------
+    ndarray, shape (N, 3)
+        A read-only float copy [m].
+
+    Raises
+    ------
+    InputError
+        With ``column = "layout.positions_m"``.
+    """
+    key = "layout.positions_m"
+    try:
+        raw = np.array(positions_m, dtype=object)
+        numeric = raw.ndim == 2 and all(
+            isinstance(v, (numbers.Real, np.floating, np.integer))
+            and not isinstance(v, (bool, np.bool_)) for v in raw.ravel())
+        p = np.array(positions_m, dtype=float) if numeric else None
+    except (TypeError, ValueError, OverflowError):
+        p = None
+    if p is None or p.ndim != 2 or p.shape[1] != 3:
+        raise InputError("positions_m must be a list of [x, y, z] rows of numbers (metres), "
+                         "one per gyro", file=source, column=key)
+    if p.shape[0] != n_gyros:
+        raise InputError(f"positions_m has {p.shape[0]} rows but the layout has {n_gyros} "
+                         "gyros (one [x, y, z] per gyro)", file=source, column=key)
+    if not np.all(np.isfinite(p)):
+        k = int(np.flatnonzero(~np.isfinite(p).all(axis=1))[0])
+        raise InputError(f"positions_m of gyro {k + 1} is not finite: {p[k].tolist()}",
+                         file=source, column=key)
+    dist = np.linalg.norm(p, axis=1)
+    if np.any(dist > MAX_POSITION_M):
+        k = int(np.argmax(dist))
+        raise InputError(f"positions_m of gyro {k + 1} is {dist[k]:.6g} m from the platform "
+                         f"origin (more than {MAX_POSITION_M:g} m: positions are in metres, "
+                         "not millimetres)", file=source, column=key)
+    p = p.copy()
+    p.setflags(write=False)
+    return p
 
 
 def conical_axes(scheme: int, n: int, alphas_rad: np.ndarray) -> np.ndarray:

@@ -3,7 +3,8 @@
 A measurement is a CSV of samples plus a TOML sidecar with the same stem
 (``shared/spec/measurement-format.md`` is the contract)::
 
-    run42.csv      (or run42.csv.gz)   time_s, gyro1..gyroN, [ref_x, ref_y, ref_z], [temp_c]
+    run42.csv      (or run42.csv.gz)   time_s, gyro1..gyroN, [ref_x, ref_y, ref_z], [temp_c],
+                                       [acc_x, acc_y, acc_z]
     run42.toml                         sample_rate_hz, description, [layout], [site], [units]
 
 :func:`read_measurement` turns such a pair into a :class:`Measurement`, the
@@ -38,12 +39,17 @@ Reading rules (where the spec leaves a choice, the choice made here)
   time; each repair is reported in :attr:`Measurement.notes`. Without
   ``repair`` both are refused; longer gaps or runs, missing values at the
   start or end, and missing times are refused either way.
+* ``acc_x``, ``acc_y``, ``acc_z`` (specific force at the platform origin,
+  platform frame, m/s²) come as a set of three or not at all, like
+  ``ref_*``; their cells follow the same rules as every other column.
 * Sidecar: ``sample_rate_hz`` (> 0) and ``[layout]`` are required;
   ``layout.axes`` wins over ``scheme``/``n_gyros``/``alpha_deg`` (with a
-  note). Optional ``[site]`` needs ``latitude_deg`` in [-90, 90] and
+  note). Optional ``layout.positions_m``: one [x, y, z] row per gyro,
+  finite, metres (within ``layout.MAX_POSITION_M`` of the origin). Optional ``[site]`` needs ``latitude_deg`` in [-90, 90] and
   ``heading_deg``. Optional ``[units]`` declares non-default units (keys
-  ``time``, ``gyro``, ``ref``, ``temp``, see :data:`ACCEPTED_UNITS`); values
-  are converted to the canonical file units (s, deg/s, degC) with a note.
+  ``time``, ``gyro``, ``ref``, ``temp``, ``acc``, see :data:`ACCEPTED_UNITS`);
+  values are converted to the canonical file units (s, deg/s, degC, m/s²)
+  with a note.
   Unknown top-level keys are noted; unknown keys inside ``[layout]``,
   ``[site]`` and ``[units]`` are refused, since every key there changes how
   the samples are interpreted (a misspelt ``gyro`` unit must not pass).
@@ -88,7 +94,7 @@ except ModuleNotFoundError:      # Python 3.10: the same parser, as a package
 
 from . import __version__, units
 from .errors import InputError
-from .layout import UNIT_NORM_TOL, Layout
+from .layout import UNIT_NORM_TOL, Layout, check_positions
 
 __all__ = [
     "Measurement",
@@ -119,6 +125,7 @@ RATE_NOTE_TOL = 0.01
 MS_PER_S = 1000.0
 
 _TIME, _REF_NAMES, _TEMP = "time_s", ("ref_x", "ref_y", "ref_z"), "temp_c"
+_ACC_NAMES = ("acc_x", "acc_y", "acc_z")
 _GYRO_RE = re.compile(r"gyro(\d+)", re.ASCII)
 _NUMBER_RE = re.compile(r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?", re.ASCII)
 _NAN_WORDS = frozenset({"nan", "+nan", "-nan"})
@@ -155,8 +162,9 @@ ACCEPTED_UNITS: Mapping[str, Mapping[str, Callable | None]] = MappingProxyType({
     "gyro": _RATE_UNITS,
     "ref": _RATE_UNITS,
     "temp": MappingProxyType({"degC": None, "C": None, "°C": None}),
+    "acc": MappingProxyType({"m/s2": None, "m/s^2": None, "m/s²": None, "g": units.g_to_m_s2}),
 })
-_CANONICAL_UNIT = {"time": "s", "gyro": "deg/s", "ref": "deg/s", "temp": "degC"}
+_CANONICAL_UNIT = {"time": "s", "gyro": "deg/s", "ref": "deg/s", "temp": "degC", "acc": "m/s2"}
 
 
 # =========================================================================
@@ -216,6 +224,10 @@ class Measurement:
     notes : tuple of str
         What the reader noticed and reported (ignored columns and keys, unit
         conversions, repairs, sample-rate disagreement).
+    acc_m_s2 : ndarray, shape (n, 3), optional
+        Specific force at the platform origin, platform frame [m/s²]
+        (``acc_x``, ``acc_y``, ``acc_z``; +g0 on z at rest, level, z up);
+        None when the file has no ``acc_*`` columns.
 
     Notes
     -----
@@ -235,6 +247,7 @@ class Measurement:
     description: str = ""
     source: str | None = None
     notes: tuple[str, ...] = field(default_factory=tuple)
+    acc_m_s2: np.ndarray | None = None
 
     def __post_init__(self):
         time = _frozen_array(self.time_s, "time_s", ndim=1)
@@ -255,6 +268,9 @@ class Measurement:
         if self.temp_c is not None:
             object.__setattr__(self, "temp_c", _frozen_array(
                 self.temp_c, "temp_c", ndim=1, shape=(n,)))
+        if self.acc_m_s2 is not None:
+            object.__setattr__(self, "acc_m_s2", _frozen_array(
+                self.acc_m_s2, "acc_m_s2", ndim=2, shape=(n, 3)))
         rate = float(self.sample_rate_hz)
         if not (math.isfinite(rate) and rate > 0):
             raise ValueError(f"sample_rate_hz must be finite and > 0, got {rate!r}")
@@ -305,6 +321,11 @@ class Measurement:
     def has_reference(self) -> bool:
         """True when the table's reference rate ``ref_deg_s`` is present."""
         return self.ref_deg_s is not None
+
+    @property
+    def has_acc(self) -> bool:
+        """True when the specific force at the origin ``acc_m_s2`` is present."""
+        return self.acc_m_s2 is not None
 
     def __repr__(self) -> str:
         return (f"Measurement(n_samples={self.n_samples}, n_gyros={self.n_gyros}, "
@@ -564,7 +585,7 @@ _CONE_KEYS = ("scheme", "n_gyros", "alpha_deg")
 
 
 def _parse_layout(doc: _TomlDoc) -> tuple[Layout, list[str]]:
-    t = _toml_table(doc, "layout", {"axes", *_CONE_KEYS})
+    t = _toml_table(doc, "layout", {"axes", "positions_m", *_CONE_KEYS})
     if t is None:
         raise doc.error("[layout] is missing (give axes, or scheme, n_gyros and alpha_deg)",
                         "layout")
@@ -572,12 +593,31 @@ def _parse_layout(doc: _TomlDoc) -> tuple[Layout, list[str]]:
         ignored = [k for k in _CONE_KEYS if k in t]
         notes = ([f"{doc.name}: layout.axes given, so {', '.join(ignored)} ignored "
                   "(explicit axes win)"] if ignored else [])
-        return _axes_layout(doc, t["axes"]), notes
+        return _with_positions(doc, t, _axes_layout(doc, t["axes"])), notes
     missing = [k for k in _CONE_KEYS if k not in t]
     if missing:
         raise doc.error("layout is incomplete: give axes, or all of scheme, n_gyros and "
                         f"alpha_deg (missing: {', '.join(missing)})", "layout")
-    return _cone_layout(doc, t), []
+    return _with_positions(doc, t, _cone_layout(doc, t)), []
+
+
+def _with_positions(doc: _TomlDoc, t: dict, layout: Layout) -> Layout:
+    """``layout`` with ``layout.positions_m`` when the table has it (checked)."""
+    if "positions_m" not in t:
+        return layout
+    rows = t["positions_m"]
+    key = "layout.positions_m"
+    if not (isinstance(rows, list) and all(
+            isinstance(r, list) and len(r) == 3 and all(_is_number(x) for x in r) for r in rows)):
+        raise doc.error("layout.positions_m must be an array of [x, y, z] rows of numbers "
+                        f"(metres, one per gyro), got {_short(rows)}", key)
+    values = [[_finite(x) for x in r] for r in rows]
+    if any(x is None for r in values for x in r):
+        raise doc.error(f"layout.positions_m must hold finite numbers, got {_short(rows)}", key)
+    try:
+        return layout.with_positions(check_positions(values, layout.n_gyros))
+    except InputError as e:
+        raise doc.error(e.message, key) from None
 
 
 def _axes_layout(doc: _TomlDoc, axes) -> Layout:
@@ -712,11 +752,12 @@ class _Columns:
     """The header, and where the columns this module reads are."""
 
     n_fields: int
-    positions: tuple[int, ...]   # file positions: time, gyro1..N, [ref x y z], [temp]
+    positions: tuple[int, ...]   # file positions: time, gyro1..N, [ref x y z], [acc x y z], [temp]
     names: tuple[str, ...]       # their names, same order
     n_gyros: int
     has_ref: bool
     has_temp: bool
+    has_acc: bool = False
 
 
 def _parse_header(text: str, name: str, line: int) -> tuple[_Columns, list[str]]:
@@ -741,13 +782,18 @@ def _parse_header(text: str, name: str, line: int) -> tuple[_Columns, list[str]]
     if refs and len(refs) != 3:
         raise error(f"ref_x, ref_y and ref_z must be given together; found only "
                     f"{', '.join(refs)}", refs[0])
-    names = (_TIME, *(f"gyro{k}" for k in range(1, n_gyros + 1)), *refs,
+    accs = [a for a in _ACC_NAMES if a in where]
+    if accs and len(accs) != 3:
+        missing = [a for a in _ACC_NAMES if a not in where]
+        raise error(f"acc_x, acc_y and acc_z must be given together; found only "
+                    f"{', '.join(accs)} ({', '.join(missing)} missing)", accs[0])
+    names = (_TIME, *(f"gyro{k}" for k in range(1, n_gyros + 1)), *refs, *accs,
              *([_TEMP] if _TEMP in where else []))
     extras = [f for f in fields if f not in names]
     notes = ([f"{name}: ignored extra column(s) {', '.join(extras)}"] if extras else [])
     cols = _Columns(n_fields=len(fields), positions=tuple(where[c] - 1 for c in names),
                     names=names, n_gyros=n_gyros, has_ref=bool(refs),
-                    has_temp=_TEMP in where)
+                    has_temp=_TEMP in where, has_acc=bool(accs))
     return cols, notes
 
 
@@ -1093,10 +1139,15 @@ def _check_repaired(values: np.ndarray, cols: _Columns, name: str) -> None:
 def _column_groups(cols: _Columns) -> dict[str, slice]:
     n = cols.n_gyros
     groups = {"time": slice(0, 1), "gyro": slice(1, 1 + n)}
+    j = 1 + n
     if cols.has_ref:
-        groups["ref"] = slice(1 + n, 4 + n)
+        groups["ref"] = slice(j, j + 3)
+        j += 3
+    if cols.has_acc:
+        groups["acc"] = slice(j, j + 3)
+        j += 3
     if cols.has_temp:
-        groups["temp"] = slice(len(cols.names) - 1, len(cols.names))
+        groups["temp"] = slice(j, j + 1)
     return groups
 
 
@@ -1133,7 +1184,8 @@ def _build(values: np.ndarray, cols: _Columns, side: _Sidecar, name: str,
         sample_rate_hz=side.sample_rate_hz,
         ref_deg_s=values[:, g["ref"]] if "ref" in g else None,
         temp_c=values[:, g["temp"].start] if "temp" in g else None,
-        site=side.site, description=side.description, source=name, notes=notes)
+        site=side.site, description=side.description, source=name, notes=notes,
+        acc_m_s2=values[:, g["acc"]] if "acc" in g else None)
 
 
 def _rate_note(time_s: np.ndarray, side: _Sidecar) -> list[str]:
@@ -1221,6 +1273,9 @@ def _csv_text(m: Measurement) -> str:
     if m.temp_c is not None:
         names.append(_TEMP)
         blocks.append(m.temp_c[:, None])
+    if m.acc_m_s2 is not None:
+        names += _ACC_NAMES
+        blocks.append(m.acc_m_s2)
     table = np.hstack(blocks)
     row_format = ",".join(["%r"] * table.shape[1])   # %r of a float: shortest round trip
     out = [f"# written by gyroarray {__version__}", ",".join(names)]
@@ -1257,8 +1312,13 @@ def _layout_table(layout: Layout) -> dict:
         again = Layout.conical(layout.scheme, layout.n_gyros, units.deg_to_rad(alpha_deg))
         if 0.0 <= alpha_deg <= 180.0 and np.array_equal(again.axes, layout.axes):
             return {"scheme": int(layout.scheme), "n_gyros": layout.n_gyros,
-                    "alpha_deg": alpha_deg}
-    return {"axes": layout.axes.tolist()}
+                    "alpha_deg": alpha_deg, **_positions_entry(layout)}
+    return {"axes": layout.axes.tolist(), **_positions_entry(layout)}
+
+
+def _positions_entry(layout: Layout) -> dict:
+    """``{"positions_m": rows}`` when the layout has positions, else empty."""
+    return {} if layout.positions_m is None else {"positions_m": layout.positions_m.tolist()}
 
 
 def _sidecar_dict(m: Measurement) -> dict:

@@ -15,7 +15,11 @@ bias instability (B)   deg/h            rad/s
 RRW  (K)               deg/h/√h         rad/s/√s
 rate ramp (R)          deg/h²           rad/s²
 quantization (Q)       deg              rad
+specific force         g                m/s²
+g-sensitivity          (deg/s)/g        (rad/s)/(m/s²)
 =====================  ===============  ====================
+
+One g is the standard gravity g0 = 9.80665 m/s² (``shared/spec/effects.md``).
 """
 
 from __future__ import annotations
@@ -113,11 +117,21 @@ def per_rad_s_to_per_deg_s(x):
     return x * RAD_PER_DEG
 
 
+def g_to_m_s2(x):
+    """Specific force [g] -> [m/s²] (g0 = 9.80665 m/s²)."""
+    return x * G0_M_S2
+
+
+def m_s2_to_g(x):
+    """Specific force [m/s²] -> [g]."""
+    return x / G0_M_S2
+
+
 def deg_s_per_g_to_rad_s_per_m_s2(x):
-    """g-sensitivity [deg/s per g] -> [rad/s per m/s²] (g = g0 = 9.80665 m/s²)."""
+    """g-sensitivity [(deg/s)/g] -> [(rad/s)/(m/s²)]."""
     return x * RAD_PER_DEG / G0_M_S2
 
 
 def rad_s_per_m_s2_to_deg_s_per_g(x):
-    """g-sensitivity [rad/s per m/s²] -> [deg/s per g]."""
+    """g-sensitivity [(rad/s)/(m/s²)] -> [(deg/s)/g]."""
     return x / RAD_PER_DEG * G0_M_S2

@@ -101,6 +101,7 @@ from gyroarray.effects import REGISTRY, did_you_mean, effect_names, get_effect
 from gyroarray.errors import InputError
 from gyroarray.layout import Layout
 from gyroarray.sim.protocol import Active, ChainState, Effect, Stage, Streams, SimContext
+from gyroarray.sim.sensor import gravity_specific_force
 
 __all__ = ["REGISTRY", "effect_names", "get_effect", "did_you_mean", "simulate_readings", "resolve"]
 
@@ -127,7 +128,8 @@ def _readonly(a: np.ndarray) -> np.ndarray:
     return a
 
 
-def _context(truth, layout, dt_s, time_s, attitude, temp_c, site) -> SimContext:
+def _context(truth, layout, dt_s, time_s, attitude, temp_c, site, specific_force=None,
+             angular_accel=None) -> SimContext:
     w = np.asarray(truth, dtype=float)
     if w.ndim != 2 or w.shape[1] != 3 or w.shape[0] < 2:
         raise InputError(f"truth_omega_body_rad_s must be (n, 3) with n >= 2, got shape {w.shape}")
@@ -159,14 +161,31 @@ def _context(truth, layout, dt_s, time_s, attitude, temp_c, site) -> SimContext:
         temp = np.asarray(temp_c, dtype=float)
         if temp.shape != (n,) or not np.all(np.isfinite(temp)):
             raise InputError(f"temp_c must be {n} finite values, got shape {temp.shape}")
-    axes = layout.H if isinstance(layout, Layout) else Layout.from_axes(layout).H
-    return SimContext(omega_body_rad_s=_readonly(w), axes=_readonly(axes), dt_s=dt,
+    lay = layout if isinstance(layout, Layout) else Layout.from_axes(layout)
+    f0 = _vectors("specific_force", specific_force, n)
+    alpha = _vectors("angular_accel", angular_accel, n)
+    return SimContext(omega_body_rad_s=_readonly(w), axes=_readonly(lay.H), dt_s=dt,
                       time_s=_readonly(t), attitude=None if att is None else _readonly(att),
-                      temp_c=None if temp is None else _readonly(temp), site=_as_site(site))
+                      temp_c=None if temp is None else _readonly(temp), site=_as_site(site),
+                      specific_force_origin_m_s2=_readonly(
+                          gravity_specific_force(att, n) if f0 is None else f0),
+                      angular_accel_rad_s2=_readonly(
+                          np.gradient(w, dt, axis=0) if alpha is None else alpha),
+                      positions_m=_readonly(lay.positions_or_zero))
+
+
+def _vectors(name: str, value, n: int) -> np.ndarray | None:
+    """An optional (n, 3) array of finite values, checked."""
+    if value is None:
+        return None
+    a = np.asarray(value, dtype=float)
+    if a.shape != (n, 3) or not np.all(np.isfinite(a)):
+        raise InputError(f"{name} must be ({n}, 3) finite values, got shape {a.shape}")
+    return a
 
 
 def _stack(values: list, kind: str) -> np.ndarray:
-    if kind == "axis":
+    if kind in ("axis", "vector"):
         return np.array([np.full(3, np.nan) if v is None else v for v in values], dtype=float)
     return np.array([np.nan if v is None else v for v in values], dtype=float)
 
@@ -206,7 +225,8 @@ def resolve(model, n_gyros: int) -> list[tuple[Effect, Active]]:
 
 def simulate_readings(model, truth_omega_body_rad_s, layout, dt_s: float,
                       rng: np.random.Generator, *, time_s=None, attitude=None,
-                      temp_c=None, site=None) -> np.ndarray:
+                      temp_c=None, site=None, specific_force=None,
+                      angular_accel=None) -> np.ndarray:
     """Gyro outputs of an array with the effects of a noise model.
 
     Parameters
@@ -217,7 +237,8 @@ def simulate_readings(model, truth_omega_body_rad_s, layout, dt_s: float,
         True rate of the platform relative to the Earth, platform frame
         [rad/s], at the sample times.
     layout : Layout or array_like, shape (N, 3)
-        The array's nominal unit sensitive axes [-].
+        The array's nominal unit sensitive axes [-] (and, for a Layout, the
+        gyro positions ``positions_m`` [m], zero when absent).
     dt_s : float
         Sample step [s] (uniform).
     rng : numpy.random.Generator
@@ -234,6 +255,14 @@ def simulate_readings(model, truth_omega_body_rad_s, layout, dt_s: float,
     site : (latitude_rad, heading_rad), optional
         Site latitude and heading of the platform x axis at t = 0 [rad]
         (``earth_rate``); an object with those two attributes also works.
+    specific_force : array_like, shape (n, 3), optional
+        Specific force at the platform origin, platform frame [m/s²] (the
+        truth's ``specific_force_m_s2``); default gravity through
+        ``attitude``, Rᵀ[0, 0, g0] (``g_sensitivity``).
+    angular_accel : array_like, shape (n, 3), optional
+        Angular acceleration dω/dt, platform frame [rad/s²] (the truth's
+        ``angular_accel_rad_s2``); default central differences of the rate
+        (``g_sensitivity`` off the origin).
 
     Returns
     -------
@@ -251,7 +280,8 @@ def simulate_readings(model, truth_omega_body_rad_s, layout, dt_s: float,
     -----
     The chain, the frames and the random streams are in the module docstring.
     """
-    ctx = _context(truth_omega_body_rad_s, layout, dt_s, time_s, attitude, temp_c, site)
+    ctx = _context(truth_omega_body_rad_s, layout, dt_s, time_s, attitude, temp_c, site,
+                   specific_force, angular_accel)
     plan = resolve(model, ctx.n_gyros)
     streams = Streams.from_rng(rng)
     state = ChainState(ctx=ctx, axes=ctx.axes.copy(), frame_rate=np.zeros((ctx.n, 3)))

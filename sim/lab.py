@@ -166,8 +166,9 @@ def lab_run(model: NoiseModel, layout: Layout, rng: np.random.Generator, *,
     site = None if latitude_deg is None else Site(latitude_deg * RAD_PER_DEG, heading_deg * RAD_PER_DEG)
     kw = {"time_s": t, "temp_c": temp}
     if any(e.effect == "earth_rate" for e in model):
-        kw["attitude"] = attitude_from_rates(ref, dt)
         kw["site"] = site
+    if any(e.effect in ("earth_rate", "g_sensitivity") for e in model):
+        kw["attitude"] = attitude_from_rates(ref, dt)      # gravity moves with the attitude too
     y = simulate_readings(model, ref, layout, dt, rng, **kw)
     return Measurement(time_s=t, gyro_deg_s=y / RAD_PER_DEG, layout=layout, sample_rate_hz=float(rate_hz),
                        ref_deg_s=ref / RAD_PER_DEG if reference else None,

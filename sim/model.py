@@ -92,6 +92,12 @@ def _check_value(prm: Param, value, label: str):
             raise InputError(f"{label}: {prm.name} {list(a)} is not a unit vector (norm {norm:.6g}, "
                              f"allowed 1 ± {UNIT_NORM_TOL:g})", column=prm.name)
         return a
+    if prm.kind == "vector":
+        if isinstance(value, (str, bytes, Mapping)) or not isinstance(value, (Sequence, np.ndarray)) \
+                or len(value) != 3 or not all(_is_number(c) for c in value):
+            raise InputError(f"{label}: {prm.name} must be 3 numbers [x, y, z] [{prm.unit}], got "
+                             f"{value!r}", column=prm.name)
+        return tuple(_number(prm, c, label) for c in value)
     if prm.kind == "rho":
         if _is_number(value):
             r = _number(prm, value, label)

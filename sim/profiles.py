@@ -57,6 +57,16 @@ rate_steps        axis; rates_deg_s = [...]; hold_s (number or list); ramp_s
                   (between levels, from and back to 0); align_s = 0
 sinusoid          axis; amplitude_deg_s; frequency_hz; duration_s;
                   phase_deg = 0; align_s = 0.  ω = A sin(2π f t + φ) · axis
+tumble            axis; rate_deg_s; duration_s (at full rate); ramp_s;
+                  tilt_deg = 0; align_s = 0. A continuous rotation about a
+                  non-vertical axis, so gravity turns through the platform
+                  frame: axis ±y turns the inner gimbal, the middle gimbal
+                  first set to tilt_deg (the axis' elevation above the
+                  horizon); an axis in the platform x–z plane turns the
+                  middle gimbal (a horizontal axis; the inner gimbal first
+                  set so that its axis is the middle gimbal's; tilt_deg must
+                  be 0). ω = rate · axis. Other axes cannot tumble on this
+                  table (refused).
 rate_csv          file: CSV of commanded body rates, path relative to the
                   TOML file; columns time_s, wx_deg_s, wy_deg_s, wz_deg_s;
                   '#' lines are comments; time_s starts at 0, increasing;
@@ -105,7 +115,8 @@ except ModuleNotFoundError:  # pragma: no cover - Python 3.10
 
 __all__ = [
     "AXIS_NORM_TOL", "GIMBAL_LOCK_MARGIN_RAD",
-    "Orientation", "Static", "MultiPosition", "ConstantRate", "RateSteps", "Sinusoid", "RateCSV",
+    "Orientation", "Static", "MultiPosition", "ConstantRate", "RateSteps", "Sinusoid", "Tumble",
+    "RateCSV",
     "Profile", "Command", "load_profile", "read_rate_csv",
     "gimbal_rotation", "gimbal_quaternion", "body_jacobian", "body_rate", "joint_rates",
     "up_vector", "gimbal_for_up_axis",
@@ -531,6 +542,55 @@ class Sinusoid:
         object.__setattr__(self, "align_s", _positive(self.align_s, "align_s", allow_zero=True))
 
 
+@dataclass(frozen=True)
+class Tumble:
+    """A continuous rotation about a non-vertical platform axis (one gimbal turning).
+
+    Parameters
+    ----------
+    axis : tuple of 3 float
+        Unit platform axis [-]: ±y (the inner gimbal turns) or any axis with
+        y = 0 (the middle gimbal turns; its axis is horizontal).
+    rate_rad_s : float
+        Rate about ``axis`` (right hand) [rad/s].
+    duration_s : float
+        Time at the full rate [s], > 0; the segment lasts
+        ``align_s + 2 ramp_s + duration_s`` and turns the platform by
+        ``rate·(duration_s + ramp_s)``.
+    ramp_s : float
+        Minimum-jerk ramp time from and back to rest [s], >= 0.
+    tilt_rad : float
+        y-axis tumble: elevation of the tumble axis above the horizon, set
+        with the middle gimbal [rad], in [−π/2, π/2]; must be 0 for an x–z
+        axis.
+    align_s : float
+        Move time to the start orientation [s], >= 0.
+    label : str
+    """
+
+    axis: tuple
+    rate_rad_s: float
+    duration_s: float
+    ramp_s: float
+    tilt_rad: float = 0.0
+    align_s: float = 0.0
+    label: str = ""
+    kind = "tumble"
+
+    def __post_init__(self):
+        object.__setattr__(self, "axis", _unit3(self.axis, "axis"))
+        for name in ("rate_rad_s", "tilt_rad"):
+            v = float(getattr(self, name))
+            if not math.isfinite(v):
+                raise InputError(f"{name} must be finite, got {getattr(self, name)!r}")
+            object.__setattr__(self, name, v)
+        if abs(self.tilt_rad) > math.pi / 2:
+            raise InputError(f"tilt must be within ±90 deg, got {rad_to_deg(self.tilt_rad):g} deg")
+        object.__setattr__(self, "duration_s", _positive(self.duration_s, "duration_s"))
+        object.__setattr__(self, "ramp_s", _positive(self.ramp_s, "ramp_s", allow_zero=True))
+        object.__setattr__(self, "align_s", _positive(self.align_s, "align_s", allow_zero=True))
+
+
 @dataclass(frozen=True, eq=False)
 class RateCSV:
     """Arbitrary commanded body rates, linear between rows.
@@ -582,7 +642,7 @@ class RateCSV:
         return int(self.line_numbers[min(max(row, 0), len(self.line_numbers) - 1)])
 
 
-_SEGMENT_TYPES = (Static, MultiPosition, ConstantRate, RateSteps, Sinusoid, RateCSV)
+_SEGMENT_TYPES = (Static, MultiPosition, ConstantRate, RateSteps, Sinusoid, Tumble, RateCSV)
 
 
 # =============================================================================
@@ -642,15 +702,20 @@ class _JointMove(_Piece):
 
 
 @dataclass(frozen=True, eq=False)
-class _OuterRamp(_Piece):
-    """Outer gimbal only: body rate r0 -> r1 about ``axis`` (minimum jerk; r0 = r1: constant)."""
+class _GimbalRamp(_Piece):
+    """One gimbal only: body rate r0 -> r1 about ``axis`` (minimum jerk; r0 = r1: constant).
+
+    The outer gimbal (``joint`` 0) for rates about the vertical; the middle
+    or inner one (1, 2) for a tumble.
+    """
 
     q_base: np.ndarray = None
     axis: np.ndarray = None     # the commanded body axis a (ω = rate · a)
-    sign: float = 1.0           # σ: σ a points up, q̇_o = σ rate
+    sign: float = 1.0           # σ: σ a is the gimbal's axis, q̇_joint = σ rate
     r0: float = 0.0
     r1: float = 0.0
     level: int = -1             # index of the rate level for role 'rate'
+    joint: int = 0              # 0 outer, 1 middle, 2 inner
 
     def eval(self, t_local):
         T = self.t1 - self.t0
@@ -661,7 +726,7 @@ class _OuterRamp(_Piece):
             s, _, S = _minjerk(t_local / T)
             rate = self.r0 + (self.r1 - self.r0) * s
             angle = self.r0 * t_local + (self.r1 - self.r0) * T * S
-        return _outer_motion(self.q_base, self.sign, self.axis, rate, angle)
+        return _outer_motion(self.q_base, self.sign, self.axis, rate, angle, self.joint)
 
 
 @dataclass(frozen=True, eq=False)
@@ -683,12 +748,12 @@ class _OuterSine(_Piece):
         return _outer_motion(self.q_base, self.sign, self.axis, rate, angle)
 
 
-def _outer_motion(q_base, sign, axis, rate, angle):
+def _outer_motion(q_base, sign, axis, rate, angle, joint=0):
     n = rate.shape[0]
     q = np.broadcast_to(q_base, (n, 3)).copy()
-    q[:, 0] += sign * angle
+    q[:, joint] += sign * angle
     qd = np.zeros((n, 3))
-    qd[:, 0] = sign * rate
+    qd[:, joint] = sign * rate
     return q, qd, rate[:, None] * axis
 
 
@@ -794,15 +859,45 @@ class _Builder:
             self.move(i, "align", self.q, seg.align_s)
         return sign
 
-    def outer_ramp(self, i, role, a, sign, r0, r1, T, level=-1):
+    def outer_ramp(self, i, role, a, sign, r0, r1, T, level=-1, joint=0):
         if T <= 0:
             return
-        p = _OuterRamp(self.t, self.t + T, i, role, q_base=self.q.copy(), axis=np.array(a),
-                       sign=sign, r0=r0, r1=r1, level=level)
+        p = _GimbalRamp(self.t, self.t + T, i, role, q_base=self.q.copy(), axis=np.array(a),
+                        sign=sign, r0=r0, r1=r1, level=level, joint=joint)
         self.add(p)
         _, _, S = _minjerk(np.array([1.0]))
         angle = r0 * T + (r1 - r0) * T * float(S[0]) if r0 != r1 else r0 * T
-        self.q = self.q + np.array([sign * angle, 0.0, 0.0])
+        step = np.zeros(3)
+        step[joint] = sign * angle
+        self.q = self.q + step
+
+    def tumble(self, i, seg: "Tumble"):
+        """Set the other gimbals, then turn the middle (x–z axis) or inner (±y) gimbal."""
+        a = np.asarray(seg.axis)
+        if abs(abs(a[1]) - 1.0) <= 1e-9:
+            joint, sign = 2, float(np.sign(a[1]))            # J[:, 2] = e_y
+            target = np.array([self.q[0], seg.tilt_rad, self.q[2]])
+        elif abs(a[1]) <= 1e-9:
+            if seg.tilt_rad != 0.0:
+                self.fail(i, seg, "tilt_deg", "tilt_deg goes with a tumble about ±y; an axis in "
+                          "the x–z plane turns the middle gimbal, whose axis is horizontal")
+            joint, sign = 1, 1.0                             # J[:, 1] = (cos q_i, 0, sin q_i) = a
+            target = np.array([self.q[0], self.q[1], _nearest(math.atan2(a[2], a[0]), self.q[2])])
+        else:
+            self.fail(i, seg, "axis", f"this table tumbles only about the platform y axis (inner "
+                      f"gimbal) or an axis in the x–z plane (middle gimbal), not {_show(a)}")
+        if np.max(np.abs(target - self.q)) > SAME_ORIENTATION_RAD:
+            if seg.align_s <= 0:
+                self.fail(i, seg, "align_s", f"the tumble starts from gimbals "
+                          f"{_show(rad_to_deg(target))} deg, not the present "
+                          f"{_show(rad_to_deg(self.q))} deg; give align_s > 0, the time to get there")
+            self.move(i, "align", target, seg.align_s)
+        elif seg.align_s > 0:
+            self.move(i, "align", self.q, seg.align_s)
+        r = seg.rate_rad_s
+        self.outer_ramp(i, "ramp", seg.axis, sign, 0.0, r, seg.ramp_s, joint=joint)
+        self.outer_ramp(i, "rate", seg.axis, sign, r, r, seg.duration_s, level=0, joint=joint)
+        self.outer_ramp(i, "ramp", seg.axis, sign, r, 0.0, seg.ramp_s, joint=joint)
 
     def segment(self, i, seg):
         if isinstance(seg, Static):
@@ -837,6 +932,8 @@ class _Builder:
             self.add(p)
             q_end, _, _ = p.eval(np.array([seg.duration_s]))
             self.q = q_end[0]
+        elif isinstance(seg, Tumble):
+            self.tumble(i, seg)
         elif isinstance(seg, RateCSV):
             self.csv(i, seg)
         else:  # pragma: no cover - guarded by Profile
@@ -925,7 +1022,7 @@ class Profile:
     ----------
     segments : tuple of segment
         :class:`Static`, :class:`MultiPosition`, :class:`ConstantRate`,
-        :class:`RateSteps`, :class:`Sinusoid` or :class:`RateCSV`.
+        :class:`RateSteps`, :class:`Sinusoid`, :class:`Tumble` or :class:`RateCSV`.
     description : str
     source : str, optional
         The file it was read from (for messages).
@@ -1022,6 +1119,8 @@ _KEYS = {
     "rate_steps": ("kind", "label", "axis", "rates_deg_s", "hold_s", "ramp_s", "align_s"),
     "sinusoid": ("kind", "label", "axis", "amplitude_deg_s", "frequency_hz", "duration_s",
                  "phase_deg", "align_s"),
+    "tumble": ("kind", "label", "axis", "rate_deg_s", "duration_s", "ramp_s", "tilt_deg",
+               "align_s"),
     "rate_csv": ("kind", "label", "file"),
 }
 _CSV_COLUMNS = ("time_s", "wx_deg_s", "wy_deg_s", "wz_deg_s")
@@ -1178,6 +1277,14 @@ def _segment_from_table(r: _Reader, base_dir: Path, csv_bytes: list):
                         duration_s=r.number("duration_s", minimum=0, strict=True),
                         phase_rad=deg_to_rad(r.number("phase_deg", default=0.0)),
                         align_s=r.number("align_s", default=0.0, minimum=0), label=r.label())
+    if k == "tumble":
+        tilt = r.number("tilt_deg", default=0.0)
+        if abs(tilt) > 90.0:
+            r.fail("tilt_deg", f"tilt_deg must be within ±90 deg, got {tilt:g}")
+        return Tumble(axis=r.axis("axis"), rate_rad_s=deg_s_to_rad_s(r.number("rate_deg_s")),
+                      duration_s=r.number("duration_s", minimum=0, strict=True),
+                      ramp_s=r.number("ramp_s", minimum=0), tilt_rad=deg_to_rad(tilt),
+                      align_s=r.number("align_s", default=0.0, minimum=0), label=r.label())
     if k == "rate_csv":
         name = r.t.get("file")
         if not isinstance(name, str) or not name:

@@ -35,6 +35,7 @@ registry and never names an effect. Units: SI inside; spec units only in
 from __future__ import annotations
 
 import enum
+import functools
 import math
 import zlib
 from dataclasses import dataclass, field, replace
@@ -118,9 +119,9 @@ class Param:
         Key of the converted value handed to ``simulate``.
     to_si : callable
         Named converter from ``unit`` to SI.
-    kind : {"scalar", "axis", "rho", "flag"}
-        A real number; a unit 3-vector; a scalar or N×N correlation matrix;
-        a boolean.
+    kind : {"scalar", "axis", "vector", "rho", "flag"}
+        A real number; a unit 3-vector; any finite 3-vector; a scalar or N×N
+        correlation matrix; a boolean.
     lo, hi : float
         Bounds of a scalar (inclusive unless ``lo_open`` / ``hi_open``).
     required : bool
@@ -174,11 +175,19 @@ class SimContext:
         Temperature at the array [°C].
     site : tuple (latitude_rad, heading_rad) or None
         Where the table stands [rad].
-    alpha_rad_s2 : ndarray, shape (n, 3), or None
-        Angular acceleration of the platform, platform frame [rad/s²].
-    force_m_s2 : ndarray, shape (n, N, 3), or None
-        Specific force at each gyro, platform frame [m/s²]
-        (f_k = f_0 + α × r_k + ω × (ω × r_k), ``shared/spec/effects.md``).
+    specific_force_origin_m_s2 : ndarray, shape (n, 3)
+        Specific force at the platform origin, platform frame [m/s²]: the
+        truth's (MuJoCo accelerometer) when given, else gravity through the
+        attitude, Rᵀ[0, 0, g0] (level when ``attitude`` is None).
+    angular_accel_rad_s2 : ndarray, shape (n, 3)
+        Angular acceleration dω/dt, platform frame [rad/s²]: the truth's when
+        given, else central differences of ``omega_body_rad_s``
+        (``numpy.gradient``).
+    positions_m : ndarray, shape (N, 3)
+        Gyro positions, platform frame [m] (zero when the layout has none).
+    specific_force_m_s2 : ndarray, shape (n, N, 3)
+        (property, computed on first use) the specific force at each gyro,
+        f_k = f_0 + α × r_k + ω × (ω × r_k) [m/s²].
     """
 
     omega_body_rad_s: np.ndarray
@@ -188,8 +197,19 @@ class SimContext:
     attitude: np.ndarray | None = None
     temp_c: np.ndarray | None = None
     site: tuple[float, float] | None = None
-    alpha_rad_s2: np.ndarray | None = None
-    force_m_s2: np.ndarray | None = None
+    specific_force_origin_m_s2: np.ndarray | None = None
+    angular_accel_rad_s2: np.ndarray | None = None
+    positions_m: np.ndarray | None = None
+
+    @functools.cached_property
+    def specific_force_m_s2(self) -> np.ndarray:
+        """Specific force at each gyro (n, N, 3) [m/s²] (see the class notes)."""
+        from gyroarray.sim.sensor import rigid_body_specific_force
+        a = rigid_body_specific_force(self.specific_force_origin_m_s2, self.omega_body_rad_s,
+                                      self.angular_accel_rad_s2, self.positions_m)
+        a = np.array(a, dtype=float, copy=True)
+        a.setflags(write=False)
+        return a
 
     @property
     def n(self) -> int:
@@ -576,6 +596,11 @@ class Effect:
                     f"better (AIC {a:.1f} against {b:.1f})")
         return None
 
+    def concede(self, mine: "EffectFit", other: "EffectFit", ctx: "FitContext") -> str | None:
+        """Why ``other`` (an effect that does not name this one a rival, but that this one names)
+        ranks above ``mine``, or None: the declaring side decides both ways."""
+        return None
+
     #: What the fit compares with the data, for the rival sentence ("ADEV", "residual").
     evidence_of: ClassVar[str] = "residual"
 
@@ -722,6 +747,11 @@ class FitContext:
     def gyro_noise(self, gyro: int) -> dict:
         """The per-gyro noise fit on the stochastic record: effect name -> EffectFit."""
         return self.services.gyro_noise(gyro)
+
+    def specific_force(self) -> np.ndarray:
+        """Specific force at each gyro (n, N, 3) [m/s²], platform frame: f_0 from ``acc`` (else
+        gravity through the attitude), plus the lever-arm terms from ``positions``."""
+        return self.services.specific_force()
 
     def noise_terms(self, gyro: int) -> list:
         """Fits of the model's per-gyro noise terms of ``gyro`` (beyond the baseline)."""

@@ -10,11 +10,14 @@ what to simulate:
     sample_rate_hz = 100.0                  # gyro sample rate [Hz]
     duration_s = 3600.0                     # optional: cut the profile short [s]
     seed = 20230329                         # the run's numpy.random.Generator seed
+    acc_columns = true                      # optional (default false): also write
+                                            # acc_x, acc_y, acc_z [m/s²]
 
     [layout]                                # as in a measurement sidecar
     scheme = 1
     n_gyros = 6
     alpha_deg = 54.7356                     # or: axes = [[x, y, z], ...]
+    # positions_m = [[0.03, 0, 0], ...]     # optional: gyro positions [m] (default 0)
 
     [motion]
     profile = "p003_static_1h"              # a shipped profile (scenarios/profiles/)
@@ -40,6 +43,14 @@ disk, layout-independent), the effects turn it into gyro readings, and the
 readings are exported in the measurement format with ``ref_*`` = the
 realised table rate and ``temp_c``, so a simulated run goes wherever a lab
 measurement goes.
+
+The effects see the specific force the table really makes: MuJoCo's
+accelerometer at the platform origin (gravity through the gimbal attitude,
+g0 = 9.80665 m/s²) and the angular acceleration, carried to each gyro's
+``positions_m`` (``g_sensitivity``). ``acc_columns = true`` writes that
+specific force at the origin as ``acc_x``, ``acc_y``, ``acc_z`` (exact, no
+accelerometer noise); the layout's ``positions_m``, when given, is written
+to the sidecar.
 """
 
 from __future__ import annotations
@@ -63,7 +74,7 @@ from .profiles import Profile, load_profile
 from .truth import Truth, compute_truth
 
 _TOP_KEYS = {"name", "description", "sample_rate_hz", "duration_s", "seed", "layout", "motion",
-             "site", "temperature", "effects"}
+             "site", "temperature", "effects", "acc_columns"}
 _NAME_RE = re.compile(r"^[A-Za-z0-9_.-]{1,100}$")
 
 
@@ -128,6 +139,8 @@ class Scenario:
     description : str
     source : str or None
         The scenario file.
+    acc_columns : bool
+        Write the specific force at the platform origin (``acc_*``).
     """
 
     name: str
@@ -141,6 +154,7 @@ class Scenario:
     temperature: TemperatureProfile | None = None
     description: str = ""
     source: str | None = None
+    acc_columns: bool = False
 
 
 def load_scenario(path) -> Scenario:
@@ -188,6 +202,10 @@ def load_scenario(path) -> Scenario:
         duration = _toml_number(doc, d["duration_s"], "duration_s")
         if duration <= 0:
             raise doc.error(f"duration_s must be > 0, got {duration!r}", "duration_s")
+    acc_columns = d.get("acc_columns", False)
+    if not isinstance(acc_columns, bool):
+        raise doc.error(f"acc_columns must be true or false, got {_toml_type(acc_columns)}",
+                        "acc_columns")
     layout, _ = _parse_layout(doc)
     profile = _parse_motion(doc, path)
     if duration is not None and duration > profile.duration_s + 1e-9:
@@ -202,7 +220,7 @@ def load_scenario(path) -> Scenario:
     return Scenario(name=name, layout=layout, profile=profile, sample_rate_hz=rate, model=model,
                     seed=seed, duration_s=duration, site=_parse_site(doc),
                     temperature=_parse_temperature(doc), description=description,
-                    source=str(path))
+                    source=str(path), acc_columns=acc_columns)
 
 
 def _parse_motion(doc: _TomlDoc, path: Path) -> Profile:
@@ -302,7 +320,8 @@ class SimulationResult:
             layout=sc.layout, sample_rate_hz=sc.sample_rate_hz,
             ref_deg_s=units.rad_s_to_deg_s(self.truth.omega_body_rad_s),
             temp_c=self.temp_c, site=sc.site,
-            description=f"{desc} (gyroarray simulate, seed {sc.seed})")
+            description=f"{desc} (gyroarray simulate, seed {sc.seed})",
+            acc_m_s2=self.truth.specific_force_m_s2 if sc.acc_columns else None)
 
 
 def simulate(scenario: Scenario, *, cache: bool = True, rng: np.random.Generator | None = None
@@ -325,7 +344,9 @@ def simulate(scenario: Scenario, *, cache: bool = True, rng: np.random.Generator
     rng = np.random.default_rng(scenario.seed) if rng is None else rng
     readings = simulate_readings(scenario.model, truth.omega_body_rad_s, scenario.layout,
                                  1.0 / scenario.sample_rate_hz, rng, time_s=truth.time_s,
-                                 attitude=truth.rotation_matrices, temp_c=temp, site=site)
+                                 attitude=truth.rotation_matrices, temp_c=temp, site=site,
+                                 specific_force=truth.specific_force_m_s2,
+                                 angular_accel=truth.angular_accel_rad_s2)
     return SimulationResult(scenario=scenario, truth=truth, readings_rad_s=readings, temp_c=temp)
 
 

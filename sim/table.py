@@ -6,10 +6,34 @@ z, x, y; at zero angles the platform frame is the local-level frame; see
 :mod:`gyroarray.sim.profiles` for the kinematics). All centres of mass lie on
 the intersection of the axes, so gravity exerts no torque. The MJCF model is
 generated; given a :class:`gyroarray.layout.Layout` the platform carries one
-site per gyro whose z axis is the gyro's sensitive axis, with one MuJoCo
-``gyro`` sensor each. The truth model always has a reference 3-axis gyro on
-a site aligned with the platform frame (ω_body), a ``framequat`` of that site
-(attitude) and joint encoders (``jointpos``, ``jointvel``).
+site per gyro, at the gyro's position (``layout.positions_m``, zero when not
+given), whose z axis is the gyro's sensitive axis, with one MuJoCo ``gyro``
+sensor each, and beside it a site aligned with the platform frame with one
+MuJoCo ``accelerometer`` (the specific force at the gyro, platform frame).
+The truth model always has, on a site at the platform origin aligned with the
+platform frame, a reference 3-axis gyro (ω_body), an ``accelerometer`` (the
+specific force f_0 at the origin), a ``frameangacc`` (angular acceleration)
+and a ``framequat`` (attitude), and joint encoders (``jointpos``,
+``jointvel``).
+
+Specific force. Gravity is the spec's g0 = 9.80665 m/s² along −z of the
+world (the local-level frame); an accelerometer reads a − g, so at rest,
+level, z up, f_0 = [0, 0, +g0]. The platform origin is the intersection of
+the gimbal axes and never moves, so f_0 = Rᵀ [0, 0, g0] and a point r of the
+platform reads f = f_0 + α × r + ω × (ω × r), all in the platform frame,
+with α = dω/dt the angular acceleration (the body-frame derivative of ω_body
+equals Rᵀ of the world-frame one). MuJoCo's accelerometers and
+``frameangacc`` are computed in the same forward pass as the gyros, from the
+same state, so the site readings satisfy that identity to rounding (tests).
+The acceleration is the *realised* one: ``implicitfast`` advances the
+velocity by dt·(M + dt·D)⁻¹ f (D the servo and bearing damping), while the
+acceleration sensors of MuJoCo's own forward pass see M⁻¹ f, 18 % larger
+in a 20 Hz servo loop stepped at 1 kHz. So after the run the acceleration
+sensors of each sample are evaluated again by MuJoCo
+(``mj_rnePostConstraint``, ``mj_sensorAcc``) with qacc = (q̇_{j+1} − q̇_j)/dt,
+the acceleration the integrator applied over the step that starts at the
+sample. MuJoCo's world does not rotate: the Earth's rate is left out of the
+centripetal term (|Ω_E|² r < 3e-10 m/s² at 5 cm).
 
 The servo of each gimbal is PD on the commanded angle and rate plus a
 viscous-friction feedforward, three MuJoCo actuators per joint::
@@ -50,11 +74,12 @@ import numpy as np
 from mujoco import rollout as _rollout
 
 from gyroarray.errors import InputError
+from gyroarray.constants import G0_M_S2
 from gyroarray.units import rad_s_to_deg_s, rad_to_deg
 
 from .profiles import Profile, gimbal_quaternion, load_profile
 
-__all__ = ["TableParams", "RateTable", "TableRun", "Tracking", "SegmentTracking",
+__all__ = ["TableParams", "RateTable", "TableRun", "Tracking", "SegmentTracking", "rotation_matrices",
            "tracking_report", "steps_per_sample", "n_samples"]
 
 JOINTS = ("outer", "middle", "inner")
@@ -63,8 +88,9 @@ CHUNK_STEPS = 20_000
 #: Steps per rollout call inside a hold, to detect the rest state early.
 HOLD_PROBE_STEPS = 1_000
 
-# sensor layout of every table model (gyro sites follow)
-_S_GYRO, _S_QUAT, _S_ENC, _S_RATE, _S_SITES = slice(0, 3), slice(3, 7), slice(7, 10), slice(10, 13), 13
+# sensor layout of every table model (gyro sites follow: N gyros, then N accelerometers)
+_S_GYRO, _S_QUAT, _S_ENC, _S_RATE = slice(0, 3), slice(3, 7), slice(7, 10), slice(10, 13)
+_S_ACC, _S_ANGACC, _S_SITES = slice(13, 16), slice(16, 19), 19
 
 
 @dataclass(frozen=True)
@@ -359,6 +385,15 @@ class TableRun:
     site_rates_rad_s : ndarray, shape (n, N) or None
         Each gyro site's MuJoCo ``gyro`` sensor along its z (sensitive) axis
         [rad/s], when the run was made with a layout.
+    specific_force_m_s2 : ndarray, shape (n, 3)
+        MuJoCo ``accelerometer`` at the platform origin: specific force f_0,
+        platform frame [m/s²] (+g0 on z at rest, level).
+    angular_accel_rad_s2 : ndarray, shape (n, 3)
+        MuJoCo ``frameangacc`` of the platform, rotated into the platform
+        frame: α = dω_body/dt [rad/s²].
+    site_specific_force_m_s2 : ndarray, shape (n, N, 3) or None
+        MuJoCo ``accelerometer`` at each gyro's position, platform frame
+        [m/s²], when the run was made with a layout.
     tracking : Tracking
     physics_dt_s : float
         Physics time step [s].
@@ -375,6 +410,9 @@ class TableRun:
     command_body_rad_s: np.ndarray
     command_joint_rad: np.ndarray
     site_rates_rad_s: np.ndarray | None
+    specific_force_m_s2: np.ndarray
+    angular_accel_rad_s2: np.ndarray
+    site_specific_force_m_s2: np.ndarray | None
     tracking: Tracking
     physics_dt_s: float
     steps_per_sample: int
@@ -412,7 +450,8 @@ class RateTable:
         Parameters
         ----------
         layout : gyroarray.layout.Layout, optional
-            Sensitive axes in the platform frame; None: reference sensors only.
+            Sensitive axes in the platform frame and positions (zero when
+            not given); None: reference sensors only.
         timestep_s : float
             Physics time step [s].
 
@@ -427,11 +466,17 @@ class RateTable:
         inertias = (p.outer_inertia_kg_m2, p.middle_inertia_kg_m2, p.inner_inertia_kg_m2)
         axes = ("0 0 1", "1 0 0", "0 1 0")
         sites = []
+        n_sites = 0
         if layout is not None:
-            for k, a in enumerate(np.asarray(layout.H, dtype=float), start=1):
-                # the site sits 6 cm out along its axis (position does not matter for a gyro)
-                sites.append(f'<site name="gyro{k}" pos="{_v(0.06 * a)}" zaxis="{_v(a)}" '
+            sens_axes = np.asarray(layout.H, dtype=float)
+            n_sites = sens_axes.shape[0]
+            pos = (np.zeros_like(sens_axes) if getattr(layout, "positions_m", None) is None
+                   else np.asarray(layout.positions_m, dtype=float))
+            for k, a in enumerate(sens_axes, start=1):
+                sites.append(f'<site name="gyro{k}" pos="{_v(pos[k - 1])}" zaxis="{_v(a)}" '
                              f'size="0.008" rgba="0.9 0.5 0.1 1"/>')
+            for k in range(1, n_sites + 1):    # platform-aligned, for the accelerometers
+                sites.append(f'<site name="acc{k}" pos="{_v(pos[k - 1])}" size="0.004"/>')
         geoms = (
             '<geom type="box" size="0.02 0.34 0.02" pos="0 0 -0.30" rgba="0.3 0.3 0.35 1"/>'
             '<geom type="box" size="0.02 0.02 0.30" pos="0 0.34 0" rgba="0.3 0.3 0.35 1"/>'
@@ -461,11 +506,14 @@ class RateTable:
                    '<framequat name="attitude" objtype="site" objname="platform"/>']
         sensors += [f'<jointpos name="enc_{n}" joint="{n}"/>' for n in JOINTS]
         sensors += [f'<jointvel name="rate_{n}" joint="{n}"/>' for n in JOINTS]
-        sensors += [f'<gyro name="gyro{k}" site="gyro{k}"/>' for k in range(1, len(sites) + 1)]
+        sensors += ['<accelerometer name="ref_acc" site="platform"/>',
+                    '<frameangacc name="ref_angacc" objtype="site" objname="platform"/>']
+        sensors += [f'<gyro name="gyro{k}" site="gyro{k}"/>' for k in range(1, n_sites + 1)]
+        sensors += [f'<accelerometer name="acc{k}" site="acc{k}"/>' for k in range(1, n_sites + 1)]
         nl = "\n"
         return f"""<mujoco model="gyroarray_rate_table">
   <compiler angle="radian" autolimits="true"/>
-  <option timestep="{_f(timestep_s)}" integrator="implicitfast" gravity="0 0 -9.81">
+  <option timestep="{_f(timestep_s)}" integrator="implicitfast" gravity="0 0 {_f(-G0_M_S2)}">
     <flag contact="disable" constraint="disable"/>
   </option>
   <worldbody>
@@ -500,7 +548,8 @@ class RateTable:
         sample_rate_hz : float
             Gyro sample rate fs [Hz]; samples at ``k / fs`` in [0, duration).
         layout : Layout, optional
-            Also read one MuJoCo gyro per sensitive axis.
+            Also read one MuJoCo gyro per sensitive axis and one MuJoCo
+            accelerometer per gyro position.
         duration_s : float, optional
             Run only the first ``duration_s`` of the profile [s].
         skip_rest : bool
@@ -529,6 +578,8 @@ class RateTable:
         mujoco.mj_getState(model, data, x, spec)
         nsens = model.nsensordata
         sens = np.empty((n, nsens))
+        qvel_next = np.empty((n, model.nv))        # joint rates after each sample's step
+        vel = slice(1 + model.nq, 1 + model.nq + model.nv)    # in the FULLPHYSICS state
         cap = max(CHUNK_STEPS, HOLD_PROBE_STEPS)
         sbuf = np.empty((1, cap, nstate))
         dbuf = np.empty((1, cap, nsens))
@@ -556,6 +607,7 @@ class RateTable:
             stepped += m
             on = steps % K == 0
             sens[steps[on] // K] = dbuf[0, :m][on]
+            qvel_next[steps[on] // K] = sbuf[0, :m][on][:, vel]
             x = sbuf[0, m - 1].copy()
             j += m
             if (hold_end is not None and j < hold_end and m >= 2
@@ -564,23 +616,72 @@ class RateTable:
                 # same state and the same sensors (those of step j-1) until the hold ends
                 k0, k1 = -(-j // K), -(-hold_end // K)
                 sens[k0:k1] = dbuf[0, m - 1]
+                qvel_next[k0:k1] = sbuf[0, m - 1, vel]
                 repeated += hold_end - j
                 j = hold_end
                 x[0] = j * dt
+        _realised_acceleration_sensors(model, sens, qvel_next, dt)
         time_s = np.arange(n) / fs
         cmd = profile.command(time_s)
-        site = None
+        site = site_f = None
         if layout is not None:
-            site = sens[:, _S_SITES + 2::3].copy()        # z component of each gyro site
+            n_g = int(np.asarray(layout.H).shape[0])
+            site = sens[:, _S_SITES:_S_SITES + 3 * n_g][:, 2::3].copy()   # z of each gyro site
+            site_f = sens[:, _S_SITES + 3 * n_g:_S_SITES + 6 * n_g].reshape(n, n_g, 3).copy()
         quat = sens[:, _S_QUAT].copy()
+        # frameangacc is in the world frame: α_body = Rᵀ α_world
+        alpha = np.einsum("nji,nj->ni", rotation_matrices(quat), sens[:, _S_ANGACC])
         tracking = tracking_report(profile, time_s, sens[:, _S_GYRO], cmd.omega_body_rad_s, quat,
                                    gimbal_quaternion(cmd.q_rad), self.params.settle_s)
         return TableRun(time_s=time_s, omega_body_rad_s=sens[:, _S_GYRO].copy(), quat_wxyz=quat,
                         joint_angles_rad=sens[:, _S_ENC].copy(),
                         joint_rates_rad_s=sens[:, _S_RATE].copy(),
                         command_body_rad_s=cmd.omega_body_rad_s, command_joint_rad=cmd.q_rad,
-                        site_rates_rad_s=site, tracking=tracking, physics_dt_s=dt,
+                        site_rates_rad_s=site, specific_force_m_s2=sens[:, _S_ACC].copy(),
+                        angular_accel_rad_s2=alpha, site_specific_force_m_s2=site_f,
+                        tracking=tracking, physics_dt_s=dt,
                         steps_per_sample=K, stepped=stepped, repeated=repeated)
+
+
+def _realised_acceleration_sensors(model, sens: np.ndarray, qvel_next: np.ndarray,
+                                   dt: float) -> None:
+    """Re-evaluate the acceleration-stage sensors at the realised joint acceleration.
+
+    ``sens`` (n, nsensordata) is changed in place in its acceleration-stage
+    columns (accelerometers, ``frameangacc``); the state of sample j is read
+    from its encoders (``jointpos``, ``jointvel``) and the acceleration is
+    qacc = (``qvel_next`` − q̇_j)/dt. Consecutive samples with the same state
+    and acceleration (holds) are evaluated once.
+    """
+    cols = np.concatenate([np.arange(model.sensor_adr[i], model.sensor_adr[i] + model.sensor_dim[i])
+                           for i in range(model.nsensor)
+                           if model.sensor_needstage[i] == mujoco.mjtStage.mjSTAGE_ACC])
+    qacc = (qvel_next - sens[:, _S_RATE]) / dt
+    key = np.hstack([sens[:, _S_ENC], sens[:, _S_RATE], qacc])
+    new = np.ones(key.shape[0], dtype=bool)
+    new[1:] = np.any(key[1:] != key[:-1], axis=1)
+    rows = np.flatnonzero(new)
+    vals = np.empty((rows.size, cols.size))
+    data = mujoco.MjData(model)
+    for r, i in enumerate(rows):
+        data.qpos[:] = key[i, 0:3]
+        data.qvel[:] = key[i, 3:6]
+        mujoco.mj_forward(model, data)          # positions and velocities of sample i
+        data.qacc[:] = key[i, 6:9]              # the acceleration the integrator applied
+        mujoco.mj_rnePostConstraint(model, data)
+        mujoco.mj_sensorAcc(model, data)
+        vals[r] = data.sensordata[cols]
+    sens[:, cols] = vals[np.cumsum(new) - 1]
+
+
+def rotation_matrices(quat_wxyz: np.ndarray) -> np.ndarray:
+    """Unit quaternions (w, x, y, z) -> rotation matrices, shape (n, 3, 3) [-]."""
+    w, x, y, z = (quat_wxyz[:, k] for k in range(4))
+    return np.stack([
+        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
+        np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
+        np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1),
+    ], axis=-2)
 
 
 def _first_ctrl_step(t: float, dt: float) -> int:

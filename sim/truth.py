@@ -4,7 +4,16 @@ The realised motion of the platform does not depend on the gyro layout: it
 is computed once per (profile content, sample rate, duration, table
 parameters, physics step, MuJoCo version, schema version) and projected on
 any layout's sensitive axes, ``project(truth, layout) = ω_body Hᵀ`` — a sweep
-over layouts runs the physics once per profile.
+over layouts runs the physics once per profile. The specific force is kept
+the same way: MuJoCo's accelerometer at the platform origin (f_0) and the
+angular acceleration α, from which :func:`specific_force` gives the force at
+any gyro position r by rigid-body kinematics, f = f_0 + α × r + ω × (ω × r)
+(the same numbers as MuJoCo accelerometers at the sites, to rounding:
+tests/test_specific_force.py).
+
+Schema 2 (this version) added ``specific_force_m_s2`` and
+``angular_accel_rad_s2`` and moved gravity to g0 = 9.80665 m/s²; schema-1
+files are not read (their key differs), the motion itself is unchanged.
 
 The cache is a folder of ``.npz`` files named by the SHA-256 of that key
 (folder: environment variable ``GYROARRAY_CACHE``, default
@@ -30,15 +39,17 @@ import numpy as np
 from gyroarray.errors import InputError
 
 from .profiles import Profile, load_profile
-from .table import RateTable, TableParams, Tracking, n_samples
+from .sensor import rigid_body_specific_force
+from .table import RateTable, TableParams, Tracking, n_samples, rotation_matrices
 
 __all__ = ["TRUTH_SCHEMA_VERSION", "Truth", "TruthMeta", "compute_truth", "project",
-           "truth_key", "default_cache_dir"]
+           "specific_force", "truth_key", "default_cache_dir"]
 
 #: Bump when the meaning or layout of cached truth changes.
-TRUTH_SCHEMA_VERSION = 1
+TRUTH_SCHEMA_VERSION = 2
 
-_ARRAYS = ("time_s", "omega_body_rad_s", "quat_wxyz", "command_body_rad_s", "joint_angles_rad")
+_ARRAYS = ("time_s", "omega_body_rad_s", "quat_wxyz", "command_body_rad_s", "joint_angles_rad",
+           "specific_force_m_s2", "angular_accel_rad_s2")
 
 
 @dataclass(frozen=True)
@@ -96,6 +107,12 @@ class Truth:
         Commanded body rate [rad/s].
     joint_angles_rad : ndarray, shape (n, 3)
         Gimbal encoders (outer, middle, inner) [rad].
+    specific_force_m_s2 : ndarray, shape (n, 3)
+        Specific force at the platform origin, platform frame, from MuJoCo's
+        accelerometer there [m/s²] (+g0 on z at rest, level, z up).
+    angular_accel_rad_s2 : ndarray, shape (n, 3)
+        Angular acceleration of the platform, dω_body/dt, platform frame,
+        from MuJoCo's ``frameangacc`` [rad/s²].
     tracking : Tracking
         Realised vs commanded.
     meta : TruthMeta
@@ -108,6 +125,8 @@ class Truth:
     quat_wxyz: np.ndarray
     command_body_rad_s: np.ndarray
     joint_angles_rad: np.ndarray
+    specific_force_m_s2: np.ndarray
+    angular_accel_rad_s2: np.ndarray
     tracking: Tracking
     meta: TruthMeta
 
@@ -130,12 +149,7 @@ class Truth:
     @property
     def rotation_matrices(self) -> np.ndarray:
         """Attitude as rotation matrices, platform -> local level, shape (n, 3, 3) [-]."""
-        w, x, y, z = (self.quat_wxyz[:, k] for k in range(4))
-        return np.stack([
-            np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
-            np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
-            np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1),
-        ], axis=-2)
+        return rotation_matrices(self.quat_wxyz)
 
 
 def project(truth: Truth, layout) -> np.ndarray:
@@ -153,6 +167,27 @@ def project(truth: Truth, layout) -> np.ndarray:
         [rad/s].
     """
     return truth.omega_body_rad_s @ np.asarray(layout.H, dtype=float).T
+
+
+def specific_force(truth: Truth, positions_m) -> np.ndarray:
+    """Specific force at points of the platform, platform frame.
+
+    Parameters
+    ----------
+    truth : Truth
+    positions_m : array_like, shape (N, 3), or a Layout
+        Points r_k in the platform frame [m] (a layout's ``positions_m``,
+        zero when it has none).
+
+    Returns
+    -------
+    ndarray, shape (n, N, 3)
+        f_k = f_0 + α × r_k + ω × (ω × r_k) [m/s²].
+    """
+    if hasattr(positions_m, "positions_or_zero"):
+        positions_m = positions_m.positions_or_zero
+    return rigid_body_specific_force(truth.specific_force_m_s2, truth.omega_body_rad_s,
+                                     truth.angular_accel_rad_s2, positions_m)
 
 
 def default_cache_dir() -> Path:
@@ -252,7 +287,9 @@ def compute_truth(profile, sample_rate_hz: float, *, duration_s: float | None = 
     run = _run_table(profile, fs, T, table)
     truth = Truth(time_s=run.time_s, omega_body_rad_s=run.omega_body_rad_s,
                   quat_wxyz=run.quat_wxyz, command_body_rad_s=run.command_body_rad_s,
-                  joint_angles_rad=run.joint_angles_rad, tracking=run.tracking, meta=meta)
+                  joint_angles_rad=run.joint_angles_rad,
+                  specific_force_m_s2=run.specific_force_m_s2,
+                  angular_accel_rad_s2=run.angular_accel_rad_s2, tracking=run.tracking, meta=meta)
     if cache:
         _write(path, truth)
     return truth
@@ -269,7 +306,8 @@ def _read(path: Path, meta: TruthMeta, n: int) -> Truth | None:
                 return None
             arrays = {name: np.array(z[name], dtype=float) for name in _ARRAYS}
         shapes = {"time_s": (n,), "omega_body_rad_s": (n, 3), "quat_wxyz": (n, 4),
-                  "command_body_rad_s": (n, 3), "joint_angles_rad": (n, 3)}
+                  "command_body_rad_s": (n, 3), "joint_angles_rad": (n, 3),
+                  "specific_force_m_s2": (n, 3), "angular_accel_rad_s2": (n, 3)}
         if any(arrays[k].shape != s for k, s in shapes.items()):
             return None
         if not all(np.all(np.isfinite(a)) for a in arrays.values()):

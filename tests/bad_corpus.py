@@ -206,6 +206,9 @@ def _header_cases() -> list[Case]:
                     column="ref_x", extra_cells=2),
         _case("gyro_count_mismatch", "gyro count does not match the layout: 3 gyro column(s)",
               toml=toml_text({"n_gyros = 3": "n_gyros = 4"}), line=3),
+        header_case("partial_acc", "acc_x, acc_y and acc_z must be given together; found "
+                    "only acc_x, acc_z (acc_y missing)", "time_s,gyro1,gyro2,gyro3,acc_x,acc_z",
+                    column="acc_x", extra_cells=2),
     ]
 
 
@@ -217,6 +220,8 @@ def _cell_cases() -> list[Case]:
     note_rows[4][2] = "bad"                   # sample 4 is now on line 4 + 4 + 1
     mid_comments = [",".join(r) for r in with_cell(9, 3, "x9")]
     mid_comments[4:4] = ["# a comment in the middle", ""]   # two extra lines before sample 4
+    acc_rows = [r + ["0.0", "0.0", "9.80665"] for r in base_rows()]
+    acc_rows[5][5] = "-inf"
     return [
         _case("non_numeric_cell", "non-numeric value 'abc' in column gyro2",
               csv=csv_text(with_cell(2, 2, "abc")), line=line_of(2), column="gyro2"),
@@ -228,6 +233,9 @@ def _cell_cases() -> list[Case]:
               csv=csv_text(with_cell(1, 1, "inf")), line=line_of(1), column="gyro1"),
         _case("overflow_value", "value '1e999' overflows to infinity in column gyro2",
               csv=csv_text(with_cell(1, 2, "1e999")), line=line_of(1), column="gyro2"),
+        _case("infinite_acc", "infinite value '-inf' in column acc_y",
+              csv=csv_text(acc_rows, header=HEADER + ",acc_x,acc_y,acc_z"), line=line_of(5),
+              column="acc_y"),
         _case("nan_cell", "NaN value 'NaN' in column gyro1 (1 missing value(s), line 10); "
               "read with repair=True", csv=csv_text(with_cell(6, 1, "NaN")),
               line=line_of(6), column="gyro1"),
@@ -291,6 +299,7 @@ def _sidecar_cases() -> list[Case]:
     axes = ("[layout]\naxes = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], "
             "[0.0, 0.5, 0.5]]\n")
     site = "\n[site]\nlatitude_deg = 34.25\nheading_deg = 0.0\n"
+    pos = ("[0.02, 0.0, 0.0]", "[-0.01, 0.0173, 0.0]", "[-0.01, -0.0173, 0.0]")
     return [
         _case("missing_sidecar", "missing sidecar", file="toml", no_toml=True),
         side("toml_syntax_error", "TOML syntax error: Illegal character '\\n'",
@@ -324,7 +333,7 @@ def _sidecar_cases() -> list[Case]:
              "n_gyros and alpha_deg (missing: alpha_deg)",
              toml_text({"alpha_deg = 54.7356\n": ""}), line=4, column="layout"),
         side("layout_unknown_key", "unknown key layout.alpha (known: alpha_deg, axes, "
-             "n_gyros, scheme)", toml_text({"alpha_deg": "alpha"}), line=7,
+             "n_gyros, positions_m, scheme)", toml_text({"alpha_deg": "alpha"}), line=7,
              column="layout.alpha"),
         side("scheme_not_1_or_2", "layout.scheme must be 1 or 2, got an integer (3)",
              toml_text({"scheme = 1": "scheme = 3"}), line=5, column="layout.scheme"),
@@ -352,6 +361,20 @@ def _sidecar_cases() -> list[Case]:
         side("axes_not_rows_of_3", "layout.axes must be an array of [x, y, z] rows of "
              "numbers", toml_text({_LAYOUT_CONE: "[layout]\naxes = [[1.0, 0.0], [0.0, 1.0]]\n"}),
              line=5, column="layout.axes"),
+        side("positions_count", "positions_m has 2 rows but the layout has 3 gyros",
+             toml_text(append=f"positions_m = [{pos[0]}, {pos[1]}]\n"), line=8,
+             column="layout.positions_m"),
+        side("positions_not_rows", "layout.positions_m must be an array of [x, y, z] rows "
+             "of numbers (metres, one per gyro)",
+             toml_text(append="positions_m = [[0.02, 0.0], [0.0, 0.02], [0.0, 0.0]]\n"),
+             line=8, column="layout.positions_m"),
+        side("positions_not_finite", "layout.positions_m must hold finite numbers",
+             toml_text(append=f"positions_m = [[nan, 0.0, 0.0], {pos[1]}, {pos[2]}]\n"),
+             line=8, column="layout.positions_m"),
+        side("positions_in_mm", "positions_m of gyro 2 is 20 m from the platform origin "
+             "(more than 10 m: positions are in metres",
+             toml_text(append=f"positions_m = [{pos[0]}, [0.0, 20.0, 0.0], {pos[2]}]\n"),
+             line=8, column="layout.positions_m"),
         side("axes_strings", "layout.axes must be an array of [x, y, z] rows of numbers",
              toml_text({_LAYOUT_CONE: '[layout]\naxes = [["1", "0", "0"]]\n'}), line=5,
              column="layout.axes"),

@@ -342,6 +342,8 @@ ALL17 = [
     {"effect": "temperature_bias", "deg_h_per_c": 0.5, "t0_c": 25.0},
     {"effect": "quantization", "q_deg": 1e-5},
     {"effect": "saturation", "range_deg_s": 400.0},
+    {"effect": "bandwidth", "cutoff_hz": 10.0, "order": 2},
+    {"effect": "g_sensitivity", "gyro": 2, "deg_s_per_g": [0.05, -0.02, 0.1]},
 ]
 
 
@@ -350,7 +352,7 @@ def _run17(seed, layout=CONE6, n=1000):
     return run(model(*ALL17), w, layout, seed=seed, temp_c=25 + t, site=(deg_to_rad(34.25), 0.3))
 
 
-def test_all_17_effects_are_in_the_bit_test_model():
+def test_every_effect_is_in_the_bit_test_model():
     assert sorted(e["effect"] for e in ALL17) == sorted(REGISTRY)
 
 

@@ -278,10 +278,14 @@ def _spec_table():
 
 def test_registry_lists_exactly_the_spec_effects_and_parameters():
     spec = _spec_table()
-    assert len(spec) == 17
-    assert list(effect_names()) == list(spec)          # same names, same order
+    assert len(spec) == 20
+    # in the spec, not registered yet (another work item): listed, so a new one cannot slip by
+    pending = {"outliers"}
+    assert list(effect_names()) == [n for n in spec if n not in pending]   # same names, same order
     extensions = set()
     for name, (per_gyro, params) in spec.items():
+        if name in pending:
+            continue
         eff = get_effect(name)
         assert eff.per_gyro is per_gyro, name
         ours = [p.name for p in eff.params if not p.extension]

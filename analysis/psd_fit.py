@@ -1,0 +1,213 @@
+"""The residual's spectrum against three models: white + random walk, filtered, or with a Gauss–Markov hump.
+
+A gyro's own low-pass filter (``bandwidth``) and a Gauss–Markov process both
+put more power at low frequency than at high frequency, and in the Allan
+deviation both look like a hump at short τ. Their spectra differ: a filter
+keeps falling (−20 or −40 dB/decade) up to the Nyquist frequency, a
+Gauss–Markov process flattens back to the white level. This module fits the
+Welch periodogram of a residual with
+
+* ``null``: S(f) = W + R/f² (ARW and RRW: W = 2N², R = K²/(2π²), one-sided);
+* ``filter``: S(f) = (W + R/f²)·|H(f)|² with the ``bandwidth`` response
+  of order 1 or 2 at cut-off fc, in two families: the spec's continuous
+  H (:func:`gyroarray.sim.sensor.bandwidth_response`), scanned beyond the
+  Nyquist frequency, where |H| → 1 and the filter becomes the null, so the
+  two are nested; and the digital H_d of the bilinear transform
+  (:func:`gyroarray.sim.sensor.bandwidth_sos`: a zero at Nyquist, not
+  nested, but what a digital filter is). The better of the two gives the
+  estimate (a digitally filtered record fits H_d: order and cut-off right;
+  H would trade a lower cut-off for a higher order);
+* ``gauss_markov``: S(f) = W + R/f² + 4σ²τc/(1 + (2π f τc)²),
+
+by maximum likelihood (each Welch estimate is S·χ²_ν/ν; W, R and σ² by
+iteratively reweighted least squares at each scanned fc or τc), so the
+likelihoods compare directly: ``lr_filter`` and ``lr_gm`` are 2·Δℓ against
+the null, and ``filter`` and ``gauss_markov`` are rivals with the same
+number of free parameters (2 each).
+
+Significance of the filter: the largest ``lr_filter`` over the scanned
+cut-offs and both orders under the null is calibrated by the number of
+effectively independent cut-offs (:data:`EFFECTIVE_TESTS`, measured on
+white and white + random-walk records; see :func:`filter_z`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import optimize, signal, special
+
+from gyroarray.sim.sensor import bandwidth_response, bandwidth_warped_frequency
+
+__all__ = ["PsdFit", "fit_psd", "filter_z", "EFFECTIVE_TESTS"]
+
+#: Effectively independent tests of the cut-off scan (see :func:`filter_z`).
+EFFECTIVE_TESTS = 3.0
+
+#: Cut-offs scanned per decade, and the lowest as a fraction of the Nyquist frequency.
+_PER_DECADE = 16
+_LOWEST = 0.01
+_TOP = 20.0
+
+
+@dataclass(frozen=True)
+class PsdFit:
+    """Maximum-likelihood fits of one residual's Welch spectrum (module docstring).
+
+    Attributes
+    ----------
+    freq_hz, psd : ndarray
+        The Welch estimate [Hz], [rad²/s²/Hz] (one-sided).
+    nu : float
+        Degrees of freedom of each estimate.
+    loglik_null : float
+    filter_cutoff_hz, filter_order : float, int
+        The best filter; ``filter_cutoff_sigma_hz`` its 1σ (curvature of the profile).
+    filter_family : {"continuous", "digital"}
+        Which response family fitted better.
+    lr_filter : float
+        2·(ℓ_filter − ℓ_null).
+    lr_filter_order : dict
+        Best 2·Δℓ per order.
+    gm_sigma_rad_s, gm_tau_s : float
+        The best Gauss–Markov hump.
+    lr_gm : float
+        2·(ℓ_gm − ℓ_null).
+    white, walk : float
+        W and R of the best filter fit (one-sided PSD coefficients).
+    """
+
+    freq_hz: np.ndarray
+    psd: np.ndarray
+    nu: float
+    loglik_null: float
+    filter_cutoff_hz: float
+    filter_cutoff_sigma_hz: float
+    filter_order: int
+    filter_family: str
+    lr_filter: float
+    lr_filter_order: dict
+    gm_sigma_rad_s: float
+    gm_tau_s: float
+    lr_gm: float
+    white: float
+    walk: float
+
+
+def _welch(x: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray, float]:
+    n = x.size
+    nper = int(min(1024, max(64, 2 ** int(math.log2(max(n // 16, 64))))))
+    f, p = signal.welch(x, fs=1.0 / dt, nperseg=nper, detrend="linear")
+    keep = slice(1, -1)                        # no DC, no Nyquist bin
+    k = max((n - nper) // (nper // 2) + 1, 1)  # segments at 50 % overlap (Hann)
+    nu = 2.0 * k * 0.95                        # Welch dof, Hann 50 %: ~1.9 per segment
+    return f[keep], p[keep], nu
+
+
+def _loglik(p: np.ndarray, s: np.ndarray, nu: float) -> float:
+    s = np.maximum(s, 1e-300)
+    return float(-0.5 * nu * np.sum(np.log(s) + p / s))
+
+
+def _linear_ml(p: np.ndarray, cols: np.ndarray, nu: float, iters: int = 6) -> tuple[np.ndarray, float]:
+    """Non-negative coefficients of S = cols @ c by IRLS of the Welch likelihood; (c, ℓ)."""
+    c = np.linalg.lstsq(cols, p, rcond=None)[0]
+    c = np.maximum(c, 0.0)
+    s = cols @ c
+    if not np.all(s > 0):
+        c = np.maximum(c, 1e-12 * max(float(np.mean(p)), 1e-300))
+        s = cols @ c
+    for _ in range(iters):
+        w = 1.0 / np.maximum(s, 1e-300)
+        c_new = np.linalg.lstsq(cols * w[:, None], p * w, rcond=None)[0]
+        c_new = np.maximum(c_new, 0.0)
+        s_new = cols @ c_new
+        if not np.all(s_new > 0):
+            break
+        c, s = c_new, s_new
+    return c, _loglik(p, s, nu)
+
+
+def fit_psd(x, dt_s: float) -> PsdFit:
+    """Fit the three spectral models to the residual ``x`` (n,) [rad/s] (module docstring)."""
+    x = np.asarray(x, dtype=float)
+    dt = float(dt_s)
+    f, p, nu = _welch(x - x.mean(), dt)
+    base = np.column_stack([np.ones_like(f), 1.0 / f ** 2])
+    c0, l0 = _linear_ml(p, base, nu)
+    nyq = 0.5 / dt
+    fcs = np.geomspace(_LOWEST * nyq, _TOP * nyq, int(_PER_DECADE * math.log10(_TOP / _LOWEST)) + 1)
+    prof = {}
+    best = (-math.inf, None, None, None, None)
+    for family in ("continuous", "digital"):
+        scan = fcs if family == "continuous" else fcs[fcs < 0.98 * nyq]
+        for order in (1, 2):
+            ll = np.empty(scan.size)
+            for i, fc in enumerate(scan):
+                ff = f if family == "continuous" else bandwidth_warped_frequency(f, fc, dt)
+                h2 = np.abs(bandwidth_response(ff, fc, order)) ** 2
+                c, ll[i] = _linear_ml(p, base * h2[:, None], nu)
+                if ll[i] > best[0]:
+                    best = (ll[i], fc, order, c, family)
+            prof[(family, order)] = (scan, ll)
+    l_bw, fc, order, cb, family = best
+    scan, ll = prof[(family, order)]
+    i = int(np.argmin(np.abs(scan - fc)))
+    sigma_fc = math.nan
+
+    def profile(log_fc: float) -> tuple[float, np.ndarray]:
+        c_ = math.exp(log_fc)
+        ff = f if family == "continuous" else bandwidth_warped_frequency(f, c_, dt)
+        h2 = np.abs(bandwidth_response(ff, c_, order)) ** 2
+        c, lv = _linear_ml(p, base * h2[:, None], nu)
+        return lv, c
+
+    if 0 < i < scan.size - 1:                  # refine between the neighbours, then the curvature
+        lo, hi = math.log(scan[i - 1]), math.log(scan[i + 1])
+        res = optimize.minimize_scalar(lambda u: -profile(u)[0], bounds=(lo, hi), method="bounded",
+                                       options={"xatol": 1e-4})
+        if -res.fun > l_bw:
+            l_bw, cb = -res.fun, profile(res.x)[1]
+            fc = math.exp(res.x)
+        h = 0.01
+        u0 = math.log(fc)
+        d2 = (profile(u0 + h)[0] - 2 * profile(u0)[0] + profile(u0 - h)[0]) / h ** 2
+        if d2 < 0:
+            sigma_fc = fc * math.sqrt(-1.0 / d2)
+    taus = np.geomspace(0.5 / (2 * math.pi * f[-1]), 5.0 / (2 * math.pi * f[0]), 60)
+    l_gm, g_best = -math.inf, (math.nan, math.nan)
+    for tau in taus:
+        cols = np.column_stack([base, 4.0 * tau / (1.0 + (2 * math.pi * f * tau) ** 2)])
+        c, lg = _linear_ml(p, cols, nu)
+        if lg > l_gm:
+            l_gm, g_best = lg, (math.sqrt(max(c[2], 0.0)), tau)
+    return PsdFit(freq_hz=f, psd=p, nu=nu, loglik_null=l0, filter_cutoff_hz=float(fc),
+                  filter_cutoff_sigma_hz=float(sigma_fc), filter_order=int(order),
+                  lr_filter=float(max(2 * (l_bw - l0), 0.0)),
+                  lr_filter_order={o: float(max(2 * (max(prof[(fm, o)][1].max() for fm in
+                                                             ("continuous", "digital")) - l0), 0.0))
+                                   for o in (1, 2)},
+                  filter_family=family,
+                  gm_sigma_rad_s=float(g_best[0]), gm_tau_s=float(g_best[1]),
+                  lr_gm=float(max(2 * (l_gm - l0), 0.0)), white=float(cb[0]), walk=float(cb[1]))
+
+
+def filter_z(lr: float, n_tests: float = EFFECTIVE_TESTS) -> float:
+    """z of the largest filter likelihood ratio of the scan.
+
+    P(max > lr) over ``n_tests`` independent tests, each a χ²₁/2 + δ₀/2
+    mixture (the filter at the top of the scan is the null: a boundary).
+    With ``n_tests`` = 3 the false-alarm rates came out 4.7 % at p < 0.05 and
+    1.3 % at p < 0.01 on 150 white / white + random-walk records of 60 000
+    samples (46 % of them with lr = 0, as the mixture has 50 %).
+    """
+    lr = max(float(lr), 0.0) if math.isfinite(lr) else 0.0
+    # log of the one-test tail: ½·erfc(√(lr/2)), in logs for large lr
+    log_p1 = math.log(0.5) + float(special.log_ndtr(-math.sqrt(lr))) + math.log(2.0)
+    p1 = math.exp(log_p1)
+    log_p = math.log(-math.expm1(n_tests * math.log1p(-p1))) if p1 > 1e-12 else log_p1 + math.log(n_tests)
+    if log_p > -700:
+        return float(-special.ndtri(min(math.exp(log_p), 1.0 - 1e-16)))
+    return float(math.sqrt(-2.0 * log_p))

@@ -1,0 +1,168 @@
+"""``bandwidth``: the gyro's own low-pass filter."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from gyroarray.analysis.effect_fit import EffectFit
+from gyroarray.analysis.psd_fit import filter_z, fit_psd
+from gyroarray.analysis.regress import _RWWhitener
+from gyroarray.effects import _draw
+from gyroarray.errors import InputError
+from gyroarray.sim.protocol import Param, RegressionEffect, Stage, explains_away, identity, with_cols
+from gyroarray.sim.sensor import bandwidth_filter
+
+
+class Bandwidth(RegressionEffect):
+    """The spec's causal low-pass on everything the sensing element produces
+    (after misalignment, scale factor, g-sensitivity and the noise terms,
+    before quantization and saturation): order 1 H(s) = 1/(1 + s/ωc), order 2
+    the Butterworth; simulated by the bilinear transform pre-warped at the
+    cut-off, the state started at the first sample's steady state
+    (:func:`gyroarray.sim.sensor.bandwidth_filter`).
+
+    Fit, from what the record has:
+
+    * the spectrum of the stochastic record (every record): the white noise
+      above the cut-off falls as |H|² (:func:`gyroarray.analysis.psd_fit.fit_psd`;
+      order and cut-off by likelihood, z calibrated for the scan);
+    * with a reference that moves: the amplitude loss and lag of the sensed
+      rate, the record's own H·ref filtered and compared with the residual
+      under ARW + a random-walk bias, profiled over the cut-off for both orders.
+
+    The two log-likelihood profiles add (they read independent parts of the
+    record: the noise and the motion). Rivals: a latency also lags the
+    motion, but leaves the spectrum flat; a Gauss–Markov hump raises the low
+    frequencies, but flattens back to the white level, where a filter keeps
+    falling (compared by the spectrum's likelihood, same number of parameters).
+    """
+
+    name = "bandwidth"
+    order = 18
+    stage = Stage.FILTER
+    stochastic = True
+    reads = "noise"
+    rivals = ("gauss_markov", "latency")
+    channel = "spectrum_rolloff"
+    scored = ("cutoff_hz", "order")
+    params = (Param("cutoff_hz", "Hz", "cutoff_hz", identity, lo=0.0, lo_open=True,
+                    doc="−3 dB frequency of the gyro's internal low-pass (below Nyquist)"),
+              Param("order", "-", "order", identity, lo=1.0, hi=2.0,
+                    doc="1: H(s) = 1/(1 + s/ωc); 2: Butterworth"))
+    doc = "the gyro's own causal low-pass filter"
+
+    def check(self, params, gyro, n_gyros):
+        if params["order"] not in (1, 2):
+            raise InputError(f"order must be 1 (first order) or 2 (Butterworth), got "
+                             f"{params['order']!r}", column="order")
+
+    def placeholder(self):
+        return {"cutoff_hz": 1.0, "order": 1}
+
+    def entry_params(self, fit, old):
+        params = super().entry_params(fit, old)
+        if "order" in params:
+            params["order"] = int(round(params["order"]))
+        return params
+
+    def simulate(self, state, act, streams):
+        try:
+            y = bandwidth_filter(state.x[:, act.cols], state.ctx.dt_s, act.p["cutoff_hz"], act.p["order"])
+        except InputError as err:
+            raise InputError(f"{act.label}: {err.message}", column=err.column) from None
+        return with_cols(state, act.cols, y)
+
+    # -- fit side ----------------------------------------------------------------
+    def _psd(self, ctx, gyro: int, E: np.ndarray | None = None):
+        """The spectral fit of the gyro's stochastic record (its longest static part before
+        the record is chosen, while the model is calibrated)."""
+        key = ("bandwidth_psd", gyro, ctx.Er is not None)
+        if key not in ctx.cache:
+            if ctx.Er is not None:
+                x = ctx.Er[:, gyro - 1]
+            else:
+                a, b = ctx.longest
+                x = (ctx.E0 if E is None else E)[a:b, gyro - 1]
+            ctx.cache[key] = fit_psd(x, ctx.dt)
+        return ctx.cache[key]
+
+    def _motion_profile(self, ctx, gyro: int, e: np.ndarray, r: float, q: float, fcs):
+        """2·Δℓ of the residual with the filter's effect on the sensed rate removed, per (order, fc)."""
+        if ctx.ref is None or not ctx.moving:
+            return None
+        u = ctx.ref @ ctx.H[gyro - 1]
+        w = _RWWhitener(e.size, r, q, ctx.use)
+        z0 = w.whiten(e)
+        base = float(z0 @ z0)
+        out = {}
+        for order in (1, 2):
+            out[order] = np.array([base - float(np.sum(w.whiten(e - (bandwidth_filter(u, ctx.dt, fc, order) - u))
+                                                       ** 2)) for fc in fcs])
+        return out
+
+    def fit(self, ctx, gyro, E):
+        g = int(gyro)
+        psd = self._psd(ctx, g, E)
+        nyq = 0.5 / ctx.dt
+        fcs = np.geomspace(0.01 * nyq, 0.95 * nyq, 24)
+        motion = self._motion_profile(ctx, g, E[:, g - 1], float(ctx.r[g - 1]), float(ctx.q[g - 1]), fcs)
+        lr_psd = psd.lr_filter
+        fc, order, s_fc = psd.filter_cutoff_hz, psd.filter_order, psd.filter_cutoff_sigma_hz
+        lr_motion = 0.0
+        if motion is not None:
+            o_best = max((1, 2), key=lambda o: motion[o].max())
+            i = int(np.argmax(motion[o_best]))
+            lr_motion = max(float(motion[o_best][i]), 0.0)
+            if lr_motion > lr_psd:                     # the motion decides the cut-off
+                fc, order = float(fcs[i]), o_best
+                s_fc = math.nan
+                if 0 < i < fcs.size - 1:
+                    h = math.log(fcs[i + 1] / fcs[i])
+                    d2 = (motion[o_best][i + 1] - 2 * motion[o_best][i] + motion[o_best][i - 1]) / (2 * h * h)
+                    if d2 < 0:
+                        s_fc = fc * math.sqrt(-1.0 / d2)
+        lr = lr_psd + lr_motion
+        z = filter_z(lr, n_tests=3.0 if motion is None else 6.0)
+        sigma = {"cutoff_hz": float(s_fc)} if math.isfinite(s_fc) else {}
+        where = "the noise spectrum" + (" and the motion" if lr_motion > 0 else "")
+        if z > 3:
+            ev = (f"gyro {g}: {where} show a low-pass of order {order} at {fc:.4g}"
+                  + (f" ± {s_fc:.2g}" if math.isfinite(s_fc) else "") + " Hz (−3 dB)")
+        else:
+            ev = f"gyro {g}: no low-pass seen in {where} (best {fc:.3g} Hz, order {order}, z = {z:.1f})"
+        return EffectFit(self.name, g, {"cutoff_hz": float(fc), "order": int(order)}, sigma, z=float(z),
+                         evidence=ev, extra={"lr_psd": float(lr_psd), "lr_motion": float(lr_motion),
+                                             "lr_gm_psd": float(psd.lr_gm), "family": psd.filter_family})
+
+    def test(self, ctx, gyro):
+        return self.fit(ctx, gyro, ctx.E)
+
+    def prefer(self, mine, other, ctx):
+        if other.effect == "gauss_markov":
+            psd = self._psd(ctx, int(mine.gyro))
+            if psd.lr_filter > psd.lr_gm:
+                return (f"; but a low-pass at {mine.params['cutoff_hz']:.3g} Hz fits the spectrum better "
+                        f"(2Δℓ {psd.lr_filter:.1f} against {psd.lr_gm:.1f}: it keeps falling to Nyquist)")
+            return None
+        if other.effect == "latency":
+            if mine.extra.get("lr_psd", 0.0) > 9.0:     # the spectrum rolls off: a filter, not a delay
+                return (f"; but the noise spectrum rolls off as a {mine.params['cutoff_hz']:.3g} Hz low-pass "
+                        f"(2Δℓ {mine.extra['lr_psd']:.1f}), which a delay does not do")
+            return None
+        return explains_away(self, mine, other, ctx)
+
+    def concede(self, mine, other, ctx):
+        if other.effect == "gauss_markov":
+            psd = self._psd(ctx, int(mine.gyro))
+            if psd.lr_gm > psd.lr_filter:
+                return (f"; but a Gauss–Markov hump fits the spectrum better (2Δℓ {psd.lr_gm:.1f} "
+                        f"against {psd.lr_filter:.1f}: it flattens back to the white level)")
+        if other.effect == "latency" and mine.extra.get("lr_psd", 0.0) < 1.0 and mine.extra.get("lr_motion", 0) > 0:
+            return "; but the noise spectrum is flat where the filter would cut: a delay, not a filter"
+        return None
+
+    def example(self, rng, n_gyros, max_rate_deg_s):
+        return _draw.gyro(rng, n_gyros), {"cutoff_hz": _draw.u(rng, 3.0, 15.0, True),
+                                          "order": int(rng.integers(1, 3))}
