@@ -79,6 +79,15 @@ class PsdFit:
         W and R of the best filter fit (one-sided PSD coefficients).
     """
 
+    def filter_lr(self, cutoff_hz: float, order: int, dt_s: float, family: str = "digital") -> float:
+        """2·(ℓ − ℓ_null) of the filter model at one cut-off (W, R refitted)."""
+        f, p = self.freq_hz, self.psd
+        ff = f if family == "continuous" else bandwidth_warped_frequency(f, cutoff_hz, dt_s)
+        h2 = np.abs(bandwidth_response(ff, cutoff_hz, order)) ** 2
+        base = np.column_stack([np.ones_like(f), 1.0 / f ** 2])
+        _, ll = _linear_ml(p, base * h2[:, None], self.nu)
+        return 2.0 * (ll - self.loglik_null)
+
     freq_hz: np.ndarray
     psd: np.ndarray
     nu: float
@@ -211,3 +220,32 @@ def filter_z(lr: float, n_tests: float = EFFECTIVE_TESTS) -> float:
     if log_p > -700:
         return float(-special.ndtri(min(math.exp(log_p), 1.0 - 1e-16)))
     return float(math.sqrt(-2.0 * log_p))
+
+
+def shortest_clean_tau(cutoff_hz: float, order: int, dt_s: float, tol: float = 0.05) -> float:
+    """The shortest octave τ = 2^k·dt [s] at which white noise through the ``bandwidth`` filter
+    has an Allan variance within ``tol`` of the unfiltered one.
+
+    From the digital filter's impulse response h: the filtered noise's
+    autocovariance R(k) = Σ h_i h_{i+k}, the variogram of its integral
+    D(m) = m R(0) + 2 Σ_{k<m} (m − k) R(k) (per dt², unit input), and
+    σ²(m) ∝ (4 D(m) − D(2m))/(2m²), against 1/m for white noise.
+    """
+    from gyroarray.sim.sensor import bandwidth_sos
+    sos = bandwidth_sos(cutoff_hz, order, dt_s)
+    length = int(min(max(64, 40.0 / (cutoff_hz * dt_s)), 1 << 20))
+    imp = np.zeros(length)
+    imp[0] = 1.0
+    h = signal.sosfilt(sos, imp)
+    r = np.correlate(h, h, mode="full")[length - 1:]           # R(0), R(1), ...
+    m = 1
+    while 2 * m < length:
+        k = np.arange(1, 2 * m)
+        d_m = m * r[0] + 2.0 * np.sum((m - k[:m - 1]) * r[1:m])
+        d_2m = 2 * m * r[0] + 2.0 * np.sum((2 * m - k) * r[1:2 * m])
+        ratio = (4.0 * d_m - d_2m) / (2.0 * m * m) * m          # against white: 1/m
+        if abs(ratio - 1.0) < tol:
+            return m * dt_s
+        m *= 2
+    return m * dt_s
+

@@ -390,32 +390,33 @@ class _Curve:
 _COV_CACHE: dict = {}
 
 
-def _factors(n: int) -> np.ndarray:
-    """Octave averaging factors of the fits: 1, 2, 4, ... <= n·_M_MAX_FRACTION."""
+def _factors(n: int, m_min: int = 1) -> np.ndarray:
+    """Octave averaging factors of the fits: m_min, 2·m_min, ... <= n·_M_MAX_FRACTION (m_min a power of 2)."""
     m_max = max(8, int(_M_MAX_FRACTION * n))
     m = 2 ** np.arange(int(math.log2(m_max)) + 1, dtype=np.int64)
+    m = m[m >= m_min]
     if m.size < 6 or n - 2 * m[-1] < 2:
         raise InputError(f"{n} samples are too few for the noise fit: it needs at least 6 "
                          "octave taus (a record of >= 256 samples)")
     return m
 
 
-def _cov_model(n: int, dt_s: float) -> _AvarCov:
-    key = (int(n), float(dt_s))
+def _cov_model(n: int, dt_s: float, m_min: int = 1) -> _AvarCov:
+    key = (int(n), float(dt_s), int(m_min))
     cov = _COV_CACHE.get(key)
     if cov is None:
         if len(_COV_CACHE) >= 8:
             _COV_CACHE.clear()
-        m = _factors(n)
+        m = _factors(n, m_min)
         cov = _COV_CACHE[key] = _AvarCov(m, (n + 1) - 2 * m, dt_s)
     return cov
 
 
-def _curve(x: np.ndarray, dt_s: float, cov: _AvarCov | None = None) -> _Curve:
-    m = _factors(x.size)
+def _curve(x: np.ndarray, dt_s: float, cov: _AvarCov | None = None, m_min: int = 1) -> _Curve:
+    m = _factors(x.size, m_min)
     res = deviation(x, dt_s, "oadev", m * float(dt_s))
     return _Curve(dt_s=float(dt_s), n=int(x.size), taus=m * float(dt_s), m=m,
-                  y=res.dev ** 2, cov=_cov_model(x.size, dt_s) if cov is None else cov)
+                  y=res.dev ** 2, cov=_cov_model(x.size, dt_s, m_min) if cov is None else cov)
 
 
 def _cross_avar(X: np.ndarray, m: np.ndarray) -> np.ndarray:
@@ -739,7 +740,7 @@ def _as_dt(dt_s) -> float:
 
 
 def fit_gyro_noise(e, dt_s: float, gyro: int, *, model_terms: tuple = (),
-                   gm_tau_s: float | None = None) -> list[EffectFit]:
+                   gm_tau_s: float | None = None, min_tau_s: float = 0.0) -> list[EffectFit]:
     """Baseline noise and the non-baseline stochastic effects of one gyro.
 
     Parameters
@@ -760,6 +761,10 @@ def fit_gyro_noise(e, dt_s: float, gyro: int, *, model_terms: tuple = (),
         The model has a Gauss–Markov term of this correlation time [s]: it
         joins the baseline the same way (the returned ``gauss_markov`` is
         its own fit, τc refitted).
+    min_tau_s : float
+        Shortest averaging time of the fits [s] (the octaves start at the
+        first power-of-two multiple of dt at or above it): what the model
+        shapes below it (a sensor's own low-pass) is left out.
 
     Returns
     -------
@@ -795,7 +800,8 @@ def fit_gyro_noise(e, dt_s: float, gyro: int, *, model_terms: tuple = (),
     gyro = int(gyro)
     label = f"gyro {gyro}"
     n = x.size
-    cv = _curve(x, dt)
+    m_min = 1 if not min_tau_s > dt else 2 ** int(math.ceil(math.log2(min_tau_s / dt)))
+    cv = _curve(x, dt, m_min=m_min)
     terms = tuple(t for t in ("b", "q") if t in model_terms)
     if set(model_terms) - {"b", "q"}:
         raise ValueError(f"model_terms must be a subset of ('b', 'q'), got {model_terms!r}")
@@ -809,7 +815,7 @@ def fit_gyro_noise(e, dt_s: float, gyro: int, *, model_terms: tuple = (),
     z_r = chi2_to_z(lr, 1) if math.isfinite(lr) else math.nan
     ramp_removed = bool(z_r > 3.0)
     if ramp_removed:
-        cv = _curve(x - r * dt * np.arange(n), dt, cov=cv.cov)
+        cv = _curve(x - r * dt * np.arange(n), dt, cov=cv.cov, m_min=m_min)
         base = _gls(cv, base_names, gm_tau_s)
     common = {"chi2_baseline": base.chi2, "dof_baseline": base.dof, "ramp_removed": ramp_removed}
 

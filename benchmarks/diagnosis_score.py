@@ -39,10 +39,14 @@ def score_case(effect: str, seed: int, n_runs: int = 20) -> dict:
     for k, want in params.items():
         if (effect, k) in NOT_SCORED or fit is None or k not in fit.params:
             continue
-        got, sig = float(fit.params[k]), float(fit.sigma.get(k, 0.0) or 0.0)
-        err = abs((got - want + 180.0) % 360.0 - 180.0) if k == "tilt_azimuth_deg" else abs(got - want)
-        param_ok &= err <= max(0.10 * abs(want), 2.0 * sig)
-        detail[k] = (round(float(want), 6), round(got, 6), round(sig, 6))
+        wants = np.atleast_1d(np.asarray(want, float))
+        gots = np.atleast_1d(np.asarray(fit.params[k], float))
+        sigs = np.nan_to_num(np.atleast_1d(np.asarray(fit.sigma.get(k, 0.0) or 0.0, float)))
+        sigs = np.broadcast_to(sigs, wants.shape)
+        for w, g_, s_ in zip(wants, gots, sigs):
+            err = abs((g_ - w + 180.0) % 360.0 - 180.0) if k == "tilt_azimuth_deg" else abs(g_ - w)
+            param_ok &= bool(err <= max(0.10 * abs(w), 2.0 * s_))
+        detail[k] = (np.round(wants, 6).tolist(), np.round(gots, 6).tolist(), np.round(sigs, 6).tolist())
     rank = next((i for i, t in enumerate(before.candidates) if (t.effect, t.gyro) == (effect, gyro)), -1)
     worst = sorted(after.tests, key=lambda t: -t.z if np.isfinite(t.z) else math.inf)[:2]
     return {"effect": effect, "gyro": gyro, "seed": seed, "layout": c.layout_name, "params": params,

@@ -5,9 +5,10 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from scipy import optimize
 
 from gyroarray.analysis.effect_fit import EffectFit
-from gyroarray.analysis.psd_fit import filter_z, fit_psd
+from gyroarray.analysis.psd_fit import filter_z, fit_psd, shortest_clean_tau
 from gyroarray.analysis.regress import _RWWhitener
 from gyroarray.effects import _draw
 from gyroarray.errors import InputError
@@ -67,6 +68,13 @@ class Bandwidth(RegressionEffect):
             params["order"] = int(round(params["order"]))
         return params
 
+    def noise_term(self, ctx, entry):
+        """The gyro's Allan fits start where the filter has let the white noise be: the
+        shortest octave τ at which filtered white noise has an Allan variance within 5 % of
+        the unfiltered (:func:`shortest_clean_tau`)."""
+        return {"min_tau_s": shortest_clean_tau(float(entry.params["cutoff_hz"]),
+                                                int(entry.params["order"]), ctx.dt)}
+
     def simulate(self, state, act, streams):
         try:
             y = bandwidth_filter(state.x[:, act.cols], state.ctx.dt_s, act.p["cutoff_hz"], act.p["order"])
@@ -88,42 +96,48 @@ class Bandwidth(RegressionEffect):
             ctx.cache[key] = fit_psd(x, ctx.dt)
         return ctx.cache[key]
 
-    def _motion_profile(self, ctx, gyro: int, e: np.ndarray, r: float, q: float, fcs):
-        """2·Δℓ of the residual with the filter's effect on the sensed rate removed, per (order, fc)."""
+    def _motion_lr(self, ctx, gyro: int, e: np.ndarray, r: float, q: float):
+        """2·Δℓ(fc, order) of the residual with the filter's effect on the sensed rate removed, or None."""
         if ctx.ref is None or not ctx.moving:
             return None
         u = ctx.ref @ ctx.H[gyro - 1]
         w = _RWWhitener(e.size, r, q, ctx.use)
         z0 = w.whiten(e)
         base = float(z0 @ z0)
-        out = {}
-        for order in (1, 2):
-            out[order] = np.array([base - float(np.sum(w.whiten(e - (bandwidth_filter(u, ctx.dt, fc, order) - u))
-                                                       ** 2)) for fc in fcs])
-        return out
+
+        def lr(fc: float, order: int) -> float:
+            z = w.whiten(e - (bandwidth_filter(u, ctx.dt, fc, order) - u))
+            return base - float(z @ z)
+        return lr
 
     def fit(self, ctx, gyro, E):
+        """Order and cut-off by the joint likelihood of the spectrum and (with motion) the motion."""
         g = int(gyro)
         psd = self._psd(ctx, g, E)
         nyq = 0.5 / ctx.dt
+        motion = self._motion_lr(ctx, g, E[:, g - 1], float(ctx.r[g - 1]), float(ctx.q[g - 1]))
+
+        def total(fc, order):
+            return max(psd.filter_lr(fc, order, ctx.dt), 0.0) + (0.0 if motion is None else motion(fc, order))
+
         fcs = np.geomspace(0.01 * nyq, 0.95 * nyq, 24)
-        motion = self._motion_profile(ctx, g, E[:, g - 1], float(ctx.r[g - 1]), float(ctx.q[g - 1]), fcs)
-        lr_psd = psd.lr_filter
-        fc, order, s_fc = psd.filter_cutoff_hz, psd.filter_order, psd.filter_cutoff_sigma_hz
-        lr_motion = 0.0
-        if motion is not None:
-            o_best = max((1, 2), key=lambda o: motion[o].max())
-            i = int(np.argmax(motion[o_best]))
-            lr_motion = max(float(motion[o_best][i]), 0.0)
-            if lr_motion > lr_psd:                     # the motion decides the cut-off
-                fc, order = float(fcs[i]), o_best
-                s_fc = math.nan
-                if 0 < i < fcs.size - 1:
-                    h = math.log(fcs[i + 1] / fcs[i])
-                    d2 = (motion[o_best][i + 1] - 2 * motion[o_best][i] + motion[o_best][i - 1]) / (2 * h * h)
-                    if d2 < 0:
-                        s_fc = fc * math.sqrt(-1.0 / d2)
-        lr = lr_psd + lr_motion
+        grid = {o: np.array([total(fc, o) for fc in fcs]) for o in (1, 2)}
+        order = max((1, 2), key=lambda o: grid[o].max())
+        i = int(np.argmax(grid[order]))
+        fc, best = float(fcs[i]), float(grid[order][i])
+        s_fc = math.nan
+        if 0 < i < fcs.size - 1:                       # refine between the neighbours, then the curvature
+            lo, hi = math.log(fcs[i - 1]), math.log(fcs[i + 1])
+            res = optimize.minimize_scalar(lambda u: -total(math.exp(u), order), bounds=(lo, hi),
+                                           method="bounded", options={"xatol": 2e-4})
+            if -res.fun > best:
+                fc, best = math.exp(res.x), -res.fun
+            h = 0.005
+            d2 = (total(fc * math.exp(h), order) - 2 * best + total(fc * math.exp(-h), order)) / (2 * h * h)
+            if d2 < 0:
+                s_fc = fc * math.sqrt(-1.0 / d2)
+        lr_motion = 0.0 if motion is None else max(motion(fc, order), 0.0)
+        lr = max(psd.lr_filter, 0.0) + lr_motion
         z = filter_z(lr, n_tests=3.0 if motion is None else 6.0)
         sigma = {"cutoff_hz": float(s_fc)} if math.isfinite(s_fc) else {}
         where = "the noise spectrum" + (" and the motion" if lr_motion > 0 else "")
@@ -133,7 +147,7 @@ class Bandwidth(RegressionEffect):
         else:
             ev = f"gyro {g}: no low-pass seen in {where} (best {fc:.3g} Hz, order {order}, z = {z:.1f})"
         return EffectFit(self.name, g, {"cutoff_hz": float(fc), "order": int(order)}, sigma, z=float(z),
-                         evidence=ev, extra={"lr_psd": float(lr_psd), "lr_motion": float(lr_motion),
+                         evidence=ev, extra={"lr_psd": float(psd.lr_filter), "lr_motion": float(lr_motion),
                                              "lr_gm_psd": float(psd.lr_gm), "family": psd.filter_family})
 
     def test(self, ctx, gyro):

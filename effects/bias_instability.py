@@ -27,7 +27,7 @@ class BiasInstability(NoiseTermEffect):
         gens = [streams.stream(self.name, int(c) + 1) for c in act.cols]
         return with_term(state, act.cols, flicker_noise(ctx.n, ctx.dt_s, act.p["b_rad_s"], gens))
 
-    def noise_term(self, entry):
+    def noise_term(self, ctx, entry):
         return {"terms": ("b",)}
 
     def example(self, rng, n_gyros, max_rate_deg_s):

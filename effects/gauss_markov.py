@@ -29,7 +29,7 @@ class GaussMarkov(NoiseTermEffect):
         return with_term(state, act.cols,
                          gauss_markov_noise(ctx.n, ctx.dt_s, act.p["sigma_rad_s"], act.p["tau_s"], z))
 
-    def noise_term(self, entry):
+    def noise_term(self, ctx, entry):
         return {"gm_tau_s": float(entry.params["tau_s"])}
 
     def entry_params(self, fit, old):

@@ -1,4 +1,4 @@
-"""``quantization``: the output angle counted in steps (ADEV slope −1)."""
+"""``quantization``: the output's angle quantization (ADEV slope −1, σ² = 3Q²/τ²)."""
 
 from __future__ import annotations
 
@@ -7,43 +7,45 @@ import math
 import numpy as np
 
 from gyroarray.effects import _draw
-from gyroarray.physics import quantize_angle
-from gyroarray.sim.protocol import NoiseTermEffect, Param, Stage, with_cols
+from gyroarray.sim.protocol import NoiseTermEffect, Param, Stage, with_term
 from gyroarray.units import deg_to_rad
 
 
 class Quantization(NoiseTermEffect):
-    """A real quantizer of the accumulated output angle, step q = √12·Q.
+    """The quantization noise of an angle counter of step q = √12·Q.
 
-    Simulate: :func:`gyroarray.physics.quantize_angle`, the counter's start
-    phase drawn once per gyro. Its Allan variance is 3Q²/τ² (the spec's
-    definition) when the angle crosses many steps between samples in a way
-    that varies along the record. Fit: one more column, Q², of the gyro's
-    Allan model.
+    One definition, for the simulator and the fitter alike, the spec's:
+    Q is the coefficient of σ²(τ) = 3Q²/τ². A counter whose angle crosses
+    many steps between samples leaves an angle error e_k that is uniform on
+    [−q/2, q/2) and independent from sample to sample (the additive
+    quantization-noise model of a dithered quantizer), variance q²/12 = Q²;
+    the output carries its difference, (e_k − e_{k−1})/dt, whose Allan
+    variance is exactly 3Q²/τ² at every τ. The simulator draws e from the
+    effect's own stream (n + 1 uniforms); the fitter reads the same Q as one
+    more column of the gyro's Allan model, and the model band simulates the
+    same process. (A counter the noise barely dithers is not this process:
+    its error follows the slow angle and its ADEV is not 3Q²/τ²; the spec's
+    signature, slope −1, is that of the dithered counter.)
     """
 
     name = "quantization"
     order = 4
     stage = Stage.QUANTIZE
     rivals = ("bias_instability", "gauss_markov")
-    static_noise = "the model quantizes the output angle (its noise depends on the rate)"
     params = (Param("q_deg", "deg", "q_rad", deg_to_rad, lo=0.0,
                     doc="angle quantization Q of σ² = 3Q²/τ² (step √12·Q)"),)
     doc = "angle quantization of the output"
 
     def simulate(self, state, act, streams):
         ctx = state.ctx
-        phase = np.array([streams.stream(self.name, int(c) + 1).random() for c in act.cols])
-        q = math.sqrt(12.0) * act.p["q_rad"]                     # step q = √12·Q
-        return with_cols(state, act.cols, quantize_angle(state.x[:, act.cols], ctx.dt_s, q, phase))
+        half = math.sqrt(3.0) * np.asarray(act.p["q_rad"], dtype=float)   # q/2 = √3·Q
+        e = np.empty((ctx.n + 1, len(act.cols)))
+        for j, c in enumerate(act.cols):
+            e[:, j] = streams.stream(self.name, int(c) + 1).uniform(-half[j], half[j], ctx.n + 1)
+        return with_term(state, act.cols, np.diff(e, axis=0) / ctx.dt_s)       # (e_k − e_{k−1})/dt
 
-    def noise_term(self, entry):
+    def noise_term(self, ctx, entry):
         return {"terms": ("q",)}
-
-    def band_noise(self, entry, n: int, dt: float, rng: np.random.Generator) -> np.ndarray:
-        """Its part of one Monte-Carlo run of the model band (n,) [rad/s]: white angle noise of σ Q, differenced."""
-        q_rad = float(entry.params["q_deg"]) * math.pi / 180.0
-        return np.diff(rng.normal(0.0, q_rad, n + 1)) / dt
 
     def example(self, rng, n_gyros, max_rate_deg_s):
         return _draw.gyro(rng, n_gyros), {"q_deg": _draw.u(rng, 5e-4, 3e-3, True)}

@@ -271,6 +271,9 @@ class Analysis:
 
 
 def _finite(x):
+    """A float, or None where not finite (a list of them for a vector)."""
+    if isinstance(x, (list, tuple, np.ndarray)):
+        return [_finite(v) for v in x]
     x = float(x)
     return x if math.isfinite(x) else None
 
@@ -721,9 +724,7 @@ class ModelComparison:
                 raise InputError(f"cannot add {label}: it is already in the model", file=self.name)
             raise InputError(f"cannot add {label}: it is not identifiable on this record "
                              "(see the notes of diagnose)", file=self.name)
-        params = {p.name: float(f.params[p.name]) for p in eff.params
-                  if p.name in f.params and f.params[p.name] is not None and np.isfinite(f.params[p.name])}
-        return ModelEntry(effect, gyro, eff.clip(params, self.N))
+        return ModelEntry(effect, gyro, eff.clip(eff.entry_params(f, {}), self.N))
 
     def _adev_band(self, cal: NoiseModel, E: np.ndarray, rec: slice):
         """Measured ADEV vs the model's Monte-Carlo band, one test per gyro."""
@@ -731,23 +732,25 @@ class ModelComparison:
         n = x.shape[0]
         m = averaging_factors(n + 1, self.dt)
         m = m[m <= n // 10]
-        # the stochastic effects simulated in the chain, and those with a noise
-        # of their own for the band (Effect.band_noise, e.g. white angle noise)
-        stoch = [e for e in cal if get_effect(e.effect).stochastic]
-        extra = [e for e in stoch if get_effect(e.effect).has_band_noise]
-        sub = NoiseModel(tuple(e for e in stoch if e not in extra))
+        # what each calibrated entry puts into the band (Effect.band_entries)
+        band_ctx = self._context(cal)
+        band_ctx.E, band_ctx.rec = E, rec
+        sub = NoiseModel(tuple(b for e in cal for b in get_effect(e.effect).band_entries(band_ctx, e)))
         taus = m * self.dt
         meas = np.array([oadev(x[:, g], self.dt, taus=taus).dev for g in range(self.N)])
         tr = self.t_sim[rec]
         # the measurement's own reference rates (quantization sees them); noise = output − H·ref
         truth = self.ref[rec] if self.ref is not None else np.zeros((n, 3))
         sensed = truth @ self.H.T
+        # what the band's own deterministic entries make of the reference (a filter's lag on the
+        # motion): taken out like the model's deterministic part is taken out of the measurement
+        det = NoiseModel(tuple(e for e in sub if get_effect(e.effect).predicts))
+        if len(det.entries):
+            sensed = simulate_readings(det, truth, self.H, self.dt, np.random.default_rng(0), time_s=tr)
         mc = np.empty((self.n_runs, self.N, taus.size))
         for k in range(self.n_runs):
             rng = np.random.default_rng([self.seed, k])
             s = simulate_readings(sub, truth, self.H, self.dt, rng, time_s=tr) - sensed
-            for e in extra:
-                s[:, e.gyro - 1] += get_effect(e.effect).band_noise(e, n, self.dt, rng)
             if rec == slice(0, self.n):
                 s = self._like_parts(s)
             for g in range(self.N):
@@ -881,11 +884,15 @@ class _Services:
         """The gyro's Allan fit on the stochastic record with the model's noise terms (cached)."""
         if gyro not in self._noise:
             kw: dict = {"model_terms": ()}
-            for e in self._terms(gyro):
-                term = get_effect(e.effect).noise_term(e)
+            for e in self.ctx.model:
+                if e.gyro != gyro:
+                    continue
+                term = get_effect(e.effect).noise_term(self.ctx, e)
                 kw["model_terms"] += tuple(term.get("terms", ()))
                 if "gm_tau_s" in term:
                     kw["gm_tau_s"] = term["gm_tau_s"]
+                if "min_tau_s" in term:
+                    kw["min_tau_s"] = max(kw.get("min_tau_s", 0.0), term["min_tau_s"])
             fl = fit_gyro_noise(self.ctx.Er[:, gyro - 1], self.comp.dt, gyro, **kw)
             self._noise[gyro] = {f.effect: f for f in fl}
         return self._noise[gyro]

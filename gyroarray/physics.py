@@ -1,8 +1,7 @@
 """Pure physics of a gyro array: the functions the simulator and the fitter share.
 
 Nothing here knows about effects, models or files: rotations and the Earth's
-rate, a fractional delay, coloured noise generators, an angle quantizer and
-the Allan variance of Gauss–Markov noise. Units are SI (rad, rad/s, s); the
+rate, a fractional delay, coloured noise generators and the Allan variance of Gauss–Markov noise. Units are SI (rad, rad/s, s); the
 frames and sign conventions are those of ``shared/spec/measurement-format.md``
 (platform frame P, local-level frame L: z up, x at the heading from north,
 turning about up).
@@ -20,7 +19,7 @@ from scipy import signal
 from gyroarray.constants import EARTH_RATE_RAD_S
 
 __all__ = ["tilted_axes", "tilt_basis", "earth_rate_level", "earth_rate_platform", "fractional_delay",
-           "flicker_noise", "gauss_markov_noise", "quantize_angle", "gauss_markov_avar"]
+           "flicker_noise", "gauss_markov_noise", "gauss_markov_avar"]
 
 
 def tilted_axes(nominal: np.ndarray, tilt_rad, azimuth_rad) -> np.ndarray:
@@ -260,44 +259,6 @@ def gauss_markov_noise(n: int, dt_s: float, sigma_rad_s, tau_s, z: np.ndarray) -
         drive[0] = sig[j] * z[0, j]                                              # x₀ ~ N(0, σ²)
         out[:, j] = signal.lfilter([1.0], [1.0, -phi], drive)                    # x_k = φ x_{k−1} + w_k
     return out
-
-
-def quantize_angle(x: np.ndarray, dt_s: float, q_rad, phase) -> np.ndarray:
-    """Angle quantization of rate outputs.
-
-    Parameters
-    ----------
-    x : ndarray, shape (n, m)
-        Rate [rad/s].
-    dt_s : float
-        Sample step [s].
-    q_rad : array_like, shape (m,)
-        Quantization step q of the angle [rad] (q = √12·Q); 0 = none.
-    phase : array_like, shape (m,)
-        Start of the angle counter within a step, in [0, 1) [-].
-
-    Returns
-    -------
-    ndarray, shape (n, m)
-        q·(c_i − c_{i−1})/dt with c_i = floor(phase + Σ_{j<=i} x_j dt / q),
-        c_{−1} = 0.
-
-    Notes
-    -----
-    If the quantization errors at the ends of the averaging windows are
-    independent and uniform (variance q²/12), the Allan variance gains
-    q²/(4τ²) = 3Q²/τ², hence q = √12·Q. That needs the angle to move
-    across many steps between τ and 2τ in a way that varies along the
-    record (table motion, a drifting bias); see tests.
-    """
-    q = np.asarray(q_rad, dtype=float)
-    on = q > 0
-    y = np.array(x, dtype=float, copy=True)
-    if not np.any(on):
-        return y
-    counts = np.floor(np.asarray(phase)[on] + np.cumsum(x[:, on], axis=0) * (dt_s / q[on]))
-    y[:, on] = np.diff(counts, axis=0, prepend=0.0) * (q[on] / dt_s)
-    return y
 
 
 def gauss_markov_avar(tau_s, sigma, tau_c, dt_s: float | None = None) -> np.ndarray:

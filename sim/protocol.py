@@ -522,8 +522,11 @@ class Effect:
         """The parameters of a model entry after ``fit`` (what the fit does not set is kept)."""
         params = dict(old)
         for k, v in fit.params.items():
-            if k in self.param_names and v is not None and np.isfinite(v):
-                params[k] = float(v)
+            if k not in self.param_names or v is None:
+                continue
+            a = np.asarray(v, dtype=float)
+            if np.all(np.isfinite(a)):
+                params[k] = float(a) if a.ndim == 0 else tuple(float(x) for x in a.ravel())
         return params
 
     # -- simulate side ----------------------------------------------------------
@@ -559,18 +562,15 @@ class Effect:
             return None
         return ctx.simulate_entry(entry)
 
-    def band_noise(self, entry: "ModelEntry", n: int, dt: float, rng: np.random.Generator) -> np.ndarray:
-        """Its own part of one Monte-Carlo run of the model band (n,) [rad/s], when it is
-        not simulated in the chain there (see :attr:`has_band_noise`)."""
-        raise NotImplementedError
+    def band_entries(self, ctx: "FitContext", entry: "ModelEntry") -> list:
+        """The entries this calibrated entry puts into the model's Monte-Carlo band (default:
+        itself if ``stochastic``, else none). An effect whose noise depends on what else the
+        gyro sees adds that too (a quantizer: the gyro's bias, which moves its counter)."""
+        return [entry] if self.stochastic else []
 
-    @property
-    def has_band_noise(self) -> bool:
-        """It adds :meth:`band_noise` to the band instead of running in the chain."""
-        return type(self).band_noise is not Effect.band_noise
-
-    def noise_term(self, entry: "ModelEntry") -> dict:
-        """For a per-gyro noise effect in the model: the term it adds to the gyro's Allan baseline."""
+    def noise_term(self, ctx: "FitContext", entry: "ModelEntry") -> dict:
+        """For an effect in the model: what it changes in its gyro's Allan fit (a term of the
+        baseline, ``terms``/``gm_tau_s``; the shortest τ to use, ``min_tau_s``)."""
         return {}
 
     def exclude(self, ctx: "FitContext", entry: "ModelEntry") -> np.ndarray | None:

@@ -108,10 +108,6 @@ def _with(effect, gyro, params, extra=()):
 XFAIL = {"sinusoid": "fitted phase 26.8 ± 1.2° against 30° set (2.7σ, outside 10 %) at this seed, a "
                      "1-in-150 draw: over seeds 20–31 the phase pulls have mean 0.33 and sd 1.1 "
                      "(unbiased, σ right); amplitude and frequency within 1σ",
-         "quantization": "found first and significant, D falls, but not consistent after the fit: "
-                         "the simulator's angle counter, barely dithered by the noise, is not the "
-                         "white angle noise (σ² = 3Q²/τ²) that the fit and the band assume; a "
-                         "Gauss–Markov (z 15.8) and the ADEV band (z 6.9) of gyro 3 remain",
          "rate_ramp": "the ramp is found and ranked above the nearly collinear warm-up "
                       "temperature (same-noise χ² 2.7 lower), but D before is only 1.43: the fit "
                       "takes it to 0.78, a 46 % fall, not the ≥ 50 % the test asks"}
@@ -123,8 +119,7 @@ def test_effect_is_found_fitted_and_explained(effect):
     gyro, params = CASES[effect]
     extra = ()
     if effect == "quantization":
-        # angle quantization is white only when the angle crosses many steps:
-        # a real gyro's bias (1 deg/s) does that (sim.effects.quantize_angle)
+        # a turn-on bias of 1 deg/s, as a real gyro has (the quantization noise does not care)
         extra = (ModelEntry("constant_bias", gyro, {"bias_deg_h": 3600.0}),)
     m = lab_run(_with(effect, gyro, params, extra), S1N6, np.random.default_rng(7))
     comp = ModelComparison(m, n_runs=20)
@@ -204,13 +199,7 @@ RIVALS = {
 # every effect once (seed 100) and the rival cases; the parameters are checked
 # by `make score` (benchmarks/diagnosis_score.py), which reports them per case
 SHAPED = sorted({(e, 100) for e in EFFECTS} | set(RIVALS))
-SHAPED_XFAIL = {
-    "quantization": "found (z 136), but the white-angle Q of the fit and the band does not describe "
-                    "the simulator's angle counter when the noise barely dithers it: D after 2.75, "
-                    "a burst (z 9.9: the counter's noise differs between still and turning) and the "
-                    "gyro's ADEV band (z 5.8) fail (test_quantization_as_the_spec_defines_it: "
-                    "white angle noise passes)",
-}
+SHAPED_XFAIL: dict = {}
 
 
 @pytest.mark.parametrize("effect,seed", [
@@ -235,9 +224,8 @@ def test_practice_shaped_case_is_found_and_explained(effect, seed):
 def test_quantization_as_the_spec_defines_it_is_found_fitted_and_explained(seed):
     """White angle noise of standard deviation Q (σ² = 3Q²/τ², the spec's signature).
 
-    An independent generator may make quantization this way rather than with
-    the simulator's angle counter; the band then must not assume a counter
-    (when it did, D stayed at 2.0–3.1 after the fit). Q = 7e-4 deg on gyro 2
+    Made here outside the simulator (Gaussian, not uniform, angle errors), as
+    an independent generator may: the fit and the band read only 3Q²/τ². Q = 7e-4 deg on gyro 2
     of a table run: D 49.6 -> 0.66 and 49.8 -> 0.44, Q 6.99e-4 and 6.96e-4
     ± 2.8e-6 deg at seeds 100 and 102."""
     layout = Layout.conical(1, 5, math.radians(54.7356))

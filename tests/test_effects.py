@@ -299,16 +299,25 @@ def test_common_mode_rho_1_gives_one_source_for_every_gyro():
 
 # -- stages 5 and 6 ----------------------------------------------------------
 
-def test_quantizer_outputs_whole_steps_and_tracks_the_angle():
+def test_quantization_noise_is_a_uniform_angle_error_of_variance_q2():
+    """The angle the output integrates to stays within half a step q/2 = √3·Q of the input's
+    (plus the start), and its error is uniform with variance Q²: 3Q²/τ² in the Allan variance."""
     q_deg = 1e-3
-    q = math.sqrt(12) * deg_to_rad(q_deg)
-    _, w = sweep(5000, 20.0)
+    half = math.sqrt(3) * deg_to_rad(q_deg)
+    n = 20000
+    _, w = sweep(n, 20.0)
     y = run(model({"effect": "quantization", "q_deg": q_deg}), w, seed=3)
-    steps = y * DT / q
-    np.testing.assert_allclose(steps, np.round(steps), atol=1e-6)  # whole steps (rounding of q/dt·dt/q)
-    # the output angle never departs from the input angle by a step or more
-    gap = np.cumsum(y, axis=0) * DT - np.cumsum(w @ TRIAD.H.T, axis=0) * DT
-    assert np.abs(gap).max() < q * (1 + 1e-9)
+    gap = np.cumsum(y - w @ TRIAD.H.T, axis=0) * DT          # e_k − e_{−1}
+    assert np.abs(gap).max() < 2 * half * (1 + 1e-9)
+    e = gap - gap.mean(axis=0)                               # e_k up to the (common) start value
+    assert np.abs(e).max() < 2 * half
+    # variance of a uniform on [−q/2, q/2): q²/12 = Q²; the sample variance of 20 000 draws has
+    # relative sd √(0.8/20 000) = 0.6 % (kurtosis 1.8): ±3 % is 5 sd
+    np.testing.assert_allclose(e.var(axis=0), deg_to_rad(q_deg) ** 2, rtol=0.03)
+    # independent from sample to sample: lag-1 autocorrelation within ±4/√n
+    for j in range(3):
+        r1 = np.corrcoef(e[1:, j], e[:-1, j])[0, 1]
+        assert abs(r1) < 4 / math.sqrt(n)
 
 
 def test_saturation_clips_last_and_exactly():
@@ -359,8 +368,7 @@ def test_every_effect_is_in_the_bit_test_model():
 def test_same_seed_same_bits_different_seed_different():
     a, b, c = _run17(7), _run17(7), _run17(8)
     assert a.tobytes() == b.tobytes()
-    # the outputs are whole quantization steps, so a few coincide by chance (~3 % here)
-    assert np.mean(a != c) > 0.9
+    assert np.mean(a != c) > 0.99
 
 
 def test_the_generator_is_consumed_once_per_run():

@@ -18,7 +18,6 @@ from scipy import signal
 from gyroarray.errors import InputError
 from gyroarray.layout import Layout
 from gyroarray.effects import REGISTRY
-from gyroarray.physics import quantize_angle
 from gyroarray.sim.effects import simulate_readings
 from gyroarray.sim.protocol import Stage
 from gyroarray.sim.model import NoiseModel
@@ -138,21 +137,22 @@ def test_bandwidth_acts_after_sensing_and_noise_before_quantization_and_saturati
     rng = np.random.default_rng(3)
     y = simulate_readings(m, w, CONE4, DT, rng, time_s=t)
     # by hand: u = H ω; (1 + s) u + b + k·f/g0 (level, at the origin: f = [0, 0, g0]); filter;
-    # quantize the angle (start phase from the effect's own stream); clip
+    # quantization noise (uniform angle errors from the effect's own stream, differenced); clip
     u = w @ CONE4.H.T
     x = u + ppm * 1e-6 * u + deg_h_to_rad_s(bias) + deg_s_to_rad_s(k[2])
     x = bandwidth_filter(x, DT, 4.0, 2)
-    phase = _quantizer_phases(3, 4)
-    x = quantize_angle(x, DT, math.sqrt(12) * np.full(4, deg_to_rad(q_deg)), phase)
+    x = x + np.diff(_quantizer_errors(3, 4, n, math.sqrt(3) * deg_to_rad(q_deg)), axis=0) / DT
     x = np.clip(x, -deg_s_to_rad_s(r_deg_s), deg_s_to_rad_s(r_deg_s))
     np.testing.assert_allclose(y, x, rtol=0, atol=1e-12)
     assert np.any(np.abs(y) == deg_s_to_rad_s(r_deg_s))     # the clip did act
 
 
-def _quantizer_phases(seed, n_gyros):
+def _quantizer_errors(seed, n_gyros, n, half):
+    """The angle errors the quantizer draws: n + 1 uniforms on [−half, half) per gyro."""
     from gyroarray.sim.protocol import Streams
     s = Streams.from_rng(np.random.default_rng(seed))
-    return np.array([s.stream("quantization", g).random() for g in range(1, n_gyros + 1)])
+    return np.stack([s.stream("quantization", g).uniform(-half, half, n + 1)
+                     for g in range(1, n_gyros + 1)], axis=1)
 
 
 # -- g_sensitivity: the closed form ------------------------------------------
