@@ -32,7 +32,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import special, stats
 
-__all__ = ["EffectFit", "chi2_to_z"]
+__all__ = ["EffectFit", "chi2_to_z", "z_from_log_p"]
 
 
 @dataclass(frozen=True)
@@ -98,3 +98,16 @@ def chi2_to_z(chi2: float, dof: int) -> float:
     for _ in range(8):
         z = np.sqrt(-2.0 * (log_tail + np.log(z * np.sqrt(2.0 * np.pi))))
     return float(z)
+
+
+def z_from_log_p(log_p: float) -> float:
+    """z with Φ̄(z) = p for an upper-tail probability given by its log: finite however small
+    p is (no cap at p = 1e-300, z = 37.05, where a linear p underflows)."""
+    import math
+    if log_p > -700:
+        return float(-special.ndtri(min(math.exp(log_p), 1.0)))
+    z = math.sqrt(-2.0 * log_p)
+    for _ in range(8):                     # log Φ̄(z) ≈ −z²/2 − log(z√(2π))
+        z = math.sqrt(-2.0 * (log_p + math.log(z * math.sqrt(2.0 * math.pi))))
+    return z
+

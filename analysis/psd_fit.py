@@ -7,8 +7,10 @@ keeps falling (−20 or −40 dB/decade) up to the Nyquist frequency, a
 Gauss–Markov process flattens back to the white level. This module fits the
 Welch periodogram of a residual with
 
-* ``null``: S(f) = W + R/f² (ARW and RRW: W = 2N², R = K²/(2π²), one-sided);
-* ``filter``: S(f) = (W + R/f²)·|H(f)|² with the ``bandwidth`` response
+* ``null``: S(f) = W + F/f + R/f² (ARW, bias instability and RRW: W = 2N²,
+  F = B²/π, R = K²/(2π²), one-sided; the flicker term keeps a record's
+  colored noise at low frequency from reading as a roll-off at high ones);
+* ``filter``: S(f) = (W + F/f + R/f²)·|H(f)|² with the ``bandwidth`` response
   of order 1 or 2 at cut-off fc, in two families: the spec's continuous
   H (:func:`gyroarray.sim.sensor.bandwidth_response`), scanned beyond the
   Nyquist frequency, where |H| → 1 and the filter becomes the null, so the
@@ -17,7 +19,7 @@ Welch periodogram of a residual with
   nested, but what a digital filter is). The better of the two gives the
   estimate (a digitally filtered record fits H_d: order and cut-off right;
   H would trade a lower cut-off for a higher order);
-* ``gauss_markov``: S(f) = W + R/f² + 4σ²τc/(1 + (2π f τc)²),
+* ``gauss_markov``: S(f) = W + F/f + R/f² + 4σ²τc/(1 + (2π f τc)²),
 
 by maximum likelihood (each Welch estimate is S·χ²_ν/ν; W, R and σ² by
 iteratively reweighted least squares at each scanned fc or τc), so the
@@ -76,7 +78,7 @@ class PsdFit:
     lr_gm : float
         2·(ℓ_gm − ℓ_null).
     white, walk : float
-        W and R of the best filter fit (one-sided PSD coefficients).
+        W and R of the best filter fit (one-sided PSD coefficients; F, the flicker's, not kept).
     """
 
     def filter_lr(self, cutoff_hz: float, order: int, dt_s: float, family: str = "digital") -> float:
@@ -84,7 +86,7 @@ class PsdFit:
         f, p = self.freq_hz, self.psd
         ff = f if family == "continuous" else bandwidth_warped_frequency(f, cutoff_hz, dt_s)
         h2 = np.abs(bandwidth_response(ff, cutoff_hz, order)) ** 2
-        base = np.column_stack([np.ones_like(f), 1.0 / f ** 2])
+        base = np.column_stack([np.ones_like(f), 1.0 / f, 1.0 / f ** 2])
         _, ll = _linear_ml(p, base * h2[:, None], self.nu)
         return 2.0 * (ll - self.loglik_null)
 
@@ -120,23 +122,27 @@ def _loglik(p: np.ndarray, s: np.ndarray, nu: float) -> float:
     return float(-0.5 * nu * np.sum(np.log(s) + p / s))
 
 
-def _linear_ml(p: np.ndarray, cols: np.ndarray, nu: float, iters: int = 6) -> tuple[np.ndarray, float]:
-    """Non-negative coefficients of S = cols @ c by IRLS of the Welch likelihood; (c, ℓ)."""
-    c = np.linalg.lstsq(cols, p, rcond=None)[0]
-    c = np.maximum(c, 0.0)
-    s = cols @ c
-    if not np.all(s > 0):
-        c = np.maximum(c, 1e-12 * max(float(np.mean(p)), 1e-300))
-        s = cols @ c
+def _linear_ml(p: np.ndarray, cols: np.ndarray, nu: float, iters: int = 8) -> tuple[np.ndarray, float]:
+    """Non-negative coefficients of S = cols @ c by iteratively reweighted NNLS of the Welch
+    likelihood (weights 1/S: the score of Σ ln S + P/S); (c, ℓ)."""
+    scale = np.maximum(np.abs(cols).max(axis=0), 1e-300)
+    A = cols / scale
+    w = 1.0 / np.maximum(p, 1e-300)
+    c, _ = optimize.nnls(A * w[:, None], p * w)
+    s = A @ c
     for _ in range(iters):
-        w = 1.0 / np.maximum(s, 1e-300)
-        c_new = np.linalg.lstsq(cols * w[:, None], p * w, rcond=None)[0]
-        c_new = np.maximum(c_new, 0.0)
-        s_new = cols @ c_new
+        if not np.all(s > 0):
+            break
+        w = 1.0 / s
+        c_new, _ = optimize.nnls(A * w[:, None], p * w)
+        s_new = A @ c_new
         if not np.all(s_new > 0):
             break
+        if np.allclose(c_new, c, rtol=1e-6, atol=0):
+            c, s = c_new, s_new
+            break
         c, s = c_new, s_new
-    return c, _loglik(p, s, nu)
+    return c / scale, _loglik(p, s, nu)
 
 
 def fit_psd(x, dt_s: float) -> PsdFit:
@@ -144,7 +150,7 @@ def fit_psd(x, dt_s: float) -> PsdFit:
     x = np.asarray(x, dtype=float)
     dt = float(dt_s)
     f, p, nu = _welch(x - x.mean(), dt)
-    base = np.column_stack([np.ones_like(f), 1.0 / f ** 2])
+    base = np.column_stack([np.ones_like(f), 1.0 / f, 1.0 / f ** 2])
     c0, l0 = _linear_ml(p, base, nu)
     nyq = 0.5 / dt
     fcs = np.geomspace(_LOWEST * nyq, _TOP * nyq, int(_PER_DECADE * math.log10(_TOP / _LOWEST)) + 1)
@@ -191,7 +197,7 @@ def fit_psd(x, dt_s: float) -> PsdFit:
         cols = np.column_stack([base, 4.0 * tau / (1.0 + (2 * math.pi * f * tau) ** 2)])
         c, lg = _linear_ml(p, cols, nu)
         if lg > l_gm:
-            l_gm, g_best = lg, (math.sqrt(max(c[2], 0.0)), tau)
+            l_gm, g_best = lg, (math.sqrt(max(c[-1], 0.0)), tau)
     return PsdFit(freq_hz=f, psd=p, nu=nu, loglik_null=l0, filter_cutoff_hz=float(fc),
                   filter_cutoff_sigma_hz=float(sigma_fc), filter_order=int(order),
                   lr_filter=float(max(2 * (l_bw - l0), 0.0)),
@@ -200,7 +206,7 @@ def fit_psd(x, dt_s: float) -> PsdFit:
                                    for o in (1, 2)},
                   filter_family=family,
                   gm_sigma_rad_s=float(g_best[0]), gm_tau_s=float(g_best[1]),
-                  lr_gm=float(max(2 * (l_gm - l0), 0.0)), white=float(cb[0]), walk=float(cb[1]))
+                  lr_gm=float(max(2 * (l_gm - l0), 0.0)), white=float(cb[0]), walk=float(cb[2]))
 
 
 def filter_z(lr: float, n_tests: float = EFFECTIVE_TESTS) -> float:

@@ -224,7 +224,7 @@ from gyroarray.physics import gauss_markov_avar
 
 from .allan import deviation
 from .davar import davar
-from .effect_fit import EffectFit, chi2_to_z
+from .effect_fit import EffectFit, chi2_to_z, z_from_log_p
 from .noise_fit import term_basis
 
 __all__ = ["fit_gyro_noise", "fit_correlation", "fit_burst"]
@@ -661,17 +661,6 @@ def _scan_log_p(w_obs: float, maxima: np.ndarray) -> tuple[float, float]:
     return math.log(m_eff) + log_tail, m_eff
 
 
-def _z_from_log_p(log_p: float) -> float:
-    """z with Φ̄(z) = p for an upper-tail probability given by its log
-    (finite however small p is)."""
-    if log_p > -700:
-        return float(-special.ndtri(min(math.exp(log_p), 1.0)))
-    z = math.sqrt(-2.0 * log_p)
-    for _ in range(8):                     # log Φ̄(z) ≈ −z²/2 − log(z√(2π))
-        z = math.sqrt(-2.0 * (log_p + math.log(z * math.sqrt(2.0 * math.pi))))
-    return z
-
-
 def _gm_grid(cv: _Curve) -> np.ndarray:
     """Correlation times scanned: 4·dt .. τ_max/2, ``_GM_PER_OCTAVE`` per octave."""
     lo = 4.0 * cv.dt_s
@@ -917,7 +906,7 @@ def _fit_gauss_markov(cv: _Curve, base: _Gls, label: str, gyro, common: dict,
     maxima = _max_calibration(vecs)
     i = int(np.argmax(stats))
     log_p, m_eff = _scan_log_p(float(stats[i]), maxima)
-    z = _z_from_log_p(log_p)
+    z = z_from_log_p(log_p)
 
     # the estimate: τc refined between the neighbours of the best grid point,
     # then the covariance from the fitted model, then τc again
@@ -1235,7 +1224,7 @@ def fit_burst(E, time_s, dt_s: float) -> EffectFit:
                      cu[-1], n2 * float(r))
     best = int(np.argmax(lr))
     lr_grid = float(lr[best])
-    z = _z_from_log_p(_burst_log_p(lr_grid, blocks))
+    z = z_from_log_p(_burst_log_p(lr_grid, blocks))
     a, b = int(ia[best]), int(ib[best])
 
     # refine both boundaries to one Haar sample (2 dt) within a block of the grid's
@@ -1270,10 +1259,13 @@ def fit_burst(E, time_s, dt_s: float) -> EffectFit:
     up = ratio >= 1.0
     rises = f"rises {math.sqrt(ratio):.3g}×" if up else f"drops to {math.sqrt(ratio):.3g}×"
     sig = np.abs(per_z) > 3.0
+    each = ", ".join(f"{k + 1} ({math.sqrt(per_gyro[k]):.3g}×)" for k in np.flatnonzero(sig))
     if sig.all():
-        who = "on all gyros"
+        who = f"on all gyros: {each}"
     elif sig.any():
-        who = "on gyros " + ", ".join(str(k + 1) for k in np.flatnonzero(sig))
+        rest = np.sqrt(per_gyro[~sig])
+        who = (f"on gyro{'s' if sig.sum() > 1 else ''} {each}; the others "
+               + (f"{rest.min():.3g}–{rest.max():.3g}×" if rest.size > 1 else f"{rest[0]:.3g}×"))
     else:
         who = "on no single gyro"
     if z > 3:

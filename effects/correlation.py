@@ -8,7 +8,7 @@ from dataclasses import replace
 import numpy as np
 from scipy import special
 
-from gyroarray.analysis.effect_fit import EffectFit
+from gyroarray.analysis.effect_fit import EffectFit, z_from_log_p
 from gyroarray.analysis.stochastic_fit import fit_correlation
 from gyroarray.design import correlation_matrix
 from gyroarray.effects import _draw
@@ -129,8 +129,10 @@ def _merge(name: str, fits: list[EffectFit]) -> EffectFit:
     zs = [f.z for f in fits if f.z is not None and np.isfinite(f.z)]
     zmax = max(zs, default=math.nan)
     if np.isfinite(zmax):
-        p = 1.0 - (1.0 - float(special.ndtr(-zmax))) ** len(zs)
-        z = float(-special.ndtri(min(max(p, 1e-300), 1.0)))
+        log_p1 = float(special.log_ndtr(-zmax))
+        p1 = math.exp(log_p1)
+        log_p = math.log(-math.expm1(len(zs) * math.log1p(-p1))) if p1 > 1e-12 else log_p1 + math.log(len(zs))
+        z = z_from_log_p(log_p)
     else:
         z = math.nan
     params = {"rho_arw": float(fa.params["rho_arw"]) if fa else 0.0,

@@ -479,7 +479,10 @@ def _diagnosis_text(a, head: str) -> str:
 
 def _write_report(comp, steps, args) -> dict:
     from .reports.compare_report import write_compare_report
-    return write_compare_report(comp, steps, args.out, args.md, force=args.force)
+    title = None
+    if getattr(args, "validate", False):
+        title = f"Validation: does the model ({comp.given_model.description or args.model}) predict {comp.name}?"
+    return write_compare_report(comp, steps, args.out, args.md, title=title, force=args.force)
 
 
 def _write_model(path: Path, model, args) -> str:
@@ -490,12 +493,29 @@ def _write_model(path: Path, model, args) -> str:
     return str(write_text(path, model.to_toml(), force=args.force))
 
 
+def _validation_text(comp, a, model_path) -> str:
+    """``the model fitted on X predicts Y: consistent / not, worst at …``."""
+    worst = max(a.tests, key=lambda t: t.z if math.isfinite(t.z) else -math.inf, default=None)
+    where = comp.given_model.description or str(model_path)
+    head = (f"the model ({where}) predicts {comp.name}: "
+            + ("consistent" if a.consistent else "NOT consistent") + f" (D = {a.discrepancy:.3g})")
+    if worst is not None and not a.consistent:
+        head += f", worst: {worst.evidence} (z = {worst.z:.1f})"
+    return head
+
+
 def cmd_compare(args):
     comp = _comparison(args)
-    # with a model beyond the baseline: the baseline first, then its effects one
-    # by one, so the report shows the error falling
-    steps = comp.steps_to_model()
-    a = steps[-1][1]
+    if args.validate:
+        if args.model is None:
+            raise InputError("gyroarray compare --validate needs --model (the model to test)")
+        a = comp.validate()
+        steps = [(None, a)]
+    else:
+        # with a model beyond the baseline: the baseline first, then its effects one
+        # by one, so the report shows the error falling
+        steps = comp.steps_to_model()
+        a = steps[-1][1]
     _write_report(comp, steps, args)
     d = a.to_json_dict()
     res = {"discrepancy": a.discrepancy, "consistent": a.consistent, "z_crit": a.z_crit,
@@ -505,7 +525,12 @@ def cmd_compare(args):
            "adev_band": d["adev_band"], "candidates": d["candidates"][:10], "notes": a.notes}
     if args.md is not None:
         res["markdown"] = str(args.md)
+    if args.validate:
+        res["validated"] = True
+        res["verdict"] = _validation_text(comp, a, args.model)
     fall = "" if len(steps) == 1 else f" (baseline alone: D = {steps[0][1].discrepancy:.3g})"
+    if args.validate:
+        fall = "\n" + res["verdict"]
     text = (f"{comp.name}: discrepancy D = {a.discrepancy:.3g} "
             f"({'consistent' if a.consistent else 'NOT consistent'} with the model){fall}\n"
             + "\n".join(f"  {t.effect}{'' if t.gyro is None else ':' + str(t.gyro)}  z = {t.z:.1f}  {t.evidence}"
@@ -516,6 +541,14 @@ def cmd_compare(args):
 
 def cmd_diagnose(args):
     comp = _comparison(args)
+    if args.validate:
+        if args.model is None:
+            raise InputError("gyroarray diagnose --validate needs --model (the model to test)")
+        a = comp.validate()
+        out = a.to_json_dict()
+        out["validated"] = True
+        out["verdict"] = _validation_text(comp, a, args.model)
+        return out, out["verdict"] + "\n" + _diagnosis_text(a, f"{comp.name}: {comp.N} gyros, {comp.n * comp.dt:.0f} s")
     a = comp.analyse()
     return a.to_json_dict(), _diagnosis_text(a, f"{comp.name}: {comp.N} gyros, {comp.n * comp.dt:.0f} s")
 
@@ -538,6 +571,12 @@ def cmd_fit(args):
 
 def cmd_ladder(args):
     comp = _comparison(args)
+    held = None
+    if args.holdout is not None:
+        from .compare import ModelComparison, split_measurement
+        first, rest = split_measurement(comp.m, args.holdout)
+        comp = ModelComparison(first, comp.given_model, n_runs=args.runs, seed=args.seed)
+        held = ModelComparison(rest, None, n_runs=args.runs, seed=args.seed)
     steps = comp.ladder(max_steps=args.max_steps)
     _write_report(comp, steps, args)
     final = steps[-1][1]
@@ -551,6 +590,17 @@ def cmd_ladder(args):
            "notes": list(final.notes), "report": str(args.out)}
     if args.model_out is not None:
         res["model"] = _write_model(args.model_out, final.model, args)
+    held_text = []
+    if held is not None:
+        from .compare import ModelComparison
+        from .sim.model import NoiseModel
+        model = NoiseModel(final.model.entries, description=f"the ladder on {comp.name}")
+        v = ModelComparison(held.m, model, n_runs=args.runs, seed=args.seed)
+        va = v.validate()
+        verdict = _validation_text(v, va, comp.name)
+        res["holdout"] = {"fraction": args.holdout, "discrepancy": va.discrepancy, "consistent": va.consistent,
+                          "verdict": verdict, "candidates": va.to_json_dict()["candidates"][:10]}
+        held_text = [f"held out ({args.holdout:g} of the record): {verdict}"]
     lines = [f"{comp.name}: the ladder"]
     for add, a in steps:
         what = "calibrated model" if add is None else f"+ {add[0]}{'' if add[1] is None else ':' + str(add[1])}"
@@ -559,6 +609,7 @@ def cmd_ladder(args):
     left = final.unexplained() + [t.evidence for t in final.candidates if final.significant(t)]
     lines += ["still unexplained:"] + ([f"  {x}" for x in left] or ["  nothing"])
     lines += [f"note: {x}" for x in final.notes if x.startswith("the ladder")]
+    lines += held_text
     lines.append(f"report: {args.out}")
     return res, "\n".join(lines)
 
@@ -676,10 +727,15 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("compare", help="measurement vs model: calibrate, model band, diagnostics report")
     _add_compare_args(p, out=True)
+    p.add_argument("--validate", action="store_true",
+                   help="keep every parameter of --model fixed (only the starting biases are fitted): "
+                        "does the model fitted on another run predict this one?")
     p.set_defaults(func=cmd_compare)
 
     p = sub.add_parser("diagnose", help="which effect is the model missing: candidates ranked by significance")
     _add_compare_args(p, out=False)
+    p.add_argument("--validate", action="store_true",
+                   help="keep every parameter of --model fixed: does it predict this record?")
     p.set_defaults(func=cmd_diagnose)
 
     p = sub.add_parser("fit", help="fit the model (plus --add EFFECT[:GYRO]) to a measurement")
@@ -695,6 +751,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--max-steps", type=_positive_int("--max-steps"), default=8, metavar="K",
                    help="effects added at most (8)")
     p.add_argument("--model-out", type=Path, metavar="NEW.toml", help="write the final fitted model")
+    p.add_argument("--holdout", type=_finite_float("--holdout"), metavar="FRACTION",
+                   help="run the ladder on the first part of the record, then validate its model on the "
+                        "last FRACTION (e.g. 0.3)")
     p.set_defaults(func=cmd_ladder)
 
     p = sub.add_parser("check", help="regression thresholds: run the threshold scenarios, exit 1 on a failure")

@@ -54,7 +54,7 @@ from scipy import optimize, special, stats
 
 from gyroarray.analysis.allan import averaging_factors, oadev
 from gyroarray.analysis.earth_fit import attitude_from_rates
-from gyroarray.analysis.effect_fit import EffectFit
+from gyroarray.analysis.effect_fit import EffectFit, chi2_to_z, z_from_log_p
 from gyroarray.analysis.motion import still_mask
 from gyroarray.analysis.regress import _RWWhitener
 from gyroarray.analysis.stochastic_fit import fit_gyro_noise
@@ -67,7 +67,8 @@ from gyroarray.sim.protocol import Effect, FitContext, Kind
 from gyroarray.sim.sensor import gravity_specific_force, rigid_body_specific_force
 from gyroarray.units import RAD_PER_DEG, arw_deg_rt_h_to_rad_rt_s, rad_s_to_deg_h, rrw_deg_h_rt_h_to_rad_s_rt_s
 
-__all__ = ["ALPHA", "Test", "Analysis", "ModelComparison", "baseline_model", "critical_z", "parse_add"]
+__all__ = ["ALPHA", "Test", "Analysis", "ModelComparison", "baseline_model", "critical_z", "parse_add",
+           "split_measurement"]
 
 #: Family-wise false-alarm rate of the discrepancy.
 ALPHA = 0.01
@@ -285,6 +286,40 @@ def _entry_params(entry: ModelEntry) -> dict:
     return d
 
 
+def _prediction_error(t: Test, entry: ModelEntry) -> Test:
+    """A test of a model's own effect on what its prediction leaves: the refit is the error δ of
+    the model's parameters; where the model carries their 1σ (σ_M, from the record it was fitted
+    on) and the refit has its own (σ_T), each is judged against √(σ_T² + σ_M²): both records'
+    uncertainty, z from the χ² of those ratios."""
+    f = t.fit
+    terms = []
+    for k, s_m in entry.sigma.items():
+        s_t = f.sigma.get(k) if f is not None else None
+        if s_t is None or k not in f.params:
+            continue
+        d, st, sm = (np.atleast_1d(np.asarray(x, float)) for x in (f.params[k], s_t, s_m))
+        if d.shape == st.shape == sm.shape and np.all(np.isfinite(d)) and np.all(st > 0):
+            terms += list(d / np.sqrt(st ** 2 + sm ** 2))
+    z = t.z
+    if terms:
+        z = chi2_to_z(float(np.sum(np.square(terms))), len(terms))
+    return replace(t, z=float(z), evidence="prediction error of the model's " + t.evidence
+                   + (f" (against the model's own 1σ too: z = {z:.1f})" if terms else ""),
+                   extra={**t.extra, "prediction_error": True, "z_without_model_sigma": t.z})
+
+
+def _sigma_of(f: EffectFit, params: dict) -> dict:
+    """The fit's finite 1σ of the entry's parameters (a vector's only when every component has one)."""
+    out = {}
+    for k, v in f.sigma.items():
+        if k not in params or v is None:
+            continue
+        a = np.asarray(v, dtype=float)
+        if a.size and np.all(np.isfinite(a)) and np.all(a >= 0):
+            out[k] = float(a) if a.ndim == 0 else tuple(float(x) for x in a)
+    return out
+
+
 def _zeros_like_outputs(n: int, N: int) -> np.ndarray:
     return np.zeros((n, N))
 
@@ -329,6 +364,7 @@ class ModelComparison:
         self.positions = measurement.layout.positions_m
         model = baseline_model(self.N) if model is None else model
         model.check(self.N)
+        self.given_model = model
         self.model = self._with_baseline(model)
         self._check_usable()
         self.parts: list[tuple[int, int]] = []      # stitched still parts, [start, stop) of the new record
@@ -495,10 +531,10 @@ class ModelComparison:
         clean = E - eff.predict(ctx, entry)
         q2 = np.array(ctx.q, dtype=float, copy=True)
         for g in (range(self.N) if gyro is None else [gyro - 1]):
-            q2[g] = self._noise_rq(clean[:, g], g + 1)[1]
+            q2[g] = self._noise_rq(clean[:, g], g + 1, self._min_tau(ctx, ctx.model, g + 1, 1))[1]
         return eff.fit(replace(ctx, q=q2), gyro, E)
 
-    def _noise_rq(self, e: np.ndarray, gyro: int) -> tuple[float, float]:
+    def _noise_rq(self, e: np.ndarray, gyro: int, min_tau_s: float = 0.0) -> tuple[float, float]:
         """White variance r = N²/dt and random-walk increment variance q = K²·dt [rad²/s²] of one gyro.
 
         r from the Allan fit of the longest static part (ARW is always well
@@ -509,9 +545,11 @@ class ModelComparison:
         and (b) the Allan fit's K + 2σ_K: a drift the Allan variance cannot
         tell from RRW (a flicker floor, a short record where K is 0 ± σ) must
         not make a slow regressor (temperature, ramp, Earth rate) significant.
+        ``min_tau_s``: the Allan fit starts there (what the model shapes below
+        it, a sensor's own filter, is not white noise).
         """
         a, b = self.longest
-        base = fit_gyro_noise(e[a:b], self.dt, gyro)
+        base = fit_gyro_noise(e[a:b], self.dt, gyro, min_tau_s=min_tau_s)
         n_rad = arw_deg_rt_h_to_rad_rt_s(base[0].params["n_deg_rt_h"])
         k_up = rrw_deg_h_rt_h_to_rad_s_rt_s(base[1].params["k_deg_h_rt_h"]
                                             + 2.0 * base[1].sigma.get("k_deg_h_rt_h", 0.0))
@@ -528,6 +566,8 @@ class ModelComparison:
         notes: list[str] = []
         self._leave_out(ctx, notes)
         fits = self.calibrate(ctx)
+        for e in model:                        # glitches the model knows of out of the record
+            ctx.E = get_effect(e.effect).clean(ctx, e, ctx.E)
         tests = self._deterministic_candidates(ctx, notes)
         self._stochastic_record(ctx, tests, notes)
         fits.update(self._noise(ctx, tests, notes))
@@ -541,6 +581,75 @@ class ModelComparison:
         return Analysis(model=cal, fits=fits, tests=tests, candidates=cands, discrepancy=float(disc),
                         z_crit=zc, residual_rad_s=ctx.E, raw_residual_rad_s=self.E0, record=ctx.rec,
                         static=self.static, adev=adev, notes=notes, r=ctx.r, q=ctx.q, context=ctx)
+
+    def validate(self) -> Analysis:
+        """Does the model, fitted on another record, predict this one? (``compare --validate``)
+
+        Every parameter of the model stays as it is: the white and random-walk
+        variances come from its baseline, the deterministic effects predict
+        with their own parameters, the stochastic part is simulated as it is
+        for the band. Only each gyro's starting bias (the random walk's free
+        start) belongs to this record. The tests: every effect not in the
+        model (as in :meth:`analyse`), each deterministic effect of the model
+        tested again on what its prediction leaves (its prediction error: z ≈
+        N(0, 1) when the model's parameters hold here), and the ADEV against
+        the model's band; D has the same meaning as in :meth:`analyse`.
+        """
+        have = {(e.effect, e.gyro) for e in self.given_model}
+        for eff in _baseline_effects():
+            missing = [g for g in range(1, self.N + 1) if (eff.name, g) not in have
+                       and (eff.name, None) not in have]
+            if missing:
+                raise InputError(f"--validate needs a fitted model: it has no {eff.name} for gyro(s) "
+                                 f"{', '.join(map(str, missing))} (write the model with gyroarray fit --out "
+                                 "or ladder --model-out)", file=self.name)
+        model = self.model
+        ctx = self._context(model)
+        where = model.description or "another record"
+        notes = [f"validation: every parameter of the model ({where}) is fixed; only each gyro's "
+                 "starting bias is fitted to this record"]
+        self._leave_out(ctx, notes)
+        ctx.r, ctx.q = self._model_rq(model)
+        preds = _zeros_like_outputs(self.n, self.N)
+        for e in model:
+            pred = get_effect(e.effect).predict(ctx, e)
+            if pred is not None:
+                preds = preds + pred
+        ctx.E = self.E0 - preds
+        for e in model:
+            ctx.E = get_effect(e.effect).clean(ctx, e, ctx.E)
+        tests = self._deterministic_candidates(ctx, notes)
+        for e in model:                        # the prediction error of each deterministic effect
+            eff = get_effect(e.effect)
+            if eff.predicts and eff.candidate and not eff.why_not(ctx):
+                before = len(tests)
+                self._test(ctx, eff, e.gyro, tests, notes)
+                if len(tests) > before:
+                    tests[-1] = _prediction_error(tests[-1], e)
+        self._stochastic_record(ctx, tests, notes)
+        self._noise(ctx, tests, notes, refit=False)
+        adev, band_tests = self._adev_band(model, ctx.E, ctx.rec)
+        tests += band_tests
+        cands, zc, disc = self._rank(ctx, tests)
+        notes += self._record_notes()
+        return Analysis(model=model, fits={}, tests=tests, candidates=cands, discrepancy=float(disc),
+                        z_crit=zc, residual_rad_s=ctx.E, raw_residual_rad_s=self.E0, record=ctx.rec,
+                        static=self.static, adev=adev, notes=notes, r=ctx.r, q=ctx.q, context=ctx)
+
+    def _model_rq(self, model: NoiseModel) -> tuple[np.ndarray, np.ndarray]:
+        """r = N²/dt and q = K²·dt per gyro [rad²/s²] from the model's baseline, as it is."""
+        r, q = np.zeros(self.N), np.zeros(self.N)
+        for e in model:
+            eff = get_effect(e.effect)
+            if not eff.baseline or e.gyro is None:
+                continue
+            v = float(e.si_params[eff.params[0].si_name])
+            if eff.baseline_term == "white":
+                r[e.gyro - 1] = v * v / self.dt
+            elif eff.baseline_term == "walk":
+                q[e.gyro - 1] = v * v * self.dt
+        r = np.maximum(r, 1e-30)
+        return r, np.maximum(q, 1e-12 * r)
 
     def _leave_out(self, ctx: FitContext, notes: list) -> None:
         """Samples the regressions leave out, as the model's entries ask (a burst's window)."""
@@ -561,13 +670,14 @@ class ModelComparison:
         """
         det = [e for e in ctx.model if get_effect(e.effect).predicts]
         preds = {(e.effect, e.gyro): _zeros_like_outputs(self.n, self.N) for e in det}
+        current = {(e.effect, e.gyro): e for e in ctx.model}
         fits = {}
         r, q = np.zeros(self.N), np.zeros(self.N)
         ctx.r, ctx.q = r, q
-        for _ in range(2):
+        for it in range(2):
             E = self.E0 - sum(preds.values(), _zeros_like_outputs(self.n, self.N))
             for g in range(self.N):
-                r[g], q[g] = self._noise_rq(E[:, g], g + 1)
+                r[g], q[g] = self._noise_rq(E[:, g], g + 1, self._min_tau(ctx, current.values(), g + 1, it))
             if not det:
                 break
             for e in det:
@@ -575,9 +685,18 @@ class ModelComparison:
                 eff = get_effect(e.effect)
                 others = sum((p for k, p in preds.items() if k != key), _zeros_like_outputs(self.n, self.N))
                 fits[key] = self._fitted(ctx, eff, e.gyro, self.E0 - others)
-                preds[key] = eff.predict(ctx, self._entry_from_fit(eff, fits[key], e))
+                current[key] = self._entry_from_fit(eff, fits[key], e)
+                preds[key] = eff.predict(ctx, current[key])
         ctx.E = self.E0 - sum(preds.values(), _zeros_like_outputs(self.n, self.N))
         return fits
+
+    @staticmethod
+    def _min_tau(ctx: FitContext, entries, gyro: int, it: int) -> float:
+        """The shortest τ of the gyro's Allan fits its model entries allow (0 before they are fitted)."""
+        if it == 0:
+            return 0.0
+        return max((get_effect(e.effect).noise_term(ctx, e).get("min_tau_s", 0.0)
+                    for e in entries if e.gyro == gyro), default=0.0)
 
     def _targets(self, eff: Effect, in_model: set) -> list:
         """The gyros (or None for the array) an effect would be tested on, not in the model."""
@@ -647,8 +766,8 @@ class ModelComparison:
             Er = get_effect(e.effect).whiten(ctx, e, Er, ctx.tr)
         ctx.Er = Er
 
-    def _noise(self, ctx: FitContext, tests: list, notes: list) -> dict:
-        """Step 5: the model's noise terms and the candidates that read the stochastic record."""
+    def _noise(self, ctx: FitContext, tests: list, notes: list, refit: bool = True) -> dict:
+        """Step 5: the model's noise terms (``refit``) and the candidates that read the stochastic record."""
         fits = {}
         per_gyro, array_wide = [], []
         for eff, targets in self._candidate_effects(ctx, "noise", notes):
@@ -656,7 +775,7 @@ class ModelComparison:
         for g in range(1, self.N + 1):
             for e in ctx.model:
                 eff = get_effect(e.effect)
-                if e.gyro == g and eff.kind is Kind.NOISE and not eff.predicts:
+                if refit and e.gyro == g and eff.kind is Kind.NOISE and not eff.predicts:
                     fits[(e.effect, g)] = eff.fit(ctx, g, ctx.E)
             for eff, targets in per_gyro:
                 if g in targets:
@@ -665,7 +784,7 @@ class ModelComparison:
             self._test(ctx, eff, None, tests, notes)
         for e in ctx.model:
             eff = get_effect(e.effect)
-            if (e.effect, e.gyro) not in fits and not eff.predicts and eff.kind is not Kind.NOISE:
+            if refit and (e.effect, e.gyro) not in fits and not eff.predicts and eff.kind is not Kind.NOISE:
                 fits[(e.effect, e.gyro)] = eff.fit(ctx, e.gyro, ctx.E)
         return fits
 
@@ -700,9 +819,10 @@ class ModelComparison:
 
     # -- the model ------------------------------------------------------------------
     def _entry_from_fit(self, eff: Effect, f: EffectFit, old: ModelEntry) -> ModelEntry:
-        """A model entry with the fitted parameters (keeping what the fit does not set)."""
+        """A model entry with the fitted parameters (keeping what the fit does not set) and their 1σ."""
         try:
-            return ModelEntry(old.effect, old.gyro, eff.clip(eff.entry_params(f, old.params), self.N))
+            params = eff.clip(eff.entry_params(f, old.params), self.N)
+            return ModelEntry(old.effect, old.gyro, params, _sigma_of(f, params))
         except InputError:
             return old
 
@@ -724,7 +844,8 @@ class ModelComparison:
                 raise InputError(f"cannot add {label}: it is already in the model", file=self.name)
             raise InputError(f"cannot add {label}: it is not identifiable on this record "
                              "(see the notes of diagnose)", file=self.name)
-        return ModelEntry(effect, gyro, eff.clip(eff.entry_params(f, {}), self.N))
+        params = eff.clip(eff.entry_params(f, {}), self.N)
+        return ModelEntry(effect, gyro, params, _sigma_of(f, params))
 
     def _adev_band(self, cal: NoiseModel, E: np.ndarray, rec: slice):
         """Measured ADEV vs the model's Monte-Carlo band, one test per gyro."""
@@ -763,10 +884,12 @@ class ModelComparison:
         tq = stats.t.ppf(0.975, M - 1)
         for g in range(self.N):
             tk = (np.log(meas[g]) - mu[g]) / sd[g]
-            p = 2.0 * stats.t.sf(np.abs(tk), M - 1)
-            pmin = float(np.min(p))
-            pg = -math.expm1(taus.size * math.log1p(-min(pmin, 1 - 1e-16)))
-            z = float(-special.ndtri(max(pg, 1e-300)))
+            log_p = math.log(2.0) + stats.t.logsf(np.abs(tk), M - 1)       # two-sided, in logs
+            log_pmin = float(np.min(log_p))
+            pmin = math.exp(log_pmin)
+            log_pg = (math.log(-math.expm1(taus.size * math.log1p(-min(pmin, 1 - 1e-16)))) if pmin > 1e-12
+                      else log_pmin + math.log(taus.size))
+            z = z_from_log_p(log_pg)
             out = np.abs(tk) > tq
             above = tk > tq
             below = tk < -tq
@@ -990,4 +1113,28 @@ def _ml_q(e: np.ndarray, r: float, q0: float, use: np.ndarray) -> float:
     res = optimize.minimize_scalar(nll, bounds=(lo, hi), method="bounded", options={"xatol": 0.05})
     return float(math.exp(res.x))
 
+
+def split_measurement(m: Measurement, fraction: float) -> tuple[Measurement, Measurement]:
+    """The first (1 − ``fraction``) of a record and the rest, by samples (``ladder --holdout``).
+
+    Raises InputError for a fraction outside (0, 1) or a part too short to analyse.
+    """
+    from dataclasses import replace as _replace
+    if not 0.0 < fraction < 1.0:
+        raise InputError(f"--holdout must be a fraction in (0, 1), got {fraction:g}")
+    n = m.time_s.size
+    k = int(round(n * (1.0 - fraction)))
+    if min(k, n - k) < MIN_STATIC:
+        raise InputError(f"--holdout {fraction:g} leaves a part of {min(k, n - k)} samples; each part "
+                         f"needs at least {MIN_STATIC} (a static part to calibrate on)", file=m.source)
+
+    def part(a, b, what):
+        return _replace(m, time_s=m.time_s[a:b], gyro_deg_s=m.gyro_deg_s[a:b],
+                        ref_deg_s=None if m.ref_deg_s is None else m.ref_deg_s[a:b],
+                        temp_c=None if m.temp_c is None else m.temp_c[a:b],
+                        acc_m_s2=None if m.acc_m_s2 is None else m.acc_m_s2[a:b],
+                        source=f"{m.source or 'measurement'} ({what})")
+    t = m.time_s
+    return (part(0, k, f"{t[0]:.0f}–{t[k - 1]:.0f} s, fitted"),
+            part(k, n, f"{t[k]:.0f}–{t[-1]:.0f} s, held out"))
 

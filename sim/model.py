@@ -144,6 +144,11 @@ class ModelEntry:
     params : Mapping[str, object]
         Parameters in the spec's units, as written by the user; stored as a
         read-only mapping (arrays as tuples).
+    sigma : Mapping[str, object]
+        Optional 1σ of fitted parameters (same units; TOML key ``sigma``, a
+        table), written by ``fit --out`` and ``ladder --model-out``: the
+        uncertainty a model carries to a record it is validated on. Never
+        simulated.
 
     Attributes
     ----------
@@ -160,6 +165,7 @@ class ModelEntry:
     effect: str
     gyro: int | None = None
     params: Mapping[str, Any] = field(default_factory=dict)
+    sigma: Mapping[str, Any] = field(default_factory=dict, compare=False)
     si_params: Mapping[str, Any] = field(init=False, repr=False, compare=False)
 
     def __post_init__(self):
@@ -197,6 +203,7 @@ class ModelEntry:
                 raise InputError(f"{label}: {err.message}", column=err.column) from None
         ordered = {p.name: checked[p.name] for p in eff.params if p.name in checked}
         object.__setattr__(self, "params", MappingProxyType(ordered))
+        object.__setattr__(self, "sigma", MappingProxyType(_check_sigma(eff, self.sigma, label)))
         object.__setattr__(self, "si_params", MappingProxyType(_si(eff, ordered)))
 
     def __hash__(self):
@@ -217,7 +224,28 @@ class ModelEntry:
             out["gyro"] = self.gyro
         for key, value in self.params.items():
             out[key] = _plain(value)
+        if self.sigma:
+            out["sigma"] = {k: _plain(v) for k, v in self.sigma.items()}
         return out
+
+
+def _check_sigma(eff: Effect, sigma, label: str) -> dict:
+    """The ``sigma`` table: parameter names of the effect, non-negative finite numbers (a list
+    for a vector parameter)."""
+    if not isinstance(sigma, Mapping):
+        raise InputError(f"{label}: sigma must be a table of parameter = 1σ, got {_type_name(sigma)}",
+                         column="sigma")
+    out = {}
+    for key, value in sigma.items():
+        if key not in eff.param_names:
+            raise InputError(f"{label}: sigma of unknown parameter {key!r} (parameters of {eff.name}: "
+                             f"{_param_list(eff)})", column=f"sigma.{key}")
+        vals = value if isinstance(value, (list, tuple)) else [value]
+        if not vals or not all(_is_number(v) and math.isfinite(v) and v >= 0 for v in vals):
+            raise InputError(f"{label}: sigma.{key} must be a non-negative number (or one per "
+                             f"component), got {value!r}", column=f"sigma.{key}")
+        out[key] = tuple(float(v) for v in vals) if isinstance(value, (list, tuple)) else float(value)
+    return out
 
 
 def _param_list(eff: Effect) -> str:
@@ -241,6 +269,8 @@ def _toml_value(value) -> str:
         return json.dumps(value)
     if isinstance(value, (list, tuple)):
         return "[" + ", ".join(_toml_value(v) for v in value) + "]"
+    if isinstance(value, Mapping):
+        return "{" + ", ".join(f"{k} = {_toml_value(v)}" for k, v in value.items()) + "}"
     raise TypeError(f"cannot write {type(value).__name__} to TOML")
 
 
@@ -338,9 +368,9 @@ class NoiseModel:
                 raise InputError(f"effects[{i}] effect must be a name (string), got "
                                  f"{_type_name(item['effect'])} {item['effect']!r}",
                                  file=file, column=f"effects[{i}].effect")
-            params = {k: v for k, v in item.items() if k not in ("effect", "gyro")}
+            params = {k: v for k, v in item.items() if k not in ("effect", "gyro", "sigma")}
             try:
-                entries.append(ModelEntry(item["effect"], item.get("gyro"), params))
+                entries.append(ModelEntry(item["effect"], item.get("gyro"), params, item.get("sigma", {})))
             except InputError as err:
                 raise _located(err, i, file) from None
         model = cls(tuple(entries), description=data.get("description", ""), source=file)

@@ -577,6 +577,11 @@ class Effect:
         """Samples (bool, n) the regressions should leave out with this entry in the model."""
         return None
 
+    def clean(self, ctx: "FitContext", entry: "ModelEntry", x: np.ndarray) -> np.ndarray:
+        """The residual (n, N) with what this entry models as glitches taken out (spikes), before any
+        test reads it (default: as is)."""
+        return x
+
     def whiten(self, ctx: "FitContext", entry: "ModelEntry", x: np.ndarray, t: np.ndarray) -> np.ndarray:
         """A stochastic record (m, N) brought back to the model's stationary level (default: as is)."""
         return x
@@ -760,7 +765,8 @@ class FitContext:
     def without(self, prediction: np.ndarray) -> "FitContext":
         """The same analysis with ``prediction`` (n, N) [rad/s] taken out of the residual
         (and of the stochastic record): what the record would show without it."""
-        ctx = replace(self, E=self.E - prediction, Er=self.Er - prediction[self.rec], cache={})
+        ctx = replace(self, E=self.E - prediction,
+                      Er=None if self.Er is None else self.Er - prediction[self.rec], cache={})
         ctx.services = self.services.derive(ctx)
         return ctx
 

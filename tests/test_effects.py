@@ -353,6 +353,7 @@ ALL17 = [
     {"effect": "saturation", "range_deg_s": 400.0},
     {"effect": "bandwidth", "cutoff_hz": 10.0, "order": 2},
     {"effect": "g_sensitivity", "gyro": 2, "deg_s_per_g": [0.05, -0.02, 0.1]},
+    {"effect": "outliers", "rate_per_h": 3600.0, "size_deg_s": 2.0},
 ]
 
 
