@@ -222,7 +222,7 @@ from gyroarray import units
 from gyroarray.errors import InputError
 from gyroarray.physics import gauss_markov_avar
 
-from .allan import deviation
+from .allan import deviation, edf_simple
 from .davar import davar
 from .effect_fit import EffectFit, chi2_to_z, z_from_log_p
 from .noise_fit import term_basis
@@ -384,6 +384,7 @@ class _Curve:
     m: np.ndarray
     y: np.ndarray             # Allan variance [(rad/s)²]
     cov: _AvarCov
+    caps: dict = None         # upper bounds of the capped coefficients (:func:`_caps`)
 
 
 #: Covariance models by (samples, dt): the gyros of one record share one.
@@ -415,8 +416,13 @@ def _cov_model(n: int, dt_s: float, m_min: int = 1) -> _AvarCov:
 def _curve(x: np.ndarray, dt_s: float, cov: _AvarCov | None = None, m_min: int = 1) -> _Curve:
     m = _factors(x.size, m_min)
     res = deviation(x, dt_s, "oadev", m * float(dt_s))
+    # the bounds read the octaves up to a third of the record (the fit stops at an eighth)
+    m_long = 2 ** np.arange(int(math.log2(m[-1])) + 1, int(math.log2(max(x.size // 3, 1))) + 1)
+    y_long = deviation(x, dt_s, "oadev", m_long * float(dt_s)).dev ** 2 if m_long.size else np.array([])
     return _Curve(dt_s=float(dt_s), n=int(x.size), taus=m * float(dt_s), m=m,
-                  y=res.dev ** 2, cov=_cov_model(x.size, dt_s, m_min) if cov is None else cov)
+                  y=res.dev ** 2, cov=_cov_model(x.size, dt_s, m_min) if cov is None else cov,
+                  caps=_caps(int(x.size), np.concatenate([m, m_long]) * float(dt_s),
+                             np.concatenate([m, m_long]), np.concatenate([res.dev ** 2, y_long])))
 
 
 def _cross_avar(X: np.ndarray, m: np.ndarray) -> np.ndarray:
@@ -443,6 +449,7 @@ class _Gls:
     dof: int
     white: np.ndarray      # W with W'W = Sigma^-1
     model: np.ndarray      # fitted variance per tau
+    capped: tuple = ()     # coefficients held at the measured Allan variance's bound
 
 
 def _whitener(sigma: np.ndarray) -> np.ndarray:
@@ -490,15 +497,45 @@ def _columns(cv: _Curve, names: tuple, tau_c: float | None = None) -> np.ndarray
     return np.column_stack(cols)
 
 
+#: Terms whose coefficient the measured Allan variance bounds from above at every τ (a random
+#: walk's K²τ/3 and a flicker's (2 ln 2/π)B² can never exceed the measured variance).
+_CAPPED = ("k", "b")
+
+
+def _caps(n: int, taus: np.ndarray, m: np.ndarray, avar: np.ndarray) -> dict:
+    """Upper bounds of the capped coefficients: the smallest over τ (octaves to a third of the
+    record) of the measured Allan variance's one-sided 95 % upper confidence bound (χ² with
+    the EDF of a random-walk FM estimate, the noise that dominates where the bound binds),
+    over the term's unit basis. A record of pure ARW + RRW leaves the free fit below it (a
+    tighter bound, one standard error, capped K on 3 of 20 such records and made false
+    bias instabilities of z 4–11); a fit that reads a hump as random walk is held at what
+    the data allow."""
+    nu = np.maximum(edf_simple(n + 1, m, -2), 1.0)
+    hi = avar * nu / _CHI2_LOW(nu)
+    return {name: float(np.min(hi / term_basis("oadev", name, taus))) for name in _CAPPED}
+
+
+def _CHI2_LOW(nu):
+    from scipy import stats as _stats
+    return _stats.chi2.ppf(0.05, nu)
+
+
 def _gls(cv: _Curve, names: tuple, tau_c: float | None = None, n_iter: int = 3,
          a0: np.ndarray | None = None) -> _Gls:
-    """Unconstrained GLS of the Allan variance on the columns ``names``
-    (``q``, ``n``, ``b``, ``k``: IEEE terms, coefficient P²; ``gm``:
-    Gauss-Markov σ² at ``tau_c``), Sigma from the fitted model."""
+    """GLS of the Allan variance on the columns ``names`` (``q``, ``n``, ``b``, ``k``: IEEE
+    terms, coefficient P²; ``gm``: Gauss-Markov σ² at ``tau_c``), Sigma from the fitted model.
+
+    A random-walk or flicker coefficient is held at the bound the measured Allan variance
+    sets at every τ (:func:`_caps`) when the free fit would exceed it (the fit then explains
+    a hump it has no term for with a random walk the data rule out: the ADIS16405's K of
+    300 deg/h/√h against an ADEV that allows 42); its row of ``cov`` keeps the free fit's
+    variance, and ``capped`` names it."""
     G = _columns(cv, names, tau_c)
     a = a0
     if a is None:                       # start: relative errors from the data, independent
         a, _, _ = _solve(cv.y, G, np.diag(1.0 / cv.y))
+    caps = cv.caps or {}
+    fixed: dict = {}
     for _ in range(n_iter):
         coef, gm = _split(names, a, tau_c)
         sigma = cv.cov.matrix(coef, gm)
@@ -506,8 +543,23 @@ def _gls(cv: _Curve, names: tuple, tau_c: float | None = None, n_iter: int = 3,
             sigma = np.diag((cv.y * 1e-3) ** 2)
         white = _whitener(sigma)
         a, cov, chi2 = _solve(cv.y, G, white)
-    return _Gls(a=a, cov=cov, chi2=chi2, dof=int(cv.taus.size - G.shape[1]), white=white,
-                model=G @ a)
+        for j, name in enumerate(names):
+            if name in caps and (a[j] > caps[name] or name in fixed):
+                fixed[name] = caps[name]
+        if fixed:
+            free = [j for j, nm in enumerate(names) if nm not in fixed]
+            y = cv.y - sum(v * G[:, names.index(nm)] for nm, v in fixed.items())
+            af, covf, chi2 = _solve(y, G[:, free], white)
+            a = np.array([fixed.get(nm, 0.0) for nm in names], float)
+            a[free] = af
+            cov_full = cov
+            cov = np.zeros_like(cov_full)
+            cov[np.ix_(free, free)] = covf
+            for nm in fixed:
+                j = names.index(nm)
+                cov[j, j] = cov_full[j, j]
+    return _Gls(a=a, cov=cov, chi2=chi2, dof=int(cv.taus.size - G.shape[1] + len(fixed)), white=white,
+                model=G @ a, capped=tuple(fixed))
 
 
 # --------------------------------------------------------------------------
