@@ -7,6 +7,8 @@ d, against the noise's robust standard deviation σ̂ = 1.4826·MAD(d). A spike 
 sample's d and no median, so it stands out; a change of the noise level (a
 burst) moves the MAD of a whole stretch and does not.
 
+* σ̂ is local: the MAD of d in blocks of 2000 samples, so a noise level that
+  changes over the record (a burst) is not read as a crowd of spikes.
 * Detection (which samples): |d| > c·σ̂ with c the Bonferroni threshold of a
   1 % family-wise false alarm over the record's samples (a clean Gaussian
   record shows a spike with probability 1 %), and at least 6: real noise has
@@ -48,6 +50,8 @@ def _neighbour_median(x: np.ndarray) -> np.ndarray:
 COUNT_THRESHOLD = 4.5
 #: Lowest detection threshold [σ̂].
 MIN_THRESHOLD = 6.0
+#: Samples per block of the local noise level.
+LOCAL_BLOCK = 2000
 
 
 @dataclass(frozen=True)
@@ -101,6 +105,19 @@ def _poisson_z(k: int, lam: float) -> float:
     return z_from_log_p(min(log_p, math.log1p(-1e-16)))
 
 
+def _local_sigma(d: np.ndarray, sigma: float, block: int = LOCAL_BLOCK) -> np.ndarray:
+    """The robust σ of d in blocks of ``block`` samples, per sample (a noise level that changes over
+    the record, a burst, is not a crowd of spikes; isolated spikes do not move a block's MAD)."""
+    n = d.size
+    nb = n // block
+    if nb < 2:
+        return np.full(n, sigma)
+    mads = 1.4826 * np.median(np.abs(d[:nb * block].reshape(nb, block)), axis=1)
+    mads = np.where(mads > 0, mads, sigma)
+    per = np.repeat(mads, block)
+    return np.concatenate([per, np.full(n - per.size, mads[-1])])
+
+
 def find_spikes(x, alpha: float = 0.01) -> Spikes:
     """Spikes of the series ``x`` (n,) (module docstring)."""
     x = np.asarray(x, dtype=float)
@@ -108,21 +125,22 @@ def find_spikes(x, alpha: float = 0.01) -> Spikes:
     d = x - _neighbour_median(x)
     mad = float(np.median(np.abs(d - np.median(d))))
     sigma = 1.4826 * mad
+    local = _local_sigma(d, sigma)
     diff = np.diff(x)
     kurt = float(stats.kurtosis(diff)) if diff.size > 3 and np.std(diff) > 0 else 0.0
     if not sigma > 0:
         return Spikes(np.array([], int), np.array([]), sigma, math.inf, 0, 0.0, 0.0, math.nan,
                       math.nan, 0.0, kurt)
     c = max(float(-special.ndtri(0.5 * alpha / max(n, 1))), MIN_THRESHOLD)   # Bonferroni, two-sided
-    idx = np.flatnonzero(np.abs(d) > c * sigma)
+    idx = np.flatnonzero(np.abs(d) > c * local)
     # count test: the tail of d/σ̂ beyond 4.5 for Gaussian noise (d's own spread: σ̂ estimates it)
-    k = int(np.sum(np.abs(d) > COUNT_THRESHOLD * sigma))
+    k = int(np.sum(np.abs(d) > COUNT_THRESHOLD * local))
     lam = n * float(special.erfc(COUNT_THRESHOLD / math.sqrt(2.0)))
     z = _poisson_z(k, lam)
     size, s_size, rate = math.nan, math.nan, 0.0
     if idx.size:
         v = d[idx]
-        cut = c * sigma
+        cut = c * float(np.median(local[idx]))
 
         def nll(log_s):
             s = math.exp(log_s)

@@ -49,7 +49,7 @@ __all__ = ["PsdFit", "fit_psd", "filter_z", "EFFECTIVE_TESTS"]
 EFFECTIVE_TESTS = 3.0
 
 #: Cut-offs scanned per decade, and the lowest as a fraction of the Nyquist frequency.
-_PER_DECADE = 16
+_PER_DECADE = 8
 _LOWEST = 0.01
 _TOP = 20.0
 

@@ -504,20 +504,21 @@ _CAPPED = ("k", "b")
 
 def _caps(n: int, taus: np.ndarray, m: np.ndarray, avar: np.ndarray) -> dict:
     """Upper bounds of the capped coefficients: the smallest over τ (octaves to a third of the
-    record) of the measured Allan variance's one-sided 95 % upper confidence bound (χ² with
-    the EDF of a random-walk FM estimate, the noise that dominates where the bound binds),
-    over the term's unit basis. A record of pure ARW + RRW leaves the free fit below it (a
-    tighter bound, one standard error, capped K on 3 of 20 such records and made false
-    bias instabilities of z 4–11); a fit that reads a hump as random walk is held at what
-    the data allow."""
+    record) of the measured Allan variance's one-sided upper confidence bound at a 5 %
+    family-wise level over those τ (χ² with the EDF of a random-walk FM estimate, the noise
+    that dominates where the bound binds; Bonferroni), over the term's unit basis. What the
+    data rule out at that level; a record of pure ARW + RRW leaves the free fit below it
+    (tighter bounds, one standard error or 5 % per τ, held K low on 2–3 of 20 such records
+    and made false bias instabilities of z 4–11); a fit that reads a hump as random walk is
+    held at what the data allow."""
     nu = np.maximum(edf_simple(n + 1, m, -2), 1.0)
-    hi = avar * nu / _CHI2_LOW(nu)
+    hi = avar * nu / _CHI2_LOW(nu, 0.05 / max(len(taus), 1))
     return {name: float(np.min(hi / term_basis("oadev", name, taus))) for name in _CAPPED}
 
 
-def _CHI2_LOW(nu):
+def _CHI2_LOW(nu, q):
     from scipy import stats as _stats
-    return _stats.chi2.ppf(0.05, nu)
+    return _stats.chi2.ppf(q, nu)
 
 
 def _gls(cv: _Curve, names: tuple, tau_c: float | None = None, n_iter: int = 3,

@@ -56,6 +56,13 @@ class GSensitivity(RegressionEffect):
     def placeholder(self):
         return {"deg_s_per_g": (0.0, 0.0, 0.0)}
 
+    def why_not(self, ctx):
+        why = super().why_not(ctx)
+        if why is None and ctx.acc is None and not ctx.moving:
+            return ("needs the specific force to change: acc_x, acc_y, acc_z, or a table that turns "
+                    "the array through gravity")
+        return why
+
     def regress(self, ctx, gyro, e, r, q):
         F = ctx.specific_force()[:, gyro - 1, :]
         moving = [j for j in range(3) if float(np.ptp(F[:, j])) >= MIN_SPAN_M_S2]

@@ -440,7 +440,7 @@ def _comparison(args):
     model = None
     if args.model is not None:
         model = NoiseModel.from_toml(args.model, n_gyros=meas.n_gyros)
-    return ModelComparison(meas, model, n_runs=args.runs, seed=args.seed)
+    return ModelComparison(meas, model, n_runs=args.runs, seed=args.seed, ref_smooth_s=args.ref_smooth)
 
 
 def _model_lines(model) -> list[str]:
@@ -575,8 +575,9 @@ def cmd_ladder(args):
     if args.holdout is not None:
         from .compare import ModelComparison, split_measurement
         first, rest = split_measurement(comp.m, args.holdout)
-        comp = ModelComparison(first, comp.given_model, n_runs=args.runs, seed=args.seed)
-        held = ModelComparison(rest, None, n_runs=args.runs, seed=args.seed)
+        comp = ModelComparison(first, comp.given_model, n_runs=args.runs, seed=args.seed,
+                               ref_smooth_s=args.ref_smooth)
+        held = ModelComparison(rest, None, n_runs=args.runs, seed=args.seed, ref_smooth_s=args.ref_smooth)
     steps = comp.ladder(max_steps=args.max_steps)
     _write_report(comp, steps, args)
     final = steps[-1][1]
@@ -595,7 +596,7 @@ def cmd_ladder(args):
         from .compare import ModelComparison
         from .sim.model import NoiseModel
         model = NoiseModel(final.model.entries, description=f"the ladder on {comp.name}")
-        v = ModelComparison(held.m, model, n_runs=args.runs, seed=args.seed)
+        v = ModelComparison(held.m, model, n_runs=args.runs, seed=args.seed, ref_smooth_s=args.ref_smooth)
         va = v.validate()
         verdict = _validation_text(v, va, comp.name)
         res["holdout"] = {"fraction": args.holdout, "discrepancy": va.discrepancy, "consistent": va.consistent,
@@ -622,6 +623,9 @@ def _add_compare_args(p, *, out: bool):
                    help="Monte-Carlo runs of the model band (40)")
     p.add_argument("--seed", type=int, default=0, help="seed of the model band (0)")
     p.add_argument("--repair", action="store_true", help="repair short gaps and isolated NaNs")
+    p.add_argument("--ref-smooth", type=_finite_float("--ref-smooth"), default=0.0, metavar="SECONDS",
+                   help="smooth a noisy reference rate (a differentiated encoder) by a centred moving "
+                        "average of this length before comparing (0: as recorded)")
     _add_plugin(p)
     if out:
         _add_force(p)

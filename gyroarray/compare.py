@@ -320,6 +320,17 @@ def _sigma_of(f: EffectFit, params: dict) -> dict:
     return out
 
 
+def _centred_mean(x: np.ndarray, length: int) -> np.ndarray:
+    """Centred moving average of each column over ``length`` samples (odd; shrinking at the ends)."""
+    if length <= 1:
+        return x
+    half = length // 2
+    c = np.cumsum(np.vstack([np.zeros((1, x.shape[1])), x]), axis=0)
+    i = np.arange(x.shape[0])
+    lo, hi = np.maximum(i - half, 0), np.minimum(i + half + 1, x.shape[0])
+    return (c[hi] - c[lo]) / (hi - lo)[:, None]
+
+
 def _zeros_like_outputs(n: int, N: int) -> np.ndarray:
     return np.zeros((n, N))
 
@@ -340,10 +351,21 @@ class ModelComparison:
         Seed of the band's ``numpy.random.Generator`` (results are bit-identical per seed).
     alpha : float
         Family-wise false-alarm rate of the discrepancy.
+    ref_smooth_s : float
+        Smooth the reference rate by a centred moving average of this length [s] before
+        anything reads it (``--ref-smooth``): a reference with noise of its own (a
+        differentiated encoder) is an errors-in-variables problem, and its noise would be
+        read as the gyros'. 0: the reference as recorded.
+
+    A record whose reference never stands still (no static part of ``MIN_STATIC``
+    samples) is calibrated on what the reference does not explain over the whole
+    record: the white level from the residual's first differences (a high-pass:
+    the deterministic part of a residual moves slowly), the random walk from its
+    Allan fit; the notes say so.
     """
 
     def __init__(self, measurement: Measurement, model: NoiseModel | None = None, *,
-                 n_runs: int = N_RUNS, seed: int = 0, alpha: float = ALPHA):
+                 n_runs: int = N_RUNS, seed: int = 0, alpha: float = ALPHA, ref_smooth_s: float = 0.0):
         self.m = measurement
         self.name = measurement.source or "measurement"
         self.n_runs = int(n_runs)
@@ -359,6 +381,12 @@ class ModelComparison:
         self.t_sim = self.t[0] + np.arange(self.n) * self.dt
         self.y = np.asarray(measurement.gyro_rad_s, float)
         self.ref = measurement.ref_rad_s
+        self.setup_notes: list[str] = []
+        if ref_smooth_s and self.ref is not None:
+            self.ref = _centred_mean(self.ref, max(int(round(ref_smooth_s / self.dt)), 1))
+            self.setup_notes.append(f"the reference rate is smoothed by a centred {ref_smooth_s:g} s moving "
+                                    "average (--ref-smooth): its own noise is not read as the gyros'; motion "
+                                    f"faster than about {1.0 / ref_smooth_s:.3g} Hz is flattened in it")
         self.temp = None if measurement.temp_c is None else np.asarray(measurement.temp_c, float)
         self.acc = None if measurement.acc_m_s2 is None else np.asarray(measurement.acc_m_s2, float)
         self.positions = measurement.layout.positions_m
@@ -377,6 +405,15 @@ class ModelComparison:
         else:
             self.static = np.ones(self.n, bool)
         runs = [r for r in _runs(self.static) if r[1] - r[0] >= MIN_STATIC]
+        self.continuous = False
+        if not runs and self.ref is not None and self.n >= MIN_STATIC:
+            longest = max((b - a for a, b in _runs(self.static)), default=0)
+            self.continuous = True
+            runs = [(0, self.n)]
+            self.setup_notes.append(
+                f"no static part (the longest stretch with the reference within 0.01 deg/s is "
+                f"{longest * self.dt:.1f} s): the noise is calibrated on what the reference does not "
+                "explain over the whole record (white level from the residual's first differences)")
         if not runs:
             longest = max((b - a for a, b in _runs(self.static)), default=0)
             raise InputError(f"no static part long enough to calibrate the noise: the longest stretch "
@@ -551,11 +588,14 @@ class ModelComparison:
         a, b = self.longest
         base = fit_gyro_noise(e[a:b], self.dt, gyro, min_tau_s=min_tau_s)
         n_rad = arw_deg_rt_h_to_rad_rt_s(base[0].params["n_deg_rt_h"])
+        if self.continuous:                    # the white level from a high-pass: first differences
+            d = np.diff(e)
+            n_rad = 1.4826 * float(np.median(np.abs(d - np.median(d)))) / math.sqrt(2.0) * math.sqrt(self.dt)
         k_up = rrw_deg_h_rt_h_to_rad_s_rt_s(base[1].params["k_deg_h_rt_h"]
                                             + 2.0 * base[1].sigma.get("k_deg_h_rt_h", 0.0))
         r = max(n_rad ** 2 / self.dt, 1e-30)
         q_up = max(k_up ** 2 * self.dt, 1e-12 * r)
-        q_ml = _ml_q(e, r, q_up, self.static)
+        q_ml = _ml_q(e, r, q_up, np.ones(self.n, bool) if self.continuous else self.static)
         return r, max(q_ml, q_up)
 
     # -- the chain, step by step -----------------------------------------------
@@ -577,7 +617,7 @@ class ModelComparison:
         adev, band_tests = self._adev_band(cal, ctx.E, ctx.rec)
         tests += band_tests
         cands, zc, disc = self._rank(ctx, tests)
-        notes += self._record_notes()
+        notes += self.setup_notes + self._record_notes()
         return Analysis(model=cal, fits=fits, tests=tests, candidates=cands, discrepancy=float(disc),
                         z_crit=zc, residual_rad_s=ctx.E, raw_residual_rad_s=self.E0, record=ctx.rec,
                         static=self.static, adev=adev, notes=notes, r=ctx.r, q=ctx.q, context=ctx)
@@ -631,7 +671,7 @@ class ModelComparison:
         adev, band_tests = self._adev_band(model, ctx.E, ctx.rec)
         tests += band_tests
         cands, zc, disc = self._rank(ctx, tests)
-        notes += self._record_notes()
+        notes += self.setup_notes + self._record_notes()
         return Analysis(model=model, fits={}, tests=tests, candidates=cands, discrepancy=float(disc),
                         z_crit=zc, residual_rad_s=ctx.E, raw_residual_rad_s=self.E0, record=ctx.rec,
                         static=self.static, adev=adev, notes=notes, r=ctx.r, q=ctx.q, context=ctx)

@@ -297,5 +297,11 @@ def simulate_readings(model, truth_omega_body_rad_s, layout, dt_s: float,
 
 
 def _sense(state: ChainState) -> ChainState:
-    """u_k = a_k · (ω + ω_extra): the sensed input of every gyro (n, N)."""
-    return replace(state, x=(state.ctx.omega_body_rad_s + state.frame_rate) @ state.axes.T)
+    """u_k = a_k · (ω + ω_extra): the sensed input of every gyro (n, N) (zeros at once for a
+    table at rest without an extra rate: the Monte-Carlo band of a static record)."""
+    w = state.ctx.omega_body_rad_s
+    if state.frame_rate.any():
+        w = w + state.frame_rate
+    elif not w.any():
+        return replace(state, x=np.zeros((w.shape[0], state.axes.shape[0])))
+    return replace(state, x=w @ state.axes.T)

@@ -396,9 +396,12 @@ def test_too_short_is_refused_clearly(tmp_path, cli):
     assert p.returncode == 2 and "too short for a diagnosis" in p.stderr and "m.csv" in p.stderr
 
 
-def test_no_static_part_is_refused_clearly(tmp_path, cli):
-    p = cli("diagnose", _short(tmp_path, 200.0, static=False), check=False)
-    assert p.returncode == 2 and "no static part long enough" in p.stderr
+def test_no_static_part_is_calibrated_on_what_the_reference_leaves(tmp_path, cli):
+    """A table that never stands still: the noise from the residual's high-pass, said in the notes."""
+    p = cli("diagnose", _short(tmp_path, 200.0, static=False), "--runs", "10", "--json")
+    d = json.loads(p.stdout)
+    assert any("no static part" in n and "whole record" in n for n in d["notes"])
+    assert d["consistent"], d["candidates"][:3]
 
 
 def test_parse_add():
