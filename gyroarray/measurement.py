@@ -87,14 +87,12 @@ import numpy as np
 import pandas as pd
 import tomli_w
 
-try:
-    import tomllib
-except ModuleNotFoundError:      # Python 3.10: the same parser, as a package
-    import tomli as tomllib
-
 from . import __version__, units
 from .errors import InputError
 from .layout import UNIT_NORM_TOL, Layout, check_positions
+from .limits import (MAX_RATE_DEG_S, check_memory, format_size, gunzip_bounded, max_memory,
+                     read_regular)
+from .tomlio import TomlDoc, load_toml
 
 __all__ = [
     "Measurement",
@@ -412,12 +410,8 @@ def _sidecar_of(csv_path: Path) -> Path:
 
 
 def _read_bytes(path: Path, what: str) -> bytes:
-    try:
-        return path.read_bytes()
-    except FileNotFoundError:
-        raise InputError(f"{what} not found", file=str(path)) from None
-    except OSError as e:
-        raise InputError(f"cannot read {what}: {e.strerror or e}", file=str(path)) from None
+    """A regular file's bytes (FIFOs, devices and folders refused), within the memory budget."""
+    return read_regular(path, what)
 
 
 def _utf8_text(data: bytes, name: str) -> str:
@@ -444,65 +438,14 @@ class _Sidecar:
     notes: tuple[str, ...]
 
 
-class _TomlDoc:
-    """A parsed TOML file and its text, to name keys (and find their lines) in errors.
-
-    Shared by the measurement sidecar, scenario and sweep readers. ``line_of``
-    understands ``[table]`` and ``[[array]]`` headers and ``key[i].leaf`` paths;
-    a key it cannot find points at its table's line.
-    """
-
-    _TABLE_RE = re.compile(r"\s*\[\[?\s*([A-Za-z0-9_.-]+)\s*\]\]?\s*(?:#.*)?$")
-    _KEY_RE = re.compile(r"\s*([A-Za-z0-9_-]+)\s*=")
-
-    def __init__(self, name: str, text: str, data: dict):
-        self.name, self.text, self.data = name, text, data
-
-    def line_of(self, key: str) -> int | None:
-        parts = re.sub(r"\[\d+\]", "", key).split(".")
-        table, leaf = ".".join(parts[:-1]), parts[-1]
-        current = ""
-        for number, line in enumerate(self.text.split("\n"), 1):
-            header = self._TABLE_RE.match(line)
-            if header:
-                current = header.group(1)
-                if current == key:
-                    return number
-                continue
-            k = self._KEY_RE.match(line)
-            if k and k.group(1) == leaf and current == table:
-                return number
-        if table:   # a dotted key inside a table, or an inline table: the table's line
-            return self.line_of(table)
-        return None
-
-    def error(self, message: str, key: str) -> InputError:
-        return InputError(message, file=self.name, line=self.line_of(key), column=key)
+_TomlDoc = TomlDoc   # the one TOML key locator (gyroarray.tomlio), for sidecars, scenarios and sweeps
 
 
-_TOML_POS_RE = re.compile(r"\s*\(at line (\d+), column (\d+)\)\s*$")
-
-
-def _load_toml(path: Path) -> _TomlDoc:
-    name = str(path)
-    if not path.is_file():
+def _load_toml(path: Path, what: str = "sidecar") -> TomlDoc:
+    if what == "sidecar" and not path.exists() and not path.is_symlink():
         raise InputError("missing sidecar: every measurement CSV needs a .toml with the "
-                         "same stem beside it (sample_rate_hz, [layout])", file=name)
-    text = _utf8_text(_read_bytes(path, "sidecar"), name)
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as e:
-        msg = str(e).splitlines()[0] if str(e) else "invalid TOML"
-        pos = _TOML_POS_RE.search(msg)
-        line = getattr(e, "lineno", None) or (int(pos.group(1)) if pos else None)
-        col = getattr(e, "colno", None) or (int(pos.group(2)) if pos else None)
-        msg = _TOML_POS_RE.sub("", getattr(e, "msg", msg))
-        raise InputError(f"TOML syntax error: {msg}", file=name, line=line,
-                         column=col) from None
-    except (ValueError, RecursionError) as e:      # tomllib's own limits
-        what = "nested too deeply" if isinstance(e, RecursionError) else str(e).split(";")[0]
-        raise InputError(f"TOML error: {what}", file=name) from None
-    return _TomlDoc(name, text, data)
+                         "same stem beside it (sample_rate_hz, [layout])", file=str(path))
+    return load_toml(path, what)
 
 
 def _read_sidecar(path: Path) -> _Sidecar:
@@ -685,14 +628,12 @@ def _read_csv_bytes(path: Path) -> tuple[bytes, list[str]]:
     name = str(path)
     raw = _read_bytes(path, "measurement file")
     if name.lower().endswith(".gz"):
-        try:
-            raw = gzip.decompress(raw)
-        except (OSError, EOFError, zlib.error) as e:
-            raise InputError(f"not a valid gzip file (the name ends in .gz): {e}",
-                             file=name) from None
+        raw = gunzip_bounded(raw, max_memory() // _READ_BYTES_FACTOR, name, cost=_read_cost,
+                             max_cost=max_memory())
     elif raw.startswith(_GZIP_MAGIC):
         raise InputError("file is gzip-compressed but its name does not end in .gz",
                          file=name)
+    _check_read_memory(raw, name)
     notes = []
     if raw.startswith(_BOM):
         raw = raw[len(_BOM):]
@@ -704,6 +645,29 @@ def _read_csv_bytes(path: Path) -> tuple[bytes, list[str]]:
         raise InputError("carriage return (\\r) inside a line: lines must end in \\n or "
                          "\\r\\n", file=name, line=raw.count(b"\n", 0, pos) + 1)
     return raw, notes
+
+
+#: The decompressed text may take at most this share of the memory budget [-]
+#: (the reader holds the text, its line index and the parsed table at once).
+_READ_BYTES_FACTOR = 8
+#: Peak memory of the reader per byte of text, per line and per comma [bytes]
+#: (measured with tracemalloc: 323 MB for 1e6 rows x 5 columns = 106 MB of
+#: text, 250 MB for 5e6 blank lines; rounded up).
+_MEM_PER_BYTE, _MEM_PER_LINE, _MEM_PER_CELL = 2, 50, 16
+
+
+def _read_cost(data: bytes) -> int:
+    """Estimated peak memory [bytes] of parsing ``data`` (a piece of the CSV text)."""
+    return (_MEM_PER_BYTE * len(data) + _MEM_PER_LINE * data.count(b"\n")
+            + _MEM_PER_CELL * data.count(b","))
+
+
+def _check_read_memory(data: bytes, name: str) -> None:
+    """Refuse, before the text is indexed, a file whose reading would exceed the budget."""
+    lines = data.count(b"\n") + 1
+    need = _read_cost(data)
+    check_memory(need, f"reading {lines} lines ({format_size(len(data))} of text)",
+                 "split the record or keep only the columns needed", file=name)
 
 
 @dataclass(frozen=True)
