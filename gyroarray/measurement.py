@@ -74,10 +74,8 @@ import csv
 import gzip
 import io
 import math
-import os
 import re
 import warnings
-import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import MappingProxyType

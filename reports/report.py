@@ -37,7 +37,6 @@ import io
 import json
 import math
 import time
-import tomllib
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
@@ -123,12 +122,8 @@ def default_paper_values() -> Path:
 def load_paper_values(path=None) -> list[dict]:
     """The experiments of a paper-values file (see the file's header), checked."""
     path = Path(path) if path is not None else default_paper_values()
-    try:
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
-    except OSError as err:
-        raise InputError(f"cannot read the paper values: {err.strerror}", file=str(path)) from None
-    except tomllib.TOMLDecodeError as err:
-        raise InputError(f"not valid TOML: {err}", file=str(path)) from None
+    from gyroarray.tomlio import load_toml
+    data = load_toml(path, "paper values file").data
     exps = data.get("experiment")
     if not isinstance(exps, list) or not exps:
         raise InputError("no [[experiment]] tables", file=str(path))

@@ -79,7 +79,6 @@ import itertools
 import json
 import math
 import re
-import tomllib
 from dataclasses import dataclass, field
 from functools import lru_cache
 from importlib import resources
@@ -89,6 +88,7 @@ import numpy as np
 
 from gyroarray.errors import InputError
 from gyroarray.measurement import _TomlDoc
+from gyroarray.tomlio import load_toml
 
 __all__ = ["Sweep", "ScenarioSpec", "load_sweep", "scenario_id", "scenario_seed", "PARAM_KEYS"]
 
@@ -119,23 +119,7 @@ _Doc = _TomlDoc  # one TOML key locator for sidecars, scenarios and sweeps
 
 
 def _read_doc(path: Path, what: str) -> _Doc:
-    if not path.is_file():
-        raise InputError(f"{what} not found", file=str(path))
-    try:
-        text = path.read_bytes().decode("utf-8")
-    except UnicodeDecodeError:
-        raise InputError(f"{what} is not UTF-8 text", file=str(path)) from None
-    except OSError as err:
-        raise InputError(f"cannot read {what}: {err.strerror}", file=str(path)) from None
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as err:
-        msg = str(err)
-        m = re.search(r"\(at line (\d+), column (\d+)\)", msg)
-        line = int(m.group(1)) if m else None
-        raise InputError(f"TOML syntax error: {msg[:m.start()].strip() if m else msg}",
-                         file=str(path), line=line) from None
-    return _Doc(str(path), text, data)
+    return load_toml(path, what)
 
 
 # -- ids and seeds -------------------------------------------------------------

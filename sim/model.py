@@ -37,8 +37,6 @@ from __future__ import annotations
 import json
 import math
 import os
-import re
-import tomllib
 from dataclasses import dataclass, field
 from types import MappingProxyType
 from typing import Any, Iterator, Mapping, Sequence
@@ -49,6 +47,7 @@ from gyroarray.errors import InputError
 from gyroarray.layout import UNIT_NORM_TOL
 from gyroarray.effects import REGISTRY, did_you_mean, get_effect
 from gyroarray.sim.protocol import Effect, Param
+from gyroarray.tomlio import load_toml
 
 __all__ = ["ModelEntry", "NoiseModel"]
 
@@ -338,13 +337,7 @@ class NoiseModel:
             data, file = source, None
         else:
             file = os.fspath(source)
-            try:
-                with open(file, "rb") as fh:
-                    data = tomllib.load(fh)
-            except OSError as err:
-                raise InputError(f"cannot read noise model: {err.strerror}", file=file) from None
-            except tomllib.TOMLDecodeError as err:
-                raise _toml_error(err, file) from None
+            data = load_toml(file, "noise model").data
         for key in data:
             if key not in _TOP_KEYS:
                 raise InputError(f"unknown top-level key {key!r}{did_you_mean(key, _TOP_KEYS)} "
@@ -444,12 +437,3 @@ class NoiseModel:
 
     def __iter__(self) -> Iterator[ModelEntry]:
         return iter(self.entries)
-
-
-def _toml_error(err: tomllib.TOMLDecodeError, file: str) -> InputError:
-    msg = str(err)
-    m = re.search(r"\(at line (\d+), column (\d+)\)", msg)
-    if m:
-        return InputError(f"invalid TOML: {msg[:m.start()].strip()}", file=file,
-                          line=int(m.group(1)), column=int(m.group(2)))
-    return InputError(f"invalid TOML: {msg}", file=file)

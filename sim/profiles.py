@@ -106,12 +106,9 @@ from pathlib import Path
 import numpy as np
 
 from gyroarray.errors import InputError
+from gyroarray.tomlio import load_toml
 from gyroarray.units import deg_s_to_rad_s, deg_to_rad, rad_to_deg
 
-try:  # Python >= 3.11
-    import tomllib
-except ModuleNotFoundError:  # pragma: no cover - Python 3.10
-    import tomli as tomllib
 
 __all__ = [
     "AXIS_NORM_TOL", "GIMBAL_LOCK_MARGIN_RAD",
@@ -1397,19 +1394,8 @@ def load_profile(path) -> Profile:
     """
     p = Path(path)
     file = str(path)
-    try:
-        raw = p.read_bytes()
-    except OSError as e:
-        raise InputError(f"cannot read profile: {e.strerror}", file=file) from None
-    try:
-        text = raw.decode("utf-8")
-        doc = tomllib.loads(text)
-    except UnicodeDecodeError as e:
-        raise InputError(f"not UTF-8 text ({e.reason})", file=file) from None
-    except tomllib.TOMLDecodeError as e:
-        m = re.search(r"line (\d+)", str(e))
-        raise InputError(f"not valid TOML: {e}", file=file,
-                         line=int(m.group(1)) if m else None) from None
+    loaded = load_toml(p, "profile")
+    raw, text, doc = loaded.raw, loaded.text, loaded.data
     for key in doc:
         if key not in _TOP_KEYS:
             raise InputError(f"unknown key {key!r}; allowed at the top: {', '.join(_TOP_KEYS)}",
