@@ -12,6 +12,7 @@ import json
 import math
 import os
 import sys
+import warnings
 from pathlib import Path
 from typing import Callable
 
@@ -189,7 +190,7 @@ def allan_signal(meas, *, raw: bool = False):
 
 
 def cmd_allan(args) -> tuple[dict, str]:
-    from .analysis.allan import allan_analysis, plot_allan
+    from .analysis.allan import plot_allan
     from .measurement import read_measurement
     from .outputs import PLOT_SUFFIXES
     taus = _parse_taus(args.taus)
@@ -200,16 +201,13 @@ def cmd_allan(args) -> tuple[dict, str]:
                          f"gyros 1..{meas.n_gyros}", file=str(args.measurement))
     gyros = [args.gyro] if args.gyro is not None else list(range(1, meas.n_gyros + 1))
     signal, what = allan_signal(meas, raw=args.raw)
-    analyses = {}
-    for k in gyros:
-        try:
-            analyses[k] = allan_analysis(signal[:, k - 1], meas.dt_s, taus, kind=args.kind)
-        except InputError as err:
-            raise InputError(f"gyro {k}: {err.message}", file=str(args.measurement)) from None
+    analyses, skipped = _allan_each(meas, signal, gyros, taus, args)
+    notes = [*meas.notes, *skipped.values()]
     out = {"gyros": {str(k): a.to_json_dict() for k, a in analyses.items()},
-           "signal": what, "notes": list(meas.notes)}
+           "signal": what, "notes": notes,
+           "not_analysed": {str(k): why for k, why in skipped.items()}}
     lines = [f"{args.measurement}: {meas.n_samples} samples at {1 / meas.dt_s:g} Hz, "
-             f"{meas.n_gyros} gyros; analysed: {what}", *[f"note: {n}" for n in meas.notes]]
+             f"{meas.n_gyros} gyros; analysed: {what}", *[f"note: {n}" for n in notes]]
     for k, a in analyses.items():
         lines.append(_format_allan(k, a.to_json_dict()))
     if args.plot is not None:
@@ -217,6 +215,32 @@ def cmd_allan(args) -> tuple[dict, str]:
         out["plot"] = str(path)
         lines.append(f"wrote {path}")
     return out, "\n".join(lines)
+
+
+def _allan_each(meas, signal, gyros: list[int], taus, args) -> tuple[dict, dict]:
+    """The Allan analysis of each gyro; a gyro that cannot be analysed is noted, not fatal.
+
+    Returns ``(analyses by gyro, reason by gyro not analysed)``; refuses
+    (one line, every reason) when no gyro can be analysed.
+    """
+    from .analysis.allan import allan_analysis
+    from .measurement import constant_gyros, constant_note
+    dead = set(constant_gyros(meas))
+    analyses, skipped = {}, {}
+    for k in gyros:
+        if k in dead:
+            skipped[k] = constant_note([k], meas) + ": not analysed"
+            continue
+        try:
+            analyses[k] = allan_analysis(signal[:, k - 1], meas.dt_s, taus, kind=args.kind)
+        except InputError as err:
+            skipped[k] = f"gyro {k} not analysed: {err.message}"
+    if not analyses:
+        dead_asked = [k for k in gyros if k in dead]
+        why = ([constant_note(dead_asked, meas)] if dead_asked else []) + [
+            v for k, v in skipped.items() if k not in dead]
+        raise InputError("nothing to analyse: " + "; ".join(why), file=str(args.measurement))
+    return analyses, skipped
 
 
 def _format_allan(k: int, d: dict) -> str:
@@ -440,7 +464,28 @@ def _comparison(args):
     model = None
     if args.model is not None:
         model = NoiseModel.from_toml(args.model, n_gyros=meas.n_gyros)
+    meas, model, args.entry_notes = _live_gyros(meas, model, args)
     return ModelComparison(meas, model, n_runs=args.runs, seed=args.seed)
+
+
+def _live_gyros(meas, model, args):
+    """Leave constant (dead or stuck) gyros out of a comparison, saying so; refuse when none is left."""
+    from .measurement import constant_gyros, constant_note, without_gyros
+    dead = constant_gyros(meas)
+    if not dead:
+        return meas, model, []
+    note = constant_note(dead, meas)
+    live = [k for k in range(1, meas.n_gyros + 1) if k not in dead]
+    if not live:
+        raise InputError(f"nothing to analyse: {note}", file=str(args.measurement))
+    if model is not None and any(e.gyro is not None for e in model):
+        raise InputError(f"{note}, and the model names gyros by number: leave the constant "
+                         "gyro out of the record (and renumber the model) first",
+                         file=str(args.model))
+    mapping = ", ".join(f"{old} as {new}" for new, old in enumerate(live, 1) if old != new)
+    note += (": left out; the analysis below numbers the others "
+             + (mapping if mapping else "as before"))
+    return without_gyros(meas, dead, note), model, [note]
 
 
 def _model_lines(model) -> list[str]:
@@ -516,6 +561,7 @@ def cmd_compare(args):
         # by one, so the report shows the error falling
         steps = comp.steps_to_model()
         a = steps[-1][1]
+    a.notes[:0] = args.entry_notes
     _write_report(comp, steps, args)
     d = a.to_json_dict()
     res = {"discrepancy": a.discrepancy, "consistent": a.consistent, "z_crit": a.z_crit,
@@ -535,7 +581,8 @@ def cmd_compare(args):
             f"({'consistent' if a.consistent else 'NOT consistent'} with the model){fall}\n"
             + "\n".join(f"  {t.effect}{'' if t.gyro is None else ':' + str(t.gyro)}  z = {t.z:.1f}  {t.evidence}"
                         for t in a.candidates[:5] if a.significant(t))
-            + f"\nreport: {args.out}" + (f" and {args.md}" if args.md is not None else ""))
+            + f"\nreport: {args.out}" + (f" and {args.md}" if args.md is not None else "")
+            + "".join(f"\nnote: {n}" for n in args.entry_notes))
     return res, text
 
 
@@ -550,6 +597,7 @@ def cmd_diagnose(args):
         out["verdict"] = _validation_text(comp, a, args.model)
         return out, out["verdict"] + "\n" + _diagnosis_text(a, f"{comp.name}: {comp.N} gyros, {comp.n * comp.dt:.0f} s")
     a = comp.analyse()
+    a.notes[:0] = args.entry_notes
     return a.to_json_dict(), _diagnosis_text(a, f"{comp.name}: {comp.N} gyros, {comp.n * comp.dt:.0f} s")
 
 
@@ -558,14 +606,17 @@ def cmd_fit(args):
     comp = _comparison(args)
     add = [parse_add(x, comp.N) for x in (args.add or [])]
     before, after = comp.fit(add)
+    after.notes[:0] = args.entry_notes
     res = {"discrepancy_before": before.discrepancy, "discrepancy_after": after.discrepancy,
-           "consistent": after.consistent, "effects": after.effects_json()}
+           "consistent": after.consistent, "effects": after.effects_json(),
+           "notes": list(args.entry_notes)}
     if args.out is not None:
         res["model"] = _write_model(args.out, after.model, args)
     text = "\n".join([f"{comp.name}: discrepancy {before.discrepancy:.3g} -> {after.discrepancy:.3g} "
                       f"({'consistent' if after.consistent else 'NOT consistent'})",
                       "fitted model (beyond ARW + RRW):"] + (_model_lines(after.model) or ["  (baseline only)"])
-                     + ([f"written to {args.out}"] if args.out is not None else []))
+                     + ([f"written to {args.out}"] if args.out is not None else [])
+                     + [f"note: {n}" for n in args.entry_notes])
     return res, text
 
 
@@ -578,6 +629,7 @@ def cmd_ladder(args):
         comp = ModelComparison(first, comp.given_model, n_runs=args.runs, seed=args.seed)
         held = ModelComparison(rest, None, n_runs=args.runs, seed=args.seed)
     steps = comp.ladder(max_steps=args.max_steps)
+    steps[-1][1].notes[:0] = args.entry_notes
     _write_report(comp, steps, args)
     final = steps[-1][1]
     res = {"steps": [{"added": None if add is None else {"effect": add[0], "gyro": add[1]},
@@ -763,7 +815,19 @@ def build_parser() -> argparse.ArgumentParser:
                    help="run each scenario at its full length (slow; default: the quick version)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=cmd_check)
+    for p in sub.choices.values():
+        p.add_argument("--max-memory", type=_size, metavar="SIZE",
+                       help="memory gyroarray may plan to use, e.g. 8G (default: half the "
+                            "machine's; or $GYROARRAY_MAX_MEMORY); larger runs are refused up front")
     return parser
+
+
+def _size(text: str) -> int:
+    from .limits import parse_size
+    try:
+        return parse_size(text)
+    except InputError as err:
+        raise argparse.ArgumentTypeError(err.message) from None
 
 
 def _version() -> str:
@@ -773,13 +837,18 @@ def _version() -> str:
 
 def main(argv: list[str] | None = None) -> int:
     """Run the CLI; returns the exit code (0 ok, 1 failure, 2 bad input)."""
+    from .limits import memory_budget
     parser = build_parser()
     try:
-        args = parser.parse_args(argv)
-        if getattr(args, "plugin", None):
-            from .effects import plugin_effects
-            plugin_effects(args.plugin)
-        result, text, *code = args.func(args)
+        with warnings.catch_warnings():
+            if not os.environ.get("GYROARRAY_DEBUG"):   # stderr carries one line at most
+                warnings.simplefilter("ignore")
+            args = parser.parse_args(argv)
+            if getattr(args, "plugin", None):
+                from .effects import plugin_effects
+                plugin_effects(args.plugin)
+            with memory_budget(getattr(args, "max_memory", None)):
+                result, text, *code = args.func(args)
     except InputError as err:
         print(f"gyroarray: {err}", file=sys.stderr)
         return EXIT_USAGE

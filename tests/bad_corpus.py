@@ -237,7 +237,7 @@ def _cell_cases() -> list[Case]:
               csv=csv_text(acc_rows, header=HEADER + ",acc_x,acc_y,acc_z"), line=line_of(5),
               column="acc_y"),
         _case("nan_cell", "NaN value 'NaN' in column gyro1 (1 missing value(s), line 10); "
-              "read with repair=True", csv=csv_text(with_cell(6, 1, "NaN")),
+              "rerun with --repair", csv=csv_text(with_cell(6, 1, "NaN")),
               line=line_of(6), column="gyro1"),
         _case("empty_cell", "empty cell in column gyro3 (1 missing value(s), line 11)",
               csv=csv_text(with_cell(7, 3, "")), line=line_of(7), column="gyro3"),
