@@ -47,6 +47,7 @@ from gyroarray.errors import InputError
 from gyroarray.layout import UNIT_NORM_TOL
 from gyroarray.effects import REGISTRY, did_you_mean, get_effect
 from gyroarray.sim.protocol import Effect, Param
+from gyroarray.limits import MAX_RATE_DEG_S
 from gyroarray.tomlio import load_toml
 
 __all__ = ["ModelEntry", "NoiseModel"]
@@ -117,7 +118,33 @@ def _check_value(prm: Param, value, label: str):
     if too_low or too_high:
         raise InputError(f"{label}: {prm.name} = {v!r} [{prm.unit}] is out of range: must be "
                          f"{prm.bounds_text()}", column=prm.name)
+    limit = PLAUSIBLE.get(prm.unit)
+    if limit is not None and abs(v) > limit:
+        raise InputError(f"{label}: {prm.name} = {v:g} [{prm.unit}] is beyond what a gyro can have "
+                         f"(|{prm.name}| <= {limit:g} {prm.unit}: rates stay within "
+                         f"{MAX_RATE_DEG_S:g} deg/s)", column=prm.name)
     return v
+
+
+#: Largest magnitude of a parameter, by unit, that a physical gyro can have:
+#: each keeps the rate it makes within :data:`~gyroarray.limits.MAX_RATE_DEG_S`
+#: (1e5 deg/s = 3.6e8 deg/h) over an hour, or at a 1 Hz bandwidth for the
+#: noise densities (N [deg/√h] / 60 = σ [deg/s] at 1 Hz). Beyond these a
+#: value is a unit error, and the simulation's arithmetic would overflow.
+PLAUSIBLE: Mapping[str, float] = MappingProxyType({
+    "deg/√h": 60.0 * MAX_RATE_DEG_S,            # ARW: σ at 1 Hz = N/60
+    "deg/h/√h": 3600.0 * MAX_RATE_DEG_S,        # RRW: K·√(1 h)
+    "deg/h": 3600.0 * MAX_RATE_DEG_S,           # bias, instability, Gauss-Markov σ
+    "deg/h²": 3600.0 * MAX_RATE_DEG_S,          # rate ramp over 1 h
+    "deg/s": MAX_RATE_DEG_S,                    # sinusoid amplitude, saturation range
+    "deg/h/°C": 36.0 * MAX_RATE_DEG_S,          # over 100 °C
+    "ppm": 1e6,                                 # scale factor within ±100 %
+    "1/(deg/s)": 1.0 / MAX_RATE_DEG_S,          # k2·ω² within the range at 1e5 deg/s
+    "s": 1e8,                                   # delays, correlation times, windows (3 years)
+    "Hz": 1e6,
+    "deg": 1e6,
+    "°C": 1e4,
+})
 
 
 def _si(eff: Effect, params: Mapping[str, Any]) -> dict[str, Any]:

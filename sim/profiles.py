@@ -106,6 +106,7 @@ from pathlib import Path
 import numpy as np
 
 from gyroarray.errors import InputError
+from gyroarray.limits import read_regular
 from gyroarray.tomlio import load_toml
 from gyroarray.units import deg_s_to_rad_s, deg_to_rad, rad_to_deg
 
@@ -1288,11 +1289,9 @@ def _segment_from_table(r: _Reader, base_dir: Path, csv_bytes: list):
             r.fail("file", f"file must be the path of a CSV file, got {name!r}")
         path = base_dir / name
         try:
-            data = path.read_bytes()
-        except FileNotFoundError:
-            r.fail("file", f"CSV file {str(path)!r} not found")
-        except OSError as e:
-            r.fail("file", f"cannot read CSV file {str(path)!r}: {e.strerror}")
+            data = read_regular(path, "rate CSV file")
+        except InputError as e:
+            r.fail("file", f"CSV file {str(path)!r}: {e.message}")
         csv_bytes.append((name, data))
         t, w, lines = _parse_rate_csv(data, str(path))
         return RateCSV(time_s=t, omega_rad_s=w, file=str(path), line_numbers=tuple(lines),
@@ -1366,10 +1365,7 @@ def read_rate_csv(path) -> RateCSV:
     RateCSV
     """
     p = Path(path)
-    try:
-        data = p.read_bytes()
-    except OSError as e:
-        raise InputError(f"cannot read: {e.strerror}", file=str(p)) from None
+    data = read_regular(p, "rate CSV file")
     t, w, lines = _parse_rate_csv(data, str(p))
     return RateCSV(time_s=t, omega_rad_s=w, file=str(p), line_numbers=tuple(lines))
 
