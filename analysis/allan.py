@@ -910,7 +910,7 @@ def allan_analysis(rate_rad_s, tau0_s: float, taus="octave",
     res = deviation(rate_rad_s, tau0_s, kind, taus)
     if np.any(res.dev <= 0):
         i = int(np.flatnonzero(res.dev <= 0)[0])
-        raise InputError(f"the {kind} is zero at tau = {res.taus_s[i]!r} s: "
+        raise InputError(f"the {kind} is zero at tau = {float(res.taus_s[i]):g} s: "
                          "the rate is constant (or exactly linear there)")
     fit = fit_noise_terms(
         res, lambda alpha: edf(kind, res.n_phase, res.m, alpha,

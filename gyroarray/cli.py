@@ -82,10 +82,29 @@ def _add_force(p):
 
 # -- gdop / design ------------------------------------------------------------
 
+#: Most gyros a design question may ask about (the search costs O(N³) per angle).
+MAX_DESIGN_GYROS = 128
+#: Most taus ``allan --taus`` may ask for (an octave grid of 1e9 samples has 30).
+MAX_TAUS = 10_000
+
+
+def _bounded_int(name: str, lo: int, hi: int) -> Callable[[str], int]:
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{name} must be a whole number, got {text!r}") from None
+        if not lo <= value <= hi:
+            raise argparse.ArgumentTypeError(f"{name} must be from {lo} to {hi}, got {value}")
+        return value
+    return parse
+
+
 def _add_layout_args(p: argparse.ArgumentParser, *, alpha: bool, required: bool):
     p.add_argument("--scheme", type=int, choices=(1, 2), required=required,
                    help="conical scheme: 1 all gyros on the cone, 2 gyro 1 on +z")
-    p.add_argument("--n", type=int, required=required, metavar="N", help="number of gyros (>= 3)")
+    p.add_argument("--n", type=_bounded_int("--n", 3, MAX_DESIGN_GYROS), required=required, metavar="N",
+                   help=f"number of gyros (3 to {MAX_DESIGN_GYROS})")
     if alpha:
         p.add_argument("--alpha", type=_finite_float("--alpha"), required=True, metavar="DEG",
                        help="cone angle from +z [deg]")
@@ -160,17 +179,22 @@ def _parse_taus(text: str):
     if text == "octave":
         return "octave"
     if "," in text:
+        if text.count(",") >= MAX_TAUS:
+            raise InputError(f"--taus lists {text.count(',') + 1} taus; at most {MAX_TAUS}")
         try:
-            return [float(v) for v in text.split(",")]
+            taus = [float(v) for v in text.split(",")]
         except ValueError:
-            raise InputError(f"--taus list must hold numbers of seconds, got {text!r}") from None
+            raise InputError(f"--taus list must hold numbers of seconds, got {text[:60]!r}") from None
+        if not all(math.isfinite(t) and t > 0 for t in taus):
+            raise InputError("--taus list must hold finite taus > 0 s")
+        return taus
     try:
         count = int(text)
     except ValueError:
         raise InputError("--taus must be 'octave', a whole number of log-spaced taus or a "
-                         f"comma-separated list of taus in s, got {text!r}") from None
-    if count < 2:
-        raise InputError(f"--taus needs at least 2 log-spaced taus, got {count}")
+                         f"comma-separated list of taus in s, got {text[:60]!r}") from None
+    if not 2 <= count <= MAX_TAUS:
+        raise InputError(f"--taus asks for {count} log-spaced taus; give 2 to {MAX_TAUS}")
     return count
 
 

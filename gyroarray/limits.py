@@ -23,6 +23,7 @@ that is lower); the CLI's ``--max-memory SIZE`` or the environment variable
 from __future__ import annotations
 
 import contextlib
+import functools
 import errno
 import math
 import os
@@ -72,6 +73,7 @@ def format_size(nbytes: float) -> str:
     return f"{int(nbytes)} bytes"
 
 
+@functools.lru_cache(maxsize=1)
 def _machine_memory() -> int:
     try:
         total = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")

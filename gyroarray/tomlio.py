@@ -146,8 +146,7 @@ def _check_shape(data: dict, name: str, text: str) -> None:
     while stack:
         node, depth, path = stack.pop()
         if depth > MAX_DEPTH:
-            raise InputError(f"TOML nested more than {MAX_DEPTH} levels deep (at {path or 'the top'})",
-                             file=name, column=path or None)
+            raise _TooDeep(path)
         items = node.items() if isinstance(node, dict) else enumerate(node)
         for k, v in items:
             if isinstance(k, str) and len(k) > MAX_KEY_CHARS:
@@ -163,10 +162,6 @@ def _check_shape(data: dict, name: str, text: str) -> None:
 
 def loads_toml(text: str, name: str) -> dict:
     """Parse TOML text with the shape caps; InputError names ``name``, line and column."""
-    deep = _too_deep_at(text)
-    if deep is not None:
-        raise InputError(f"TOML nested more than {MAX_DEPTH} levels deep", file=name,
-                         line=deep[0], column=deep[1])
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
@@ -177,11 +172,24 @@ def loads_toml(text: str, name: str) -> dict:
         msg = _POS_RE.sub("", getattr(e, "msg", msg))
         raise InputError(f"TOML syntax error: {msg}", file=name, line=line, column=col) from None
     except RecursionError:
-        raise InputError(f"TOML nested more than {MAX_DEPTH} levels deep", file=name) from None
+        raise _too_deep(text, name) from None
     except (ValueError, MemoryError) as e:      # the parser's own limits
         raise InputError(f"TOML error: {str(e).split(';')[0]}", file=name) from None
-    _check_shape(data, name, text)
+    try:
+        _check_shape(data, name, text)
+    except _TooDeep:
+        raise _too_deep(text, name) from None
     return data
+
+
+class _TooDeep(Exception):
+    """Raised by the shape check; the location is found in the text afterwards."""
+
+
+def _too_deep(text: str, name: str) -> InputError:
+    at = _too_deep_at(text) or (None, None)
+    return InputError(f"TOML nested more than {MAX_DEPTH} levels deep", file=name, line=at[0],
+                      column=at[1])
 
 
 def load_toml(path, what: str = "TOML file") -> TomlDoc:

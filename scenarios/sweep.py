@@ -259,8 +259,7 @@ def _build_scenario(data: dict, name: str, seed: int, file: str, doc: _Doc | Non
                     prefix: str = ""):
     from gyroarray.measurement import _parse_layout, _parse_site
     from gyroarray.sim.model import NoiseModel
-    from gyroarray.sim.profiles import load_profile
-    from gyroarray.sim.scenario import Scenario, _parse_temperature, resolve_profile
+    from gyroarray.sim.scenario import Scenario, _parse_temperature, resolve_profile, validate_scenario
 
     view = _Prefixed(doc, data, file, prefix)
     rate = data.get("sample_rate_hz")
@@ -273,7 +272,7 @@ def _build_scenario(data: dict, name: str, seed: int, file: str, doc: _Doc | Non
     if not isinstance(motion, dict) or set(motion) != {"profile"} or not isinstance(ref, str) or not ref:
         raise view.error("motion must be a table with one key, profile = \"<name or file>\"",
                          "motion")
-    profile = load_profile(resolve_profile(ref, Path(data["_base_dir"]), view))
+    profile = _cached_profile(resolve_profile(ref, Path(data["_base_dir"]), view))
     duration = data.get("duration_s")
     if duration is not None:
         if not _is_num(duration) or duration <= 0:
@@ -291,10 +290,31 @@ def _build_scenario(data: dict, name: str, seed: int, file: str, doc: _Doc | Non
         raise InputError(err.message, file=file, line=view.line_of("effects"),
                          column=prefix + (err.column if isinstance(err.column, str) else "effects")
                          ) from None
-    return Scenario(name=name, layout=layout, profile=profile, sample_rate_hz=float(rate),
-                    model=model, seed=seed, duration_s=None if duration is None else float(duration),
-                    site=_parse_site(view), temperature=_parse_temperature(view),
-                    description=description, source=file)
+    scenario = Scenario(name=name, layout=layout, profile=profile, sample_rate_hz=float(rate),
+                        model=model, seed=seed, duration_s=None if duration is None else float(duration),
+                        site=_parse_site(view), temperature=_parse_temperature(view),
+                        description=description, source=file)
+    validate_scenario(scenario, view, "run")     # every scenario, before any runs
+    return scenario
+
+
+_PROFILES: dict = {}
+
+
+def _cached_profile(path: Path):
+    """:func:`~gyroarray.sim.profiles.load_profile`, once per file version (a grid names a few
+    profiles thousands of times)."""
+    from gyroarray.sim.profiles import load_profile
+    try:
+        st = path.stat()
+        key = (str(path.resolve()), st.st_mtime_ns, st.st_size)
+    except OSError:
+        return load_profile(path)      # refuses it, naming the file
+    if key not in _PROFILES:
+        if len(_PROFILES) > 64:
+            _PROFILES.clear()
+        _PROFILES[key] = load_profile(path)
+    return _PROFILES[key]
 
 
 # -- reading -------------------------------------------------------------------

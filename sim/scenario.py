@@ -221,11 +221,23 @@ def load_scenario(path) -> Scenario:
                         seed=seed, duration_s=duration, site=_parse_site(doc),
                         temperature=_parse_temperature(doc), description=description,
                         source=str(path), acc_columns=acc_columns)
+    validate_scenario(scenario, doc)
+    return scenario
+
+
+def validate_scenario(scenario: Scenario, doc, what: str = "simulate") -> None:
+    """The checks that need the whole scenario, each naming ``doc``'s file, line and key.
+
+    Samples (at least :data:`MIN_SCENARIO_SAMPLES`, a rate up to
+    :data:`MAX_SAMPLE_RATE_HZ`), memory for ``what`` (:func:`check_size`),
+    effects that must fit the run (a sinusoid below Nyquist, a latency
+    shorter than the run) and the table's rate and acceleration limits.
+    Sweeps run it on every scenario before any runs.
+    """
     _check_run_shape(scenario, doc)
-    check_size(scenario, "simulate", doc)
+    check_size(scenario, what, doc)
     _check_effects_fit_run(scenario, doc)
     _check_table_limits(scenario, doc)
-    return scenario
 
 
 #: Fewest samples a scenario may produce (an Allan curve and a score need a few
@@ -318,7 +330,20 @@ def _check_table_limits(scenario: Scenario, doc: _TomlDoc) -> None:
                             "(TableParams)", "motion.profile")
 
 
+_EXTREMES: dict = {}
+
+
 def command_extremes(profile: Profile, duration_s: float, per_piece: int = 200) -> tuple[float, float]:
+    """Cached :func:`_command_extremes` (profiles are immutable; keyed by fingerprint)."""
+    key = (profile.fingerprint, float(duration_s), per_piece)
+    if key not in _EXTREMES:
+        if len(_EXTREMES) > 256:
+            _EXTREMES.clear()
+        _EXTREMES[key] = _command_extremes(profile, duration_s, per_piece)
+    return _EXTREMES[key]
+
+
+def _command_extremes(profile: Profile, duration_s: float, per_piece: int = 200) -> tuple[float, float]:
     """Largest commanded gimbal rate [deg/s] and acceleration [deg/s²] over ``duration_s``.
 
     The command is evaluated on ``per_piece`` points of each profile piece
