@@ -140,7 +140,6 @@ PLAUSIBLE: Mapping[str, float] = MappingProxyType({
     "deg/h/°C": 36.0 * MAX_RATE_DEG_S,          # over 100 °C
     "ppm": 1e6,                                 # scale factor within ±100 %
     "1/(deg/s)": 0.1,                           # k2·ω² within 1e5 deg/s at 1000 deg/s
-    "s": 1e8,                                   # delays, correlation times, windows (3 years)
     "Hz": 1e6,
     "deg": 1e6,
     "°C": 1e4,
