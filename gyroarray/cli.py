@@ -441,6 +441,12 @@ def cmd_report(args):
     from .reports.report import write_report
     if args.top < 1:
         raise InputError("gyroarray report: --top must be >= 1")
+    from .outputs import same_path
+    for i, d in enumerate(args.dirs):
+        twice = next((e for e in args.dirs[:i] if same_path(d, e)), None)
+        if twice is not None:
+            raise InputError(f"the sweep folder is given twice ({twice} and {d}): its results "
+                             "would count twice", file=str(d))
     inputs = [args.paper_values] if args.paper_values is not None else []
     _output(args.out, args, "--out", inputs=inputs, suffixes=(".html", ".htm"))
     _output(args.md, args, "--md", inputs=inputs, suffixes=(".md",))
