@@ -27,6 +27,21 @@ class _Parser(argparse.ArgumentParser):
     def error(self, message: str):  # noqa: D401 - argparse API
         raise InputError(f"{message} (see '{self.prog} --help')")
 
+    def format_help(self) -> str:
+        text = super().format_help()
+        return text + _plugins_help() if getattr(self, "plugin_help", False) else text
+
+
+def _plugins_help() -> str:
+    """What installed third-party code a scenario, sweep or --estimators may load by name."""
+    from .estimators.base import ENTRY_POINT_GROUP, _entry_points
+    eps = _entry_points()
+    listed = "\n".join(f"  {name} = {ep.value}" for name, ep in sorted(eps.items())) or "  (none installed)"
+    return (f"\nplugins that --estimators and sweep files can load by name (entry-point group "
+            f"{ENTRY_POINT_GROUP!r}; importing one runs its code):\n{listed}\n"
+            "--scheduler tcp://... sends pickled tasks: use only a scheduler you trust "
+            "(README: 'What gyroarray trusts').\n")
+
 
 def _finite_float(name: str) -> Callable[[str], float]:
     def parse(text: str) -> float:
@@ -703,7 +718,7 @@ def _add_compare_args(p, *, out: bool):
     p.add_argument("--runs", type=_positive_int("--runs"), default=40, metavar="K",
                    help="Monte-Carlo runs of the model band (40)")
     p.add_argument("--seed", type=int, default=0, help="seed of the model band (0)")
-    p.add_argument("--repair", action="store_true", help="repair short gaps and isolated NaNs")
+    p.add_argument("--repair", action="store_true", help="repair short gaps, missing values, exact duplicate rows and a jittering clock (each listed)")
     _add_plugin(p)
     if out:
         _add_force(p)
@@ -714,6 +729,7 @@ def _add_compare_args(p, *, out: bool):
 
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog="gyroarray", description=__doc__.splitlines()[0])
+    parser.plugin_help = True
     parser.add_argument("--version", action="version", version=f"gyroarray {_version()}")
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
 
@@ -740,7 +756,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--kind", choices=("oadev", "ohdev"), default="oadev",
                    help="overlapping Allan (default) or Hadamard deviation")
     p.add_argument("--repair", action="store_true",
-                   help="repair short gaps and isolated NaNs (reported) instead of refusing them")
+                   help="repair short gaps, missing values, exact duplicate rows and a jittering clock (each listed)")
     p.add_argument("--raw", action="store_true",
                    help="analyse the raw gyro output even when a moving reference is present")
     p.add_argument("--plot", type=Path, metavar="OUT.png", help="write the ADEV plot")
@@ -760,7 +776,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="adaptive: longest window [samples] (default 600)")
     p.add_argument("--l-min", type=_positive_int("--l-min"), default=400, metavar="L",
                    help="adaptive: shortest window [samples] (default 400)")
-    p.add_argument("--repair", action="store_true", help="repair short gaps and isolated NaNs")
+    p.add_argument("--repair", action="store_true", help="repair short gaps, missing values, exact duplicate rows and a jittering clock (each listed)")
     p.add_argument("--plot", type=Path, metavar="OUT.png", help="heat map + ARW and window tracks")
     _add_force(p)
     p.add_argument("--paper-table1", action="store_true",
@@ -786,6 +802,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_plugin(p)
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=cmd_run)
+    p.plugin_help = True
 
     p = sub.add_parser("sweep", help="run a sweep of scenarios in parallel into a Parquet dataset (resumable)")
     p.add_argument("sweep", type=Path, metavar="SWEEP.toml")
@@ -795,6 +812,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--scheduler", metavar="tcp://HOST:PORT", help="a Dask distributed scheduler")
     p.add_argument("--json", action="store_true", help="print one JSON object (no progress bar)")
     p.set_defaults(func=cmd_sweep)
+    p.plugin_help = True
 
     p = sub.add_parser("report", help="design comparison report (HTML + Markdown) from sweep folders")
     p.add_argument("dirs", type=Path, nargs="+", metavar="DIR", help="gyroarray sweep --out folders")
