@@ -33,14 +33,19 @@ class _Parser(argparse.ArgumentParser):
 
 
 def _plugins_help() -> str:
-    """What installed third-party code a scenario, sweep or --estimators may load by name."""
-    from .estimators.base import ENTRY_POINT_GROUP, _entry_points
-    eps = _entry_points()
-    listed = "\n".join(f"  {name} = {ep.value}" for name, ep in sorted(eps.items())) or "  (none installed)"
-    return (f"\nplugins that --estimators and sweep files can load by name (entry-point group "
-            f"{ENTRY_POINT_GROUP!r}; importing one runs its code):\n{listed}\n"
-            "--scheduler tcp://... sends pickled tasks: use only a scheduler you trust "
-            "(README: 'What gyroarray trusts').\n")
+    """What installed third-party code scenario, model and sweep files may load by name."""
+    from .effects import ENTRY_POINT_GROUP as EFFECTS, installed_plugins
+    from .estimators.base import ENTRY_POINT_GROUP as ESTIMATORS, _entry_points
+    estimators = sorted((name, ep.value) for name, ep in _entry_points().items())
+
+    def listed(pairs):
+        return "\n".join(f"  {name} = {value}" for name, value in pairs) or "  (none installed)"
+    return (f"\ninstalled effect plugins (entry-point group {EFFECTS!r}; imported when the effect "
+            f"registry loads, named by scenario and model files):\n{listed(installed_plugins())}\n"
+            f"installed estimator plugins (group {ESTIMATORS!r}; imported when --estimators or a "
+            f"sweep file names one):\n{listed(estimators)}\n"
+            "--plugin PATH.py runs that file. --scheduler tcp://... exchanges pickled tasks: use only "
+            "a scheduler you trust (README: 'What gyroarray trusts').\n")
 
 
 def _finite_float(name: str) -> Callable[[str], float]:
@@ -793,6 +798,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_plugin(p)
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=cmd_simulate)
+    p.plugin_help = True
 
     p = sub.add_parser("run", help="simulate a scenario and score fusion estimators")
     p.add_argument("scenario", type=Path, metavar="SCENARIO.toml")
