@@ -267,6 +267,7 @@ def _allan_each(meas, signal, gyros: list[int], taus, args) -> tuple[dict, dict]
     Returns ``(analyses by gyro, reason by gyro not analysed)``; refuses
     (one line, every reason) when no gyro can be analysed.
     """
+    import numpy as np
     from .analysis.allan import allan_analysis
     from .measurement import constant_gyros, constant_note
     dead = set(constant_gyros(meas))
@@ -276,9 +277,13 @@ def _allan_each(meas, signal, gyros: list[int], taus, args) -> tuple[dict, dict]
             skipped[k] = constant_note([k], meas) + ": not analysed"
             continue
         try:
-            analyses[k] = allan_analysis(signal[:, k - 1], meas.dt_s, taus, kind=args.kind)
+            with np.errstate(all="ignore"):
+                analyses[k] = allan_analysis(signal[:, k - 1], meas.dt_s, taus, kind=args.kind)
         except InputError as err:
             skipped[k] = f"gyro {k} not analysed: {err.message}"
+        except (np.linalg.LinAlgError, ValueError, FloatingPointError) as err:
+            # a fit that cannot be computed on these numbers: said, the other gyros go on
+            skipped[k] = f"gyro {k} not analysed: the noise fit failed on its data ({err})"
     if not analyses:
         dead_asked = [k for k in gyros if k in dead]
         why = ([constant_note(dead_asked, meas)] if dead_asked else []) + [

@@ -1018,6 +1018,10 @@ def _checked_values(table: _Table, cols: _Columns, name: str, repair: bool,
     dup_notes: list[str] = []
     if repair:
         table, dup_notes = _drop_duplicate_rows(table, name)
+        if len(table.values) < MIN_SAMPLES:
+            raise InputError(f"too few samples after dropping exact duplicate rows: "
+                             f"{len(table.values)}, at least {MIN_SAMPLES} needed", file=name,
+                             line=int(table.lines[-1]))
     _check_time(table, name)
     _check_time_steps(table, name)
     values, lines = table.values, table.lines
@@ -1129,7 +1133,12 @@ def _jitter(values: np.ndarray, nominal_s: float | None, name: str,
         return values, [f"{name}: {what}; the analyses assume the uniform step (rerun with --repair "
                         "to resample onto the nominal grid by linear interpolation)"]
     rel = t - t[0]
-    k = int(round(float(rel[-1]) / period))
+    with np.errstate(all="ignore"):
+        steps = float(rel[-1]) / period
+    if not (math.isfinite(steps) and steps <= 2 * len(t) + 10):
+        raise InputError(f"cannot resample onto a {period:.6g} s grid: the record spans "
+                         f"{_fmt(rel[-1])} s", file=name, column=_TIME)
+    k = int(round(steps))
     grid = np.arange(k + 1) * period
     grid = grid[grid <= rel[-1]]
     out = np.empty((grid.size, values.shape[1]))

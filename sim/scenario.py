@@ -311,6 +311,10 @@ def _check_effects_fit_run(scenario: Scenario, doc: _TomlDoc) -> None:
                              f"Nyquist frequency {nyquist:g} Hz of sample_rate_hz = "
                              f"{scenario.sample_rate_hz:g} Hz", file=doc.name,
                              line=doc.line_of("effects"), column=f"{key}.freq_hz")
+        if e.effect == "temperature_bias" and scenario.temperature is None:
+            raise InputError(f"{key} (temperature_bias) needs a temperature: add a [temperature] "
+                             "table (points, start_c/end_c/tau_s or constant_c)", file=doc.name,
+                             line=doc.line_of("effects"), column=key)
         if e.effect == "latency" and e.params["delay_s"] >= duration:
             raise InputError(f"{key} (latency): delay_s = {e.params['delay_s']:g} s is not shorter "
                              f"than the run ({duration:g} s)", file=doc.name,
@@ -486,7 +490,20 @@ def simulate(scenario: Scenario, *, cache: bool = True, rng: np.random.Generator
                                  attitude=truth.rotation_matrices, temp_c=temp, site=site,
                                  specific_force=truth.specific_force_m_s2,
                                  angular_accel=truth.angular_accel_rad_s2)
+    _check_readings(scenario, readings)
     return SimulationResult(scenario=scenario, truth=truth, readings_rad_s=readings, temp_c=temp)
+
+
+def _check_readings(scenario: Scenario, readings_rad_s: np.ndarray) -> None:
+    """Refuse a run whose effects drive a gyro beyond what any gyro can output."""
+    from gyroarray.limits import MAX_RATE_DEG_S
+    with np.errstate(all="ignore"):
+        peak = float(np.max(np.abs(units.rad_s_to_deg_s(readings_rad_s)), initial=0.0))
+    if not peak <= MAX_RATE_DEG_S:
+        raise InputError(f"the simulated outputs reach {peak:.4g} deg/s, beyond the {MAX_RATE_DEG_S:g} "
+                         "deg/s a gyro can output: an effect's parameters are too large for this run "
+                         f"(noise densities grow with sqrt(sample_rate_hz = {scenario.sample_rate_hz:g}))",
+                         file=scenario.source, column="effects")
 
 
 def scenario_files(scenario: Scenario) -> list[Path]:
