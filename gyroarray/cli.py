@@ -422,9 +422,10 @@ _RUN_COLUMNS = (("sigma_1_deg_s", "1sigma[deg/s]", ".4g"), ("reduction", "reduct
 
 def cmd_run(args) -> tuple[dict, str]:
     from .chain import run_scenario
-    from .sim.scenario import load_scenario
+    from .sim.scenario import check_size, load_scenario
     names = [n.strip() for n in args.estimators.split(",") if n.strip()] if args.estimators else None
     scenario = load_scenario(args.scenario)
+    check_size(scenario, "run")
     result = run_scenario(scenario, names, cache=not args.no_cache)
     out = result.to_json_dict()
 
