@@ -138,7 +138,7 @@ def _check_row_files(path: Path, ids: set) -> None:
     schema, first = None, None
     for f in files:
         if f.stem not in ids:
-            raise InputError(f"a result file of a scenario that sweep.json does not list (copied "
+            raise InputError("a result file of a scenario that sweep.json does not list (copied "
                              "from another sweep?); move it out of rows/", file=str(f))
         try:
             names = sorted(pq.read_schema(f).names)
