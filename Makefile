@@ -6,7 +6,7 @@ STAMP  := $(VENV)/.installed
 # sweep worker processes (one per core)
 WORKERS ?= $(shell nproc 2>/dev/null || echo 2)
 
-.PHONY: demo test bench score venv clean
+.PHONY: demo test fuzz bench score venv clean
 
 venv: $(STAMP)
 
@@ -33,6 +33,11 @@ demo: $(STAMP)
 test: $(STAMP)
 	$(PY) -m pytest -q -n $(WORKERS)
 	$(VENV)/bin/gyroarray check
+
+# long fuzzing of the CLI with generated hostile inputs (issue 17; make test runs 25 examples)
+FUZZ_EXAMPLES ?= 2000
+fuzz: $(STAMP)
+	GYROARRAY_FUZZ_EXAMPLES=$(FUZZ_EXAMPLES) $(PY) -m pytest -q -n $(WORKERS) tests/test_fuzz.py tests/test_hostile.py
 
 bench: $(STAMP)
 	OPENBLAS_NUM_THREADS=1 $(PY) benchmarks/run.py

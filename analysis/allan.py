@@ -910,8 +910,9 @@ def allan_analysis(rate_rad_s, tau0_s: float, taus="octave",
     res = deviation(rate_rad_s, tau0_s, kind, taus)
     if np.any(res.dev <= 0):
         i = int(np.flatnonzero(res.dev <= 0)[0])
-        raise InputError(f"the {kind} is zero at tau = {res.taus_s[i]!r} s: "
+        raise InputError(f"the {kind} is zero at tau = {float(res.taus_s[i]):g} s: "
                          "the rate is constant (or exactly linear there)")
+    _check_fit_range(res.taus_s, res.dev, kind)
     fit = fit_noise_terms(
         res, lambda alpha: edf(kind, res.n_phase, res.m, alpha,
                                method=edf_method),
@@ -921,6 +922,21 @@ def allan_analysis(rate_rad_s, tau0_s: float, taus="octave",
                          m=res.m, n_terms=res.n_terms, adev_rad_s=res.dev,
                          ci_low_rad_s=low, ci_high_rad_s=high, edf=fit.edf,
                          confidence=float(confidence), fit=fit)
+
+
+#: The noise fit works with tau^-2 .. tau^2 and deviation^2: taus [s] and
+#: deviations [rad/s] must lie within these bounds for those to be normal doubles.
+_FIT_RANGE = (1e-150, 1e150)
+
+
+def _check_fit_range(taus, dev, kind: str) -> None:
+    """Refuse taus or deviations whose squares (and inverse squares) a double cannot hold."""
+    lo, hi = _FIT_RANGE
+    for name, values, unit in (("tau", taus, "s"), (kind, dev, "rad/s")):
+        bad = ~((values > lo) & (values < hi))
+        if bad.any():
+            raise InputError(f"cannot fit noise terms: {name} = {float(values[bad][0]):g} {unit} is "
+                             f"outside [{lo:g}, {hi:g}] (the fit squares it)")
 
 
 def plot_allan(analyses: Mapping[str, AllanAnalysis], path, *, force: bool = True) -> Path:

@@ -19,11 +19,11 @@ a check asks for ``efficiency``).
 from __future__ import annotations
 
 import math
-import tomllib
 from dataclasses import replace
 from pathlib import Path
 
 from .errors import InputError
+from .tomlio import load_toml
 
 #: Metrics a check may bound (columns of :attr:`gyroarray.chain.RunResult.table`).
 METRICS = ("sigma_1_deg_s", "mean_error_deg_s", "reduction", "attenuation", "phase_deg",
@@ -53,14 +53,7 @@ def load_thresholds(path) -> list[dict]:
     from .estimators import available
     path = Path(path)
     f = str(path)
-    if not path.is_file():
-        raise InputError("thresholds file not found", file=f)
-    try:
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
-    except tomllib.TOMLDecodeError as err:
-        raise InputError(f"not valid TOML: {err}", file=f) from None
-    except UnicodeDecodeError:
-        raise InputError("not UTF-8 text", file=f) from None
+    data = load_toml(path, "thresholds file").data
     unknown = sorted(set(data) - {"check"})
     if unknown:
         raise InputError(f"unknown key {unknown[0]!r} (known: check)", file=f, column=unknown[0])

@@ -12,6 +12,7 @@ import json
 import math
 import os
 import sys
+import warnings
 from pathlib import Path
 from typing import Callable
 
@@ -25,6 +26,26 @@ class _Parser(argparse.ArgumentParser):
 
     def error(self, message: str):  # noqa: D401 - argparse API
         raise InputError(f"{message} (see '{self.prog} --help')")
+
+    def format_help(self) -> str:
+        text = super().format_help()
+        return text + _plugins_help() if getattr(self, "plugin_help", False) else text
+
+
+def _plugins_help() -> str:
+    """What installed third-party code scenario, model and sweep files may load by name."""
+    from .effects import ENTRY_POINT_GROUP as EFFECTS, installed_plugins
+    from .estimators.base import ENTRY_POINT_GROUP as ESTIMATORS, _entry_points
+    estimators = sorted((name, ep.value) for name, ep in _entry_points().items())
+
+    def listed(pairs):
+        return "\n".join(f"  {name} = {value}" for name, value in pairs) or "  (none installed)"
+    return (f"\ninstalled effect plugins (entry-point group {EFFECTS!r}; imported when the effect "
+            f"registry loads, named by scenario and model files):\n{listed(installed_plugins())}\n"
+            f"installed estimator plugins (group {ESTIMATORS!r}; imported when --estimators or a "
+            f"sweep file names one):\n{listed(estimators)}\n"
+            "--plugin PATH.py runs that file. --scheduler tcp://... exchanges pickled tasks: use only "
+            "a scheduler you trust (README: 'What gyroarray trusts').\n")
 
 
 def _finite_float(name: str) -> Callable[[str], float]:
@@ -81,10 +102,29 @@ def _add_force(p):
 
 # -- gdop / design ------------------------------------------------------------
 
+#: Most gyros a design question may ask about (the search costs O(N³) per angle).
+MAX_DESIGN_GYROS = 128
+#: Most taus ``allan --taus`` may ask for (an octave grid of 1e9 samples has 30).
+MAX_TAUS = 10_000
+
+
+def _bounded_int(name: str, lo: int, hi: int) -> Callable[[str], int]:
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{name} must be a whole number, got {text!r}") from None
+        if not lo <= value <= hi:
+            raise argparse.ArgumentTypeError(f"{name} must be from {lo} to {hi}, got {value}")
+        return value
+    return parse
+
+
 def _add_layout_args(p: argparse.ArgumentParser, *, alpha: bool, required: bool):
     p.add_argument("--scheme", type=int, choices=(1, 2), required=required,
                    help="conical scheme: 1 all gyros on the cone, 2 gyro 1 on +z")
-    p.add_argument("--n", type=int, required=required, metavar="N", help="number of gyros (>= 3)")
+    p.add_argument("--n", type=_bounded_int("--n", 3, MAX_DESIGN_GYROS), required=required, metavar="N",
+                   help=f"number of gyros (3 to {MAX_DESIGN_GYROS})")
     if alpha:
         p.add_argument("--alpha", type=_finite_float("--alpha"), required=True, metavar="DEG",
                        help="cone angle from +z [deg]")
@@ -159,17 +199,22 @@ def _parse_taus(text: str):
     if text == "octave":
         return "octave"
     if "," in text:
+        if text.count(",") >= MAX_TAUS:
+            raise InputError(f"--taus lists {text.count(',') + 1} taus; at most {MAX_TAUS}")
         try:
-            return [float(v) for v in text.split(",")]
+            taus = [float(v) for v in text.split(",")]
         except ValueError:
-            raise InputError(f"--taus list must hold numbers of seconds, got {text!r}") from None
+            raise InputError(f"--taus list must hold numbers of seconds, got {text[:60]!r}") from None
+        if not all(math.isfinite(t) and t > 0 for t in taus):
+            raise InputError("--taus list must hold finite taus > 0 s")
+        return taus
     try:
         count = int(text)
     except ValueError:
         raise InputError("--taus must be 'octave', a whole number of log-spaced taus or a "
-                         f"comma-separated list of taus in s, got {text!r}") from None
-    if count < 2:
-        raise InputError(f"--taus needs at least 2 log-spaced taus, got {count}")
+                         f"comma-separated list of taus in s, got {text[:60]!r}") from None
+    if not 2 <= count <= MAX_TAUS:
+        raise InputError(f"--taus asks for {count} log-spaced taus; give 2 to {MAX_TAUS}")
     return count
 
 
@@ -189,7 +234,7 @@ def allan_signal(meas, *, raw: bool = False):
 
 
 def cmd_allan(args) -> tuple[dict, str]:
-    from .analysis.allan import allan_analysis, plot_allan
+    from .analysis.allan import plot_allan
     from .measurement import read_measurement
     from .outputs import PLOT_SUFFIXES
     taus = _parse_taus(args.taus)
@@ -200,16 +245,13 @@ def cmd_allan(args) -> tuple[dict, str]:
                          f"gyros 1..{meas.n_gyros}", file=str(args.measurement))
     gyros = [args.gyro] if args.gyro is not None else list(range(1, meas.n_gyros + 1))
     signal, what = allan_signal(meas, raw=args.raw)
-    analyses = {}
-    for k in gyros:
-        try:
-            analyses[k] = allan_analysis(signal[:, k - 1], meas.dt_s, taus, kind=args.kind)
-        except InputError as err:
-            raise InputError(f"gyro {k}: {err.message}", file=str(args.measurement)) from None
+    analyses, skipped = _allan_each(meas, signal, gyros, taus, args)
+    notes = [*meas.notes, *skipped.values()]
     out = {"gyros": {str(k): a.to_json_dict() for k, a in analyses.items()},
-           "signal": what, "notes": list(meas.notes)}
+           "signal": what, "notes": notes,
+           "not_analysed": {str(k): why for k, why in skipped.items()}}
     lines = [f"{args.measurement}: {meas.n_samples} samples at {1 / meas.dt_s:g} Hz, "
-             f"{meas.n_gyros} gyros; analysed: {what}", *[f"note: {n}" for n in meas.notes]]
+             f"{meas.n_gyros} gyros; analysed: {what}", *[f"note: {n}" for n in notes]]
     for k, a in analyses.items():
         lines.append(_format_allan(k, a.to_json_dict()))
     if args.plot is not None:
@@ -217,6 +259,37 @@ def cmd_allan(args) -> tuple[dict, str]:
         out["plot"] = str(path)
         lines.append(f"wrote {path}")
     return out, "\n".join(lines)
+
+
+def _allan_each(meas, signal, gyros: list[int], taus, args) -> tuple[dict, dict]:
+    """The Allan analysis of each gyro; a gyro that cannot be analysed is noted, not fatal.
+
+    Returns ``(analyses by gyro, reason by gyro not analysed)``; refuses
+    (one line, every reason) when no gyro can be analysed.
+    """
+    import numpy as np
+    from .analysis.allan import allan_analysis
+    from .measurement import constant_gyros, constant_note
+    dead = set(constant_gyros(meas))
+    analyses, skipped = {}, {}
+    for k in gyros:
+        if k in dead:
+            skipped[k] = constant_note([k], meas) + ": not analysed"
+            continue
+        try:
+            with np.errstate(all="ignore"):
+                analyses[k] = allan_analysis(signal[:, k - 1], meas.dt_s, taus, kind=args.kind)
+        except InputError as err:
+            skipped[k] = f"gyro {k} not analysed: {err.message}"
+        except (np.linalg.LinAlgError, ValueError, FloatingPointError) as err:
+            # a fit that cannot be computed on these numbers: said, the other gyros go on
+            skipped[k] = f"gyro {k} not analysed: the noise fit failed on its data ({err})"
+    if not analyses:
+        dead_asked = [k for k in gyros if k in dead]
+        why = ([constant_note(dead_asked, meas)] if dead_asked else []) + [
+            v for k, v in skipped.items() if k not in dead]
+        raise InputError("nothing to analyse: " + "; ".join(why), file=str(args.measurement))
+    return analyses, skipped
 
 
 def _format_allan(k: int, d: dict) -> str:
@@ -349,9 +422,10 @@ _RUN_COLUMNS = (("sigma_1_deg_s", "1sigma[deg/s]", ".4g"), ("reduction", "reduct
 
 def cmd_run(args) -> tuple[dict, str]:
     from .chain import run_scenario
-    from .sim.scenario import load_scenario
+    from .sim.scenario import check_size, load_scenario
     names = [n.strip() for n in args.estimators.split(",") if n.strip()] if args.estimators else None
     scenario = load_scenario(args.scenario)
+    check_size(scenario, "run")
     result = run_scenario(scenario, names, cache=not args.no_cache)
     out = result.to_json_dict()
 
@@ -393,6 +467,12 @@ def cmd_report(args):
     from .reports.report import write_report
     if args.top < 1:
         raise InputError("gyroarray report: --top must be >= 1")
+    from .outputs import same_path
+    for i, d in enumerate(args.dirs):
+        twice = next((e for e in args.dirs[:i] if same_path(d, e)), None)
+        if twice is not None:
+            raise InputError(f"the sweep folder is given twice ({twice} and {d}): its results "
+                             "would count twice", file=str(d))
     inputs = [args.paper_values] if args.paper_values is not None else []
     _output(args.out, args, "--out", inputs=inputs, suffixes=(".html", ".htm"))
     _output(args.md, args, "--md", inputs=inputs, suffixes=(".md",))
@@ -440,7 +520,28 @@ def _comparison(args):
     model = None
     if args.model is not None:
         model = NoiseModel.from_toml(args.model, n_gyros=meas.n_gyros)
+    meas, model, args.entry_notes = _live_gyros(meas, model, args)
     return ModelComparison(meas, model, n_runs=args.runs, seed=args.seed, ref_smooth_s=args.ref_smooth)
+
+
+def _live_gyros(meas, model, args):
+    """Leave constant (dead or stuck) gyros out of a comparison, saying so; refuse when none is left."""
+    from .measurement import constant_gyros, constant_note, without_gyros
+    dead = constant_gyros(meas)
+    if not dead:
+        return meas, model, []
+    note = constant_note(dead, meas)
+    live = [k for k in range(1, meas.n_gyros + 1) if k not in dead]
+    if not live:
+        raise InputError(f"nothing to analyse: {note}", file=str(args.measurement))
+    if model is not None and any(e.gyro is not None for e in model):
+        raise InputError(f"{note}, and the model names gyros by number: leave the constant "
+                         "gyro out of the record (and renumber the model) first",
+                         file=str(args.model))
+    mapping = ", ".join(f"{old} as {new}" for new, old in enumerate(live, 1) if old != new)
+    note += (": left out; the analysis below numbers the others "
+             + (mapping if mapping else "as before"))
+    return without_gyros(meas, dead, note), model, [note]
 
 
 def _model_lines(model) -> list[str]:
@@ -516,6 +617,7 @@ def cmd_compare(args):
         # by one, so the report shows the error falling
         steps = comp.steps_to_model()
         a = steps[-1][1]
+    a.notes[:0] = args.entry_notes
     _write_report(comp, steps, args)
     d = a.to_json_dict()
     res = {"discrepancy": a.discrepancy, "consistent": a.consistent, "z_crit": a.z_crit,
@@ -535,7 +637,8 @@ def cmd_compare(args):
             f"({'consistent' if a.consistent else 'NOT consistent'} with the model){fall}\n"
             + "\n".join(f"  {t.effect}{'' if t.gyro is None else ':' + str(t.gyro)}  z = {t.z:.1f}  {t.evidence}"
                         for t in a.candidates[:5] if a.significant(t))
-            + f"\nreport: {args.out}" + (f" and {args.md}" if args.md is not None else ""))
+            + f"\nreport: {args.out}" + (f" and {args.md}" if args.md is not None else "")
+            + "".join(f"\nnote: {n}" for n in args.entry_notes))
     return res, text
 
 
@@ -545,11 +648,13 @@ def cmd_diagnose(args):
         if args.model is None:
             raise InputError("gyroarray diagnose --validate needs --model (the model to test)")
         a = comp.validate()
+        a.notes[:0] = args.entry_notes
         out = a.to_json_dict()
         out["validated"] = True
         out["verdict"] = _validation_text(comp, a, args.model)
         return out, out["verdict"] + "\n" + _diagnosis_text(a, f"{comp.name}: {comp.N} gyros, {comp.n * comp.dt:.0f} s")
     a = comp.analyse()
+    a.notes[:0] = args.entry_notes
     return a.to_json_dict(), _diagnosis_text(a, f"{comp.name}: {comp.N} gyros, {comp.n * comp.dt:.0f} s")
 
 
@@ -558,14 +663,17 @@ def cmd_fit(args):
     comp = _comparison(args)
     add = [parse_add(x, comp.N) for x in (args.add or [])]
     before, after = comp.fit(add)
+    after.notes[:0] = args.entry_notes
     res = {"discrepancy_before": before.discrepancy, "discrepancy_after": after.discrepancy,
-           "consistent": after.consistent, "effects": after.effects_json()}
+           "consistent": after.consistent, "effects": after.effects_json(),
+           "notes": list(args.entry_notes)}
     if args.out is not None:
         res["model"] = _write_model(args.out, after.model, args)
     text = "\n".join([f"{comp.name}: discrepancy {before.discrepancy:.3g} -> {after.discrepancy:.3g} "
                       f"({'consistent' if after.consistent else 'NOT consistent'})",
                       "fitted model (beyond ARW + RRW):"] + (_model_lines(after.model) or ["  (baseline only)"])
-                     + ([f"written to {args.out}"] if args.out is not None else []))
+                     + ([f"written to {args.out}"] if args.out is not None else [])
+                     + [f"note: {n}" for n in args.entry_notes])
     return res, text
 
 
@@ -579,6 +687,7 @@ def cmd_ladder(args):
                                ref_smooth_s=args.ref_smooth)
         held = ModelComparison(rest, None, n_runs=args.runs, seed=args.seed, ref_smooth_s=args.ref_smooth)
     steps = comp.ladder(max_steps=args.max_steps)
+    steps[-1][1].notes[:0] = args.entry_notes
     _write_report(comp, steps, args)
     final = steps[-1][1]
     res = {"steps": [{"added": None if add is None else {"effect": add[0], "gyro": add[1]},
@@ -622,7 +731,7 @@ def _add_compare_args(p, *, out: bool):
     p.add_argument("--runs", type=_positive_int("--runs"), default=40, metavar="K",
                    help="Monte-Carlo runs of the model band (40)")
     p.add_argument("--seed", type=int, default=0, help="seed of the model band (0)")
-    p.add_argument("--repair", action="store_true", help="repair short gaps and isolated NaNs")
+    p.add_argument("--repair", action="store_true", help="repair short gaps, missing values, exact duplicate rows and a jittering clock (each listed)")
     p.add_argument("--ref-smooth", type=_finite_float("--ref-smooth"), default=0.0, metavar="SECONDS",
                    help="smooth a noisy reference rate (a differentiated encoder) by a centred moving "
                         "average of this length before comparing (0: as recorded)")
@@ -636,6 +745,7 @@ def _add_compare_args(p, *, out: bool):
 
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog="gyroarray", description=__doc__.splitlines()[0])
+    parser.plugin_help = True
     parser.add_argument("--version", action="version", version=f"gyroarray {_version()}")
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
 
@@ -662,7 +772,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--kind", choices=("oadev", "ohdev"), default="oadev",
                    help="overlapping Allan (default) or Hadamard deviation")
     p.add_argument("--repair", action="store_true",
-                   help="repair short gaps and isolated NaNs (reported) instead of refusing them")
+                   help="repair short gaps, missing values, exact duplicate rows and a jittering clock (each listed)")
     p.add_argument("--raw", action="store_true",
                    help="analyse the raw gyro output even when a moving reference is present")
     p.add_argument("--plot", type=Path, metavar="OUT.png", help="write the ADEV plot")
@@ -682,7 +792,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="adaptive: longest window [samples] (default 600)")
     p.add_argument("--l-min", type=_positive_int("--l-min"), default=400, metavar="L",
                    help="adaptive: shortest window [samples] (default 400)")
-    p.add_argument("--repair", action="store_true", help="repair short gaps and isolated NaNs")
+    p.add_argument("--repair", action="store_true", help="repair short gaps, missing values, exact duplicate rows and a jittering clock (each listed)")
     p.add_argument("--plot", type=Path, metavar="OUT.png", help="heat map + ARW and window tracks")
     _add_force(p)
     p.add_argument("--paper-table1", action="store_true",
@@ -699,6 +809,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_plugin(p)
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=cmd_simulate)
+    p.plugin_help = True
 
     p = sub.add_parser("run", help="simulate a scenario and score fusion estimators")
     p.add_argument("scenario", type=Path, metavar="SCENARIO.toml")
@@ -708,6 +819,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_plugin(p)
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=cmd_run)
+    p.plugin_help = True
 
     p = sub.add_parser("sweep", help="run a sweep of scenarios in parallel into a Parquet dataset (resumable)")
     p.add_argument("sweep", type=Path, metavar="SWEEP.toml")
@@ -717,6 +829,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--scheduler", metavar="tcp://HOST:PORT", help="a Dask distributed scheduler")
     p.add_argument("--json", action="store_true", help="print one JSON object (no progress bar)")
     p.set_defaults(func=cmd_sweep)
+    p.plugin_help = True
 
     p = sub.add_parser("report", help="design comparison report (HTML + Markdown) from sweep folders")
     p.add_argument("dirs", type=Path, nargs="+", metavar="DIR", help="gyroarray sweep --out folders")
@@ -767,7 +880,19 @@ def build_parser() -> argparse.ArgumentParser:
                    help="run each scenario at its full length (slow; default: the quick version)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=cmd_check)
+    for p in sub.choices.values():
+        p.add_argument("--max-memory", type=_size, metavar="SIZE",
+                       help="memory gyroarray may plan to use, e.g. 8G (default: half the "
+                            "machine's; or $GYROARRAY_MAX_MEMORY); larger runs are refused up front")
     return parser
+
+
+def _size(text: str) -> int:
+    from .limits import parse_size
+    try:
+        return parse_size(text)
+    except InputError as err:
+        raise argparse.ArgumentTypeError(err.message) from None
 
 
 def _version() -> str:
@@ -777,13 +902,18 @@ def _version() -> str:
 
 def main(argv: list[str] | None = None) -> int:
     """Run the CLI; returns the exit code (0 ok, 1 failure, 2 bad input)."""
+    from .limits import memory_budget
     parser = build_parser()
     try:
-        args = parser.parse_args(argv)
-        if getattr(args, "plugin", None):
-            from .effects import plugin_effects
-            plugin_effects(args.plugin)
-        result, text, *code = args.func(args)
+        with warnings.catch_warnings():
+            if not os.environ.get("GYROARRAY_DEBUG"):   # stderr carries one line at most
+                warnings.simplefilter("ignore")
+            args = parser.parse_args(argv)
+            if getattr(args, "plugin", None):
+                from .effects import plugin_effects
+                plugin_effects(args.plugin)
+            with memory_budget(getattr(args, "max_memory", None)):
+                result, text, *code = args.func(args)
     except InputError as err:
         print(f"gyroarray: {err}", file=sys.stderr)
         return EXIT_USAGE

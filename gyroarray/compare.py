@@ -60,7 +60,7 @@ from gyroarray.analysis.regress import _RWWhitener
 from gyroarray.analysis.stochastic_fit import fit_gyro_noise
 from gyroarray.effects import REGISTRY, did_you_mean, effect_names, get_effect
 from gyroarray.errors import InputError
-from gyroarray.measurement import Measurement, _runs
+from gyroarray.measurement import Measurement, _runs, relative_time_s
 from gyroarray.sim.effects import simulate_readings
 from gyroarray.sim.model import ModelEntry, NoiseModel
 from gyroarray.sim.protocol import Effect, FitContext, Kind
@@ -374,7 +374,7 @@ class ModelComparison:
         self.H = np.asarray(measurement.layout.axes, float)
         self.N = self.H.shape[0]
         self.dt = float(measurement.dt_s)
-        self.t = np.asarray(measurement.time_s, float)
+        self.t = relative_time_s(measurement)   # epoch stamps: differences to the first are exact
         self.n = self.t.size
         # the simulator's clock: uniform at dt from the first sample (the
         # measured clock may jitter by a fraction of a step)

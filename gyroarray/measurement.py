@@ -74,10 +74,8 @@ import csv
 import gzip
 import io
 import math
-import os
 import re
 import warnings
-import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import MappingProxyType
@@ -87,19 +85,21 @@ import numpy as np
 import pandas as pd
 import tomli_w
 
-try:
-    import tomllib
-except ModuleNotFoundError:      # Python 3.10: the same parser, as a package
-    import tomli as tomllib
-
 from . import __version__, units
 from .errors import InputError
 from .layout import UNIT_NORM_TOL, Layout, check_positions
+from .limits import (MAX_RATE_DEG_S, check_memory, format_size, gunzip_bounded, max_memory,
+                     read_regular)
+from .tomlio import TomlDoc, load_toml
 
 __all__ = [
     "Measurement",
     "Site",
     "read_measurement",
+    "constant_gyros",
+    "without_gyros",
+    "relative_time_s",
+    "MIN_SPREAD_DEG_S",
     "write_measurement",
     "MIN_SAMPLES",
     "MAX_REPAIR_SAMPLES",
@@ -377,11 +377,63 @@ def read_measurement(path, *, repair: bool = False) -> Measurement:
     data, notes = _read_csv_bytes(csv_path)
     cols, table, line_notes = _parse_csv(data, csv_name)
     _check_gyro_count(cols, side, csv_name, table.header_line)
-    values, repair_notes = _checked_values(table, cols, csv_name, repair)
+    values, repair_notes = _checked_values(table, cols, csv_name, repair,
+                                           _nominal_period(side, cols), side.units)
     values, unit_notes = _to_canonical(values, cols, side.units, side.name, csv_name)
     rate_note = _rate_note(values[:, 0], side)
     all_notes = (*notes, *line_notes, *side.notes, *unit_notes, *repair_notes, *rate_note)
     return _build(values, cols, side, csv_name, all_notes)
+
+
+#: A gyro whose output spans less than this [deg/s] is constant: no gyro
+#: resolves 3.6e-9 deg/h, so such a column is a dead, stuck or zeroed channel
+#: (also one of subnormal numbers).
+MIN_SPREAD_DEG_S = 1e-12
+
+
+def constant_gyros(m: Measurement) -> list[int]:
+    """The gyros (1-based) whose output is constant (dead or stuck).
+
+    A column is constant when its spread (max − min) is below
+    :data:`MIN_SPREAD_DEG_S`. Such a gyro carries no noise to analyse: the
+    analyses report it and go on with the others.
+    """
+    spread = np.ptp(m.gyro_deg_s, axis=0)
+    return [k + 1 for k in np.flatnonzero(spread < MIN_SPREAD_DEG_S).tolist()]
+
+
+def constant_note(gyros: list[int], m: Measurement) -> str:
+    """``gyro 2 is constant (dead or stuck?): ...`` for the notes and refusals."""
+    values = ", ".join(f"{float(m.gyro_deg_s[0, k - 1]):.6g} deg/s" for k in gyros)
+    which = (f"gyro {gyros[0]} is" if len(gyros) == 1 else
+             "gyros " + ", ".join(map(str, gyros)) + " are")
+    return f"{which} constant (dead or stuck?) at {values}"
+
+
+def without_gyros(m: Measurement, gyros: list[int], note: str = "") -> Measurement:
+    """The measurement without the given gyros (1-based), the note added.
+
+    The remaining gyros keep their order and are numbered 1..N' in the
+    result (the note should say how the numbers map).
+    """
+    keep = [k for k in range(m.n_gyros) if k + 1 not in set(gyros)]
+    if not keep:
+        raise InputError("no gyro left to analyse", file=m.source)
+    layout = Layout.from_axes(m.layout.axes[keep], source=m.source)
+    return Measurement(time_s=m.time_s, gyro_deg_s=m.gyro_deg_s[:, keep], layout=layout,
+                       sample_rate_hz=m.sample_rate_hz, ref_deg_s=m.ref_deg_s, temp_c=m.temp_c,
+                       site=m.site, description=m.description, source=m.source,
+                       notes=(*m.notes, *([note] if note else [])))
+
+
+def relative_time_s(m: Measurement) -> np.ndarray:
+    """``time_s − time_s[0]`` [s]: the clock every analysis works on.
+
+    Unix-epoch stamps (1.7e9 s) resolve only 2.4e-7 s in a double; a clock
+    built at the epoch (``t0 + k·dt``) is not uniform to the analyses'
+    tolerance, while the differences to the first stamp are exact.
+    """
+    return m.time_s - m.time_s[0]
 
 
 # -- paths ------------------------------------------------------------------
@@ -412,12 +464,8 @@ def _sidecar_of(csv_path: Path) -> Path:
 
 
 def _read_bytes(path: Path, what: str) -> bytes:
-    try:
-        return path.read_bytes()
-    except FileNotFoundError:
-        raise InputError(f"{what} not found", file=str(path)) from None
-    except OSError as e:
-        raise InputError(f"cannot read {what}: {e.strerror or e}", file=str(path)) from None
+    """A regular file's bytes (FIFOs, devices and folders refused), within the memory budget."""
+    return read_regular(path, what)
 
 
 def _utf8_text(data: bytes, name: str) -> str:
@@ -444,65 +492,14 @@ class _Sidecar:
     notes: tuple[str, ...]
 
 
-class _TomlDoc:
-    """A parsed TOML file and its text, to name keys (and find their lines) in errors.
-
-    Shared by the measurement sidecar, scenario and sweep readers. ``line_of``
-    understands ``[table]`` and ``[[array]]`` headers and ``key[i].leaf`` paths;
-    a key it cannot find points at its table's line.
-    """
-
-    _TABLE_RE = re.compile(r"\s*\[\[?\s*([A-Za-z0-9_.-]+)\s*\]\]?\s*(?:#.*)?$")
-    _KEY_RE = re.compile(r"\s*([A-Za-z0-9_-]+)\s*=")
-
-    def __init__(self, name: str, text: str, data: dict):
-        self.name, self.text, self.data = name, text, data
-
-    def line_of(self, key: str) -> int | None:
-        parts = re.sub(r"\[\d+\]", "", key).split(".")
-        table, leaf = ".".join(parts[:-1]), parts[-1]
-        current = ""
-        for number, line in enumerate(self.text.split("\n"), 1):
-            header = self._TABLE_RE.match(line)
-            if header:
-                current = header.group(1)
-                if current == key:
-                    return number
-                continue
-            k = self._KEY_RE.match(line)
-            if k and k.group(1) == leaf and current == table:
-                return number
-        if table:   # a dotted key inside a table, or an inline table: the table's line
-            return self.line_of(table)
-        return None
-
-    def error(self, message: str, key: str) -> InputError:
-        return InputError(message, file=self.name, line=self.line_of(key), column=key)
+_TomlDoc = TomlDoc   # the one TOML key locator (gyroarray.tomlio), for sidecars, scenarios and sweeps
 
 
-_TOML_POS_RE = re.compile(r"\s*\(at line (\d+), column (\d+)\)\s*$")
-
-
-def _load_toml(path: Path) -> _TomlDoc:
-    name = str(path)
-    if not path.is_file():
+def _load_toml(path: Path, what: str = "sidecar") -> TomlDoc:
+    if what == "sidecar" and not path.exists() and not path.is_symlink():
         raise InputError("missing sidecar: every measurement CSV needs a .toml with the "
-                         "same stem beside it (sample_rate_hz, [layout])", file=name)
-    text = _utf8_text(_read_bytes(path, "sidecar"), name)
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as e:
-        msg = str(e).splitlines()[0] if str(e) else "invalid TOML"
-        pos = _TOML_POS_RE.search(msg)
-        line = getattr(e, "lineno", None) or (int(pos.group(1)) if pos else None)
-        col = getattr(e, "colno", None) or (int(pos.group(2)) if pos else None)
-        msg = _TOML_POS_RE.sub("", getattr(e, "msg", msg))
-        raise InputError(f"TOML syntax error: {msg}", file=name, line=line,
-                         column=col) from None
-    except (ValueError, RecursionError) as e:      # tomllib's own limits
-        what = "nested too deeply" if isinstance(e, RecursionError) else str(e).split(";")[0]
-        raise InputError(f"TOML error: {what}", file=name) from None
-    return _TomlDoc(name, text, data)
+                         "same stem beside it (sample_rate_hz, [layout])", file=str(path))
+    return load_toml(path, what)
 
 
 def _read_sidecar(path: Path) -> _Sidecar:
@@ -685,14 +682,12 @@ def _read_csv_bytes(path: Path) -> tuple[bytes, list[str]]:
     name = str(path)
     raw = _read_bytes(path, "measurement file")
     if name.lower().endswith(".gz"):
-        try:
-            raw = gzip.decompress(raw)
-        except (OSError, EOFError, zlib.error) as e:
-            raise InputError(f"not a valid gzip file (the name ends in .gz): {e}",
-                             file=name) from None
+        raw = gunzip_bounded(raw, max_memory() // _READ_BYTES_FACTOR, name, cost=_read_cost,
+                             max_cost=max_memory())
     elif raw.startswith(_GZIP_MAGIC):
         raise InputError("file is gzip-compressed but its name does not end in .gz",
                          file=name)
+    _check_read_memory(raw, name)
     notes = []
     if raw.startswith(_BOM):
         raw = raw[len(_BOM):]
@@ -704,6 +699,29 @@ def _read_csv_bytes(path: Path) -> tuple[bytes, list[str]]:
         raise InputError("carriage return (\\r) inside a line: lines must end in \\n or "
                          "\\r\\n", file=name, line=raw.count(b"\n", 0, pos) + 1)
     return raw, notes
+
+
+#: The decompressed text may take at most this share of the memory budget [-]
+#: (the reader holds the text, its line index and the parsed table at once).
+_READ_BYTES_FACTOR = 8
+#: Peak memory of the reader per byte of text, per line and per comma [bytes]
+#: (measured with tracemalloc: 323 MB for 1e6 rows x 5 columns = 106 MB of
+#: text, 250 MB for 5e6 blank lines; rounded up).
+_MEM_PER_BYTE, _MEM_PER_LINE, _MEM_PER_CELL = 2, 50, 16
+
+
+def _read_cost(data: bytes) -> int:
+    """Estimated peak memory [bytes] of parsing ``data`` (a piece of the CSV text)."""
+    return (_MEM_PER_BYTE * len(data) + _MEM_PER_LINE * data.count(b"\n")
+            + _MEM_PER_CELL * data.count(b","))
+
+
+def _check_read_memory(data: bytes, name: str) -> None:
+    """Refuse, before the text is indexed, a file whose reading would exceed the budget."""
+    lines = data.count(b"\n") + 1
+    need = _read_cost(data)
+    check_memory(need, f"reading {lines} lines ({format_size(len(data))} of text)",
+                 "split the record or keep only the columns needed", file=name)
 
 
 @dataclass(frozen=True)
@@ -983,23 +1001,155 @@ def _check_gyro_count(cols: _Columns, side: _Sidecar, name: str, line: int) -> N
             f"{side.layout.n_gyros} axes", file=name, line=line)
 
 
-def _checked_values(table: _Table, cols: _Columns, name: str,
-                    repair: bool) -> tuple[np.ndarray, list[str]]:
-    """Check cells, time and gaps; repair or refuse; values in file units."""
-    values, lines = table.values, table.lines
+def _checked_values(table: _Table, cols: _Columns, name: str, repair: bool,
+                    nominal_s: float | None = None, declared: dict | None = None
+                    ) -> tuple[np.ndarray, list[str]]:
+    """Check cells, time and gaps; repair or refuse; values in file units.
+
+    With ``repair``, in this order: exact duplicate rows are dropped, short
+    gaps and runs of missing values are filled, and a jittering clock is
+    resampled onto the nominal grid (each step listed in the notes).
+    """
     _check_infinite(table, cols, name)
-    if len(values) < MIN_SAMPLES:
-        raise InputError(f"too few samples: {len(values)}, at least {MIN_SAMPLES} needed",
-                         file=name, line=int(lines[-1]))
+    _check_physical(table, cols, declared or {}, name)
+    if len(table.values) < MIN_SAMPLES:
+        raise InputError(f"too few samples: {len(table.values)}, at least {MIN_SAMPLES} needed",
+                         file=name, line=int(table.lines[-1]))
+    dup_notes: list[str] = []
+    if repair:
+        table, dup_notes = _drop_duplicate_rows(table, name)
+        if len(table.values) < MIN_SAMPLES:
+            raise InputError(f"too few samples after dropping exact duplicate rows: "
+                             f"{len(table.values)}, at least {MIN_SAMPLES} needed", file=name,
+                             line=int(table.lines[-1]))
     _check_time(table, name)
+    _check_time_steps(table, name)
+    values, lines = table.values, table.lines
     gaps, gap_notes = _find_gaps(values[:, 0], lines, name, repair)
     runs, run_notes = _find_missing_runs(table, cols, name, repair)
-    if not (gaps or runs):
+    if gaps or runs:
+        values = _fill_runs(values.copy(), runs)
+        values = _insert_gap_rows(values, gaps)
+        _check_repaired(values, cols, name)
+    values, jitter_notes = _jitter(values, nominal_s, name, repair)
+    return values, dup_notes + run_notes + gap_notes + jitter_notes
+
+
+def _nominal_period(side: "_Sidecar", cols: _Columns) -> float:
+    """The sidecar's nominal sample period in the time column's unit."""
+    period = 1.0 / side.sample_rate_hz
+    return period * MS_PER_S if side.units.get("time") == "ms" else period
+
+
+def _check_physical(table: _Table, cols: _Columns, declared: dict, name: str) -> None:
+    """Refuse a gyro or reference rate beyond :data:`MAX_RATE_DEG_S` (a unit or logging error)."""
+    groups = _column_groups(cols)
+    for key in ("gyro", "ref"):
+        if key not in groups:
+            continue
+        block = table.values[:, groups[key]]
+        convert = ACCEPTED_UNITS[key][declared.get(key, "deg/s")]
+        with np.errstate(invalid="ignore", over="ignore"):
+            mag = np.abs(block if convert is None else convert(block))
+            bad = mag > MAX_RATE_DEG_S
+        if bad.any():
+            row = int(np.flatnonzero(bad.any(axis=1))[0])
+            j = int(np.flatnonzero(bad[row])[0])
+            col = cols.names[groups[key].start + j]
+            raise InputError(f"{col} = {_fmt(table.values[row, groups[key].start + j])} is beyond "
+                             f"the {MAX_RATE_DEG_S:g} deg/s any gyro or rate table can see "
+                             "(a unit or logging error?)", file=name, line=int(table.lines[row]),
+                             column=col)
+
+
+#: Shortest time step accepted [s]: a clock faster than 1 GHz is not a gyro's.
+MIN_TIME_STEP_S = 1e-9
+#: Largest |step - nominal period| / nominal period accepted as the same clock
+#: without a note [-] (printing the times to a few digits stays far below it).
+JITTER_TOL = 1e-3
+
+
+def _check_time_steps(table: _Table, name: str) -> None:
+    """Refuse time steps below :data:`MIN_TIME_STEP_S` (subnormal or nanosecond steps)."""
+    t = table.values[:, 0]
+    step = np.diff(t)
+    tiny = np.flatnonzero(step < MIN_TIME_STEP_S)
+    if tiny.size:
+        i = int(tiny[0])
+        raise InputError(f"time step of {_fmt(step[i])} s between line {table.lines[i]} and line "
+                         f"{table.lines[i + 1]} is shorter than {MIN_TIME_STEP_S:g} s (a sample "
+                         "rate above 1 GHz): not a gyro's clock (a unit error?)", file=name,
+                         line=int(table.lines[i + 1]), column=_TIME)
+
+
+def _drop_duplicate_rows(table: _Table, name: str) -> tuple[_Table, list[str]]:
+    """Drop rows that repeat the previous row exactly (``repair``); refuse conflicting ones.
+
+    Two rows with the same time stamp and different values are refused,
+    naming both lines: nothing tells which of them is right.
+    """
+    v = table.values
+    same_t = v[1:, 0] == v[:-1, 0]
+    if not same_t.any():
+        return table, []
+    same_row = same_t & np.all((v[1:] == v[:-1]) | (np.isnan(v[1:]) & np.isnan(v[:-1])), axis=1)
+    conflict = np.flatnonzero(same_t & ~same_row)
+    if conflict.size:
+        i = int(conflict[0])
+        raise InputError(f"conflicting duplicate rows: line {table.lines[i]} and line "
+                         f"{table.lines[i + 1]} both have time_s = {_fmt(v[i, 0])} s but different "
+                         "values; --repair drops exact duplicates only (it cannot tell which row "
+                         "is right)", file=name, line=int(table.lines[i + 1]), column=_TIME)
+    keep = np.concatenate(([True], ~same_row))
+    kept = np.flatnonzero(keep)
+    dropped = table.lines[1:][same_row]
+    notes = [f"{name}: repaired: dropped line {int(line)}, an exact duplicate of the row before it"
+             for line in dropped]
+    token = table.token
+    return (_Table(v[kept], table.lines[kept], table.header_line,
+                   lambda row, j: token(int(kept[row]), j)),
+            _summarised(notes, "exact duplicate rows dropped"))
+
+
+def _jitter(values: np.ndarray, nominal_s: float | None, name: str,
+            repair: bool) -> tuple[np.ndarray, list[str]]:
+    """Resample a jittering clock onto the nominal grid (``repair``), or note the jitter.
+
+    The period is the median step, or the sidecar's nominal period when the
+    two agree to 1 %. With ``repair`` every column is linearly interpolated
+    in time onto ``t0 + k * period``, k = 0 .. round((t_end - t0) / period).
+    """
+    t = values[:, 0]
+    period = float(np.median(np.diff(t)))
+    if nominal_s is not None and abs(period / nominal_s - 1.0) <= RATE_NOTE_TOL:
+        period = nominal_s
+    dev = np.abs(np.diff(t) - period)
+    worst = float(dev.max()) if dev.size else 0.0
+    if worst <= JITTER_TOL * period:
         return values, []
-    values = _fill_runs(values.copy(), runs)
-    values = _insert_gap_rows(values, gaps)
-    _check_repaired(values, cols, name)
-    return values, run_notes + gap_notes
+    what = (f"the time steps jitter by up to {worst:.3g} s ({100 * worst / period:.3g} % of the "
+            f"{period:.6g} s step; rms {float(np.sqrt(np.mean(dev ** 2))):.3g} s)")
+    if not repair:
+        return values, [f"{name}: {what}; the analyses assume the uniform step (rerun with --repair "
+                        "to resample onto the nominal grid by linear interpolation)"]
+    rel = t - t[0]
+    with np.errstate(all="ignore"):
+        steps = float(rel[-1]) / period
+    if not (math.isfinite(steps) and steps <= 2 * len(t) + 10):
+        raise InputError(f"cannot resample onto a {period:.6g} s grid: the record spans "
+                         f"{_fmt(rel[-1])} s", file=name, column=_TIME)
+    k = int(round(steps))
+    grid = np.arange(k + 1) * period
+    grid = grid[grid <= rel[-1]]
+    out = np.empty((grid.size, values.shape[1]))
+    out[:, 0] = t[0] + grid
+    for j in range(1, values.shape[1]):
+        out[:, j] = np.interp(grid, rel, values[:, j])
+    if not np.all(np.diff(out[:, 0]) > 0):
+        raise InputError("cannot resample: the nominal grid is not representable at these time "
+                         "stamps (subtract the first stamp from time_s)", file=name, column=_TIME)
+    return out, [f"{name}: repaired: {what}; resampled {len(t)} samples onto {grid.size} at the "
+                 f"nominal {period:.6g} s step from the first stamp, by linear interpolation in time"]
 
 
 def _check_infinite(table: _Table, cols: _Columns, name: str) -> None:
@@ -1028,8 +1178,10 @@ def _check_time(table: _Table, name: str) -> None:
     bad = np.flatnonzero(~(np.diff(t) > 0))
     if bad.size:
         i = int(bad[0])
+        hint = ("; if the rows repeat exactly, --repair drops the duplicates"
+                if t[i + 1] == t[i] else "")
         raise InputError(f"time_s is not strictly increasing: {_fmt(t[i + 1])} s at line "
-                         f"{lines[i + 1]} follows {_fmt(t[i])} s at line {lines[i]}",
+                         f"{lines[i + 1]} follows {_fmt(t[i])} s at line {lines[i]}{hint}",
                          file=name, line=int(lines[i + 1]), column=_TIME)
 
 
@@ -1052,7 +1204,7 @@ def _find_gaps(t: np.ndarray, lines: np.ndarray, name: str,
         if m > MAX_REPAIR_SAMPLES or not repair:
             fix = (f"gaps longer than {MAX_REPAIR_SAMPLES} samples cannot be repaired"
                    if m > MAX_REPAIR_SAMPLES else
-                   "read with repair=True to fill it by linear interpolation")
+                   "rerun with --repair (repair=True in Python) to fill it by linear interpolation")
             raise InputError(f"gap of {m} missing sample(s) {span} (nominal period "
                              f"{period:.6g} s); {fix}", file=name,
                              line=int(lines[i + 1]), column=_TIME)
@@ -1089,8 +1241,8 @@ def _find_missing_runs(table: _Table, cols: _Columns, name: str,
             problem = (f"run of {b - a} missing values in column {col} ({what}) is longer "
                        f"than {MAX_REPAIR_SAMPLES} samples and cannot be repaired")
         elif not repair:
-            problem = (f"{kind} in column {col} ({b - a} missing value(s), {where}); read "
-                       "with repair=True to fill by linear interpolation")
+            problem = (f"{kind} in column {col} ({b - a} missing value(s), {where}); rerun "
+                       "with --repair (repair=True in Python) to fill by linear interpolation")
         else:
             notes.append(f"{name}: repaired {b - a} missing value(s) in column {col} at "
                          f"{where} by linear interpolation in time")

@@ -37,7 +37,6 @@ import io
 import json
 import math
 import time
-import tomllib
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
@@ -89,6 +88,7 @@ class SweepData:
 
 def load_sweep_dir(path) -> SweepData:
     """Read a ``gyroarray sweep`` output folder (complete scenario files only)."""
+    from gyroarray.limits import read_regular
     from gyroarray.scenarios.runner import MANIFEST, load_results
 
     path = Path(path)
@@ -98,21 +98,58 @@ def load_sweep_dir(path) -> SweepData:
     if not man.is_file():
         raise InputError(f"no {MANIFEST}: not a gyroarray sweep folder", file=str(path))
     try:
-        manifest = json.loads(man.read_text())
-    except (OSError, ValueError) as err:
-        raise InputError(f"unreadable sweep manifest: {err}", file=str(man)) from None
+        manifest = json.loads(read_regular(man, "sweep manifest"))
+    except (UnicodeDecodeError, ValueError, RecursionError) as err:
+        raise InputError(f"unreadable sweep manifest: {str(err)[:200]}", file=str(man)) from None
+    scenarios = manifest.get("scenarios") if isinstance(manifest, dict) else None
+    if not (isinstance(scenarios, list) and all(
+            isinstance(s, dict) and isinstance(s.get("id"), str) for s in scenarios)):
+        raise InputError("not a gyroarray sweep manifest: it must be a JSON object whose "
+                         "\"scenarios\" is a list of objects with an \"id\" (was it edited?)",
+                         file=str(man))
+    ids = {s["id"] for s in scenarios}
+    _check_row_files(path, ids)
     rows = load_results(path)
     if rows.empty:
         raise InputError("the sweep has no finished scenario yet (rows/ is empty)",
                          file=str(path))
+    if "scenario_id" not in rows:
+        raise InputError("the result rows have no scenario_id column: not gyroarray sweep results",
+                         file=str(path / "rows"))
     done = set(rows["scenario_id"])
-    missing = sum(1 for s in manifest.get("scenarios", []) if s["id"] not in done)
+    foreign = sorted(done - ids)
+    if foreign:
+        raise InputError(f"rows/ holds results of {len(foreign)} scenario(s) that {MANIFEST} does not "
+                         f"list (e.g. {foreign[0]}): copied from another sweep? Move them out of rows/",
+                         file=str(path / "rows"))
+    missing = sum(1 for s in scenarios if s["id"] not in done)
     if "scenario" not in rows:
         rows["scenario"] = ""
     if "replicate" not in rows:
         rows["replicate"] = 0
     return SweepData(path=path, name=str(manifest.get("name", path.name)), manifest=manifest,
                      rows=rows, missing=missing)
+
+
+def _check_row_files(path: Path, ids: set) -> None:
+    """Every ``rows/<id>.parquet`` belongs to the manifest and has the schema of the others."""
+    import pyarrow.parquet as pq
+    files = sorted((path / "rows").glob("*.parquet")) if (path / "rows").is_dir() else []
+    schema, first = None, None
+    for f in files:
+        if f.stem not in ids:
+            raise InputError("a result file of a scenario that sweep.json does not list (copied "
+                             "from another sweep?); move it out of rows/", file=str(f))
+        try:
+            names = sorted(pq.read_schema(f).names)
+        except Exception:      # a broken footer: load_results names it with the way out
+            continue
+        if schema is None:
+            schema, first = names, f
+        elif names != schema:
+            diff = sorted(set(names) ^ set(schema))
+            raise InputError(f"its columns differ from those of {first.name} ({', '.join(diff[:5])}): "
+                             "not a result of this sweep; move it out of rows/", file=str(f))
 
 
 def default_paper_values() -> Path:
@@ -123,12 +160,8 @@ def default_paper_values() -> Path:
 def load_paper_values(path=None) -> list[dict]:
     """The experiments of a paper-values file (see the file's header), checked."""
     path = Path(path) if path is not None else default_paper_values()
-    try:
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
-    except OSError as err:
-        raise InputError(f"cannot read the paper values: {err.strerror}", file=str(path)) from None
-    except tomllib.TOMLDecodeError as err:
-        raise InputError(f"not valid TOML: {err}", file=str(path)) from None
+    from gyroarray.tomlio import load_toml
+    data = load_toml(path, "paper values file").data
     exps = data.get("experiment")
     if not isinstance(exps, list) or not exps:
         raise InputError("no [[experiment]] tables", file=str(path))

@@ -79,7 +79,6 @@ import itertools
 import json
 import math
 import re
-import tomllib
 from dataclasses import dataclass, field
 from functools import lru_cache
 from importlib import resources
@@ -89,6 +88,7 @@ import numpy as np
 
 from gyroarray.errors import InputError
 from gyroarray.measurement import _TomlDoc
+from gyroarray.tomlio import load_toml
 
 __all__ = ["Sweep", "ScenarioSpec", "load_sweep", "scenario_id", "scenario_seed", "PARAM_KEYS"]
 
@@ -119,23 +119,7 @@ _Doc = _TomlDoc  # one TOML key locator for sidecars, scenarios and sweeps
 
 
 def _read_doc(path: Path, what: str) -> _Doc:
-    if not path.is_file():
-        raise InputError(f"{what} not found", file=str(path))
-    try:
-        text = path.read_bytes().decode("utf-8")
-    except UnicodeDecodeError:
-        raise InputError(f"{what} is not UTF-8 text", file=str(path)) from None
-    except OSError as err:
-        raise InputError(f"cannot read {what}: {err.strerror}", file=str(path)) from None
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as err:
-        msg = str(err)
-        m = re.search(r"\(at line (\d+), column (\d+)\)", msg)
-        line = int(m.group(1)) if m else None
-        raise InputError(f"TOML syntax error: {msg[:m.start()].strip() if m else msg}",
-                         file=str(path), line=line) from None
-    return _Doc(str(path), text, data)
+    return load_toml(path, what)
 
 
 # -- ids and seeds -------------------------------------------------------------
@@ -275,8 +259,7 @@ def _build_scenario(data: dict, name: str, seed: int, file: str, doc: _Doc | Non
                     prefix: str = ""):
     from gyroarray.measurement import _parse_layout, _parse_site
     from gyroarray.sim.model import NoiseModel
-    from gyroarray.sim.profiles import load_profile
-    from gyroarray.sim.scenario import Scenario, _parse_temperature, resolve_profile
+    from gyroarray.sim.scenario import Scenario, _parse_temperature, resolve_profile, validate_scenario
 
     view = _Prefixed(doc, data, file, prefix)
     rate = data.get("sample_rate_hz")
@@ -289,7 +272,7 @@ def _build_scenario(data: dict, name: str, seed: int, file: str, doc: _Doc | Non
     if not isinstance(motion, dict) or set(motion) != {"profile"} or not isinstance(ref, str) or not ref:
         raise view.error("motion must be a table with one key, profile = \"<name or file>\"",
                          "motion")
-    profile = load_profile(resolve_profile(ref, Path(data["_base_dir"]), view))
+    profile = _cached_profile(resolve_profile(ref, Path(data["_base_dir"]), view))
     duration = data.get("duration_s")
     if duration is not None:
         if not _is_num(duration) or duration <= 0:
@@ -307,10 +290,31 @@ def _build_scenario(data: dict, name: str, seed: int, file: str, doc: _Doc | Non
         raise InputError(err.message, file=file, line=view.line_of("effects"),
                          column=prefix + (err.column if isinstance(err.column, str) else "effects")
                          ) from None
-    return Scenario(name=name, layout=layout, profile=profile, sample_rate_hz=float(rate),
-                    model=model, seed=seed, duration_s=None if duration is None else float(duration),
-                    site=_parse_site(view), temperature=_parse_temperature(view),
-                    description=description, source=file)
+    scenario = Scenario(name=name, layout=layout, profile=profile, sample_rate_hz=float(rate),
+                        model=model, seed=seed, duration_s=None if duration is None else float(duration),
+                        site=_parse_site(view), temperature=_parse_temperature(view),
+                        description=description, source=file)
+    validate_scenario(scenario, view, "run")     # every scenario, before any runs
+    return scenario
+
+
+_PROFILES: dict = {}
+
+
+def _cached_profile(path: Path):
+    """:func:`~gyroarray.sim.profiles.load_profile`, once per file version (a grid names a few
+    profiles thousands of times)."""
+    from gyroarray.sim.profiles import load_profile
+    try:
+        st = path.stat()
+        key = (str(path.resolve()), st.st_mtime_ns, st.st_size)
+    except OSError:
+        return load_profile(path)      # refuses it, naming the file
+    if key not in _PROFILES:
+        if len(_PROFILES) > 64:
+            _PROFILES.clear()
+        _PROFILES[key] = load_profile(path)
+    return _PROFILES[key]
 
 
 # -- reading -------------------------------------------------------------------

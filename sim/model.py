@@ -37,8 +37,6 @@ from __future__ import annotations
 import json
 import math
 import os
-import re
-import tomllib
 from dataclasses import dataclass, field
 from types import MappingProxyType
 from typing import Any, Iterator, Mapping, Sequence
@@ -49,6 +47,8 @@ from gyroarray.errors import InputError
 from gyroarray.layout import UNIT_NORM_TOL
 from gyroarray.effects import REGISTRY, did_you_mean, get_effect
 from gyroarray.sim.protocol import Effect, Param
+from gyroarray.limits import MAX_RATE_DEG_S
+from gyroarray.tomlio import load_toml
 
 __all__ = ["ModelEntry", "NoiseModel"]
 
@@ -118,7 +118,32 @@ def _check_value(prm: Param, value, label: str):
     if too_low or too_high:
         raise InputError(f"{label}: {prm.name} = {v!r} [{prm.unit}] is out of range: must be "
                          f"{prm.bounds_text()}", column=prm.name)
+    limit = PLAUSIBLE.get(prm.unit)
+    if limit is not None and abs(v) > limit:
+        raise InputError(f"{label}: {prm.name} = {v:g} [{prm.unit}] is beyond what a gyro can have "
+                         f"(|{prm.name}| <= {limit:g} {prm.unit}: rates stay within "
+                         f"{MAX_RATE_DEG_S:g} deg/s)", column=prm.name)
     return v
+
+
+#: Largest magnitude of a parameter, by unit, that a physical gyro can have:
+#: each keeps the rate it makes within :data:`~gyroarray.limits.MAX_RATE_DEG_S`
+#: (1e5 deg/s = 3.6e8 deg/h) over an hour, or at a 1 Hz bandwidth for the
+#: noise densities (N [deg/√h] / 60 = σ [deg/s] at 1 Hz). Beyond these a
+#: value is a unit error, and the simulation's arithmetic would overflow.
+PLAUSIBLE: Mapping[str, float] = MappingProxyType({
+    "deg/√h": 60.0 * MAX_RATE_DEG_S,            # ARW: σ at 1 Hz = N/60
+    "deg/h/√h": 3600.0 * MAX_RATE_DEG_S,        # RRW: K·√(1 h)
+    "deg/h": 3600.0 * MAX_RATE_DEG_S,           # bias, instability, Gauss-Markov σ
+    "deg/h²": 3600.0 * MAX_RATE_DEG_S,          # rate ramp over 1 h
+    "deg/s": MAX_RATE_DEG_S,                    # sinusoid amplitude, saturation range
+    "deg/h/°C": 36.0 * MAX_RATE_DEG_S,          # over 100 °C
+    "ppm": 1e6,                                 # scale factor within ±100 %
+    "1/(deg/s)": 0.1,                           # k2·ω² within 1e5 deg/s at 1000 deg/s
+    "Hz": 1e6,
+    "deg": 1e6,
+    "°C": 1e4,
+})
 
 
 def _si(eff: Effect, params: Mapping[str, Any]) -> dict[str, Any]:
@@ -338,13 +363,7 @@ class NoiseModel:
             data, file = source, None
         else:
             file = os.fspath(source)
-            try:
-                with open(file, "rb") as fh:
-                    data = tomllib.load(fh)
-            except OSError as err:
-                raise InputError(f"cannot read noise model: {err.strerror}", file=file) from None
-            except tomllib.TOMLDecodeError as err:
-                raise _toml_error(err, file) from None
+            data = load_toml(file, "noise model").data
         for key in data:
             if key not in _TOP_KEYS:
                 raise InputError(f"unknown top-level key {key!r}{did_you_mean(key, _TOP_KEYS)} "
@@ -444,12 +463,3 @@ class NoiseModel:
 
     def __iter__(self) -> Iterator[ModelEntry]:
         return iter(self.entries)
-
-
-def _toml_error(err: tomllib.TOMLDecodeError, file: str) -> InputError:
-    msg = str(err)
-    m = re.search(r"\(at line (\d+), column (\d+)\)", msg)
-    if m:
-        return InputError(f"invalid TOML: {msg[:m.start()].strip()}", file=file,
-                          line=int(m.group(1)), column=int(m.group(2)))
-    return InputError(f"invalid TOML: {msg}", file=file)

@@ -106,12 +106,10 @@ from pathlib import Path
 import numpy as np
 
 from gyroarray.errors import InputError
+from gyroarray.limits import read_regular
+from gyroarray.tomlio import load_toml
 from gyroarray.units import deg_s_to_rad_s, deg_to_rad, rad_to_deg
 
-try:  # Python >= 3.11
-    import tomllib
-except ModuleNotFoundError:  # pragma: no cover - Python 3.10
-    import tomli as tomllib
 
 __all__ = [
     "AXIS_NORM_TOL", "GIMBAL_LOCK_MARGIN_RAD",
@@ -1291,11 +1289,9 @@ def _segment_from_table(r: _Reader, base_dir: Path, csv_bytes: list):
             r.fail("file", f"file must be the path of a CSV file, got {name!r}")
         path = base_dir / name
         try:
-            data = path.read_bytes()
-        except FileNotFoundError:
-            r.fail("file", f"CSV file {str(path)!r} not found")
-        except OSError as e:
-            r.fail("file", f"cannot read CSV file {str(path)!r}: {e.strerror}")
+            data = read_regular(path, "rate CSV file")
+        except InputError as e:
+            r.fail("file", f"CSV file {str(path)!r}: {e.message}")
         csv_bytes.append((name, data))
         t, w, lines = _parse_rate_csv(data, str(path))
         return RateCSV(time_s=t, omega_rad_s=w, file=str(path), line_numbers=tuple(lines),
@@ -1369,10 +1365,7 @@ def read_rate_csv(path) -> RateCSV:
     RateCSV
     """
     p = Path(path)
-    try:
-        data = p.read_bytes()
-    except OSError as e:
-        raise InputError(f"cannot read: {e.strerror}", file=str(p)) from None
+    data = read_regular(p, "rate CSV file")
     t, w, lines = _parse_rate_csv(data, str(p))
     return RateCSV(time_s=t, omega_rad_s=w, file=str(p), line_numbers=tuple(lines))
 
@@ -1397,19 +1390,8 @@ def load_profile(path) -> Profile:
     """
     p = Path(path)
     file = str(path)
-    try:
-        raw = p.read_bytes()
-    except OSError as e:
-        raise InputError(f"cannot read profile: {e.strerror}", file=file) from None
-    try:
-        text = raw.decode("utf-8")
-        doc = tomllib.loads(text)
-    except UnicodeDecodeError as e:
-        raise InputError(f"not UTF-8 text ({e.reason})", file=file) from None
-    except tomllib.TOMLDecodeError as e:
-        m = re.search(r"line (\d+)", str(e))
-        raise InputError(f"not valid TOML: {e}", file=file,
-                         line=int(m.group(1)) if m else None) from None
+    loaded = load_toml(p, "profile")
+    raw, text, doc = loaded.raw, loaded.text, loaded.data
     for key in doc:
         if key not in _TOP_KEYS:
             raise InputError(f"unknown key {key!r}; allowed at the top: {', '.join(_TOP_KEYS)}",

@@ -217,10 +217,153 @@ def load_scenario(path) -> Scenario:
     except InputError as err:
         key = err.column if isinstance(err.column, str) else "effects"
         raise InputError(err.message, file=str(path), line=doc.line_of("effects"), column=key) from None
-    return Scenario(name=name, layout=layout, profile=profile, sample_rate_hz=rate, model=model,
-                    seed=seed, duration_s=duration, site=_parse_site(doc),
-                    temperature=_parse_temperature(doc), description=description,
-                    source=str(path), acc_columns=acc_columns)
+    scenario = Scenario(name=name, layout=layout, profile=profile, sample_rate_hz=rate, model=model,
+                        seed=seed, duration_s=duration, site=_parse_site(doc),
+                        temperature=_parse_temperature(doc), description=description,
+                        source=str(path), acc_columns=acc_columns)
+    validate_scenario(scenario, doc)
+    return scenario
+
+
+def validate_scenario(scenario: Scenario, doc, what: str = "simulate") -> None:
+    """The checks that need the whole scenario, each naming ``doc``'s file, line and key.
+
+    Samples (at least :data:`MIN_SCENARIO_SAMPLES`, a rate up to
+    :data:`MAX_SAMPLE_RATE_HZ`), memory for ``what`` (:func:`check_size`),
+    effects that must fit the run (a sinusoid below Nyquist, a latency
+    shorter than the run) and the table's rate and acceleration limits.
+    Sweeps run it on every scenario before any runs.
+    """
+    _check_run_shape(scenario, doc)
+    check_size(scenario, what, doc)
+    _check_effects_fit_run(scenario, doc)
+    _check_table_limits(scenario, doc)
+
+
+#: Fewest samples a scenario may produce (an Allan curve and a score need a few
+#: hundred; two samples are not a run).
+MIN_SCENARIO_SAMPLES = 100
+#: Fastest sample rate a scenario may ask for [Hz] (MEMS gyros output at most
+#: tens of kHz).
+MAX_SAMPLE_RATE_HZ = 1e6
+#: Peak memory per sample [bytes] of simulating (``simulate``) and of scoring
+#: every estimator (``run``): a + b·N doubles, N gyros (measured with
+#: tracemalloc on 600 s at 100 Hz, N = 4 and 8, the table truth included;
+#: rounded up).
+_DOUBLES_PER_SAMPLE = {"simulate": (80, 5), "run": (130, 5)}
+
+
+def _duration_key(scenario: Scenario, doc: _TomlDoc) -> str:
+    return "duration_s" if "duration_s" in doc.data else "sample_rate_hz"
+
+
+def run_duration_s(scenario: Scenario) -> float:
+    """How long the scenario runs [s]: ``duration_s`` or the whole profile."""
+    return scenario.duration_s if scenario.duration_s is not None else scenario.profile.duration_s
+
+
+def _check_run_shape(scenario: Scenario, doc: _TomlDoc) -> None:
+    rate, duration = scenario.sample_rate_hz, run_duration_s(scenario)
+    if rate > MAX_SAMPLE_RATE_HZ:
+        raise doc.error(f"sample_rate_hz = {rate:g} Hz is above the {MAX_SAMPLE_RATE_HZ:g} Hz a "
+                        "gyro array simulation supports", "sample_rate_hz")
+    n = duration * rate
+    if n < MIN_SCENARIO_SAMPLES:
+        raise doc.error(f"{duration:g} s at {rate:g} Hz gives {n:.3g} samples; a run needs at least "
+                        f"{MIN_SCENARIO_SAMPLES} (lengthen duration_s or raise sample_rate_hz)",
+                        _duration_key(scenario, doc))
+
+
+def memory_needed(scenario: Scenario, what: str = "simulate") -> float:
+    """Estimated peak memory [bytes] of simulating (``"simulate"``) or scoring (``"run"``) it."""
+    a, b = _DOUBLES_PER_SAMPLE[what]
+    n = run_duration_s(scenario) * scenario.sample_rate_hz
+    return 8.0 * n * (a + b * scenario.layout.n_gyros)
+
+
+def check_size(scenario: Scenario, what: str = "simulate", doc: _TomlDoc | None = None) -> None:
+    """Refuse a scenario whose ``what`` (simulate or run) would exceed the memory budget.
+
+    Raises
+    ------
+    InputError
+        Naming the scenario file, the size needed and the way out.
+    """
+    from gyroarray.limits import check_memory
+    duration = run_duration_s(scenario)
+    hours = f"{duration / 3600:g} h" if duration >= 3600 else f"{duration:g} s"
+    key = "duration_s" if scenario.duration_s is not None else "sample_rate_hz"
+    line = doc.line_of(key) if doc is not None else None
+    check_memory(memory_needed(scenario, what),
+                 f"{what} of {hours} at {scenario.sample_rate_hz:g} Hz x {scenario.layout.n_gyros} gyros",
+                 "shorten duration_s or lower sample_rate_hz", file=scenario.source, line=line,
+                 column=key)
+
+
+def _check_effects_fit_run(scenario: Scenario, doc: _TomlDoc) -> None:
+    """Effects whose parameters must fit this run: a sinusoid below Nyquist, a latency shorter than it."""
+    nyquist = 0.5 * scenario.sample_rate_hz
+    duration = run_duration_s(scenario)
+    for i, e in enumerate(scenario.model.entries):
+        key = f"effects[{i}]"
+        if e.effect == "sinusoid" and e.params["freq_hz"] >= nyquist:
+            raise InputError(f"{key} (sinusoid): freq_hz = {e.params['freq_hz']:g} Hz must be below the "
+                             f"Nyquist frequency {nyquist:g} Hz of sample_rate_hz = "
+                             f"{scenario.sample_rate_hz:g} Hz", file=doc.name,
+                             line=doc.line_of("effects"), column=f"{key}.freq_hz")
+        if e.effect == "temperature_bias" and scenario.temperature is None:
+            raise InputError(f"{key} (temperature_bias) needs a temperature: add a [temperature] "
+                             "table (points, start_c/end_c/tau_s or constant_c)", file=doc.name,
+                             line=doc.line_of("effects"), column=key)
+        if e.effect == "latency" and e.params["delay_s"] >= duration:
+            raise InputError(f"{key} (latency): delay_s = {e.params['delay_s']:g} s is not shorter "
+                             f"than the run ({duration:g} s)", file=doc.name,
+                             line=doc.line_of("effects"), column=f"{key}.delay_s")
+
+
+def _check_table_limits(scenario: Scenario, doc: _TomlDoc) -> None:
+    """Refuse a profile that commands the table beyond its rate or acceleration limits."""
+    from .table import TableParams
+    rate, accel = command_extremes(scenario.profile, run_duration_s(scenario))
+    limits = TableParams
+    for value, limit, what, unit in ((rate, limits.max_rate_deg_s, "gimbal rate", "deg/s"),
+                                     (accel, limits.max_accel_deg_s2, "gimbal acceleration", "deg/s²")):
+        if not value <= limit:
+            raise doc.error(f"the motion profile {scenario.profile.source or ''} commands a {what} of "
+                            f"{value:.4g} {unit}, beyond the rate table's {limit:g} {unit} "
+                            "(TableParams)", "motion.profile")
+
+
+_EXTREMES: dict = {}
+
+
+def command_extremes(profile: Profile, duration_s: float, per_piece: int = 200) -> tuple[float, float]:
+    """Cached :func:`_command_extremes` (profiles are immutable; keyed by fingerprint)."""
+    key = (profile.fingerprint, float(duration_s), per_piece)
+    if key not in _EXTREMES:
+        if len(_EXTREMES) > 256:
+            _EXTREMES.clear()
+        _EXTREMES[key] = _command_extremes(profile, duration_s, per_piece)
+    return _EXTREMES[key]
+
+
+def _command_extremes(profile: Profile, duration_s: float, per_piece: int = 200) -> tuple[float, float]:
+    """Largest commanded gimbal rate [deg/s] and acceleration [deg/s²] over ``duration_s``.
+
+    The command is evaluated on ``per_piece`` points of each profile piece
+    (at most 200 000 points in all); the acceleration is the finite
+    difference of the rates.
+    """
+    pieces = [p for p in profile.pieces if p.t0 < duration_s]
+    per = max(2, min(per_piece, 200_000 // max(len(pieces), 1)))
+    t = np.unique(np.concatenate([np.linspace(p.t0, min(p.t1, duration_s), per) for p in pieces]))
+    with np.errstate(all="ignore"):
+        qd = profile.command(t).qd_rad_s
+        step = np.diff(t)
+        acc = np.abs(np.diff(qd, axis=0)) / step[:, None]
+        rate = float(np.max(np.abs(qd))) if qd.size else 0.0
+        accel = float(np.max(acc)) if acc.size else 0.0
+    return units.rad_to_deg(rate), units.rad_to_deg(accel)
 
 
 def _parse_motion(doc: _TomlDoc, path: Path) -> Profile:
@@ -347,7 +490,20 @@ def simulate(scenario: Scenario, *, cache: bool = True, rng: np.random.Generator
                                  attitude=truth.rotation_matrices, temp_c=temp, site=site,
                                  specific_force=truth.specific_force_m_s2,
                                  angular_accel=truth.angular_accel_rad_s2)
+    _check_readings(scenario, readings)
     return SimulationResult(scenario=scenario, truth=truth, readings_rad_s=readings, temp_c=temp)
+
+
+def _check_readings(scenario: Scenario, readings_rad_s: np.ndarray) -> None:
+    """Refuse a run whose effects drive a gyro beyond what any gyro can output."""
+    from gyroarray.limits import MAX_RATE_DEG_S
+    with np.errstate(all="ignore"):
+        peak = float(np.max(np.abs(units.rad_s_to_deg_s(readings_rad_s)), initial=0.0))
+    if not peak <= MAX_RATE_DEG_S:
+        raise InputError(f"the simulated outputs reach {peak:.4g} deg/s, beyond the {MAX_RATE_DEG_S:g} "
+                         "deg/s a gyro can output: an effect's parameters are too large for this run "
+                         f"(noise densities grow with sqrt(sample_rate_hz = {scenario.sample_rate_hz:g}))",
+                         file=scenario.source, column="effects")
 
 
 def scenario_files(scenario: Scenario) -> list[Path]:

@@ -68,6 +68,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass, field
+from typing import ClassVar
 
 import mujoco
 import numpy as np
@@ -112,7 +113,18 @@ class TableParams:
         Damping ratio of each position loop [-].
     min_physics_rate_hz : float
         Lowest physics rate [Hz]; the step is ``1/(k fs)`` with integer k.
+
+    Attributes
+    ----------
+    max_rate_deg_s : float
+        Fastest gimbal rate the table is commanded to [deg/s] (a scenario
+        asking for more is refused when it loads).
+    max_accel_deg_s2 : float
+        Largest gimbal acceleration commanded [deg/s²].
     """
+
+    max_rate_deg_s: ClassVar[float] = 1000.0
+    max_accel_deg_s2: ClassVar[float] = 10000.0
 
     outer_inertia_kg_m2: tuple = (1.2, 1.2, 2.0)
     middle_inertia_kg_m2: tuple = (0.5, 0.35, 0.5)

@@ -71,9 +71,9 @@ def test_design_plot_writes_png(capsys, tmp_path):
 @pytest.mark.parametrize("argv,fragment", [
     (["gdop", "--scheme", "1", "--n", "6", "--alpha", "54.7", "--rho", "2"], "outside"),
     (["gdop", "--scheme", "3", "--n", "6", "--alpha", "50"], "invalid choice"),
-    (["gdop", "--scheme", "1", "--n", "six", "--alpha", "50"], "invalid int value"),
+    (["gdop", "--scheme", "1", "--n", "six", "--alpha", "50"], "must be a whole number"),
     (["gdop", "--scheme", "1", "--n", "6", "--alpha", "nan"], "must be finite"),
-    (["gdop", "--scheme", "1", "--n", "2", "--alpha", "50"], "in [3, 1024]"),
+    (["gdop", "--scheme", "1", "--n", "2", "--alpha", "50"], "must be from 3 to 128"),
     (["design", "--scheme", "1"], "--scheme and --n go together"),
     (["design", "--plot", "out.txt"], ".png, .svg or .pdf"),
     (["design", "--scheme", "1", "--n", "6", "--rho", "-0.2"], "singular"),

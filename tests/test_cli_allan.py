@@ -62,7 +62,7 @@ def test_practice_file_with_motion_uses_the_residual(capsys, tmp_path):
 @pytest.mark.parametrize("argv,fragment", [
     (["--gyro", "4"], "out of range"),
     (["--taus", "many"], "--taus must be"),
-    (["--taus", "1"], "at least 2"),
+    (["--taus", "1"], "give 2 to 10000"),
     (["--taus", "0.015,1"], "0.015"),
 ])
 def test_allan_bad_options_exit_2(capsys, argv, fragment):

@@ -171,8 +171,8 @@ def test_real_file_round_trip(tmp_path, shared_reads):
 # Write -> read round trip
 # =========================================================================
 def random_measurement(rng: np.random.Generator, n=50, n_gyros=5) -> Measurement:
-    gyro = rng.normal(size=(n, n_gyros)) * 10.0 ** rng.integers(-300, 300, size=(n, n_gyros))
-    gyro[0, :3] = [-0.0, 5e-324, 1.7976931348623157e308]   # signed zero, subnormal, max
+    gyro = rng.normal(size=(n, n_gyros)) * 10.0 ** rng.integers(-300, 4, size=(n, n_gyros))
+    gyro[0, :3] = [-0.0, 5e-324, -1e5]   # signed zero, subnormal, the largest rate accepted
     return Measurement(
         time_s=1e5 + 0.01 * np.arange(n) + rng.uniform(0, 1e-4, n), gyro_deg_s=gyro,
         layout=Layout.conical(2, n_gyros, deg_to_rad(63.6271)), sample_rate_hz=100.0,
@@ -204,7 +204,7 @@ def test_written_files_look_like_the_spec(tmp_path):
     lines = csv_path.read_text().splitlines()
     assert lines[0].startswith("#")
     assert lines[1] == "time_s,gyro1,gyro2,gyro3,ref_x,ref_y,ref_z,temp_c"
-    assert lines[2].split(",")[1:4] == ["-0.0", "5e-324", "1.7976931348623157e+308"]
+    assert lines[2].split(",")[1:4] == ["-0.0", "5e-324", "-100000.0"]
     toml = toml_path.read_text()
     # degrees as the user would write them, though rad_to_deg(deg_to_rad(x)) != x for
     # these three (e.g. 15.188099999999999)

@@ -1,7 +1,8 @@
 """Property-based tests of the measurement reader and writer.
 
 * Any valid measurement round-trips write -> read exactly: every array
-  bit for bit (signed zeros, subnormals and the largest doubles included),
+  bit for bit (signed zeros, subnormals and the largest doubles included;
+  rates within the 1e5 deg/s a gyro can see),
   conical layouts and sites exactly, explicit axes to 1e-15.
 * Random corruption of a valid pair (byte flips, insertions, deletions,
   truncation; of the CSV text, of the gzip stream or of the sidecar) gives a
@@ -25,6 +26,7 @@ from hypothesis.extra.numpy import arrays
 
 from gyroarray.errors import InputError
 from gyroarray.layout import Layout
+from gyroarray.limits import MAX_RATE_DEG_S
 from gyroarray.measurement import (GAP_FACTOR, Measurement, Site, read_measurement,
                                    write_measurement)
 from gyroarray.units import deg_to_rad
@@ -33,6 +35,8 @@ CI = settings(max_examples=120, deadline=None, derandomize=True, database=None,
               suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
 
 finite = st.floats(allow_nan=False, allow_infinity=False)   # incl. -0.0, subnormals, ±max
+# rates a gyro or table can see (the reader refuses beyond MAX_RATE_DEG_S): -0.0 and subnormals included
+rates = st.floats(-MAX_RATE_DEG_S, MAX_RATE_DEG_S, allow_nan=False, allow_infinity=False)
 
 
 @st.composite
@@ -72,10 +76,10 @@ def measurements(draw, max_n: int = 30) -> Measurement:
                     deg_to_rad(draw(st.floats(-720.0, 720.0))))
     return Measurement(
         time_s=draw(times(n)),
-        gyro_deg_s=draw(arrays(np.float64, (n, layout.n_gyros), elements=finite)),
+        gyro_deg_s=draw(arrays(np.float64, (n, layout.n_gyros), elements=rates)),
         layout=layout,
         sample_rate_hz=draw(st.floats(1e-3, 1e6)),
-        ref_deg_s=draw(st.none() | arrays(np.float64, (n, 3), elements=finite)),
+        ref_deg_s=draw(st.none() | arrays(np.float64, (n, 3), elements=rates)),
         temp_c=draw(st.none() | arrays(np.float64, n, elements=finite)),
         site=site,
         description=draw(st.text(st.characters(codec="utf-8"), max_size=20)),

@@ -274,7 +274,7 @@ BAD = [  # id, TOML text, CSV text or None, (file is 'toml'|'csv', column, line)
     ("axis not up without align_s", SEG + SEG.replace("[0, 0, 1]", "[1, 0, 0]"), None,
      ("toml", "segment[2].align_s", 7)),
     ("no segments", 'description = "empty"\n', None, ("toml", "segment", None)),
-    ("TOML syntax", SEG + "ramp_s = = 2\n", None, ("toml", None, 7)),
+    ("TOML syntax", SEG + "ramp_s = = 2\n", None, ("toml", 10, 7)),
     ("missing CSV", '[[segment]]\nkind = "rate_csv"\nfile = "nope.csv"\n', None,
      ("toml", "segment[1].file", 3)),
     ("non-numeric CSV cell", '[[segment]]\nkind = "rate_csv"\nfile = "r.csv"\n',
