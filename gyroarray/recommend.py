@@ -239,6 +239,7 @@ class _Channels:
     gm: np.ndarray
     ratio: np.ndarray | None   # kf_array: q/r the filter is designed for (G, 3)
     decoupled: bool
+    kf_single_ratio: float = 0.0   # kf_single: q/r of one gyro
 
 
 def _channels(est: str, H: np.ndarray, g: GyroNoise, dt: float) -> _Channels:
@@ -438,6 +439,8 @@ def _search_one(bank, space, g: GyroNoise, scheme: int, n: int, est: str, rho: f
         J, _ = _evaluate(est, resp, ch, slice(None))
         J = np.where(alive & np.isfinite(J), J, np.inf)
         k = int(np.argmin(J))
+        if np.isfinite(J[k]):                       # ties (α and 180° − α at ρ = 0): the smaller α
+            k = int(np.flatnonzero(J <= J[k] * (1.0 + 1e-9))[0])
         if np.isfinite(J[k]) and (best is None or J[k] < best.objective):
             best = _Best(scheme, n, est, float(alphas[k]), bw, float(J[k]), resp, rho)
     return best, ch
@@ -571,10 +574,27 @@ def search(g: GyroNoise, space: DesignSpace, rho: float) -> tuple[list[dict], li
                     notes.append(f"scheme {scheme}, N = {n}, kf_array: its z axis does not decouple "
                                  "(unequal ARW and RRW correlation); predicted by the full predictor "
                                  "at kf_single's cone angle and bandwidth")
-    designs.sort(key=_rank_key)
-    for i, d in enumerate(designs):
-        d["rank"] = i + 1
+    designs = _ranked(designs, space.estimators)
     return designs, notes
+
+
+def _ranked(designs: list[dict], estimators) -> list[dict]:
+    """Best RMS first; designs equal to 1e-9 are ordered by fault tolerance (worst GDOP
+    after two failures), Scheme 1 first, a cone opening upwards, then the estimator order."""
+    designs = sorted(designs, key=_rank_key)
+    out, i = [], 0
+    order = {e: k for k, e in enumerate(estimators)}
+    while i < len(designs):
+        j = i + 1
+        while j < len(designs) and designs[j]["rms_3axis_deg_s"] <= designs[i]["rms_3axis_deg_s"] * (1 + 1e-9):
+            j += 1
+        out += sorted(designs[i:j], key=lambda d: (
+            round(d.get("fault_tolerance", {}).get("worst_gdop_after", {}).get("2", math.inf), 9),
+            d["scheme"], d["alpha_deg"] > 90.0, order.get(d["estimator"], 99)))
+        i = j
+    for k, d in enumerate(out):
+        d["rank"] = k + 1
+    return out
 
 
 def equivalent_groups(designs: list[dict], share: float = EQUIVALENT_SHARE) -> list[dict]:
@@ -728,10 +748,7 @@ def _robust_ranking(per_rho: dict, g: GyroNoise, space: DesignSpace) -> list[dic
         at["worst_rms_3axis_deg_s"] = worst
         at["rms_3axis_deg_s"] = worst
         out.append(at)
-    out.sort(key=_rank_key)
-    for i, d in enumerate(out):
-        d["rank"] = i + 1
-    return out
+    return _ranked(out, space.estimators)
 
 
 def _robustness(per_rho: dict, g: GyroNoise, space: DesignSpace) -> list[dict]:
@@ -818,3 +835,111 @@ def assumptions(g: GyroNoise, space: DesignSpace, rhos, single: bool) -> dict:
                        "assumption"),
         "ignored_effects": item(list(g.ignored), "model"),
     }
+
+
+# -- the Monte-Carlo check of the top designs ------------------------------------------
+
+def _pick_for_check(designs: list[dict], top: int) -> list[dict]:
+    """The first ``top`` designs of the ranking, one per distinct (layout, estimator family),
+    plus the best ``naive`` design as the no-model baseline."""
+    seen, out = set(), []
+    for d in designs:
+        fam = "kf" if d["estimator"] in ("kf_array", "kf_single") else d["estimator"]
+        key = (d["scheme"], d["n"], round(d["alpha_deg"], 3), fam, d["bandwidth_hz"])
+        if key in seen:
+            continue
+        seen.add(key)
+        out.append(d)
+        if len(out) == top:
+            break
+    naive = next((d for d in designs if d["estimator"] == "naive"), None)
+    if naive is not None and naive not in out:
+        out.append(naive)
+    return out
+
+
+def monte_carlo_check(designs: list[dict], g: GyroNoise, space: DesignSpace, *,
+                      replicates: int = 20, seed: int = 20260412, top: int = 4) -> dict:
+    """Simulate the top designs with common random numbers and set the runs beside the prediction.
+
+    Every replicate r draws the gyro noise from the same seed for every design
+    (paired: gyro k's streams are the same in each layout), through the
+    simulator's own effects (:func:`gyroarray.sim.effects.simulate_readings`)
+    and the real estimators; the rate truth is the design's motion.
+
+    Returns
+    -------
+    dict
+        ``replicates``, ``seed``, ``designs``: per design its label, the
+        predicted and simulated (RMS over the runs, 95 % CI) per axis of
+        ``rms_deg_s``, ``std_deg_s``, ``mean_deg_s`` and ``angle_deg``, and
+        ``paired``: the recommended design against each other one, the mean
+        difference of the runs' 3-axis mean square with its 95 % CI
+        (``resolved``: the interval excludes 0).
+    """
+    from .chain import mean_ci, replicate_rng, rms_ci
+    from .estimators import get_estimator
+    from .sim.effects import simulate_readings
+    picked = _pick_for_check(designs, top)
+    n, dt = space.n_samples, space.dt_s
+    k0 = settle_start(n, dt, space.settle_s)
+    t = np.arange(n) * dt
+    if space.motion is not None:
+        truth = np.asarray(space.motion, dtype=float)[:n]
+    elif space.swing is not None:
+        truth = swing_truth(space.swing, n, dt)
+    else:
+        truth = np.zeros((n, 3))
+    setups = []
+    for d in picked:
+        rho = d.get("rho", g.rho_arw)
+        gr = g.with_rho(rho) if g.rho_arw == g.rho_rrw else g
+        layout = Layout.conical(d["scheme"], d["n"], math.radians(d["alpha_deg"]))
+        model = gr.noise_model(d["n"])
+        bw = d["bandwidth_hz"]
+        kw = {"bandwidth_hz": bw} if d["estimator"] in ("kf_array", "kf_single") else (
+            {"lowpass_hz": bw} if d["estimator"] in ("gls", "ols") else {})
+        est = get_estimator(d["estimator"])(**kw).fit(layout, model, dt)
+        setups.append((d, layout, model, est))
+    per = [[] for _ in setups]                                        # runs × (4 metrics × 3 axes)
+    for r in range(int(replicates)):
+        for j, (d, layout, model, est) in enumerate(setups):
+            z = simulate_readings(model, truth, layout, dt, replicate_rng(seed, r), time_s=t)
+            e = est.estimate(z) - truth
+            w = e[k0:]
+            per[j].append(np.stack([np.sqrt(np.mean(w ** 2, axis=0)), np.std(w, axis=0, ddof=1),
+                                    np.mean(w, axis=0), dt * e.sum(axis=0)]))
+    keys = ("rms_deg_s", "std_deg_s", "mean_deg_s", "angle_deg")
+    conv = {"rms_deg_s": units.rad_s_to_deg_s, "std_deg_s": units.rad_s_to_deg_s,
+            "mean_deg_s": units.rad_s_to_deg_s, "angle_deg": units.rad_to_deg}
+    out_designs = []
+    for j, (d, *_rest) in enumerate(setups):
+        arr = np.array(per[j])                                        # (R, 4, 3)
+        axes = {}
+        for a, ax in enumerate(AXES):
+            axes[ax] = {}
+            for m, key in enumerate(keys):
+                mc = rms_ci(conv[key](arr[:, m, a]), gaussian=key in ("mean_deg_s", "angle_deg"))
+                pk = "angle_deg_at_horizon" if key == "angle_deg" else key
+                p = d["predicted"][ax][pk]
+                axes[ax][key] = {"predicted": p, "monte_carlo": mc,
+                                 "agrees": bool(mc["ci_low"] <= p <= mc["ci_high"])
+                                 if mc["ci_low"] is not None else None}
+        tot = rms_ci(units.rad_s_to_deg_s(np.sqrt(np.sum(arr[:, 0, :] ** 2, axis=1))))
+        out_designs.append({"label": _label(d), "rank": d.get("rank"), "scheme": d["scheme"],
+                            "n": d["n"], "alpha_deg": d["alpha_deg"], "estimator": d["estimator"],
+                            "bandwidth_hz": d["bandwidth_hz"],
+                            "rms_3axis_deg_s": {"predicted": d["rms_3axis_deg_s"], "monte_carlo": tot},
+                            "axes": axes})
+    paired = []
+    ms0 = np.sum(np.array(per[0])[:, 0, :] ** 2, axis=1)
+    for j in range(1, len(setups)):
+        diff = units.rad_s_to_deg_s(1.0) ** 2 * (np.sum(np.array(per[j])[:, 0, :] ** 2, axis=1) - ms0)
+        s = mean_ci(diff)
+        paired.append({"against": out_designs[j]["label"], "mean_square_difference_deg2_s2": s,
+                       "resolved": None if s["ci_low"] is None else bool(s["ci_low"] > 0 or s["ci_high"] < 0)})
+    checked = [c for dd in out_designs for ax in dd["axes"].values() for c in ax.values()
+               if c["agrees"] is not None]
+    return {"replicates": int(replicates), "seed": int(seed), "designs": out_designs,
+            "paired": paired, "inside_95": sum(c["agrees"] for c in checked),
+            "compared": len(checked)}
