@@ -939,7 +939,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="--recommend: bias instability [deg/h] (default 0)")
     p.add_argument("--rho-range", metavar="LO,HI",
                    help="--recommend: the correlations the gyros may have; ranked per rho, "
-                        "recommended: the best worst case")
+                        "recommended: the best worst case (a negative LO: --rho-range=-0.1,0.5)")
     p.add_argument("--rate-hz", type=_finite_float("--rate-hz"), metavar="HZ",
                    help="--recommend: sample rate (default 100)")
     p.add_argument("--horizon-s", type=_finite_float("--horizon-s"), metavar="T",

@@ -488,6 +488,10 @@ def _design_dict(b: _Best, space: DesignSpace, g: GyroNoise, failures: int) -> d
                     "std_deg_s": float(to(math.sqrt(max(var[a], 0.0)))),
                     "mean_deg_s": float(to(math.sqrt(mean2[a]))),
                     "angle_deg_at_horizon": float(units.rad_to_deg(dt * math.sqrt(sumf2[0, a]))),
+                    "arw_long_deg_rt_h": float(units.arw_rad_rt_s_to_deg_rt_h(
+                        abs(r.dc_gain) * math.sqrt(ch.white[0, a] * dt))),
+                    "rrw_long_deg_h_rt_h": float(units.rrw_rad_s_rt_s_to_deg_h_rt_h(
+                        abs(r.dc_gain) * math.sqrt(ch.walk[0, a] / dt))),
                     "dc_gain": r.dc_gain,
                     "amplitude_ratio": r.amplitude_ratio, "phase_deg": r.phase_deg}
     layout = Layout.conical(b.scheme, b.n, b.alpha_rad)
@@ -517,6 +521,8 @@ def _generic_design(scheme, n, est, alpha, bw, rho, space: DesignSpace, g: GyroN
     rms2 = sum(units.deg_s_to_rad_s(v["rms_deg_s"]) ** 2 for v in p.axes.values())
     pred = {ax: {"rms_deg_s": v["rms_deg_s"], "std_deg_s": v["std_deg_s"],
                  "mean_deg_s": v["mean_deg_s"], "angle_deg_at_horizon": v["angle_deg"],
+                 "arw_long_deg_rt_h": v["arw_long_deg_rt_h"],
+                 "rrw_long_deg_h_rt_h": v["rrw_long_deg_h_rt_h"],
                  "dc_gain": v["dc_gain"], "amplitude_ratio": v["amplitude_ratio"],
                  "phase_deg": v["phase_deg"]} for ax, v in p.axes.items()}
     ft = fault_tolerance(layout, gr.rho_arw)
