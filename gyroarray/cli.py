@@ -288,6 +288,8 @@ def _design_space(args):
 
 def _design_recommend(args) -> tuple[dict, str]:
     from .recommend import monte_carlo_check, recommend
+    _output(args.out, args, "--out", inputs=[args.model] if args.model is not None else [],
+            suffixes=(".json",))
     g, space, rhos = _design_space(args)
     res = recommend(g, space, rhos=rhos)
     if args.check:
@@ -300,19 +302,9 @@ def _design_recommend(args) -> tuple[dict, str]:
 
 
 def _write_json(path: Path, obj: dict, args) -> None:
-    if path.suffix.lower() != ".json":
-        raise InputError("--out must end in .json", file=str(path))
-    if args.model is not None and path.exists() and path.resolve() == Path(args.model).resolve():
-        raise InputError("--out is an input of this command", file=str(path))
-    if path.exists() and path.is_dir():
-        raise InputError("--out is a folder; give a .json file", file=str(path))
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_name(f".{path.name}.tmp")
-        tmp.write_text(json.dumps(_json_safe(obj), indent=1, allow_nan=False), encoding="utf-8")
-        tmp.replace(path)
-    except OSError as err:
-        raise InputError(f"cannot write: {err.strerror}", file=str(path)) from None
+    """The result as JSON at ``path``, atomically (checked before the work by _design_recommend)."""
+    from .outputs import write_text
+    write_text(path, json.dumps(_json_safe(obj), indent=1, allow_nan=False), force=args.force)
 
 
 def _recommend_text(res: dict) -> str:
