@@ -663,12 +663,16 @@ def cmd_report(args):
     if args.top < 1:
         raise InputError("gyroarray report: --top must be >= 1")
     inputs = [args.paper_values] if args.paper_values is not None else []
+    if args.design is not None:
+        inputs.append(args.design)
     _output(args.out, args, "--out", inputs=inputs, suffixes=(".html", ".htm"))
     _output(args.md, args, "--md", inputs=inputs, suffixes=(".md",))
-    res = write_report(args.dirs, args.out, args.md, paper_values=args.paper_values, top=args.top,
-                       force=args.force)
+    res = write_report(args.dirs, args.out, args.md, design=args.design,
+                       paper_values=args.paper_values, top=args.top, force=args.force)
     lines = [f"report: {res['html']}" + (f" (Markdown twin {res['markdown']})" if res["markdown"] else "")
              + f", {res['figures']} figures, {res['seconds']:.1f} s"]
+    if res.get("decision"):
+        lines += res["decision"]["summary"]
     for b in res["best"]:
         lines.append(f"best for {b['motion']}: scheme {b['scheme']}, N = {b['n_gyros']}, "
                      f"alpha = {b['alpha_deg']:.2f} deg, rho_arw = {b['rho_arw']}, {b['estimator']}: "
@@ -1031,7 +1035,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=cmd_sweep)
 
     p = sub.add_parser("report", help="design comparison report (HTML + Markdown) from sweep folders")
-    p.add_argument("dirs", type=Path, nargs="+", metavar="DIR", help="gyroarray sweep --out folders")
+    p.add_argument("dirs", type=Path, nargs="*", metavar="DIR", help="gyroarray sweep --out folders")
+    p.add_argument("--design", type=Path, metavar="FILE.json",
+                   help="a gyroarray design --recommend --out result: the decision opens the report")
     p.add_argument("--out", type=Path, required=True, metavar="REPORT.html")
     p.add_argument("--md", type=Path, metavar="REPORT.md", help="also write a Markdown twin")
     p.add_argument("--paper-values", type=Path, metavar="FILE",

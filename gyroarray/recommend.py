@@ -30,9 +30,11 @@ and bandwidth found for ``kf_single``, and the assumptions say so.
 from __future__ import annotations
 
 import itertools
+import json
 import math
 import time
 from dataclasses import dataclass, field, replace
+from functools import lru_cache
 
 import numpy as np
 from scipy.optimize import minimize_scalar
@@ -469,6 +471,12 @@ def _refine_alpha(best: _Best, space: DesignSpace, g: GyroNoise, alphas: np.ndar
     return best
 
 
+@lru_cache(maxsize=4096)
+def _fault_tolerance(scheme: int, n: int, alpha_rad: float, rho: float) -> dict:
+    """:func:`gyroarray.design.fault_tolerance` of a conical layout (cached; copy before changing)."""
+    return fault_tolerance(Layout.conical(scheme, n, alpha_rad), rho)
+
+
 def _design_dict(b: _Best, space: DesignSpace, g: GyroNoise, failures: int) -> dict:
     """The predicted metrics of one design (fast path), in datasheet units."""
     gr = g.with_rho(b.rho) if g.rho_arw == g.rho_rrw else g
@@ -494,14 +502,13 @@ def _design_dict(b: _Best, space: DesignSpace, g: GyroNoise, failures: int) -> d
                         abs(r.dc_gain) * math.sqrt(ch.walk[0, a] / dt))),
                     "dc_gain": r.dc_gain,
                     "amplitude_ratio": r.amplitude_ratio, "phase_deg": r.phase_deg}
-    layout = Layout.conical(b.scheme, b.n, b.alpha_rad)
-    ft = fault_tolerance(layout, b.rho if g.rho_arw == g.rho_rrw else g.rho_arw)
+    ft = _fault_tolerance(b.scheme, b.n, b.alpha_rad, b.rho if g.rho_arw == g.rho_rrw else g.rho_arw)
     return {"scheme": b.scheme, "n": b.n, "alpha_deg": float(np.degrees(b.alpha_rad)),
             "estimator": b.est, "bandwidth_hz": b.bw, "rho": b.rho,
             "rms_3axis_deg_s": float(to(math.sqrt(b.objective))),
             "predicted": pred, "gdop": ft["gdop"],
             "worst_gdop_after_failures": ft["worst_gdop_after"][str(failures)] if failures else ft["gdop"],
-            "fault_tolerance": ft}
+            "fault_tolerance": json.loads(json.dumps(ft))}
 
 
 def _generic_design(scheme, n, est, alpha, bw, rho, space: DesignSpace, g: GyroNoise,
@@ -525,16 +532,26 @@ def _generic_design(scheme, n, est, alpha, bw, rho, space: DesignSpace, g: GyroN
                  "rrw_long_deg_h_rt_h": v["rrw_long_deg_h_rt_h"],
                  "dc_gain": v["dc_gain"], "amplitude_ratio": v["amplitude_ratio"],
                  "phase_deg": v["phase_deg"]} for ax, v in p.axes.items()}
-    ft = fault_tolerance(layout, gr.rho_arw)
+    ft = _fault_tolerance(scheme, n, alpha, gr.rho_arw)
     return {"scheme": scheme, "n": n, "alpha_deg": float(np.degrees(alpha)), "estimator": est,
             "bandwidth_hz": bw, "rho": rho, "rms_3axis_deg_s": float(units.rad_s_to_deg_s(math.sqrt(rms2))),
             "predicted": pred, "gdop": ft["gdop"],
             "worst_gdop_after_failures": ft["worst_gdop_after"][str(failures)] if failures else ft["gdop"],
-            "fault_tolerance": ft, "path": "full predictor (the array KF does not decouple here)"}
+            "fault_tolerance": json.loads(json.dumps(ft)),
+            "path": "full predictor (the array KF does not decouple here)"}
 
 
 def _rank_key(d: dict) -> float:
     return d["rms_3axis_deg_s"] if math.isfinite(d["rms_3axis_deg_s"]) else math.inf
+
+
+def _bank(space: DesignSpace, g: GyroNoise) -> "_FilterBank":
+    """The filter bank of a search (one per space and noise shape; ρ does not enter it)."""
+    cache = space.__dict__.setdefault("_banks", {})
+    key = (g.gm_tau_s, g.bi_deg_h > 0)
+    if key not in cache:
+        cache[key] = _FilterBank(space, g.gm_tau_s, bi=g.bi_deg_h > 0)
+    return cache[key]
 
 
 def search(g: GyroNoise, space: DesignSpace, rho: float) -> tuple[list[dict], list[str]]:
@@ -542,7 +559,7 @@ def search(g: GyroNoise, space: DesignSpace, rho: float) -> tuple[list[dict], li
 
     Returns the designs (best first) and notes (what was left out and why).
     """
-    bank = _FilterBank(space, g.gm_tau_s, bi=g.bi_deg_h > 0)
+    bank = _bank(space, g)
     designs, notes = [], []
     for scheme in space.schemes:
         alphas = _alpha_grid(scheme, space.alpha_points)
@@ -689,7 +706,9 @@ def recommend(g: GyroNoise, space: DesignSpace, *, rhos=None) -> dict:
     if not designs:
         raise InputError("no design meets the requirements (see the notes: failures, rho, bandwidth)")
     rec = designs[0]
-    out = {"recommended": _short(rec), "runner_up": _short(designs[1]) if len(designs) > 1 else None,
+    other = [d for d in designs[1:] if (d["scheme"], d["n"], round(d["alpha_deg"], 3))
+             != (rec["scheme"], rec["n"], round(rec["alpha_deg"], 3))]
+    out = {"recommended": _short(rec), "runner_up": _short(other[0]) if other else None,
            "designs": [_short(d) for d in designs],
            "equivalent": equivalent_groups(designs),
            "assumptions": assumptions(g, space, rho_list, single),
@@ -724,7 +743,7 @@ def _generic_or_fast(scheme, n, est, alpha, bw, rho, g, space) -> dict:
                           / units.arw_deg_rt_h_to_rad_rt_s(g.arw_deg_rt_h) ** 2)
     if not ch.decoupled:
         return _generic_design(scheme, n, est, alpha, bw, rho, space, g, space.failures)
-    bank = _FilterBank(space, g.gm_tau_s, bi=g.bi_deg_h > 0)
+    bank = _bank(space, g)
     resp = _responses(bank, est, bw, ch)
     J, _ = _evaluate(est, resp, ch, slice(None))
     b = _Best(scheme, n, est, alpha, bw, float(J[0]), resp, rho)
@@ -850,8 +869,8 @@ def _pick_for_check(designs: list[dict], top: int) -> list[dict]:
     plus the best ``naive`` design as the no-model baseline."""
     seen, out = set(), []
     for d in designs:
-        fam = "kf" if d["estimator"] in ("kf_array", "kf_single") else d["estimator"]
-        key = (d["scheme"], d["n"], round(d["alpha_deg"], 3), fam, d["bandwidth_hz"])
+        # one of each set of designs the predictor says are the same (same layout, same RMS)
+        key = (d["scheme"], d["n"], round(d["alpha_deg"], 3), f"{d['rms_3axis_deg_s']:.9g}")
         if key in seen:
             continue
         seen.add(key)
