@@ -195,7 +195,7 @@ def check_fusable(scenario) -> None:
 
 
 def run_scenario(scenario, estimator_names=None, *, cache: bool = True,
-                 rng: np.random.Generator | None = None) -> RunResult:
+                 rng: np.random.Generator | None = None, params: dict | None = None) -> RunResult:
     """Simulate a scenario and score each named estimator (default: all built-ins).
 
     Parameters
@@ -207,6 +207,8 @@ def run_scenario(scenario, estimator_names=None, *, cache: bool = True,
         Use the rate-table truth cache.
     rng : numpy.random.Generator, optional
         Overrides the scenario's seed (replicates).
+    params : dict, optional
+        Hyperparameters per estimator name, e.g. ``{"kf_array": {"bandwidth_hz": 2.0}}``.
 
     Raises
     ------
@@ -227,7 +229,8 @@ def run_scenario(scenario, estimator_names=None, *, cache: bool = True,
     estimates, notes = {}, []
     for name in names:
         try:
-            est = get_estimator(name)().fit(scenario.layout, scenario.model, dt)
+            est = get_estimator(name)(**(params or {}).get(name, {})).fit(scenario.layout,
+                                                                          scenario.model, dt)
         except InputError as err:
             # a named estimator that cannot serve this model is the user's error; a default
             # one is skipped and said so (e.g. bias-state KFs on a model without RRW)
@@ -379,7 +382,8 @@ class ReplicateResult:
 
 
 def run_replicates(scenario, estimator_names=None, *, replicates: int, seed: int | None = None,
-                   cache: bool = True, predict: bool = True) -> ReplicateResult:
+                   cache: bool = True, predict: bool = True,
+                   params: dict | None = None) -> ReplicateResult:
     """Run a scenario ``replicates`` times (seeds :func:`replicate_rng`) and predict each estimator.
 
     Parameters
@@ -393,6 +397,8 @@ def run_replicates(scenario, estimator_names=None, *, replicates: int, seed: int
     cache : bool
     predict : bool
         Add the analytic prediction of every linear estimator (same truth, same noise model).
+    params : dict, optional
+        Hyperparameters per estimator name (as :func:`run_scenario`).
     """
     from .estimators import get_estimator
     from .predict import predict as _predict
@@ -401,8 +407,8 @@ def run_replicates(scenario, estimator_names=None, *, replicates: int, seed: int
     if k < 1:
         raise InputError(f"--replicates must be >= 1, got {replicates!r}")
     s = scenario.seed if seed is None else int(seed)
-    runs = tuple(run_scenario(scenario, estimator_names, cache=cache, rng=replicate_rng(s, i))
-                 for i in range(k))
+    runs = tuple(run_scenario(scenario, estimator_names, cache=cache, rng=replicate_rng(s, i),
+                              params=params) for i in range(k))
     preds, notes = {}, list(runs[0].notes)
     if predict:
         truth = compute_truth(scenario.profile, scenario.sample_rate_hz,
@@ -410,7 +416,8 @@ def run_replicates(scenario, estimator_names=None, *, replicates: int, seed: int
         dt = 1.0 / scenario.sample_rate_hz
         for name in dict.fromkeys(runs[0].table.estimator):
             try:
-                est = get_estimator(name)().fit(scenario.layout, scenario.model, dt)
+                est = get_estimator(name)(**(params or {}).get(name, {})).fit(
+                    scenario.layout, scenario.model, dt)
                 preds[name] = _predict(est, scenario.model, n_samples=truth.time_s.size,
                                        truth_rad_s=truth.omega_body_rad_s)
             except InputError as err:

@@ -9,27 +9,35 @@ hypothesis and the change to the experiment's scenario that expresses it::
     hypothesis = "The paper correlated the ARW too (rho_arw = rho_rrw = -0.19)."
     effects = [{ effect = "correlation", rho_arw = -0.19, rho_rrw = -0.19 }]  # replace these effects
     estimator_params = { bandwidth_hz = 0.5 }   # optional: the estimator's hyperparameters
-    values = [{ axis = "z", metric = "arw_long_deg_rt_h", value = 0.0203 }]   # the paper's numbers
+    runs = 20                                   # optional (default 20)
+    values = [{ axis = "z", metric = "arw_deg_rt_h", value = 0.0203 }]   # the paper's numbers
 
-The report predicts the metrics (:mod:`gyroarray.predict`: exact
-expectations, no seed) for the scenario as shipped and as changed, and
-says what the change gave beside the paper: it **supports** the hypothesis
-when every value moves at least half-way from the shipped model's
-prediction to the paper's, otherwise it **does not support** it.
+The report runs the changed scenario ``runs`` times through the same chain
+as the paper reproduction (same metrics, same Allan fits; seeds from the
+check's name) and compares each paper value with the changed model's 95 %
+band (2.5–97.5 percentiles of its runs). The check **supports** the
+hypothesis when every paper value lies inside the changed model's band,
+and **does not support** it otherwise. The shipped model's band, when the
+reproduction sweep has it, is shown beside.
 """
 
 from __future__ import annotations
 
+import hashlib
 from pathlib import Path
+
+import numpy as np
 
 from gyroarray.errors import InputError
 
-__all__ = ["METRICS", "check_entry", "run_check"]
+__all__ = ["METRICS", "check_entry", "run_check", "MIN_RUNS"]
 
-#: Metrics a check may name: the predictor's per-axis outputs.
-METRICS = ("rms_deg_s", "std_deg_s", "mean_deg_s", "angle_deg", "amplitude_ratio", "phase_deg",
-           "arw_long_deg_rt_h", "rrw_long_deg_h_rt_h", "bi_long_deg_h", "dc_gain")
-_KEYS = {"name", "hypothesis", "effects", "estimator_params", "values"}
+#: Metrics a check may name: result columns of the chain (gyroarray.chain.score).
+METRICS = ("sigma_1_deg_s", "rms_deg_s", "mean_error_deg_s", "arw_deg_rt_h", "rrw_deg_h_rt_h",
+           "bi_deg_h", "attenuation", "phase_deg", "noise_density_deg_s_rt_hz")
+#: Fewest runs for a 95 % percentile band.
+MIN_RUNS = 20
+_KEYS = {"name", "hypothesis", "effects", "estimator_params", "values", "runs"}
 
 
 def check_entry(c, where: str, file: str) -> dict:
@@ -48,6 +56,10 @@ def check_entry(c, where: str, file: str) -> dict:
     if not isinstance(c.get("estimator_params", {}), dict):
         raise InputError("estimator_params must be a table", file=file,
                          column=f"{where}.estimator_params")
+    runs = c.get("runs", MIN_RUNS)
+    if not (isinstance(runs, int) and not isinstance(runs, bool) and MIN_RUNS <= runs <= 1000):
+        raise InputError(f"runs must be a whole number from {MIN_RUNS} (a 95 % band) to 1000",
+                         file=file, column=f"{where}.runs")
     vals = c.get("values")
     if not isinstance(vals, list) or not vals:
         raise InputError("values must be a non-empty array", file=file, column=f"{where}.values")
@@ -66,53 +78,84 @@ def check_entry(c, where: str, file: str) -> dict:
     return c
 
 
-def _scenario(ref: str):
+def _scenario(ref: str, base: Path | None):
     from gyroarray.check import scenarios_dir
     from gyroarray.sim.scenario import load_scenario
-    return load_scenario(Path(scenarios_dir()) / f"{ref}.toml")
+    for folder in ([base] if base is not None else []) + [Path(scenarios_dir())]:
+        f = folder / f"{ref}.toml"
+        if f.is_file():
+            return load_scenario(f)
+    raise InputError(f"scenario {ref!r} not found")
 
 
-def _predict(scenario, model, estimator: str, params: dict):
-    from gyroarray.chain import _with_swing, swing_frequency
-    from gyroarray.estimators import get_estimator
-    from gyroarray.predict import predict
-    from gyroarray.sim.truth import compute_truth
-    dt = 1.0 / scenario.sample_rate_hz
-    truth = compute_truth(scenario.profile, scenario.sample_rate_hz, duration_s=scenario.duration_s)
-    est = get_estimator(estimator)(**params).fit(scenario.layout, model, dt)
-    p = predict(est, model, n_samples=truth.time_s.size, truth_rad_s=truth.omega_body_rad_s)
-    sw = swing_frequency(scenario.profile)
-    return _with_swing(p, est, sw[0]) if sw is not None else p
+def _band(x):
+    x = np.asarray([v for v in x if v is not None and np.isfinite(v)], dtype=float)
+    if x.size < MIN_RUNS:
+        return None, None, x
+    return float(np.percentile(x, 2.5)), float(np.percentile(x, 97.5)), x
 
 
-def run_check(experiment: dict, check: dict) -> dict:
-    """Predict the experiment's scenario as shipped and as the check changes it.
+def run_check(experiment: dict, check: dict, *, shipped_rows=None, base: Path | None = None) -> dict:
+    """Run the experiment's scenario as the check changes it and set the paper beside its band.
 
-    Returns ``{"name", "hypothesis", "simulation", "rows": [{"axis", "metric",
-    "paper", "shipped", "changed", "toward"}], "verdict"}``.
+    Parameters
+    ----------
+    experiment : dict
+        ``scenario`` and ``estimator`` of the experiment.
+    check : dict
+        One validated ``[[experiment.check]]``.
+    shipped_rows : pandas.DataFrame, optional
+        The reproduction sweep's rows of this experiment (the shipped model's band).
+    base : Path, optional
+        Folder to look for the scenario first (the values file's folder).
+
+    Returns
+    -------
+    dict
+        ``name``, ``hypothesis``, ``simulation`` (what was run), ``rows``:
+        [{"axis", "metric", "paper", "changed_low", "changed_high",
+        "changed_mean", "shipped_low", "shipped_high", "inside"}], ``verdict``.
     """
-    from gyroarray.sim.model import ModelEntry, NoiseModel
-    sc = _scenario(experiment["scenario"])
+    from dataclasses import replace
+    from gyroarray.chain import run_replicates
+    from gyroarray.sim.model import NoiseModel
+    sc = _scenario(experiment["scenario"], base)
     new = NoiseModel.from_toml({"effects": check.get("effects", [])})
     replaced = {e.effect for e in new.entries}
     entries = tuple(e for e in sc.model.entries if e.effect not in replaced) + tuple(new.entries)
-    changed_model = NoiseModel(entries, description=f"{check['name']}")
-    changed_model.check(sc.layout.n_gyros)
+    model = NoiseModel(entries, description=check["name"])
+    model.check(sc.layout.n_gyros)
+    changed = replace(sc, model=model)
+    est = experiment["estimator"]
     params = dict(check.get("estimator_params", {}))
-    base = _predict(sc, sc.model, experiment["estimator"], {})
-    mod = _predict(sc, changed_model, experiment["estimator"], params)
-    rows, toward = [], []
+    runs = int(check.get("runs", MIN_RUNS))
+    seed = int.from_bytes(hashlib.sha256(check["name"].encode()).digest()[:8], "little") >> 1
+    rep = run_replicates(changed, [est], replicates=runs, seed=seed, predict=False,
+                         params={est: params} if params else None)
+    rows, inside = [], []
     for v in check["values"]:
-        b = base.axes[v["axis"]][v["metric"]]
-        m = mod.axes[v["axis"]][v["metric"]]
-        ok = None if b is None or m is None else abs(m - v["value"]) <= 0.5 * abs(b - v["value"])
+        vals = []
+        for r in rep.runs:
+            t = r.table
+            row = t[(t.estimator == est) & (t.axis == v["axis"])]
+            x = row[v["metric"]].iloc[0] if len(row) else None
+            vals.append(None if x is None else float(x))
+        lo, hi, x = _band(vals)
+        s_lo = s_hi = None
+        if shipped_rows is not None and v["metric"] in shipped_rows:
+            sel = shipped_rows[shipped_rows.axis == v["axis"]][v["metric"]].to_numpy(float)
+            s_lo, s_hi, _ = _band(sel)
+        ok = None if lo is None else bool(lo <= v["value"] <= hi)
         rows.append({"axis": v["axis"], "metric": v["metric"], "paper": float(v["value"]),
-                     "shipped": b, "changed": m, "toward": ok})
-        toward.append(bool(ok))
-    what = ", ".join(f"{e.effect} " + ", ".join(f"{k} = {val}" for k, val in e.params.items())
-                     for e in new.entries) or "no noise change"
+                     "changed_mean": float(np.mean(x)) if x.size else None,
+                     "changed_low": lo, "changed_high": hi, "shipped_low": s_lo,
+                     "shipped_high": s_hi, "inside": ok})
+        inside.append(ok)
+    what = "; ".join(f"{e.effect} " + ", ".join(f"{k} = {val}" for k, val in e.params.items())
+                     for e in new.entries) or "the noise as shipped"
     if params:
-        what += "; " + experiment["estimator"] + " with " + ", ".join(f"{k} = {v}" for k, v in params.items())
+        what += f"; {est} with " + ", ".join(f"{k} = {v}" for k, v in params.items())
+    verdict = ("supports" if all(inside) else "does not support") if None not in inside else "undetermined"
     return {"name": check["name"], "hypothesis": " ".join(check["hypothesis"].split()),
-            "simulation": f"{experiment['scenario']} with {what} (analytic predictor, expectations)",
-            "rows": rows, "verdict": "supports" if all(toward) else "does not support"}
+            "simulation": f"{experiment['scenario']} with {what}, {runs} runs (seed {seed})",
+            "rows": rows, "verdict": verdict}
