@@ -219,3 +219,20 @@ def test_run_refuses_an_unobservable_layout(tmp_path, capsys):
     code, out, err = _run_cli(["run", str(s)], capsys)
     assert code == 2
     assert "z is unobservable: all axes lie in the x-y plane" in err and err.count("\n") == 1
+
+
+def test_paired_sweep_gives_every_design_the_same_seed(tmp_path):
+    from gyroarray.scenarios.sweep import load_sweep
+    text = ('name = "p"\nseed = 3\npaired = true\nreplicates = 2\n'
+            'base = "paper003/static_s1_n6_rhob_0"\n[grid]\nn_gyros = [4, 6]\nscheme = [1, 2]\n'
+            'duration_s = [10.0]\n')
+    (tmp_path / "p.toml").write_text(text)
+    sw = load_sweep(tmp_path / "p.toml")
+    seeds = {}
+    for s in sw.scenarios:
+        seeds.setdefault(s.params["replicate"], set()).add(s.seed)
+    assert len(sw) == 8 and all(len(v) == 1 for v in seeds.values())   # one seed per replicate
+    assert seeds[0] != seeds[1]
+    (tmp_path / "u.toml").write_text(text.replace("paired = true\n", ""))
+    unpaired = load_sweep(tmp_path / "u.toml")
+    assert len({s.seed for s in unpaired.scenarios}) == 8
