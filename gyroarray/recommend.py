@@ -423,17 +423,17 @@ def _responses(bank: _FilterBank, est: str, bw, ch: _Channels, idx=None) -> list
 
 
 def _search_one(bank, space, g: GyroNoise, scheme: int, n: int, est: str, rho: float,
-                alive: np.ndarray, alphas: np.ndarray, H: np.ndarray):
-    """Best (α, bandwidth) of one scheme, N and estimator at one ρ."""
+                alive: np.ndarray, alphas: np.ndarray, H: np.ndarray, evaluate: bool = True):
+    """Best (α, bandwidth) of one scheme, N and estimator at one ρ (``evaluate`` False:
+    only the channels)."""
     gr = g.with_rho(rho) if g.rho_arw == g.rho_rrw else g
     ch = _channels(est, H, gr, space.dt_s)
-    ch.kf_single_ratio = (units.rrw_deg_h_rt_h_to_rad_s_rt_s(g.rrw_deg_h_rt_h) ** 2 * space.dt_s ** 2
-                          / units.arw_deg_rt_h_to_rad_rt_s(g.arw_deg_rt_h) ** 2)
+    ch.kf_single_ratio = _single_ratio(g, space)
     if est == "kf_array" and ch.decoupled:
         r0 = ch.ratio[alive][0] if alive.any() else ch.ratio[0]
         if np.any(np.abs(ch.ratio[alive] - r0) > 1e-9 * np.abs(r0) + 1e-300):
             ch.decoupled = False
-    if not ch.decoupled:
+    if not ch.decoupled or not evaluate:
         return None, ch
     best = None
     for bw in _bandwidths(space, est):
@@ -461,6 +461,7 @@ def _refine_alpha(best: _Best, space: DesignSpace, g: GyroNoise, alphas: np.ndar
         if failures and not np.isfinite(_survives(H, best.rho, failures)[0]):
             return math.inf
         ch = _channels(best.est, H, gr, space.dt_s)
+        ch.kf_single_ratio = _single_ratio(g, space)
         J, _ = _evaluate(best.est, best.resp, ch, slice(None))
         return float(J[0]) if np.isfinite(J[0]) else math.inf
     if hi <= lo:
@@ -598,7 +599,43 @@ def search(g: GyroNoise, space: DesignSpace, rho: float) -> tuple[list[dict], li
                                  "(unequal ARW and RRW correlation); predicted by the full predictor "
                                  "at kf_single's cone angle and bandwidth")
     designs = _ranked(designs, space.estimators)
+    designs = _refine_top_bandwidths(designs, g, space, rho)
     return designs, notes
+
+
+#: Designs at the top of a ranking whose bandwidth is refined off the grid.
+REFINE_TOP = 8
+
+
+def _refine_top_bandwidths(designs: list[dict], g: GyroNoise, space: DesignSpace, rho: float) -> list[dict]:
+    """Bounded Brent in log(bandwidth) between the grid neighbours, for the top designs."""
+    lo, hi = space.bandwidth_hz
+    if lo == hi:
+        return designs
+    out = list(designs)
+    for i, d in enumerate(designs[:REFINE_TOP]):
+        bw = d["bandwidth_hz"]
+        if bw is None:
+            continue
+        grid = [f for f in _bandwidths(space, d["estimator"]) if f is not None]
+        k = int(np.argmin(np.abs(np.log(np.array(grid) / bw))))
+        a, b = grid[max(k - 1, 0)], grid[min(k + 1, len(grid) - 1)]
+        alpha = math.radians(d["alpha_deg"])
+
+        def f(logbw):
+            e = _generic_or_fast(d["scheme"], d["n"], d["estimator"], alpha, float(np.exp(logbw)),
+                                 rho, g, space)
+            return e["rms_3axis_deg_s"] if math.isfinite(e["rms_3axis_deg_s"]) else math.inf
+        if b <= a:
+            continue
+        res = minimize_scalar(f, bounds=(math.log(a), math.log(b)), method="bounded",
+                              options={"xatol": 1e-3})
+        if res.fun < d["rms_3axis_deg_s"]:
+            new = _generic_or_fast(d["scheme"], d["n"], d["estimator"], alpha,
+                                   float(round(math.exp(res.x), 3)), rho, g, space)
+            new["rank"] = d.get("rank")
+            out[i] = new
+    return _ranked(out, space.estimators)
 
 
 def _ranked(designs: list[dict], estimators) -> list[dict]:
@@ -659,6 +696,9 @@ def _why_equal(members: list[dict], spread: float) -> str:
         bits.append("kf_array and kf_single are the same filter here: with alike gyros and equal "
                     "ARW/RRW correlation the array KF decouples per axis into the single-gyro KF "
                     "on the least-squares channel")
+    if ests & {"kf_array", "kf_single"} and ests & {"gls", "ols"}:
+        bits.append("the Kalman filters are the low-passed least squares times their DC gain "
+                    "q_ω/(q_ω + q_b), which is close to 1 at this bandwidth")
     if len(ests & {"gls", "ols", "naive"}) > 1:
         bits.append("gls, ols and naive have the same weights: HᵀC⁻¹H is diagonal and the axes "
                     "are eigenvectors of C on these cones")
@@ -706,8 +746,7 @@ def recommend(g: GyroNoise, space: DesignSpace, *, rhos=None) -> dict:
     if not designs:
         raise InputError("no design meets the requirements (see the notes: failures, rho, bandwidth)")
     rec = designs[0]
-    other = [d for d in designs[1:] if (d["scheme"], d["n"], round(d["alpha_deg"], 3))
-             != (rec["scheme"], rec["n"], round(rec["alpha_deg"], 3))]
+    other = [d for d in designs[1:] if (d["scheme"], d["n"]) != (rec["scheme"], rec["n"])]
     out = {"recommended": _short(rec), "runner_up": _short(other[0]) if other else None,
            "designs": [_short(d) for d in designs],
            "equivalent": equivalent_groups(designs),
@@ -725,7 +764,7 @@ def _short(d: dict) -> dict:
     """The JSON fields of one design (the issue's keys first)."""
     keys = ("rank", "scheme", "n", "alpha_deg", "estimator", "bandwidth_hz", "predicted",
             "worst_gdop_after_failures", "rms_3axis_deg_s", "gdop", "fault_tolerance", "rho",
-            "worst_rms_3axis_deg_s", "path")
+            "worst_rms_3axis_deg_s", "rms_by_rho", "path")
     return {k: d[k] for k in keys if k in d}
 
 
@@ -739,8 +778,7 @@ def _generic_or_fast(scheme, n, est, alpha, bw, rho, g, space) -> dict:
     gr = g.with_rho(rho) if g.rho_arw == g.rho_rrw else g
     H = conical_axes(scheme, n, np.array([alpha]))
     ch = _channels(est, H, gr, space.dt_s)
-    ch.kf_single_ratio = (units.rrw_deg_h_rt_h_to_rad_s_rt_s(g.rrw_deg_h_rt_h) ** 2 * space.dt_s ** 2
-                          / units.arw_deg_rt_h_to_rad_rt_s(g.arw_deg_rt_h) ** 2)
+    ch.kf_single_ratio = _single_ratio(g, space)
     if not ch.decoupled:
         return _generic_design(scheme, n, est, alpha, bw, rho, space, g, space.failures)
     bank = _bank(space, g)
@@ -751,29 +789,84 @@ def _generic_or_fast(scheme, n, est, alpha, bw, rho, g, space) -> dict:
 
 
 def _robust_ranking(per_rho: dict, g: GyroNoise, space: DesignSpace) -> list[dict]:
-    """Min-max over ρ: each candidate (the winners of every ρ per scheme/N/estimator)
-    evaluated at every ρ; ranked by its worst 3-axis RMS."""
-    cands = {}
-    for ds in per_rho.values():
-        for d in ds:
-            key = (d["scheme"], d["n"], d["estimator"], round(d["alpha_deg"], 6), d["bandwidth_hz"])
-            cands.setdefault(key, d)
+    """Min-max over ρ for each scheme × N × estimator: the cone angle and bandwidth whose
+    worst 3-axis RMS over the ρ of the range is smallest (grid, then bounded Brent in α),
+    predicted at its worst ρ; ``rms_by_rho`` holds the 3-axis RMS at every ρ."""
+    bank = _bank(space, g)
+    rhos = list(per_rho)
     out = []
-    for key, d in cands.items():
-        worst, at = -1.0, None
-        for r in per_rho:
-            if r <= -1.0 / (d["n"] - 1):
+    for scheme in space.schemes:
+        alphas = _alpha_grid(scheme, space.alpha_points)
+        for n in space.ns:
+            ok = [r for r in rhos if r > -1.0 / (n - 1)]
+            if not ok:
                 continue
-            e = _evaluate_design(d, g, space, r)
-            if e["rms_3axis_deg_s"] > worst:
-                worst, at = e["rms_3axis_deg_s"], e
-        if at is None:
-            continue
-        at = dict(at)
-        at["worst_rms_3axis_deg_s"] = worst
-        at["rms_3axis_deg_s"] = worst
-        out.append(at)
+            H = conical_axes(scheme, n, alphas)
+            alive = np.ones(alphas.size, bool)
+            for r in ok:
+                alive &= np.isfinite(_survives(H, r, space.failures))
+            if not alive.any():
+                continue
+            for est in space.estimators:
+                best = None
+                chs = {}
+                for r in ok:
+                    _, ch = _search_one(bank, space, g, scheme, n, est, r, alive, alphas, H,
+                                        evaluate=False)
+                    chs[r] = ch
+                if not all(ch.decoupled for ch in chs.values()):
+                    continue
+                for bw in _bandwidths(space, est):
+                    J = np.zeros(alphas.size)
+                    for r, ch in chs.items():
+                        resp = _responses(bank, est, bw, ch, idx=int(np.argmax(alive)))
+                        Jr, _ = _evaluate(est, resp, ch, slice(None))
+                        J = np.maximum(J, np.where(np.isfinite(Jr), Jr, np.inf))
+                    J = np.where(alive, J, np.inf)
+                    k = int(np.argmin(J))
+                    if np.isfinite(J[k]) and (best is None or J[k] < best[0]):
+                        best = (float(J[k]), float(alphas[k]), bw)
+                if best is None:
+                    continue
+                alpha, bw = _refine_minmax(scheme, n, est, best, alphas, ok, bank, space, g)
+                by_rho = {r: _generic_or_fast(scheme, n, est, alpha, bw, r, g, space) for r in ok}
+                worst_r = max(by_rho, key=lambda r: by_rho[r]["rms_3axis_deg_s"])
+                d = dict(by_rho[worst_r])
+                d["worst_rms_3axis_deg_s"] = d["rms_3axis_deg_s"]
+                d["rms_by_rho"] = {f"{r:g}": by_rho[r]["rms_3axis_deg_s"] for r in ok}
+                out.append(d)
     return _ranked(out, space.estimators)
+
+
+def _refine_minmax(scheme, n, est, best, alphas, rhos, bank, space, g):
+    """Bounded Brent in α on the worst-case objective, at the grid's best bandwidth."""
+    _, a0, bw = best
+    k = int(np.argmin(np.abs(alphas - a0)))
+    lo = alphas[k - 1] if k > 0 else alphas[k] * 0.5
+    hi = alphas[k + 1] if k + 1 < alphas.size else alphas[k]
+
+    def f(alpha):
+        H = conical_axes(scheme, n, np.array([alpha]))
+        worst = 0.0
+        for r in rhos:
+            if space.failures and not np.isfinite(_survives(H, r, space.failures)[0]):
+                return math.inf
+            gr = g.with_rho(r) if g.rho_arw == g.rho_rrw else g
+            ch = _channels(est, H, gr, space.dt_s)
+            ch.kf_single_ratio = _single_ratio(g, space)
+            J, _ = _evaluate(est, _responses(bank, est, bw, ch), ch, slice(None))
+            worst = max(worst, float(J[0]) if np.isfinite(J[0]) else math.inf)
+        return worst
+    if hi <= lo:
+        return a0, bw
+    res = minimize_scalar(f, bounds=(lo, hi), method="bounded", options={"xatol": 1e-7})
+    return (float(res.x), bw) if res.fun <= best[0] else (a0, bw)
+
+
+def _single_ratio(g: GyroNoise, space: DesignSpace) -> float:
+    """q_b / r of one gyro (the design ratio of kf_single's filter)."""
+    return (units.rrw_deg_h_rt_h_to_rad_s_rt_s(g.rrw_deg_h_rt_h) ** 2 * space.dt_s ** 2
+            / units.arw_deg_rt_h_to_rad_rt_s(g.arw_deg_rt_h) ** 2)
 
 
 def _robustness(per_rho: dict, g: GyroNoise, space: DesignSpace) -> list[dict]:

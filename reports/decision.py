@@ -84,7 +84,11 @@ def decision_summary(res: dict) -> list[str]:
     rms = " / ".join(f"{p[x]['rms_deg_s']:.3g}" for x in AXES)
     ang = " / ".join(f"{p[x]['angle_deg_at_horizon']:.3g}" for x in AXES)
     s = (f"Expected over {horizon:g} s: RMS rate error about the truth x/y/z {rms} deg/s, "
-         f"angle error at the end {ang} deg (predicted)")
+         f"angle error at the end {ang} deg (predicted")
+    if r.get("rms_by_rho"):
+        s += (f" at ρ = {r['rho']:g}, the worst case of the range; 3-axis RMS at each ρ: "
+              + ", ".join(f"{k}: {v:.4g}" for k, v in r["rms_by_rho"].items()) + " deg/s")
+    s += ")"
     if chk:
         t = chk["rms_3axis_deg_s"]["monte_carlo"]
         s += (f"; {res['check']['replicates']} paired simulated runs give a 3-axis RMS of "
