@@ -327,12 +327,15 @@ def adev_section(doc, res: dict, *, seed: int = 20260413):
                         alpha=0.2, lw=0)
         ax.loglog(an.taus_s, to(an.adev_rad_s), color=f"C{i}", lw=1.6,
                   label=f"fused {axis} ({d['estimator']})")
-    ax.set(title=f"{_label(d)}: one {n * dt:g} s record", xlabel="averaging time τ [s]",
+    rho = d.get("rho", g.rho_arw)
+    ax.set(title=f"{_label(d)}, ρ = {rho:g}: one {n * dt:g} s record", xlabel="averaging time τ [s]",
            ylabel="Allan deviation [deg/h]")
     ax.grid(alpha=0.3, which="both")
     ax.legend(fontsize=8)
     p = d["predicted"]
-    note = (f"Record length {n * dt:g} s at {1 / dt:g} Hz (seed {seed}); bands: 1σ confidence of "
+    note = (f"Record length {n * dt:g} s at {1 / dt:g} Hz (seed {seed}), gyro correlation ρ = {rho:g} "
+            "(with ρ > 0 the common part does not average out: the fused curves stay above the "
+            "dashed line); bands: 1σ confidence of "
             "each point. At τ above the filter's time constants the fused curves meet the dashed "
             "√(3/N) line when the DC gain is 1; predicted long-τ fused ARW x/y/z "
             + " / ".join(f"{p[a].get('arw_long_deg_rt_h', float('nan')):.4g}" for a in AXES)

@@ -170,14 +170,15 @@ def accuracy_vs_n_fig(res: dict):
                   label=label + ("  (equal to 1e-6)" if len(grp) > 1 else ""),
                   offset=0.03 * (ests.index(est) - len(ests) / 2))
     chk = (res.get("check") or {}).get("designs", [])
-    for c in chk:
+    for i, c in enumerate(chk):
         mc = c["rms_3axis_deg_s"]["monte_carlo"]
         if mc["ci_low"] is None:
             continue
-        ax.errorbar([c["n"] + 0.15], [mc["value"]], yerr=[[mc["value"] - mc["ci_low"]],
-                                                          [mc["ci_high"] - mc["value"]]],
-                    fmt="D", color="k", ms=4, capsize=3,
-                    label="simulated (95 % CI), offset right" if c is chk[0] else None)
+        color = f"C{ests.index(c['estimator'])}" if c["estimator"] in ests else "k"
+        ax.errorbar([c["n"] + 0.12 + 0.06 * i], [mc["value"]],
+                    yerr=[[mc["value"] - mc["ci_low"]], [mc["ci_high"] - mc["value"]]],
+                    fmt="o" if c["scheme"] == 1 else "s", mfc="none", color=color, ms=6, capsize=3,
+                    label=f"simulated: scheme {c['scheme']}, {c['estimator']} (95 % CI)")
     ax.set(xlabel="gyros N [-]", ylabel="3-axis RMS about the truth [deg/s]",
            title="Predicted accuracy per N (best cone angle and bandwidth)")
     ax.grid(alpha=0.3, which="both")

@@ -1,25 +1,30 @@
-"""The design comparison report: one self-contained HTML file and a Markdown twin.
+"""The design report: one self-contained HTML file and a Markdown twin, the decision first.
 
-:func:`write_report` reads one or more sweep folders (``gyroarray sweep``
-output: ``sweep.json`` + ``rows/*.parquet``) and writes
+:func:`write_report` takes a ``gyroarray design --recommend --out`` result
+(``design``) and/or sweep folders (``gyroarray sweep`` output: ``sweep.json``
++ ``rows/*.parquet``) and writes, top first:
 
-* **GDOP vs α and vs ρ** (paper 003 Figs. 8–10; from the layouts, no sweep needed);
-* the **design ranking** per motion: every scheme/N/α/ρ/estimator of the
-  sweeps with its 1σ error, fused ARW and RRW (mean over the body axes and
-  the replicates), best first, and a chart of the best 1σ per design;
+* with a design result (:mod:`gyroarray.reports.decision`): the **decision**
+  (array, estimator, bandwidth, predicted accuracy with the simulated check,
+  runner-up, what would change the choice), the **assumptions** (each input
+  and its source), and the **evidence** from the analytic predictor and its
+  paired Monte-Carlo check, fault tolerance and ρ robustness;
+* **GDOP vs α and vs ρ** (paper 003 Figs. 8–10; from the layouts);
 * **Allan deviation of single gyros vs the fused output** with confidence
-  bands (paper 003 Figs. 14 and 22), re-simulated from the sweep's own
-  scenario (same seed, same bits) for the best static design and, when a
-  paper sweep is given, for the paper's 6-gyro and 4-gyro static arrays;
-* the **estimator comparison** per motion: 1σ, reduction, attenuation,
-  phase lag and efficiency against the offline bound (when the sweep ran
-  ``bound``);
+  bands and the √(3/N) reference line, for the recommended design
+  (re-simulated) and, from the sweeps, the best static design and the
+  paper's 6-gyro and 4-gyro static arrays (paper 003 Figs. 14 and 22);
+* from design sweeps: the **design ranking** per motion and per ρ (ρ is a
+  condition of the gyros, not a design choice), 1σ with its 95 % interval
+  over the runs, RMS about the truth, Allan-fit ARW/RRW labelled as such;
+  the **estimator comparison** (1σ, reduction, attenuation, phase lag,
+  efficiency against the offline bound);
 * **paper vs model** for each reproduced experiment of
-  ``scenarios/paper_values.toml``: the paper's value, the model's mean and
-  standard deviation over the replicates, their ratio and a flag where the
-  paper's value lies outside the model's 95 % prediction interval
-  (mean ± t₀.₉₇₅,ₙ₋₁ · sd · √(1 + 1/n): where one more run of the model
-  would fall), with the experiment's likely-reason sentence.
+  ``scenarios/paper_values.toml``: the paper's value beside the model's runs
+  (mean, sd, min–max) and its 95 % band, the 2.5–97.5 percentiles of ≥ 20
+  runs (where one more run falls 95 % of the time; positive like the runs),
+  a flag outside it, and for a disagreement only explanations that a named
+  simulation tests (:mod:`gyroarray.reports.hypotheses`).
 
 The HTML has its figures as ``data:image/png;base64`` URIs, its style inline
 and no script: it opens anywhere, offline. The Markdown twin has the same
