@@ -134,6 +134,30 @@ def plot_vs_n(ax, ns, ys, yerr=None, *, color, marker, label, offset: float = 0.
     ax.set_xticks(sorted(ticks))
 
 
+def plot_series(ax, series: dict, *, rtol: float) -> list:
+    """Series {(scheme, estimator): (N, values, error bars or None)} vs N: one marker per
+    scheme, one colour per estimator; series equal to ``rtol`` are drawn once, their label
+    naming them all. Returns the estimators in colour order."""
+    merged: list[list] = []
+    for k, (n, y, _) in series.items():
+        for grp in merged:
+            n0, y0, _ = series[grp[0]]
+            if np.array_equal(n, n0) and np.allclose(y, y0, rtol=rtol, atol=0):
+                grp.append(k)
+                break
+        else:
+            merged.append([k])
+    ests = sorted({k[1] for k in series})
+    for grp in merged:
+        n, y, e = series[grp[0]]
+        scheme, est = grp[0]
+        label = " = ".join(f"scheme {sc}, {es}" for sc, es in grp)
+        plot_vs_n(ax, n, y, e, color=f"C{ests.index(est)}", marker="o" if scheme == 1 else "s",
+                  label=label + (f"  (equal to {rtol:g})" if len(grp) > 1 else ""),
+                  offset=0.04 * (ests.index(est) - len(ests) / 2) + (0.0 if scheme == 1 else 0.02))
+    return ests
+
+
 def accuracy_vs_n_fig(res: dict):
     """Predicted 3-axis RMS vs N per scheme and estimator (identical series merged), with the
     simulated check's 95 % interval as error bars at the checked designs."""
@@ -152,23 +176,7 @@ def accuracy_vs_n_fig(res: dict):
     for key, per_n in best.items():
         ns = sorted(per_n)
         series[key] = (np.array(ns), np.array([per_n[n]["rms_3axis_deg_s"] for n in ns]), None)
-    merged: list[list] = []
-    for k in series:
-        for grp in merged:
-            n0, y0, _ = series[grp[0]]
-            if np.array_equal(series[k][0], n0) and np.allclose(series[k][1], y0, rtol=1e-6, atol=0):
-                grp.append(k)
-                break
-        else:
-            merged.append([k])
-    ests = sorted({k[1] for k in series})
-    for grp in merged:
-        ns, ys, _ = series[grp[0]]
-        scheme, est = grp[0]
-        label = " = ".join(f"scheme {sc}, {es}" for sc, es in grp)
-        plot_vs_n(ax, ns, ys, color=f"C{ests.index(est)}", marker="o" if scheme == 1 else "s",
-                  label=label + ("  (equal to 1e-6)" if len(grp) > 1 else ""),
-                  offset=0.03 * (ests.index(est) - len(ests) / 2))
+    ests = plot_series(ax, series, rtol=1e-6)
     chk = (res.get("check") or {}).get("designs", [])
     for i, c in enumerate(chk):
         mc = c["rms_3axis_deg_s"]["monte_carlo"]
@@ -178,7 +186,7 @@ def accuracy_vs_n_fig(res: dict):
         ax.errorbar([c["n"] + 0.12 + 0.06 * i], [mc["value"]],
                     yerr=[[mc["value"] - mc["ci_low"]], [mc["ci_high"] - mc["value"]]],
                     fmt="o" if c["scheme"] == 1 else "s", mfc="none", color=color, ms=6, capsize=3,
-                    label=f"simulated: scheme {c['scheme']}, {c['estimator']} (95 % CI)")
+                    label=f"simulated: scheme {c['scheme']}, α {c['alpha_deg']:.1f}°, {c['estimator']} (95 % CI)")
     ax.set(xlabel="gyros N [-]", ylabel="3-axis RMS about the truth [deg/s]",
            title="Predicted accuracy per N (best cone angle and bandwidth)")
     ax.grid(alpha=0.3, which="both")

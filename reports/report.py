@@ -299,6 +299,7 @@ def _png(fig, dpi=96) -> bytes:
 def _ranking_fig(ranking: pd.DataFrame) -> bytes:
     """Best 1σ vs N per scheme and estimator, one panel per motion, at one ρ (the first
     listed; ρ is a condition, not a series), error bars: 95 % CI over the runs."""
+    from .design_plots import plot_series
     motions = list(dict.fromkeys(ranking.motion))
     fig, axs = _figure(5.2 * len(motions), 4.4, len(motions))
     for ax, motion in zip(axs, motions):
@@ -311,37 +312,12 @@ def _ranking_fig(ranking: pd.DataFrame) -> bytes:
             err = np.vstack([best.sigma_1_deg_s - best.ci_low, best.ci_high - best.sigma_1_deg_s])
             series[(scheme, est)] = (best.n_gyros.to_numpy(), best.sigma_1_deg_s.to_numpy(),
                                      None if np.isnan(err.astype(float)).any() else err)
-        _plot_series(ax, series)
+        plot_series(ax, series, rtol=1e-9)
         ax.set(title=f"{motion}, ρ_arw = {rho[0]}, ρ_rrw = {rho[1]}: best 1σ per N",
                xlabel="gyros N [-]", ylabel="1σ error [deg/s]", yscale="log")
         ax.grid(alpha=0.3, which="both")
         ax.legend(fontsize=7)
     return _png(fig)
-
-
-def _plot_series(ax, series: dict):
-    """One marker style per scheme, one colour per estimator; series equal to 1e-9 share
-    one entry whose label names them all (drawn once)."""
-    from .design_plots import plot_vs_n
-    keys = list(series)
-    merged: list[list] = []
-    for k in keys:
-        n, y, e = series[k]
-        for grp in merged:
-            n0, y0, _ = series[grp[0]]
-            if np.array_equal(n, n0) and np.allclose(y, y0, rtol=1e-9, atol=0):
-                grp.append(k)
-                break
-        else:
-            merged.append([k])
-    ests = sorted({k[1] for k in keys})
-    for grp in merged:
-        n, y, e = series[grp[0]]
-        scheme, est = grp[0]
-        label = " = ".join(f"scheme {sc}, {es}" for sc, es in grp)
-        plot_vs_n(ax, n, y, e, color=f"C{ests.index(est)}", marker="o" if scheme == 1 else "s",
-                  label=label + ("  (identical)" if len(grp) > 1 else ""),
-                  offset=0.04 * (ests.index(est) - len(ests) / 2) + (0.0 if scheme == 1 else 0.02))
 
 
 def _estimator_fig(comp: pd.DataFrame) -> bytes:
