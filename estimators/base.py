@@ -31,16 +31,18 @@ from __future__ import annotations
 
 import inspect
 import math
+from dataclasses import dataclass
 from importlib import metadata
 from typing import Any, Callable
 
 import numpy as np
 
+from gyroarray.design import unobservable_reason
 from gyroarray.errors import InputError
 from gyroarray.layout import Layout
 
-__all__ = ["Estimator", "NotFittedError", "register", "get_estimator", "available", "make",
-           "ENTRY_POINT_GROUP"]
+__all__ = ["Estimator", "NotFittedError", "LinearSystem", "register", "get_estimator", "available",
+           "make", "ENTRY_POINT_GROUP", "unobservable_reason"]
 
 #: Entry-point group of third-party estimators.
 ENTRY_POINT_GROUP = "gyroarray.estimators"
@@ -52,6 +54,61 @@ _BUILTIN_MODULES = ("simple", "kf_array", "kf_single", "bound")
 
 class NotFittedError(InputError):
     """``estimate`` was called before ``fit``."""
+
+
+@dataclass(frozen=True, eq=False)
+class LinearSystem:
+    """A fitted linear estimator as a discrete state-space filter.
+
+    x̂_k = A x̂_{k-1} + K z_k,  ω̂_k = C x̂_k,  x̂_{-1} = X0 z_0
+
+    with A diagonalised as A = S diag(lam) S⁻¹ (real eigenvalues in [0, 1];
+    the eigenvalue-1 modes of a Kalman filter with bias states are the
+    unobservable directions, which K does not drive).
+
+    Attributes
+    ----------
+    A : ndarray, shape (D, D)
+    K : ndarray, shape (D, N)
+        Input gain [-].
+    C : ndarray, shape (3, D)
+        Output map [-].
+    X0 : ndarray, shape (D, N)
+        Start: x̂_{-1} = X0 z_0 [-].
+    lam : ndarray, shape (D,)
+        Eigenvalues of A [-].
+    S, S_inv : ndarray, shape (D, D)
+        Eigenvectors of A (columns) and the inverse [-].
+    """
+
+    A: np.ndarray
+    K: np.ndarray
+    C: np.ndarray
+    X0: np.ndarray
+    lam: np.ndarray
+    S: np.ndarray
+    S_inv: np.ndarray
+
+    @property
+    def dim(self) -> int:
+        return int(self.A.shape[0])
+
+    def response(self, theta) -> np.ndarray:
+        """Frequency response (len(theta), 3, N) from gyro readings to rate estimates at
+        normalised angular frequencies θ = 2π f dt [rad] (the stable modes; θ > 0)."""
+        th = np.atleast_1d(np.asarray(theta, dtype=float))
+        cs = self.C @ self.S                                         # output of each mode
+        bk = self.S_inv @ self.K                                     # input of each mode
+        live = np.flatnonzero(np.max(np.abs(bk), axis=1) > 0.0)
+        g = 1.0 / (1.0 - self.lam[live][None, :] * np.exp(-1j * th)[:, None])  # 1/(1 − λ e^{−jθ})
+        return np.einsum("am,tm,mi->tai", cs[:, live], g, bk[live])
+
+    def dc_gain(self) -> np.ndarray:
+        """Gain (3, N) from slow changes of the readings to the rate estimates (θ → 0⁺)."""
+        cs, bk = self.C @ self.S, self.S_inv @ self.K
+        stable = self.lam < 1.0 - 1e-12
+        return np.real(cs[:, stable] @ (bk[stable] / (1.0 - self.lam[stable])[:, None]))
+
 
 
 class Estimator:
@@ -118,9 +175,9 @@ class Estimator:
         if not isinstance(layout, Layout):
             raise InputError(f"layout must be a gyroarray Layout, got {type(layout).__name__}")
         h = np.array(layout.H, dtype=float)
-        if np.linalg.matrix_rank(h) < 3:
-            raise InputError(f"the layout's axes do not span 3-D space ({layout!r}): "
-                             "no estimator can recover a 3-axis rate")
+        why = unobservable_reason(h)
+        if why is not None:
+            raise InputError(f"{layout.name}: {why}; no estimator can recover a 3-axis rate")
         try:
             dt = float(dt_s)
         except (TypeError, ValueError):
@@ -173,6 +230,18 @@ class Estimator:
 
     def _estimate(self, z: np.ndarray) -> np.ndarray:  # pragma: no cover - abstract
         raise NotImplementedError
+
+    def linear_system(self) -> LinearSystem:
+        """The fitted estimator as a :class:`LinearSystem` (for the accuracy predictor).
+
+        Raises
+        ------
+        InputError
+            The estimator is not a fixed linear filter (e.g. the offline bound).
+        """
+        self._check_fitted()
+        raise InputError(f"estimator {self.name!r} is not a fixed linear filter: the accuracy "
+                         "predictor cannot model it")
 
     def _check_fitted(self) -> None:
         if not hasattr(self, "n_gyros_"):

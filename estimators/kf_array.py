@@ -13,7 +13,7 @@ import numpy as np
 from gyroarray.errors import InputError
 
 from ._kalman import NoSteadyState, SteadyStateFilter, solve_log, state_model, steady_state
-from .base import Estimator, _readonly, register
+from .base import Estimator, LinearSystem, _readonly, register
 
 __all__ = ["ArrayKF", "DEFAULT_BANDWIDTH_HZ", "gls_weights", "rate_psd"]
 
@@ -121,6 +121,19 @@ def rate_psd(H: np.ndarray, R: np.ndarray, Qb: np.ndarray | None, dt_s: float,
     raise InputError(f"the q_omega design for bandwidth_hz = {f:g} Hz did not converge")
 
 
+def filter_system(filt: SteadyStateFilter, x0_map: np.ndarray) -> LinearSystem:
+    """A steady-state filter as a :class:`LinearSystem` (its stable and unit modes)."""
+    mdl = filt.model
+    D, p = mdl.dim, mdl.p
+    A = (np.eye(D) - filt.K @ mdl.H1) @ mdl.F                        # A = (I − K H1) F
+    S = np.hstack([filt.modes, filt.Vu])
+    lam = np.concatenate([filt.lam, np.ones(D - filt.lam.size)])
+    C = np.zeros((p, D))
+    C[:, :p] = np.eye(p)
+    return LinearSystem(A=A, K=filt.K.copy(), C=C, X0=np.array(x0_map, dtype=float), lam=lam,
+                        S=S, S_inv=filt.to_modes.copy())
+
+
 def design(H, R, Qb, q_omega, dt_s) -> SteadyStateFilter:
     """The steady-state filter for q_ω [rad²/s³] per axis (increments q_ω·dt)."""
     return steady_state(state_model(H, R, np.asarray(q_omega, dtype=float) * dt_s, Qb))
@@ -214,6 +227,11 @@ class ArrayKF(Estimator):
 
     def _estimate(self, z):
         return self._filter.apply(z, self._x0_map() @ z[0])
+
+    def linear_system(self) -> LinearSystem:
+        """x̂_k = A x̂_{k-1} + K z_k with A = (I − K H1) F, from x̂_{-1} = [G z_0; 0]."""
+        self._check_fitted()
+        return filter_system(self._filter, self._x0_map())
 
     def error_covariance(self, n_samples: int, *, arw: bool = True, rrw: bool = True) -> np.ndarray:
         """Exact covariance of the noise-driven body-rate error at each sample.

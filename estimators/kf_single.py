@@ -17,8 +17,8 @@ from gyroarray import units
 from gyroarray.errors import InputError
 
 from ._kalman import NoSteadyState, SteadyStateFilter, state_model, steady_state
-from .base import Estimator, _readonly, register
-from .kf_array import rate_psd
+from .base import Estimator, LinearSystem, _readonly, register
+from .kf_array import filter_system, rate_psd
 
 __all__ = ["SingleGyroKF", "single_gyro_filter", "single_gyro_gain", "bandwidth_hz",
            "q_omega_for_bandwidth", "Paper002Relation", "paper002_relation"]
@@ -149,6 +149,24 @@ class SingleGyroKF(Estimator):
         s = noise.R(dt_s) * np.outer(g, g) / (1.0 - np.outer(lam, lam))
         cov = m @ s @ m.T
         self.covariance_ = _readonly(0.5 * (cov + cov.T))
+
+    def linear_system(self) -> LinearSystem:
+        """The N gyro filters (state [ω_i, b_i] each, from [z_0i, 0]) side by side, then OLS."""
+        self._check_fitted()
+        n = self.n_gyros_
+        D = 2 * n
+        out = {k: np.zeros((D, D)) for k in ("A", "S", "S_inv")}
+        K, X0, lam = np.zeros((D, n)), np.zeros((D, n)), np.zeros(D)
+        pick = np.zeros((n, D))
+        for i, f in enumerate(self._filters):
+            s = filter_system(f, np.array([[1.0], [0.0]]))
+            blk = slice(2 * i, 2 * i + 2)
+            for k in out:
+                out[k][blk, blk] = getattr(s, k)
+            K[blk, i], X0[blk, i], lam[blk] = s.K[:, 0], s.X0[:, 0], s.lam
+            pick[i, 2 * i] = 1.0
+        return LinearSystem(A=out["A"], K=K, C=np.array(self.weights_) @ pick, X0=X0, lam=lam,
+                            S=out["S"], S_inv=out["S_inv"])
 
     def _estimate(self, z):
         w = np.empty_like(z)

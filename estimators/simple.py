@@ -23,7 +23,7 @@ import numpy as np
 from gyroarray.errors import InputError
 
 from ._kalman import first_order_lowpass, lowpass_pole
-from .base import Estimator, _readonly, register
+from .base import Estimator, LinearSystem, _readonly, register
 from .kf_array import gls_weights
 
 __all__ = ["OLS", "GLS", "Naive"]
@@ -53,6 +53,17 @@ class _PerSample(Estimator):
         self._lowpass = f
         self.weights_ = _readonly(m)
         self.covariance_ = _readonly(0.5 * (cov + cov.T))
+
+    def linear_system(self) -> LinearSystem:
+        """ω̂_k = M z_k (A = 0), or with the low-pass y_k = a y_{k-1} + (1 − a) M z_k, y_{-1} = M z_0."""
+        self._check_fitted()
+        m, eye = np.array(self.weights_), np.eye(3)
+        if self._lowpass is None:
+            return LinearSystem(A=np.zeros((3, 3)), K=m, C=eye, X0=np.zeros_like(m),
+                                lam=np.zeros(3), S=eye, S_inv=eye)
+        a = lowpass_pole(self._lowpass, self.dt_s_)
+        return LinearSystem(A=a * eye, K=(1.0 - a) * m, C=eye, X0=m, lam=np.full(3, a),
+                            S=eye, S_inv=eye)
 
     def _estimate(self, z):
         w = z @ self.weights_.T                                      # ω̂_k = M z_k

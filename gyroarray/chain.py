@@ -8,9 +8,13 @@ taken against.
 
 Metrics (per body axis; :mod:`gyroarray.analysis.metrics`):
 
-``sigma_1_deg_s``, ``mean_error_deg_s``
-    Standard deviation and mean of estimate − truth (paper 002 Eq. 19),
+``sigma_1_deg_s``, ``mean_error_deg_s``, ``rms_deg_s``
+    Standard deviation and mean of estimate − truth, and its RMS about the
+    truth (paper 002 Eq. 19: √(1σ² + mean²), what drives attitude drift),
     after the first ``settle_s`` seconds (filter start-up).
+``angle_error_deg``
+    The integrated rate error over the whole run, dt·Σ (estimate − truth):
+    the attitude error the run leaves (signed; its RMS over runs is the 1σ).
 ``reduction``
     Single-gyro 1σ (mean over gyros of the 1σ of z_k − h_k·ω) / this 1σ.
 ``attenuation``, ``phase_deg``
@@ -94,6 +98,7 @@ def error_metrics(error_rad_s: np.ndarray, dt_s: float) -> dict:
     """1σ, mean, noise density and Allan terms of one error series (datasheet units out)."""
     return {"sigma_1_deg_s": float(units.rad_s_to_deg_s(np.std(error_rad_s, ddof=1))),
             "mean_error_deg_s": float(units.rad_s_to_deg_s(np.mean(error_rad_s))),
+            "rms_deg_s": float(units.rad_s_to_deg_s(np.sqrt(np.mean(error_rad_s ** 2)))),
             "noise_density_deg_s_rt_hz": float(units.rad_s_to_deg_s(noise_density(error_rad_s, dt_s))),
             **_allan_terms(error_rad_s, dt_s)}
 
@@ -153,9 +158,12 @@ def score(estimates: dict[str, np.ndarray], truth_rad_s: np.ndarray, readings_ra
 
     rows = []
     for name, est in estimates.items():
-        err = (est - truth_rad_s)[keep]
+        full = est - truth_rad_s
+        err = full[keep]
+        angle = units.rad_to_deg(dt_s * np.sum(full, axis=0))
         for a, axis in enumerate(AXES):
             m = error_metrics(err[:, a], dt_s)
+            m["angle_error_deg"] = float(angle[a])
             att = lag = None
             if swing_sel is not None and swing_axes[a]:
                 att, lag_rad = attenuation_and_lag(time_s[swing_sel], est[swing_sel, a],
@@ -177,7 +185,17 @@ def score(estimates: dict[str, np.ndarray], truth_rad_s: np.ndarray, readings_ra
                      swing_hz=None if swing is None else swing[0])
 
 
-def run_scenario(scenario, estimator_names=None, *, cache: bool = True) -> RunResult:
+def check_fusable(scenario) -> None:
+    """Refuse a scenario whose layout cannot give a 3-axis rate, with the reason."""
+    from .design import unobservable_reason
+    why = unobservable_reason(scenario.layout.H)
+    if why is not None:
+        raise InputError(f"the layout cannot be fused: {why}", file=scenario.source,
+                         column="layout")
+
+
+def run_scenario(scenario, estimator_names=None, *, cache: bool = True,
+                 rng: np.random.Generator | None = None, params: dict | None = None) -> RunResult:
     """Simulate a scenario and score each named estimator (default: all built-ins).
 
     Parameters
@@ -187,6 +205,15 @@ def run_scenario(scenario, estimator_names=None, *, cache: bool = True) -> RunRe
         Registry names (``gyroarray.estimators.available()``).
     cache : bool
         Use the rate-table truth cache.
+    rng : numpy.random.Generator, optional
+        Overrides the scenario's seed (replicates).
+    params : dict, optional
+        Hyperparameters per estimator name, e.g. ``{"kf_array": {"bandwidth_hz": 2.0}}``.
+
+    Raises
+    ------
+    InputError
+        Unknown estimator, or a layout whose axes leave a body axis unobservable.
     """
     from .estimators import available, get_estimator
     from .sim.scenario import simulate
@@ -196,12 +223,14 @@ def run_scenario(scenario, estimator_names=None, *, cache: bool = True) -> RunRe
     unknown = [n for n in names if n not in available()]
     if unknown:
         raise InputError(f"unknown estimator {unknown[0]!r} (available: {', '.join(available())})")
-    res = simulate(scenario, cache=cache)
+    check_fusable(scenario)
+    res = simulate(scenario, cache=cache, rng=rng)
     dt = 1.0 / scenario.sample_rate_hz
     estimates, notes = {}, []
     for name in names:
         try:
-            est = get_estimator(name)().fit(scenario.layout, scenario.model, dt)
+            est = get_estimator(name)(**(params or {}).get(name, {})).fit(scenario.layout,
+                                                                          scenario.model, dt)
         except InputError as err:
             # a named estimator that cannot serve this model is the user's error; a default
             # one is skipped and said so (e.g. bias-state KFs on a model without RRW)
@@ -213,3 +242,203 @@ def run_scenario(scenario, estimator_names=None, *, cache: bool = True) -> RunRe
     result = score(estimates, res.truth.omega_body_rad_s, res.readings_rad_s, scenario.layout,
                    res.truth.time_s, dt, swing=swing_frequency(scenario.profile), scenario=scenario.name)
     return replace(result, notes=tuple(notes))
+
+
+# -- replicates -------------------------------------------------------------------
+
+#: Two-sided level of the replicate confidence intervals.
+CI_LEVEL = 0.95
+#: Chain metric that each predicted metric is compared with, and how the runs are pooled:
+#: "rms": √(mean over runs of value²) (the predictor gives √E[x²]); "mean": the plain mean.
+PREDICTED_VS_RUN = {"std_deg_s": ("sigma_1_deg_s", "rms"), "rms_deg_s": ("rms_deg_s", "rms"),
+                    "mean_deg_s": ("mean_error_deg_s", "rms"), "angle_deg": ("angle_error_deg", "rms"),
+                    "amplitude_ratio": ("attenuation", "mean"), "phase_deg": ("phase_deg", "mean")}
+
+
+def replicate_rng(seed: int, i: int) -> np.random.Generator:
+    """The Generator of replicate ``i`` of a run seeded ``seed`` (same seed, same bits)."""
+    return np.random.default_rng(np.random.SeedSequence(int(seed), spawn_key=(int(i),)))
+
+
+def mean_ci(values, level: float = CI_LEVEL) -> dict:
+    """Mean and Student-t confidence interval of the mean of independent runs.
+
+    Returns ``{"mean", "ci_low", "ci_high", "n"}`` (None where undefined: no
+    finite value, or one run for the interval).
+    """
+    from scipy import stats
+    x = np.asarray([v for v in values if v is not None and np.isfinite(v)], dtype=float)
+    n = int(x.size)
+    if n == 0:
+        return {"mean": None, "ci_low": None, "ci_high": None, "n": 0}
+    m = float(np.mean(x))
+    if n < 2:
+        return {"mean": m, "ci_low": None, "ci_high": None, "n": n}
+    half = float(stats.t.ppf(0.5 + level / 2, n - 1) * np.std(x, ddof=1) / np.sqrt(n))
+    return {"mean": m, "ci_low": m - half, "ci_high": m + half, "n": n}
+
+
+def rms_ci(values, level: float = CI_LEVEL, *, gaussian: bool = False) -> dict:
+    """√(mean of x²) over runs, with a confidence interval for √E[x²].
+
+    The mean square m of n runs is taken as E[x²]·χ²_ν/ν with the
+    Satterthwaite degrees of freedom ν = 2 n m² / var(x²) (exact, ν = n, when
+    x is a zero-mean Gaussian such as a run's mean error or angle error; large
+    when each x² is itself a long average), so the interval is
+    [m ν/χ²_ν(0.975), m ν/χ²_ν(0.025)]: it never reaches below zero and
+    covers the skewed small-sample case that a t-interval of x² misses.
+    ``gaussian``: x is known to be a zero-mean Gaussian (linear in the noise),
+    so ν = n exactly.
+    """
+    from scipy import stats
+    x = np.asarray([float(v) ** 2 for v in values if v is not None and np.isfinite(v)], dtype=float)
+    n = int(x.size)
+    if n == 0:
+        return {"value": None, "ci_low": None, "ci_high": None, "n": 0}
+    m = float(np.mean(x))
+    if n < 2 or m == 0.0:
+        return {"value": float(np.sqrt(m)), "ci_low": None, "ci_high": None, "n": n}
+    var = float(np.var(x, ddof=1))
+    nu = float(n) if gaussian else (2.0 * n * m * m / var if var > 0 else 1e9)
+    a = 1.0 - level
+    lo = m * nu / stats.chi2.ppf(1.0 - a / 2, nu)
+    hi = m * nu / stats.chi2.ppf(a / 2, nu)
+    return {"value": float(np.sqrt(m)), "ci_low": float(np.sqrt(lo)), "ci_high": float(np.sqrt(hi)),
+            "n": n}
+
+
+@dataclass(frozen=True)
+class ReplicateResult:
+    """K runs of one scenario with independent seeds, summarised.
+
+    Attributes
+    ----------
+    scenario : str
+    seed : int
+    runs : tuple of RunResult
+    predictions : dict
+        estimator -> :class:`gyroarray.predict.Prediction` (linear estimators).
+    notes : tuple of str
+    """
+
+    scenario: str
+    seed: int
+    runs: tuple
+    predictions: dict
+    notes: tuple[str, ...] = ()
+
+    def summary(self) -> dict:
+        """estimator -> axis -> metric -> {"mean", "ci_low", "ci_high", "n"}."""
+        out: dict = {}
+        tables = [r.table for r in self.runs]
+        cols = [c for c in tables[0].columns if c not in ("estimator", "axis")]
+        for name in dict.fromkeys(tables[0].estimator):
+            for axis in AXES:
+                vals = {c: [] for c in cols}
+                for t in tables:
+                    row = t[(t.estimator == name) & (t.axis == axis)]
+                    for c in cols:
+                        v = row[c].iloc[0] if len(row) else None
+                        vals[c].append(None if v is None or (isinstance(v, float) and np.isnan(v))
+                                       else float(v))
+                out.setdefault(name, {})[axis] = {c: mean_ci(v) for c, v in vals.items()}
+        return out
+
+    def single_gyro_summary(self) -> dict:
+        cols = [c for c in self.runs[0].single_gyro.columns if c != "gyro"]
+        return {c: mean_ci([float(r.single_gyro[c].mean()) for r in self.runs]) for c in cols}
+
+    def comparison(self) -> dict:
+        """estimator -> axis -> predicted metric -> {"predicted", "monte_carlo", "agrees"}.
+
+        ``monte_carlo`` pools the runs as the predictor defines the metric
+        (:data:`PREDICTED_VS_RUN`); ``agrees``: the prediction lies inside the
+        95 % interval (for each comparison alone: over many, about 5 % fall
+        outside by chance).
+        """
+        out: dict = {}
+        for name, pred in self.predictions.items():
+            for axis in AXES:
+                for key, (col, how) in PREDICTED_VS_RUN.items():
+                    p = pred.axes[axis].get(key)
+                    if p is None:
+                        continue
+                    vals = []
+                    for r in self.runs:
+                        row = r.table[(r.table.estimator == name) & (r.table.axis == axis)]
+                        v = row[col].iloc[0] if len(row) else None
+                        vals.append(None if v is None or (isinstance(v, float) and np.isnan(v)) else float(v))
+                    if how == "rms":
+                        mc = rms_ci(vals, gaussian=key in ("mean_deg_s", "angle_deg"))
+                    else:
+                        s = mean_ci(vals)
+                        mc = {"value": s["mean"], "ci_low": s["ci_low"], "ci_high": s["ci_high"], "n": s["n"]}
+                    if mc["value"] is None:
+                        continue
+                    ok = (None if mc["ci_low"] is None else bool(mc["ci_low"] <= p <= mc["ci_high"]))
+                    out.setdefault(name, {}).setdefault(axis, {})[key] = {
+                        "predicted": p, "monte_carlo": {**mc, "pooled": how}, "agrees": ok}
+        return out
+
+
+def run_replicates(scenario, estimator_names=None, *, replicates: int, seed: int | None = None,
+                   cache: bool = True, predict: bool = True,
+                   params: dict | None = None) -> ReplicateResult:
+    """Run a scenario ``replicates`` times (seeds :func:`replicate_rng`) and predict each estimator.
+
+    Parameters
+    ----------
+    scenario : Scenario
+    estimator_names : sequence of str, optional
+    replicates : int
+        Number of runs K >= 1.
+    seed : int, optional
+        Root seed (default: the scenario's).
+    cache : bool
+    predict : bool
+        Add the analytic prediction of every linear estimator (same truth, same noise model).
+    params : dict, optional
+        Hyperparameters per estimator name (as :func:`run_scenario`).
+    """
+    from .estimators import get_estimator
+    from .predict import predict as _predict
+    from .sim.truth import compute_truth
+    k = int(replicates)
+    if k < 1:
+        raise InputError(f"--replicates must be >= 1, got {replicates!r}")
+    s = scenario.seed if seed is None else int(seed)
+    runs = tuple(run_scenario(scenario, estimator_names, cache=cache, rng=replicate_rng(s, i),
+                              params=params) for i in range(k))
+    preds, notes = {}, list(runs[0].notes)
+    if predict:
+        truth = compute_truth(scenario.profile, scenario.sample_rate_hz,
+                              duration_s=scenario.duration_s, cache=cache)
+        dt = 1.0 / scenario.sample_rate_hz
+        for name in dict.fromkeys(runs[0].table.estimator):
+            try:
+                est = get_estimator(name)(**(params or {}).get(name, {})).fit(
+                    scenario.layout, scenario.model, dt)
+                preds[name] = _predict(est, scenario.model, n_samples=truth.time_s.size,
+                                       truth_rad_s=truth.omega_body_rad_s)
+            except InputError as err:
+                notes.append(f"{name}: no prediction ({err.message})")
+                continue
+            sw = swing_frequency(scenario.profile)
+            if sw is not None and runs[0].swing_hz is not None:
+                preds[name] = _with_swing(preds[name], est, sw[0])
+        ignored = sorted({i for p in preds.values() for i in p.ignored})
+        if ignored:
+            notes.append("the prediction leaves out " + ", ".join(ignored))
+    return ReplicateResult(scenario=scenario.name, seed=s, runs=runs, predictions=preds,
+                           notes=tuple(dict.fromkeys(notes)))
+
+
+def _with_swing(pred, est, freq_hz: float):
+    """Add the amplitude ratio and phase at the swing frequency, on the swinging axes only."""
+    sysm = est.linear_system()
+    resp = np.diagonal(sysm.response(2.0 * np.pi * freq_hz * est.dt_s_)[0] @ np.array(est.H_))
+    axes = {}
+    for a, ax in enumerate(AXES):
+        axes[ax] = dict(pred.axes[ax], amplitude_ratio=float(abs(resp[a])),
+                        phase_deg=float(-np.degrees(np.angle(resp[a]))))
+    return replace(pred, axes=axes, swing_hz=freq_hz)

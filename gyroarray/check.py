@@ -8,8 +8,8 @@ table per bound::
     quick_duration_s = 300                      # run length of the quick check [s]
     estimator = "kf_array"
     axis = "all"                                # x, y, z or all
-    metric = "arw_reduction"                    # a column of RunResult.table
-    min = 2.2                                   # and/or max
+    metric = "sigma_1_deg_s"                    # a column of RunResult.table
+    min = 0.0118                                # and/or max
 
 Checks are grouped by (scenario, duration), so each scenario is simulated
 once, with the union of the estimators its checks name (plus ``bound`` when
@@ -26,7 +26,8 @@ from .errors import InputError
 from .tomlio import load_toml
 
 #: Metrics a check may bound (columns of :attr:`gyroarray.chain.RunResult.table`).
-METRICS = ("sigma_1_deg_s", "mean_error_deg_s", "reduction", "attenuation", "phase_deg",
+METRICS = ("sigma_1_deg_s", "mean_error_deg_s", "rms_deg_s", "angle_error_deg", "reduction",
+           "attenuation", "phase_deg",
            "arw_deg_rt_h", "bi_deg_h", "rrw_deg_h_rt_h", "arw_reduction", "bi_reduction",
            "rrw_reduction", "noise_density_deg_s_rt_hz", "efficiency")
 _KEYS = {"scenario", "quick_duration_s", "estimator", "axis", "metric", "min", "max"}

@@ -133,29 +133,52 @@ def _add_layout_args(p: argparse.ArgumentParser, *, alpha: bool, required: bool)
 
 
 def cmd_gdop(args) -> tuple[dict, str]:
-    from .design import gdop
+    from .design import gdop, gdop_note
     from .layout import Layout
     from .units import deg_to_rad
     layout = Layout.conical(args.scheme, args.n, deg_to_rad(args.alpha))
     g = gdop(layout, args.rho)
+    note = gdop_note(layout, args.rho)
     text = f"GDOP = {g:.6f}  (scheme {args.scheme}, N = {args.n}, alpha = {args.alpha:g} deg, rho = {args.rho:g})"
-    return {"gdop": g}, text
+    out = {"gdop": g}
+    if note:
+        out["note"] = note
+        text += f"\nnote: {note}"
+    return out, text
 
 
 def cmd_design(args) -> tuple[dict, str]:
     from . import design
     from .units import rad_to_deg
+    if args.recommend:
+        return _design_recommend(args)
+    rec_only = [o for o, v in (("--model", args.model), ("--arw", args.arw), ("--rrw", args.rrw),
+                                ("--bi", args.bi), ("--rho-range", args.rho_range),
+                                ("--swing", args.swing), ("--motion", args.motion),
+                                ("--failures", args.failures), ("--estimators", args.estimators),
+                                ("--check", args.check), ("--out", args.out),
+                                ("--bandwidth-hz", args.bandwidth_hz), ("--rate-hz", args.rate_hz),
+                                ("--horizon-s", args.horizon_s)) if v is not None]
+    if rec_only:
+        raise InputError(f"gyroarray design: {rec_only[0]} goes with --recommend")
     out: dict = {}
     lines: list[str] = []
     from .outputs import PLOT_SUFFIXES
     _output(args.plot, args, "--plot", suffixes=PLOT_SUFFIXES)
+    rho = 0.0 if args.rho is None else args.rho
     if args.scheme is not None or args.n is not None:
         if args.scheme is None or args.n is None:
             raise InputError("gyroarray design: --scheme and --n go together")
-        opt = design.optimal_alpha(args.scheme, args.n, args.rho)
+        n = _single_n(args.n)
+        opt = design.optimal_alpha(args.scheme, n, rho)
         out.update({"alpha_opt_deg": rad_to_deg(opt.alpha_rad), "gdop_min": opt.gdop})
-        lines.append(f"scheme {args.scheme}, N = {args.n}, rho = {args.rho:g}: "
+        lines.append(f"scheme {args.scheme}, N = {n}, rho = {rho:g}: "
                      f"optimal alpha = {rad_to_deg(opt.alpha_rad):.4f} deg, GDOP min = {opt.gdop:.6f}")
+        from .layout import Layout
+        note = design.gdop_note(Layout.conical(args.scheme, n, opt.alpha_rad), rho)
+        if note:
+            out["note"] = f"no cone angle gives a 3-axis rate: {note}"
+            lines.append(f"note: {out['note']}")
     if args.paper_tables:
         cells = design.paper003_cells()
         out["paper_tables"] = [c.to_dict() for c in cells]
@@ -171,6 +194,188 @@ def cmd_design(args) -> tuple[dict, str]:
         out["optima"] = table
         lines.append(_format_optimum_table(table))
     return out, "\n".join(lines)
+
+
+def _single_n(text: str) -> int:
+    try:
+        n = int(text)
+    except ValueError:
+        raise InputError(f"--n must be one whole number here (a list like 4,5,6,8 goes with "
+                         f"--recommend), got {text!r}") from None
+    return n
+
+
+def _number_list(text: str, name: str, *, integer: bool = False) -> list:
+    vals = []
+    for part in text.split(","):
+        part = part.strip()
+        try:
+            v = int(part) if integer else float(part)
+        except ValueError:
+            raise InputError(f"{name} must be a comma-separated list of "
+                             f"{'whole numbers' if integer else 'numbers'}, got {text!r}") from None
+        if not integer and not math.isfinite(v):
+            raise InputError(f"{name} must hold finite numbers, got {text!r}")
+        vals.append(v)
+    return vals
+
+
+#: Largest N the design search takes (every failure combination is enumerated).
+MAX_DESIGN_N = 24
+
+
+def _design_space(args):
+    """The DesignSpace and GyroNoise of ``design --recommend`` (every default recorded)."""
+    import numpy as np
+    from .predict import Swing
+    from .recommend import DEFAULT_BANDWIDTH_HZ, ESTIMATORS, DesignSpace, GyroNoise
+    from .units import deg_s_to_rad_s
+    src = {}
+    if args.model is not None and any(v is not None for v in (args.arw, args.rrw, args.bi)):
+        raise InputError("gyroarray design: give the noise as --model MODEL.toml or as a datasheet "
+                         "(--arw, --rrw, --bi), not both")
+    if args.model is not None:
+        from .sim.model import NoiseModel
+        g = GyroNoise.from_model(NoiseModel.from_toml(args.model), source=f"model {args.model}")
+    elif args.arw is not None:
+        g = GyroNoise(arw_deg_rt_h=args.arw, rrw_deg_h_rt_h=args.rrw or 0.0, bi_deg_h=args.bi or 0.0,
+                      sources={"arw": "user", "rrw": "user" if args.rrw is not None else "default",
+                               "bi": "user" if args.bi is not None else "default",
+                               "gauss_markov": "default", "rho_arw": "default", "rho_rrw": "default"})
+    else:
+        raise InputError("gyroarray design --recommend: give the gyro noise: --model MODEL.toml (from "
+                         "gyroarray fit --out) or --arw N_DEG_RT_H [--rrw K] [--bi B]")
+    if args.rho is not None and args.rho_range is not None:
+        raise InputError("gyroarray design: --rho and --rho-range exclude each other")
+    rhos = None
+    if args.rho is not None:
+        g = g.with_rho(args.rho)
+        g = GyroNoise(**{**g.__dict__, "sources": {**g.sources, "rho_arw": "user", "rho_rrw": "user"}})
+    if args.rho_range is not None:
+        lo, hi = (_number_list(args.rho_range, "--rho-range") + [None, None])[:2]
+        if hi is None or len(args.rho_range.split(",")) != 2 or not -1 < lo < hi < 1:
+            raise InputError(f"--rho-range must be LO,HI with -1 < LO < HI < 1, got {args.rho_range!r}")
+        rhos = sorted(set(np.round(np.linspace(lo, hi, 5), 12).tolist() + ([0.0] if lo < 0 < hi else [])))
+        g = GyroNoise(**{**g.with_rho(0.0).__dict__,
+                         "sources": {**g.sources, "rho_arw": "user", "rho_rrw": "user"}})
+    rate = 100.0 if args.rate_hz is None else args.rate_hz
+    if not rate > 0:
+        raise InputError(f"--rate-hz must be > 0, got {rate:g}")
+    horizon = 600.0 if args.horizon_s is None else args.horizon_s
+    if not horizon > 0:
+        raise InputError(f"--horizon-s must be > 0, got {horizon:g}")
+    if horizon * rate > 2e7:
+        raise InputError(f"--horizon-s {horizon:g} at {rate:g} Hz is {horizon * rate:.3g} samples "
+                         "(at most 2e7): shorten the horizon or lower the rate")
+    ns = tuple(_number_list(args.n, "--n", integer=True)) if args.n is not None else (4, 5, 6, 8)
+    bad = [n for n in ns if not 3 <= n <= MAX_DESIGN_N]
+    if bad:
+        raise InputError(f"--n {bad[0]} is outside 3..{MAX_DESIGN_N} (every failure combination is "
+                         "enumerated)")
+    failures = 0 if args.failures is None else args.failures
+    if failures < 0 or failures > 2:
+        raise InputError(f"--failures must be 0, 1 or 2, got {failures}")
+    ests = ESTIMATORS
+    if args.estimators is not None:
+        ests = tuple(e.strip() for e in args.estimators.split(",") if e.strip())
+        unknown = [e for e in ests if e not in ESTIMATORS]
+        if unknown or not ests:
+            raise InputError(f"--estimators: {unknown[0] if unknown else '(none)'} is not one the "
+                             f"design search predicts ({', '.join(ESTIMATORS)})")
+    swing, motion, motion_name = None, None, "at rest"
+    if args.swing is not None and args.motion is not None:
+        raise InputError("gyroarray design: --swing and --motion exclude each other")
+    if args.swing is not None:
+        vals = _number_list(args.swing, "--swing")
+        if len(vals) != 2 or not vals[0] > 0 or not 0 < vals[1] < 0.5 * rate:
+            raise InputError(f"--swing must be AMP_DPS,FREQ_HZ with AMP > 0 and 0 < FREQ < Nyquist, "
+                             f"got {args.swing!r}")
+        swing = Swing(deg_s_to_rad_s(vals[0]), vals[1])
+        motion_name = f"swing {vals[0]:g} deg/s at {vals[1]:g} Hz about each axis"
+    if args.motion is not None:
+        from .sim.profiles import load_profile
+        from .sim.scenario import resolve_profile
+        from .sim.truth import compute_truth
+        prof = load_profile(resolve_profile(args.motion, Path.cwd()))
+        dur = min(horizon, prof.duration_s)
+        if dur < horizon:
+            raise InputError(f"--motion {args.motion} lasts {prof.duration_s:g} s, shorter than "
+                             f"--horizon-s {horizon:g}")
+        motion = compute_truth(prof, rate, duration_s=horizon).omega_body_rad_s
+        motion_name = f"profile {args.motion} (rate-table truth)"
+    if args.bandwidth_hz is not None:
+        bw = _number_list(args.bandwidth_hz, "--bandwidth-hz")
+        if len(bw) == 1:
+            bw = [bw[0], bw[0]]
+        if len(bw) != 2 or not 0 < bw[0] <= bw[1] < 0.5 * rate:
+            raise InputError(f"--bandwidth-hz must be F or LO,HI with 0 < LO <= HI < Nyquist "
+                             f"({0.5 * rate:g} Hz), got {args.bandwidth_hz!r}")
+        src["bandwidth_hz"] = "user"
+    elif swing is None and motion is None:
+        bw = [DEFAULT_BANDWIDTH_HZ, DEFAULT_BANDWIDTH_HZ]
+    else:
+        bw = [0.1, 0.45 * rate]
+    for key, v in (("rate_hz", args.rate_hz), ("horizon_s", args.horizon_s), ("ns", args.n),
+                   ("estimators", args.estimators), ("failures", args.failures),
+                   ("motion", args.swing or args.motion)):
+        src[key] = "user" if v is not None else "default"
+    space = DesignSpace(rate_hz=rate, horizon_s=horizon, ns=ns, estimators=ests, failures=failures,
+                        bandwidth_hz=(float(bw[0]), float(bw[1])), swing=swing, motion=motion,
+                        motion_name=motion_name)
+    object.__setattr__(space, "_sources", src)
+    return g, space, rhos
+
+
+def _design_recommend(args) -> tuple[dict, str]:
+    from .recommend import monte_carlo_check, recommend
+    _output(args.out, args, "--out", inputs=[args.model] if args.model is not None else [],
+            suffixes=(".json",))
+    g, space, rhos = _design_space(args)
+    res = recommend(g, space, rhos=rhos)
+    if args.check:
+        res["check"] = monte_carlo_check(res["designs"], g, space, replicates=args.check,
+                                         seed=20260412 if args.seed is None else args.seed)
+    if args.out is not None:
+        _write_json(args.out, res, args)
+        res["written"] = str(args.out)
+    return res, _recommend_text(res)
+
+
+def _write_json(path: Path, obj: dict, args) -> None:
+    """The result as JSON at ``path``, atomically (checked before the work by _design_recommend)."""
+    from .outputs import write_text
+    write_text(path, json.dumps(_json_safe(obj), indent=1, allow_nan=False), force=args.force)
+
+
+def _recommend_text(res: dict) -> str:
+    from .recommend import _label
+    r = res["recommended"]
+    lines = ["Designs, best predicted 3-axis RMS about the truth first:",
+             f"{'rank':>4} {'design':<62} {'RMS 3-axis':>11} {'worst GDOP':>10}"]
+    for d in res["designs"][:15]:
+        lines.append(f"{d['rank']:>4} {_label(d):<62} {d['rms_3axis_deg_s']:>11.4g} "
+                     f"{d['worst_gdop_after_failures']:>10.4g}")
+    for grp in res["equivalent"][:6]:
+        lines.append(f"equivalent (ranks {', '.join(map(str, grp['members']))}): {grp['reason']}")
+    if "check" in res:
+        c = res["check"]
+        lines.append(f"Monte-Carlo check ({c['replicates']} paired runs): {c['inside_95']} of "
+                     f"{c['compared']} predictions inside the runs' 95 % CI")
+        for d in c["designs"]:
+            t = d["rms_3axis_deg_s"]
+            lines.append(f"  {d['label']}: predicted {t['predicted']:.4g}, simulated {t['monte_carlo']['value']:.4g} "
+                         f"[{t['monte_carlo']['ci_low']:.4g}, {t['monte_carlo']['ci_high']:.4g}] deg/s")
+    lines += [f"what would change the choice: {w}" for w in res["what_changes_the_choice"]]
+    lines += [f"note: {n}" for n in res["notes"]]
+    p = r["predicted"]
+    lines += ["", "RECOMMENDED: " + _label(r),
+              "  predicted RMS about the truth x/y/z: " + " / ".join(f"{p[a]['rms_deg_s']:.4g}" for a in "xyz")
+              + " deg/s; angle error at the horizon: " + " / ".join(f"{p[a]['angle_deg_at_horizon']:.3g}" for a in "xyz")
+              + " deg",
+              f"  worst GDOP after {res['assumptions']['failures']['value']} failure(s): "
+              f"{r['worst_gdop_after_failures']:.4g}; runner-up: "
+              + (_label(res["runner_up"]) if res.get("runner_up") else "none")]
+    return "\n".join(lines)
 
 
 def _format_optimum_table(rows: list[dict]) -> str:
@@ -368,6 +573,18 @@ def _positive_int(name: str) -> Callable[[str], int]:
     return parse
 
 
+def _nonneg_int(name: str) -> Callable[[str], int]:
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{name} must be a whole number, got {text!r}") from None
+        if not 0 <= value < 2 ** 63:
+            raise argparse.ArgumentTypeError(f"{name} must be in [0, 2^63), got {value}")
+        return value
+    return parse
+
+
 # -- simulate -----------------------------------------------------------------
 
 def tracking_datasheet(tracking) -> list[dict]:
@@ -426,6 +643,8 @@ def cmd_run(args) -> tuple[dict, str]:
     names = [n.strip() for n in args.estimators.split(",") if n.strip()] if args.estimators else None
     scenario = load_scenario(args.scenario)
     check_size(scenario, "run")
+    if args.replicates is not None or args.seed is not None:
+        return _run_replicates(args, scenario, names)
     result = run_scenario(scenario, names, cache=not args.no_cache)
     out = result.to_json_dict()
 
@@ -441,6 +660,56 @@ def cmd_run(args) -> tuple[dict, str]:
     lines.append(f"single gyro (mean of {len(sg['gyros'])}): 1sigma {sg['sigma_1_deg_s']:.4g} deg/s, "
                  f"ARW {sg['arw_deg_rt_h']:.4g} deg/rt(h), BI {sg['bi_deg_h']:.4g} deg/h, "
                  f"RRW {sg['rrw_deg_h_rt_h']:.4g} deg/h/rt(h)")
+    return out, "\n".join(lines)
+
+
+_REP_COLUMNS = (("sigma_1_deg_s", "1sigma[deg/s]"), ("rms_deg_s", "RMS[deg/s]"),
+                ("angle_error_deg", "angle@T[deg]"), ("attenuation", "atten."),
+                ("phase_deg", "phase[deg]"))
+
+
+def _run_replicates(args, scenario, names) -> tuple[dict, str]:
+    from .chain import run_replicates
+    k = 1 if args.replicates is None else args.replicates
+    rep = run_replicates(scenario, names, replicates=k, seed=args.seed, cache=not args.no_cache)
+    summ = rep.summary()
+    comp = rep.comparison()
+    checked = [c for e in comp.values() for a in e.values() for c in a.values() if c["agrees"] is not None]
+    inside = sum(c["agrees"] for c in checked)
+    out = {"scenario": rep.scenario, "replicates": k, "seed": rep.seed,
+           "swing_hz": rep.runs[0].swing_hz, "estimators": summ,
+           "single_gyro": rep.single_gyro_summary(), "predicted": comp,
+           "agreement": {"compared": len(checked), "inside_95": inside,
+                         "note": "each comparison at 95 %: about 5 % fall outside by chance"},
+           "notes": list(rep.notes)}
+
+    def ci(d):
+        if d["mean"] is None:
+            return "-"
+        if d["ci_low"] is None:
+            return f"{d['mean']:.4g}"
+        return f"{d['mean']:.4g} [{d['ci_low']:.3g}, {d['ci_high']:.3g}]"
+    lines = [f"scenario {scenario.name}: {k} runs (seed {rep.seed}), mean and 95 % CI of the mean",
+             f"{'estimator':<10} {'axis':<4} " + " ".join(f"{h:>30}" for _, h in _REP_COLUMNS)]
+    for name, axes in summ.items():
+        for axis, m in axes.items():
+            lines.append(f"{name:<10} {axis:<4} " + " ".join(f"{ci(m[c]) if c in m else '-':>30}"
+                                                              for c, _ in _REP_COLUMNS))
+    if comp:
+        lines += ["", "predicted vs these runs (RMS over runs for std/RMS/mean/angle; mean for "
+                      "amplitude and phase; 95 % CI):"]
+        for name, axes in comp.items():
+            for axis, m in axes.items():
+                cells = []
+                for key, c in m.items():
+                    mc = c["monte_carlo"]
+                    tag = "" if c["agrees"] is None else (" ok" if c["agrees"] else " OUTSIDE")
+                    rng = "" if mc["ci_low"] is None else f" [{mc['ci_low']:.3g}, {mc['ci_high']:.3g}]"
+                    cells.append(f"{key} {c['predicted']:.4g} vs {mc['value']:.4g}{rng}{tag}")
+                lines.append(f"  {name:<10} {axis}: " + "; ".join(cells))
+        lines.append(f"{inside} of {len(checked)} predictions inside the runs' 95 % CI "
+                     "(about 5 % fall outside by chance)")
+    lines += [f"note: {n}" for n in rep.notes]
     return out, "\n".join(lines)
 
 
@@ -474,12 +743,16 @@ def cmd_report(args):
             raise InputError(f"the sweep folder is given twice ({twice} and {d}): its results "
                              "would count twice", file=str(d))
     inputs = [args.paper_values] if args.paper_values is not None else []
+    if args.design is not None:
+        inputs.append(args.design)
     _output(args.out, args, "--out", inputs=inputs, suffixes=(".html", ".htm"))
     _output(args.md, args, "--md", inputs=inputs, suffixes=(".md",))
-    res = write_report(args.dirs, args.out, args.md, paper_values=args.paper_values, top=args.top,
-                       force=args.force)
+    res = write_report(args.dirs, args.out, args.md, design=args.design,
+                       paper_values=args.paper_values, top=args.top, force=args.force)
     lines = [f"report: {res['html']}" + (f" (Markdown twin {res['markdown']})" if res["markdown"] else "")
              + f", {res['figures']} figures, {res['seconds']:.1f} s"]
+    if res.get("decision"):
+        lines += res["decision"]["summary"]
     for b in res["best"]:
         lines.append(f"best for {b['motion']}: scheme {b['scheme']}, N = {b['n_gyros']}, "
                      f"alpha = {b['alpha_deg']:.2f} deg, rho_arw = {b['rho_arw']}, {b['estimator']}: "
@@ -754,8 +1027,50 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=cmd_gdop)
 
-    p = sub.add_parser("design", help="optimal cone angle, paper 003 tables, GDOP plots")
-    _add_layout_args(p, alpha=False, required=False)
+    p = sub.add_parser("design", help="optimal cone angle, paper 003 tables, GDOP plots; "
+                                      "--recommend: which array to build")
+    p.add_argument("--scheme", type=int, choices=(1, 2),
+                   help="conical scheme: 1 all gyros on the cone, 2 gyro 1 on +z")
+    p.add_argument("--n", metavar="N", help="number of gyros (>= 3); with --recommend a list "
+                                            "(default 4,5,6,8)")
+    p.add_argument("--rho", type=_finite_float("--rho"), metavar="R",
+                   help="common correlation of the gyros' noise [-] (default 0; with --recommend "
+                        "it applies to ARW and RRW)")
+    p.add_argument("--recommend", action="store_true",
+                   help="search scheme x N x cone angle x estimator x bandwidth with the "
+                        "analytic predictor and recommend a design")
+    p.add_argument("--model", type=Path, metavar="MODEL.toml",
+                   help="--recommend: the gyro noise from a model (gyroarray fit --out)")
+    p.add_argument("--arw", type=_finite_float("--arw"), metavar="DEG_RT_H",
+                   help="--recommend: angle random walk [deg/rt(h)]")
+    p.add_argument("--rrw", type=_finite_float("--rrw"), metavar="DEG_H_RT_H",
+                   help="--recommend: rate random walk [deg/h/rt(h)] (default 0)")
+    p.add_argument("--bi", type=_finite_float("--bi"), metavar="DEG_H",
+                   help="--recommend: bias instability [deg/h] (default 0)")
+    p.add_argument("--rho-range", metavar="LO,HI",
+                   help="--recommend: the correlations the gyros may have; ranked per rho, "
+                        "recommended: the best worst case (a negative LO: --rho-range=-0.1,0.5)")
+    p.add_argument("--rate-hz", type=_finite_float("--rate-hz"), metavar="HZ",
+                   help="--recommend: sample rate (default 100)")
+    p.add_argument("--horizon-s", type=_finite_float("--horizon-s"), metavar="T",
+                   help="--recommend: run length the accuracy refers to (default 600)")
+    p.add_argument("--swing", metavar="AMP_DPS,FREQ_HZ",
+                   help="--recommend: a swing about each body axis (the bandwidth is traded against lag)")
+    p.add_argument("--motion", metavar="PROFILE",
+                   help="--recommend: a motion profile (shipped name or .toml file) instead of a swing")
+    p.add_argument("--bandwidth-hz", metavar="F|LO,HI",
+                   help="--recommend: filter bandwidth, fixed or searched (default: 10 at rest, "
+                        "0.1..0.45*rate with motion)")
+    p.add_argument("--failures", type=int, metavar="K",
+                   help="--recommend: a 3-axis rate must survive K failed gyros (0, 1, 2; default 0)")
+    p.add_argument("--estimators", metavar="A,B,...",
+                   help="--recommend: estimators compared (default kf_array,kf_single,gls,ols,naive)")
+    p.add_argument("--check", type=_positive_int("--check"), metavar="K",
+                   help="--recommend: simulate the top designs K times (paired) beside the prediction")
+    p.add_argument("--seed", type=_nonneg_int("--seed"), metavar="S",
+                   help="--recommend --check: root seed of the paired runs")
+    p.add_argument("--out", type=Path, metavar="FILE.json",
+                   help="--recommend: also write the whole result (for gyroarray report --design)")
     p.add_argument("--paper-tables", action="store_true",
                    help="paper 003 Tables 1-2 beside the computed values, cell by cell")
     p.add_argument("--plot", type=Path, metavar="OUT.png",
@@ -817,6 +1132,11 @@ def build_parser() -> argparse.ArgumentParser:
                    help="registry names (default: kf_array, kf_single, gls, ols, naive, bound)")
     p.add_argument("--no-cache", action="store_true", help="recompute the rate-table truth")
     _add_plugin(p)
+    p.add_argument("--replicates", type=_positive_int("--replicates"), metavar="K",
+                   help="run K times with independent seeds: mean and 95 %% CI of every metric, "
+                        "beside the analytic prediction")
+    p.add_argument("--seed", type=_nonneg_int("--seed"), metavar="S",
+                   help="root seed of the replicates (default: the scenario's seed)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=cmd_run)
     p.plugin_help = True
@@ -832,7 +1152,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.plugin_help = True
 
     p = sub.add_parser("report", help="design comparison report (HTML + Markdown) from sweep folders")
-    p.add_argument("dirs", type=Path, nargs="+", metavar="DIR", help="gyroarray sweep --out folders")
+    p.add_argument("dirs", type=Path, nargs="*", metavar="DIR", help="gyroarray sweep --out folders")
+    p.add_argument("--design", type=Path, metavar="FILE.json",
+                   help="a gyroarray design --recommend --out result: the decision opens the report")
     p.add_argument("--out", type=Path, required=True, metavar="REPORT.html")
     p.add_argument("--md", type=Path, metavar="REPORT.md", help="also write a Markdown twin")
     p.add_argument("--paper-values", type=Path, metavar="FILE",

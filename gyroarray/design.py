@@ -17,6 +17,7 @@ Array", Micromachines 14(4), 759, 2023, Eq. (12), Tables 1–2, Figs. 8–10.
 
 from __future__ import annotations
 
+import itertools
 import math
 import tomllib
 from dataclasses import dataclass, replace
@@ -83,6 +84,58 @@ def correlation_matrix(n: int, rho) -> np.ndarray:
     return c
 
 
+#: Relative eigenvalue floor of HᵀH (HᵀC⁻¹H) below which a direction counts as unobservable.
+GDOP_RCOND = 1e-10
+
+
+def unobservable_reason(H, *, rcond: float = GDOP_RCOND) -> str | None:
+    """Why a layout cannot give a 3-axis rate, or None when it can.
+
+    The body rate is observable when HᵀH is well conditioned: its smallest
+    eigenvalue above ``rcond`` times the largest. Otherwise the eigenvector of
+    the smallest eigenvalue is the direction the gyros do not see, named as
+    a body axis when it lies within 0.1° of one.
+
+    Parameters
+    ----------
+    H : array_like, shape (N, 3)
+        Sensitive axes [-].
+    rcond : float
+        Relative eigenvalue floor [-].
+
+    Returns
+    -------
+    str or None
+        E.g. "z is unobservable: all axes lie in the x-y plane".
+    """
+    h = np.asarray(H, dtype=float)
+    if h.ndim != 2 or h.shape[1] != 3:
+        return f"the axes must be an (N, 3) array, got shape {h.shape}"
+    if h.shape[0] < 3:
+        return (f"{h.shape[0]} gyro{'s' if h.shape[0] != 1 else ''} cannot give a 3-axis rate: "
+                "at least 3 non-coplanar axes are needed")
+    w, v = np.linalg.eigh(h.T @ h)
+    if w[-1] <= 0 or w[0] > rcond * w[-1]:
+        return None
+    weak = int(np.sum(w <= rcond * w[-1]))
+    u = v[:, 0] * np.sign(v[np.argmax(np.abs(v[:, 0])), 0])
+
+    def name(vec) -> str:
+        k = int(np.argmax(np.abs(vec)))
+        if abs(vec[k]) >= np.cos(np.deg2rad(0.1)):
+            return "xyz"[k]
+        return "[" + ", ".join(f"{c:.3f}" for c in vec) + "]"
+    if weak >= 2:
+        seen = v[:, -1] * np.sign(v[np.argmax(np.abs(v[:, -1])), -1])
+        return (f"only the direction {name(seen)} is observable: all axes are parallel "
+                "(at least 3 non-coplanar axes are needed)")
+    axis = name(u)
+    if axis in ("x", "y", "z"):
+        plane = {"x": "y-z", "y": "x-z", "z": "x-y"}[axis]
+        return f"{axis} is unobservable: all axes lie in the {plane} plane"
+    return f"the direction {axis} is unobservable: all axes lie in the plane normal to it"
+
+
 def gdop(layout: Layout, rho=0.0) -> float:
     """Geometric dilution of precision of a layout (paper 003 Eq. 12).
 
@@ -116,8 +169,10 @@ def _gdop_batch(hs: np.ndarray, chol: np.ndarray) -> np.ndarray:
     a = np.linalg.solve(chol, hs)                   # A = L⁻¹ H, batched
     info = np.einsum("gni,gnj->gij", a, a)          # Hᵀ C⁻¹ H
     out = np.full(hs.shape[0], math.inf)
-    # A layout that does not span 3-D space has no finite GDOP.
-    ok = np.linalg.cond(info) < 1e12
+    # A layout that does not span 3-D space has no finite GDOP (the same floor as
+    # unobservable_reason: smallest eigenvalue of the information <= 1e-10 of the largest).
+    w = np.linalg.eigvalsh(info)
+    ok = (w[:, -1] > 0) & (w[:, 0] > GDOP_RCOND * w[:, -1])
     out[ok] = np.sqrt(np.trace(np.linalg.inv(info[ok]), axis1=1, axis2=2))
     return out
 
@@ -218,6 +273,137 @@ def optimal_alpha(scheme: int, n: int, rho: float = 0.0, *,
     if alpha > math.pi / 2 and f(math.pi - alpha) <= g * (1.0 + 1e-12):
         alpha = math.pi - alpha
     return OptimalAngle(scheme=scheme, n=n, rho=float(rho), alpha_rad=alpha, gdop=g)
+
+
+def gdop_note(layout: Layout, rho=0.0) -> str | None:
+    """Why the GDOP of a layout is infinite (None when it is finite)."""
+    why = unobservable_reason(layout.H)
+    if why is None and not math.isfinite(gdop(layout, rho)):
+        why = "the correlation leaves a direction without information (H' C^-1 H is singular)"
+    return None if why is None else f"GDOP is infinite: {why}"
+
+
+def fault_tolerance(layout: Layout, rho=0.0, max_failures: int = 2) -> dict:
+    """What a layout keeps when gyros fail, from its geometry alone.
+
+    Parameters
+    ----------
+    layout : Layout
+    rho : float
+        Common ARW correlation of the gyros [-] (the survivors keep theirs).
+    max_failures : int
+        Failures counted (1 and 2 by default).
+
+    Returns
+    -------
+    dict
+        ``gdop`` (intact), ``worst_gdop_after`` {"k": worst-case GDOP over every
+        choice of k failed gyros, inf when some choice loses an axis},
+        ``three_axes_after`` {"k": bool}, ``lost_axis_example`` {"k": which gyros
+        and why, or None}, ``detectable`` (one failure shows in the parity
+        residual: N >= 4 and every gyro has a parity signature),
+        ``isolable`` (no two gyros share a parity direction: N >= 5 on a
+        general layout).
+
+    Notes
+    -----
+    The parity space is the null space of Hᵀ (dimension N − 3); a fault on
+    gyro k moves the parity vector along row k of its orthonormal basis V.
+    Detectable: every row nonzero. Isolable: no two rows parallel.
+    """
+    h = np.asarray(layout.H, dtype=float)
+    n = h.shape[0]
+    chol = np.linalg.cholesky(correlation_matrix(n, rho))
+    out = {"gdop": _gdop(h, chol), "worst_gdop_after": {}, "three_axes_after": {},
+           "lost_axis_example": {}}
+    for k in range(1, max_failures + 1):
+        if n - k < 3:
+            out["worst_gdop_after"][str(k)] = math.inf
+            out["three_axes_after"][str(k)] = False
+            out["lost_axis_example"][str(k)] = f"{n - k} gyros cannot give a 3-axis rate"
+            continue
+        c_sub = np.linalg.cholesky(correlation_matrix(n - k, rho))
+        worst, example = 0.0, None
+        for failed in itertools.combinations(range(n), k):
+            keep = [i for i in range(n) if i not in failed]
+            g = _gdop(h[keep], c_sub)
+            if not math.isfinite(g) and example is None:
+                example = (f"gyros {', '.join(str(i + 1) for i in failed)} failed: "
+                           f"{unobservable_reason(h[keep]) or 'an axis is lost'}")
+            worst = max(worst, g)
+        out["worst_gdop_after"][str(k)] = worst
+        out["three_axes_after"][str(k)] = bool(math.isfinite(worst))
+        out["lost_axis_example"][str(k)] = example
+    if n > 3 and unobservable_reason(h) is None:
+        u, _, _ = np.linalg.svd(h, full_matrices=True)
+        v = u[:, 3:]                                                 # parity basis (N, N−3)
+        norms = np.linalg.norm(v, axis=1)
+        detectable = bool(np.all(norms > 1e-9))
+        isolable = detectable and n - 3 >= 2
+        if isolable:
+            unit = v / norms[:, None]
+            cos = np.abs(unit @ unit.T) - np.eye(n)
+            isolable = bool(np.max(cos) < 1.0 - 1e-9)
+    else:
+        detectable = isolable = False
+    out["detectable"] = detectable
+    out["isolable"] = isolable
+    return out
+
+
+def gdop_robustness(scheme: int, n: int, rhos, alpha_rad: float | None = None,
+                    design_rho: float = 0.0) -> list[dict]:
+    """GDOP of one layout over a range of ρ, beside each ρ's own optimum.
+
+    Parameters
+    ----------
+    scheme, n : int
+    rhos : sequence of float
+        The correlations the layout may meet [-].
+    alpha_rad : float, optional
+        The cone angle [rad]; default: the optimum at ``design_rho``.
+    design_rho : float
+        The ρ the layout was chosen for [-].
+
+    Returns
+    -------
+    list of dict
+        ``rho``, ``gdop`` (this layout), ``gdop_opt`` (the best α at that ρ),
+        ``alpha_opt_deg``, ``excess`` (gdop / gdop_opt − 1).
+    """
+    if alpha_rad is None:
+        alpha_rad = optimal_alpha(scheme, n, design_rho).alpha_rad
+    layout = Layout.conical(scheme, n, alpha_rad)
+    rows = []
+    for r in rhos:
+        opt = optimal_alpha(scheme, n, float(r))
+        g = gdop(layout, float(r))
+        rows.append({"rho": float(r), "gdop": g, "gdop_opt": opt.gdop,
+                     "alpha_opt_deg": rad_to_deg(opt.alpha_rad), "excess": g / opt.gdop - 1.0})
+    return rows
+
+
+def minmax_alpha(scheme: int, n: int, rhos, *, grid_step_rad: float = deg_to_rad(0.05)) -> OptimalAngle:
+    """The cone angle whose worst GDOP over the correlations ``rhos`` is smallest.
+
+    Returns an :class:`OptimalAngle` with ``rho`` the worst-case ρ and ``gdop``
+    the worst-case GDOP at that angle. Grid search, refined by bounded Brent.
+    """
+    rhos = [float(r) for r in rhos]
+    lo, hi = _SEARCH[scheme]
+    grid = np.arange(lo + grid_step_rad, hi + 0.5 * grid_step_rad, grid_step_rad)
+    worst = np.max([gdop_vs_alpha(scheme, n, grid, r) for r in rhos], axis=0)
+    k = int(np.argmin(worst))
+
+    def f(a):
+        return max(float(gdop_vs_alpha(scheme, n, a, r)[0]) for r in rhos)
+    a_lo = grid[k - 1] if k > 0 else lo + 1e-9
+    a_hi = grid[k + 1] if k + 1 < grid.size else hi
+    res = minimize_scalar(f, bounds=(a_lo, a_hi), method="bounded", options={"xatol": 1e-9})
+    alpha = float(res.x) if res.fun <= worst[k] else float(grid[k])
+    vals = [float(gdop_vs_alpha(scheme, n, alpha, r)[0]) for r in rhos]
+    j = int(np.argmax(vals))
+    return OptimalAngle(scheme=scheme, n=n, rho=rhos[j], alpha_rad=alpha, gdop=vals[j])
 
 
 def gdop_closed_form_optimum(n: int) -> float:

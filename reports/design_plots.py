@@ -90,15 +90,105 @@ def design_fig():
         ax.grid(alpha=0.3)
 
     ax = axs[1, 2]
+    jumps = []
     for scheme, style in ((1, "-"), (2, "--")):
-        for n in NS:
+        for k, n in enumerate(NS):
             rhos = _rho_grid(n, 60)
-            ax.plot(rhos, [rad_to_deg(optimal_alpha(scheme, n, r).alpha_rad)
-                           for r in rhos], style, label=f"scheme {scheme}, N = {n}")
-    ax.set(title="Optimal cone angle vs ρ  [Table 2]", xlabel="ARW correlation ρ [-]",
-           ylabel="optimal α [deg]")
-    ax.legend(fontsize=7, ncol=2)
+            a = np.array([rad_to_deg(optimal_alpha(scheme, n, r).alpha_rad) for r in rhos])
+            # the optimum changes branch (Scheme 2: the cone flips below the horizontal):
+            # break the line there instead of drawing a vertical stroke through angles no
+            # optimum takes
+            cut = np.flatnonzero(np.abs(np.diff(a)) > 10.0)
+            a_plot = a.copy()
+            r_plot = rhos.copy()
+            for c in cut[::-1]:
+                jumps.append((scheme, n, 0.5 * (rhos[c] + rhos[c + 1])))
+                a_plot = np.insert(a_plot, c + 1, np.nan)
+                r_plot = np.insert(r_plot, c + 1, np.nan)
+            ax.plot(r_plot, a_plot, style, color=f"C{k}", label=f"scheme {scheme}, N = {n}")
+    ax.set(title="Optimal cone angle vs ρ  [Table 2]" + ("  (breaks: the optimum jumps branch)"
+                                                         if jumps else ""),
+           xlabel="ARW correlation ρ [-]", ylabel="optimal α [deg]")
+    ax.legend(fontsize=7, ncol=2, title="solid: scheme 1, dashed: scheme 2", title_fontsize=7)
     ax.grid(alpha=0.3)
 
     fig.suptitle("gyroarray design analysis: GDOP = sqrt(trace((Hᵀ C⁻¹ H)⁻¹))")
+    return fig
+
+
+def plot_vs_n(ax, ns, ys, yerr=None, *, color, marker, label, offset: float = 0.0):
+    """Values per number of gyros N: markers (error bars when given), joined only between
+    consecutive N, so no line runs through an N that was not computed (e.g. N = 7)."""
+    ns = np.asarray(ns, dtype=float)
+    ys = np.asarray(ys, dtype=float)
+    x = ns + offset
+    if yerr is not None:
+        ax.errorbar(x, ys, yerr=yerr, fmt=marker, color=color, ms=5, capsize=3, label=label)
+    else:
+        ax.plot(x, ys, marker, color=color, ms=5, label=label)
+    for i in range(len(ns) - 1):
+        if ns[i + 1] - ns[i] == 1:
+            ax.plot(x[i:i + 2], ys[i:i + 2], "-", color=color, lw=1.0)
+    ticks = set(getattr(ax, "_gyroarray_n_ticks", set())) | {int(n) for n in ns}
+    ax._gyroarray_n_ticks = ticks
+    ax.set_xticks(sorted(ticks))
+
+
+def plot_series(ax, series: dict, *, rtol: float) -> list:
+    """Series {(scheme, estimator): (N, values, error bars or None)} vs N: one marker per
+    scheme, one colour per estimator; series equal to ``rtol`` are drawn once, their label
+    naming them all. Returns the estimators in colour order."""
+    merged: list[list] = []
+    for k, (n, y, _) in series.items():
+        for grp in merged:
+            n0, y0, _ = series[grp[0]]
+            if np.array_equal(n, n0) and np.allclose(y, y0, rtol=rtol, atol=0):
+                grp.append(k)
+                break
+        else:
+            merged.append([k])
+    ests = sorted({k[1] for k in series})
+    for grp in merged:
+        n, y, e = series[grp[0]]
+        scheme, est = grp[0]
+        label = " = ".join(f"scheme {sc}, {es}" for sc, es in grp)
+        plot_vs_n(ax, n, y, e, color=f"C{ests.index(est)}", marker="o" if scheme == 1 else "s",
+                  label=label + (f"  (equal to {rtol:g})" if len(grp) > 1 else ""),
+                  offset=0.04 * (ests.index(est) - len(ests) / 2) + (0.0 if scheme == 1 else 0.02))
+    return ests
+
+
+def accuracy_vs_n_fig(res: dict):
+    """Predicted 3-axis RMS vs N per scheme and estimator (identical series merged), with the
+    simulated check's 95 % interval as error bars at the checked designs."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+    fig = Figure(figsize=(8.5, 5.0), layout="constrained")
+    FigureCanvasAgg(fig)
+    ax = fig.subplots()
+    best: dict = {}
+    for d in res["designs"]:
+        key = (d["scheme"], d["estimator"])
+        cur = best.setdefault(key, {})
+        if d["n"] not in cur or d["rms_3axis_deg_s"] < cur[d["n"]]["rms_3axis_deg_s"]:
+            cur[d["n"]] = d
+    series = {}
+    for key, per_n in best.items():
+        ns = sorted(per_n)
+        series[key] = (np.array(ns), np.array([per_n[n]["rms_3axis_deg_s"] for n in ns]), None)
+    ests = plot_series(ax, series, rtol=1e-6)
+    chk = (res.get("check") or {}).get("designs", [])
+    for i, c in enumerate(chk):
+        mc = c["rms_3axis_deg_s"]["monte_carlo"]
+        if mc["ci_low"] is None:
+            continue
+        color = f"C{ests.index(c['estimator'])}" if c["estimator"] in ests else "k"
+        ax.errorbar([c["n"] + 0.12 + 0.06 * i], [mc["value"]],
+                    yerr=[[mc["value"] - mc["ci_low"]], [mc["ci_high"] - mc["value"]]],
+                    fmt="o" if c["scheme"] == 1 else "s", mfc="none", color=color, ms=6, capsize=3,
+                    label=f"simulated: scheme {c['scheme']}, α {c['alpha_deg']:.1f}°, {c['estimator']} (95 % CI)")
+    ax.set(xlabel="gyros N [-]", ylabel="3-axis RMS about the truth [deg/s]",
+           title="Predicted accuracy per N (best cone angle and bandwidth)")
+    ax.grid(alpha=0.3, which="both")
+    ax.legend(fontsize=7)
     return fig

@@ -1,25 +1,30 @@
-"""The design comparison report: one self-contained HTML file and a Markdown twin.
+"""The design report: one self-contained HTML file and a Markdown twin, the decision first.
 
-:func:`write_report` reads one or more sweep folders (``gyroarray sweep``
-output: ``sweep.json`` + ``rows/*.parquet``) and writes
+:func:`write_report` takes a ``gyroarray design --recommend --out`` result
+(``design``) and/or sweep folders (``gyroarray sweep`` output: ``sweep.json``
++ ``rows/*.parquet``) and writes, top first:
 
-* **GDOP vs α and vs ρ** (paper 003 Figs. 8–10; from the layouts, no sweep needed);
-* the **design ranking** per motion: every scheme/N/α/ρ/estimator of the
-  sweeps with its 1σ error, fused ARW and RRW (mean over the body axes and
-  the replicates), best first, and a chart of the best 1σ per design;
+* with a design result (:mod:`gyroarray.reports.decision`): the **decision**
+  (array, estimator, bandwidth, predicted accuracy with the simulated check,
+  runner-up, what would change the choice), the **assumptions** (each input
+  and its source), and the **evidence** from the analytic predictor and its
+  paired Monte-Carlo check, fault tolerance and ρ robustness;
+* **GDOP vs α and vs ρ** (paper 003 Figs. 8–10; from the layouts);
 * **Allan deviation of single gyros vs the fused output** with confidence
-  bands (paper 003 Figs. 14 and 22), re-simulated from the sweep's own
-  scenario (same seed, same bits) for the best static design and, when a
-  paper sweep is given, for the paper's 6-gyro and 4-gyro static arrays;
-* the **estimator comparison** per motion: 1σ, reduction, attenuation,
-  phase lag and efficiency against the offline bound (when the sweep ran
-  ``bound``);
+  bands and the √(3/N) reference line, for the recommended design
+  (re-simulated) and, from the sweeps, the best static design and the
+  paper's 6-gyro and 4-gyro static arrays (paper 003 Figs. 14 and 22);
+* from design sweeps: the **design ranking** per motion and per ρ (ρ is a
+  condition of the gyros, not a design choice), 1σ with its 95 % interval
+  over the runs, RMS about the truth, Allan-fit ARW/RRW labelled as such;
+  the **estimator comparison** (1σ, reduction, attenuation, phase lag,
+  efficiency against the offline bound);
 * **paper vs model** for each reproduced experiment of
-  ``scenarios/paper_values.toml``: the paper's value, the model's mean and
-  standard deviation over the replicates, their ratio and a flag where the
-  paper's value lies outside the model's 95 % prediction interval
-  (mean ± t₀.₉₇₅,ₙ₋₁ · sd · √(1 + 1/n): where one more run of the model
-  would fall), with the experiment's likely-reason sentence.
+  ``scenarios/paper_values.toml``: the paper's value beside the model's runs
+  (mean, sd, min–max) and its 95 % band, the 2.5–97.5 percentiles of ≥ 20
+  runs (where one more run falls 95 % of the time; positive like the runs),
+  a flag outside it, and for a disagreement only explanations that a named
+  simulation tests (:mod:`gyroarray.reports.hypotheses`).
 
 The HTML has its figures as ``data:image/png;base64`` URIs, its style inline
 and no script: it opens anywhere, offline. The Markdown twin has the same
@@ -51,15 +56,18 @@ from gyroarray.errors import InputError
 __all__ = ["SweepData", "load_sweep_dir", "design_ranking", "estimator_comparison",
            "paper_vs_model", "load_paper_values", "write_report", "default_paper_values"]
 
-#: Two-sided level of the paper-vs-model prediction interval.
+#: Two-sided level of the paper-vs-model band (percentiles of the model's runs).
 AGREEMENT_LEVEL = 0.95
+#: Fewest model runs whose percentiles make a 95 % band (fewer: no band, no verdict).
+MIN_BAND_RUNS = 20
 AXES = ("x", "y", "z")
-_METRICS = ("sigma_1_deg_s", "arw_deg_rt_h", "rrw_deg_h_rt_h", "bi_deg_h",
+_METRICS = ("sigma_1_deg_s", "rms_deg_s", "mean_error_deg_s", "arw_deg_rt_h", "rrw_deg_h_rt_h", "bi_deg_h",
             "noise_density_deg_s_rt_hz", "attenuation", "phase_deg", "efficiency", "reduction")
 #: Single-gyro value of a metric: the estimator's value × the matching reduction column.
 _SINGLE_FROM = {"sigma_1_deg_s": "reduction", "arw_deg_rt_h": "arw_reduction",
                 "rrw_deg_h_rt_h": "rrw_reduction", "bi_deg_h": "bi_reduction"}
-_LABELS = {"sigma_1_deg_s": "1σ error [deg/s]", "arw_deg_rt_h": "ARW [deg/√h]",
+_LABELS = {"sigma_1_deg_s": "1σ error [deg/s]", "rms_deg_s": "RMS about truth [deg/s]",
+           "mean_error_deg_s": "mean error [deg/s]", "arw_deg_rt_h": "ARW [deg/√h]",
            "rrw_deg_h_rt_h": "RRW [deg/h/√h]", "bi_deg_h": "bias instability [deg/h]",
            "noise_density_deg_s_rt_hz": "noise density [deg/s/√Hz]",
            "attenuation": "amplitude ratio [-]", "phase_deg": "phase lag [deg]",
@@ -180,6 +188,13 @@ def load_paper_values(path=None) -> list[dict]:
                                  f"one of {', '.join(_METRICS)} (single: {', '.join(_SINGLE_FROM)}),"
                                  f" value = number }}, got {v!r}", file=str(path),
                                  column=f"{where}.values[{j}]")
+        from .hypotheses import check_entry
+        checks = e.get("check", [])
+        if not isinstance(checks, list):
+            raise InputError(f"{where}.check must be an array of tables ([[experiment.check]])",
+                             file=str(path), column=f"{where}.check")
+        for j, c in enumerate(checks):
+            check_entry(c, f"{where}.check[{j}]", str(path))
     return exps
 
 
@@ -190,25 +205,45 @@ _DESIGN_KEYS = ["motion", "scheme", "n_gyros", "alpha_deg", "rho_arw", "rho_rrw"
 
 
 def design_ranking(rows: pd.DataFrame) -> pd.DataFrame:
-    """One row per design × estimator (per motion), best 1σ first.
+    """One row per design × estimator, ranked within each motion and correlation (ρ is a condition).
 
-    Means over the body axes and the replicates: ``sigma_1_deg_s``,
-    ``arw_deg_rt_h``, ``rrw_deg_h_rt_h``; ``attenuation`` is the one farthest
-    from 1 over the swinging axes; ``runs`` the number of scenario runs;
-    ``rank`` within the motion. The offline ``bound`` is not a design
-    choice and is left out.
+    Means over the body axes and the replicates: ``sigma_1_deg_s`` (the run's
+    1σ, its mean removed), ``rms_deg_s`` (RMS about the truth, paper 002 Eq. 19:
+    1σ and mean error together), ``arw_deg_rt_h`` and ``rrw_deg_h_rt_h`` (Allan
+    fits of the filtered output: they hold at the estimator's bandwidth);
+    ``ci_low``/``ci_high``: the 95 % interval of the mean 1σ over the runs
+    (None with one run); ``resolved``: the interval lies above the best
+    design's (None when either has one run); ``attenuation`` is the one
+    farthest from 1 over the swinging axes; ``runs`` the number of scenario
+    runs; ``rank`` within the motion and ρ. The offline ``bound`` is not a
+    design choice and is left out.
     """
+    from gyroarray.chain import mean_ci
     df = rows[rows.estimator != "bound"].copy()
     df = df.assign(**{k: df[k].astype(object).where(df[k].notna(), "none")
                       for k in ("scheme", "rho_arw", "rho_rrw")})
+    if "rms_deg_s" not in df:
+        df["rms_deg_s"] = np.sqrt(df.sigma_1_deg_s ** 2 + df.mean_error_deg_s ** 2)
     g = df.groupby(_DESIGN_KEYS, sort=False, dropna=False)
     att = g["attenuation"].agg(lambda a: np.nan if a.isna().all()
                                else float(a.dropna().iloc[np.argmax(np.abs(a.dropna() - 1.0))]))
-    out = g.agg(sigma_1_deg_s=("sigma_1_deg_s", "mean"), arw_deg_rt_h=("arw_deg_rt_h", "mean"),
-                rrw_deg_h_rt_h=("rrw_deg_h_rt_h", "mean"), reduction=("reduction", "mean"),
-                runs=("scenario_id", "nunique")).join(att).reset_index()
-    out = out.sort_values(["motion", "sigma_1_deg_s"], kind="stable")
-    out["rank"] = out.groupby("motion").cumcount() + 1
+    per_run = g.apply(lambda x: x.groupby("scenario_id").sigma_1_deg_s.mean().to_list(),
+                      include_groups=False).rename("per_run")
+    out = g.agg(sigma_1_deg_s=("sigma_1_deg_s", "mean"), rms_deg_s=("rms_deg_s", "mean"),
+                arw_deg_rt_h=("arw_deg_rt_h", "mean"), rrw_deg_h_rt_h=("rrw_deg_h_rt_h", "mean"),
+                reduction=("reduction", "mean"), runs=("scenario_id", "nunique")
+                ).join(att).join(per_run).reset_index()
+    cis = [mean_ci(v) for v in out.per_run]
+    out["ci_low"] = [c["ci_low"] for c in cis]
+    out["ci_high"] = [c["ci_high"] for c in cis]
+    out = out.drop(columns="per_run")
+    cond = ["motion", "rho_arw", "rho_rrw"]
+    out = out.sort_values(cond + ["sigma_1_deg_s"], kind="stable")
+    out["rank"] = out.groupby(cond, sort=False).cumcount() + 1
+    best_hi = out.groupby(cond, sort=False).ci_high.transform("first")
+    out["resolved"] = [None if pd.isna(lo) or pd.isna(h) else bool(lo > h)
+                       for lo, h in zip(out.ci_low, best_hi)]
+    out.loc[out["rank"] == 1, "resolved"] = None
     return out.reset_index(drop=True)
 
 
@@ -227,20 +262,19 @@ def estimator_comparison(rows: pd.DataFrame) -> pd.DataFrame:
     return out.reset_index()
 
 
-def _t_quantile(dof: int) -> float:
-    from scipy import stats
-    return float(stats.t.ppf(0.5 + AGREEMENT_LEVEL / 2.0, dof))
-
-
 def paper_vs_model(rows: pd.DataFrame, experiments: list[dict]) -> list[dict]:
     """Each experiment with its values beside the model's spread over the replicates.
 
-    Returns a list of ``{"title", "scenario", "estimator", "reason", "runs",
-    "flagged", "values": [{"axis", "metric", "paper", "model_mean", "model_sd",
+    Returns a list of ``{"title", "scenario", "estimator", "runs", "flagged",
+    "checks", "values": [{"axis", "metric", "paper", "model_mean", "model_sd",
     "model_min", "model_max", "n", "ratio", "low", "high", "flag"}]}`` for the
-    experiments whose scenario is in ``rows`` (``low``/``high``: the 95 %
-    prediction interval of one more model run; ``flag``: the paper's value is
-    outside it; ``ratio`` = paper / model mean).
+    experiments whose scenario is in ``rows``. ``low``/``high``: the 2.5 and
+    97.5 percentiles of the model's runs, where one more run falls with 95 %
+    probability (a band of positive runs never reaches below zero); with
+    fewer than :data:`MIN_BAND_RUNS` runs there is no band and ``flag`` is
+    None (undetermined). ``flag``: the paper's value is outside the band.
+    ``ratio`` = paper / model mean. ``checks``: the experiment's named
+    hypothesis checks (scenarios/paper_values.toml), run by the report.
     """
     out = []
     for e in experiments:
@@ -258,23 +292,23 @@ def paper_vs_model(rows: pd.DataFrame, experiments: list[dict]) -> list[dict]:
             n = x.size
             mean = float(np.mean(x)) if n else math.nan
             sd = float(np.std(x, ddof=1)) if n > 1 else math.nan
-            if n > 1:
-                half = _t_quantile(n - 1) * sd * math.sqrt(1.0 + 1.0 / n)
-                low, high = mean - half, mean + half
+            if n >= MIN_BAND_RUNS:
+                q = 100.0 * (1.0 - AGREEMENT_LEVEL) / 2.0
+                low, high = (float(np.percentile(x, q)), float(np.percentile(x, 100.0 - q)))
                 flag = not (low <= v["value"] <= high)
             else:
                 low = high = math.nan
-                flag = n == 1 and not math.isclose(v["value"], mean, rel_tol=1e-9)
+                flag = None
             vals.append({"axis": v["axis"], "metric": v["metric"], "paper": float(v["value"]),
                          "model_mean": mean, "model_sd": sd,
                          "model_min": float(np.min(x)) if n else math.nan,
                          "model_max": float(np.max(x)) if n else math.nan, "n": int(n),
                          "ratio": float(v["value"]) / mean if n and mean else math.nan,
-                         "low": low, "high": high, "flag": bool(flag)})
+                         "low": low, "high": high, "flag": flag})
         flagged = any(v["flag"] for v in vals)
         out.append({"title": e["title"], "scenario": e["scenario"], "estimator": e["estimator"],
-                    "reason": " ".join(str(e.get("reason", "")).split()) if flagged else "",
-                    "runs": int(sub.scenario_id.nunique()), "flagged": flagged, "values": vals})
+                    "runs": int(sub.scenario_id.nunique()), "flagged": flagged,
+                    "checks": list(e.get("check", [])), "values": vals})
     return out
 
 
@@ -296,19 +330,26 @@ def _png(fig, dpi=96) -> bytes:
 
 
 def _ranking_fig(ranking: pd.DataFrame) -> bytes:
-    """Best 1σ (over estimators and ρ) vs N, per scheme, one panel per motion."""
+    """Best 1σ vs N per scheme and estimator, one panel per motion, at one ρ (the first
+    listed; ρ is a condition, not a series), error bars: 95 % CI over the runs."""
+    from .design_plots import plot_series
     motions = list(dict.fromkeys(ranking.motion))
-    fig, axs = _figure(5.0 * len(motions), 4.2, len(motions))
+    fig, axs = _figure(5.2 * len(motions), 4.4, len(motions))
     for ax, motion in zip(axs, motions):
         sub = ranking[ranking.motion == motion]
+        rho = (sub.rho_arw.iloc[0], sub.rho_rrw.iloc[0])
+        sub = sub[(sub.rho_arw == rho[0]) & (sub.rho_rrw == rho[1])]
+        series = {}
         for (scheme, est), grp in sub.groupby(["scheme", "estimator"], sort=True):
-            best = grp.groupby("n_gyros")["sigma_1_deg_s"].min()
-            ax.plot(best.index, best.to_numpy(), "o-" if scheme == 1 else "s--",
-                    label=f"scheme {scheme}, {est}")
-        ax.set(title=f"{motion}: best 1σ error per N", xlabel="gyros N [-]",
-               ylabel="1σ error [deg/s]", yscale="log")
+            best = grp.loc[grp.groupby("n_gyros")["sigma_1_deg_s"].idxmin()].sort_values("n_gyros")
+            err = np.vstack([best.sigma_1_deg_s - best.ci_low, best.ci_high - best.sigma_1_deg_s])
+            series[(scheme, est)] = (best.n_gyros.to_numpy(), best.sigma_1_deg_s.to_numpy(),
+                                     None if np.isnan(err.astype(float)).any() else err)
+        plot_series(ax, series, rtol=1e-9)
+        ax.set(title=f"{motion}, ρ_arw = {rho[0]}, ρ_rrw = {rho[1]}: best 1σ per N",
+               xlabel="gyros N [-]", ylabel="1σ error [deg/s]", yscale="log")
         ax.grid(alpha=0.3, which="both")
-        ax.legend(fontsize=7, ncol=2)
+        ax.legend(fontsize=7)
     return _png(fig)
 
 
@@ -336,16 +377,17 @@ def _paper_fig(pvm: list[dict]) -> bytes:
         m = v["model_mean"]
         lo, hi = v["low"] / m, v["high"] / m
         if np.isfinite(lo) and np.isfinite(hi) and m > 0:
-            ax.plot([max(lo, 1e-3), hi], [i, i], color="0.7", lw=5, solid_capstyle="butt")
-        ax.plot(v["ratio"], i, "o", color="C3" if v["flag"] else "C2", ms=5)
+            ax.plot([lo, hi], [i, i], color="0.7", lw=5, solid_capstyle="butt")
+        color = "0.4" if v["flag"] is None else ("C3" if v["flag"] else "C2")
+        ax.plot(v["ratio"], i, "o", color=color, ms=5)
         labels.append(f"{e['scenario'].split('/')[-1]} {v['axis']} {v['metric'].split('_')[0]}")
     ax.axvline(1.0, color="k", lw=0.8)
     finite = [v["ratio"] for _, v in items if v["ratio"] > 0]
     ax.set_xlim(min([0.05, *[r / 2 for r in finite]]), max([20.0, *[2 * r for r in finite]]))
     ax.set_yticks(range(len(items)), labels, fontsize=7)
     ax.invert_yaxis()
-    ax.set(xscale="log", xlabel="paper / model mean [-]  (grey: model 95 % prediction band; "
-           "red: outside)", title="Paper vs model")
+    ax.set(xscale="log", xlabel="paper / model mean [-]  (grey bar: 2.5–97.5 percentiles of the "
+           "model's runs; red: outside; dark grey dot: < 20 runs, no band)", title="Paper vs model")
     ax.grid(alpha=0.3, axis="x", which="both")
     return _png(fig)
 
@@ -387,16 +429,23 @@ def _adev_fig(title: str, spec, estimator: str) -> _Adev:
                   lw=0.8 if label.startswith("gyro") else 1.6,
                   label=label if (not label.startswith("gyro") or label == "gyro 1") else None)
         lines.append((label, an))
-    ax.set(title=title, xlabel="averaging time τ [s]", ylabel="Allan deviation [deg/h]")
+    first = next(an for lab, an in lines if lab == "gyro 1")
+    n_g = gyro_err.shape[1]
+    ax.loglog(first.taus_s, to(first.adev_rad_s) * np.sqrt(3.0 / n_g), "k--", lw=1.0,
+              label=f"gyro 1 × √(3/N) = ×{np.sqrt(3.0 / n_g):.3f}")
+    ax.set(title=f"{title}\n(one {t[keep][-1] - t[keep][0]:.0f} s record)", xlabel="averaging time τ [s]",
+           ylabel="Allan deviation [deg/h]")
     ax.grid(alpha=0.3, which="both")
     ax.legend(fontsize=8, title="(grey: every single gyro)", title_fontsize=7)
     single = np.mean([an.fit.to_datasheet_dict()["arw_deg_rt_h"] for lab, an in lines
                       if lab.startswith("gyro")])
     fused = [an.fit.to_datasheet_dict()["arw_deg_rt_h"] for lab, an in lines
              if lab.startswith("fused")]
-    note = (f"{estimator} on {sc.layout.n_gyros} gyros, seed {spec.seed}: fitted ARW single "
-            f"{single:.4g} deg/√h, fused x/y/z " + " / ".join(f"{f:.4g}" for f in fused)
-            + "; bands: 1σ confidence of each point (Greenhall EDF).")
+    note = (f"{estimator} on {sc.layout.n_gyros} gyros, seed {spec.seed}, record "
+            f"{t[keep][-1] - t[keep][0]:.0f} s: Allan-fit ARW single {single:.4g} deg/√h, fused "
+            "x/y/z " + " / ".join(f"{f:.4g}" for f in fused) + " (a fit of the filtered output: "
+            "it holds at the filter's bandwidth; the long-τ value is the dashed √(3/N) line for a "
+            "unity-DC-gain filter); bands: 1σ confidence of each point (Greenhall EDF).")
     return _Adev(title=title, png=_png(fig), note=note)
 
 
@@ -464,14 +513,20 @@ class _Doc:
         self.html.append(f"<p{c}>{html.escape(text)}</p>")
         self.md += [text, ""]
 
-    def table(self, headers: list[str], rows: list[list], flags: list[bool] | None = None):
+    def ul(self, items: list[str]):
+        self.html.append("<ul>" + "".join(f"<li>{html.escape(i)}</li>" for i in items) + "</ul>")
+        self.md += [f"* {i}" for i in items] + [""]
+
+    def table(self, headers: list[str], rows: list[list], flags: list[bool] | None = None,
+              cls: str = ""):
         h = "".join(f"<th>{html.escape(x)}</th>" for x in headers)
         body = []
         for i, r in enumerate(rows):
             cls = ' class="flag"' if flags and flags[i] else ""
             body.append(f"<tr{cls}>" + "".join(f"<td>{html.escape(_fmt(c))}</td>" for c in r)
                         + "</tr>")
-        self.html.append(f"<table><thead><tr>{h}</tr></thead><tbody>{''.join(body)}</tbody></table>")
+        c = f' class="{cls}"' if cls else ""
+        self.html.append(f"<table{c}><thead><tr>{h}</tr></thead><tbody>{''.join(body)}</tbody></table>")
         self.md.append("| " + " | ".join(headers) + " |")
         self.md.append("|" + "---|" * len(headers))
         for r in rows:
@@ -538,6 +593,9 @@ figcaption {{ color: #555; font-size: 0.9em; }}
 .note {{ color: #555; font-size: 0.92em; }} .reason {{ background: #fff6e0; padding: 0.5em;
        border-left: 4px solid #e0a800; }}
 nav ol {{ columns: 2; }}
+p.decision {{ font-size: 1.08em; background: #eef6ee; padding: 0.4em 0.7em; margin: 0.3em 0;
+       border-left: 4px solid #3a8a3a; }}
+table.assumptions {{ background: #f7f7fb; }}
 </style></head>
 <body>
 <h1>{title}</h1>
@@ -563,29 +621,38 @@ def _section_ranking(doc: _Doc, design: list[SweepData], top: int) -> pd.DataFra
         doc.p("No design sweep given (only paper reproductions): nothing to rank.", "note")
         return None
     ranking = design_ranking(rows)
+    one_run = int(ranking.runs.max()) < 2
     doc.p(f"{rows.scenario_id.nunique()} scenarios from {', '.join(d.name for d in design)}; "
-          "per motion, every layout × correlation × estimator, best mean 1σ error first "
-          "(means over x/y/z and the runs; amplitude ratio: the swinging axis farthest from 1).")
-    doc.figure("ranking", _ranking_fig(ranking), "Best 1σ error per N, scheme and estimator")
-    for motion, sub in ranking.groupby("motion", sort=False):
-        doc.h3(f"Motion {motion}: the {min(top, len(sub))} best of {len(sub)}")
-        doc.table(["rank", "scheme", "N", "α [deg]", "ρ_arw", "ρ_rrw", "estimator",
-                   "1σ [deg/s]", "reduction [-]", "fused ARW [deg/√h]", "fused RRW [deg/h/√h]",
-                   "amplitude ratio [-]", "runs"],
-                  [[r["rank"], r.scheme, r.n_gyros, r.alpha_deg, r.rho_arw, r.rho_rrw, r.estimator,
-                    r.sigma_1_deg_s, r.reduction, r.arw_deg_rt_h, r.rrw_deg_h_rt_h, r.attenuation,
-                    r.runs] for _, r in sub.head(top).iterrows()])
-        best = sub.groupby(["scheme", "n_gyros"], sort=True).first().reset_index()
-        doc.p(f"Best per scheme and N ({motion}):")
-        doc.table(["scheme", "N", "α [deg]", "ρ_arw", "estimator", "1σ [deg/s]", "rank"],
-                  [[r.scheme, r.n_gyros, r.alpha_deg, r.rho_arw, r.estimator, r.sigma_1_deg_s,
-                    r["rank"]] for _, r in best.iterrows()])
+          "ranked within each motion and each correlation ρ (a condition of the gyros, not a "
+          "choice), best mean 1σ first (means over x/y/z and the runs; amplitude ratio: the "
+          "swinging axis farthest from 1). RMS about the truth and 1σ are separate columns; the "
+          "fused ARW/RRW here are Allan fits of the filtered output and hold at the estimator's "
+          "bandwidth (10 Hz for the KFs by default), not the long-τ values."
+          + (" One run per design: a single run's 1σ scatters by 13–20 %, so designs within "
+             "that of each other are not resolved by this sweep (no interval; the analytic "
+             "predictor ranks them)." if one_run else
+             " 'resolved': the design's 95 % interval lies above the best one's."))
+    doc.figure("ranking", _ranking_fig(ranking), "Best 1σ error per N, scheme and estimator "
+               "(error bars: 95 % CI over the runs; identical series merged)")
+    for (motion, ra, rr), sub in ranking.groupby(["motion", "rho_arw", "rho_rrw"], sort=False):
+        doc.h3(f"Motion {motion}, ρ_arw = {ra}, ρ_rrw = {rr}: the {min(top, len(sub))} best of {len(sub)}")
+        doc.table(["rank", "scheme", "N", "α [deg]", "estimator", "1σ [deg/s]", "95 % CI",
+                   "RMS about truth [deg/s]", "resolved", "reduction [-]",
+                   "ARW Allan fit [deg/√h]", "RRW Allan fit [deg/h/√h]", "amplitude ratio [-]",
+                   "runs"],
+                  [[r["rank"], r.scheme, r.n_gyros, r.alpha_deg, r.estimator, r.sigma_1_deg_s,
+                    "–" if pd.isna(r.ci_low) else f"{r.ci_low:.4g} – {r.ci_high:.4g}", r.rms_deg_s,
+                    "–" if r.resolved is None else r.resolved, r.reduction, r.arw_deg_rt_h,
+                    r.rrw_deg_h_rt_h, r.attenuation, r.runs] for _, r in sub.head(top).iterrows()])
     return ranking
 
 
 def _section_adev(doc: _Doc, design: list[SweepData], paper: list[SweepData],
-                  ranking: pd.DataFrame | None):
-    doc.h2("Allan deviation: single gyros vs fused output (paper 003 Figs. 14, 22)")
+                  ranking: pd.DataFrame | None, heading: bool = True):
+    if heading:
+        doc.h2("Allan deviation: single gyros vs fused output (paper 003 Figs. 14, 22)")
+    else:
+        doc.h3("From the sweeps (paper 003 Figs. 14, 22)")
     done = 0
     if ranking is not None:
         static = ranking[ranking.motion.str.contains("static")]
@@ -622,7 +689,7 @@ def _section_adev(doc: _Doc, design: list[SweepData], paper: list[SweepData],
                 doc.figure(fig_name, a.png, a.note)
                 done += 1
             break
-    if not done:
+    if not done and heading:
         doc.p("No static scenario in the given sweeps to draw.", "note")
 
 
@@ -645,48 +712,76 @@ def _section_estimators(doc: _Doc, rows: pd.DataFrame):
 
 
 def _section_paper(doc: _Doc, paper: list[SweepData], values_path) -> list[dict]:
+    from .hypotheses import run_check
     doc.h2("Paper vs model")
     if not paper:
-        doc.p("No paper reproduction sweep given (run scenarios/sweeps/paper_reproduction.toml "
-              "and pass its folder too).", "note")
+        doc.p("No paper reproduction sweep given (run scenarios/sweeps/paper_reproduction.toml, "
+              "e.g. make paper, and pass its folder too).", "note")
         return []
     rows = pd.concat([d.rows for d in paper], ignore_index=True)
     pvm = paper_vs_model(rows, load_paper_values(values_path))
-    n_flag = sum(v["flag"] for e in pvm for v in e["values"])
-    n_all = sum(len(e["values"]) for e in pvm)
-    doc.p(f"{len(pvm)} experiments, {n_all} published values; {n_flag} lie outside the model's "
-          f"{AGREEMENT_LEVEL:.0%} prediction interval for one run (mean ± t·sd·√(1 + 1/n) over "
-          "the replicates; red rows). The likely reason is given under each table that has one.")
+    vals = [v for e in pvm for v in e["values"]]
+    n_flag = sum(v["flag"] is True for v in vals)
+    n_und = sum(v["flag"] is None for v in vals)
+    doc.p(f"{len(pvm)} experiments, {len(vals)} published values; {n_flag} lie outside the "
+          f"model's {AGREEMENT_LEVEL:.0%} band (red rows): the 2.5–97.5 percentiles of the "
+          f"model's runs, where one more run falls 95 % of the time"
+          + (f"; {n_und} have fewer than {MIN_BAND_RUNS} runs, so no band and no verdict"
+             if n_und else "") + ". A disagreement is explained only where a named simulation "
+          "tests the explanation; the rest are reported as unexplained.")
     if pvm:
         doc.figure("paper_vs_model", _paper_fig(pvm), "Paper value / model mean, with the model's "
-                   "95 % band for one run")
+                   "95 % percentile band of its runs (none where fewer than 20 runs)")
     for e in pvm:
         doc.h3(e["title"])
         doc.p(f"scenario {e['scenario']}, estimator {e['estimator']}, {e['runs']} runs", "note")
         doc.table(["axis", "metric", "paper", "model mean", "model sd", "model min–max",
-                   "95 % band", "paper/model", "agrees"],
+                   "95 % band (percentiles)", "paper/model", "agrees"],
                   [[v["axis"], _LABELS.get(v["metric"], v["metric"]), v["paper"], v["model_mean"],
                     v["model_sd"], f"{_fmt(v['model_min'])} – {_fmt(v['model_max'])}",
                     f"{_fmt(v['low'])} – {_fmt(v['high'])}", v["ratio"],
-                    "no" if v["flag"] else "yes"] for v in e["values"]],
-                  flags=[v["flag"] for v in e["values"]])
-        if e["reason"]:
-            doc.p("Likely reason: " + e["reason"], "reason")
+                    "undetermined (< 20 runs)" if v["flag"] is None else ("no" if v["flag"] else "yes")]
+                   for v in e["values"]],
+                  flags=[bool(v["flag"]) for v in e["values"]])
+        if e["flagged"] and not e["checks"]:
+            doc.p("Unexplained: no explanation of this disagreement has been tested.", "reason")
+        shipped = rows[(rows.scenario == e["scenario"]) & (rows.estimator == e["estimator"])]
+        base = Path(values_path).parent if values_path is not None else None
+        for c in e["checks"]:
+            try:
+                r = run_check(e, c, shipped_rows=shipped, base=base)
+            except InputError as err:
+                doc.p(f"Check {c['name']}: could not run ({err.message}).", "reason")
+                continue
+            e.setdefault("check_results", []).append(r)
+            doc.p(f"Hypothesis: {r['hypothesis']} Simulation {r['name']}: {r['simulation']}. "
+                  f"Result: it {r['verdict']} the hypothesis (supports: every paper value inside "
+                  "the changed model's 95 % band).", "reason")
+            doc.table(["axis", "metric", "paper", "changed model: mean", "its 95 % band",
+                       "shipped model's 95 % band", "paper inside"],
+                      [[x["axis"], _LABELS.get(x["metric"], x["metric"]), x["paper"],
+                        x["changed_mean"], f"{_fmt(x['changed_low'])} – {_fmt(x['changed_high'])}",
+                        f"{_fmt(x['shipped_low'])} – {_fmt(x['shipped_high'])}", x["inside"]]
+                       for x in r["rows"]])
     return pvm
 
 
-def write_report(dirs, out_html, out_md=None, *, paper_values=None, top: int = 15,
+def write_report(dirs, out_html, out_md=None, *, design=None, paper_values=None, top: int = 15,
                  force: bool = True) -> dict:
-    """Write the report of the sweep folders ``dirs`` (see the module docstring).
+    """Write the report: the decision first, then the evidence (see the module docstring).
 
     Parameters
     ----------
     dirs : sequence of path
-        ``gyroarray sweep`` output folders (design sweeps and/or paper reproductions).
+        ``gyroarray sweep`` output folders (design sweeps and/or paper reproductions);
+        may be empty when ``design`` is given.
     out_html : path
         The HTML file (figures embedded).
     out_md : path, optional
         The Markdown twin; its figures go to ``<stem>_figures/`` beside it.
+    design : path or dict, optional
+        A ``gyroarray design --recommend --out`` result: the decision, the
+        assumptions and the predictor's evidence open the report.
     paper_values : path, optional
         Paper values file (default: the shipped ``scenarios/paper_values.toml``).
     top : int
@@ -698,36 +793,46 @@ def write_report(dirs, out_html, out_md=None, *, paper_values=None, top: int = 1
     -------
     dict
         ``html``, ``markdown``, ``figures`` (count), ``sweeps`` (name, folder,
-        scenarios, missing), ``best`` (the top design per motion),
-        ``paper_vs_model`` (see :func:`paper_vs_model`), ``seconds``.
+        scenarios, missing), ``best`` (the top design per motion of the sweeps),
+        ``decision`` (the recommended design and the summary sentences, with
+        ``design``), ``paper_vs_model`` (see :func:`paper_vs_model`), ``seconds``.
     """
+    from . import decision as dec
     t0 = time.perf_counter()
     dirs = [Path(d) for d in dirs]
-    if not dirs:
-        raise InputError("gyroarray report: give at least one sweep folder")
+    if not dirs and design is None:
+        raise InputError("gyroarray report: give at least one sweep folder or --design FILE.json")
     out_html = Path(out_html)
     if out_html.suffix.lower() not in (".html", ".htm"):
         raise InputError("the report must end in .html", file=str(out_html))
     if out_md is not None and Path(out_md).suffix.lower() != ".md":
         raise InputError("the Markdown twin must end in .md", file=str(out_md))
+    res = dec.load_design(design) if isinstance(design, (str, Path)) else design
     data = [load_sweep_dir(d) for d in dirs]
     paper = [d for d in data if d.is_paper]
-    design = [d for d in data if not d.is_paper]
-    doc = _Doc("gyroarray design comparison report")
+    designs = [d for d in data if not d.is_paper]
+    doc = _Doc("gyroarray design report" if res is not None else "gyroarray design comparison report")
     notes = [f"{d.name}: {d.missing} scenario(s) of the sweep not finished — rerun the sweep "
              "command to complete it" for d in data if d.missing]
     for n in notes:
         doc.p("Note: " + n, "note")
+    decision = dec.write_sections(doc, res, top) if res is not None else None
     _section_design(doc)
-    ranking = _section_ranking(doc, design, top)
-    _section_adev(doc, design, paper, ranking)
-    all_rows = pd.concat([d.rows for d in (design or data)], ignore_index=True)
-    _section_estimators(doc, all_rows)
-    pvm = _section_paper(doc, paper, paper_values)
+    if res is not None:
+        doc.h2("Allan deviation: single gyros vs fused output")
+        dec.adev_section(doc, res)
+    ranking = _section_ranking(doc, designs, top) if designs or res is None else None
+    if data:
+        _section_adev(doc, designs, paper, ranking, heading=res is None)
+        all_rows = pd.concat([d.rows for d in (designs or data)], ignore_index=True)
+        _section_estimators(doc, all_rows)
+    pvm = _section_paper(doc, paper, paper_values) if data else []
 
     stamp = time.strftime("%Y-%m-%d %H:%M", time.localtime())
-    subtitle = (f"{stamp} · sweeps: " + ", ".join(f"{d.name} ({d.rows.scenario_id.nunique()} "
-                                                   f"scenarios)" for d in data))
+    subtitle = f"{stamp}" + ("" if not data else " · sweeps: " + ", ".join(
+        f"{d.name} ({d.rows.scenario_id.nunique()} scenarios)" for d in data))
+    if res is not None:
+        subtitle += " · decision from the analytic predictor"
     md_path = doc.write(out_html, out_md, subtitle, force=force)
     best = []
     if ranking is not None:
@@ -736,11 +841,12 @@ def write_report(dirs, out_html, out_md=None, *, paper_values=None, top: int = 1
             best.append({"motion": motion, "scheme": None if r.scheme == "none" else int(r.scheme),
                          "n_gyros": int(r.n_gyros), "alpha_deg": float(r.alpha_deg),
                          "rho_arw": None if r.rho_arw == "none" else float(r.rho_arw),
-                         "estimator": r.estimator, "sigma_1_deg_s": float(r.sigma_1_deg_s)})
+                         "estimator": r.estimator, "sigma_1_deg_s": float(r.sigma_1_deg_s),
+                         "rms_deg_s": float(r.rms_deg_s)})
     return {"html": str(out_html), "markdown": None if md_path is None else str(md_path),
             "figures": len(doc.figures),
             "sweeps": [{"name": d.name, "folder": str(d.path),
                         "scenarios": int(d.rows.scenario_id.nunique()), "missing": d.missing,
                         "paper": d.is_paper} for d in data],
-            "best": best, "paper_vs_model": pvm, "notes": notes,
+            "best": best, "decision": decision, "paper_vs_model": pvm, "notes": notes,
             "seconds": time.perf_counter() - t0}

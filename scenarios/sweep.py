@@ -49,6 +49,10 @@ Other top-level keys:
 
     replicates = 5                         # run each scenario 5 times (seeds differ;
                                            # adds the parameter ``replicate`` = 0..4)
+    paired = true                          # common random numbers: every design of a
+                                           # replicate gets the same seed (from the sweep
+                                           # seed and the replicate only), so differences
+                                           # between designs are paired comparisons
     skip_invalid = true                    # grid combinations that make no valid
                                            # scenario (e.g. rho below -1/(N-1)) are
                                            # left out and listed (``Sweep.excluded``)
@@ -96,7 +100,7 @@ __all__ = ["Sweep", "ScenarioSpec", "load_sweep", "scenario_id", "scenario_seed"
 PARAM_KEYS = ("scheme", "n_gyros", "alpha_deg", "rho_arw", "rho_rrw", "motion", "effects",
               "duration_s")
 _TOP_KEYS = {"name", "description", "seed", "estimators", "base", "grid", "points", "effect_sets",
-             "replicates", "skip_invalid", "scenarios"}
+             "replicates", "skip_invalid", "scenarios", "paired"}
 MAX_REPLICATES = 1000
 _BASE_KEYS = {"description", "sample_rate_hz", "duration_s", "layout", "motion", "site",
               "temperature", "effects"}
@@ -546,6 +550,9 @@ def load_sweep(path) -> Sweep:
                                        and 1 <= replicates <= MAX_REPLICATES):
         raise doc.error(f"replicates must be a whole number from 1 to {MAX_REPLICATES}, got "
                         f"{_type(replicates)} {replicates!r}", "replicates")
+    paired = d.get("paired", False)
+    if not isinstance(paired, bool):
+        raise doc.error(f"paired must be true or false, got {_type(paired)} {paired!r}", "paired")
     skip_invalid = d.get("skip_invalid", False)
     if not isinstance(skip_invalid, bool):
         raise doc.error(f"skip_invalid must be true or false, got {_type(skip_invalid)} "
@@ -652,7 +659,8 @@ def load_sweep(path) -> Sweep:
                     if specs[sid].params != p:      # a hash collision: never silently merge
                         raise doc.error(f"two scenarios share the id {sid}", "grid")
                     continue                         # the same scenario twice (grid ∪ points)
-                spec = ScenarioSpec(id=sid, seed=scenario_seed(seed, sid), params=p, data=data,
+                seed_key = f"paired:{ref or ''}:{rep or 0}" if paired else sid
+                spec = ScenarioSpec(id=sid, seed=scenario_seed(seed, seed_key), params=p, data=data,
                                     file=b.file)
                 try:
                     spec.build()

@@ -1,9 +1,10 @@
 """gyroarray report: tables, paper-vs-model flags, self-contained HTML that a browser renders.
 
 Two tiny sweeps are run once for the module (20 s runs): a design grid and a
-"paper" sweep of one scenario file with 4 replicates, compared with a
-paper-values file written here whose numbers are set from the model's own
-spread (one inside, one far outside), so the flags are known in advance.
+"paper" sweep of one scenario file with 20 replicates (the fewest whose
+percentiles make a 95 % band), compared with a paper-values file written here
+whose numbers are set from the model's own runs (one inside, one far
+outside), so the flags are known in advance.
 """
 
 from __future__ import annotations
@@ -51,7 +52,7 @@ motion = ["p003_static_1h", "p003_sine_5dps_0p03hz"]
 PAPER = """\
 name = "tiny_paper"
 seed = 6
-replicates = 4
+replicates = 20
 estimators = ["kf_array", "gls"]
 scenarios = ["tiny_static"]
 """
@@ -83,11 +84,15 @@ def _paper_values(root: Path, inside: float, outside: float) -> Path:
 title = "Tiny table"
 scenario = "tiny_static"
 estimator = "gls"
-reason = "a made-up reason for the test"
 values = [
   {{ axis = "x", metric = "sigma_1_deg_s", value = {float(inside)!r} }},
   {{ axis = "single", metric = "sigma_1_deg_s", value = {float(outside)!r} }},
 ]
+[[experiment.check]]
+name = "tiny_ten_times_noisier"
+hypothesis = "The gyros were ten times noisier."
+effects = [{{ effect = "arw", n_deg_rt_h = 1.0 }}]
+values = [{{ axis = "x", metric = "sigma_1_deg_s", value = {float(inside)!r} }}]
 [[experiment]]
 title = "Not run"
 scenario = "paper003/swing_s1_n6"
@@ -97,28 +102,31 @@ values = [{{ axis = "x", metric = "sigma_1_deg_s", value = 0.01 }}]
     return p
 
 
-def test_paper_vs_model_flags_against_the_prediction_interval(sweeps):
+def test_paper_vs_model_flags_against_the_percentile_band(sweeps):
     rows = load_sweep_dir(sweeps / "paper_out").rows
     x = rows[(rows.estimator == "gls") & (rows.axis == "x")]["sigma_1_deg_s"].to_numpy()
-    assert x.size == 4 and len(set(x)) == 4                 # 4 replicates, 4 seeds
-    mean, sd = x.mean(), x.std(ddof=1)
-    half = stats.t.ppf(0.975, 3) * sd * math.sqrt(1 + 1 / 4)
+    assert x.size == 20 and len(set(x)) == 20              # 20 replicates, 20 seeds
+    lo, hi = np.percentile(x, 2.5), np.percentile(x, 97.5)
     single = (rows[rows.estimator == "gls"].eval("sigma_1_deg_s * reduction")
               .groupby(rows.scenario_id).mean())
-    pvm = paper_vs_model(rows, load_paper_values(_paper_values(sweeps, mean + 0.9 * half,
-                                                               10 * single.mean())))
+    inside = 0.5 * (lo + hi)
+    pvm = paper_vs_model(rows, load_paper_values(_paper_values(sweeps, inside, 10 * single.mean())))
     assert len(pvm) == 1                                    # the experiment not run is left out
     e = pvm[0]
-    assert e["runs"] == 4 and e["flagged"] and e["reason"] == "a made-up reason for the test"
+    assert e["runs"] == 20 and e["flagged"] and e["checks"][0]["name"] == "tiny_ten_times_noisier"
     vx, vs = e["values"]
-    assert vx["model_mean"] == pytest.approx(mean, rel=1e-12)
-    assert vx["high"] - vx["model_mean"] == pytest.approx(half, rel=1e-12)
-    assert not vx["flag"] and vx["ratio"] == pytest.approx((mean + 0.9 * half) / mean)
-    assert vs["flag"] and vs["ratio"] == pytest.approx(10.0, rel=1e-9)
-    # just outside the band is flagged too
-    pvm2 = paper_vs_model(rows, load_paper_values(_paper_values(sweeps, mean + 1.01 * half,
-                                                                single.mean())))
-    assert pvm2[0]["values"][0]["flag"] and not pvm2[0]["values"][1]["flag"]
+    assert vx["model_mean"] == pytest.approx(x.mean(), rel=1e-12)
+    assert (vx["low"], vx["high"]) == pytest.approx((lo, hi), rel=1e-12)
+    assert vx["low"] > 0                                    # a band of positive runs stays positive
+    assert vx["flag"] is False and vx["ratio"] == pytest.approx(inside / x.mean())
+    assert vs["flag"] is True and vs["ratio"] == pytest.approx(10.0, rel=1e-9)
+    # just outside the band is flagged; with fewer than 20 runs there is no band and no verdict
+    pvm2 = paper_vs_model(rows, load_paper_values(_paper_values(sweeps, hi * 1.001, single.mean())))
+    assert pvm2[0]["values"][0]["flag"] is True
+    few = rows[rows.replicate < 19]
+    pvm3 = paper_vs_model(few, load_paper_values(_paper_values(sweeps, 10 * hi, single.mean())))
+    v3 = pvm3[0]["values"][0]
+    assert v3["flag"] is None and math.isnan(v3["low"]) and not pvm3[0]["flagged"]
 
 
 def test_ranking_and_estimator_tables(sweeps):
@@ -154,7 +162,10 @@ def test_report_files_are_self_contained(sweeps, tmp_path):
     assert "<script" not in text
     for heading in ("Design ranking", "Allan deviation", "Estimator comparison", "Paper vs model"):
         assert heading in text
-    assert "a made-up reason for the test" in text and 'class="flag"' in text
+    assert 'class="flag"' in text
+    # the explanation is printed with the simulation that tests it, and its verdict
+    assert "Hypothesis: The gyros were ten times noisier." in text
+    assert "Simulation tiny_ten_times_noisier" in text and "does not support" in text
     md = (tmp_path / "r.md").read_text()
     figs = re.findall(r"!\[[^\]]*\]\(([^)]+)\)", md)
     assert len(figs) == res["figures"] and all((tmp_path / f).is_file() for f in figs)
@@ -201,5 +212,8 @@ def test_shipped_paper_values_name_shipped_scenarios():
     listed = {s.params["scenario"]
               for s in load_sweep(root / "sweeps" / "paper_reproduction.toml").scenarios}
     assert {e["scenario"] for e in exps} <= listed
-    assert all(e.get("reason") for e in exps)
+    # no free-text explanation: every explanation is a named check of a hypothesis
+    assert not any(e.get("reason") for e in exps)
     assert all((root / f"{e['scenario']}.toml").is_file() for e in exps)
+    names = [c["name"] for e in exps for c in e.get("check", [])]
+    assert len(names) == len(set(names)) >= 8
