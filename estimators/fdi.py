@@ -311,7 +311,7 @@ def design_parity(H: np.ndarray, noise: ArrayNoise, dt_s: float, gyros=None, *,
     share = _white_share(P, R, var_dir, K, S)
     scales = {
         "step": _pow2_scales(1, max(1.0, 4.0 / float(np.min(K)))),
-        "drift": _pow2_scales(2, drift_window_s / dt_s),
+        "drift": _pow2_scales(min(2.0 / float(np.max(K)), drift_window_s / dt_s), drift_window_s / dt_s),
         "variance": _pow2_scales(VARIANCE_MIN_BLOCK, variance_window_s / dt_s),
     }
     G, _ = gls_weights(Ha, R)
@@ -687,6 +687,64 @@ def _scan(eps: np.ndarray, design: ParityDesign, *, trace: bool = False) -> dict
     return best
 
 
+def alarm_events(eps: np.ndarray, design: ParityDesign) -> dict:
+    """Every excursion of every statistic over its threshold (no isolation, no exclusion).
+
+    An excursion of one statistic (family, window L, any direction) starts
+    where it exceeds after more than L samples under and ends at its last
+    exceedance; overlapping excursions of different statistics are one
+    alarm. Used to count false alarms on clean records.
+
+    Returns
+    -------
+    dict
+        ``samples``: start sample of each alarm; ``family``: the family that
+        fired first; ``per_family``: the count of each family's own excursions.
+    """
+    n = eps.shape[0]
+    w = ff.reverse_ar1(eps, design.a)
+    wn = np.vstack([w, np.zeros((1, w.shape[1]))])
+    cs = np.vstack([np.zeros((1, eps.shape[1])), np.cumsum(eps, axis=0)])
+    reps = [g[0] for g in design.groups if np.linalg.norm(design.coef[:, g[0]]) > 0]
+    spans = []                                                # (start, end, family)
+    for fam in ("step", "drift"):
+        u = design.thresholds[fam]
+        for L in design.scales[fam]:
+            if L > n - 1:
+                break
+            over = (np.abs(_window_stats(fam, wn, cs, design, reps, L, n)) > u).any(axis=1)
+            ks = np.flatnonzero(over) + L - 1
+            spans += [(a, b, fam) for a, b in _clumps(ks[ks >= 1], L)]
+    g = design.thresholds["variance"]
+    x = eps @ design.var_dir[:, reps]
+    for L in design.scales["variance"]:
+        nb = (n - 1) // L
+        if nb < 1:
+            break
+        lam = np.maximum((x[1:1 + nb * L] ** 2).reshape(nb, L, -1).sum(axis=1) / L, 1e-300)
+        over = (0.5 * L * (lam - 1.0 - np.log(lam)) > g).any(axis=1)
+        spans += [(a, b, "variance") for a, b in _clumps((np.flatnonzero(over) + 1) * L, L)]
+    per = {f: sum(1 for s in spans if s[2] == f) for f in _FAMILIES}
+    spans.sort()
+    merged, end = [], -1
+    for a, b, fam in spans:
+        if a > end:
+            merged.append((a, fam))
+        end = max(end, b)
+    return {"samples": np.array([k for k, _ in merged], dtype=np.int64),
+            "family": [f for _, f in merged], "per_family": per}
+
+
+def _clumps(ks: np.ndarray, gap: int) -> list:
+    """(first, last) exceedance of each run of exceedances no more than ``gap`` apart."""
+    if ks.size == 0:
+        return []
+    cut = np.flatnonzero(np.diff(ks) > gap)
+    first = np.concatenate([[0], cut + 1])
+    last = np.concatenate([cut, [ks.size - 1]])
+    return [(int(ks[i]), int(ks[j])) for i, j in zip(first, last)]
+
+
 # -- characterisation: kind, onset, size, isolation ----------------------------------
 
 def _characterize(z, t, k0, eps, design: ParityDesign, hit: dict, hp: dict, dt: float):
@@ -697,6 +755,7 @@ def _characterize(z, t, k0, eps, design: ParityDesign, hit: dict, hp: dict, dt: 
     lo = max(1, k - 2 * L - int(round(2.0 / dt)))              # earliest onset considered
     log_odds = math.log(hp["isolation_odds"])
     horizons = [0.0] + [2.0 ** i for i in range(0, 64) if 2.0 ** i <= hp["isolation_s"]]
+    horizon = int(round(hp["isolation_s"] / dt))              # data the final fit may use
     fits = None
     for h_s in horizons:
         E = min(n - 1, k + int(round(h_s / dt)))
@@ -708,7 +767,8 @@ def _characterize(z, t, k0, eps, design: ParityDesign, hit: dict, hp: dict, dt: 
         if len(stuck) == 1:
             return _alarm_stuck(z, t, k0, design, hit, stuck[0], fits, E, dt)
         if len(design.groups[g1]) == 1 and len(order) > 1 and margin >= log_odds:
-            return _alarm_fit(z, t, k0, design, hit, fits, g1, E, True, margin, dt,
+            final = _fit_segment(eps, design, lo, k, min(n - 1, max(E, k + horizon)))
+            return _alarm_fit(z, t, k0, design, hit, final, g1, E, True, margin, dt,
                               hp["isolation_odds"])
         if E >= n - 1:
             break
@@ -785,7 +845,7 @@ def _best_kind(fits, j: int) -> str:
 
 def _alarm_fit(z, t, k0, design, hit, fits, gi, E, isolated, margin, dt, odds):
     grp = design.groups[gi]
-    j = grp[0]
+    j = max(grp, key=lambda p: float(np.linalg.norm(design.coef[:, p])))   # smallest size
     kind = _best_kind(fits, j)
     b, bsig, size, sig, dll = _kind_fit(fits, j, kind, design, dt)
     onset_k = k0 + fits["lo"] + b
@@ -801,8 +861,10 @@ def _alarm_fit(z, t, k0, design, hit, fits, gi, E, isolated, margin, dt, odds):
                 f"by ln LR = {margin:.1f} (needs ln {odds:g} = {math.log(odds):.1f})"
                 if isolated else
                 ("detected, not isolable: " + (f"gyros {', '.join(map(str, cands))} share one parity "
-                                               "direction" if len(grp) > 1 else
-                                               f"best gyro {cands[0]} ahead by only ln LR = {margin:.1f}")))
+                                               f"direction (size given for gyro {design.gyros[j] + 1})"
+                                               if len(grp) > 1 else
+                                               f"best gyro {cands[0]} ahead by only ln LR = {margin:.1f}, "
+                                               f"needs ln {odds:g}")))
     evidence = (f"{fam} test over {L * dt:g} s: |statistic| {abs(hit['value']):.3g} > threshold "
                 f"{hit['threshold']:.3g}; {kind} fit: onset {t[onset_k]:.3f} ± {bsig * dt:.3f} s, "
                 f"size {size_out:.4g} ± {sig_out:.2g} {KIND_UNITS[kind]}; {iso_text}")
