@@ -51,7 +51,8 @@ The chain (one stage each)
    :func:`profile_variance`); the gyro is named when its log-likelihood beats
    every gyro with another parity direction by ln(``isolation_odds``)
    (odds 99:1 by default), re-tried on 0, 1, 2, 4, ... s of data after the
-   alarm up to ``isolation_s``. Gyros whose parity directions are parallel
+   alarm up to ``isolation_s``; the kind, onset and size are then refitted
+   on that whole stretch. Gyros whose parity directions are parallel
    (all four of an N = 4 array: m = 1) cannot be told apart: "detected, not
    isolable" — never a guess. A gyro whose output repeats the same value
    from before the alarm on (run longer than its pre-fault repeats make
@@ -105,6 +106,9 @@ COLLINEAR_COS = 1.0 - 1e-9
 
 #: Shortest variance block [samples].
 VARIANCE_MIN_BLOCK = 32
+
+#: Shortest start of a record the noise is estimated on when no model is given [s].
+REFERENCE_SPAN_S = 60.0
 
 #: Probability a stuck run of repeated outputs may have under the gyro's normal behaviour.
 STUCK_RUN_P = 1e-9
@@ -472,7 +476,10 @@ class FaultDetector(Estimator):
         Likelihood ratio the named gyro must reach against every other
         parity direction [-] (default 99).
     isolation_s : float
-        Longest wait after an alarm for the isolation [s] (default 30).
+        Longest wait after an alarm for the isolation [s] (default 120; at
+        least the window of the test that fired). It stops as soon as the
+        odds are reached: a step isolates within a second, a drift near its
+        minimum detectable rate may need a minute.
     bias_memory_s : float
         Longest bias-tracker time constant [s] (default 600).
     drift_window_s : float
@@ -502,7 +509,7 @@ class FaultDetector(Estimator):
 
     description = "parity-space fault detection, isolation and recovery (GLS without the faulty gyro)"
 
-    def __init__(self, *, far_per_h=0.01, isolation_odds=99.0, isolation_s=30.0,
+    def __init__(self, *, far_per_h=0.01, isolation_odds=99.0, isolation_s=120.0,
                  bias_memory_s=ff.DEFAULT_BIAS_MEMORY_S, drift_window_s=600.0,
                  variance_window_s=40.0):
         self.far_per_h = far_per_h
@@ -670,9 +677,9 @@ def _scan(eps: np.ndarray, design: ParityDesign, *, trace: bool = False) -> dict
         blocks = (x[1:1 + nb * L] ** 2).reshape(nb, L, -1).sum(axis=1)   # skip ε₀
         lam = np.maximum(blocks / L, 1e-300)
         G = 0.5 * L * (lam - 1.0 - np.log(lam))
-        if trace:
-            r = np.repeat(G.max(axis=1) / g, L)
-            np.maximum(ratio["variance"][1:1 + nb * L], r, out=ratio["variance"][1:1 + nb * L])
+        if trace:                                              # known at each block's end
+            r = np.repeat(G.max(axis=1) / g, L)[:max(n - L, 0)]
+            np.maximum(ratio["variance"][L:L + r.size], r, out=ratio["variance"][L:L + r.size])
         over = np.flatnonzero((G > g).any(axis=1))
         if over.size:
             b = int(over[0])
@@ -754,8 +761,9 @@ def _characterize(z, t, k0, eps, design: ParityDesign, hit: dict, hp: dict, dt: 
     L = hit["L"]
     lo = max(1, k - 2 * L - int(round(2.0 / dt)))              # earliest onset considered
     log_odds = math.log(hp["isolation_odds"])
-    horizons = [0.0] + [2.0 ** i for i in range(0, 64) if 2.0 ** i <= hp["isolation_s"]]
-    horizon = int(round(hp["isolation_s"] / dt))              # data the final fit may use
+    wait_s = max(hp["isolation_s"], L * dt)                   # a slow test's fault isolates slowly
+    horizons = [0.0] + [2.0 ** i for i in range(0, 64) if 2.0 ** i < wait_s] + [wait_s]
+    horizon = int(round(wait_s / dt))                          # data the final fit may use
     fits = None
     for h_s in horizons:
         E = min(n - 1, k + int(round(h_s / dt)))
@@ -1081,13 +1089,16 @@ def estimate_noise(readings_rad_s, layout: Layout, dt_s: float, ref_rad_s=None) 
 
     Notes
     -----
-    Adjacent means of m samples differ with variance 2σ²/m + q(2m² + 1)/(3m)
+    Only the first quarter of the record (at least ``REFERENCE_SPAN_S``) is
+    used: a fault lasts to the end of the record, so the start is the
+    healthy reference. Adjacent means of m samples differ with variance 2σ²/m + q(2m² + 1)/(3m)
     (white σ² = N²/dt, random walk q = K²dt per sample). That variance is
     read as (1.4826·MAD)² of the differences at m = 1, 2, 4, ... n/16 (the
     MAD ignores the few differences a step or a short fault touches) and
-    (σ², q) fitted by non-negative least squares weighted by 1/(2/M) of each
-    octave's relative variance. A fault that lasts most of the record biases
-    it; correlations are taken as 0.
+    (σ², q) fitted by non-negative least squares, each octave weighted by its
+    relative standard error √(2/M) (M differences); each is then raised by
+    twice its standard error, so an estimated model errs toward fewer false
+    alarms. Correlations are taken as 0.
     """
     z = np.asarray(readings_rad_s, dtype=float)
     H = layout.H
@@ -1102,7 +1113,11 @@ def estimate_noise(readings_rad_s, layout: Layout, dt_s: float, ref_rad_s=None) 
         notes.append("noise estimated from the record (parity of the readings, robust MAD of "
                      "adjacent means): one ARW and RRW for every gyro, no correlation (no "
                      "reference rate to tell the gyros apart)")
-    n = e.shape[0]
+    n_all = e.shape[0]
+    n = min(n_all, max(n_all // 4, int(round(REFERENCE_SPAN_S / dt_s))))
+    e = e[:n]
+    notes.append(f"noise taken from the first {n * dt_s:.4g} s of the record (a fault lasts to the "
+                 "end of a record, so its start is the healthy reference)")
     ms = _pow2_scales(1, max(1, n // 16))
     s2, q = [], []
     for col in range(e.shape[1]):
@@ -1118,10 +1133,18 @@ def estimate_noise(readings_rad_s, layout: Layout, dt_s: float, ref_rad_s=None) 
             b.append(v)
             W.append(math.sqrt(d.size / 2.0) / max(v, 1e-300))
         A, b, W = np.array(A), np.array(b), np.array(W)
-        sol, _ = optimize.nnls(A * W[:, None], b * W)
-        s2.append(max(sol[0], 1e-300))
-        q.append(sol[1])
+        Aw = A * W[:, None]
+        sol, _ = optimize.nnls(Aw, b * W)
+        cov = np.linalg.pinv(Aw.T @ Aw)                       # rows have unit variance
+        s2.append(max(sol[0] + 2.0 * math.sqrt(max(cov[0, 0], 0.0)), 1e-300))
+        q.append(sol[1] + 2.0 * math.sqrt(max(cov[1, 1], 0.0)))
     s2, q = np.array(s2), np.array(q)
+    floor = 1e-6 * float(np.median(s2))
+    if np.any(s2 <= floor):
+        bad = np.flatnonzero(s2 <= floor) + 1
+        notes.append(f"gyro(s) {', '.join(map(str, bad))} barely move in the reference span: their "
+                     "white noise is floored at 1e-6 of the median")
+        s2 = np.maximum(s2, floor)
     if ref_rad_s is None:
         s2 = np.full(H.shape[0], float(np.median(s2)))
         q = np.full(H.shape[0], float(np.median(q)))

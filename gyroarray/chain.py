@@ -198,10 +198,10 @@ def run_scenario(scenario, estimator_names=None, *, cache: bool = True) -> RunRe
         raise InputError(f"unknown estimator {unknown[0]!r} (available: {', '.join(available())})")
     res = simulate(scenario, cache=cache)
     dt = 1.0 / scenario.sample_rate_hz
-    estimates, notes = {}, []
+    estimates, notes, fitted = {}, [], {}
     for name in names:
         try:
-            est = get_estimator(name)().fit(scenario.layout, scenario.model, dt)
+            est = fitted[name] = get_estimator(name)().fit(scenario.layout, scenario.model, dt)
         except InputError as err:
             # a named estimator that cannot serve this model is the user's error; a default
             # one is skipped and said so (e.g. bias-state KFs on a model without RRW)
@@ -212,4 +212,8 @@ def run_scenario(scenario, estimator_names=None, *, cache: bool = True) -> RunRe
         estimates[name] = est.estimate(res.readings_rad_s)
     result = score(estimates, res.truth.omega_body_rad_s, res.readings_rad_s, scenario.layout,
                    res.truth.time_s, dt, swing=swing_frequency(scenario.profile), scenario=scenario.name)
-    return replace(result, notes=tuple(notes))
+    result = replace(result, notes=tuple(notes))
+    if "fdi" in estimates:                     # the fault detector's scores (issue 16)
+        from .analysis.fdi_score import add_fdi_metrics
+        result = add_fdi_metrics(result, scenario, res, fitted["fdi"])
+    return result

@@ -23,12 +23,13 @@ import tomllib
 from dataclasses import replace
 from pathlib import Path
 
+from .analysis.fdi_score import FDI_METRICS
 from .errors import InputError
 
 #: Metrics a check may bound (columns of :attr:`gyroarray.chain.RunResult.table`).
 METRICS = ("sigma_1_deg_s", "mean_error_deg_s", "reduction", "attenuation", "phase_deg",
            "arw_deg_rt_h", "bi_deg_h", "rrw_deg_h_rt_h", "arw_reduction", "bi_reduction",
-           "rrw_reduction", "noise_density_deg_s_rt_hz", "efficiency")
+           "rrw_reduction", "noise_density_deg_s_rt_hz", "efficiency") + FDI_METRICS
 _KEYS = {"scenario", "quick_duration_s", "estimator", "axis", "metric", "min", "max"}
 _REQUIRED = ("scenario", "quick_duration_s", "estimator", "axis", "metric")
 _AXES = ("x", "y", "z")
