@@ -32,8 +32,8 @@ Method (Willsky & Jones' GLR on Kalman innovations)
    signature (a linear Gaussian model), and the log-likelihood gain is
    ΔLL(θ) = (Σ g ε)²/(2 Σ g²) (means) or M/2·(λ̂ − 1 − ln λ̂) (variance over
    the M samples from θ). The onset maximises ΔLL (GLR over the onset); its
-   1σ is half the width of {θ : ΔLL(θ) ≥ max − 1/2} (profile likelihood);
-   the size's 1σ is 1/√(Σ g²) at the fitted onset.
+   1σ is the spread of the profile likelihood exp(ΔLL(θ)) over the onsets
+   (:func:`onset_sigma`); the size's 1σ is 1/√(Σ g²) at the fitted onset.
 4. The z-score: the p-value of max_θ |Y(θ)| under "no fault", Y the signed
    root of 2ΔLL, from the expected number of up-crossings of the level by
    the Gaussian sequence Y(θ) (exact lag-one correlations, bivariate normal
@@ -72,7 +72,7 @@ from gyroarray.units import rad_s_to_deg_s
 __all__ = ["KINDS", "FaultFit", "rw_gains", "steady_gain", "rw_innovations", "reverse_ar1",
            "step_energy", "ramp_energy", "upcrossing_prob", "overshoot_nu", "clump_rate",
            "chi2_glr_pvalue", "noise_share",
-           "profile_means", "profile_variance", "onset_interval", "stuck_run",
+           "profile_means", "profile_variance", "onset_sigma", "stuck_run",
            "fit_fault", "fit_faults", "DEFAULT_BIAS_MEMORY_S"]
 
 #: The fault kinds, in the spec's order (effect name = ``"fault_" + kind``).
@@ -427,8 +427,8 @@ def _null_pvalue(stat: float, null: np.ndarray, tail) -> float:
     """
     R = null.size
     q95 = float(null[int(0.95 * (R - 1))])
-    if stat <= q95:
-        return (1.0 + np.sum(null >= stat)) / (1.0 + R)
+    if stat <= q95:                                           # mid-p: ties (a mass at 0) count half
+        return (1.0 + np.sum(null > stat) + 0.5 * np.sum(null == stat)) / (1.0 + R)
     anchor = (1.0 + np.sum(null >= q95)) / (1.0 + R)
     t_anchor = tail(q95)
     if not t_anchor > 0:
@@ -499,7 +499,9 @@ def profile_means(eps: np.ndarray, a, K, S, coef: np.ndarray, kind: str, onsets:
         smooth = (step_energy(a[None, :], S[None, :], length[1:]) * S[None, :]) @ c2
     else:
         raise ValueError(f"kind must be 'step' or 'drift', got {kind!r}")
-    den = np.maximum(den, 1e-300)
+    empty = den <= 1e-12 * np.max(den, axis=0, keepdims=True)  # a drift's first sample: no signal
+    num = np.where(empty, 0.0, num)
+    den = np.where(empty, 1.0, den)
     scale = 2.0 * np.sqrt(den[:-1] * den[1:])
     return num, den, rough / scale, smooth / scale
 
@@ -531,17 +533,31 @@ def profile_variance(x: np.ndarray, onsets: np.ndarray):
     return dll, lam, count
 
 
-def onset_interval(dll: np.ndarray) -> tuple[int, int, int]:
-    """Best index and the profile-likelihood interval {ΔLL >= max − 1/2} (first, last index)."""
+def onset_sigma(dll: np.ndarray, positions: np.ndarray | None = None) -> tuple[int, float]:
+    """Best onset and its 1σ from the profile likelihood over the onsets.
+
+    Parameters
+    ----------
+    dll : ndarray, shape (T,)
+        Log-likelihood gain ΔLL(θ) of each candidate onset.
+    positions : ndarray, shape (T,), optional
+        The onsets (sample indices); default 0 .. T − 1.
+
+    Returns
+    -------
+    best : int
+        Index of the maximum.
+    sigma : float
+        √(Σ w (θ − θ̂)²) with w ∝ exp(ΔLL(θ) − max), in samples: the spread
+        of the profile likelihood over the onsets (a flat-prior posterior).
+        A change-point's likelihood is jagged, so the curvature or the
+        ΔLL >= max − ½ interval would understate it. At least 1/√12 (the grid).
+    """
+    pos = np.arange(dll.size, dtype=float) if positions is None else np.asarray(positions, float)
     best = int(np.argmax(dll))
-    ok = dll >= dll[best] - 0.5
-    lo = best
-    while lo > 0 and ok[lo - 1]:
-        lo -= 1
-    hi = best
-    while hi < dll.size - 1 and ok[hi + 1]:
-        hi += 1
-    return best, lo, hi
+    w = np.exp(dll - dll[best])
+    w /= w.sum()
+    return best, max(math.sqrt(float(np.sum(w * (pos - pos[best]) ** 2))), 1.0 / math.sqrt(12.0))
 
 
 def stuck_run(output: np.ndarray, end: int | None = None) -> int:
@@ -688,12 +704,12 @@ def _fit_mean(kind, eps, a, K, S, qn, t, dt, r) -> FaultFit:
     num, den, mr, ms = profile_means(eps[:, None], [a], [K], [S], np.ones((1, 1)), kind, onsets)
     num, den, mr, ms = num[:, 0], den[:, 0], mr[:, 0], ms[:, 0]
     dll = num * num / (2.0 * den)
-    best, lo, hi = onset_interval(dll)
+    best, sig_k = onset_sigma(dll)
     size = num[best] / den[best] * math.sqrt(r)               # rad/s (step) or rad/s per sample
     sigma = math.sqrt(r / den[best])
     null = _null_maxima(kind, eps.size, qn, NULL_DRAWS)
     z = _z_of_p(_null_pvalue(math.sqrt(2.0 * dll[best]), null, lambda y: _analytic_max_p(y, mr, ms)))
-    onset, onset_sig = float(t[best]), max(0.5 * (t[hi] - t[lo]), dt / math.sqrt(12.0))
+    onset, onset_sig = float(t[best]), sig_k * dt
     if kind == "step":
         params = {"start_s": onset, "size_deg_s": float(rad_s_to_deg_s(size))}
         psig = {"start_s": onset_sig, "size_deg_s": float(rad_s_to_deg_s(sigma))}
@@ -716,7 +732,7 @@ def _fit_noise(eps, K, S, t, dt, sides: str = "both") -> FaultFit:
     dll, lam = dll[:, 0], lam[:, 0]
     if sides == "down":
         dll = np.where(lam < 1.0, dll, 0.0)
-    best, lo, hi = onset_interval(dll)
+    best, sig_k = onset_sigma(dll)
     w = noise_share(K, S)
     ratio = math.sqrt(max(0.0, 1.0 + (lam[best] - 1.0) / w))
     lam_sig = lam[best] * math.sqrt(2.0 / count[best])
@@ -724,7 +740,7 @@ def _fit_noise(eps, K, S, t, dt, sides: str = "both") -> FaultFit:
     rr = 1.0 - np.sqrt(count[1:] / count[:-1])                # 1 − corr of running sums of x²
     null = _null_maxima("stuck" if sides == "down" else "noise", eps.size, 0.0, NULL_DRAWS)
     z = _z_of_p(_null_pvalue(math.sqrt(2.0 * dll[best]), null, lambda y: _analytic_max_p(y, rr)))
-    onset, onset_sig = float(t[best]), max(0.5 * (t[hi] - t[lo]), dt / math.sqrt(12.0))
+    onset, onset_sig = float(t[best]), sig_k * dt
     params = {"start_s": onset, "ratio": ratio}
     psig = {"start_s": onset_sig, "ratio": ratio_sig}
     return FaultFit("noise", onset, onset_sig, ratio, ratio_sig, z, float(dll[best]), params, psig)

@@ -30,8 +30,8 @@ __all__ = ["FDI_METRICS", "analyse_measurement", "format_fdi", "plot_fdi", "reco
 
 #: Columns :func:`add_fdi_metrics` adds to the chain's table (``gyroarray check`` may bound them).
 FDI_METRICS = ("fdi_detected", "fdi_detection_delay_s", "fdi_onset_error_s", "fdi_correct_isolation",
-               "fdi_correct_kind", "fdi_false_alarms_per_h", "fdi_sigma_after_recovered_deg_s",
-               "fdi_sigma_after_unrecovered_deg_s")
+               "fdi_correct_kind", "fdi_false_alarms_per_h", "fdi_fused_dev_during_deg_s",
+               "fdi_fused_dev_after_recovered_deg_s", "fdi_fused_dev_after_unrecovered_deg_s")
 
 
 # -- the measurement ------------------------------------------------------------
@@ -270,8 +270,8 @@ def true_faults(model) -> list[dict]:
     return sorted(out, key=lambda f: f["start_s"])
 
 
-def score_faults(result, faults: list[dict], time_s, *, readings=None, H=None, noise=None,
-                 dt_s=None, truth_rad_s=None) -> dict:
+def score_faults(result, faults: list[dict], time_s, *, readings=None, clean_readings=None,
+                 H=None, noise=None, dt_s=None) -> dict:
     """Scores of one run against its true faults.
 
     Parameters
@@ -280,19 +280,26 @@ def score_faults(result, faults: list[dict], time_s, *, readings=None, H=None, n
     faults : list of dict
         :func:`true_faults`.
     time_s : ndarray
-    readings, H, noise, dt_s, truth_rad_s : optional
-        For the fused error after the exclusion with and without recovery.
+    readings, clean_readings : ndarray, shape (n, N), optional
+        The run, and the same run without its faults (same noise draws: the
+        simulator's streams do not depend on the fault entries).
+    H, noise, dt_s : optional
+        Layout axes, ArrayNoise and period for the fusion.
 
     Returns
     -------
     dict
-        ``fdi_detected`` (1/0, first fault, NaN without fault),
+        ``fdi_detected`` (1/0, first fault; NaN without fault),
         ``fdi_detection_delay_s``, ``fdi_onset_error_s``,
         ``fdi_correct_isolation`` (1 right gyro, 0 wrong gyro, NaN not
         isolated), ``fdi_correct_kind``, ``fdi_false_alarms_per_h`` (alarms
-        before the first fault's start, per hour of that clean part),
-        ``fdi_sigma_after_recovered_deg_s``, ``fdi_sigma_after_unrecovered_deg_s``
-        (rms error of the worst axis after the isolation).
+        before the first fault's start, per hour of that clean part), and how
+        far the fused rate moves from the fault-free all-gyro GLS (rms of the
+        worst axis [deg/s]): ``fdi_fused_dev_during_deg_s`` (onset to
+        exclusion), ``fdi_fused_dev_after_recovered_deg_s`` (after it, GLS
+        without the gyro: the price of N − 1) and
+        ``fdi_fused_dev_after_unrecovered_deg_s`` (after it, had the gyro
+        stayed in).
     """
     t = np.asarray(time_s, dtype=float)
     t0, t1 = float(t[0]), float(t[-1])
@@ -315,12 +322,24 @@ def score_faults(result, faults: list[dict], time_s, *, readings=None, H=None, n
     out["fdi_onset_error_s"] = a.onset_s - first["start_s"]
     out["fdi_correct_isolation"] = nan if a.gyro is None else float(a.gyro == first["gyro"])
     out["fdi_correct_kind"] = float(a.kind == first["kind"])
-    if readings is not None and truth_rad_s is not None and a.isolated_s is not None:
-        rows = recovery_errors(readings, H, noise, dt_s, result.exclusions, [a], t, truth_rad_s)
-        after = rows[0]["after"]
-        if after["n"]:
-            out["fdi_sigma_after_recovered_deg_s"] = after["recovered_deg_s"]
-            out["fdi_sigma_after_unrecovered_deg_s"] = after["unrecovered_deg_s"]
+    if readings is not None and clean_readings is not None:
+        out.update(_fused_deviation(result, a, first, t, readings, clean_readings, H, noise, dt_s))
+    return out
+
+
+def _fused_deviation(result, alarm, fault, t, z, z_clean, H, noise, dt_s) -> dict:
+    from gyroarray.estimators.fdi import fuse
+    ref = fuse(z_clean, H, noise, dt_s, ())                   # fault-free, every gyro
+    raw = fuse(z, H, noise, dt_s, ())
+    rec = fuse(z, H, noise, dt_s, result.exclusions)
+    on = int(np.searchsorted(t, fault["start_s"]))
+    off = t.size if alarm.isolated_s is None else int(np.searchsorted(t, alarm.isolated_s, side="right"))
+    out = {}
+    if off > on:
+        out["fdi_fused_dev_during_deg_s"] = _rms_worst(raw[on:off] - ref[on:off])
+    if off < t.size:
+        out["fdi_fused_dev_after_recovered_deg_s"] = _rms_worst(rec[off:] - ref[off:])
+        out["fdi_fused_dev_after_unrecovered_deg_s"] = _rms_worst(raw[off:] - ref[off:])
     return out
 
 
@@ -338,14 +357,23 @@ def add_fdi_metrics(run_result, scenario, sim_result, detector):
     Returns
     -------
     RunResult
-        A copy; other estimators' rows get NaN in the new columns.
+        A copy; other estimators' rows get NaN in the new columns. With
+        faults, the scenario is simulated once more without them (same seed,
+        same noise draws) for the fused-rate deviations.
     """
+    from gyroarray.sim.model import NoiseModel
+    from gyroarray.sim.scenario import simulate
     truth = sim_result.truth
     z = sim_result.readings_rad_s
     res = detector.detect(z, truth.time_s)
-    sc = score_faults(res, true_faults(scenario.model), truth.time_s, readings=z,
-                      H=scenario.layout.H, noise=detector.noise_, dt_s=detector.dt_s_,
-                      truth_rad_s=truth.omega_body_rad_s)
+    faults = true_faults(scenario.model)
+    z_clean = None
+    if faults:
+        kept = tuple(e for e in scenario.model.entries if not e.effect.startswith("fault_"))
+        clean = replace(scenario, model=NoiseModel(kept, description=scenario.model.description))
+        z_clean = simulate(clean).readings_rad_s
+    sc = score_faults(res, faults, truth.time_s, readings=z, clean_readings=z_clean,
+                      H=scenario.layout.H, noise=detector.noise_, dt_s=detector.dt_s_)
     table = run_result.table.copy()
     is_fdi = table["estimator"] == "fdi"
     for k in FDI_METRICS:
@@ -363,7 +391,7 @@ def summarise_scores(scores: list[dict]) -> dict:
         ``p_missed`` (share of runs with a fault not detected), ``delay_s_mean``,
         ``delay_s_median``, ``correct_isolation`` (share of isolated alarms on
         the right gyro), ``isolated_share``, ``correct_kind``,
-        ``false_alarms_per_h`` (pooled), ``runs``.
+        ``false_alarms_per_h`` (mean of the runs' rates), ``runs``.
     """
     det = np.array([s["fdi_detected"] for s in scores], dtype=float)
     det = det[np.isfinite(det)]

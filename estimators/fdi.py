@@ -314,8 +314,9 @@ def design_parity(H: np.ndarray, noise: ArrayNoise, dt_s: float, gyros=None, *,
     var_dir = vd / np.where(vn > 0, vn, 1.0)
     share = _white_share(P, R, var_dir, K, S)
     scales = {
-        "step": _pow2_scales(1, max(1.0, 4.0 / float(np.min(K)))),
-        "drift": _pow2_scales(min(2.0 / float(np.max(K)), drift_window_s / dt_s), drift_window_s / dt_s),
+        "step": _pow2_scales(1, max(1.0, min(4.0 / float(np.min(K)), drift_window_s / dt_s))),
+        "drift": _pow2_scales(max(2.0, min(2.0 / float(np.max(K)), drift_window_s / dt_s)),
+                              max(2.0, drift_window_s / dt_s)),
         "variance": _pow2_scales(VARIANCE_MIN_BLOCK, variance_window_s / dt_s),
     }
     G, _ = gls_weights(Ha, R)
@@ -567,6 +568,27 @@ class FaultDetector(Estimator):
     # -- estimate (fault-tolerant GLS) ------------------------------------------
     def _estimate(self, z):
         return fuse(z, self.H_, self.noise_, self.dt_s_, self.detect(z).exclusions)
+
+    def false_alarms(self, readings_rad_s) -> dict:
+        """Every alarm a clean record raises, without isolation or exclusion.
+
+        Parameters
+        ----------
+        readings_rad_s : array_like, shape (n, N)
+            Gyro outputs [rad/s] of a record without fault.
+
+        Returns
+        -------
+        dict
+            :func:`alarm_events` (``samples``, ``family``, ``per_family``) and
+            ``hours`` (record length [h]).
+        """
+        self._check_fitted()
+        z = check_readings(readings_rad_s, self.n_gyros_)
+        eps = ff.rw_innovations(z @ self.design_.P.T, self.design_.q)
+        out = alarm_events(eps, self.design_)
+        out["hours"] = z.shape[0] * self.dt_s_ / 3600.0
+        return out
 
     # -- detect ------------------------------------------------------------------
     def detect(self, readings_rad_s, time_s=None, *, trace: bool = False) -> FdiResult:
@@ -831,18 +853,17 @@ def _kind_fit(fits, j: int, kind: str, design, dt: float):
     """(onset index in segment, onset σ [samples], size, σ, dll) of gyro position j."""
     if kind in ("step", "drift"):
         num, den, dll = fits[kind]
-        b, lo_i, hi_i = ff.onset_interval(dll[:, j])
+        b, bsig = ff.onset_sigma(dll[:, j])
         size, sig = num[b, j] / den[b, j], 1.0 / math.sqrt(den[b, j])
         if kind == "drift":
             size, sig = size / dt, sig / dt
-        return b, max(0.5 * (hi_i - lo_i), 0.5), size, sig, float(dll[b, j])
+        return b, bsig, size, sig, float(dll[b, j])
     lam, count, dll, var_on = fits["noise"]
-    b, lo_i, hi_i = ff.onset_interval(dll[:, j])
+    b, bsig = ff.onset_sigma(dll[:, j], var_on)
     w = design.white_share[j]
     ratio = math.sqrt(max(0.0, 1.0 + (lam[b, j] - 1.0) / w))
     lam_sig = lam[b, j] * math.sqrt(2.0 / count[b])
-    return (int(var_on[b]), max(0.5 * (var_on[hi_i] - var_on[lo_i]), 0.5), ratio,
-            lam_sig / (2.0 * w * max(ratio, 1e-12)), float(dll[b, j]))
+    return (int(var_on[b]), bsig, ratio, lam_sig / (2.0 * w * max(ratio, 1e-12)), float(dll[b, j]))
 
 
 def _best_kind(fits, j: int) -> str:
