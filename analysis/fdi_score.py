@@ -209,7 +209,7 @@ def format_fdi(out: dict, source: str = "") -> str:
     return "\n".join(lines)
 
 
-def plot_fdi(result, path, title: str = "") -> Path:
+def plot_fdi(result, path, title: str = "", *, force: bool = True) -> Path:
     """The detector's statistics against their thresholds over time, onsets marked.
 
     Parameters
@@ -217,7 +217,10 @@ def plot_fdi(result, path, title: str = "") -> Path:
     result : FdiResult
         From ``detect(..., trace=True)``.
     path : str or os.PathLike
-        Output image (format from the suffix).
+        Output image (format from the suffix: png, svg, pdf).
+    title : str
+    force : bool
+        Replace an existing file (:func:`gyroarray.outputs.save_figure`).
 
     Notes
     -----
@@ -251,9 +254,8 @@ def plot_fdi(result, path, title: str = "") -> Path:
     ax.set_title(title or "parity statistics (dashed: fitted onset, dotted: alarm)")
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize="small", loc="upper left")
-    out = Path(path)
-    fig.savefig(out, dpi=120)
-    return out
+    from gyroarray.outputs import save_figure
+    return save_figure(fig, path, force=force, dpi=120)
 
 
 # -- scores of simulated runs ------------------------------------------------------

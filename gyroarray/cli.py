@@ -426,14 +426,16 @@ def cmd_check(args):
 def cmd_fdi(args):
     from .analysis.fdi_score import analyse_measurement, format_fdi, plot_fdi
     from .measurement import read_measurement
+    from .outputs import PLOT_SUFFIXES
     from .sim.model import NoiseModel
+    _output(args.plot, args, "--plot", inputs=_measurement_inputs(args), suffixes=PLOT_SUFFIXES)
     meas = read_measurement(args.measurement, repair=args.repair)
     model = None if args.model is None else NoiseModel.from_toml(args.model, n_gyros=meas.n_gyros)
     out, res, _ = analyse_measurement(meas, model, far_per_h=args.far_per_h)
     text = format_fdi(out, str(args.measurement))
     if args.plot is not None:
-        _refuse_inputs(args.plot, args, "--plot")
-        path = plot_fdi(res, args.plot, title=f"{args.measurement}: parity statistics")
+        path = plot_fdi(res, args.plot, title=f"{args.measurement}: parity statistics",
+                        force=args.force)
         text += f"\nwrote {path}"
     return out, text
 
@@ -781,6 +783,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="false alarms per hour the thresholds are set for (0.01)")
     p.add_argument("--plot", type=Path, metavar="OUT.png", help="statistics vs threshold over time")
     p.add_argument("--repair", action="store_true", help="repair short gaps and isolated NaNs")
+    _add_force(p)
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=cmd_fdi)
 

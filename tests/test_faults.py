@@ -19,7 +19,9 @@ from scipy import stats
 from gyroarray.analysis import fault_fit as ff
 from gyroarray.errors import InputError
 from gyroarray.layout import Layout
-from gyroarray.sim.effects import REGISTRY, Stage, simulate_readings
+from gyroarray.effects import REGISTRY
+from gyroarray.sim.effects import simulate_readings
+from gyroarray.sim.protocol import Stage
 from gyroarray.sim.model import NoiseModel
 from gyroarray.units import deg_s_to_rad_s
 

@@ -92,3 +92,11 @@ def test_too_few_gyros_in_the_measurement(tmp_path, capsys):
     csv, _ = write_measurement(meas, tmp_path / "triad.csv")
     assert main(["fdi", str(csv)]) == 2
     assert "at least 4 gyros" in capsys.readouterr().err
+
+
+def test_plot_never_overwrites_an_input(tmp_path, capsys):
+    csv = _record(tmp_path, "guard", n=3000)
+    sidecar = tmp_path / "guard.toml"
+    before = sidecar.read_bytes()
+    assert main(["fdi", str(csv), "--plot", str(sidecar), "--force"]) == 2
+    assert "--plot" in capsys.readouterr().err and sidecar.read_bytes() == before
