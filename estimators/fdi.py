@@ -1092,6 +1092,26 @@ def isolability(layout: Layout, noise=None, *, dt_s: float = 0.01) -> dict:
 
 # -- noise from the record itself ---------------------------------------------------
 
+def _white_and_walk(e: np.ndarray) -> tuple[float, float]:
+    """(σ², q) per sample of one series, each raised by 2σ of its fit (:func:`estimate_noise`)."""
+    n = e.size
+    A, b, W = [], [], []
+    for m in _pow2_scales(1, max(1, n // 16)):
+        nb = n // m
+        if nb < 8:
+            break
+        d = np.diff(e[:nb * m].reshape(nb, m).mean(axis=1))          # adjacent means of m
+        v = (1.4826 * np.median(np.abs(d - np.median(d)))) ** 2        # robust variance
+        A.append([2.0 / m, (2.0 * m * m + 1.0) / (3.0 * m)])          # 2σ²/m + q(2m² + 1)/(3m)
+        b.append(v)
+        W.append(math.sqrt(d.size / 2.0) / max(v, 1e-300))            # 1/(v √(2/M))
+    Aw = np.array(A) * np.array(W)[:, None]
+    sol, _ = optimize.nnls(Aw, np.array(b) * np.array(W))
+    cov = np.linalg.pinv(Aw.T @ Aw)                                    # rows have unit variance
+    return (max(sol[0] + 2.0 * math.sqrt(max(cov[0, 0], 0.0)), 1e-300),
+            sol[1] + 2.0 * math.sqrt(max(cov[1, 1], 0.0)))
+
+
 def estimate_noise(readings_rad_s, layout: Layout, dt_s: float, ref_rad_s=None) -> tuple[ArrayNoise, list]:
     """ARW and RRW of each gyro estimated robustly from the record (no model given).
 
@@ -1139,27 +1159,7 @@ def estimate_noise(readings_rad_s, layout: Layout, dt_s: float, ref_rad_s=None) 
     e = e[:n]
     notes.append(f"noise taken from the first {n * dt_s:.4g} s of the record (a fault lasts to the "
                  "end of a record, so its start is the healthy reference)")
-    ms = _pow2_scales(1, max(1, n // 16))
-    s2, q = [], []
-    for col in range(e.shape[1]):
-        A, b, W = [], [], []
-        for m in ms:
-            nb = n // m
-            if nb < 8:
-                break
-            means = e[:nb * m, col].reshape(nb, m).mean(axis=1)
-            d = np.diff(means)
-            v = (1.4826 * np.median(np.abs(d - np.median(d)))) ** 2
-            A.append([2.0 / m, (2.0 * m * m + 1.0) / (3.0 * m)])
-            b.append(v)
-            W.append(math.sqrt(d.size / 2.0) / max(v, 1e-300))
-        A, b, W = np.array(A), np.array(b), np.array(W)
-        Aw = A * W[:, None]
-        sol, _ = optimize.nnls(Aw, b * W)
-        cov = np.linalg.pinv(Aw.T @ Aw)                       # rows have unit variance
-        s2.append(max(sol[0] + 2.0 * math.sqrt(max(cov[0, 0], 0.0)), 1e-300))
-        q.append(sol[1] + 2.0 * math.sqrt(max(cov[1, 1], 0.0)))
-    s2, q = np.array(s2), np.array(q)
+    s2, q = np.array([_white_and_walk(e[:, c]) for c in range(e.shape[1])]).T
     floor = 1e-6 * float(np.median(s2))
     if np.any(s2 <= floor):
         bad = np.flatnonzero(s2 <= floor) + 1
