@@ -76,9 +76,10 @@ def analyse_measurement(meas, model=None, *, far_per_h: float = 0.01, p_md: floa
             notes.append(f"the model's {', '.join(faults)} entries are not used: the detector "
                          "looks for faults, it does not assume them")
     det = FaultDetector(far_per_h=far_per_h).fit(meas.layout, noise, dt)
-    if det.noise_.ignored_effects:
+    other = [e for e in det.noise_.ignored_effects if not e.startswith("fault_")]
+    if other:
         notes.append("the detector models ARW, RRW and their correlation only; also in the model: "
-                     + ", ".join(e for e in det.noise_.ignored_effects if not e.startswith("fault_")))
+                     + ", ".join(other))
     res = det.detect(z, meas.time_s, trace=True)
     md = minimum_detectable(meas.layout, det.noise_, far_per_h, p_md, dt_s=dt, design=det.design_)
     notes.append(f"minimum_detectable: found with probability {1 - p_md:g} at {far_per_h:g} false "
