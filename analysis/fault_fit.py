@@ -23,15 +23,16 @@ Method (Willsky & Jones' GLR on Kalman innovations)
      time constant dt/K);
    * drift of rate ρ:    ρ·dt·(1 − aⁿ)/(K√S) (the tracker lags a ramp by
      ρ·dt/K: that offset is all a drift leaves once it is older than dt/K);
-   * noise × ratio:      innovation variance 1 → λ = 1 + (ratio² − 1)·w,
+   * noise × ratio:      innovation variance λ_b → λ_a, λ_a/λ_b = 1 + (ratio² − 1)·w,
      w = 2/((2 − K)·S) the share of the innovation variance that is this
-     white noise;
+     white noise (both levels free: a calibration on the faulty record has
+     neither);
    * stuck: the output stops moving (white noise ratio 0 and no bias walk);
      with the raw output at hand, the exact run of repeated values.
 3. For every candidate onset θ the size is the least-squares fit of the
    signature (a linear Gaussian model), and the log-likelihood gain is
-   ΔLL(θ) = (Σ g ε)²/(2 Σ g²) (means) or M/2·(λ̂ − 1 − ln λ̂) (variance over
-   the M samples from θ). The onset maximises ΔLL (GLR over the onset); its
+   ΔLL(θ) = (Σ g ε)²/(2 Σ g²) (means) or the two-level variance GLR
+   (:func:`profile_variance_change`). The onset maximises ΔLL (GLR over the onset); its
    1σ is the spread of the profile likelihood exp(ΔLL(θ)) over the onsets
    (:func:`onset_sigma`); the size's 1σ is 1/√(Σ g²) at the fitted onset.
 4. The z-score: the p-value of max_θ |Y(θ)| under "no fault", Y the signed
@@ -72,7 +73,8 @@ from gyroarray.units import rad_s_to_deg_s
 __all__ = ["KINDS", "FaultFit", "rw_gains", "steady_gain", "rw_innovations", "reverse_ar1",
            "step_energy", "ramp_energy", "upcrossing_prob", "overshoot_nu", "clump_rate",
            "chi2_glr_pvalue", "noise_share",
-           "profile_means", "profile_variance", "onset_sigma", "stuck_run",
+           "profile_means", "profile_variance", "profile_variance_change", "onset_sigma",
+           "stuck_run",
            "fit_fault", "fit_faults", "DEFAULT_BIAS_MEMORY_S"]
 
 #: The fault kinds, in the spec's order (effect name = ``"fault_" + kind``).
@@ -408,10 +410,9 @@ def _null_maxima(kind: str, n: int, q: float, draws: int) -> np.ndarray:
                                         np.ones((1, 1)), kind, onsets)
             out[i] = float(np.max(np.abs(num[:, 0]) / np.sqrt(den[:, 0])))
     else:
-        onsets = np.arange(max(n - MIN_VARIANCE_SAMPLES, 1))
+        onsets = _variance_onsets(n)
         for i in range(draws):
-            e = rng.standard_normal(n)
-            dll, lam, _ = profile_variance(e[:, None], onsets)
+            dll, lam, _ = profile_variance_change(rng.standard_normal(n), onsets)
             if kind == "stuck":
                 dll = np.where(lam < 1.0, dll, 0.0)
             out[i] = float(np.sqrt(2.0 * np.max(dll)))
@@ -531,6 +532,44 @@ def profile_variance(x: np.ndarray, onsets: np.ndarray):
     lam_safe = np.maximum(lam, 1e-300)
     dll = 0.5 * count[:, None] * (lam_safe - 1.0 - np.log(lam_safe))
     return dll, lam, count
+
+
+def profile_variance_change(x: np.ndarray, onsets: np.ndarray):
+    """GLR of a variance change at each onset, both levels unknown (one series).
+
+    Parameters
+    ----------
+    x : ndarray, shape (M,)
+        White series whose level need not be known.
+    onsets : ndarray of int, shape (T,)
+        Candidate onsets; each leaves samples on both sides.
+
+    Returns
+    -------
+    dll : ndarray, shape (T,)
+        M/2·ln λ̂ − M_b/2·ln λ̂_b − M_a/2·ln λ̂_a (λ̂ the mean of x² over the
+        whole, before θ, from θ on).
+    ratio : ndarray, shape (T,)
+        λ̂_a/λ̂_b, the variance after over before.
+    count : ndarray, shape (T,)
+        M_a, samples from θ on.
+
+    Notes
+    -----
+    Unlike :func:`profile_variance` it does not trust the noise model's
+    level: a calibration made on a record whose noise rose half-way has a
+    level between the two, and only the ratio after/before is right.
+    """
+    x2 = np.asarray(x, dtype=float) ** 2
+    M = x2.size
+    c = np.concatenate([[0.0], np.cumsum(x2)])
+    mb = onsets.astype(float)
+    ma = M - mb
+    lb = np.maximum(c[onsets] / mb, 1e-300)
+    la = np.maximum((c[M] - c[onsets]) / ma, 1e-300)
+    lall = max(c[M] / M, 1e-300)
+    dll = 0.5 * (M * math.log(lall) - mb * np.log(lb) - ma * np.log(la))
+    return dll, la / lb, ma
 
 
 def onset_sigma(dll: np.ndarray, positions: np.ndarray | None = None) -> tuple[int, float]:
@@ -726,21 +765,26 @@ def noise_share(K: float, S: float) -> float:
     return 2.0 / ((2.0 - K) * S)
 
 
+def _variance_onsets(n: int) -> np.ndarray:
+    """Onsets of a variance fit: at least MIN_VARIANCE_SAMPLES on each side."""
+    return np.arange(MIN_VARIANCE_SAMPLES, max(n - MIN_VARIANCE_SAMPLES, MIN_VARIANCE_SAMPLES + 1))
+
+
 def _fit_noise(eps, K, S, t, dt, sides: str = "both") -> FaultFit:
-    onsets = np.arange(max(eps.size - MIN_VARIANCE_SAMPLES, 1))
-    dll, lam, count = profile_variance(eps[:, None], onsets)
-    dll, lam = dll[:, 0], lam[:, 0]
+    onsets = _variance_onsets(eps.size)
+    dll, lam, count = profile_variance_change(eps, onsets)
     if sides == "down":
         dll = np.where(lam < 1.0, dll, 0.0)
-    best, sig_k = onset_sigma(dll)
+    best, sig_k = onset_sigma(dll, onsets)
     w = noise_share(K, S)
     ratio = math.sqrt(max(0.0, 1.0 + (lam[best] - 1.0) / w))
-    lam_sig = lam[best] * math.sqrt(2.0 / count[best])
+    before = float(onsets[best])
+    lam_sig = lam[best] * math.sqrt(2.0 / count[best] + 2.0 / before)   # ratio of two χ² means
     ratio_sig = lam_sig / (2.0 * w * max(ratio, 1e-12))
     rr = 1.0 - np.sqrt(count[1:] / count[:-1])                # 1 − corr of running sums of x²
     null = _null_maxima("stuck" if sides == "down" else "noise", eps.size, 0.0, NULL_DRAWS)
     z = _z_of_p(_null_pvalue(math.sqrt(2.0 * dll[best]), null, lambda y: _analytic_max_p(y, rr)))
-    onset, onset_sig = float(t[best]), sig_k * dt
+    onset, onset_sig = float(t[onsets[best]]), sig_k * dt
     params = {"start_s": onset, "ratio": ratio}
     psig = {"start_s": onset_sig, "ratio": ratio_sig}
     return FaultFit("noise", onset, onset_sig, ratio, ratio_sig, z, float(dll[best]), params, psig)
