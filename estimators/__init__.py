@@ -11,6 +11,8 @@ ols        ordinary least squares per sample (optional low-pass)
 gls        generalized least squares per sample (optional low-pass)
 naive      mean of the back-projected readings per axis, no model
 bound      time-varying KF + RTS smoother (offline), and the CRB
+fdi        parity-space fault detection and isolation; GLS without the
+           isolated gyro (a detector whose estimate is the recovered rate)
 ========== ================================================================
 
 Usage::
@@ -23,12 +25,13 @@ Usage::
 from .base import (ENTRY_POINT_GROUP, Estimator, NotFittedError, available, get_estimator, make,
                    register)
 from .bound import OfflineBound, efficiency
+from .fdi import FaultDetector
 from .kf_array import ArrayKF
 from .kf_single import SingleGyroKF, bandwidth_hz, paper002_relation, single_gyro_gain
 from .noise import ArrayNoise, array_noise
 from .simple import GLS, OLS, Naive
 
 __all__ = ["ENTRY_POINT_GROUP", "Estimator", "NotFittedError", "available", "get_estimator", "make",
-           "register", "OfflineBound", "efficiency", "ArrayKF", "SingleGyroKF", "bandwidth_hz",
+           "register", "OfflineBound", "efficiency", "FaultDetector", "ArrayKF", "SingleGyroKF", "bandwidth_hz",
            "paper002_relation", "single_gyro_gain", "ArrayNoise", "array_noise", "GLS", "OLS",
            "Naive"]

@@ -49,7 +49,7 @@ ENTRY_POINT_GROUP = "gyroarray.estimators"
 
 _BUILTIN: dict[str, type] = {}
 _LOADED_PLUGINS: dict[str, type] = {}
-_BUILTIN_MODULES = ("simple", "kf_array", "kf_single", "bound")
+_BUILTIN_MODULES = ("simple", "kf_array", "kf_single", "bound", "fdi")
 
 
 class NotFittedError(InputError):

@@ -226,11 +226,11 @@ def run_scenario(scenario, estimator_names=None, *, cache: bool = True,
     check_fusable(scenario)
     res = simulate(scenario, cache=cache, rng=rng)
     dt = 1.0 / scenario.sample_rate_hz
-    estimates, notes = {}, []
+    estimates, notes, fitted = {}, [], {}
     for name in names:
         try:
-            est = get_estimator(name)(**(params or {}).get(name, {})).fit(scenario.layout,
-                                                                          scenario.model, dt)
+            est = fitted[name] = get_estimator(name)(**(params or {}).get(name, {})).fit(
+                scenario.layout, scenario.model, dt)
         except InputError as err:
             # a named estimator that cannot serve this model is the user's error; a default
             # one is skipped and said so (e.g. bias-state KFs on a model without RRW)
@@ -241,7 +241,11 @@ def run_scenario(scenario, estimator_names=None, *, cache: bool = True,
         estimates[name] = est.estimate(res.readings_rad_s)
     result = score(estimates, res.truth.omega_body_rad_s, res.readings_rad_s, scenario.layout,
                    res.truth.time_s, dt, swing=swing_frequency(scenario.profile), scenario=scenario.name)
-    return replace(result, notes=tuple(notes))
+    result = replace(result, notes=tuple(notes))
+    if "fdi" in estimates:                     # the fault detector's scores (issue 16)
+        from .analysis.fdi_score import add_fdi_metrics
+        result = add_fdi_metrics(result, scenario, res, fitted["fdi"])
+    return result
 
 
 # -- replicates -------------------------------------------------------------------

@@ -22,6 +22,7 @@ import math
 from dataclasses import replace
 from pathlib import Path
 
+from .analysis.fdi_score import FDI_METRICS
 from .errors import InputError
 from .tomlio import load_toml
 
@@ -29,7 +30,7 @@ from .tomlio import load_toml
 METRICS = ("sigma_1_deg_s", "mean_error_deg_s", "rms_deg_s", "angle_error_deg", "reduction",
            "attenuation", "phase_deg",
            "arw_deg_rt_h", "bi_deg_h", "rrw_deg_h_rt_h", "arw_reduction", "bi_reduction",
-           "rrw_reduction", "noise_density_deg_s_rt_hz", "efficiency")
+           "rrw_reduction", "noise_density_deg_s_rt_hz", "efficiency") + FDI_METRICS
 _KEYS = {"scenario", "quick_duration_s", "estimator", "axis", "metric", "min", "max"}
 _REQUIRED = ("scenario", "quick_duration_s", "estimator", "axis", "metric")
 _AXES = ("x", "y", "z")

@@ -774,6 +774,25 @@ def cmd_check(args):
     return result, format_check(result), (EXIT_OK if result["passed"] else EXIT_FAIL)
 
 
+# -- fdi ----------------------------------------------------------------------
+
+def cmd_fdi(args):
+    from .analysis.fdi_score import analyse_measurement, format_fdi, plot_fdi
+    from .measurement import read_measurement
+    from .outputs import PLOT_SUFFIXES
+    from .sim.model import NoiseModel
+    _output(args.plot, args, "--plot", inputs=_measurement_inputs(args), suffixes=PLOT_SUFFIXES)
+    meas = read_measurement(args.measurement, repair=args.repair)
+    model = None if args.model is None else NoiseModel.from_toml(args.model, n_gyros=meas.n_gyros)
+    out, res, _ = analyse_measurement(meas, model, far_per_h=args.far_per_h)
+    text = format_fdi(out, str(args.measurement))
+    if args.plot is not None:
+        path = plot_fdi(res, args.plot, title=f"{args.measurement}: parity statistics",
+                        force=args.force)
+        text += f"\nwrote {path}"
+    return out, text
+
+
 # -- entry point --------------------------------------------------------------
 
 # -- model vs measurement: compare / diagnose / fit / ladder ------------------------
@@ -1194,6 +1213,18 @@ def build_parser() -> argparse.ArgumentParser:
                    help="run the ladder on the first part of the record, then validate its model on the "
                         "last FRACTION (e.g. 0.3)")
     p.set_defaults(func=cmd_ladder)
+
+    p = sub.add_parser("fdi", help="fault detection and isolation on a measurement (parity space)")
+    p.add_argument("measurement", type=Path, metavar="MEAS.csv")
+    p.add_argument("--model", type=Path, metavar="MODEL.toml",
+                   help="ARW/RRW/correlation of the gyros (default: estimated from the record)")
+    p.add_argument("--far-per-h", type=_finite_float("--far-per-h"), default=0.01, metavar="RATE",
+                   help="false alarms per hour the thresholds are set for (0.01)")
+    p.add_argument("--plot", type=Path, metavar="OUT.png", help="statistics vs threshold over time")
+    p.add_argument("--repair", action="store_true", help="repair short gaps and isolated NaNs")
+    _add_force(p)
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(func=cmd_fdi)
 
     p = sub.add_parser("check", help="regression thresholds: run the threshold scenarios, exit 1 on a failure")
     p.add_argument("thresholds", type=Path, nargs="?", metavar="THRESHOLDS.toml",

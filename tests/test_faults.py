@@ -1,0 +1,256 @@
+"""The four fault effects: simulated as the spec says, and fitted (onset and size with 1σ).
+
+Outside truth: the spec's table and definitions (exact formulas, to the last
+bit where the simulator has no randomness), filterpy's Kalman filter for the
+bias tracker, scipy's bivariate normal for the up-crossing probability, and
+the χ² distribution for the block variance test.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from gyroarray.analysis import fault_fit as ff
+from gyroarray.errors import InputError
+from gyroarray.layout import Layout
+from gyroarray.effects import REGISTRY
+from gyroarray.sim.effects import simulate_readings
+from gyroarray.sim.protocol import Stage
+from gyroarray.sim.model import NoiseModel
+from gyroarray.units import deg_s_to_rad_s
+
+SPEC = Path(__file__).resolve().parents[2] / "shared" / "spec" / "effects.md"
+DT = 0.01
+CONE6 = Layout.conical(1, 6, math.acos(1 / math.sqrt(3)))
+
+
+def model(*entries: dict) -> NoiseModel:
+    return NoiseModel.from_toml({"effects": list(entries)})
+
+
+def run(m, omega, layout=CONE6, seed=0, **kw):
+    return simulate_readings(m, omega, layout, DT, np.random.default_rng(seed), **kw)
+
+
+def swing(n=3000):
+    t = np.arange(n) * DT
+    return t, deg_s_to_rad_s(50.0) * np.column_stack([np.sin(2 * np.pi * 0.3 * t),
+                                                       np.cos(2 * np.pi * 0.2 * t), np.sin(t)])
+
+
+# -- the registry matches the spec's faults table --------------------------------------
+
+def _spec_faults() -> dict:
+    """{name: [param, ...]} of the spec's "Faults" table (3 columns: name | params | output)."""
+    text = SPEC.read_text(encoding="utf-8")
+    section = text[text.index("### Faults"):]
+    rows = {}
+    for line in section.splitlines():
+        cells = [c.strip() for c in line.strip().strip("|").split("|")]
+        if len(cells) == 3 and cells[0].startswith("`fault_"):
+            rows[cells[0].strip("`")] = re.findall(r"`([a-z0-9_]+)`", cells[1])
+    return rows
+
+
+def test_the_four_faults_are_registered_with_the_spec_parameters():
+    spec = _spec_faults()
+    assert list(spec) == ["fault_step", "fault_drift", "fault_stuck", "fault_noise"]
+    for name, params in spec.items():
+        eff = REGISTRY[name]
+        assert eff.per_gyro and list(eff.param_names) == params, name
+    assert REGISTRY["fault_step"].param("size_deg_s").unit == "deg/s"
+    assert REGISTRY["fault_drift"].param("rate_deg_s2").unit == "deg/s²"
+    # step/drift/stuck act on the final output, after quantization and saturation
+    assert all(REGISTRY[f].stage > Stage.SATURATE for f in ("fault_step", "fault_drift", "fault_stuck"))
+    assert REGISTRY["fault_noise"].stage == Stage.SHAPE
+
+
+@pytest.mark.parametrize("entry", [
+    {"effect": "fault_step", "start_s": 1.0, "size_deg_s": 0.1},
+    {"effect": "fault_stuck", "start_s": 1.0},
+])
+def test_a_fault_needs_its_gyro(entry):
+    with pytest.raises(InputError, match="gyro"):
+        model(entry)
+
+
+def test_a_negative_noise_ratio_is_refused():
+    with pytest.raises(InputError, match="ratio"):
+        model({"effect": "fault_noise", "gyro": 1, "start_s": 1.0, "ratio": -1.0})
+
+
+# -- simulate: exact formulas --------------------------------------------------------
+
+def test_step_and_drift_add_to_the_saturated_output():
+    t, w = swing()
+    base = [{"effect": "saturation", "range_deg_s": 30.0}]
+    clean = run(model(*base), w)
+    y = run(model(*base, {"effect": "fault_step", "gyro": 2, "start_s": 10.0, "size_deg_s": 0.5},
+                  {"effect": "fault_drift", "gyro": 4, "start_s": 12.5, "rate_deg_s2": 0.02}), w)
+    on = t >= 10.0
+    np.testing.assert_array_equal(y[~on, 1], clean[~on, 1])
+    # after saturation: a clipped gyro reads range + size (the step is not clipped)
+    np.testing.assert_allclose(y[on, 1], clean[on, 1] + deg_s_to_rad_s(0.5), rtol=0, atol=1e-15)
+    assert np.max(y[:, 1]) > deg_s_to_rad_s(30.0) + deg_s_to_rad_s(0.5) - 1e-12
+    ramp = np.where(t >= 12.5, (t - 12.5) * deg_s_to_rad_s(0.02), 0.0)
+    np.testing.assert_allclose(y[:, 3], clean[:, 3] + ramp, rtol=0, atol=1e-15)
+    np.testing.assert_array_equal(y[:, [0, 2, 4, 5]], clean[:, [0, 2, 4, 5]])
+
+
+def test_stuck_repeats_the_last_quantized_value_forever():
+    t, w = swing()
+    base = [{"effect": "arw", "n_deg_rt_h": 0.1}, {"effect": "quantization", "q_deg": 1e-4}]
+    clean = run(model(*base), w, seed=3)
+    y = run(model(*base, {"effect": "fault_stuck", "gyro": 5, "start_s": 7.005}), w, seed=3)
+    i0 = int(np.searchsorted(t, 7.005))                       # first sample with t >= start
+    np.testing.assert_array_equal(y[:i0, 4], clean[:i0, 4])
+    assert np.all(y[i0:, 4] == clean[i0 - 1, 4])               # the quantized value, bit for bit
+    np.testing.assert_array_equal(y[:, :4], clean[:, :4])       # no other draw moved
+
+
+def test_stuck_before_the_first_sample_is_refused():
+    with pytest.raises(InputError, match="no value before"):
+        run(model({"effect": "fault_stuck", "gyro": 1, "start_s": 0.0}), np.zeros((10, 3)))
+
+
+def test_noise_fault_scales_the_arw_draw_only():
+    n = 2000
+    t = np.arange(n) * DT
+    arw = {"effect": "arw", "n_deg_rt_h": 0.2}
+    rrw = {"effect": "rrw", "k_deg_h_rt_h": 50.0}
+    burst = {"effect": "burst", "start_s": 5.0, "end_s": 12.0, "variance_ratio": 4.0}
+    fault = {"effect": "fault_noise", "gyro": 3, "start_s": 8.0, "ratio": 3.0}
+    white = run(model(arw, burst), np.zeros((n, 3)), seed=4)
+    y = run(model(arw, rrw, burst, fault), np.zeros((n, 3)), seed=4)
+    walk = run(model(rrw), np.zeros((n, 3)), seed=4)
+    gain = np.where(t >= 8.0, 3.0, 1.0)                        # on top of the burst's √4
+    np.testing.assert_allclose(y[:, 2], gain * white[:, 2] + walk[:, 2], rtol=0, atol=1e-15)
+    np.testing.assert_allclose(y[:, [0, 1, 3]], white[:, [0, 1, 3]] + walk[:, [0, 1, 3]],
+                               rtol=0, atol=1e-15)
+
+
+def test_a_fault_after_the_record_changes_nothing():
+    _, w = swing(500)
+    clean = run(model({"effect": "arw", "n_deg_rt_h": 0.1}), w, seed=1)
+    y = run(model({"effect": "arw", "n_deg_rt_h": 0.1},
+                  {"effect": "fault_stuck", "gyro": 1, "start_s": 99.0},
+                  {"effect": "fault_step", "gyro": 2, "start_s": 99.0, "size_deg_s": 1.0}), w, seed=1)
+    np.testing.assert_array_equal(y, clean)
+
+
+# -- the bias tracker and the calibration pieces ----------------------------------------
+
+def test_bias_tracker_innovations_match_filterpy():
+    from filterpy.kalman import KalmanFilter
+    rng = np.random.default_rng(2)
+    q, n = 0.05, 400
+    y = np.cumsum(rng.standard_normal(n) * math.sqrt(q)) + rng.standard_normal(n) + 30.0
+    eps = ff.rw_innovations(y, q)
+    kf = KalmanFilter(dim_x=1, dim_z=1)
+    kf.x = np.array([[y[0]]])
+    kf.P = np.array([[1.0]])                                   # started on the first sample
+    kf.F, kf.H, kf.R, kf.Q = (np.eye(1), np.eye(1), np.eye(1), np.array([[q]]))
+    ref = [0.0]
+    for k in range(1, n):
+        kf.predict()
+        kf.update(np.array([[y[k]]]))
+        ref.append(float(kf.y[0, 0]) / math.sqrt(float(kf.S[0, 0])))
+    # the closed-form gain vs filterpy's sequential Riccati: rounding only
+    np.testing.assert_allclose(eps, ref, rtol=0, atol=1e-9)
+    K, S = ff.steady_gain(q)
+    assert abs(kf.K[0, 0] - K) < 1e-12 and abs(kf.S[0, 0] - S) < 1e-12
+
+
+@pytest.mark.parametrize("r", [-0.5, 0.0, 0.6, 0.98])
+def test_upcrossing_probability_against_the_bivariate_normal(r):
+    u = 2.2                                                    # where scipy's cdf is accurate
+    mvn = stats.multivariate_normal(mean=[0, 0], cov=[[1, r], [r, 1]])
+    # P(|Y0| <= u, |Y1| > u) = P(|Y0| <= u) − P(|Y0| <= u, |Y1| <= u)
+    inner = mvn.cdf([u, u]) - mvn.cdf([-u, u]) - mvn.cdf([u, -u]) + mvn.cdf([-u, -u])
+    want = (1 - 2 * stats.norm.sf(u)) - inner
+    assert ff.upcrossing_prob(u, r) == pytest.approx(want, rel=1e-4, abs=1e-7)
+
+
+def test_block_variance_glr_pvalue_is_the_chi2_tail():
+    L, g = 64, 6.0
+    lo, hi = ff._glr_roots(g, L)
+    for lam in (lo, hi):                                       # both roots sit on the level
+        assert 0.5 * L * (lam - 1 - math.log(lam)) == pytest.approx(g, rel=1e-9)
+    want = stats.chi2.cdf(L * lo, L) + stats.chi2.sf(L * hi, L)
+    assert ff.chi2_glr_pvalue(g, L) == pytest.approx(want, rel=1e-12)
+    # and by simulation: 200 000 blocks, binomial 4σ
+    x = np.random.default_rng(0).chisquare(L, 200_000) / L
+    hits = np.mean(0.5 * L * (x - 1 - np.log(x)) > g)
+    sd = math.sqrt(want * (1 - want) / x.size)
+    assert abs(hits - want) < 4 * sd
+
+
+# -- the fit side: onset and size with 1σ, z under the null ---------------------------
+
+N_ARW = math.radians(0.1 / 60)            # 0.1 deg/√h [rad/√s]
+K_RRW = math.radians(600 / 3600 / 60)     # 600 deg/h/√h [rad/s/√s]
+R = N_ARW**2 / DT
+Q = K_RRW**2 * DT
+
+
+def _residual(seed, n=12000, fault=None):
+    rng = np.random.default_rng(seed)
+    t = np.arange(n) * DT
+    y = np.cumsum(rng.standard_normal(n) * math.sqrt(Q)) + rng.standard_normal(n) * math.sqrt(R) + 1e-3
+    if fault == "step":
+        y = y + (t >= 60.0) * deg_s_to_rad_s(0.03)
+    elif fault == "drift":
+        y = y + np.where(t >= 40.0, (t - 40.0) * deg_s_to_rad_s(0.004), 0.0)
+    elif fault == "noise":
+        white = rng.standard_normal(n) * math.sqrt(R)
+        y = y + np.where(t >= 70.0, 0.8 * white, 0.0)           # ratio √(1 + 0.8²) = 1.281
+    return t, y
+
+
+@pytest.mark.parametrize("kind,param,true,start", [
+    ("step", "size_deg_s", 0.03, 60.0),
+    ("drift", "rate_deg_s2", 0.004, 40.0),
+    ("noise", "ratio", math.sqrt(1 + 0.8**2), 70.0),
+])
+def test_fit_recovers_onset_and_size_within_their_sigma(kind, param, true, start):
+    pulls, onset_pulls = [], []
+    for seed in range(12):
+        t, y = _residual(100 + seed, fault=kind)
+        f = ff.fit_fault(kind, y, DT, R, Q, time_s=t)
+        assert f.z > 3.0, (seed, f)                            # clearly present
+        pulls.append((f.params[param] - true) / f.params_sigma[param])
+        onset_pulls.append((f.onset_s - start) / max(f.onset_sigma_s, DT))
+    pulls = np.array(pulls)
+    # 12 pulls of N(0, 1): mean within 3/√12 = 0.87, rms below 1.6 (χ²₁₂ 99.5 % is 28.3 -> 1.54)
+    assert abs(pulls.mean()) < 0.87 and math.sqrt(np.mean(pulls**2)) < 1.6, pulls
+    # onsets: the profile-likelihood half-width covers the truth at least half the time
+    assert np.mean(np.abs(onset_pulls) <= 1.5) >= 0.5, onset_pulls
+
+
+def test_stuck_fit_from_the_output_is_exact():
+    t, y = _residual(7)
+    out = y.copy()
+    out[5000:] = out[4999]
+    f = ff.fit_fault("stuck", y, DT, R, Q, time_s=t, output_rad_s=out)
+    assert f.onset_s == t[5000] and f.z > 8
+    assert ff.fit_fault("stuck", y, DT, R, Q, time_s=t, output_rad_s=y).z < 3
+
+
+def test_z_is_standard_normal_without_a_fault():
+    # 48 clean residuals x 4 kinds; the Monte Carlo null is cached per shape, so cheap
+    zs = {k: [] for k in ff.KINDS}
+    for seed in range(48):
+        t, y = _residual(1000 + seed, n=6000)
+        for k in ff.KINDS:
+            zs[k].append(ff.fit_fault(k, y, DT, R, Q, time_s=t).z)
+    for k, v in zs.items():
+        v = np.array(v)
+        # mean of 48 N(0, 1) within 3/√48 = 0.43 (+ 0.15 for the 200-draw null);
+        # sd within [0.65, 1.35] (χ²₄₇ 0.5–99.5 % is [0.70, 1.32] in sd, plus the null's)
+        assert abs(v.mean()) < 0.58 and 0.65 < v.std() < 1.35, (k, v.mean(), v.std())
