@@ -7,16 +7,19 @@ d, against the noise's robust standard deviation σ̂ = 1.4826·MAD(d). A spike 
 sample's d and no median, so it stands out; a change of the noise level (a
 burst) moves the MAD of a whole stretch and does not.
 
-* σ̂ is local: the MAD of d in blocks of 2000 samples, so a noise level that
-  changes over the record (a burst) is not read as a crowd of spikes.
+* σ̂ is local: 1.4826 × the running median of |d| over 2001 samples, so a
+  noise level that changes over the record (a burst) is not read as a crowd
+  of spikes; samples with d exactly 0 (a clipped stretch) are left out.
 * Detection (which samples): |d| > c·σ̂ with c the Bonferroni threshold of a
   1 % family-wise false alarm over the record's samples (a clean Gaussian
   record shows a spike with probability 1 %), and at least 6: real noise has
   heavier tails than a Gaussian (the Xsens MTi-G record: 19 000 samples
   beyond 4σ̂, 2 000 beyond 6σ̂, its source's ~2 000 spikes).
-* Significance (is there an excess?): the count of |d| > 4.5σ̂ against its
-  Poisson expectation under Gaussian noise, λ₀ = n·P(|d/σ| > 4.5) with d's
-  own variance (a sample minus a median of five), as a normal score.
+* Significance (is there an excess?): on the second difference
+  d₂ = x_i − (x_{i−1} + x_{i+1})/2, linear and so Gaussian for any Gaussian
+  noise however coloured (the median's d is not, on low-passed noise), the
+  clusters of |d₂| > 4.5σ̂₂ against the Poisson expectation of the
+  exceedances, λ₀ = n·P(|Z| > 4.5), as a normal score.
 * Size: the detected values are the spikes' tails beyond c·σ̂; the rms spike
   size s of spikes ~ N(0, s²) (the spec's ``size_deg_s``) is the maximum
   likelihood of that two-sided truncated normal, and the rate counts the
@@ -29,7 +32,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import optimize, special, stats
+from scipy import ndimage, optimize, special, stats
 
 from gyroarray.analysis.effect_fit import z_from_log_p
 
@@ -50,8 +53,9 @@ def _neighbour_median(x: np.ndarray) -> np.ndarray:
 COUNT_THRESHOLD = 4.5
 #: Lowest detection threshold [σ̂].
 MIN_THRESHOLD = 6.0
-#: Samples per block of the local noise level.
-LOCAL_BLOCK = 2000
+#: Samples in the running window of the local noise level (its σ̂ to ±3 %: the 4.5σ tail
+#: probability moves by < 20 % with it).
+LOCAL_WINDOW = 2001
 
 
 @dataclass(frozen=True)
@@ -69,9 +73,9 @@ class Spikes:
     threshold : float
         Detection threshold c [σ̂].
     count_excess : int
-        Samples beyond :data:`COUNT_THRESHOLD`·σ̂.
+        Clusters of the second difference beyond :data:`COUNT_THRESHOLD`·σ̂₂.
     expected : float
-        Their Poisson expectation without spikes.
+        The Poisson expectation of the exceedances without spikes.
     z : float
         Normal score of the count's excess (≈ N(0, 1) without spikes).
     size : float
@@ -105,17 +109,47 @@ def _poisson_z(k: int, lam: float) -> float:
     return z_from_log_p(min(log_p, math.log1p(-1e-16)))
 
 
-def _local_sigma(d: np.ndarray, sigma: float, block: int = LOCAL_BLOCK) -> np.ndarray:
-    """The robust σ of d in blocks of ``block`` samples, per sample (a noise level that changes over
-    the record, a burst, is not a crowd of spikes; isolated spikes do not move a block's MAD)."""
+def _local_sigma(d: np.ndarray, sigma: float, window: int = LOCAL_WINDOW) -> np.ndarray:
+    """The robust σ of d per sample: 1.4826 × the running median of |d| over ``window`` samples
+    centred on it (a noise level that changes over the record, a burst, is not a crowd of spikes;
+    isolated spikes do not move a median). Samples whose d is exactly 0 carry no noise (a clipped
+    stretch, a dead gyro) and are left out; a window with nothing else falls back to ``sigma``."""
     n = d.size
-    nb = n // block
-    if nb < 2:
+    if n < 2 * window:
         return np.full(n, sigma)
-    mads = 1.4826 * np.median(np.abs(d[:nb * block].reshape(nb, block)), axis=1)
-    mads = np.where(mads > 0, mads, sigma)
-    per = np.repeat(mads, block)
-    return np.concatenate([per, np.full(n - per.size, mads[-1])])
+    a = np.abs(d)
+    zero = a == 0
+    if zero.any():
+        # a zero sorts below every noise sample: push half of them above, so the median is the
+        # median of the non-zero samples where they are many, and 0 (then ``sigma``) where not
+        a = np.where(zero, np.where(np.arange(n) % 2 == 0, 0.0, np.inf), a)
+    med = 1.4826 * ndimage.median_filter(a, size=window, mode="mirror")
+    return np.where(np.isfinite(med) & (med > 0), med, sigma)
+
+
+def _count_test(x: np.ndarray, sigma: float) -> tuple[int, float, float]:
+    """(clusters beyond :data:`COUNT_THRESHOLD`, their expectation without spikes, z).
+
+    The test runs on the second difference d₂ = x_i − (x_{i−1} + x_{i+1})/2: linear in x, so its
+    marginal is Gaussian for any Gaussian noise however coloured (a running median's d is not:
+    on low-passed noise it has heavy tails and the count would fire without a spike).
+    Exceedances within two samples of each other count once (a spike moves d₂ at i and i ± 1;
+    correlated noise clusters its exceedances): the cluster count is at most the exceedance count
+    whose expectation under Gaussian noise is n·P(|Z| > 4.5), so z errs on the quiet side.
+    """
+    n = x.size
+    if n < 3:
+        return 0, 0.0, 0.0
+    d2 = np.empty(n)
+    d2[1:-1] = x[1:-1] - 0.5 * (x[:-2] + x[2:])
+    d2[0], d2[-1] = d2[1], d2[-2]
+    s2 = 1.4826 * float(np.median(np.abs(d2 - np.median(d2))))
+    if not s2 > 0:
+        return 0, 0.0, 0.0
+    hit = np.flatnonzero(np.abs(d2) > COUNT_THRESHOLD * _local_sigma(d2, s2))
+    k = int(hit.size and 1 + np.count_nonzero(np.diff(hit) > 2))
+    lam = n * float(special.erfc(COUNT_THRESHOLD / math.sqrt(2.0)))
+    return k, lam, _poisson_z(k, lam)
 
 
 def find_spikes(x, alpha: float = 0.01) -> Spikes:
@@ -133,10 +167,7 @@ def find_spikes(x, alpha: float = 0.01) -> Spikes:
                       math.nan, 0.0, kurt)
     c = max(float(-special.ndtri(0.5 * alpha / max(n, 1))), MIN_THRESHOLD)   # Bonferroni, two-sided
     idx = np.flatnonzero(np.abs(d) > c * local)
-    # count test: the tail of d/σ̂ beyond 4.5 for Gaussian noise (d's own spread: σ̂ estimates it)
-    k = int(np.sum(np.abs(d) > COUNT_THRESHOLD * local))
-    lam = n * float(special.erfc(COUNT_THRESHOLD / math.sqrt(2.0)))
-    z = _poisson_z(k, lam)
+    k, lam, z = _count_test(x, sigma)
     size, s_size, rate = math.nan, math.nan, 0.0
     if idx.size:
         v = d[idx]

@@ -39,7 +39,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import optimize, signal, special
+from scipy import ndimage, optimize, signal, special, stats
 
 from gyroarray.sim.sensor import bandwidth_response, bandwidth_warped_frequency
 
@@ -145,11 +145,39 @@ def _linear_ml(p: np.ndarray, cols: np.ndarray, nu: float, iters: int = 8) -> tu
     return c / scale, _loglik(p, s, nu)
 
 
+def _line_free(p: np.ndarray, nu: float, alpha: float = 0.01) -> np.ndarray:
+    """Mask of the Welch bins free of spectral lines.
+
+    A line (``sinusoid``: a 19.6 Hz tone on the ADIS16405's gyro 3) is a narrow peak that the
+    broad models read as a roll-off or a hump. A bin is a line's when it exceeds the median of the
+    15 bins around it (a monotone or smooth spectrum's median is its own level; a line moves no
+    median) by the Bonferroni quantile of S·χ²_ν/ν over the bins; it and 2 bins on each side (the
+    Hann window's leakage) are left out. The lowest 8 bins, where the random walk's 1/f² is steep
+    against the window, are kept.
+    """
+    m = p.size
+    keep = np.ones(m, bool)
+    if m < 32:
+        return keep
+    med = ndimage.median_filter(p, size=15, mode="mirror")
+    thr = float(stats.chi2.ppf(1.0 - alpha / m, nu) / nu)
+    peak = p > thr * med
+    peak[:8] = False
+    if peak.any():
+        keep = ~ndimage.binary_dilation(peak, iterations=2)
+    return keep
+
+
 def fit_psd(x, dt_s: float) -> PsdFit:
-    """Fit the three spectral models to the residual ``x`` (n,) [rad/s] (module docstring)."""
+    """Fit the three spectral models to the residual ``x`` (n,) [rad/s] (module docstring).
+
+    Bins under spectral lines are left out first (:func:`_line_free`).
+    """
     x = np.asarray(x, dtype=float)
     dt = float(dt_s)
     f, p, nu = _welch(x - x.mean(), dt)
+    keep = _line_free(p, nu)
+    f, p = f[keep], p[keep]
     base = np.column_stack([np.ones_like(f), 1.0 / f, 1.0 / f ** 2])
     c0, l0 = _linear_ml(p, base, nu)
     nyq = 0.5 / dt

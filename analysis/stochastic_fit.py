@@ -1206,6 +1206,24 @@ def _profile_boundary(cu: np.ndarray, r: int, lo: int, hi: int, other: int, movi
     return best, mean, float(math.sqrt(max(w @ (cand - mean) ** 2, 0.0)))
 
 
+def _within_block_kurtosis(g: np.ndarray, edges: np.ndarray) -> float:
+    """Excess kurtosis of the whitened Haar differences within the blocks of the grid, ≥ 0.
+
+    For m iid normals, E[m Σg⁴/(Σg²)²] = 3m/(m + 2) (g/|g| is uniform on the sphere), so the
+    mean over blocks and columns of m Σg⁴/(Σg²)² (m + 2)/m − 3 is 0 for Gaussian noise at any
+    block length; a change of variance between blocks does not move it.
+    """
+    k = []
+    for a, b in zip(edges[:-1], edges[1:]):
+        blk = g[a:b]
+        m = blk.shape[0]
+        s2 = np.sum(blk * blk, axis=0)
+        ok = s2 > 0
+        if m >= 4 and ok.any():
+            k.append(m * np.sum(blk[:, ok] ** 4, axis=0) / s2[ok] ** 2 * (m + 2) / m - 3.0)
+    return max(float(np.mean(np.concatenate(k))), 0.0) if k else 0.0
+
+
 def fit_burst(E, time_s, dt_s: float) -> EffectFit:
     """Window of raised (or lowered) ARW variance common to all gyros.
 
@@ -1275,6 +1293,11 @@ def fit_burst(E, time_s, dt_s: float) -> EffectFit:
     ia, ib = ia[sel], ib[sel]
     lr = _segment_lr(cu[edges[ib]] - cu[edges[ia]], (edges[ib] - edges[ia]) * float(r),
                      cu[-1], n2 * float(r))
+    # heavy tails (real noise): var(g²) = 2 + κ, not 2, so the Gaussian LR is a quasi-likelihood
+    # ratio that (2 + κ)/2 inflates; κ within blocks, so that a burst's own change of level
+    # (a scale mixture across blocks) does not count as a tail
+    heavy = 2.0 / (2.0 + _within_block_kurtosis(g, edges))
+    lr = lr * heavy
     best = int(np.argmax(lr))
     lr_grid = float(lr[best])
     z = z_from_log_p(_burst_log_p(lr_grid, blocks))
@@ -1291,8 +1314,8 @@ def fit_burst(E, time_s, dt_s: float) -> EffectFit:
     d_out = (n2 - (i1 - i0)) * float(r)
     u_in = cu[i1] - cu[i0]
     ratio = float((u_in / d_in) / ((cu[-1] - u_in) / d_out))
-    s_ratio = float(ratio * math.sqrt(2.0 / d_in + 2.0 / d_out))
-    lr_final = float(_segment_lr(np.array([u_in]), np.array([d_in]), cu[-1], n2 * float(r))[0])
+    s_ratio = float(ratio * math.sqrt((2.0 / d_in + 2.0 / d_out) / heavy))
+    lr_final = float(_segment_lr(np.array([u_in]), np.array([d_in]), cu[-1], n2 * float(r))[0]) * heavy
 
     # times: Haar sample j covers samples 2j and 2j + 1
     start_s = float(t[0] + 2 * i0 * dt)
@@ -1305,7 +1328,7 @@ def fit_burst(E, time_s, dt_s: float) -> EffectFit:
     hi_in = np.mean(h[i0:i1] ** 2, axis=0)
     hi_out = (np.sum(h[:i0] ** 2, axis=0) + np.sum(h[i1:] ** 2, axis=0)) / max(n2 - (i1 - i0), 1)
     per_gyro = hi_in / hi_out
-    per_sd = per_gyro * math.sqrt(2.0 / max(i1 - i0, 1) + 2.0 / max(n2 - (i1 - i0), 1))
+    per_sd = per_gyro * math.sqrt((2.0 / max(i1 - i0, 1) + 2.0 / max(n2 - (i1 - i0), 1)) / heavy)
     per_z = (per_gyro - 1.0) / per_sd
     davar_check = _davar_check(X, dt, t, i0, i1, int(np.argmax(np.abs(per_z))))
 

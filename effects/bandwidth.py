@@ -126,12 +126,29 @@ class Bandwidth(RegressionEffect):
         # when the motion sees the filter clearly, it alone gives the cut-off
         use_motion = mgrid is not None and max(mgrid[1].max(), mgrid[2].max()) > 25.0
 
-        def total(fc, order):
-            if use_motion:
-                return motion(fc, order)
-            return max(psd.filter_lr(fc, order, ctx.dt), 0.0)
+        if use_motion:
+            fc, order, s_fc = self._motion_fit(motion, mgrid, fcs)
+        else:          # the spectrum's own fit: its better family (continuous or digital), refined
+            fc, order, s_fc = psd.filter_cutoff_hz, psd.filter_order, psd.filter_cutoff_sigma_hz
+            if not fc < 0.95 * nyq:      # the continuous family scans past Nyquist: no roll-off here
+                fc, s_fc = 0.95 * nyq, math.nan
+        lr_motion = 0.0 if motion is None else max(motion(fc, order), 0.0)
+        lr = max(psd.lr_filter, 0.0) + lr_motion
+        z = filter_z(lr, n_tests=3.0 if motion is None else 6.0)
+        sigma = {"cutoff_hz": float(s_fc)} if math.isfinite(s_fc) else {}
+        where = "the noise spectrum" + (" and the motion" if lr_motion > 0 else "")
+        if z > 3:
+            ev = (f"gyro {g}: {where} show{'' if lr_motion > 0 else 's'} a low-pass of order {order} at "
+                  f"{fc:.4g}" + (f" ± {s_fc:.2g}" if math.isfinite(s_fc) else "") + " Hz (−3 dB)")
+        else:
+            ev = f"gyro {g}: no low-pass seen in {where} (best {fc:.3g} Hz, order {order}, z = {z:.1f})"
+        return EffectFit(self.name, g, {"cutoff_hz": float(fc), "order": int(order)}, sigma, z=float(z),
+                         evidence=ev, extra={"lr_psd": float(psd.lr_filter), "lr_motion": float(lr_motion),
+                                             "lr_gm_psd": float(psd.lr_gm), "family": psd.filter_family})
 
-        grid = mgrid if use_motion else {o: np.array([total(fc, o) for fc in fcs]) for o in (1, 2)}
+    @staticmethod
+    def _motion_fit(total, grid, fcs) -> tuple[float, int, float]:
+        """(cut-off [Hz], order, 1σ [Hz]) from the motion's likelihood on the grid, refined."""
         order = max((1, 2), key=lambda o: grid[o].max())
         i = int(np.argmax(grid[order]))
         fc, best = float(fcs[i]), float(grid[order][i])
@@ -146,19 +163,7 @@ class Bandwidth(RegressionEffect):
             d2 = (total(fc * math.exp(h), order) - 2 * best + total(fc * math.exp(-h), order)) / (2 * h * h)
             if d2 < 0:
                 s_fc = fc * math.sqrt(-1.0 / d2)
-        lr_motion = 0.0 if motion is None else max(motion(fc, order), 0.0)
-        lr = max(psd.lr_filter, 0.0) + lr_motion
-        z = filter_z(lr, n_tests=3.0 if motion is None else 6.0)
-        sigma = {"cutoff_hz": float(s_fc)} if math.isfinite(s_fc) else {}
-        where = "the noise spectrum" + (" and the motion" if lr_motion > 0 else "")
-        if z > 3:
-            ev = (f"gyro {g}: {where} show a low-pass of order {order} at {fc:.4g}"
-                  + (f" ± {s_fc:.2g}" if math.isfinite(s_fc) else "") + " Hz (−3 dB)")
-        else:
-            ev = f"gyro {g}: no low-pass seen in {where} (best {fc:.3g} Hz, order {order}, z = {z:.1f})"
-        return EffectFit(self.name, g, {"cutoff_hz": float(fc), "order": int(order)}, sigma, z=float(z),
-                         evidence=ev, extra={"lr_psd": float(psd.lr_filter), "lr_motion": float(lr_motion),
-                                             "lr_gm_psd": float(psd.lr_gm), "family": psd.filter_family})
+        return fc, order, s_fc
 
     def test(self, ctx, gyro):
         return self.fit(ctx, gyro, ctx.E)

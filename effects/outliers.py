@@ -82,11 +82,11 @@ class Outliers(Effect):
                 sigma["size_deg_s"] = float(rad_s_to_deg_s(sp.size_sigma))
         if sp.z > 3:
             ev = (f"gyro {g} has {sp.index.size} isolated spikes (rms {size:.3g} deg/s, {rate:.3g} per hour "
-                  f"counting those below the {sp.threshold:.1f}σ threshold; {sp.count_excess} samples beyond "
-                  f"{4.5:g}σ against {sp.expected:.2g} expected; first differences' excess kurtosis "
+                  f"counting those below the {sp.threshold:.1f}σ threshold; {sp.count_excess} second-difference "
+                  f"clusters beyond {4.5:g}σ against {sp.expected:.2g} expected; first differences' excess kurtosis "
                   f"{sp.kurtosis:.3g})")
         else:
-            ev = (f"gyro {g} shows no spikes ({sp.count_excess} samples beyond 4.5σ against "
+            ev = (f"gyro {g} shows no spikes ({sp.count_excess} second-difference clusters beyond 4.5σ against "
                   f"{sp.expected:.2g} expected, z = {sp.z:.1f})")
         return EffectFit(self.name, g, {"rate_per_h": float(rate), "size_deg_s": size}, sigma, z=float(sp.z),
                          evidence=ev, extra={"n_spikes": int(sp.index.size), "kurtosis": sp.kurtosis})

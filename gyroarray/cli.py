@@ -202,6 +202,8 @@ def _single_n(text: str) -> int:
     except ValueError:
         raise InputError(f"--n must be one whole number here (a list like 4,5,6,8 goes with "
                          f"--recommend), got {text!r}") from None
+    if not 3 <= n <= MAX_DESIGN_GYROS:
+        raise InputError(f"--n must be from 3 to {MAX_DESIGN_GYROS}, got {n}")
     return n
 
 
