@@ -42,8 +42,9 @@ paper: demo
 	$(VENV)/bin/gyroarray report reports/demo/paper_reproduction --design reports/demo/design.json --out reports/demo/report.html --md reports/demo/report.md --force
 	@tail -n 3 reports/demo/design.txt
 
+# the long statistical cases (marked slow) run in make score
 test: $(STAMP)
-	$(PY) -m pytest -q -n $(WORKERS)
+	OPENBLAS_NUM_THREADS=1 $(PY) -m pytest -q -n $(WORKERS) -m "not slow"
 	$(VENV)/bin/gyroarray check
 
 # long fuzzing of the CLI with generated hostile inputs (issue 17; make test runs 25 examples)
@@ -54,10 +55,12 @@ fuzz: $(STAMP)
 bench: $(STAMP)
 	OPENBLAS_NUM_THREADS=1 $(PY) benchmarks/run.py
 
-# how often diagnose names a hidden effect right (not a speed benchmark; ~4 min), and the
+# the slow test cases (every practice-shaped effect and practice file, ~10 min), how often
+# diagnose names a hidden effect right (not a speed benchmark; ~4 min), and the
 # analytic predictor against 30 simulated runs of every quick-sweep design (~3 min)
 score: $(STAMP)
 	mkdir -p bench_out
+	OPENBLAS_NUM_THREADS=1 $(PY) -m pytest -q -n $(WORKERS) -m slow
 	OPENBLAS_NUM_THREADS=1 $(PY) benchmarks/diagnosis_score.py --seeds 2 --json bench_out/diagnosis_score.json
 	OPENBLAS_NUM_THREADS=1 $(PY) benchmarks/predictor_check.py --replicates 30 --json bench_out/predictor_check.json
 

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import contextlib
+import io
 import subprocess
 import sys
 
@@ -20,11 +22,30 @@ def _registry_as_shipped():
 
 
 @pytest.fixture
-def cli():
-    """Run ``python -m gyroarray.cli ARGS...`` as a user would; ``check`` asserts exit 0 (stderr shown)."""
+def cli(request):
+    """Run ``gyroarray ARGS...`` as a user would, in this process (``gyroarray.cli.main`` with
+    stdout/stderr captured: the interpreter's 2 s start-up and scipy's import are paid once per
+    worker, not per call; tests/test_cli.py runs the installed entry point in a subprocess);
+    ``check`` asserts exit 0 (stderr shown). Plugin tests keep a subprocess per call: a plugin
+    loaded once must not be seen by the next call."""
+    fresh = request.module.__name__.endswith("test_plugins")
+
     def run(*args, check: bool = True, timeout: float = 900.0) -> subprocess.CompletedProcess:
-        p = subprocess.run([sys.executable, "-m", "gyroarray.cli", *map(str, args)],
-                           capture_output=True, text=True, timeout=timeout)
+        from gyroarray.cli import main
+        argv = [str(a) for a in args]
+        if fresh:
+            p = subprocess.run([sys.executable, "-m", "gyroarray.cli", *argv], capture_output=True,
+                               text=True, timeout=timeout)
+            assert not check or p.returncode == 0, p.stderr
+            return p
+        out, err = io.StringIO(), io.StringIO()
+        with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+            try:
+                code = main(argv)
+            except SystemExit as stop:             # argparse's own refusals and --help
+                code = stop.code if isinstance(stop.code, int) else (0 if stop.code is None else 2)
+        p = subprocess.CompletedProcess([sys.executable, "-m", "gyroarray.cli", *argv], code or 0,
+                                        out.getvalue(), err.getvalue())
         if check:
             assert p.returncode == 0, p.stderr
         return p

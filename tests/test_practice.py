@@ -24,7 +24,12 @@ ANSWERS = json.loads((PRACTICE / "answers.json").read_text()) if PRACTICE.exists
 pytestmark = pytest.mark.skipif(not ANSWERS, reason="shared/measurements/practice not present")
 
 
-@pytest.mark.parametrize("name", sorted(ANSWERS))
+#: make test diagnoses these; the others run in make score (`pytest -m slow`)
+PRACTICE_FAST = {"p1_scale_factor", "p4_burst"}
+
+
+@pytest.mark.parametrize("name", [pytest.param(n, marks=[] if n in PRACTICE_FAST else [pytest.mark.slow])
+                                  for n in sorted(ANSWERS)])
 def test_practice_file_is_diagnosed_and_fitted(name, cli):
     truth = ANSWERS[name][0]
     meas = PRACTICE / f"{name}.csv.gz"

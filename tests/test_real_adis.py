@@ -66,6 +66,7 @@ def test_adis_roll_off_agrees_with_a_plain_welch_ratio():
         assert h2(hi) / h2(lo) == pytest.approx(measured, rel=0.03), (g + 1, fc, n, measured)
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(not ADIS.exists(), reason="shared/measurements/real not present")
 def test_adis_needs_no_bias_instability_once_the_filter_hump_is_fitted():
     from gyroarray.compare import ModelComparison

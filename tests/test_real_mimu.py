@@ -32,6 +32,7 @@ def test_mimu_motion_is_cut_out_and_the_still_parts_diagnosed(cli):
     assert not corr["significant"] and abs(corr["score"]) < 3
 
 
+@pytest.mark.slow
 def test_mimu_axes_are_heterogeneous():
     from gyroarray.compare import ModelComparison
     from gyroarray.measurement import read_measurement

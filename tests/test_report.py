@@ -174,6 +174,7 @@ def test_report_files_are_self_contained(sweeps, tmp_path):
     assert res["best"][0]["estimator"] in ("kf_array", "gls")
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(find_chromium() is None, reason="chromium not installed: apt-get install chromium")
 def test_report_renders_in_chromium(sweeps, tmp_path):
     res = write_report([sweeps / "design_out", sweeps / "paper_out"], tmp_path / "r.html",
