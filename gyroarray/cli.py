@@ -656,11 +656,39 @@ def cmd_run(args) -> tuple[dict, str]:
         lines.append(f"{row['estimator']:<10} {row['axis']:<4} "
                      + " ".join(f"{cell(row.get(k), f):>15}" for k, _, f in _RUN_COLUMNS))
     lines += [f"note: {n}" for n in result.notes]
+    lines += _sensor_lines(result)
     sg = out["single_gyro"]
     lines.append(f"single gyro (mean of {len(sg['gyros'])}): 1sigma {sg['sigma_1_deg_s']:.4g} deg/s, "
                  f"ARW {sg['arw_deg_rt_h']:.4g} deg/rt(h), BI {sg['bi_deg_h']:.4g} deg/h, "
                  f"RRW {sg['rrw_deg_h_rt_h']:.4g} deg/h/rt(h)")
     return out, "\n".join(lines)
+
+
+def _sensor_lines(result) -> list[str]:
+    """The sensors' share of the swing response and the g-sensitivity's rate error, in words."""
+    lines = []
+    t, sg = result.table, result.single_gyro
+    if "sensor_amplitude_ratio" in sg and sg["sensor_amplitude_ratio"].notna().any():
+        sw = t[t.sensor_amplitude_ratio.notna()]
+        r = sw.iloc[0]
+        lines.append(f"swing {result.swing_hz:g} Hz: the gyros' own response (measured on the raw "
+                     f"gyros) {r.sensor_amplitude_ratio:.5f}, lag {r.sensor_phase_deg:.3g} deg; "
+                     "each estimator's attenuation = its own share x the sensors':")
+        for row in sw.itertuples():
+            lines.append(f"  {row.estimator:<10} {row.axis}: total {row.attenuation:.5f} "
+                         f"({row.phase_deg:.3g} deg) = estimator {row.estimator_amplitude_ratio:.5f} "
+                         f"({row.estimator_phase_deg:.3g} deg) x sensor {row.sensor_amplitude_ratio:.5f} "
+                         f"({row.sensor_phase_deg:.3g} deg)")
+    if "g_sensitivity_rms_deg_s" in sg:
+        per = ", ".join(f"{v:.4g}" for v in sg["g_sensitivity_rms_deg_s"])
+        lines.append(f"g-sensitivity rate error on this motion (RMS over the scored window, deg/s): "
+                     f"per gyro {per}")
+        for name, grp in t.groupby("estimator", sort=False):
+            v = grp.g_sensitivity_rms_deg_s.tolist()
+            if all(x is not None and x == x for x in v):
+                lines.append(f"  {name:<10} fused (DC gain x per-gyro) x/y/z: "
+                             + " / ".join(f"{x:.4g}" for x in v))
+    return lines
 
 
 _REP_COLUMNS = (("sigma_1_deg_s", "1sigma[deg/s]"), ("rms_deg_s", "RMS[deg/s]"),
