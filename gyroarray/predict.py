@@ -892,7 +892,10 @@ class ChannelResponse:
     per sample (``white``), unit random-walk increment variance (``walk``),
     unit flicker coefficient B² (``flicker``) and unit Gauss–Markov variance
     (``gauss_markov``); ``motion`` the same three for the deterministic rate
-    error of each body axis' motion (None: at rest), and ``dc_gain``.
+    error of each body axis' motion (None: at rest), and ``dc_gain``. With a
+    sensor filter everything is of the cascade (sensor, then channel filter);
+    ``amplitude_ratio``/``phase_deg`` are the total at the swing frequency and
+    the ``estimator_*``/``sensor_*`` fields its two factors.
     """
 
     white: tuple
@@ -903,11 +906,16 @@ class ChannelResponse:
     dc_gain: float
     amplitude_ratio: float | None
     phase_deg: float | None
+    estimator_amplitude_ratio: float | None = None
+    estimator_phase_deg: float | None = None
+    sensor_amplitude_ratio: float | None = None
+    sensor_phase_deg: float | None = None
 
 
 def channel_response(sys, dt_s: float, n: int, k0: int, *, bi: bool = False,
                      gm_tau_s: float | None = None, motion: np.ndarray | None = None,
-                     swing_hz: float | None = None) -> ChannelResponse:
+                     swing_hz: float | None = None,
+                     sensor: SensorBandwidth | None = None) -> ChannelResponse:
     """Unit responses of a single-input channel filter (see :class:`ChannelResponse`).
 
     Parameters
@@ -925,7 +933,14 @@ def channel_response(sys, dt_s: float, n: int, k0: int, *, bi: bool = False,
         The body rate per axis [rad/s] (each axis through this channel).
     swing_hz : float, optional
         Frequency of the amplitude ratio and phase [Hz].
+    sensor : SensorBandwidth, optional
+        The gyros' own filter (one, as every gyro is alike), cascaded before the
+        channel filter: a per-sample combination of alike filtered gyros is the
+        filtered combination.
     """
+    est_sys = sys
+    sys = cascade(sys, sensor)
+
     def tri(m: Moments):
         return (float(m.ms_window[0, 0]), float(m.sum_window[0, 0]), float(m.sum_full[0, 0]))
     one, zero = np.ones((1, 1)), np.zeros((1, 1))
@@ -957,12 +972,16 @@ def channel_response(sys, dt_s: float, n: int, k0: int, *, bi: bool = False,
             est += cs[0, i] * y
         e = np.real(est) - w
         mot = (np.mean(e[k0:] ** 2, axis=0), np.sum(e[k0:], axis=0), np.sum(e, axis=0))
-    amp = ph = None
+    split = {"amplitude_ratio": None, "phase_deg": None}
     if swing_hz is not None:
-        r = complex(sys.response(2.0 * np.pi * swing_hz * dt_s)[0, 0, 0])
-        amp, ph = abs(r), float(-np.degrees(np.angle(r)))
+        te = complex(est_sys.response(2.0 * np.pi * swing_hz * dt_s)[0, 0, 0])
+        fs = 1.0 + 0j if sensor is None else complex(sensor.response(swing_hz)[0])
+        split = {}
+        for key, z in (("", te * fs), ("estimator_", te), ("sensor_", fs)):
+            split[f"{key}amplitude_ratio"] = float(abs(z))
+            split[f"{key}phase_deg"] = float(-np.degrees(np.angle(z)))
     return ChannelResponse(white=white, walk=walk, flicker=flick, gauss_markov=gmr, motion=mot,
-                           dc_gain=float(sys.dc_gain()[0, 0]), amplitude_ratio=amp, phase_deg=ph)
+                           dc_gain=float(sys.dc_gain()[0, 0]), **split)
 
 
 def replace_noise(noise: NoiseSources, **kw) -> NoiseSources:
