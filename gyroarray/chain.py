@@ -461,7 +461,9 @@ class ReplicateResult:
                         mc = {"value": s["mean"], "ci_low": s["ci_low"], "ci_high": s["ci_high"], "n": s["n"]}
                     if mc["value"] is None:
                         continue
-                    ok = (None if mc["ci_low"] is None else bool(mc["ci_low"] <= p <= mc["ci_high"]))
+                    tol = 1e-9 * max(1.0, abs(p))       # rounding (a per-sample estimator passes 1)
+                    ok = (None if mc["ci_low"] is None
+                          else bool(mc["ci_low"] - tol <= p <= mc["ci_high"] + tol))
                     out.setdefault(name, {}).setdefault(axis, {})[key] = {
                         "predicted": p, "monte_carlo": {**mc, "pooled": how}, "agrees": ok}
         return out
