@@ -23,18 +23,18 @@ import pytest
 from scipy import signal
 
 from gyroarray import units
-from gyroarray.chain import mean_ci, replicate_rng, rms_ci, run_replicates, run_scenario
+from gyroarray.chain import mean_ci, rms_ci, run_replicates, run_scenario
 from gyroarray.cli import main
 from gyroarray.constants import G0_M_S2
 from gyroarray.estimators import get_estimator
 from gyroarray.layout import Layout
 from gyroarray.predict import (Swing, cascade, g_sensitivity_error, predict, sensor_bandwidth,
-                               settle_start, swing_truth)
+                               swing_truth)
 from gyroarray.recommend import DesignSpace, GyroNoise, recommend
-from gyroarray.sim.effects import simulate_readings
 from gyroarray.sim.model import ModelEntry, NoiseModel
 from gyroarray.sim.scenario import load_scenario
 from gyroarray.sim.sensor import bandwidth_filter
+from replicates import predictions_outside
 
 DT = 0.01
 TETRA = Layout.conical(1, 4, math.radians(54.7356))
@@ -103,33 +103,13 @@ def test_predictor_inside_monte_carlo_with_a_sensor_filter():
     95 % (Šidák over the 36 comparisons)."""
     model = _model(3.0, 2)
     sw = Swing(units.deg_s_to_rad_s(10.0), 0.7)
-    n, reps = 1500, 40
-    t = np.arange(n) * DT
+    n = 1500
     truth = swing_truth(sw, n, DT)
-    k0 = settle_start(n, DT, 2.0)
     ests = {nm: get_estimator(nm)(**kw).fit(TETRA, model, DT)
             for nm, kw in (("kf_array", {"bandwidth_hz": 2.0}), ("gls", {"lowpass_hz": 8.0}), ("naive", {}))}
     preds = {nm: predict(e, model, n_samples=n, swing=sw) for nm, e in ests.items()}
-    runs = {nm: [] for nm in ests}
-    for r in range(reps):
-        z = simulate_readings(model, truth, TETRA, DT, replicate_rng(11, r), time_s=t)
-        for nm, e in ests.items():
-            err = e.estimate(z) - truth
-            w = err[k0:]
-            runs[nm].append(np.stack([np.sqrt(np.mean(w ** 2, 0)), np.std(w, 0, ddof=1),
-                                      np.mean(w, 0), DT * err.sum(0)]))
-    keys = ("rms_deg_s", "std_deg_s", "mean_deg_s", "angle_deg")
-    level = 0.95 ** (1.0 / (len(ests) * 3 * len(keys)))
-    outside = []
-    for nm, vals in runs.items():
-        arr = np.array(vals)
-        for a, ax in enumerate("xyz"):
-            for m, key in enumerate(keys):
-                conv = units.rad_to_deg if key == "angle_deg" else units.rad_s_to_deg_s
-                ci = rms_ci(conv(arr[:, m, a]), level, gaussian=key in ("mean_deg_s", "angle_deg"))
-                p = preds[nm].axes[ax][key]
-                if not ci["ci_low"] <= p <= ci["ci_high"]:
-                    outside.append((nm, ax, key, p, ci))
+    level = 0.95 ** (1.0 / (len(ests) * 3 * 4))
+    outside = predictions_outside(ests, preds, model, TETRA, truth, DT, reps=40, seed=11, level=level)
     assert not outside, outside[:4]
     # the filter's lag is in the error: the naive motion error is A |1 − F| (mean square A²|1 − F|²/2,
     # 9 swing periods in the window: within 3 %)
