@@ -21,6 +21,15 @@ problem falls apart into one scalar channel per body axis:
 
 A channel filter's unit responses (:func:`gyroarray.predict.channel_response`)
 are computed once per bandwidth, so every α and N is a weighted sum of them.
+The gyros' own low-pass (``DesignSpace.sensor_bandwidth``, the spec's
+``bandwidth`` on every gyro) commutes with every per-sample combination of
+alike gyros, so it is cascaded in front of each channel filter
+(:func:`gyroarray.predict.cascade`): the noise and the motion pass it, and the
+swing response splits into the estimator's and the sensor's factors
+(:func:`tracking_limit` says which one limits tracking). A g-sensitivity
+(``DesignSpace.g_sensitivity_deg_s_per_g``) is reported beside the noise:
+per gyro k · f, fused through the design's DC gain.
+
 The tests check the fast path against the full predictor. Where
 ``kf_array`` does not decouple (Scheme 2 with unequal ARW and RRW
 correlation) it is predicted exactly by the full predictor at the cone angle
@@ -855,7 +864,7 @@ def recommend(g: GyroNoise, space: DesignSpace, *, rhos=None) -> dict:
            "assumptions": assumptions(g, space, rho_list, single),
            "what_changes_the_choice": _what_changes(designs, g, space, rho_list),
            "notes": sorted(set(notes))}
-    lim = tracking_limit(rec, space)
+    lim = tracking_limit(rec, space, g)
     if lim is not None:
         out["tracking_limit"] = lim
     gst = g_sensitivity_statement(rec, space)
@@ -868,7 +877,7 @@ def recommend(g: GyroNoise, space: DesignSpace, *, rhos=None) -> dict:
     return out
 
 
-def tracking_limit(d: dict, space: DesignSpace) -> dict | None:
+def tracking_limit(d: dict, space: DesignSpace, g: GyroNoise | None = None) -> dict | None:
     """Whether the sensors' own bandwidth or the estimator limits tracking of the swing.
 
     On the design's worst-tracked axis, the tracking error per unit swing
@@ -905,7 +914,14 @@ def tracking_limit(d: dict, space: DesignSpace) -> dict | None:
     else:
         text = f"the {d['estimator']}, not the sensor bandwidth, limits tracking at {f:g} Hz: {nums}"
         by = "estimator"
+    if g is not None:
+        bare = _generic_or_fast(d["scheme"], d["n"], d["estimator"], math.radians(d["alpha_deg"]),
+                                d["bandwidth_hz"], d.get("rho", g.rho_arw), g,
+                                replace(space, sensor_bandwidth=None))["rms_3axis_deg_s"]
+        text += (f". With an ideal sensor this design would predict {bare:.4g} deg/s 3-axis RMS "
+                 f"instead of {d['rms_3axis_deg_s']:.4g}")
     return {"limited_by": by, "axis": ax, "swing_hz": f, "statement": text,
+            "rms_3axis_without_sensor_filter_deg_s": None if g is None else float(bare),
             "sensor_tracking_error_share": float(se), "estimator_tracking_error_share": float(ee),
             "sensor_amplitude_ratio": sa, "sensor_phase_deg": q["sensor_phase_deg"],
             "estimator_amplitude_ratio": ea, "estimator_phase_deg": q["estimator_phase_deg"],

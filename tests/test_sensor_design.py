@@ -296,3 +296,23 @@ def test_design_json_carries_the_sensor_numbers(capsys):
     assert res["tracking_limit"]["limited_by"] == "sensor"
     assert res["assumptions"]["sensor_bandwidth"]["value"] == {"cutoff_hz": 12.0, "order": 2}
     assert res["g_sensitivity"]["per_gyro_rms_deg_s"] == pytest.approx(0.05)
+
+
+def test_recommend_takes_the_sensor_bandwidth_from_the_model(tmp_path, capsys):
+    path = tmp_path / "m.toml"
+    path.write_text('effects = [ { effect = "arw", n_deg_rt_h = 0.5 },\n'
+                    '  { effect = "bandwidth", gyro = 1, cutoff_hz = 20.0, order = 1 },\n'
+                    '  { effect = "bandwidth", gyro = 2, cutoff_hz = 15.0, order = 2 } ]\n')
+    code = main(["design", "--recommend", "--model", str(path), "--n", "4", "--horizon-s", "20",
+                 "--swing", "20,2", "--estimators", "gls", "--json"])
+    out, err = capsys.readouterr()
+    assert code == 0, err
+    res = json.loads(out)
+    src = res["assumptions"]["sensor_bandwidth"]
+    assert src["value"] == {"cutoff_hz": 15.0, "order": 2} and src["source"].startswith("model")
+    b, a = _spec_filter(15.0, 2, 100.0)
+    _, F = signal.freqz(b, a, worN=[2.0], fs=100.0)
+    assert res["tracking_limit"]["sensor_amplitude_ratio"] == pytest.approx(abs(F[0]), rel=1e-12)
+    assert "bandwidth" not in res["assumptions"]["ignored_effects"]["value"]
+    # without the filter the same design tracks better
+    assert res["tracking_limit"]["rms_3axis_without_sensor_filter_deg_s"] < res["recommended"]["rms_3axis_deg_s"]
