@@ -940,9 +940,10 @@ def g_sensitivity_statement(d: dict, space: DesignSpace) -> str | None:
     return (f"g-sensitivity ({k}) (deg/s)/g on every gyro, on {where}: {gs['per_gyro_rms_deg_s']:.4g} deg/s "
             f"RMS per gyro, {gs['fused_rms_3axis_deg_s']:.4g} deg/s 3-axis on the fused output "
             f"(x/y/z {xyz}), "
-            f"{ratio:.3g} x the noise RMS ({d['rms_3axis_deg_s']:.4g} deg/s)"
-            + ("; it, not the noise, dominates: calibrate it out or choose gyros with less"
-               if ratio > 1 else "") + ". Not part of the ranking (a bias a calibration removes)")
+            f"{ratio:.3g} x the design's predicted 3-axis RMS from noise and tracking "
+            f"({d['rms_3axis_deg_s']:.4g} deg/s)"
+            + ("; it dominates: calibrate it out or choose gyros with less" if ratio > 1 else "")
+            + ". Not part of the ranking: a deterministic bias that a calibration of k removes")
 
 
 def _short(d: dict) -> dict:
