@@ -303,7 +303,12 @@ def run_scenario(scenario, estimator_names=None, *, cache: bool = True,
     if unknown:
         raise InputError(f"unknown estimator {unknown[0]!r} (available: {', '.join(available())})")
     check_fusable(scenario)
-    res = simulate(scenario, cache=cache, rng=rng)
+    try:
+        res = simulate(scenario, cache=cache, rng=rng)
+    except InputError as err:                  # e.g. a bandwidth cut-off above this run's Nyquist
+        if err.file is not None:
+            raise
+        raise InputError(err.message, file=scenario.source, line=err.line, column=err.column) from None
     dt = 1.0 / scenario.sample_rate_hz
     estimates, notes, fitted = {}, [], {}
     for name in names:

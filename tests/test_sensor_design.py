@@ -316,3 +316,12 @@ def test_recommend_takes_the_sensor_bandwidth_from_the_model(tmp_path, capsys):
     assert "bandwidth" not in res["assumptions"]["ignored_effects"]["value"]
     # without the filter the same design tracks better
     assert res["tracking_limit"]["rms_3axis_without_sensor_filter_deg_s"] < res["recommended"]["rms_3axis_deg_s"]
+
+
+def test_run_refuses_a_sensor_cutoff_above_nyquist_naming_the_file(tmp_path, capsys):
+    path = tmp_path / "bad.toml"
+    path.write_text(SWING_BW.replace("cutoff_hz = 1.5", "cutoff_hz = 60.0"))
+    code = main(["run", str(path), "--json"])
+    out, err = capsys.readouterr()
+    assert code == 2 and out == ""
+    assert err.count("\n") == 1 and "bad.toml" in err and "Nyquist" in err
