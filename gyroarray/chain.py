@@ -215,6 +215,9 @@ def _sensor_response(time_s, readings_rad_s, projected_rad_s, freq_hz: float) ->
     (:func:`attenuation_and_lag`); the array's value is the mean of the
     complex responses weighted by the projected amplitude² (gyros whose
     projected amplitude is below ``SWING_SHARE`` of the largest are left out).
+    The predictor's share, [T diag(F) H]_aa / [T H]_aa, weights gyro k by
+    T_ak h_ka instead: the same for alike gyros, and for any filters on an
+    isotropic layout (HᵀH ∝ I) under a per-sample estimator (T ∝ Hᵀ).
 
     Returns
     -------
