@@ -62,8 +62,10 @@ class LinearSystem:
 
     x̂_k = A x̂_{k-1} + K z_k,  ω̂_k = C x̂_k,  x̂_{-1} = X0 z_0
 
-    with A diagonalised as A = S diag(lam) S⁻¹ (real eigenvalues in [0, 1];
-    the eigenvalue-1 modes of a Kalman filter with bias states are the
+    with A diagonalised as A = S diag(lam) S⁻¹ (an estimator's eigenvalues are
+    real in [0, 1]; cascaded with a sensor's Butterworth filter,
+    :func:`gyroarray.predict.cascade`, a complex pair joins them; the
+    eigenvalue-1 modes of a Kalman filter with bias states are the
     unobservable directions, which K does not drive).
 
     Attributes
@@ -106,7 +108,7 @@ class LinearSystem:
     def dc_gain(self) -> np.ndarray:
         """Gain (3, N) from slow changes of the readings to the rate estimates (θ → 0⁺)."""
         cs, bk = self.C @ self.S, self.S_inv @ self.K
-        stable = self.lam < 1.0 - 1e-12
+        stable = np.abs(1.0 - self.lam) > 1e-12                      # all but the unit modes
         return np.real(cs[:, stable] @ (bk[stable] / (1.0 - self.lam[stable])[:, None]))
 
 

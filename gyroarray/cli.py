@@ -158,6 +158,8 @@ def cmd_design(args) -> tuple[dict, str]:
                                 ("--failures", args.failures), ("--estimators", args.estimators),
                                 ("--check", args.check), ("--out", args.out),
                                 ("--bandwidth-hz", args.bandwidth_hz), ("--rate-hz", args.rate_hz),
+                                ("--sensor-bandwidth", args.sensor_bandwidth),
+                                ("--g-sensitivity", args.g_sensitivity),
                                 ("--horizon-s", args.horizon_s)) if v is not None]
     if rec_only:
         raise InputError(f"gyroarray design: {rec_only[0]} goes with --recommend")
@@ -303,7 +305,8 @@ def _design_space(args):
         if dur < horizon:
             raise InputError(f"--motion {args.motion} lasts {prof.duration_s:g} s, shorter than "
                              f"--horizon-s {horizon:g}")
-        motion = compute_truth(prof, rate, duration_s=horizon).omega_body_rad_s
+        mtruth = compute_truth(prof, rate, duration_s=horizon)
+        motion = mtruth.omega_body_rad_s
         motion_name = f"profile {args.motion} (rate-table truth)"
     if args.bandwidth_hz is not None:
         bw = _number_list(args.bandwidth_hz, "--bandwidth-hz")
@@ -317,15 +320,63 @@ def _design_space(args):
         bw = [DEFAULT_BANDWIDTH_HZ, DEFAULT_BANDWIDTH_HZ]
     else:
         bw = [0.1, 0.45 * rate]
+    sensor_bw, src["sensor_bandwidth"] = _sensor_bandwidth_arg(args, rate)
+    gsens = None
+    if args.g_sensitivity is not None:
+        gsens = _number_list(args.g_sensitivity, "--g-sensitivity")
+        if len(gsens) == 1:
+            gsens = [0.0, 0.0, gsens[0]]
+        if len(gsens) != 3:
+            raise InputError(f"--g-sensitivity must be K or KX,KY,KZ [(deg/s)/g], got {args.g_sensitivity!r}")
+        src["g_sensitivity"] = "user"
     for key, v in (("rate_hz", args.rate_hz), ("horizon_s", args.horizon_s), ("ns", args.n),
                    ("estimators", args.estimators), ("failures", args.failures),
                    ("motion", args.swing or args.motion)):
         src[key] = "user" if v is not None else "default"
     space = DesignSpace(rate_hz=rate, horizon_s=horizon, ns=ns, estimators=ests, failures=failures,
                         bandwidth_hz=(float(bw[0]), float(bw[1])), swing=swing, motion=motion,
-                        motion_name=motion_name)
+                        motion_name=motion_name, sensor_bandwidth=sensor_bw,
+                        g_sensitivity_deg_s_per_g=None if gsens is None else tuple(gsens),
+                        specific_force_m_s2=None if motion is None else mtruth.specific_force_m_s2)
     object.__setattr__(space, "_sources", src)
     return g, space, rhos
+
+
+def parse_sensor_bandwidth(text: str, rate_hz: float) -> tuple[float, int]:
+    """``HZ[,ORDER]`` of ``--sensor-bandwidth``: the gyros' own −3 dB cut-off [Hz] and filter
+    order (1, default, or 2 = Butterworth), checked against the Nyquist frequency."""
+    vals = _number_list(text, "--sensor-bandwidth")
+    nyq = 0.5 * rate_hz
+    if len(vals) not in (1, 2):
+        raise InputError(f"--sensor-bandwidth must be HZ or HZ,ORDER, got {text!r}")
+    fc = vals[0]
+    order = vals[1] if len(vals) == 2 else 1
+    if not fc > 0:
+        raise InputError(f"--sensor-bandwidth: the cut-off must be > 0 Hz, got {fc:g}")
+    if order not in (1, 2):
+        raise InputError(f"--sensor-bandwidth: the order must be 1 or 2 (Butterworth), got {order:g}")
+    if not fc < nyq:
+        raise InputError(f"--sensor-bandwidth: the cut-off {fc:g} Hz must lie below the Nyquist "
+                         f"frequency {nyq:g} Hz of --rate-hz {rate_hz:g}")
+    return float(fc), int(order)
+
+
+def _sensor_bandwidth_arg(args, rate: float):
+    """The sensor bandwidth of ``design --recommend`` and its source: the flag, else the
+    model's ``bandwidth`` (its lowest cut-off, the worst gyro), else none."""
+    if args.sensor_bandwidth is not None:
+        return parse_sensor_bandwidth(args.sensor_bandwidth, rate), "user"
+    if args.model is not None:
+        from .sim.model import NoiseModel
+        ents = [e for e in NoiseModel.from_toml(args.model).entries if e.effect == "bandwidth"]
+        if ents:
+            e = min(ents, key=lambda e: float(e.params["cutoff_hz"]))
+            fc, order = float(e.params["cutoff_hz"]), int(e.params["order"])
+            if not fc < 0.5 * rate:
+                raise InputError(f"the model's bandwidth cut-off {fc:g} Hz is not below the Nyquist "
+                                 f"frequency {0.5 * rate:g} Hz of --rate-hz {rate:g}", file=args.model)
+            return (fc, order), f"model {args.model} (lowest cut-off)"
+    return None, "default"
 
 
 def _design_recommend(args) -> tuple[dict, str]:
@@ -367,6 +418,10 @@ def _recommend_text(res: dict) -> str:
             t = d["rms_3axis_deg_s"]
             lines.append(f"  {d['label']}: predicted {t['predicted']:.4g}, simulated {t['monte_carlo']['value']:.4g} "
                          f"[{t['monte_carlo']['ci_low']:.4g}, {t['monte_carlo']['ci_high']:.4g}] deg/s")
+    if "tracking_limit" in res:
+        lines.append("tracking: " + res["tracking_limit"]["statement"])
+    if "g_sensitivity" in res:
+        lines.append(res["g_sensitivity"]["statement"])
     lines += [f"what would change the choice: {w}" for w in res["what_changes_the_choice"]]
     lines += [f"note: {n}" for n in res["notes"]]
     p = r["predicted"]
@@ -658,11 +713,39 @@ def cmd_run(args) -> tuple[dict, str]:
         lines.append(f"{row['estimator']:<10} {row['axis']:<4} "
                      + " ".join(f"{cell(row.get(k), f):>15}" for k, _, f in _RUN_COLUMNS))
     lines += [f"note: {n}" for n in result.notes]
+    lines += _sensor_lines(result)
     sg = out["single_gyro"]
     lines.append(f"single gyro (mean of {len(sg['gyros'])}): 1sigma {sg['sigma_1_deg_s']:.4g} deg/s, "
                  f"ARW {sg['arw_deg_rt_h']:.4g} deg/rt(h), BI {sg['bi_deg_h']:.4g} deg/h, "
                  f"RRW {sg['rrw_deg_h_rt_h']:.4g} deg/h/rt(h)")
     return out, "\n".join(lines)
+
+
+def _sensor_lines(result) -> list[str]:
+    """The sensors' share of the swing response and the g-sensitivity's rate error, in words."""
+    lines = []
+    t, sg = result.table, result.single_gyro
+    if "sensor_amplitude_ratio" in sg and sg["sensor_amplitude_ratio"].notna().any():
+        sw = t[t.sensor_amplitude_ratio.notna()]
+        r = sw.iloc[0]
+        lines.append(f"swing {result.swing_hz:g} Hz: the gyros' own response (measured on the raw "
+                     f"gyros) {r.sensor_amplitude_ratio:.5f}, lag {r.sensor_phase_deg:.3g} deg; "
+                     "each estimator's attenuation = its own share x the sensors':")
+        for row in sw.itertuples():
+            lines.append(f"  {row.estimator:<10} {row.axis}: total {row.attenuation:.5f} "
+                         f"({row.phase_deg:.3g} deg) = estimator {row.estimator_amplitude_ratio:.5f} "
+                         f"({row.estimator_phase_deg:.3g} deg) x sensor {row.sensor_amplitude_ratio:.5f} "
+                         f"({row.sensor_phase_deg:.3g} deg)")
+    if "g_sensitivity_rms_deg_s" in sg:
+        per = ", ".join(f"{v:.4g}" for v in sg["g_sensitivity_rms_deg_s"])
+        lines.append(f"g-sensitivity rate error on this motion (RMS over the scored window, deg/s): "
+                     f"per gyro {per}")
+        for name, grp in t.groupby("estimator", sort=False):
+            v = grp.g_sensitivity_rms_deg_s.tolist()
+            if all(x is not None and x == x for x in v):
+                lines.append(f"  {name:<10} fused (DC gain x per-gyro) x/y/z: "
+                             + " / ".join(f"{x:.4g}" for x in v))
+    return lines
 
 
 _REP_COLUMNS = (("sigma_1_deg_s", "1sigma[deg/s]"), ("rms_deg_s", "RMS[deg/s]"),
@@ -1082,6 +1165,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--bandwidth-hz", metavar="F|LO,HI",
                    help="--recommend: filter bandwidth, fixed or searched (default: 10 at rest, "
                         "0.1..0.45*rate with motion)")
+    p.add_argument("--sensor-bandwidth", metavar="HZ[,ORDER]",
+                   help="--recommend: the gyros' own low-pass (-3 dB cut-off, order 1 or 2 = "
+                        "Butterworth; default from --model, else none), cascaded before every estimator")
+    p.add_argument("--g-sensitivity", metavar="K|KX,KY,KZ",
+                   help="--recommend: every gyro's g-sensitivity [(deg/s)/g], platform frame (K alone: "
+                        "0,0,K, along gravity at rest); its rate error is reported beside the noise")
     p.add_argument("--failures", type=int, metavar="K",
                    help="--recommend: a 3-axis rate must survive K failed gyros (0, 1, 2; default 0)")
     p.add_argument("--estimators", metavar="A,B,...",

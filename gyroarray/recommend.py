@@ -21,6 +21,15 @@ problem falls apart into one scalar channel per body axis:
 
 A channel filter's unit responses (:func:`gyroarray.predict.channel_response`)
 are computed once per bandwidth, so every α and N is a weighted sum of them.
+The gyros' own low-pass (``DesignSpace.sensor_bandwidth``, the spec's
+``bandwidth`` on every gyro) commutes with every per-sample combination of
+alike gyros, so it is cascaded in front of each channel filter
+(:func:`gyroarray.predict.cascade`): the noise and the motion pass it, and the
+swing response splits into the estimator's and the sensor's factors
+(:func:`tracking_limit` says which one limits tracking). A g-sensitivity
+(``DesignSpace.g_sensitivity_deg_s_per_g``) is reported beside the noise:
+per gyro k · f, fused through the design's DC gain.
+
 The tests check the fast path against the full predictor. Where
 ``kf_array`` does not decouple (Scheme 2 with unequal ARW and RRW
 correlation) it is predicted exactly by the full predictor at the cone angle
@@ -130,7 +139,8 @@ class GyroNoise:
         tau = _per_gyro(model, "gauss_markov", "tau_s", n)
         tau = tau[np.isfinite(tau)]
         src = {k: source for k in ("arw", "rrw", "bi", "gauss_markov", "rho_arw", "rho_rrw")}
-        from .predict import MODELLED
+        from .predict import MODELLED      # the sensor's own effects come in through DesignSpace
+        MODELLED = tuple(m for m in MODELLED if m not in ("bandwidth", "g_sensitivity"))
         return cls(arw_deg_rt_h=arw,
                    rrw_deg_h_rt_h=units.rrw_rad_s_rt_s_to_deg_h_rt_h(qmean("rrw", "k_rad_s_rt_s")),
                    bi_deg_h=units.rad_s_to_deg_h(qmean("bias_instability", "b_rad_s")),
@@ -192,6 +202,16 @@ class DesignSpace:
     settle_s : float
         Start-up excluded from the window metrics [s].
     alpha_points : int
+    sensor_bandwidth : (float, int) or None
+        The gyros' own low-pass, (cut-off [Hz], order 1 or 2), as the spec's
+        ``bandwidth`` effect on every gyro: cascaded before every estimator.
+    g_sensitivity_deg_s_per_g : (float, float, float) or None
+        Every gyro's g-sensitivity, platform frame [(deg/s)/g] (the spec's
+        ``g_sensitivity`` on every gyro); its rate error is reported beside
+        the noise terms, not ranked.
+    specific_force_m_s2 : ndarray (n, 3) or None
+        The specific force at the platform origin over the run (a motion
+        profile's truth) [m/s²]; None: the level table at rest, [0, 0, g0].
     """
 
     rate_hz: float = 100.0
@@ -206,10 +226,40 @@ class DesignSpace:
     motion_name: str = "at rest"
     settle_s: float = 2.0
     alpha_points: int = ALPHA_POINTS
+    sensor_bandwidth: tuple[float, int] | None = None
+    g_sensitivity_deg_s_per_g: tuple[float, float, float] | None = None
+    specific_force_m_s2: np.ndarray | None = None
+
+    def __post_init__(self):
+        if self.sensor_bandwidth is not None:
+            from .sim.sensor import bandwidth_sos
+            fc, order = self.sensor_bandwidth
+            bandwidth_sos(fc, order, self.dt_s)                     # order 1/2, 0 < fc < Nyquist
 
     @property
     def dt_s(self) -> float:
         return 1.0 / self.rate_hz
+
+    def sensor(self, n_gyros: int = 1):
+        """The gyros' own filter as :class:`gyroarray.predict.SensorBandwidth` (None: none)."""
+        from .predict import SensorBandwidth
+        if self.sensor_bandwidth is None:
+            return None
+        fc, order = self.sensor_bandwidth
+        return SensorBandwidth(cutoff_hz=np.full(n_gyros, float(fc)),
+                               order=np.full(n_gyros, int(order)), dt_s=self.dt_s)
+
+    def sensor_entries(self) -> tuple:
+        """The sensor's ``bandwidth`` and ``g_sensitivity`` as model entries on every gyro."""
+        from .sim.model import ModelEntry
+        out = []
+        if self.sensor_bandwidth is not None:
+            out.append(ModelEntry("bandwidth", None, {"cutoff_hz": float(self.sensor_bandwidth[0]),
+                                                      "order": int(self.sensor_bandwidth[1])}))
+        if self.g_sensitivity_deg_s_per_g is not None:
+            out.append(ModelEntry("g_sensitivity", None,
+                                  {"deg_s_per_g": tuple(float(v) for v in self.g_sensitivity_deg_s_per_g)}))
+        return tuple(out)
 
     @property
     def n_samples(self) -> int:
@@ -301,7 +351,7 @@ class _FilterBank:
             sys = channel_filter(kind, self.space.dt_s, bw, ratio)
             self._cache[key] = None if sys is None else channel_response(
                 sys, self.space.dt_s, self.n, self.k0, bi=self.bi, gm_tau_s=self.gm_tau,
-                motion=self.motion, swing_hz=self.swing_hz)
+                motion=self.motion, swing_hz=self.swing_hz, sensor=self.space.sensor())
         return self._cache[key]
 
 
@@ -364,6 +414,64 @@ def _add_motion(m: _Moments, resp) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         sumw2[..., a] += msw[a] ** 2
         sumf2[..., a] += msf[a] ** 2
     return ms, sumw2, sumf2
+
+
+#: The swing-response keys of a design's prediction: total, then its two factors.
+_SPLIT_KEYS = ("amplitude_ratio", "phase_deg", "estimator_amplitude_ratio", "estimator_phase_deg",
+               "sensor_amplitude_ratio", "sensor_phase_deg")
+
+
+def _split(r) -> dict:
+    """The swing response of a channel (None at rest): total, estimator's and sensor's."""
+    return {k: getattr(r, k) for k in _SPLIT_KEYS}
+
+
+def _with_sensor(model, space: DesignSpace, *, g_sensitivity: bool = True):
+    """The noise model with the space's sensor bandwidth (and g-sensitivity) on every gyro.
+
+    The Monte-Carlo check and the full predictor leave the g-sensitivity out
+    (``g_sensitivity`` False), as the ranking does: it is reported on its own.
+    """
+    from .sim.model import NoiseModel
+    extra = tuple(e for e in space.sensor_entries() if g_sensitivity or e.effect != "g_sensitivity")
+    return model if not extra else NoiseModel(tuple(model.entries) + extra,
+                                              description=model.description)
+
+
+def _r_matrix(n: int, g: GyroNoise, dt: float) -> np.ndarray:
+    """Covariance of one white sample of the N gyros [rad²/s²]."""
+    return units.arw_deg_rt_h_to_rad_rt_s(g.arw_deg_rt_h) ** 2 / dt * correlation_matrix(n, g.rho_arw)
+
+
+def _space_specific_force(space: DesignSpace) -> np.ndarray:
+    """The specific force at the platform origin over the scored window (n, 3) [m/s²]:
+    the motion profile's truth, else the level table at rest (a swing's few degrees of
+    tilt are left out), [0, 0, g0]."""
+    from .constants import G0_M_S2
+    if space.specific_force_m_s2 is not None:
+        return np.asarray(space.specific_force_m_s2, dtype=float)[:space.n_samples]
+    return np.array([[0.0, 0.0, G0_M_S2]])
+
+
+def _g_sensitivity(space: DesignSpace, dc_gain: np.ndarray) -> dict:
+    """``g_sensitivity``: the RMS rate error of the space's g-sensitivity on its motion, per
+    gyro and fused through the design's DC gain T₀ (3, N) (:func:`gyroarray.predict.g_sensitivity_error`);
+    {} without one."""
+    from .predict import g_sensitivity_error, settle_start as _k0
+    if space.g_sensitivity_deg_s_per_g is None:
+        return {}
+    T0 = np.asarray(dc_gain, dtype=float)
+    N = T0.shape[1]
+    k = np.tile(units.deg_s_per_g_to_rad_s_per_m_s2(np.asarray(space.g_sensitivity_deg_s_per_g,
+                                                               dtype=float)), (N, 1))
+    f0 = _space_specific_force(space)
+    f = np.broadcast_to(f0[:, None, :], (f0.shape[0], N, 3))
+    k0 = _k0(f0.shape[0], space.dt_s, space.settle_s) if f0.shape[0] > 1 else 0
+    r = g_sensitivity_error(k, f, T0, k0)
+    fused = r["fused_rms_deg_s"]
+    return {"g_sensitivity": {"per_gyro_rms_deg_s": float(np.mean(r["per_gyro_rms_deg_s"])),
+                              "fused_rms_deg_s": fused,
+                              "fused_rms_3axis_deg_s": float(math.sqrt(sum(v * v for v in fused.values())))}}
 
 
 # -- the search --------------------------------------------------------------------------
@@ -501,13 +609,15 @@ def _design_dict(b: _Best, space: DesignSpace, g: GyroNoise, failures: int) -> d
                         abs(r.dc_gain) * math.sqrt(ch.white[0, a] * dt))),
                     "rrw_long_deg_h_rt_h": float(units.rrw_rad_s_rt_s_to_deg_h_rt_h(
                         abs(r.dc_gain) * math.sqrt(ch.walk[0, a] / dt))),
-                    "dc_gain": r.dc_gain,
-                    "amplitude_ratio": r.amplitude_ratio, "phase_deg": r.phase_deg}
+                    "dc_gain": r.dc_gain, **_split(r)}
     ft = _fault_tolerance(b.scheme, b.n, b.alpha_rad, b.rho if g.rho_arw == g.rho_rrw else g.rho_arw)
+    dcg = np.array([r.dc_gain for r in b.resp])
+    kind = {"kf_array": "gls", "kf_single": "ols"}.get(b.est, b.est)
+    gs = _g_sensitivity(space, dcg[:, None] * _weights(kind, H, _r_matrix(b.n, gr, space.dt_s))[0])
     return {"scheme": b.scheme, "n": b.n, "alpha_deg": float(np.degrees(b.alpha_rad)),
             "estimator": b.est, "bandwidth_hz": b.bw, "rho": b.rho,
             "rms_3axis_deg_s": float(to(math.sqrt(b.objective))),
-            "predicted": pred, "gdop": ft["gdop"],
+            "predicted": pred, "gdop": ft["gdop"], **gs,
             "worst_gdop_after_failures": ft["worst_gdop_after"][str(failures)] if failures else ft["gdop"],
             "fault_tolerance": json.loads(json.dumps(ft))}
 
@@ -524,19 +634,20 @@ def _generic_design(scheme, n, est, alpha, bw, rho, space: DesignSpace, g: GyroN
         {"lowpass_hz": bw} if est in ("gls", "ols") else {})
     e = get_estimator(est)(**kw).fit(layout, model, space.dt_s)
     motion = space.motion[:space.n_samples] if space.motion is not None else None
-    p = predict(e, model, n_samples=space.n_samples, settle_s=space.settle_s, truth_rad_s=motion,
-                swing=space.swing)
+    p = predict(e, _with_sensor(model, space, g_sensitivity=False), n_samples=space.n_samples,
+                settle_s=space.settle_s, truth_rad_s=motion, swing=space.swing)
     rms2 = sum(units.deg_s_to_rad_s(v["rms_deg_s"]) ** 2 for v in p.axes.values())
     pred = {ax: {"rms_deg_s": v["rms_deg_s"], "std_deg_s": v["std_deg_s"],
                  "mean_deg_s": v["mean_deg_s"], "angle_deg_at_horizon": v["angle_deg"],
                  "arw_long_deg_rt_h": v["arw_long_deg_rt_h"],
                  "rrw_long_deg_h_rt_h": v["rrw_long_deg_h_rt_h"],
-                 "dc_gain": v["dc_gain"], "amplitude_ratio": v["amplitude_ratio"],
-                 "phase_deg": v["phase_deg"]} for ax, v in p.axes.items()}
+                 "dc_gain": v["dc_gain"], **{k: v.get(k) for k in _SPLIT_KEYS}}
+            for ax, v in p.axes.items()}
     ft = _fault_tolerance(scheme, n, alpha, gr.rho_arw)
     return {"scheme": scheme, "n": n, "alpha_deg": float(np.degrees(alpha)), "estimator": est,
             "bandwidth_hz": bw, "rho": rho, "rms_3axis_deg_s": float(units.rad_s_to_deg_s(math.sqrt(rms2))),
             "predicted": pred, "gdop": ft["gdop"],
+            **_g_sensitivity(space, e.linear_system().dc_gain()),
             "worst_gdop_after_failures": ft["worst_gdop_after"][str(failures)] if failures else ft["gdop"],
             "fault_tolerance": json.loads(json.dumps(ft)),
             "path": "full predictor (the array KF does not decouple here)"}
@@ -753,6 +864,12 @@ def recommend(g: GyroNoise, space: DesignSpace, *, rhos=None) -> dict:
            "assumptions": assumptions(g, space, rho_list, single),
            "what_changes_the_choice": _what_changes(designs, g, space, rho_list),
            "notes": sorted(set(notes))}
+    lim = tracking_limit(rec, space, g)
+    if lim is not None:
+        out["tracking_limit"] = lim
+    gst = g_sensitivity_statement(rec, space)
+    if gst is not None:
+        out["g_sensitivity"] = {**rec["g_sensitivity"], "statement": gst}
     if not single:
         out["per_rho"] = {f"{r:g}": [_short(d) for d in per_rho[r][:10]] for r in rho_list}
         out["robustness"] = _robustness(per_rho, g, space)
@@ -760,11 +877,80 @@ def recommend(g: GyroNoise, space: DesignSpace, *, rhos=None) -> dict:
     return out
 
 
+def tracking_limit(d: dict, space: DesignSpace, g: GyroNoise | None = None) -> dict | None:
+    """Whether the sensors' own bandwidth or the estimator limits tracking of the swing.
+
+    On the design's worst-tracked axis, the tracking error per unit swing
+    amplitude of the gyros' own filter, |1 − F| (amplitude loss and lag
+    together), is set against the estimator's, |1 − T|; the fused output
+    passes their product T·F. None without a sensor bandwidth.
+    """
+    if space.sensor_bandwidth is None:
+        return None
+    fc, order = space.sensor_bandwidth
+    what = f"the gyros' own {fc:g} Hz order-{int(order)} low-pass"
+    if space.swing is None:
+        return {"limited_by": None,
+                "statement": f"{what} is cascaded before the estimator in every prediction (noise and "
+                             "motion); give --swing AMP,FREQ to learn whether it or the estimator limits tracking"}
+    p = d["predicted"]
+    ax = min(AXES, key=lambda a: p[a]["amplitude_ratio"])
+    q = p[ax]
+    sa, ea = q["sensor_amplitude_ratio"], q["estimator_amplitude_ratio"]
+    est = d["estimator"] + ("" if d["bandwidth_hz"] is None else f" at {d['bandwidth_hz']:.3g} Hz")
+    f = space.swing.frequency_hz
+    def err(amp, lag_deg):                                           # |1 − A e^{−jφ}|
+        return abs(1.0 - amp * np.exp(-1j * np.radians(lag_deg)))
+    se, ee = err(sa, q["sensor_phase_deg"]), err(ea, q["estimator_phase_deg"])
+    nums = (f"{what} passes {sa:.4f} of the amplitude with a lag of {q['sensor_phase_deg'] + 0.0:.3g} deg "
+            f"(tracking error {100 * se:.3g} % of the swing), the {est} {ea:.4f} with "
+            f"{q['estimator_phase_deg'] + 0.0:.3g} deg ({100 * ee:.3g} %); the fused output "
+            f"{q['amplitude_ratio']:.4f} with {q['phase_deg'] + 0.0:.3g} deg")
+    if se > ee:
+        text = (f"the sensor bandwidth, not the {d['estimator']}, limits tracking at {f:g} Hz: {nums}. "
+                "A wider estimator bandwidth cannot win back the sensors' loss; gyros with a wider "
+                "internal filter can")
+        by = "sensor"
+    else:
+        text = f"the {d['estimator']}, not the sensor bandwidth, limits tracking at {f:g} Hz: {nums}"
+        by = "estimator"
+    if g is not None:
+        bare = _generic_or_fast(d["scheme"], d["n"], d["estimator"], math.radians(d["alpha_deg"]),
+                                d["bandwidth_hz"], d.get("rho", g.rho_arw), g,
+                                replace(space, sensor_bandwidth=None))["rms_3axis_deg_s"]
+        text += (f". With an ideal sensor this design would predict {bare:.4g} deg/s 3-axis RMS "
+                 f"instead of {d['rms_3axis_deg_s']:.4g}")
+    return {"limited_by": by, "axis": ax, "swing_hz": f, "statement": text,
+            "rms_3axis_without_sensor_filter_deg_s": None if g is None else float(bare),
+            "sensor_tracking_error_share": float(se), "estimator_tracking_error_share": float(ee),
+            "sensor_amplitude_ratio": sa, "sensor_phase_deg": q["sensor_phase_deg"],
+            "estimator_amplitude_ratio": ea, "estimator_phase_deg": q["estimator_phase_deg"],
+            "amplitude_ratio": q["amplitude_ratio"], "phase_deg": q["phase_deg"]}
+
+
+def g_sensitivity_statement(d: dict, space: DesignSpace) -> str | None:
+    """The g-sensitivity's rate error of a design beside its noise RMS, in words."""
+    gs = d.get("g_sensitivity")
+    if gs is None:
+        return None
+    k = ", ".join(f"{v:g}" for v in space.g_sensitivity_deg_s_per_g)
+    ratio = gs["fused_rms_3axis_deg_s"] / d["rms_3axis_deg_s"] if d["rms_3axis_deg_s"] > 0 else math.inf
+    xyz = " / ".join(f"{gs['fused_rms_deg_s'][a]:.3g}" for a in AXES)
+    where = "the motion profile" if space.specific_force_m_s2 is not None else "the level table (gravity on z)"
+    return (f"g-sensitivity ({k}) (deg/s)/g on every gyro, on {where}: {gs['per_gyro_rms_deg_s']:.4g} deg/s "
+            f"RMS per gyro, {gs['fused_rms_3axis_deg_s']:.4g} deg/s 3-axis on the fused output "
+            f"(x/y/z {xyz}), "
+            f"{ratio:.3g} x the design's predicted 3-axis RMS from noise and tracking "
+            f"({d['rms_3axis_deg_s']:.4g} deg/s)"
+            + ("; it dominates: calibrate it out or choose gyros with less" if ratio > 1 else "")
+            + ". Not part of the ranking: a deterministic bias that a calibration of k removes")
+
+
 def _short(d: dict) -> dict:
     """The JSON fields of one design (the issue's keys first)."""
     keys = ("rank", "scheme", "n", "alpha_deg", "estimator", "bandwidth_hz", "predicted",
             "worst_gdop_after_failures", "rms_3axis_deg_s", "gdop", "fault_tolerance", "rho",
-            "worst_rms_3axis_deg_s", "rms_by_rho", "path")
+            "worst_rms_3axis_deg_s", "rms_by_rho", "g_sensitivity", "path")
     return {k: d[k] for k in keys if k in d}
 
 
@@ -951,7 +1137,16 @@ def assumptions(g: GyroNoise, space: DesignSpace, rhos, single: bool) -> dict:
                           "(random-walk drift included), from the analytic predictor", "definition"),
         "biases": item("start at zero (calibrated at switch-on), as the simulator draws them",
                        "assumption"),
-        "ignored_effects": item(list(g.ignored), "model"),
+        "ignored_effects": item([e for e in g.ignored if not (
+            (e == "bandwidth" and space.sensor_bandwidth is not None)
+            or (e == "g_sensitivity" and space.g_sensitivity_deg_s_per_g is not None))], "model"),
+        "sensor_bandwidth": item(None if space.sensor_bandwidth is None else
+                                 {"cutoff_hz": space.sensor_bandwidth[0], "order": space.sensor_bandwidth[1]},
+                                 s.get("sensor_bandwidth", "default"),
+                                 "every gyro's own low-pass, cascaded before the estimator (None: none)"),
+        "g_sensitivity": item(None if space.g_sensitivity_deg_s_per_g is None else
+                              list(space.g_sensitivity_deg_s_per_g), s.get("g_sensitivity", "default"),
+                              "(deg/s)/g, platform frame, every gyro alike; reported, not ranked"),
     }
 
 
@@ -1013,7 +1208,7 @@ def monte_carlo_check(designs: list[dict], g: GyroNoise, space: DesignSpace, *,
         rho = d.get("rho", g.rho_arw)
         gr = g.with_rho(rho) if g.rho_arw == g.rho_rrw else g
         layout = Layout.conical(d["scheme"], d["n"], math.radians(d["alpha_deg"]))
-        model = gr.noise_model(d["n"])
+        model = _with_sensor(gr.noise_model(d["n"]), space, g_sensitivity=False)
         bw = d["bandwidth_hz"]
         kw = {"bandwidth_hz": bw} if d["estimator"] in ("kf_array", "kf_single") else (
             {"lowpass_hz": bw} if d["estimator"] in ("gls", "ols") else {})

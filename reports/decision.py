@@ -104,6 +104,10 @@ def decision_summary(res: dict) -> list[str]:
     if res.get("runner_up"):
         ru = res["runner_up"]
         lines.append(f"Runner-up: {_label(ru)} ({ru['rms_3axis_deg_s']:.4g} deg/s 3-axis RMS).")
+    if res.get("tracking_limit"):                      # the sensor's own bandwidth (issue 15)
+        lines.append("Tracking: " + res["tracking_limit"]["statement"] + ".")
+    if res.get("g_sensitivity"):
+        lines.append(res["g_sensitivity"]["statement"] + ".")
     return lines
 
 

@@ -20,16 +20,16 @@ import pytest
 from scipy import stats
 
 from gyroarray import units
-from gyroarray.chain import replicate_rng, rms_ci
+from gyroarray.chain import rms_ci
 from gyroarray.errors import InputError
 from gyroarray.estimators import get_estimator
 from gyroarray.estimators._kalman import state_model, steady_state
 from gyroarray.estimators.kf_array import rate_psd
 from gyroarray.layout import Layout
-from gyroarray.predict import (Swing, channel_filter, noise_sources, predict, settle_start,
+from gyroarray.predict import (Swing, channel_filter, noise_sources, predict,
                                swing_truth, window_sums)
-from gyroarray.sim.effects import simulate_readings
 from gyroarray.sim.model import ModelEntry, NoiseModel
+from replicates import predictions_outside
 
 DT = 0.01
 ESTIMATORS = ("kf_array", "kf_single", "gls", "ols", "naive")
@@ -200,32 +200,14 @@ def test_prediction_inside_the_simulated_replicates():
     cases.append((Layout.conical(1, 4, math.radians(54.7356)), _tetra_model(), "swing"))
     comparisons = len(cases) * len(ESTIMATORS) * 3 * 4
     level = (1 - 0.05) ** (1 / comparisons)                      # Šidák
-    keys = ("rms_deg_s", "std_deg_s", "mean_deg_s", "angle_deg")
-    t = np.arange(n) * DT
-    k0 = settle_start(n, DT, 2.0)
     outside = []
     for layout, model, motion in cases:
         sw = Swing(units.deg_s_to_rad_s(5.0), 0.03) if motion else None
         truth = swing_truth(sw, n, DT) if sw else np.zeros((n, 3))
         ests = {nm: get_estimator(nm)().fit(layout, model, DT) for nm in ESTIMATORS}
         preds = {nm: predict(e, model, n_samples=n, swing=sw) for nm, e in ests.items()}
-        runs = {nm: [] for nm in ESTIMATORS}
-        for r in range(reps):
-            z = simulate_readings(model, truth, layout, DT, replicate_rng(99, r), time_s=t)
-            for nm, e in ests.items():
-                err = e.estimate(z) - truth
-                w = err[k0:]
-                runs[nm].append(np.stack([np.sqrt(np.mean(w ** 2, 0)), np.std(w, 0, ddof=1),
-                                          np.mean(w, 0), DT * err.sum(0)]))
-        for nm in ESTIMATORS:
-            arr = np.array(runs[nm])
-            for a, ax in enumerate("xyz"):
-                for m, key in enumerate(keys):
-                    conv = units.rad_to_deg if key == "angle_deg" else units.rad_s_to_deg_s
-                    ci = rms_ci(conv(arr[:, m, a]), level, gaussian=key in ("mean_deg_s", "angle_deg"))
-                    p = preds[nm].axes[ax][key]
-                    if not ci["ci_low"] <= p <= ci["ci_high"]:
-                        outside.append((layout.name, nm, ax, key, p, ci))
+        outside += [(layout.name, *o) for o in predictions_outside(
+            ests, preds, model, layout, truth, DT, reps=reps, seed=99, level=level)]
     assert not outside, outside[:5]
 
 
