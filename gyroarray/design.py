@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import itertools
 import math
-import tomllib
 from dataclasses import dataclass, replace
 from importlib import resources
 
@@ -495,8 +494,9 @@ def _printed_unit(text: str) -> float:
 
 def load_paper003_tables() -> dict:
     """The cells of paper 003 Tables 1 and 2 as printed (data, not truth)."""
-    with resources.files("gyroarray").joinpath("data/paper003_tables.toml").open("rb") as fh:
-        return tomllib.load(fh)
+    from .tomlio import loads_toml
+    res = resources.files("gyroarray").joinpath("data/paper003_tables.toml")
+    return loads_toml(res.read_text(encoding="utf-8"), "gyroarray/data/paper003_tables.toml")
 
 
 def paper003_cells() -> list[PaperCell]:

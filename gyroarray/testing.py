@@ -105,11 +105,8 @@ def _check_toml_round_trip(effect_cls) -> None:
     eff = _registered(effect_cls)
     gyro, params = _params_of(eff, np.random.default_rng(1))
     model = NoiseModel((ModelEntry(eff.name, gyro, params),))
-    try:
-        import tomllib
-    except ModuleNotFoundError:                  # Python 3.10
-        import tomli as tomllib
-    again = NoiseModel.from_toml(tomllib.loads(model.to_toml()), n_gyros=_layout().n_gyros)
+    from .tomlio import loads_toml
+    again = NoiseModel.from_toml(loads_toml(model.to_toml(), f"{eff.name} model"), n_gyros=_layout().n_gyros)
     assert again.entries == model.entries, f"{eff.name}: {again.entries} != {model.entries}"
 
 
