@@ -54,6 +54,7 @@ class Bandwidth(RegressionEffect):
                     doc="−3 dB frequency of the gyro's internal low-pass (below Nyquist)"),
               Param("order", "-", "order", identity, lo=1.0, hi=2.0,
                     doc="1: H(s) = 1/(1 + s/ωc); 2: Butterworth"))
+    refit_absolute = True           # the spectrum gives the cut-off itself, whatever the model
     doc = "the gyro's own causal low-pass filter"
 
     def check(self, params, gyro, n_gyros):

@@ -293,16 +293,24 @@ def _prediction_error(t: Test, entry: ModelEntry) -> Test:
     uncertainty, z from the χ² of those ratios."""
     f = t.fit
     terms = []
-    for k, s_m in entry.sigma.items():
+    absolute = get_effect(entry.effect).refit_absolute
+    keys = f.sigma if absolute and f is not None else entry.sigma
+    for k in keys:
+        s_m = entry.sigma.get(k, 0.0)
         s_t = f.sigma.get(k) if f is not None else None
         if s_t is None or k not in f.params:
             continue
-        d, st, sm = (np.atleast_1d(np.asarray(x, float)) for x in (f.params[k], s_t, s_m))
+        got = f.params[k]
+        if absolute:                      # the refit is the parameter: its error is the difference
+            got = np.asarray(got, float) - np.asarray(entry.params[k], float)
+        d, st, sm = (np.atleast_1d(np.asarray(x, float)) for x in (got, s_t, s_m))
         if d.shape == st.shape == sm.shape and np.all(np.isfinite(d)) and np.all(st > 0):
             terms += list(d / np.sqrt(st ** 2 + sm ** 2))
     z = t.z
     if terms:
         z = chi2_to_z(float(np.sum(np.square(terms))), len(terms))
+    elif absolute:                        # nothing to compare: the test says only that it is there
+        z = math.nan
     return replace(t, z=float(z), evidence="prediction error of the model's " + t.evidence
                    + (f" (against the model's own 1σ too: z = {z:.1f})" if terms else ""),
                    extra={**t.extra, "prediction_error": True, "z_without_model_sigma": t.z})

@@ -425,6 +425,11 @@ class Effect:
     predicts : bool
         It adds a deterministic part to the outputs (:meth:`predict`); in a
         model it is backfitted with the other deterministic effects.
+    refit_absolute : bool
+        Its test on what the model's prediction leaves still measures the
+        parameters themselves, not their error (a filter read from the noise
+        spectrum, which no prediction removes): a validation compares the
+        refit with the model's values.
     changes_adev : bool
         An array-wide effect that changes each gyro's own ADEV (a burst; not a
         correlation): when significant it explains every gyro's band.
@@ -456,6 +461,7 @@ class Effect:
     slow: ClassVar[bool] = False
     static_noise: ClassVar[str | None] = None
     predicts: ClassVar[bool] = False
+    refit_absolute: ClassVar[bool] = False
     reads: ClassVar[str] = "residual"
     changes_adev: ClassVar[bool] = False
     channel: ClassVar[str | None] = None

@@ -82,3 +82,22 @@ def test_split_measurement_refuses_a_too_short_part():
     assert first.time_s.size + rest.time_s.size == m.time_s.size and rest.time_s[0] > first.time_s[-1]
     with pytest.raises(InputError, match="--holdout"):
         split_measurement(m, 0.999)
+
+
+def _filtered(cutoff_hz, seed):
+    model = NoiseModel((ModelEntry("arw", None, {"n_deg_rt_h": 0.15}), ModelEntry("rrw", None, {"k_deg_h_rt_h": 5.0}),
+                        ModelEntry("bandwidth", 3, {"cutoff_hz": cutoff_hz, "order": 2})))
+    return lab_run(model, LAYOUT, np.random.default_rng(seed), static_s=600.0, motion_s=0.0, tail_s=0.0)
+
+
+def test_a_filter_read_from_the_spectrum_is_compared_with_the_model_not_taken_as_an_error():
+    """The spectrum gives a filter's cut-off itself, whatever the model holds: validation compares
+    it with the model's (same sensor: no prediction error; another cut-off: the worst test)."""
+    _, after = ModelComparison(_filtered(10.0, 1), n_runs=10).fit([("bandwidth", 3)])
+    fitted = after.model
+    same = ModelComparison(_filtered(10.0, 2), fitted, n_runs=10).validate()
+    t = next(t for t in same.tests if t.effect == "bandwidth" and t.gyro == 3)
+    assert t.extra.get("prediction_error") and not same.significant(t), t.evidence
+    other = ModelComparison(_filtered(5.0, 2), fitted, n_runs=10).validate()
+    worst = other.candidates[0]
+    assert (worst.effect, worst.gyro) == ("bandwidth", 3) and other.significant(worst), worst.evidence
