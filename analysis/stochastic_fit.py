@@ -395,11 +395,12 @@ def _factors(n: int, m_min: int = 1) -> np.ndarray:
     """Octave averaging factors of the fits: m_min, 2·m_min, ... <= n·_M_MAX_FRACTION (m_min a power of 2)."""
     m_max = max(8, int(_M_MAX_FRACTION * n))
     m = 2 ** np.arange(int(math.log2(m_max)) + 1, dtype=np.int64)
-    m = m[m >= m_min]
     if m.size < 6 or n - 2 * m[-1] < 2:
         raise InputError(f"{n} samples are too few for the noise fit: it needs at least 6 "
                          "octave taus (a record of >= 256 samples)")
-    return m
+    # a model that shapes the short τ (a very low filter cut-off) may ask to start where fewer
+    # than 6 octaves are left: the fit then takes the record's longest 6
+    return m[m >= m_min] if np.count_nonzero(m >= m_min) >= 6 else m[-6:]
 
 
 def _cov_model(n: int, dt_s: float, m_min: int = 1) -> _AvarCov:

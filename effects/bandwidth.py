@@ -126,6 +126,9 @@ class Bandwidth(RegressionEffect):
         # through a Welch estimate whose fit is biased by about 1 % in fc at these record sizes:
         # when the motion sees the filter clearly, it alone gives the cut-off
         use_motion = mgrid is not None and max(mgrid[1].max(), mgrid[2].max()) > 25.0
+        if use_motion:       # a best cut-off at the grid's end is no roll-off the motion measured
+            o = max((1, 2), key=lambda k: mgrid[k].max())
+            use_motion = 0 < int(np.argmax(mgrid[o])) < fcs.size - 1
 
         if use_motion:
             fc, order, s_fc = self._motion_fit(motion, mgrid, fcs)

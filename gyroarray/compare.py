@@ -667,14 +667,14 @@ class ModelComparison:
         for e in model:
             ctx.E = get_effect(e.effect).clean(ctx, e, ctx.E)
         tests = self._deterministic_candidates(ctx, notes)
+        self._stochastic_record(ctx, tests, notes)
         for e in model:                        # the prediction error of each deterministic effect
-            eff = get_effect(e.effect)
+            eff = get_effect(e.effect)         # (after the stochastic record: a line's test reads it)
             if eff.predicts and eff.candidate and not eff.why_not(ctx):
                 before = len(tests)
                 self._test(ctx, eff, e.gyro, tests, notes)
                 if len(tests) > before:
                     tests[-1] = _prediction_error(tests[-1], e)
-        self._stochastic_record(ctx, tests, notes)
         self._noise(ctx, tests, notes, refit=False)
         adev, band_tests = self._adev_band(model, ctx.E, ctx.rec)
         tests += band_tests
