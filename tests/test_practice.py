@@ -25,7 +25,7 @@ pytestmark = pytest.mark.skipif(not ANSWERS, reason="shared/measurements/practic
 
 
 #: make test diagnoses these; the others run in make score (`pytest -m slow`)
-PRACTICE_FAST = {"p1_scale_factor", "p4_burst"}
+PRACTICE_FAST = {"p4_burst"}
 
 
 @pytest.mark.parametrize("name", [pytest.param(n, marks=[] if n in PRACTICE_FAST else [pytest.mark.slow])

@@ -87,7 +87,7 @@ def test_split_measurement_refuses_a_too_short_part():
 def _filtered(cutoff_hz, seed):
     model = NoiseModel((ModelEntry("arw", None, {"n_deg_rt_h": 0.15}), ModelEntry("rrw", None, {"k_deg_h_rt_h": 5.0}),
                         ModelEntry("bandwidth", 3, {"cutoff_hz": cutoff_hz, "order": 2})))
-    return lab_run(model, LAYOUT, np.random.default_rng(seed), static_s=600.0, motion_s=0.0, tail_s=0.0)
+    return lab_run(model, LAYOUT, np.random.default_rng(seed), static_s=300.0, motion_s=0.0, tail_s=0.0)
 
 
 def test_a_filter_read_from_the_spectrum_is_compared_with_the_model_not_taken_as_an_error():
