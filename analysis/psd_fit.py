@@ -198,6 +198,20 @@ def fit_psd(x, dt_s: float) -> PsdFit:
     l_bw, fc, order, cb, family = best
     scan, ll = prof[(family, order)]
     i = int(np.argmin(np.abs(scan - fc)))
+    if i == 0:
+        # the likelihood still rises at the lowest cut-off scanned: the spectrum falls from the
+        # bottom of the band (a random walk, a hump), which is no roll-off: the best cut-off
+        # with a peak of its own, else none (the null)
+        peaks = [(ll_[k], fam, o, k) for (fam, o), (sc, ll_) in prof.items()
+                 for k in range(1, sc.size - 1) if ll_[k] > ll_[k - 1] and ll_[k] >= ll_[k + 1]]
+        if peaks:
+            _, family, order, i = max(peaks)
+            scan, ll = prof[(family, order)]
+            fc = float(scan[i])
+            ff = f if family == "continuous" else bandwidth_warped_frequency(f, fc, dt)
+            cb, l_bw = _linear_ml(p, base * (np.abs(bandwidth_response(ff, fc, order)) ** 2)[:, None], nu)
+        else:
+            l_bw, cb = l0, c0
     sigma_fc = math.nan
 
     def profile(log_fc: float) -> tuple[float, np.ndarray]:
