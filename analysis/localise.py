@@ -85,7 +85,7 @@ from .davar import davar
 __all__ = ["Finding", "ChannelCorrelation", "Localisation", "localise", "critical_z", "chi2_z",
            "davar_window",
            "baseline_psd", "default_nperseg", "residual_psd", "adev_excess", "psd_findings", "fit_lowpass",
-           "LowPassFit", "lag_on_motion", "time_windows", "channel_correlations",
+           "LowPassFit", "lag_on_motion", "time_windows", "channel_correlations", "record_channels",
            "butterworth_group_delay"]
 
 #: Family-wise false-alarm rate of the significance tests [-].
@@ -968,8 +968,16 @@ def _channel_findings(corrs, z_crit) -> list[Finding]:
     return out
 
 
-def _channels(n, n_gyros, rate, angular_accel, acc, temp_c, time_s, dt, extra
-              ) -> dict[str, np.ndarray]:
+def record_channels(n, n_gyros, rate, angular_accel, acc, temp_c, time_s, dt, extra
+                    ) -> dict[str, np.ndarray]:
+    """The channels :func:`localise` correlates the residual with, name -> (n,) or (n, N).
+
+    ``time`` [s] always; with ``rate`` (n, N) [rad/s]: ``rate``, ``rate²``,
+    ``angular acceleration`` [rad/s²] (``angular_accel`` or the rate's
+    derivative); with ``acc`` (n, 3) [m/s²]: ``acc_x``, ``acc_y``, ``acc_z``;
+    with ``temp_c`` (n,) [°C]: ``temperature``, ``dT/dt`` [°C/s]; then
+    ``extra``. InputError on a wrong shape or a non-finite value.
+    """
     ch: dict[str, np.ndarray] = {"time": np.asarray(time_s, dtype=float)}
     if rate is not None:
         ch["rate"] = rate
@@ -1108,7 +1116,7 @@ def localise(residual, dt_s: float, *, time_s=None, taus_s=None, band_lo=None, b
     n, N = e.shape
     t = np.arange(n) * dt if time_s is None else np.asarray(time_s, dtype=float)
     u = None if rate is None else np.asarray(rate, dtype=float)
-    channels = _channels(n, N, u, angular_accel, acc, temp_c, t, dt, extra_channels)
+    channels = record_channels(n, N, u, angular_accel, acc, temp_c, t, dt, extra_channels)
     f, P, nu = residual_psd(e, dt, nperseg)
     S = None
     if model_psd is not None:
