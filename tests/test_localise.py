@@ -216,3 +216,11 @@ def test_bad_inputs_are_refused():
         localise(e, DT, rate=np.zeros((1000, 3)))
     with pytest.raises(InputError, match=r"acc must be \(1000, 3\)"):
         localise(e, DT, acc=np.zeros((1000, 4)))
+
+
+def test_bandwidth_gain2_is_sosfreqz_of_the_library_filter():
+    from gyroarray.analysis.localise import bandwidth_gain2
+    f = np.linspace(0.01, 49.9, 997)
+    for fc, order in ((0.5, 1), (8.0, 2), (30.0, 1), (45.0, 2)):
+        _, h = signal.sosfreqz(bandwidth_sos(fc, order, DT), worN=f, fs=FS)
+        np.testing.assert_allclose(bandwidth_gain2(f, fc, order, DT), np.abs(h) ** 2, rtol=1e-9, atol=1e-15)
