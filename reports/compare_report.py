@@ -497,6 +497,15 @@ def _model_asd_deg_h(f_hz: np.ndarray, n_deg_rt_h: float, k_deg_h_rt_h: float) -
     return units.rad_s_to_deg_h(np.sqrt(2.0 * n ** 2 + k ** 2 / (2.0 * math.pi ** 2 * f ** 2)))
 
 
+def _asd_axes(ax):
+    """Log ticks, grid and labels of an amplitude-spectral-density panel."""
+    _log_ticks(ax)
+    ax.grid(alpha=0.3)
+    ax.set_xlabel("frequency [Hz]", fontsize=8)
+    ax.set_ylabel("ASD [deg/h/√Hz]", fontsize=8)
+    ax.tick_params(labelsize=7)
+
+
 def _psd_fig(comp, analysis) -> bytes:
     """Residual ASD per gyro over the record, with the sinusoid candidates and the model's level."""
     from scipy.signal import welch
@@ -537,11 +546,7 @@ def _psd_fig(comp, analysis) -> bytes:
             ax.axvline(fq, color=color if color != "0.15" else _GREY, lw=1, ls=":",
                        label="line candidate")
         ax.set_title(title, fontsize=9, color=color, y=1.0, pad=4)
-        _log_ticks(ax)
-        ax.grid(alpha=0.3)
-        ax.set_xlabel("frequency [Hz]", fontsize=8)
-        ax.set_ylabel("ASD [deg/h/√Hz]", fontsize=8)
-        ax.tick_params(labelsize=7)
+        _asd_axes(ax)
     _header(fig, "Residual amplitude spectral density", axs)
     return _png(fig, DPI)
 
@@ -797,11 +802,7 @@ def _localise_psd_fig(comp, final) -> bytes:
         bad = loc.gyro_scores[g] > loc.z_crit
         ax.set_title(f"gyro {g + 1}" + (f": score {loc.gyro_scores[g]:.1f}" if bad else ""),
                      fontsize=9, color=_RED if bad else "0.15", y=1.0, pad=4)
-        _log_ticks(ax)
-        ax.grid(alpha=0.3)
-        ax.set_xlabel("frequency [Hz]", fontsize=8)
-        ax.set_ylabel("ASD [deg/h/√Hz]", fontsize=8)
-        ax.tick_params(labelsize=7)
+        _asd_axes(ax)
     _header(fig, "Residual spectrum against the model's band", axs)
     return _png(fig, DPI)
 

@@ -26,6 +26,7 @@ from gyroarray.layout import Layout
 from gyroarray.measurement import Measurement, write_measurement
 from gyroarray.sim.effects import simulate_readings
 from gyroarray.sim.model import NoiseModel
+from swings import two_swings
 
 FS = 100.0
 DT = 1.0 / FS
@@ -35,23 +36,9 @@ FILTER = signal.butter(4, 10.0, fs=FS)            # (b, a), applied with filtfil
 FILTERED = (2, 3)
 
 
-def _motion():
-    t = np.arange(N_SAMPLES) * DT
-
-    def envelope(t0, t1, ramp=3.0):                    # minimum-jerk in and out
-        def s(x):
-            return x**3 * (10 - 15 * x + 6 * x * x)
-        return s(np.clip((t - t0) / ramp, 0, 1)) * s(np.clip((t1 - t) / ramp, 0, 1))
-
-    a1 = np.array([1.0, 1.0, 1.0]) / math.sqrt(3)
-    a2 = np.array([1.0, -1.0, 0.0]) / math.sqrt(2)
-    w = (math.radians(30) * (envelope(100, 180) * np.sin(2 * math.pi * 0.5 * (t - 100)))[:, None] * a1
-         + math.radians(20) * (envelope(190, 270) * np.sin(2 * math.pi * 1.3 * (t - 190)))[:, None] * a2)
-    return t, w
-
-
 def _record(seed: int, zero_phase: bool) -> Measurement:
-    t, w = _motion()
+    t = np.arange(N_SAMPLES) * DT
+    w = two_swings(t, (100.0, 180.0), (190.0, 270.0))
     model = NoiseModel.from_toml({"effects": [{"effect": "arw", "n_deg_rt_h": 0.3},
                                               {"effect": "rrw", "k_deg_h_rt_h": 5.0}]}, n_gyros=4)
     y = simulate_readings(model, w, LAYOUT, DT, np.random.default_rng(seed), time_s=t)

@@ -30,6 +30,7 @@ from gyroarray.sim.effects import simulate_readings
 from gyroarray.sim.model import NoiseModel
 from gyroarray.sim.sensor import bandwidth_sos
 from gyroarray.units import arw_deg_rt_h_to_rad_rt_s, deg_s_to_rad_s, rrw_deg_h_rt_h_to_rad_s_rt_s
+from swings import two_swings
 
 FS = 100.0
 DT = 1.0 / FS
@@ -42,17 +43,7 @@ N_SI, K_SI = arw_deg_rt_h_to_rad_rt_s(ARW), rrw_deg_h_rt_h_to_rad_s_rt_s(RRW)
 def _motion():
     """Still 100 s; 30 deg/s at 0.5 Hz about (1,1,1)/√3; 20 deg/s at 1.3 Hz about (1,−1,0)/√2."""
     t = np.arange(N_SAMPLES) * DT
-
-    def envelope(t0, t1, ramp=3.0):                    # minimum-jerk in and out
-        def s(x):
-            return x**3 * (10 - 15 * x + 6 * x * x)
-        return s(np.clip((t - t0) / ramp, 0, 1)) * s(np.clip((t1 - t) / ramp, 0, 1))
-
-    a1 = np.array([1.0, 1.0, 1.0]) / math.sqrt(3)
-    a2 = np.array([1.0, -1.0, 0.0]) / math.sqrt(2)
-    w = (deg_s_to_rad_s(30) * (envelope(100, 200) * np.sin(2 * math.pi * 0.5 * (t - 100)))[:, None] * a1
-         + deg_s_to_rad_s(20) * (envelope(220, 320) * np.sin(2 * math.pi * 1.3 * (t - 220)))[:, None] * a2)
-    return t, w
+    return t, two_swings(t)
 
 
 T, W = _motion()
