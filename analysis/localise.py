@@ -965,15 +965,27 @@ def channel_correlations(residual, channels: Mapping[str, np.ndarray], *,
     return sorted(out, key=lambda c: -abs(c.z))
 
 
+#: The slope of the residual on a channel in datasheet units: channel -> (factor from SI, text).
+_DEG_H = 180.0 / math.pi * 3600.0
+_SLOPE_UNITS = {"time": (_DEG_H * 3600.0, "deg/h per hour"),
+                "rate": (1e6, "ppm of the rate"),
+                "rate²": (math.pi / 180.0, "deg/s per (deg/s)²"),
+                "angular acceleration": (1e3, "ms (residual per angular acceleration)"),
+                "temperature": (_DEG_H, "deg/h per °C"),
+                "dT/dt": (_DEG_H, "deg/h per °C/s"),
+                **{f"acc_{a}": (180.0 / math.pi * 9.80665, "deg/s per g") for a in "xyz"}}
+
+
 def _channel_findings(corrs, z_crit) -> list[Finding]:
     out = []
     for c in corrs:
         if abs(c.z) < z_crit:
             continue
+        k, unit = _SLOPE_UNITS.get(c.channel, (1.0, "rad/s per unit"))
         out.append(Finding("channel", (c.gyro,), abs(c.z),
-                           f"residual follows {c.channel} (r = {c.r:+.2f}, {c.slope:.3g} rad/s "
-                           f"per unit)", {"channel": c.channel, "r": c.r, "slope": c.slope,
-                                          "n_eff": c.n_eff}))
+                           f"residual follows {c.channel} (r = {c.r:+.2f}, slope {c.slope * k:.3g} "
+                           f"{unit})", {"channel": c.channel, "r": c.r, "slope": c.slope,
+                                        "n_eff": c.n_eff}))
     return out
 
 
