@@ -1029,6 +1029,29 @@ class ModelComparison:
         a.localisation = [_finding_dict(f, a) for f in loc.findings]
         return a
 
+    def _mimics(self, a: Analysis, notes: list) -> set:
+        """(effect, gyro) the ladder must not add: on a gyro whose spectrum a non-causal low-pass
+        shapes (the localisation of ``a``), every effect that reads the noise, and the rivals of
+        ``bandwidth``, would only mimic a filter the library does not have."""
+        self.localise(a)
+        gyros = sorted({g for f in a.localisation if f["kind"] == "lowpass"
+                        and f["details"].get("causal") is False for g in f["gyros"]})
+        if not gyros:
+            return set()
+        rivals = set(get_effect("bandwidth").rivals) | {"bandwidth"}
+        out = set()
+        for t in a.candidates:
+            eff = get_effect(t.effect)
+            mimic = eff.reads == "noise" or t.effect in rivals
+            if mimic and (t.gyro in gyros or (t.gyro is None and eff.changes_adev)):
+                out.add((t.effect, t.gyro))
+        note = (f"the ladder adds no noise effect on gyro{'s' if len(gyros) > 1 else ''} "
+                f"{', '.join(map(str, gyros))}: a low-pass that does not lag on motion (not causal) shapes "
+                "its spectrum, which no effect of the library models (see where it fails)")
+        if out and note not in notes:
+            notes.append(note)
+        return out
+
     # -- the user's loop ------------------------------------------------------
     def diagnose(self) -> Analysis:
         """The calibrated model's analysis, localised where no effect explains it."""
@@ -1081,7 +1104,9 @@ class ModelComparison:
             if cur.consistent:
                 break
             taken = None
-            for t in [t for t in cur.candidates if cur.significant(t)][:max_tries]:
+            blocked = self._mimics(cur, refused)
+            for t in [t for t in cur.candidates if cur.significant(t)
+                      and (t.effect, t.gyro) not in blocked][:max_tries]:
                 trial = self.analyse(model.with_effect(self.entry_for(t.effect, t.gyro, cur)))
                 if (trial.excess < cur.excess
                         and trial.discrepancy <= cur.discrepancy * (1.0 + LADDER_D_SLACK)):

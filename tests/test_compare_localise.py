@@ -96,6 +96,17 @@ def test_zero_phase_decimation_filter_is_a_lowpass_that_does_not_lag(samsung):
     assert out["localisation"][0]["kind"] == "lowpass"
 
 
+def test_ladder_does_not_mimic_the_filter_with_noise_effects(samsung):
+    # without the localisation the ladder added gauss_markov, outliers and quantization on
+    # gyros 2 and 3 (D 152 -> 99.5): effects that only mimic a filter the library does not have
+    _, comp, _ = samsung
+    steps = comp.ladder(max_steps=3)
+    final = steps[-1][1]
+    assert len(steps) == 1 and not final.consistent
+    assert final.localisation[0]["kind"] == "lowpass" and final.localisation[0]["details"]["causal"] is False
+    assert any(n.startswith("the ladder adds no noise effect on gyros 2, 3") for n in final.notes)
+
+
 def test_clean_record_gives_no_findings_and_the_correlations_are_plain_ones(clean):
     comp, a = clean
     assert a.consistent and a.localisation == [] and a.to_json_dict()["localisation"] == []
