@@ -10,6 +10,9 @@ zero-phase decimation filter, the "Samsung" case of issue 15). The expected
 cut-off is the −3 dB point of that filter's magnitude from ``scipy.signal.freqz``
 (|H|² for a forward-backward pass); correlations are checked against a plain
 ``np.corrcoef`` of the same block means.
+
+False alarms: the clean record of seeds 2-11, localised even though
+consistent, gives no finding (measured; the family-wise rate is 1 %).
 """
 
 from __future__ import annotations
@@ -75,9 +78,9 @@ def test_zero_phase_decimation_filter_is_a_lowpass_that_does_not_lag(samsung):
     top = a.localisation[0]
     assert top["kind"] == "lowpass" and top["gyros"] == list(FILTERED)
     d = top["details"]
-    # 9.01 Hz from freqz; measured 8.77 (the roll-off is seen over ~3 tenth-decade bins
-    # before the motion's own high-frequency content floors it, hence 8 %)
-    assert d["cutoff_hz"] == pytest.approx(_minus_3db_hz(), rel=0.08)
+    # 9.01 Hz from freqz; measured 8.77 here, 0.973-1.001 of it over seeds 1-6 (the
+    # roll-off is seen over ~3 tenth-decade bins before it reaches 20 dB): 5 %
+    assert d["cutoff_hz"] == pytest.approx(_minus_3db_hz(), rel=0.05)
     assert f"low-pass at ≈ {d['cutoff_hz']:.3g} Hz" in top["sentence"]
     assert "not causal: no lag on motion" in top["sentence"] and d["causal"] is False
     # a causal filter of that magnitude lags ~60 ms; measured -0.03 ± 0.02 ms
