@@ -315,11 +315,12 @@ def _finding_dict(f, a: Analysis) -> dict:
                          | {e.gyro for e in a.model if e.effect == "bandwidth"})
         on = [g for g in f.gyros if g in with_bw]
         if on:
-            d["sentence"] += (f"; bandwidth on gyro{'s' if len(on) > 1 else ''} "
-                              f"{', '.join(map(str, on))} would model the magnitude, but it is causal and "
-                              f"would put a lag of ≈ {f.details['expected_lag_s'] * 1e3:.3g} ms on the "
-                              "motion that the record does not have (a zero-phase filter, e.g. a "
-                              "decimation filter applied offline, is not in the library)")
+            fits = "its magnitude fits, but " if f.details.get("library_fits") else ""
+            d["sentence"] += (f"; bandwidth (significant or in the model on gyro{'s' if len(on) > 1 else ''} "
+                              f"{', '.join(map(str, on))}): {fits}it is causal and would put a lag of "
+                              f"≈ {f.details['expected_lag_s'] * 1e3:.3g} ms on the motion that the record "
+                              "does not have (a zero-phase filter, e.g. a decimation filter applied "
+                              "offline, is not in the library)")
     return d
 
 

@@ -87,7 +87,7 @@ def test_zero_phase_decimation_filter_is_a_lowpass_that_does_not_lag(samsung):
     assert abs(d["lag_s"]) < 4 * d["lag_se_s"] + 1e-4 < 0.1 * d["expected_lag_s"]
     # the magnitude is what bandwidth reads (its candidate comes first), and the missing lag is said
     assert a.candidates[0].effect == "bandwidth" and a.candidates[0].gyro in FILTERED
-    assert "bandwidth on gyros 2, 3 would model the magnitude" in top["sentence"]
+    assert "bandwidth (significant or in the model on gyros 2, 3): it is causal" in top["sentence"]
     for f in a.localisation:       # never Gauss-Markov or a burst, no noise-level change at rest
         assert "Gauss" not in f["sentence"] and "burst" not in f["sentence"]
         assert f["kind"] != "time_window" or f["details"]["moving_fraction"] > 0
