@@ -101,6 +101,9 @@ LAG_BLOCKS = 8
 #: A low-pass is fitted down to this PSD ratio (20 dB): below, floors (spectral
 #: leakage, quantization, aliasing near Nyquist) take over in real records.
 LOWPASS_FLOOR = 0.01
+#: A deficit at the top of the band is a low-pass only when its last bin falls below this
+#: fraction (−3 dB) of the level before it: a deficit that stays flat is the model's level.
+LOWPASS_DROP = 0.5
 #: Normal σ from the median absolute deviation [-].
 MAD_TO_SIGMA = 1.4826
 #: A time window during which the table moves at least this fraction of the
@@ -699,7 +702,7 @@ def _classify(gyro, a, b, f, bins, fb, rb, nub, zb, lines_explain, dt_s, rate) -
     top = b >= fb.size - 1
     score = float(np.abs(zb[a:b]).max())
     span = {"f_lo_hz": float(fb[a]), "f_hi_hz": float(fb[b - 1])}
-    if zb[a] < 0 and top:
+    if zb[a] < 0 and top and rb[-1] < LOWPASS_DROP * _flat_level(fb, rb, a, b):
         return _lowpass_finding(gyro, a, f, bins, fb, rb, nub, zb, dt_s, score, rate)
     if zb[a] < 0:
         return Finding("band_deficit", (gyro,), score, f"less noise than the model between "
@@ -728,6 +731,13 @@ def _slope(f: np.ndarray, excess: np.ndarray) -> float:
     return float(np.polyfit(np.log(f[ok]), np.log(excess[ok]), 1)[0])
 
 
+def _flat_level(fb: np.ndarray, rb: np.ndarray, a: int, b: int) -> float:
+    """The PSD ratio before a deficit region [a, b) of log bins: its median over the decade below
+    fb[a] (at least 3 bins), else over the region itself (a level offset, not a roll-off)."""
+    below = (fb >= fb[a] / 10.0) & (np.arange(fb.size) < a)
+    return float(np.median(rb[below] if np.count_nonzero(below) >= 3 else rb[a:b]))
+
+
 def _lowpass_finding(gyro, a, f, bins, fb, rb, nub, zb, dt_s, score, rate) -> Finding:
     """A deficit reaching the top of the band: fit the low-pass, test its lag."""
     # a decade of the flat part before the deficit, without bins in excess (motion, lines),
@@ -735,8 +745,7 @@ def _lowpass_finding(gyro, a, f, bins, fb, rb, nub, zb, dt_s, score, rate) -> Fi
     # (excess judged against the level of that decade: a model whose white level was
     # calibrated on the filtered short τ sits below the flat part)
     near = fb >= fb[a] / 10.0
-    flat = near & (np.arange(fb.size) < a)
-    level = float(np.median(rb[flat])) if np.any(flat) else 1.0
+    level = _flat_level(fb, rb, a, fb.size)
     use = near & (rb >= LOWPASS_FLOOR * level) & (chi2_z(rb / level, nub) < 2.0)
     fit = fit_lowpass(f, [bins[i] for i in np.flatnonzero(use)], rb[use], nub[use], dt_s)
     p_round = max(1, round(fit.order))

@@ -215,3 +215,13 @@ def test_bandwidth_gain2_is_sosfreqz_of_the_library_filter():
     for fc, order in ((0.5, 1), (8.0, 2), (30.0, 1), (45.0, 2)):
         _, h = signal.sosfreqz(bandwidth_sos(fc, order, DT), worN=f, fs=FS)
         np.testing.assert_allclose(bandwidth_gain2(f, fc, order, DT), np.abs(h) ** 2, rtol=1e-9, atol=1e-15)
+
+
+def test_a_flat_deficit_is_the_models_level_not_a_lowpass():
+    # a model 1.6x too high everywhere (its white level inflated by what it misses): the residual
+    # sits at 1/1.6 of it up to Nyquist, a level, not a roll-off (it was read as a low-pass once)
+    loc = localise(_record(seed=3) - U, DT, rate=U,
+                   model_psd=lambda f: 1.6 * baseline_psd(f, np.full(4, N_SI), np.full(4, K_SI)))
+    assert not loc.of_kind("lowpass")
+    (deficit,) = loc.of_kind("band_deficit")
+    assert deficit.gyros == (1, 2, 3, 4) and 0.5 < deficit.details["ratio"] < 1 / 1.6
