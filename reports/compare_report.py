@@ -9,7 +9,11 @@ found, for people who would rather look than read:
 2. **the error falling** (a ladder of several steps): D after each added effect;
 3. **effects found**: the final model's effects, params ± 1σ in the spec's
    units, and the baseline ARW/RRW of every gyro;
-4. **what is still unexplained**, in sentences;
+4. **what is still unexplained**: when the model is not consistent, the
+   ranked localisation of the final step (``Analysis.localisation``: τ range,
+   frequency band and shape, time window, gyros, channels) with the residual
+   PSD against the model's Monte-Carlo PSD band and the residual against
+   every channel of the record; else the unexplained sentences;
 5. **candidates**: the best candidate effects of the final (and the first) step;
 6. **where the model fails**, per gyro, for the *first* step (what a user wants
    to see before fitting anything):
