@@ -84,9 +84,9 @@ from .davar import davar
 
 __all__ = ["Finding", "ChannelCorrelation", "Localisation", "localise", "critical_z", "chi2_z",
            "davar_window",
-           "baseline_psd", "residual_psd", "adev_excess", "psd_findings", "fit_lowpass",
-           "LowPassFit", "lag_on_motion", "time_windows", "channel_correlations",
-           "butterworth_group_delay"]
+           "baseline_psd", "default_nperseg", "residual_psd", "adev_excess", "psd_findings", "fit_lowpass",
+           "LowPassFit", "lag_on_motion", "time_windows", "channel_correlations", "record_channels",
+           "butterworth_group_delay", "bandwidth_gain2"]
 
 #: Family-wise false-alarm rate of the significance tests [-].
 ALPHA = 0.01
@@ -101,6 +101,9 @@ LAG_BLOCKS = 8
 #: A low-pass is fitted down to this PSD ratio (20 dB): below, floors (spectral
 #: leakage, quantization, aliasing near Nyquist) take over in real records.
 LOWPASS_FLOOR = 0.01
+#: A deficit at the top of the band is a low-pass only when its last bin falls below this
+#: fraction (−3 dB) of the level before it: a deficit that stays flat is the model's level.
+LOWPASS_DROP = 0.5
 #: Normal σ from the median absolute deviation [-].
 MAD_TO_SIGMA = 1.4826
 #: A time window during which the table moves at least this fraction of the
@@ -287,6 +290,12 @@ def baseline_psd(freq_hz, arw_rad_rt_s, rrw_rad_s_rt_s=0.0) -> np.ndarray:
     return out[0] if out.shape[0] == 1 and np.ndim(arw_rad_rt_s) == 0 else out
 
 
+def default_nperseg(n: int) -> int:
+    """Welch segment of an n-sample record: the power of two nearest n/32, within [256, 65536], at most n."""
+    nperseg = int(2 ** round(math.log2(max(n / 32.0, 1.0))))
+    return int(min(max(nperseg, 256), 65536, n))
+
+
 def residual_psd(residual, dt_s: float, nperseg: int | None = None
                  ) -> tuple[np.ndarray, np.ndarray, float]:
     """Welch PSD of each column (Hann, 50 % overlap) and its degrees of freedom.
@@ -312,8 +321,7 @@ def residual_psd(residual, dt_s: float, nperseg: int | None = None
     e = np.asarray(residual, dtype=float)
     n = e.shape[0]
     if nperseg is None:
-        nperseg = int(2 ** round(math.log2(max(n / 32.0, 1.0))))
-        nperseg = min(max(nperseg, 256), 65536, n)
+        nperseg = default_nperseg(n)
     f, p = signal.welch(e, fs=1.0 / dt_s, window="hann", nperseg=nperseg,
                         noverlap=nperseg // 2, detrend="constant", axis=0)
     k = 1 + (n - nperseg) // (nperseg // 2)
@@ -419,9 +427,10 @@ class LowPassFit:
     Attributes
     ----------
     cutoff_hz : float
-        −3 dB frequency of the free-slope fit g/(1 + (f/fc)^(2p)) [Hz].
+        −3 dB frequency (PSD ratio g/2) of the free-slope fit
+        g/(1 + (f/f0)^(2p))^m, m = ``passes`` [Hz].
     slope_db_decade : float
-        −20·p [dB/decade] above the corner.
+        −20·p·m [dB/decade] far above the corner.
     gain : float
         g, the level below the corner relative to the model [-].
     bandwidth_order : int
@@ -432,6 +441,9 @@ class LowPassFit:
         χ² of the two fits over the same bins [-].
     dof : int
         Number of bins minus the free fit's 3 parameters.
+    passes : int
+        m of the free fit: 1 a Butterworth-shaped |H|², 2 its square (a
+        filter run forward and backward, ``filtfilt``), whichever fits best.
     """
 
     cutoff_hz: float
@@ -442,6 +454,7 @@ class LowPassFit:
     chi2_free: float
     chi2_bandwidth: float
     dof: int
+    passes: int = 1
 
     @property
     def library_fits(self) -> bool:
@@ -504,36 +517,53 @@ def _weighted_fit(lr: np.ndarray, shape: np.ndarray, w: np.ndarray) -> tuple[flo
 
 
 def _lowpass_free(ff, A, lr, w):
-    """Fit ln r ≈ ln g + ln(bin mean of 1/(1 + (f/fc)^(2p))): (fc, p, g, χ²)."""
+    """Fit ln r ≈ ln g + ln(bin mean of (1 + (f/f0)^(2p))^(−m)), m = 1 and 2: (fc, p·m, g, χ², m).
+
+    fc is the −3 dB point of the best shape, f0·(2^(1/m) − 1)^(1/(2p)).
+    """
     lf = np.log(ff)
-
-    def shape(q):
-        return np.log(A @ np.exp(-np.logaddexp(0.0, 2.0 * q[1] * (lf - q[0]))))
-
-    def resid(q):
-        return _weighted_fit(lr, shape(q), w)[1]
-
     best = None
-    for p0 in (0.5, 1.0, 2.0, 4.0):
-        for c0 in np.quantile(lf, [0.3, 0.6, 0.9]):
-            sol = optimize.least_squares(resid, [c0, p0],
-                                         bounds=([lf.min() - 2, 0.25], [lf.max() + 2, 12.0]))
-            if best is None or sol.cost < best.cost:
-                best = sol
-    g, _ = _weighted_fit(lr, shape(best.x), w)
-    return math.exp(best.x[0]), float(best.x[1]), math.exp(g), float(2.0 * best.cost)
+    for m in (1, 2):
+        def shape(q, m=m):
+            return np.log(A @ np.exp(-m * np.logaddexp(0.0, 2.0 * q[1] * (lf - q[0]))))
+
+        def resid(q, shape=shape):
+            return _weighted_fit(lr, shape(q), w)[1]
+
+        for p0 in (1.0, 2.0, 4.0):
+            for c0 in np.quantile(lf, [0.5, 0.9]):
+                sol = optimize.least_squares(resid, [c0, p0],
+                                             bounds=([lf.min() - 2, 0.25], [lf.max() + 2, 12.0]))
+                # the single pass is preferred unless the double one fits clearly better
+                cost = sol.cost + (0.0 if m == 1 else 2.0)
+                if best is None or cost < best[0]:
+                    best = (cost, sol, m, shape)
+    _, sol, m, shape = best
+    g, _ = _weighted_fit(lr, shape(sol.x), w)
+    f0, p = math.exp(sol.x[0]), float(sol.x[1])
+    fc = f0 * (2.0 ** (1.0 / m) - 1.0) ** (1.0 / (2.0 * p))
+    return fc, p * m, math.exp(g), float(2.0 * sol.cost), m
+
+
+def bandwidth_gain2(freq_hz, cutoff_hz: float, order: int, dt_s: float) -> np.ndarray:
+    """|H|² of the library's discrete ``bandwidth`` filter (:func:`gyroarray.sim.sensor.bandwidth_sos`).
+
+    The bilinear transform pre-warped at fc maps the analog Butterworth onto
+    1/(1 + (tan(π f dt)/tan(π fc dt))^(2·order)) exactly (what ``sosfreqz``
+    of those sections gives, at a fraction of its cost).
+    """
+    x = np.tan(np.pi * np.asarray(freq_hz, dtype=float) * dt_s) / math.tan(math.pi * cutoff_hz * dt_s)
+    return 1.0 / (1.0 + x ** (2 * order))
 
 
 def _lowpass_library(ff, A, lr, w, dt_s):
     """Best ``bandwidth`` (order 1 or 2, the simulator's discrete filter): (order, fc, χ²)."""
-    from gyroarray.sim.sensor import bandwidth_sos
     nyq = 0.5 / dt_s
     best = (1, float("nan"), float("inf"))
     for order in (1, 2):
         def chi2(lfc, order=order):
             fc = min(math.exp(lfc), 0.999 * nyq)
-            _, h = signal.sosfreqz(bandwidth_sos(fc, order, dt_s), worN=ff, fs=1.0 / dt_s)
-            shape = np.log(np.maximum(A @ np.abs(h) ** 2, 1e-300))
+            shape = np.log(np.maximum(A @ bandwidth_gain2(ff, fc, order, dt_s), 1e-300))
             return float(np.sum(_weighted_fit(lr, shape, w)[1] ** 2))
 
         grid = np.linspace(math.log(ff.min()), math.log(0.999 * nyq), 60)
@@ -569,11 +599,11 @@ def fit_lowpass(freq_hz, bins, ratio, nu_bins, dt_s: float) -> LowPassFit:
     ff, A = _averaging(np.asarray(freq_hz, dtype=float), list(bins))
     lr = np.log(np.asarray(ratio, dtype=float))
     w = np.asarray(nu_bins, dtype=float) / 2.0               # 1/var(ln r̄) = ν/2
-    fc, p, g, chi2 = _lowpass_free(ff, A, lr, w)
+    fc, p, g, chi2, m = _lowpass_free(ff, A, lr, w)
     order, fc_lib, chi2_lib = _lowpass_library(ff, A, lr, w, dt_s)
     return LowPassFit(cutoff_hz=fc, slope_db_decade=-20.0 * p, gain=g, bandwidth_order=order,
                       bandwidth_cutoff_hz=fc_lib, chi2_free=chi2, chi2_bandwidth=chi2_lib,
-                      dof=max(int(lr.size) - 3, 1))
+                      dof=max(int(lr.size) - 3, 1), passes=m)
 
 
 def _lines(f, p, s, nu, gyro, z_crit_fine) -> list[Finding]:
@@ -672,7 +702,7 @@ def _classify(gyro, a, b, f, bins, fb, rb, nub, zb, lines_explain, dt_s, rate) -
     top = b >= fb.size - 1
     score = float(np.abs(zb[a:b]).max())
     span = {"f_lo_hz": float(fb[a]), "f_hi_hz": float(fb[b - 1])}
-    if zb[a] < 0 and top:
+    if zb[a] < 0 and top and rb[-1] < LOWPASS_DROP * _flat_level(fb, rb, a, b):
         return _lowpass_finding(gyro, a, f, bins, fb, rb, nub, zb, dt_s, score, rate)
     if zb[a] < 0:
         return Finding("band_deficit", (gyro,), score, f"less noise than the model between "
@@ -701,11 +731,22 @@ def _slope(f: np.ndarray, excess: np.ndarray) -> float:
     return float(np.polyfit(np.log(f[ok]), np.log(excess[ok]), 1)[0])
 
 
+def _flat_level(fb: np.ndarray, rb: np.ndarray, a: int, b: int) -> float:
+    """The PSD ratio before a deficit region [a, b) of log bins: its median over the decade below
+    fb[a] (at least 3 bins), else over the region itself (a level offset, not a roll-off)."""
+    below = (fb >= fb[a] / 10.0) & (np.arange(fb.size) < a)
+    return float(np.median(rb[below] if np.count_nonzero(below) >= 3 else rb[a:b]))
+
+
 def _lowpass_finding(gyro, a, f, bins, fb, rb, nub, zb, dt_s, score, rate) -> Finding:
     """A deficit reaching the top of the band: fit the low-pass, test its lag."""
     # a decade of the flat part before the deficit, without bins in excess (motion, lines),
     # down to 20 dB below the model (floors: leakage, quantization, aliasing)
-    use = ((fb >= fb[a] / 10.0) & (zb < 2.0) & (rb >= LOWPASS_FLOOR))
+    # (excess judged against the level of that decade: a model whose white level was
+    # calibrated on the filtered short τ sits below the flat part)
+    near = fb >= fb[a] / 10.0
+    level = _flat_level(fb, rb, a, fb.size)
+    use = near & (rb >= LOWPASS_FLOOR * level) & (chi2_z(rb / level, nub) < 2.0)
     fit = fit_lowpass(f, [bins[i] for i in np.flatnonzero(use)], rb[use], nub[use], dt_s)
     p_round = max(1, round(fit.order))
     if fit.library_fits:
@@ -718,13 +759,17 @@ def _lowpass_finding(gyro, a, f, bins, fb, rb, nub, zb, dt_s, score, rate) -> Fi
                else "not the shape of")
         text = (f"looks like a low-pass at ≈ {_fmt(fit.cutoff_hz)} Hz ({fit.slope_db_decade:.0f} "
                 f"dB/decade above it, order ≈ {fit.order:.1f}: {how} bandwidth's; nearest "
-                f"bandwidth order {fit.bandwidth_order} at {_fmt(fit.bandwidth_cutoff_hz)} Hz)")
+                f"bandwidth order {fit.bandwidth_order} at {_fmt(fit.bandwidth_cutoff_hz)} Hz"
+                + ("; the shape of a Butterworth run forward and backward" if fit.passes == 2 else "")
+                + ")")
         tau_g = butterworth_group_delay(fit.cutoff_hz, p_round)
+    if abs(math.log(fit.gain)) > math.log(1.5):
+        text += f" (below it the PSD is {fit.gain:.2g}× the model's)"
     details = {"cutoff_hz": fit.cutoff_hz, "slope_db_decade": fit.slope_db_decade,
                "gain": fit.gain, "bandwidth_order": fit.bandwidth_order,
                "bandwidth_cutoff_hz": fit.bandwidth_cutoff_hz, "library_fits": fit.library_fits,
                "chi2_free": fit.chi2_free, "chi2_bandwidth": fit.chi2_bandwidth,
-               "expected_lag_s": tau_g, "causal": None}
+               "passes": fit.passes, "expected_lag_s": tau_g, "causal": None}
     if rate is not None:
         u, e = rate
         lag = lag_on_motion(e[:, gyro - 1], u[:, gyro - 1], dt_s)
@@ -929,20 +974,40 @@ def channel_correlations(residual, channels: Mapping[str, np.ndarray], *,
     return sorted(out, key=lambda c: -abs(c.z))
 
 
+#: The slope of the residual on a channel in datasheet units: channel -> (factor from SI, text).
+_DEG_H = 180.0 / math.pi * 3600.0
+_SLOPE_UNITS = {"time": (_DEG_H * 3600.0, "deg/h per hour"),
+                "rate": (1e6, "ppm of the rate"),
+                "rate²": (math.pi / 180.0, "deg/s per (deg/s)²"),
+                "angular acceleration": (1e3, "ms (residual per angular acceleration)"),
+                "temperature": (_DEG_H, "deg/h per °C"),
+                "dT/dt": (_DEG_H, "deg/h per °C/s"),
+                **{f"acc_{a}": (180.0 / math.pi * 9.80665, "deg/s per g") for a in "xyz"}}
+
+
 def _channel_findings(corrs, z_crit) -> list[Finding]:
     out = []
     for c in corrs:
         if abs(c.z) < z_crit:
             continue
+        k, unit = _SLOPE_UNITS.get(c.channel, (1.0, "rad/s per unit"))
         out.append(Finding("channel", (c.gyro,), abs(c.z),
-                           f"residual follows {c.channel} (r = {c.r:+.2f}, {c.slope:.3g} rad/s "
-                           f"per unit)", {"channel": c.channel, "r": c.r, "slope": c.slope,
-                                          "n_eff": c.n_eff}))
+                           f"residual follows {c.channel} (r = {c.r:+.2f}, slope {c.slope * k:.3g} "
+                           f"{unit})", {"channel": c.channel, "r": c.r, "slope": c.slope,
+                                        "n_eff": c.n_eff}))
     return out
 
 
-def _channels(n, n_gyros, rate, angular_accel, acc, temp_c, time_s, dt, extra
-              ) -> dict[str, np.ndarray]:
+def record_channels(n, n_gyros, rate, angular_accel, acc, temp_c, time_s, dt, extra
+                    ) -> dict[str, np.ndarray]:
+    """The channels :func:`localise` correlates the residual with, name -> (n,) or (n, N).
+
+    ``time`` [s] always; with ``rate`` (n, N) [rad/s]: ``rate``, ``rate²``,
+    ``angular acceleration`` [rad/s²] (``angular_accel`` or the rate's
+    derivative); with ``acc`` (n, 3) [m/s²]: ``acc_x``, ``acc_y``, ``acc_z``;
+    with ``temp_c`` (n,) [°C]: ``temperature``, ``dT/dt`` [°C/s]; then
+    ``extra``. InputError on a wrong shape or a non-finite value.
+    """
     ch: dict[str, np.ndarray] = {"time": np.asarray(time_s, dtype=float)}
     if rate is not None:
         ch["rate"] = rate
@@ -1021,7 +1086,8 @@ def _merge(findings: list[Finding]) -> list[Finding]:
 
 
 def localise(residual, dt_s: float, *, time_s=None, taus_s=None, band_lo=None, band_hi=None,
-             band_level: float = 0.95, model_psd=None, rate=None, angular_accel=None, acc=None,
+             band_level: float = 0.95, band_samples=None, model_psd=None, rate=None,
+             angular_accel=None, acc=None,
              temp_c=None, extra_channels: Mapping[str, np.ndarray] | None = None,
              alpha: float = ALPHA, nperseg: int | None = None) -> Localisation:
     """Localise a model's unexplained residual: τ range, frequency band and shape, time, gyros, channels.
@@ -1040,6 +1106,9 @@ def localise(residual, dt_s: float, *, time_s=None, taus_s=None, band_lo=None, b
         [rad/s] covering ``band_level`` (two-sided).
     band_level : float
         Coverage of the band [-].
+    band_samples : slice or array_like of bool, optional
+        The samples of ``residual`` the ADEV band describes (a model band
+        simulated over the static part only); default all.
     model_psd : callable or array_like, optional
         The model's one-sided rate PSD [(rad/s)²/Hz]: ``model_psd(freq_hz)``
         returning (N, m), or an (N, m) array at the Welch frequencies of
@@ -1077,7 +1146,7 @@ def localise(residual, dt_s: float, *, time_s=None, taus_s=None, band_lo=None, b
     n, N = e.shape
     t = np.arange(n) * dt if time_s is None else np.asarray(time_s, dtype=float)
     u = None if rate is None else np.asarray(rate, dtype=float)
-    channels = _channels(n, N, u, angular_accel, acc, temp_c, t, dt, extra_channels)
+    channels = record_channels(n, N, u, angular_accel, acc, temp_c, t, dt, extra_channels)
     f, P, nu = residual_psd(e, dt, nperseg)
     S = None
     if model_psd is not None:
@@ -1091,7 +1160,8 @@ def localise(residual, dt_s: float, *, time_s=None, taus_s=None, band_lo=None, b
     z_crit = critical_z(n_tests, alpha)
     findings, notes, adev = [], [], None
     if taus_s is not None and band_lo is not None and band_hi is not None:
-        found, adev = adev_excess(e, dt, taus_s, band_lo, band_hi, z_crit=z_crit,
+        eb = e if band_samples is None else e[band_samples]
+        found, adev = adev_excess(eb, dt, taus_s, band_lo, band_hi, z_crit=z_crit,
                                   band_level=band_level)
         findings += found
     if S is not None:

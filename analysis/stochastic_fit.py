@@ -807,7 +807,8 @@ def fit_gyro_noise(e, dt_s: float, gyro: int, *, model_terms: tuple = (),
     min_tau_s : float
         Shortest averaging time of the fits [s] (the octaves start at the
         first power-of-two multiple of dt at or above it): what the model
-        shapes below it (a sensor's own low-pass) is left out.
+        shapes below it (a sensor's own low-pass) is left out; never later
+        than the sixth-longest octave τ (the fit needs 6).
 
     Returns
     -------
@@ -844,6 +845,9 @@ def fit_gyro_noise(e, dt_s: float, gyro: int, *, model_terms: tuple = (),
     label = f"gyro {gyro}"
     n = x.size
     m_min = 1 if not min_tau_s > dt else 2 ** int(math.ceil(math.log2(min_tau_s / dt)))
+    # a start that would leave fewer than 6 octaves (a low cut-off on a short record) is moved
+    # back to the 6th-longest octave τ
+    m_min = int(min(m_min, _factors(n)[-6]))
     cv = _curve(x, dt, m_min=m_min)
     terms = tuple(t for t in ("b", "q") if t in model_terms)
     if set(model_terms) - {"b", "q"}:

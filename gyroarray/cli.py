@@ -947,9 +947,9 @@ def _diagnosis_text(a, head: str) -> str:
     bands = [t for t in a.tests if t.kind == "adev_band" and a.significant(t)]
     if bands:
         lines += ["", "ADEV outside the model band:"] + [f"  {t.evidence} (z = {t.z:.1f})" for t in bands]
-    un = a.unexplained()
-    if un:
-        lines += ["", "unexplained:"] + [f"  {u}" for u in un]
+    where = a.where_it_fails()
+    if where:
+        lines += [""] + where
     if a.notes:
         lines += ["", "notes:"] + [f"  {n}" for n in a.notes]
     return "\n".join(lines)
@@ -1001,7 +1001,8 @@ def cmd_compare(args):
            "n_tests": len(a.tests), "report": str(args.out),
            "steps": [{"added": None if add is None else {"effect": add[0], "gyro": add[1]},
                       "discrepancy": s.discrepancy, "consistent": s.consistent} for add, s in steps],
-           "adev_band": d["adev_band"], "candidates": d["candidates"][:10], "notes": a.notes}
+           "adev_band": d["adev_band"], "candidates": d["candidates"][:10],
+           "localisation": d["localisation"], "notes": a.notes}
     if args.md is not None:
         res["markdown"] = str(args.md)
     if args.validate:
@@ -1014,6 +1015,7 @@ def cmd_compare(args):
             f"({'consistent' if a.consistent else 'NOT consistent'} with the model){fall}\n"
             + "\n".join(f"  {t.effect}{'' if t.gyro is None else ':' + str(t.gyro)}  z = {t.z:.1f}  {t.evidence}"
                         for t in a.candidates[:5] if a.significant(t))
+            + "".join("\n" + x for x in a.where_it_fails())
             + f"\nreport: {args.out}" + (f" and {args.md}" if args.md is not None else "")
             + "".join(f"\nnote: {n}" for n in args.entry_notes))
     return res, text
@@ -1030,7 +1032,7 @@ def cmd_diagnose(args):
         out["validated"] = True
         out["verdict"] = _validation_text(comp, a, args.model)
         return out, out["verdict"] + "\n" + _diagnosis_text(a, f"{comp.name}: {comp.N} gyros, {comp.n * comp.dt:.0f} s")
-    a = comp.analyse()
+    a = comp.diagnose()
     a.notes[:0] = args.entry_notes
     return a.to_json_dict(), _diagnosis_text(a, f"{comp.name}: {comp.N} gyros, {comp.n * comp.dt:.0f} s")
 
@@ -1072,6 +1074,7 @@ def cmd_ladder(args):
                      for add, a in steps],
            "discrepancy": final.discrepancy, "consistent": final.consistent,
            "effects": final.effects_json(), "unexplained": final.unexplained(),
+           "localisation": list(final.localisation),
            "candidates_left": [{"effect": t.effect, "gyro": t.gyro, "score": t.z, "evidence": t.evidence}
                                for t in final.candidates if final.significant(t)],
            "notes": list(final.notes), "report": str(args.out)}
@@ -1093,8 +1096,13 @@ def cmd_ladder(args):
         what = "calibrated model" if add is None else f"+ {add[0]}{'' if add[1] is None else ':' + str(add[1])}"
         lines.append(f"  {what:<28} D = {a.discrepancy:8.3g}  {'consistent' if a.consistent else ''}")
     lines += ["fitted model (beyond ARW + RRW):"] + (_model_lines(final.model) or ["  (baseline only)"])
-    left = final.unexplained() + [t.evidence for t in final.candidates if final.significant(t)]
-    lines += ["still unexplained:"] + ([f"  {x}" for x in left] or ["  nothing"])
+    left = [t.evidence for t in final.candidates if final.significant(t)]
+    if not final.localisation:
+        left = final.unexplained() + left
+    lines += ["still unexplained:"] + ([f"  {x}" for x in left] or
+                                       (["  nothing"] if not final.localisation else []))
+    if final.localisation:
+        lines += final.where_it_fails()
     lines += [f"note: {x}" for x in final.notes if x.startswith("the ladder")]
     lines += held_text
     lines.append(f"report: {args.out}")

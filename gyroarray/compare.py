@@ -55,6 +55,8 @@ from scipy import optimize, special, stats
 from gyroarray.analysis.allan import averaging_factors, oadev
 from gyroarray.analysis.earth_fit import attitude_from_rates
 from gyroarray.analysis.effect_fit import EffectFit, chi2_to_z, z_from_log_p
+from gyroarray.analysis.localise import Localisation, _plain, default_nperseg, residual_psd
+from gyroarray.analysis.localise import localise as localise_residual
 from gyroarray.analysis.motion import still_mask
 from gyroarray.analysis.regress import _RWWhitener
 from gyroarray.analysis.stochastic_fit import fit_gyro_noise
@@ -185,6 +187,14 @@ class Analysis:
         White and random-walk increment variances per sample [rad²/s²].
     context : FitContext
         What the fit sides read in this analysis.
+    localisation : list of dict
+        Where the model fails (:meth:`ModelComparison.localise`), ranked: each
+        finding's ``kind``, ``gyros``, ``score`` (standard errors of its own
+        statistic), ``sentence`` and ``details`` (numbers, unit in each key:
+        ``_hz``, ``_s``, ``_rad_s``); empty when the model is consistent or
+        nothing is localised.
+    localised : Localisation or None
+        The whole localisation (spectra, correlations) for the report's figures.
     """
 
     model: NoiseModel
@@ -202,6 +212,8 @@ class Analysis:
     r: np.ndarray
     q: np.ndarray
     context: FitContext | None = None
+    localisation: list = field(default_factory=list)
+    localised: Localisation | None = None
 
     @property
     def consistent(self) -> bool:
@@ -258,8 +270,22 @@ class Analysis:
             "adev_band": [{"gyro": t.gyro, "z": _finite(t.z), "significant": self.significant(t),
                            "evidence": t.evidence} for t in self.tests if t.kind == "adev_band"],
             "unexplained": self.unexplained(),
+            "localisation": list(self.localisation),
             "notes": list(self.notes),
         }
+
+    def where_it_fails(self, top: int = 6) -> list[str]:
+        """Text lines: the ranked localisation (its top findings), else the unexplained sentences."""
+        if not self.localisation:
+            un = self.unexplained()
+            return ["unexplained:"] + [f"  {u}" for u in un] if un else []
+        crit = self.localised.z_crit if self.localised is not None else math.nan
+        lines = [f"where it fails (ranked; score in standard errors of each statistic, critical "
+                 f"{crit:.2f}):"]
+        lines += [f"  [{f['score']:.1f}] {f['sentence']}" for f in self.localisation[:top]]
+        if len(self.localisation) > top:
+            lines.append(f"  ... {len(self.localisation) - top} more (--json)")
+        return lines
 
     def effects_json(self) -> list[dict]:
         """The calibrated model's effects with params and sigma (``fit --json``)."""
@@ -277,6 +303,25 @@ def _finite(x):
         return [_finite(v) for v in x]
     x = float(x)
     return x if math.isfinite(x) else None
+
+
+def _finding_dict(f, a: Analysis) -> dict:
+    """One localisation finding as ``Analysis.localisation`` keeps it; a non-causal low-pass on
+    gyros where ``bandwidth`` is a significant candidate or in the model says what that misses."""
+    d = {"kind": f.kind, "gyros": list(f.gyros), "score": float(f.score), "sentence": f.summary,
+         "details": _plain(f.details)}
+    if f.kind == "lowpass" and f.details.get("causal") is False:
+        with_bw = sorted({t.gyro for t in a.candidates if t.effect == "bandwidth" and a.significant(t)}
+                         | {e.gyro for e in a.model if e.effect == "bandwidth"})
+        on = [g for g in f.gyros if g in with_bw]
+        if on:
+            fits = "its magnitude fits, but " if f.details.get("library_fits") else ""
+            d["sentence"] += (f"; bandwidth (significant or in the model on gyro{'s' if len(on) > 1 else ''} "
+                              f"{', '.join(map(str, on))}): {fits}it is causal and would put a lag of "
+                              f"≈ {f.details['expected_lag_s'] * 1e3:.3g} ms on the motion that the record "
+                              "does not have (a zero-phase filter, e.g. a decimation filter applied "
+                              "offline, is not in the library)")
+    return d
 
 
 def _entry_params(entry: ModelEntry) -> dict:
@@ -680,9 +725,10 @@ class ModelComparison:
         tests += band_tests
         cands, zc, disc = self._rank(ctx, tests)
         notes += self.setup_notes + self._record_notes()
-        return Analysis(model=model, fits={}, tests=tests, candidates=cands, discrepancy=float(disc),
-                        z_crit=zc, residual_rad_s=ctx.E, raw_residual_rad_s=self.E0, record=ctx.rec,
-                        static=self.static, adev=adev, notes=notes, r=ctx.r, q=ctx.q, context=ctx)
+        return self.localise(Analysis(
+            model=model, fits={}, tests=tests, candidates=cands, discrepancy=float(disc), z_crit=zc,
+            residual_rad_s=ctx.E, raw_residual_rad_s=self.E0, record=ctx.rec, static=self.static,
+            adev=adev, notes=notes, r=ctx.r, q=ctx.q, context=ctx))
 
     def _model_rq(self, model: NoiseModel) -> tuple[np.ndarray, np.ndarray]:
         """r = N²/dt and q = K²·dt per gyro [rad²/s²] from the model's baseline, as it is."""
@@ -917,6 +963,8 @@ class ModelComparison:
         if len(det.entries):
             sensed = simulate_readings(det, truth, self.H, self.dt, np.random.default_rng(0), time_s=tr)
         mc = np.empty((self.n_runs, self.N, taus.size))
+        nperseg = min(default_nperseg(self.n), n)
+        psd = []
         for k in range(self.n_runs):
             rng = np.random.default_rng([self.seed, k])
             s = simulate_readings(sub, truth, self.H, self.dt, rng, time_s=tr) - sensed
@@ -924,6 +972,8 @@ class ModelComparison:
                 s = self._like_parts(s)
             for g in range(self.N):
                 mc[k, g] = oadev(s[:, g], self.dt, taus=taus).dev
+            f_hz, p, _ = residual_psd(s, self.dt, nperseg)
+            psd.append(p)
         tests = []
         M = self.n_runs
         L = np.log(mc)
@@ -952,13 +1002,69 @@ class ModelComparison:
                 ev = f"gyro {g + 1} ADEV within the model's 95 % band at every τ"
             tests.append(Test("adev_band", None, g + 1, z, ev,
                               extra={"t": tk.tolist(), "p_min": pmin}))
+        psd = np.array(psd)
         band = {"taus_s": taus, "measured": meas, "mc": mc,
-                "lo": np.exp(mu - tq * sd), "hi": np.exp(mu + tq * sd), "median": np.exp(mu)}
+                "lo": np.exp(mu - tq * sd), "hi": np.exp(mu + tq * sd), "median": np.exp(mu),
+                "psd_freq_hz": f_hz, "psd_nperseg": nperseg, "psd_mean": psd.mean(axis=0),
+                "psd_lo": np.quantile(psd, 0.025, axis=0), "psd_hi": np.quantile(psd, 0.975, axis=0)}
         return band, tests
+
+    # -- where it fails -------------------------------------------------------
+    def localise(self, a: Analysis, force: bool = False) -> Analysis:
+        """Localise what the model leaves (:func:`gyroarray.analysis.localise.localise`); sets
+        ``a.localisation`` and ``a.localised`` and returns ``a``.
+
+        Run when the model is not consistent (or ``force``). The residual is
+        the analysis's: output − H·ref − the calibrated model's deterministic
+        prediction, every gyro, the whole record; the ADEV band is the
+        analysis's Monte-Carlo band over the samples it describes, the model
+        PSD the mean Welch PSD of the same runs (so every noise effect of the
+        model is in it); the channels are what the record has (H·ref, its
+        square and derivative, ``acc_*``, temperature and dT/dt, time). A
+        low-pass that the library's ``bandwidth`` would model in magnitude but
+        that does not lag on motion is said so (a zero-phase filter, outside
+        the causal ``bandwidth``).
+        """
+        if a.consistent and not force:
+            a.localisation, a.localised = [], None
+            return a
+        band = a.adev
+        loc = localise_residual(a.residual_rad_s, self.dt, time_s=self.t, taus_s=band["taus_s"],
+                                band_lo=band["lo"], band_hi=band["hi"], band_samples=a.record,
+                                model_psd=band["psd_mean"], nperseg=band["psd_nperseg"],
+                                rate=None if self.ref is None else self.ref @ self.H.T,
+                                acc=self.acc, temp_c=self.temp, alpha=self.alpha)
+        a.localised = loc
+        a.localisation = [_finding_dict(f, a) for f in loc.findings]
+        return a
+
+    def _mimics(self, a: Analysis, notes: list) -> set:
+        """(effect, gyro) the ladder must not add: on a gyro whose spectrum a non-causal low-pass
+        shapes (the localisation of ``a``), every effect that reads the noise, and the rivals of
+        ``bandwidth``, would only mimic a filter the library does not have."""
+        self.localise(a)
+        gyros = sorted({g for f in a.localisation if f["kind"] == "lowpass"
+                        and f["details"].get("causal") is False for g in f["gyros"]})
+        if not gyros:
+            return set()
+        rivals = set(get_effect("bandwidth").rivals) | {"bandwidth"}
+        out = set()
+        for t in a.candidates:
+            eff = get_effect(t.effect)
+            mimic = eff.reads == "noise" or t.effect in rivals
+            if mimic and (t.gyro in gyros or (t.gyro is None and eff.changes_adev)):
+                out.add((t.effect, t.gyro))
+        note = (f"the ladder adds no noise effect on gyro{'s' if len(gyros) > 1 else ''} "
+                f"{', '.join(map(str, gyros))}: a low-pass that does not lag on motion (not causal) shapes "
+                "its spectrum, which no effect of the library models (see where it fails)")
+        if out and note not in notes:
+            notes.append(note)
+        return out
 
     # -- the user's loop ------------------------------------------------------
     def diagnose(self) -> Analysis:
-        return self.analyse()
+        """The calibrated model's analysis, localised where no effect explains it."""
+        return self.localise(self.analyse())
 
     def steps_to_model(self) -> list[tuple[tuple | None, Analysis]]:
         """The error falling from the baseline to this comparison's model, one effect at a time.
@@ -974,6 +1080,7 @@ class ModelComparison:
         for e in extra:
             model = model.with_effect(e)
             steps.append(((e.effect, e.gyro), self.analyse(model)))
+        self.localise(steps[-1][1])
         return steps
 
     def fit(self, add=()) -> tuple[Analysis, Analysis]:
@@ -1006,7 +1113,9 @@ class ModelComparison:
             if cur.consistent:
                 break
             taken = None
-            for t in [t for t in cur.candidates if cur.significant(t)][:max_tries]:
+            blocked = self._mimics(cur, refused)
+            for t in [t for t in cur.candidates if cur.significant(t)
+                      and (t.effect, t.gyro) not in blocked][:max_tries]:
                 trial = self.analyse(model.with_effect(self.entry_for(t.effect, t.gyro, cur)))
                 if (trial.excess < cur.excess
                         and trial.discrepancy <= cur.discrepancy * (1.0 + LADDER_D_SLACK)):
@@ -1022,6 +1131,7 @@ class ModelComparison:
             model = taken[1].model
         if refused:
             steps[-1][1].notes.extend(refused)
+        self.localise(steps[-1][1])
         return steps
 
 

@@ -9,7 +9,11 @@ found, for people who would rather look than read:
 2. **the error falling** (a ladder of several steps): D after each added effect;
 3. **effects found**: the final model's effects, params ± 1σ in the spec's
    units, and the baseline ARW/RRW of every gyro;
-4. **what is still unexplained**, in sentences;
+4. **what is still unexplained**: when the model is not consistent, the
+   ranked localisation of the final step (``Analysis.localisation``: τ range,
+   frequency band and shape, time window, gyros, channels) with the residual
+   PSD against the model's Monte-Carlo PSD band and the residual against
+   every channel of the record; else the unexplained sentences;
 5. **candidates**: the best candidate effects of the final (and the first) step;
 6. **where the model fails**, per gyro, for the *first* step (what a user wants
    to see before fitting anything):
@@ -497,6 +501,15 @@ def _model_asd_deg_h(f_hz: np.ndarray, n_deg_rt_h: float, k_deg_h_rt_h: float) -
     return units.rad_s_to_deg_h(np.sqrt(2.0 * n ** 2 + k ** 2 / (2.0 * math.pi ** 2 * f ** 2)))
 
 
+def _asd_axes(ax):
+    """Log ticks, grid and labels of an amplitude-spectral-density panel."""
+    _log_ticks(ax)
+    ax.grid(alpha=0.3)
+    ax.set_xlabel("frequency [Hz]", fontsize=8)
+    ax.set_ylabel("ASD [deg/h/√Hz]", fontsize=8)
+    ax.tick_params(labelsize=7)
+
+
 def _psd_fig(comp, analysis) -> bytes:
     """Residual ASD per gyro over the record, with the sinusoid candidates and the model's level."""
     from scipy.signal import welch
@@ -537,11 +550,7 @@ def _psd_fig(comp, analysis) -> bytes:
             ax.axvline(fq, color=color if color != "0.15" else _GREY, lw=1, ls=":",
                        label="line candidate")
         ax.set_title(title, fontsize=9, color=color, y=1.0, pad=4)
-        _log_ticks(ax)
-        ax.grid(alpha=0.3)
-        ax.set_xlabel("frequency [Hz]", fontsize=8)
-        ax.set_ylabel("ASD [deg/h/√Hz]", fontsize=8)
-        ax.tick_params(labelsize=7)
+        _asd_axes(ax)
     _header(fig, "Residual amplitude spectral density", axs)
     return _png(fig, DPI)
 
@@ -757,10 +766,104 @@ def _section_effects(doc: _Doc, final, n_gyros: int):
               brow, flags)
 
 
-def _section_unexplained(doc: _Doc, final):
+#: Channels of the localisation: display unit and the factor from SI.
+_CHANNEL_UNITS = {"time": ("s", 1.0), "rate": ("deg/s", 1.0 / units.RAD_PER_DEG),
+                  "rate²": ("deg²/s²", units.RAD_PER_DEG ** -2),
+                  "angular acceleration": ("deg/s²", 1.0 / units.RAD_PER_DEG),
+                  "temperature": ("°C", 1.0), "dT/dt": ("°C/s", 1.0)}
+
+
+def _finding_marks(ax, loc, gyro: int):
+    """Draw one gyro's spectral findings on a PSD panel: cut-offs, lines, bands."""
+    for f in loc.findings:
+        if gyro not in f.gyros:
+            continue
+        d = f.details.get("per_gyro", {}).get(gyro, f.details)
+        if f.kind == "lowpass":
+            ax.axvline(d["cutoff_hz"], color=_RED, lw=1.2, label="low-pass cut-off (−3 dB)")
+        elif f.kind == "line":
+            ax.axvline(d["freq_hz"], color=_RED, lw=1, ls=":", label="line")
+        elif f.kind in ("band_excess", "band_deficit", "low_frequency"):
+            ax.axvspan(d["f_lo_hz"], d["f_hi_hz"], color=_RED, alpha=0.1, lw=0,
+                       label="band off the model")
+
+
+def _localise_psd_fig(comp, final) -> bytes:
+    """Residual PSD of every gyro (whole record) against the model's Monte-Carlo PSD band."""
+    loc, a = final.localised, final.adev
+    f = loc.psd_freq_hz[1:]
+    P = loc.psd_residual[:, 1:].T
+    fb, Pb = _log_binned(f, P)
+    to = units.rad_s_to_deg_h
+    fig, axs = _grid(comp.N, 4, 3.4, 2.9)
+    for g, ax in enumerate(axs):
+        ax.fill_between(f, to(np.sqrt(a["psd_lo"][g, 1:])), to(np.sqrt(a["psd_hi"][g, 1:])),
+                        color="C0", alpha=0.22, lw=0, label="model 95 % band")
+        ax.loglog(f, to(np.sqrt(a["psd_mean"][g, 1:])), "--", color="C0", lw=1, label="model mean")
+        ax.loglog(f, to(np.sqrt(P[:, g])), color="0.72", lw=0.5, label="residual (Welch)")
+        ax.loglog(fb, to(np.sqrt(Pb[:, g])), color="k", lw=1.1, label="residual, log-binned")
+        _finding_marks(ax, loc, g + 1)
+        bad = loc.gyro_scores[g] > loc.z_crit
+        ax.set_title(f"gyro {g + 1}" + (f": score {loc.gyro_scores[g]:.1f}" if bad else ""),
+                     fontsize=9, color=_RED if bad else "0.15", y=1.0, pad=4)
+        _asd_axes(ax)
+    _header(fig, "Residual spectrum against the model's band", axs)
+    return _png(fig, DPI)
+
+
+def _localise_channels_fig(comp, final) -> bytes:
+    """Binned residual (mean removed) against every channel of the record, all gyros per panel."""
+    from gyroarray.analysis.localise import record_channels
+    loc = final.localised
+    rate = None if comp.ref is None else comp.ref @ comp.H.T
+    chans = record_channels(comp.n, comp.N, rate, None, comp.acc, comp.temp, comp.t, comp.dt, None)
+    E = final.residual_rad_s - final.residual_rad_s.mean(axis=0)
+    to = units.rad_s_to_deg_h
+    fig, axs = _grid(len(chans), 3, 3.6, 2.9)
+    for ax, (name, v) in zip(axs, chans.items()):
+        unit, k = _CHANNEL_UNITS.get(name, ("m/s²", 1.0))
+        for g in range(comp.N):
+            xc, m, se = _binned((v if v.ndim == 1 else v[:, g]) * k, E[:, g])
+            if xc.size:
+                ax.errorbar(xc, to(m), yerr=2.0 * to(se), fmt="o-", ms=2.5, lw=0.8, capsize=0,
+                            color=f"C{g % 10}", label=f"gyro {g + 1}")
+        c = next((c for c in loc.correlations if c.channel == name), None)
+        bad = c is not None and abs(c.z) > loc.z_crit
+        ax.set_title(name if c is None else f"{name}: r = {c.r:+.2f} (gyro {c.gyro}), |z| = "
+                     f"{abs(c.z):.1f}", fontsize=9, color=_RED if bad else "0.15", y=1.0, pad=4)
+        ax.grid(alpha=0.3)
+        ax.set_xlabel(f"{name} [{unit}]", fontsize=8)
+        ax.set_ylabel("residual [deg/h]", fontsize=8)
+        ax.tick_params(labelsize=7)
+    _header(fig, "Residual against each channel of the record", axs)
+    return _png(fig, DPI)
+
+
+def _section_localisation(doc: _Doc, comp, final):
+    """The ranked findings of the localisation and their figures."""
+    loc = final.localised
+    doc.h3("Where it fails")
+    doc.p(f"What no effect explains, localised and ranked (score: the departure in standard "
+          f"errors of its own statistic; every finding is past the 1 % family-wise critical "
+          f"{loc.z_crit:.3g}). The residual is the output minus H·ref minus the model's "
+          "deterministic part, the whole record.")
+    doc.table(["score", "kind", "gyros", "finding"],
+              [[f"{f['score']:.1f}", f["kind"], ", ".join(map(str, f["gyros"])), f["sentence"]]
+               for f in final.localisation], [True] * len(final.localisation))
+    doc.figure("localise_psd", _localise_psd_fig(comp, final),
+               "Residual PSD (as ASD) of each gyro over the whole record against the model's "
+               f"95 % band (the same {final.adev['mc'].shape[0]} Monte-Carlo runs as the ADEV band, "
+               "per Welch frequency); red: the localised cut-offs, lines and bands.")
+    doc.figure("localise_channels", _localise_channels_fig(comp, final),
+               "Binned residual (mean removed, ± 2 standard errors) against every channel the "
+               "record has; titles: the strongest correlation (block means, autocorrelation-"
+               "corrected), red past the critical value.")
+
+
+def _section_unexplained(doc: _Doc, final, comp=None):
     doc.h2("What is still unexplained")
     left = [t for t in final.candidates if final.significant(t)]
-    sentences = final.unexplained()
+    sentences = [] if final.localisation else final.unexplained()
     if final.consistent and not left and not sentences:
         doc.p("Nothing left unexplained: no candidate effect and no ADEV band test is significant "
               f"(every z ≤ z_crit = {final.z_crit:.3g}).")
@@ -773,9 +876,11 @@ def _section_unexplained(doc: _Doc, final):
                   [[t.effect, "all" if t.gyro is None else t.gyro, _z(t.z), t.evidence] for t in left],
                   [True] * len(left))
     band = [t for t in final.tests if t.kind == "adev_band" and final.significant(t)]
-    if band and not sentences:
+    if band and not sentences and not final.localisation:
         doc.p("ADEV outside the model's band (explained by a significant candidate above): "
               + "; ".join(t.evidence for t in band) + ".")
+    if final.localisation and final.localised is not None and comp is not None:
+        _section_localisation(doc, comp, final)
 
 
 def _candidate_table(doc: _Doc, a):
@@ -936,7 +1041,7 @@ def write_compare_report(comp, steps, out_html, out_md=None, *, title: str | Non
     if len(steps) > 1:
         _section_ladder(doc, steps)
     _section_effects(doc, steps[-1][1], comp.N)
-    _section_unexplained(doc, steps[-1][1])
+    _section_unexplained(doc, steps[-1][1], comp)
     _section_candidates(doc, steps)
     _section_diagnostics(doc, comp, steps)
     _section_notes(doc, comp, steps)

@@ -30,6 +30,7 @@ from gyroarray.sim.effects import simulate_readings
 from gyroarray.sim.model import NoiseModel
 from gyroarray.sim.sensor import bandwidth_sos
 from gyroarray.units import arw_deg_rt_h_to_rad_rt_s, deg_s_to_rad_s, rrw_deg_h_rt_h_to_rad_s_rt_s
+from swings import two_swings
 
 FS = 100.0
 DT = 1.0 / FS
@@ -42,17 +43,7 @@ N_SI, K_SI = arw_deg_rt_h_to_rad_rt_s(ARW), rrw_deg_h_rt_h_to_rad_s_rt_s(RRW)
 def _motion():
     """Still 100 s; 30 deg/s at 0.5 Hz about (1,1,1)/√3; 20 deg/s at 1.3 Hz about (1,−1,0)/√2."""
     t = np.arange(N_SAMPLES) * DT
-
-    def envelope(t0, t1, ramp=3.0):                    # minimum-jerk in and out
-        def s(x):
-            return x**3 * (10 - 15 * x + 6 * x * x)
-        return s(np.clip((t - t0) / ramp, 0, 1)) * s(np.clip((t1 - t) / ramp, 0, 1))
-
-    a1 = np.array([1.0, 1.0, 1.0]) / math.sqrt(3)
-    a2 = np.array([1.0, -1.0, 0.0]) / math.sqrt(2)
-    w = (deg_s_to_rad_s(30) * (envelope(100, 200) * np.sin(2 * math.pi * 0.5 * (t - 100)))[:, None] * a1
-         + deg_s_to_rad_s(20) * (envelope(220, 320) * np.sin(2 * math.pi * 1.3 * (t - 220)))[:, None] * a2)
-    return t, w
+    return t, two_swings(t)
 
 
 T, W = _motion()
@@ -216,3 +207,21 @@ def test_bad_inputs_are_refused():
         localise(e, DT, rate=np.zeros((1000, 3)))
     with pytest.raises(InputError, match=r"acc must be \(1000, 3\)"):
         localise(e, DT, acc=np.zeros((1000, 4)))
+
+
+def test_bandwidth_gain2_is_sosfreqz_of_the_library_filter():
+    from gyroarray.analysis.localise import bandwidth_gain2
+    f = np.linspace(0.01, 49.9, 997)
+    for fc, order in ((0.5, 1), (8.0, 2), (30.0, 1), (45.0, 2)):
+        _, h = signal.sosfreqz(bandwidth_sos(fc, order, DT), worN=f, fs=FS)
+        np.testing.assert_allclose(bandwidth_gain2(f, fc, order, DT), np.abs(h) ** 2, rtol=1e-9, atol=1e-15)
+
+
+def test_a_flat_deficit_is_the_models_level_not_a_lowpass():
+    # a model 1.6x too high everywhere (its white level inflated by what it misses): the residual
+    # sits at 1/1.6 of it up to Nyquist, a level, not a roll-off (it was read as a low-pass once)
+    loc = localise(_record(seed=3) - U, DT, rate=U,
+                   model_psd=lambda f: 1.6 * baseline_psd(f, np.full(4, N_SI), np.full(4, K_SI)))
+    assert not loc.of_kind("lowpass")
+    (deficit,) = loc.of_kind("band_deficit")
+    assert deficit.gyros == (1, 2, 3, 4) and 0.5 < deficit.details["ratio"] < 1 / 1.6

@@ -273,3 +273,13 @@ def test_bad_inputs_are_refused():
         sf.fit_burst(y, np.arange(999) * DT, DT)
     with pytest.raises(InputError, match="uniformly"):
         sf.fit_burst(y, np.arange(1000) * DT * 1.5, DT)
+
+
+def test_a_late_start_is_moved_back_to_leave_six_octaves():
+    # 10016 samples: octaves m = 1 ... 1024; a start at 5 s (m = 512) would leave 2, the fit
+    # needs 6, so it starts at m = 32 (the 6th-longest), exactly as asked with 0.32 s
+    x = np.random.default_rng(3).normal(0.0, 1e-3, 10016)
+    late = sf.fit_gyro_noise(x, 0.01, 1, min_tau_s=5.0)
+    at_cap = sf.fit_gyro_noise(x, 0.01, 1, min_tau_s=0.32)
+    assert late[0].params == at_cap[0].params and late[1].params == at_cap[1].params
+    assert late[0].params != sf.fit_gyro_noise(x, 0.01, 1)[0].params
