@@ -37,8 +37,8 @@ from scipy import special
 from gyroarray import units
 from gyroarray.errors import InputError
 
-from . import _kernels
-from .noise_fit import NoiseFit, fit_noise_terms
+from gyroarray.analysis import _kernels
+from gyroarray.analysis.noise_fit import NoiseFit, fit_noise_terms
 
 __all__ = [
     "KINDS",

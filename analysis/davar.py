@@ -46,11 +46,11 @@ from scipy import special
 from gyroarray import units
 from gyroarray.errors import InputError
 
-from . import _kernels
-from .allan import (KINDS, ONE_SIGMA, AllanResult, as_series, check_kind,
-                    check_tau0, first_non_finite, averaging_factors,
-                    confidence_interval, deviation, edf)
-from .noise_fit import fit_noise_terms, term_basis
+from gyroarray.analysis import _kernels
+from gyroarray.analysis.allan import (KINDS, ONE_SIGMA, AllanResult, as_series, check_kind,
+                                      check_tau0, first_non_finite, averaging_factors,
+                                      confidence_interval, deviation, edf)
+from gyroarray.analysis.noise_fit import fit_noise_terms, term_basis
 
 __all__ = [
     "ARW_METHODS",

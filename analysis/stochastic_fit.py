@@ -222,10 +222,10 @@ from gyroarray import units
 from gyroarray.errors import InputError
 from gyroarray.physics import gauss_markov_avar
 
-from .allan import deviation, edf_simple
-from .davar import davar
-from .effect_fit import EffectFit, chi2_to_z, z_from_log_p
-from .noise_fit import term_basis
+from gyroarray.analysis.allan import deviation, edf_simple
+from gyroarray.analysis.davar import davar
+from gyroarray.analysis.effect_fit import EffectFit, chi2_to_z, z_from_log_p
+from gyroarray.analysis.noise_fit import term_basis
 
 __all__ = ["fit_gyro_noise", "fit_correlation", "fit_burst"]
 

@@ -173,7 +173,7 @@ class Estimator:
         -------
         self
         """
-        from .noise import ArrayNoise, array_noise
+        from gyroarray.estimators.noise import ArrayNoise, array_noise
         if not isinstance(layout, Layout):
             raise InputError(f"layout must be a gyroarray Layout, got {type(layout).__name__}")
         h = np.array(layout.H, dtype=float)

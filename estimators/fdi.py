@@ -90,9 +90,9 @@ from gyroarray.errors import InputError
 from gyroarray.layout import Layout
 from gyroarray.units import rad_s_to_deg_s
 
-from .base import Estimator, _readonly, check_readings, register
-from .kf_array import gls_weights
-from .noise import ArrayNoise, array_noise
+from gyroarray.estimators.base import Estimator, _readonly, check_readings, register
+from gyroarray.estimators.kf_array import gls_weights
+from gyroarray.estimators.noise import ArrayNoise, array_noise
 
 __all__ = ["FaultDetector", "ParityDesign", "Alarm", "FdiResult", "parity_matrix",
            "design_parity", "minimum_detectable", "minimum_detectable_step", "isolability",

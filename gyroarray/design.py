@@ -25,9 +25,9 @@ from importlib import resources
 import numpy as np
 from scipy.optimize import minimize_scalar
 
-from .errors import InputError
-from .layout import Layout, conical_axes
-from .units import deg_to_rad, rad_to_deg
+from gyroarray.errors import InputError
+from gyroarray.layout import Layout, conical_axes
+from gyroarray.units import deg_to_rad, rad_to_deg
 
 
 def correlation_matrix(n: int, rho) -> np.ndarray:
@@ -494,7 +494,7 @@ def _printed_unit(text: str) -> float:
 
 def load_paper003_tables() -> dict:
     """The cells of paper 003 Tables 1 and 2 as printed (data, not truth)."""
-    from .tomlio import loads_toml
+    from gyroarray.tomlio import loads_toml
     res = resources.files("gyroarray").joinpath("data/paper003_tables.toml")
     return loads_toml(res.read_text(encoding="utf-8"), "gyroarray/data/paper003_tables.toml")
 

@@ -85,12 +85,12 @@ import numpy as np
 import pandas as pd
 import tomli_w
 
-from . import __version__, units
-from .errors import InputError
-from .layout import UNIT_NORM_TOL, Layout, check_positions
-from .limits import (MAX_RATE_DEG_S, check_memory, format_size, gunzip_bounded, max_memory,
-                     read_regular)
-from .tomlio import TomlDoc, load_toml
+from gyroarray import __version__, units
+from gyroarray.errors import InputError
+from gyroarray.layout import UNIT_NORM_TOL, Layout, check_positions
+from gyroarray.limits import (MAX_RATE_DEG_S, check_memory, format_size, gunzip_bounded, max_memory,
+                              read_regular)
+from gyroarray.tomlio import TomlDoc, load_toml
 
 __all__ = [
     "Measurement",

@@ -48,11 +48,12 @@ from functools import lru_cache
 import numpy as np
 from scipy.optimize import minimize_scalar
 
-from . import units
-from .design import correlation_matrix, fault_tolerance
-from .errors import InputError
-from .layout import Layout, conical_axes
-from .predict import (AXES, Swing, channel_filter, channel_response, settle_start, swing_truth)
+from gyroarray import units
+from gyroarray.design import correlation_matrix, fault_tolerance
+from gyroarray.errors import InputError
+from gyroarray.layout import Layout, conical_axes
+from gyroarray.predict import (AXES, Swing, channel_filter, channel_response, settle_start,
+                               swing_truth)
 
 __all__ = ["GyroNoise", "DesignSpace", "recommend", "ESTIMATORS", "DEFAULT_BANDWIDTH_HZ"]
 
@@ -118,7 +119,7 @@ class GyroNoise:
 
         A correlation matrix is reduced to the mean of its off-diagonal entries.
         """
-        from .estimators.noise import _per_gyro
+        from gyroarray.estimators.noise import _per_gyro
         n = max([e.gyro or 1 for e in model.entries] + [1])
 
         def qmean(effect, key):
@@ -139,7 +140,8 @@ class GyroNoise:
         tau = _per_gyro(model, "gauss_markov", "tau_s", n)
         tau = tau[np.isfinite(tau)]
         src = {k: source for k in ("arw", "rrw", "bi", "gauss_markov", "rho_arw", "rho_rrw")}
-        from .predict import MODELLED      # the sensor's own effects come in through DesignSpace
+        # the sensor's own effects come in through DesignSpace
+        from gyroarray.predict import MODELLED
         MODELLED = tuple(m for m in MODELLED if m not in ("bandwidth", "g_sensitivity"))
         return cls(arw_deg_rt_h=arw,
                    rrw_deg_h_rt_h=units.rrw_rad_s_rt_s_to_deg_h_rt_h(qmean("rrw", "k_rad_s_rt_s")),
@@ -154,7 +156,7 @@ class GyroNoise:
 
     def noise_model(self, n_gyros: int):
         """This noise on every gyro of an N-gyro array, as a NoiseModel (for the simulator)."""
-        from .sim.model import ModelEntry, NoiseModel
+        from gyroarray.sim.model import ModelEntry, NoiseModel
         entries = [ModelEntry("arw", None, {"n_deg_rt_h": self.arw_deg_rt_h})]
         if self.rrw_deg_h_rt_h > 0:
             entries.append(ModelEntry("rrw", None, {"k_deg_h_rt_h": self.rrw_deg_h_rt_h}))
@@ -232,7 +234,7 @@ class DesignSpace:
 
     def __post_init__(self):
         if self.sensor_bandwidth is not None:
-            from .sim.sensor import bandwidth_sos
+            from gyroarray.sim.sensor import bandwidth_sos
             fc, order = self.sensor_bandwidth
             bandwidth_sos(fc, order, self.dt_s)                     # order 1/2, 0 < fc < Nyquist
 
@@ -242,7 +244,7 @@ class DesignSpace:
 
     def sensor(self, n_gyros: int = 1):
         """The gyros' own filter as :class:`gyroarray.predict.SensorBandwidth` (None: none)."""
-        from .predict import SensorBandwidth
+        from gyroarray.predict import SensorBandwidth
         if self.sensor_bandwidth is None:
             return None
         fc, order = self.sensor_bandwidth
@@ -251,7 +253,7 @@ class DesignSpace:
 
     def sensor_entries(self) -> tuple:
         """The sensor's ``bandwidth`` and ``g_sensitivity`` as model entries on every gyro."""
-        from .sim.model import ModelEntry
+        from gyroarray.sim.model import ModelEntry
         out = []
         if self.sensor_bandwidth is not None:
             out.append(ModelEntry("bandwidth", None, {"cutoff_hz": float(self.sensor_bandwidth[0]),
@@ -263,7 +265,7 @@ class DesignSpace:
 
     @property
     def n_samples(self) -> int:
-        from .sim.table import n_samples
+        from gyroarray.sim.table import n_samples
         return n_samples(self.horizon_s, self.rate_hz)
 
 
@@ -432,7 +434,7 @@ def _with_sensor(model, space: DesignSpace, *, g_sensitivity: bool = True):
     The Monte-Carlo check and the full predictor leave the g-sensitivity out
     (``g_sensitivity`` False), as the ranking does: it is reported on its own.
     """
-    from .sim.model import NoiseModel
+    from gyroarray.sim.model import NoiseModel
     extra = tuple(e for e in space.sensor_entries() if g_sensitivity or e.effect != "g_sensitivity")
     return model if not extra else NoiseModel(tuple(model.entries) + extra,
                                               description=model.description)
@@ -447,7 +449,7 @@ def _space_specific_force(space: DesignSpace) -> np.ndarray:
     """The specific force at the platform origin over the scored window (n, 3) [m/s²]:
     the motion profile's truth, else the level table at rest (a swing's few degrees of
     tilt are left out), [0, 0, g0]."""
-    from .constants import G0_M_S2
+    from gyroarray.constants import G0_M_S2
     if space.specific_force_m_s2 is not None:
         return np.asarray(space.specific_force_m_s2, dtype=float)[:space.n_samples]
     return np.array([[0.0, 0.0, G0_M_S2]])
@@ -457,7 +459,7 @@ def _g_sensitivity(space: DesignSpace, dc_gain: np.ndarray) -> dict:
     """``g_sensitivity``: the RMS rate error of the space's g-sensitivity on its motion, per
     gyro and fused through the design's DC gain T₀ (3, N) (:func:`gyroarray.predict.g_sensitivity_error`);
     {} without one."""
-    from .predict import g_sensitivity_error, settle_start as _k0
+    from gyroarray.predict import g_sensitivity_error, settle_start as _k0
     if space.g_sensitivity_deg_s_per_g is None:
         return {}
     T0 = np.asarray(dc_gain, dtype=float)
@@ -483,7 +485,7 @@ def _alpha_grid(scheme: int, points: int) -> np.ndarray:
 
 def _survives(H: np.ndarray, rho: float, k: int) -> np.ndarray:
     """Worst-case GDOP (G,) over every choice of k failed gyros (inf: an axis is lost)."""
-    from .design import _gdop_batch
+    from gyroarray.design import _gdop_batch
     G, N, _ = H.shape
     if k == 0:
         return _gdop_batch(H, np.linalg.cholesky(correlation_matrix(N, rho)))
@@ -625,8 +627,8 @@ def _design_dict(b: _Best, space: DesignSpace, g: GyroNoise, failures: int) -> d
 def _generic_design(scheme, n, est, alpha, bw, rho, space: DesignSpace, g: GyroNoise,
                     failures: int) -> dict:
     """A design predicted by the full predictor (used where the fast path does not apply)."""
-    from .estimators import get_estimator
-    from .predict import predict
+    from gyroarray.estimators import get_estimator
+    from gyroarray.predict import predict
     gr = g.with_rho(rho) if g.rho_arw == g.rho_rrw else g
     layout = Layout.conical(scheme, n, alpha)
     model = gr.noise_model(n)
@@ -1190,9 +1192,9 @@ def monte_carlo_check(designs: list[dict], g: GyroNoise, space: DesignSpace, *,
         difference of the runs' 3-axis mean square with its 95 % CI
         (``resolved``: the interval excludes 0).
     """
-    from .chain import mean_ci, replicate_rng, rms_ci
-    from .estimators import get_estimator
-    from .sim.effects import simulate_readings
+    from gyroarray.chain import mean_ci, replicate_rng, rms_ci
+    from gyroarray.estimators import get_estimator
+    from gyroarray.sim.effects import simulate_readings
     picked = _pick_for_check(designs, top)
     n, dt = space.n_samples, space.dt_s
     k0 = settle_start(n, dt, space.settle_s)

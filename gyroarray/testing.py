@@ -105,7 +105,7 @@ def _check_toml_round_trip(effect_cls) -> None:
     eff = _registered(effect_cls)
     gyro, params = _params_of(eff, np.random.default_rng(1))
     model = NoiseModel((ModelEntry(eff.name, gyro, params),))
-    from .tomlio import loads_toml
+    from gyroarray.tomlio import loads_toml
     again = NoiseModel.from_toml(loads_toml(model.to_toml(), f"{eff.name} model"), n_gyros=_layout().n_gyros)
     assert again.entries == model.entries, f"{eff.name}: {again.entries} != {model.entries}"
 

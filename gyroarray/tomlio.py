@@ -25,8 +25,8 @@ from __future__ import annotations
 import re
 from pathlib import Path
 
-from .errors import InputError
-from .limits import read_regular
+from gyroarray.errors import InputError
+from gyroarray.limits import read_regular
 
 try:  # Python >= 3.11
     import tomllib

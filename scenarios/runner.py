@@ -59,7 +59,7 @@ import multiprocessing as mp
 
 from gyroarray.errors import InputError
 
-from .sweep import ScenarioSpec, Sweep, load_sweep
+from gyroarray.scenarios.sweep import ScenarioSpec, Sweep, load_sweep
 
 __all__ = ["run_sweep", "load_results", "run_one", "verify_rows_file", "THREAD_ENV"]
 
