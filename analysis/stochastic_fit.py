@@ -79,14 +79,17 @@ squaring. Lags on the integers when short, else 512 midpoints over
 and 400 simulated ARW + RRW curves match its correlations (adjacent octaves
 0.60/0.76/0.85 at the crossover against 0.61/0.79/0.87 measured).
 
-Why not ``noise_fit``'s covariance: its ``_structure`` gives random-walk and
-flicker FM the opposite sign to white FM (+|t|³ + |t|/2, +t² ln|t|; the
-generalised variograms are −|t|³ + |t| and −t² ln|t| up to positive
-factors). Within one term the sign cancels; in a mixture (the ARW–RRW
-crossover, where a flat term is decided) the terms subtract instead of
-adding: the model's adjacent-octave correlation there jumps 0.45 -> 0.94
-(measured 0.61 -> 0.79) and the Wald z of B had a standard deviation of
-1.6–1.8 instead of 1; with this covariance it is 0.97–1.09.
+The phase variograms and the white-PM spikes are those of
+:func:`~gyroarray.analysis.noise_fit.phase_variogram` and
+:func:`~gyroarray.analysis.noise_fit.spike_lags`, shared with the
+correlation model of :func:`~gyroarray.analysis.noise_fit.fit_noise_terms`
+(which works for any difference order, Hadamard included, but with the
+large-record weight √(min M/max M) instead of the exact w_jk(l), and
+without Gauss–Markov). In a mixture the signs of the generalised
+variograms decide whether terms add: with random-walk and flicker FM of
+the wrong sign the model's adjacent-octave correlation at the ARW–RRW
+crossover was 0.94 instead of the measured 0.79, and the Wald z of B had
+a standard deviation of 1.6–1.8 instead of 0.97–1.09.
 
 Bias instability and quantization: one column more than the baseline, z =
 Â/σ_Â, the coefficient √Â with the 1σ of ``noise_fit`` (the larger distance
@@ -108,10 +111,9 @@ Parameter pulls (fit − true)/σ measured over 30 fits (10 seeds × 3 gyros,
 flicker lacks the lowest frequencies); Q = 5e-5 deg +0.06, 0.86; R = 200
 deg/h² +0.05, 0.45 (conservative: K profiled); Gauss–Markov σ = 20 deg/h,
 τc = 10 s: σ −0.22, 1.14, τc −0.28, 1.32 (one of 30 at −5.3: the Jacobian
-σ of τc is optimistic by about 1.3, against 1.9 for the independent-τ fit
-:func:`~gyroarray.sim.effects.fit_gauss_markov_avar`; the estimate
-covariance is not the cause: 300 simulated Gauss–Markov curves match it
-within 7 %).
+σ of τc is optimistic by about 1.3, against 1.9 for a fit that treats
+the taus as independent; the estimate covariance is not the cause: 300
+simulated Gauss–Markov curves match it within 7 %).
 
 Rate ramp (time domain)
 -----------------------
@@ -225,7 +227,7 @@ from gyroarray.physics import gauss_markov_avar
 from gyroarray.analysis.allan import deviation, edf_simple
 from gyroarray.analysis.davar import davar
 from gyroarray.analysis.effect_fit import EffectFit, chi2_to_z, z_from_log_p
-from gyroarray.analysis.noise_fit import term_basis
+from gyroarray.analysis.noise_fit import phase_variogram, spike_lags, term_basis
 
 __all__ = ["fit_gyro_noise", "fit_correlation", "fit_burst"]
 
@@ -234,21 +236,6 @@ __all__ = ["fit_gyro_noise", "fit_correlation", "fit_burst"]
 # Covariance of overlapping Allan variance estimates (Gaussian noise, exact)
 
 _B2 = np.array([1.0, -2.0, 1.0])          # second difference of the phase
-
-
-def _d_white_fm(t, dt):            # phase = random walk: variogram |t| (per N² = 1)
-    return np.abs(t) / dt
-
-
-def _d_rw_fm(t, dt):               # sampled random-walk rate, generalized variogram (per K² = 1)
-    a = np.abs(t)
-    return -(dt / 6.0) * (a ** 3 - a)
-
-
-def _d_flicker_fm(t, dt):          # flicker rate, generalized variogram (per B² = 1)
-    a = np.abs(t)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        return np.where(a > 0, -(a * a * np.log(a)) / math.pi, 0.0)
 
 
 def _d_gauss_markov(t, dt, tau_c):  # AR(1) rate, variogram of the phase (per σ² = 1)
@@ -285,23 +272,18 @@ class _AvarCov:
         self.w = np.where(used, w, 0.0) * self.step[:, None]
         self.norm = 2.0 / (4.0 * (mj[:, 0] * mk[:, 0]) ** 2 * Mj[:, 0] * Mk[:, 0])
         self.lags, self.mj, self.mk, self.Mj, self.Mk = lags, mj, mk, Mj, Mk
-        self.profiles = {"n": self._profile(lambda t: _d_white_fm(t, dt)),
-                         "k": self._profile(lambda t: _d_rw_fm(t, dt)),
-                         "b": self._profile(lambda t: _d_flicker_fm(t, dt))}
+        self.profiles = {key: self._profile(lambda t, key=key: phase_variogram(key, t, dt))
+                         for key in ("n", "k", "b")}
         # white PM spikes: C(l) = (1/dt²) Σ b_p b_q [l = p m_j − q m_k], the nine
         # (p, q) merged where their lags coincide (unused slots get weight 0)
         n_pairs = self.j.size
         self.spike_lag = np.zeros((n_pairs, 9))
         self.spike_val = np.zeros((n_pairs, 9))
         for pair in range(n_pairs):
-            acc = {}
-            for p in range(3):
-                for q in range(3):
-                    lag = p * int(mj[pair, 0]) - q * int(mk[pair, 0])
-                    acc[lag] = acc.get(lag, 0.0) + _B2[p] * _B2[q] / dt ** 2
-            for slot, lag in enumerate(sorted(acc)):
+            acc = spike_lags(_B2, int(mj[pair, 0]), int(mk[pair, 0]))
+            for slot, (lag, val) in enumerate(acc.items()):
                 self.spike_lag[pair, slot] = lag
-                self.spike_val[pair, slot] = acc[lag]
+                self.spike_val[pair, slot] = val / dt ** 2
         self.spike_w = np.clip(np.minimum(Mj, Mk - self.spike_lag) - np.maximum(0.0, -self.spike_lag),
                                0.0, None) * (self.spike_val != 0)
         # linear interpolation of a profile at the spike lags (uniform grids)
