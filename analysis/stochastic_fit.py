@@ -30,26 +30,8 @@ burst             maximum likelihood ratio over windows, calibrated null tail
 
 For a linear model with fixed Σ the Wald ratio is the signed root of the
 likelihood-ratio χ²(1); it is kept signed (a negative z says the data lie
-below ARW + RRW there). Measured under the null with the project's
-simulator, ARW and RRW drawn log-uniformly in 0.1–0.5 deg/√h and 10–600
-deg/h/√h for each seed, 100 Hz; A: 100 seeds × 4 gyros × 20 min,
-B: 30 seeds × 8 gyros × 46 min (per-gyro terms count every gyro):
-
-================  =====  =====  ====  =========  =====  =====  ====  =========
-z under the null  A: n   mean   sd    P(|z|>3)   B: n   mean   sd    P(|z|>3)
-================  =====  =====  ====  =========  =====  =====  ====  =========
-bias_instability  400    −0.11  0.89  0          240    −0.03  0.96  0
-quantization      400    −0.03  0.96  0.0025     240    +0.07  1.02  0.004
-rate_ramp         400    +0.09  1.08  0.0075     240    +0.03  0.96  0
-gauss_markov      400    −0.10  0.95  0.005      240    −0.11  0.93  0.004
-rho_arw           100    +0.14  1.03  0.01       30     +0.09  1.13  0
-rho_rrw           100    +0.03  0.81  0.01       30     −0.20  0.90  0
-burst             100    +0.09  1.05  0          30     −0.16  0.81  0
-================  =====  =====  ====  =========  =====  =====  ====  =========
-
-(N(0, 1): P(|z| > 3) = 0.0027. ``rho_rrw`` is 0, "not estimable", where
-the RRW of a 20-min record is not seen on two gyros.) Separately, 150
-records of 4 independent gyros gave sd(ρ̂/σ₀) = 1.00 (ARW) and 1.04 (RRW).
+below ARW + RRW there). The z of each effect as measured under the null:
+``benchmarks/stochastic_fit_validation.md``.
 
 Allan variance GLS (``bias_instability``, ``quantization``, ``gauss_markov``, baseline)
 --------------------------------------------------------------------------------------
@@ -74,10 +56,7 @@ variance is K²dt); flicker FM −t² ln|t|/π; Gauss–Markov the exact AR(1)
 variogram t(1+φ)/(1−φ) − 2φ(1−φᵗ)/(1−φ)²; white PM (quantization) spikes
 (1/dt²)Σ b_p b_q at the lags p m_j − q m_k. Mixtures add their C's before
 squaring. Lags on the integers when short, else 512 midpoints over
-±8(m_j + m_k). Its diagonal equals 2σ⁴/ν with Greenhall's EDF
-(:func:`~gyroarray.analysis.allan.edf`) within 0.7 % for one noise type,
-and 400 simulated ARW + RRW curves match its correlations (adjacent octaves
-0.60/0.76/0.85 at the crossover against 0.61/0.79/0.87 measured).
+±8(m_j + m_k).
 
 The phase variograms and the white-PM spikes are those of
 :func:`~gyroarray.analysis.noise_fit.phase_variogram` and
@@ -86,10 +65,7 @@ correlation model of :func:`~gyroarray.analysis.noise_fit.fit_noise_terms`
 (which works for any difference order, Hadamard included, but with the
 large-record weight √(min M/max M) instead of the exact w_jk(l), and
 without Gauss–Markov). In a mixture the signs of the generalised
-variograms decide whether terms add: with random-walk and flicker FM of
-the wrong sign the model's adjacent-octave correlation at the ARW–RRW
-crossover was 0.94 instead of the measured 0.79, and the Wald z of B had
-a standard deviation of 1.6–1.8 instead of 0.97–1.09.
+variograms decide whether terms add.
 
 Bias instability and quantization: one column more than the baseline, z =
 Â/σ_Â, the coefficient √Â with the 1σ of ``noise_fit`` (the larger distance
@@ -105,15 +81,6 @@ beyond 20 exceedances, the Šidák form 1 − (1 − Φ̄(w))^M with M the effec
 number of tests read at the 99th percentile. The estimate: τc refined
 (bounded Brent) around the best grid point, Σ from the fitted model, τc
 again, σ's from the whitened Jacobian in (N², K², σ², ln τc).
-
-Parameter pulls (fit − true)/σ measured over 30 fits (10 seeds × 3 gyros,
-46 min, ARW 0.2, RRW 30 or 10): B = 6 deg/h mean −0.32 sd 1.00 (the FFT
-flicker lacks the lowest frequencies); Q = 5e-5 deg +0.06, 0.86; R = 200
-deg/h² +0.05, 0.45 (conservative: K profiled); Gauss–Markov σ = 20 deg/h,
-τc = 10 s: σ −0.22, 1.14, τc −0.28, 1.32 (one of 30 at −5.3: the Jacobian
-σ of τc is optimistic by about 1.3, against 1.9 for a fit that treats
-the taus as independent; the estimate covariance is not the cause: 300
-simulated Gauss–Markov curves match it within 7 %).
 
 Rate ramp (time domain)
 -----------------------
@@ -149,9 +116,7 @@ coefficients), σ₀ its exact σ without correlation (per-pair z), its 1σ
 mean of the pairs (uncorrelated without correlation, so its σ₀ is exact and
 gives z); its 1σ comes from the Olkin–Siotani covariance of correlation
 estimates at the common ρ. A family is used only on gyros where its
-coefficient is above 3σ (the RRW of a short record often is not). Measured
-(46 min, 8 gyros, ARW 0.2, RRW 300, ρ = 0.3/0.5, 15 seeds): ρᵃ 0.2999, sd
-0.0008, stated 0.0008; ρʳ 0.504, sd 0.021, stated 0.025.
+coefficient is above 3σ (the RRW of a short record often is not).
 
 Burst
 -----
@@ -177,24 +142,14 @@ z: the grid maximum of LR has, under the null, a distribution that depends
 on B only (the Gaussian limit; tested at 100 and 10 000 degrees of freedom
 per block: the same). It was simulated (40 000 maxima per B = 16 .. 256,
 1000 degrees of freedom per block) and fitted, over its upper 70 %, by
-P(max LR > x) = 1 − exp(−A x^β e^{−x/2}) (:data:`_BURST_NULL`): the fitted
-tail probability is within 10 % of the simulated one from 0.7 down to 3e-4
-(z = 3.4), a Bonferroni bound over the B²/2 windows would be 10–100 times
-too large at the 1 % level (2 times for B = 16, 15 times for B = 256).
+P(max LR > x) = 1 − exp(−A x^β e^{−x/2}) (:data:`_BURST_NULL`).
 Below the median z is approximate: the fitted p is a little small there, so
 z is pulled toward 0 (the null's 1 % quantile gives z ≈ −2.0 instead of
 −2.33).
 
 Cross-check: a fixed-window DAVAR (:func:`~gyroarray.analysis.davar.davar`,
 ARW read at τ0) of the most affected gyro, ``extra["davar"]``: its ARW²
-inside the window over outside agrees with ``variance_ratio`` (3.03–3.08
-for a simulated ratio of 3 over 600–900 s, against 2.97–3.02 fitted).
-
-Speed (46 min × 8 gyros × 100 Hz = 2.2 M samples, 2 cores shared with
-other jobs, load 2–3; ranges over repeated runs): :func:`fit_gyro_noise`
-0.03–0.10 s per gyro (0.25–0.82 s for all 8; the first call of a record
-length adds 0.03 s for the covariance profiles, cached), :func:`fit_correlation`
-0.23–0.40 s, :func:`fit_burst` 0.03–0.12 s (with the DAVAR check).
+inside the window over outside agrees with ``variance_ratio``.
 
 References
 ----------

@@ -581,11 +581,9 @@ def _format_allan(k: int, d: dict) -> str:
 
 def cmd_davar(args) -> tuple[dict, str]:
     from .analysis import davar as dv
-    if args.paper_table1:
-        table = dv.paper_table1(tuple(range(args.seeds)))
-        return table.to_json_dict(), dv.format_paper_table1(table)
     if args.measurement is None:
-        raise InputError("gyroarray davar: give MEAS.csv (or --paper-table1)")
+        raise InputError("gyroarray davar: give MEAS.csv (paper 000's Table 1: "
+                         "python benchmarks/davar_paper.py)")
     if args.gyro is None:
         raise InputError("gyroarray davar: --gyro K is required (one gyro at a time)")
     if args.window is not None and args.adaptive:
@@ -1220,9 +1218,6 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--repair", action="store_true", help="repair short gaps, missing values, exact duplicate rows and a jittering clock (each listed)")
     p.add_argument("--plot", type=Path, metavar="OUT.png", help="heat map + ARW and window tracks")
     _add_force(p)
-    p.add_argument("--paper-table1", action="store_true",
-                   help="reproduce paper 000 Table 1 (simulated) over --seeds realisations")
-    p.add_argument("--seeds", type=_positive_int("--seeds"), default=20, metavar="N")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=cmd_davar)
 
