@@ -79,10 +79,9 @@ I. V. Nikiforov, *Detection of Abrupt Changes*, 1993.
 
 from __future__ import annotations
 
-from typing import Any
-
 import math
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from scipy import linalg, optimize, special, stats

@@ -78,6 +78,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
+from typing import Any
 
 import numpy as np
 import scipy.fft as sfft
@@ -194,7 +195,7 @@ class SensorBandwidth:
         from scipy import signal
         out = np.ones(self.order.size, dtype=complex)
         for k in np.flatnonzero(self.filtered):
-            _, h = signal.sosfreqz(self.sos(k), worN=[float(freq_hz)], fs=1.0 / self.dt_s)
+            _, h = signal.sosfreqz(self.sos(int(k)), worN=[float(freq_hz)], fs=1.0 / self.dt_s)
             out[k] = h[0]
         return out
 
@@ -236,7 +237,7 @@ def sensor_bandwidth(noise_model, n_gyros: int, dt_s: float) -> SensorBandwidth 
         fc[sel], order[sel] = float(e.si_params["cutoff_hz"]), int(e.si_params["order"])
     sb = SensorBandwidth(cutoff_hz=fc, order=order, dt_s=float(dt_s))
     for k in np.flatnonzero(sb.filtered):
-        sb.sos(k)                                                    # checks order and cut-off
+        sb.sos(int(k))                                               # checks order and cut-off
     return sb
 
 
@@ -383,7 +384,8 @@ def g_sensitivity_error(coeff_rad_s_per_m_s2: np.ndarray, specific_force_m_s2: n
         f = np.broadcast_to(f, (1, c.shape[0], 3))
     e = g_sensitivity_bias(c, f)[k0:]                                # (n, N) [rad/s]
     to = units.rad_s_to_deg_s
-    out = {"per_gyro_rms_deg_s": [float(to(v)) for v in np.sqrt(np.mean(e ** 2, axis=0))]}
+    out: dict[str, Any] = {"per_gyro_rms_deg_s": [float(to(v))
+                                                for v in np.sqrt(np.mean(e ** 2, axis=0))]}
     if dc_gain is not None:
         fe = e @ np.asarray(dc_gain, dtype=float).T                  # (n, 3)
         out["fused_rms_deg_s"] = {ax: float(to(v)) for ax, v in zip(AXES, np.sqrt(np.mean(fe ** 2, 0)))}
@@ -767,15 +769,16 @@ def predict_system(sys, noise: NoiseSources, H: np.ndarray, *, n: int, settle_s:
     if n - k0 < 2:
         raise InputError(f"the run is too short: {n - k0} samples after the {settle_s:g} s start-up")
     nw = n - k0
-    parts = {"white": error_moments(sys, noise, n, k0, white=True, walk=False, gm=False),
-             "walk": error_moments(sys, noise, n, k0, white=False, walk=True, gm=False),
-             "gauss_markov": error_moments(sys, noise, n, k0, white=False, walk=False, gm=True)
-             if np.any(noise.gm_sigma_rad_s > 0) else None,
-             "flicker": flicker_moments(sys, noise.bi_rad_s, n, k0, dt)}
-    parts = {k: v for k, v in parts.items() if v is not None}
-    total = None
-    for m in parts.values():
-        total = m if total is None else total + m
+    raw = {"white": error_moments(sys, noise, n, k0, white=True, walk=False, gm=False),
+           "walk": error_moments(sys, noise, n, k0, white=False, walk=True, gm=False),
+           "gauss_markov": error_moments(sys, noise, n, k0, white=False, walk=False, gm=True)
+           if np.any(noise.gm_sigma_rad_s > 0) else None,
+           "flicker": flicker_moments(sys, noise.bi_rad_s, n, k0, dt)}
+    parts: dict[str, Moments] = {k: v for k, v in raw.items() if v is not None}
+    total = parts["white"]
+    for key, m in parts.items():
+        if key != "white":
+            total = total + m
     ms = np.diag(total.ms_window).copy()
     mean_sq = np.diag(total.sum_window) / nw ** 2
     angle_sq = np.diag(total.sum_full) * dt ** 2
@@ -866,12 +869,16 @@ def channel_filter(kind: str, dt_s: float, bandwidth_hz: float | None = None,
     if kind == "none":
         return LinearSystem(A=np.zeros((1, 1)), K=one, C=one, X0=np.zeros((1, 1)),
                             lam=np.zeros(1), S=one, S_inv=one)
+    if bandwidth_hz is None:
+        raise ValueError(f"channel filter {kind!r} needs bandwidth_hz")
     lam = lowpass_pole(float(bandwidth_hz), dt_s)
     if kind == "lowpass":
         return LinearSystem(A=lam * one, K=(1.0 - lam) * one, C=one, X0=one, lam=np.array([lam]),
                             S=one, S_inv=one)
     if kind != "kf":
         raise ValueError(f"unknown channel filter {kind!r}")
+    if ratio is None:
+        raise ValueError("the kf channel filter needs ratio")
     q_sum = (1.0 - lam) ** 2 / lam                                   # Q / r
     kappa = 1.0 - float(ratio) / q_sum
     if not kappa > 0.0:
@@ -972,7 +979,7 @@ def channel_response(sys, dt_s: float, n: int, k0: int, *, bi: bool = False,
             est += cs[0, i] * y
         e = np.real(est) - w
         mot = (np.mean(e[k0:] ** 2, axis=0), np.sum(e[k0:], axis=0), np.sum(e, axis=0))
-    split = {"amplitude_ratio": None, "phase_deg": None}
+    split: dict[str, float | None] = {"amplitude_ratio": None, "phase_deg": None}
     if swing_hz is not None:
         te = complex(est_sys.response(2.0 * np.pi * swing_hz * dt_s)[0, 0, 0])
         fs = 1.0 + 0j if sensor is None else complex(sensor.response(swing_hz)[0])

@@ -44,6 +44,7 @@ import math
 import time
 from dataclasses import dataclass, field, replace
 from functools import lru_cache
+from typing import Any
 
 import numpy as np
 from scipy.optimize import minimize_scalar
@@ -142,13 +143,13 @@ class GyroNoise:
         src = {k: source for k in ("arw", "rrw", "bi", "gauss_markov", "rho_arw", "rho_rrw")}
         # the sensor's own effects come in through DesignSpace
         from gyroarray.predict import MODELLED
-        MODELLED = tuple(m for m in MODELLED if m not in ("bandwidth", "g_sensitivity"))
+        modelled = tuple(m for m in MODELLED if m not in ("bandwidth", "g_sensitivity"))
         return cls(arw_deg_rt_h=arw,
                    rrw_deg_h_rt_h=units.rrw_rad_s_rt_s_to_deg_h_rt_h(qmean("rrw", "k_rad_s_rt_s")),
                    bi_deg_h=units.rad_s_to_deg_h(qmean("bias_instability", "b_rad_s")),
                    gm_sigma_deg_h=units.rad_s_to_deg_h(qmean("gauss_markov", "sigma_rad_s")),
                    gm_tau_s=float(np.mean(tau)) if tau.size else 0.0, sources=src,
-                   ignored=tuple(sorted({e.effect for e in model.entries} - set(MODELLED))), **rho)
+                   ignored=tuple(sorted({e.effect for e in model.entries} - set(modelled))), **rho)
 
     def with_rho(self, rho: float) -> "GyroNoise":
         """The same gyros with a common correlation ρ of ARW and RRW (the condition varied)."""
@@ -338,6 +339,7 @@ class _FilterBank:
         self.k0 = settle_start(self.n, space.dt_s, space.settle_s)
         self.gm_tau = gm_tau_s if gm_tau_s > 0 else None
         self.bi = bi
+        self.motion: np.ndarray | None
         if space.motion is not None:
             self.motion = np.asarray(space.motion, dtype=float)[:self.n]
         elif space.swing is not None:
@@ -361,7 +363,7 @@ def _filter_kind(est: str) -> str:
     return {"kf_array": "kf", "kf_single": "kf", "gls": "lowpass", "ols": "lowpass"}.get(est, "none")
 
 
-def _bandwidths(space: DesignSpace, est: str) -> list:
+def _bandwidths(space: DesignSpace, est: str) -> list[float | None]:
     """The bandwidths an estimator is tried at (None: its unfiltered form)."""
     if est == "naive":
         return [None]
@@ -371,7 +373,7 @@ def _bandwidths(space: DesignSpace, est: str) -> list:
     lo = min(lo, hi)
     grid = [lo] if lo == hi else list(np.geomspace(lo, hi, max(2, int(round(
         BW_PER_DECADE * math.log10(hi / lo))) + 1)))
-    out = [float(f) for f in grid if 0 < f < nyq]
+    out: list[float | None] = [float(f) for f in grid if 0 < f < nyq]
     if est in ("gls", "ols") and lo != hi:
         out.append(None)                                             # no low-pass
     return out
@@ -498,7 +500,7 @@ def _survives(H: np.ndarray, rho: float, k: int) -> np.ndarray:
     return worst
 
 
-def _evaluate(est, resp_of, ch: _Channels, sel) -> tuple[np.ndarray, list]:
+def _evaluate(est, resp_of, ch: _Channels, sel) -> tuple[np.ndarray, _Moments]:
     """Objective (3-axis RMS² about the truth over the window) of channels ``sel``."""
     m = _combine(ch, sel, resp_of)
     ms, _, _ = _add_motion(m, resp_of)
@@ -524,6 +526,7 @@ def _responses(bank: _FilterBank, est: str, bw, ch: _Channels, idx=None) -> list
         kind = "none"
     if kind == "kf":
         if est == "kf_array":
+            assert ch.ratio is not None                              # _channels sets it for kf_array
             ratios = ch.ratio[0 if idx is None else idx]
         else:
             ratios = np.full(3, ch.kf_single_ratio)
@@ -540,6 +543,7 @@ def _search_one(bank, space, g: GyroNoise, scheme: int, n: int, est: str, rho: f
     ch = _channels(est, H, gr, space.dt_s)
     ch.kf_single_ratio = _single_ratio(g, space)
     if est == "kf_array" and ch.decoupled:
+        assert ch.ratio is not None                                  # _channels sets it for kf_array
         r0 = ch.ratio[alive][0] if alive.any() else ch.ratio[0]
         if np.any(np.abs(ch.ratio[alive] - r0) > 1e-9 * np.abs(r0) + 1e-300):
             ch.decoupled = False
@@ -691,7 +695,7 @@ def search(g: GyroNoise, space: DesignSpace, rho: float) -> tuple[list[dict], li
                 notes.append(f"scheme {scheme}, N = {n}: no cone angle keeps a 3-axis rate after "
                              f"{space.failures} failed gyro(s); left out")
                 continue
-            found = {}
+            found: dict[str, _Best | None] = {}
             for est in space.estimators:
                 best, ch = _search_one(bank, space, g, scheme, n, est, rho, alive, alphas, H)
                 if best is None and est == "kf_array" and not ch.decoupled:
@@ -860,12 +864,13 @@ def recommend(g: GyroNoise, space: DesignSpace, *, rhos=None) -> dict:
         raise InputError("no design meets the requirements (see the notes: failures, rho, bandwidth)")
     rec = designs[0]
     other = [d for d in designs[1:] if (d["scheme"], d["n"]) != (rec["scheme"], rec["n"])]
-    out = {"recommended": _short(rec), "runner_up": _short(other[0]) if other else None,
-           "designs": [_short(d) for d in designs],
-           "equivalent": equivalent_groups(designs),
-           "assumptions": assumptions(g, space, rho_list, single),
-           "what_changes_the_choice": _what_changes(designs, g, space, rho_list),
-           "notes": sorted(set(notes))}
+    out: dict[str, Any] = {"recommended": _short(rec),
+                           "runner_up": _short(other[0]) if other else None,
+                           "designs": [_short(d) for d in designs],
+                           "equivalent": equivalent_groups(designs),
+                           "assumptions": assumptions(g, space, rho_list, single),
+                           "what_changes_the_choice": _what_changes(designs, g, space, rho_list),
+                           "notes": sorted(set(notes))}
     lim = tracking_limit(rec, space, g)
     if lim is not None:
         out["tracking_limit"] = lim
@@ -933,7 +938,7 @@ def tracking_limit(d: dict, space: DesignSpace, g: GyroNoise | None = None) -> d
 def g_sensitivity_statement(d: dict, space: DesignSpace) -> str | None:
     """The g-sensitivity's rate error of a design beside its noise RMS, in words."""
     gs = d.get("g_sensitivity")
-    if gs is None:
+    if gs is None or space.g_sensitivity_deg_s_per_g is None:
         return None
     k = ", ".join(f"{v:g}" for v in space.g_sensitivity_deg_s_per_g)
     ratio = gs["fused_rms_3axis_deg_s"] / d["rms_3axis_deg_s"] if d["rms_3axis_deg_s"] > 0 else math.inf
@@ -1064,7 +1069,7 @@ def _robustness(per_rho: dict, g: GyroNoise, space: DesignSpace) -> list[dict]:
         if not ds:
             continue
         d = ds[0]
-        vals = {}
+        vals: dict[str, Any] = {}
         for r in per_rho:
             best_r = per_rho[r][0]["rms_3axis_deg_s"] if per_rho[r] else math.nan
             if r <= -1.0 / (d["n"] - 1):
@@ -1216,7 +1221,7 @@ def monte_carlo_check(designs: list[dict], g: GyroNoise, space: DesignSpace, *,
             {"lowpass_hz": bw} if d["estimator"] in ("gls", "ols") else {})
         est = get_estimator(d["estimator"])(**kw).fit(layout, model, dt)
         setups.append((d, layout, model, est))
-    per = [[] for _ in setups]                                        # runs × (4 metrics × 3 axes)
+    per: list[list[np.ndarray]] = [[] for _ in setups]                                        # runs × (4 metrics × 3 axes)
     for r in range(int(replicates)):
         for j, (d, layout, model, est) in enumerate(setups):
             z = simulate_readings(model, truth, layout, dt, replicate_rng(seed, r), time_s=t)
@@ -1230,7 +1235,7 @@ def monte_carlo_check(designs: list[dict], g: GyroNoise, space: DesignSpace, *,
     out_designs = []
     for j, (d, *_rest) in enumerate(setups):
         arr = np.array(per[j])                                        # (R, 4, 3)
-        axes = {}
+        axes: dict[str, Any] = {}
         for a, ax in enumerate(AXES):
             axes[ax] = {}
             for m, key in enumerate(keys):
