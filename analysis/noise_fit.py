@@ -67,7 +67,7 @@ KIND_ORDER = {"oadev": 2, "ohdev": 3}
 #: ``c_i`` of ``A_i = c_i P_i^2`` for each variance.  ``None``: the variance is
 #: blind to the term (the Hadamard variance cancels a rate ramp).
 #: Derivations in the Notes of :func:`term_basis`.
-TERM_CONSTANTS = {
+TERM_CONSTANTS: dict[str, dict[str, float | None]] = {
     "oadev": {"q": 3.0, "n": 1.0, "b": 2.0 * _LN2 / math.pi, "k": 1.0 / 3.0,
               "r": 0.5},
     "ohdev": {"q": 10.0 / 3.0, "n": 1.0,
@@ -881,6 +881,7 @@ def fit_noise_terms(result, edf_of_alpha: Callable[[np.ndarray], np.ndarray],
     values: dict = {}
     for j, term in enumerate(terms):
         c = TERM_CONSTANTS[kind][term]
+        assert c is not None                                   # blind terms were refused above
         name = _SI_NAME[term]
         values[name] = math.sqrt(a[j] / c)
         sigma = None

@@ -21,6 +21,7 @@ import itertools
 import math
 from dataclasses import dataclass, replace
 from importlib import resources
+from typing import Any
 
 import numpy as np
 from scipy.optimize import minimize_scalar
@@ -313,8 +314,8 @@ def fault_tolerance(layout: Layout, rho=0.0, max_failures: int = 2) -> dict:
     h = np.asarray(layout.H, dtype=float)
     n = h.shape[0]
     chol = np.linalg.cholesky(correlation_matrix(n, rho))
-    out = {"gdop": _gdop(h, chol), "worst_gdop_after": {}, "three_axes_after": {},
-           "lost_axis_example": {}}
+    out: dict[str, Any] = {"gdop": _gdop(h, chol), "worst_gdop_after": {}, "three_axes_after": {},
+                           "lost_axis_example": {}}
     for k in range(1, max_failures + 1):
         if n - k < 3:
             out["worst_gdop_after"][str(k)] = math.inf

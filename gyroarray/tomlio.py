@@ -143,7 +143,7 @@ def _too_deep_at(text: str) -> tuple[int, int] | None:
 
 def _check_shape(data: dict, name: str, text: str) -> None:
     """Depth, string and key length of a parsed document (iterative: no recursion)."""
-    stack = [(data, 1, "")]
+    stack: list[tuple[dict | list, int, str]] = [(data, 1, "")]
     while stack:
         node, depth, path = stack.pop()
         if depth > MAX_DEPTH:

@@ -112,6 +112,7 @@ class TemperatureProfile:
             return np.interp(t, pts[:, 0], pts[:, 1])
         if self.constant_c is not None:
             return np.full(t.shape, float(self.constant_c))
+        assert self.start_c is not None and self.end_c is not None and self.tau_s is not None
         return self.end_c + (self.start_c - self.end_c) * np.exp(-t / self.tau_s)
 
 
@@ -389,7 +390,7 @@ def resolve_profile(ref: str, base: Path, doc: _TomlDoc | None = None) -> Path:
             return candidate
         message = f"motion profile file {ref!r} not found (looked in {base})"
     else:
-        shipped = resources.files("gyroarray.scenarios").joinpath("profiles", ref + ".toml")
+        shipped = resources.files("gyroarray.scenarios").joinpath("profiles").joinpath(ref + ".toml")
         if shipped.is_file():
             return Path(str(shipped))
         message = (f"unknown shipped motion profile {ref!r} (shipped: {', '.join(shipped_profiles())}; "
