@@ -31,6 +31,7 @@ Public API
 from __future__ import annotations
 
 import contextlib
+import functools
 import math
 import numbers
 from dataclasses import asdict, dataclass, field
@@ -388,6 +389,11 @@ def _factors(l_short: int, tau0: float, taus, kind: str) -> np.ndarray:
     return averaging_factors(l_short + 1, tau0, taus, kind)
 
 
+def _edf_at(kind: str, n_phase: int, m: np.ndarray, alpha: np.ndarray) -> np.ndarray:
+    """Greenhall's EDF of ``kind`` for ``n_phase`` phase points at factors ``m`` [-]."""
+    return edf(kind, n_phase, m, alpha)
+
+
 def _window_arw(kind: str, tau0: float, m: np.ndarray, adev: np.ndarray,
                 lengths: np.ndarray, method: str, confidence: float):
     """ARW [rad/√s] of each window and its confidence bounds."""
@@ -413,9 +419,9 @@ def _window_arw(kind: str, tau0: float, m: np.ndarray, adev: np.ndarray,
         res = AllanResult(kind=kind, tau0_s=tau0, n_phase=n_phase, m=m,
                           taus_s=m * tau0, dev=adev[i],
                           n_terms=n_phase - d * m)
-        fit = fit_noise_terms(
-            res, lambda alpha, n=n_phase: edf(kind, n, m, alpha))
+        fit = fit_noise_terms(res, functools.partial(_edf_at, kind, n_phase, m))
         value, sigma = fit.coefficient("n")
+        assert value is not None                       # "n" is a term of both kinds
         sigma = math.nan if sigma is None else sigma
         arw[i] = value
         low[i] = max(value - z * sigma, 0.0)
@@ -764,6 +770,7 @@ def change_nodes(result: DavarResult, change_s: float) -> ChangeNodes:
     if hits.size == 0:
         return ChangeNodes(change, math.nan, math.nan, math.nan)
     i_b = int(hits[0])
+    assert result.params is not None                   # adaptive
     l_max = result.params.l_max
     after = (lengths[i_b + 1:] == l_max) & (result.start[i_b + 1:] >= c)
     if not after.any():
@@ -788,8 +795,11 @@ def _cell_edges(centres: np.ndarray, result: DavarResult | None, *,
     factor 2 around it when ``exp``); ``exp``: ``centres`` are logarithms
     and the edges are returned exponentiated."""
     if centres.size == 1:
-        half = (0.5 * math.log(2.0) if exp
-                else 0.5 * result.tau0_s * float(result.window_length[0]))
+        if exp:
+            half = 0.5 * math.log(2.0)
+        else:
+            assert result is not None                  # the window's span
+            half = 0.5 * result.tau0_s * float(result.window_length[0])
         edges = np.array([centres[0] - half, centres[0] + half])
     else:
         mid = 0.5 * (centres[1:] + centres[:-1])

@@ -321,7 +321,7 @@ class _Curve:
     m: np.ndarray
     y: np.ndarray             # Allan variance [(rad/s)²]
     cov: _AvarCov
-    caps: dict = None         # upper bounds of the capped coefficients (:func:`_caps`)
+    caps: dict | None = None  # upper bounds of the capped coefficients (:func:`_caps`)
 
 
 #: Covariance models by (samples, dt): the gyros of one record share one.

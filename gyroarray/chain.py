@@ -48,6 +48,7 @@ Metrics (per body axis; :mod:`gyroarray.analysis.metrics`):
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -156,7 +157,8 @@ def score(estimates: dict[str, np.ndarray], truth_rad_s: np.ndarray, readings_ra
                            for k in range(gyro_err.shape[1])])
     ref = single.mean(numeric_only=True)
 
-    swing_sel = swing_axes = None
+    swing_sel: np.ndarray | None = None
+    swing_axes: np.ndarray | None = None
     if swing is not None:
         freq, (t0, t1) = swing
         swing_sel = keep & (time_s >= t0) & (time_s <= t1)
@@ -164,7 +166,7 @@ def score(estimates: dict[str, np.ndarray], truth_rad_s: np.ndarray, readings_ra
         if span_s * freq < MIN_SWING_PERIODS:
             # the run was cut before (most of) the swing: nothing to attenuate
             swing, swing_sel = None, None
-    sensor = None
+    sensor: dict[str, Any] | None = None
     if swing is not None:
         amps = np.array([np.ptp(truth_rad_s[swing_sel, a]) for a in range(3)])
         swing_axes = amps >= SWING_SHARE * amps.max() if amps.max() > 0 else np.zeros(3, bool)
@@ -184,7 +186,8 @@ def score(estimates: dict[str, np.ndarray], truth_rad_s: np.ndarray, readings_ra
             att = lag = None
             split = {"sensor_amplitude_ratio": None, "sensor_phase_deg": None,
                      "estimator_amplitude_ratio": None, "estimator_phase_deg": None}
-            if swing_sel is not None and swing_axes[a]:
+            if swing_sel is not None and swing_axes is not None and sensor is not None \
+                    and swing_axes[a]:
                 att, lag_rad = attenuation_and_lag(time_s[swing_sel], est[swing_sel, a],
                                                    truth_rad_s[swing_sel, a], swing[0])
                 lag = float(units.rad_to_deg(lag_rad))
@@ -428,7 +431,7 @@ class ReplicateResult:
         cols = [c for c in tables[0].columns if c not in ("estimator", "axis")]
         for name in dict.fromkeys(tables[0].estimator):
             for axis in AXES:
-                vals = {c: [] for c in cols}
+                vals: dict[str, list] = {c: [] for c in cols}
                 for t in tables:
                     row = t[(t.estimator == name) & (t.axis == axis)]
                     for c in cols:

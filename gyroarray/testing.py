@@ -42,6 +42,7 @@ Effect checks
 
 from __future__ import annotations
 
+import functools
 import math
 from typing import Callable, Iterable
 
@@ -213,7 +214,7 @@ def parametrize_effect_checks(classes):
 def estimator_checks(estimator_cls) -> list[tuple[str, Callable[[], None]]]:
     """The estimator contract as (name, zero-argument callable) pairs (:mod:`gyroarray.estimators.checks`)."""
     from gyroarray.estimators import checks
-    return [(name, (lambda fn=fn: fn(estimator_cls))) for name, fn in checks.CHECKS]
+    return [(name, functools.partial(fn, estimator_cls)) for name, fn in checks.CHECKS]
 
 
 def check_estimator(estimator_cls) -> None:

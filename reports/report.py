@@ -155,6 +155,7 @@ def _check_row_files(path: Path, ids: set) -> None:
         if schema is None:
             schema, first = names, f
         elif names != schema:
+            assert first is not None                           # set with schema
             diff = sorted(set(names) ^ set(schema))
             raise InputError(f"its columns differ from those of {first.name} ({', '.join(diff[:5])}): "
                              "not a result of this sweep; move it out of rows/", file=str(f))
