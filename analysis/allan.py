@@ -37,8 +37,8 @@ from scipy import special
 from gyroarray import units
 from gyroarray.errors import InputError
 
-from . import _kernels
-from .noise_fit import NoiseFit, fit_noise_terms
+from gyroarray.analysis import _kernels
+from gyroarray.analysis.noise_fit import NoiseFit, fit_noise_terms
 
 __all__ = [
     "KINDS",
@@ -499,7 +499,7 @@ def _gh_sx(t: np.ndarray, f: float, alpha: int) -> np.ndarray:
                     - _gh_sw(t + 1.0 / f, alpha))
 
 
-def _gh_sz(t: np.ndarray, f: float, alpha: int, d: int) -> np.ndarray:
+def _gh_sz(t: float | np.ndarray, f: float, alpha: int, d: int) -> np.ndarray:
     """sz(t) (eq. 9): the d-th difference, binomial weights of order 2d."""
     t = np.asarray(t, dtype=float)
     out = np.zeros_like(t)
@@ -535,18 +535,18 @@ def _edf_greenhall_one(n: int, m: int, alpha: int, d: int,
         if j <= jmax:
             f = float(m) if filtered and m * (d + 1) <= jmax else math.inf
             inv = (_gh_basic_sum(j, big_m, s, f, alpha, d)
-                   / (_gh_sz(0.0, f, alpha, d) ** 2 * big_m))
+                   / (float(_gh_sz(0.0, f, alpha, d)) ** 2 * big_m))
         elif r > d + 1:
             a0, a1 = _GREENHALL_T2[(alpha, d)]
             inv = (a0 - a1 / r) / r
         else:
             mp = jmax / r
             inv = (_gh_basic_sum(jmax, jmax, mp, math.inf, alpha, d)
-                   / (_gh_sz(0.0, math.inf, alpha, d) ** 2 * jmax))
+                   / (float(_gh_sz(0.0, math.inf, alpha, d)) ** 2 * jmax))
     elif alpha == 1:                                        # case 3
         if j <= jmax:
             inv = (_gh_basic_sum(j, big_m, s, float(m), 1, d)
-                   / (_gh_sz(0.0, float(m), 1, d) ** 2 * big_m))
+                   / (float(_gh_sz(0.0, float(m), 1, d)) ** 2 * big_m))
         else:
             b0, b1 = _GREENHALL_T3[d]
             norm = (b0 + b1 * math.log(m)) ** 2

@@ -33,8 +33,8 @@ import numpy as np
 from numba import njit
 from gyroarray.constants import EARTH_RATE_RAD_S
 
-from .effect_fit import EffectFit, chi2_to_z
-from .regress import NotIdentifiableError, _pm, gls_rw
+from gyroarray.analysis.effect_fit import EffectFit, chi2_to_z
+from gyroarray.analysis.regress import NotIdentifiableError, _pm, gls_rw
 
 __all__ = ["attitude_from_rates", "earth_rate_regressors", "fit_earth_rate"]
 

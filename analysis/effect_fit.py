@@ -28,6 +28,7 @@ Conventions
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from scipy import special, stats
@@ -67,7 +68,7 @@ class EffectFit:
 
     def entry(self) -> dict:
         """The model TOML entry (``{"effect": .., "gyro": .., **params}``)."""
-        out = {"effect": self.effect}
+        out: dict[str, Any] = {"effect": self.effect}
         if self.gyro is not None:
             out["gyro"] = int(self.gyro)
         out.update(self.params)

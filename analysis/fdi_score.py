@@ -168,7 +168,7 @@ def recovery_errors(z, H, noise, dt_s, exclusions, alarms, time_s, truth_rad_s=N
         row = {}
         for name, sl in spans.items():
             m = sl.stop - sl.start
-            d = {"n": int(max(m, 0))}
+            d: dict[str, float] = {"n": int(max(m, 0))}
             if m > 0:
                 d["shift_deg_s"] = _rms_worst(rec[sl] - raw[sl])
                 if truth_rad_s is not None:

@@ -37,6 +37,8 @@ __all__ = [
     "term_basis",
     "term_from_curve",
     "fit_noise_terms",
+    "phase_variogram",
+    "spike_lags",
 ]
 
 #: The five IEEE Std 952 terms, in order of the exponent of tau in the
@@ -65,7 +67,7 @@ KIND_ORDER = {"oadev": 2, "ohdev": 3}
 #: ``c_i`` of ``A_i = c_i P_i^2`` for each variance.  ``None``: the variance is
 #: blind to the term (the Hadamard variance cancels a rate ramp).
 #: Derivations in the Notes of :func:`term_basis`.
-TERM_CONSTANTS = {
+TERM_CONSTANTS: dict[str, dict[str, float | None]] = {
     "oadev": {"q": 3.0, "n": 1.0, "b": 2.0 * _LN2 / math.pi, "k": 1.0 / 3.0,
               "r": 0.5},
     "ohdev": {"q": 10.0 / 3.0, "n": 1.0,
@@ -412,26 +414,66 @@ def _covariance(x: np.ndarray) -> np.ndarray | None:
 # Correlation between the variance estimates at different taus
 
 
-def _structure(t: np.ndarray, alpha: int) -> np.ndarray:
-    """Phase structure function ``E[(x(s+t) - x(s))^2]`` up to scale.
+def phase_variogram(term: str, t, dt_s: float) -> np.ndarray:
+    """Generalised variogram D(t) of the phase of one noise term, per unit coefficient.
 
-    Strictly: minus twice the generalised covariance of the phase, the
-    quantity whose second differences give the covariances below. Terms of
-    degree <= 2 in t are dropped: the products of two differences of order
-    >= 2 annihilate them. White FM: ``|t|`` (exact for sampled white rate);
-    flicker FM: ``-t^2 ln|t|``; random-walk FM: ``-|t|^3 + |t|`` (exact for
-    a sampled random walk: generalised covariance (|t|^3 - |t|)/6). The
-    signs matter once terms mix (each term is normalised by its own
-    zero-lag value, so a wrong sign makes two terms subtract; found by the
-    simulation check of ``analysis/stochastic_fit.py``).
+    The phase is the cumulative sum of the sampled rate; ``t`` is a lag in
+    samples. Terms of degree <= 2 in t are dropped (differences of order
+    >= 2 annihilate them), so only the covariances of such differences,
+    ``cov(z_j(i), z_k(i + l)) = -1/2 sum_pq b_p b_q D(l + q m_k - p m_j)``,
+    are meaningful. The signs matter once terms mix.
+
+    Parameters
+    ----------
+    term : {"n", "k", "b"}
+        White FM (angle random walk, per N² = 1): ``|t|/dt``, exact for
+        sampled white rate; random-walk FM (per K² = 1):
+        ``-dt (|t|³ - |t|)/6``, exact for a sampled random walk (the m = 1
+        Allan variance is K² dt); flicker FM (per B² = 1): ``-t² ln|t|/π``.
+    t : array_like
+        Lags [samples].
+    dt_s : float
+        Sampling step [s].
+
+    Returns
+    -------
+    ndarray
+        D(t) [rad² per unit coefficient].
     """
-    a = np.abs(t)
-    if alpha == 0:
-        return a
-    if alpha == -1:
+    a = np.abs(np.asarray(t, dtype=float))
+    if term == "n":
+        return a / dt_s
+    if term == "k":
+        return -(dt_s / 6.0) * (a ** 3 - a)
+    if term == "b":
         with np.errstate(divide="ignore", invalid="ignore"):
-            return np.where(a > 0, -a * a * np.log(a), 0.0)
-    return -(a ** 3) + a  # alpha == -2
+            return np.where(a > 0, -(a * a * np.log(a)) / math.pi, 0.0)
+    raise ValueError(f"no phase variogram for term {term!r}")
+
+
+#: The noise type whose phase variogram models each exponent of TERM_ALPHA (a rate
+#: ramp, alpha -2, is modelled as random-walk FM).
+_ALPHA_TERM = {0: "n", -1: "b", -2: "k"}
+
+
+def spike_lags(b: np.ndarray, m_j: int, m_k: int) -> dict:
+    """White-PM (quantization) covariance spikes of two phase differences.
+
+    ``z_j(i) = sum_p b_p x(i + p m_j)`` and ``z_k`` likewise with white
+    phase x: ``cov(z_j(i), z_k(i + l))`` is ``sum b_p b_q`` over the (p, q)
+    with ``l = p m_j - q m_k`` (per unit phase variance).
+
+    Returns
+    -------
+    dict
+        Lag [samples] -> ``sum b_p b_q`` [-], lags in increasing order.
+    """
+    acc: dict = {}
+    for p in range(len(b)):
+        for q in range(len(b)):
+            lag = p * int(m_j) - q * int(m_k)
+            acc[lag] = acc.get(lag, 0.0) + float(b[p] * b[q])
+    return {lag: acc[lag] for lag in sorted(acc)}
 
 
 class _EstimateCorrelation:
@@ -483,9 +525,9 @@ class _EstimateCorrelation:
             for p in range(d + 1):
                 for q in range(d + 1):
                     w = -0.5 * b[p] * b[q]
-                    c += w * _structure(lags + q * mk - p * mj, alpha)
-                    c0j += w * _structure((q - p) * mj[:, 0], alpha)
-                    c0k += w * _structure((q - p) * mk[:, 0], alpha)
+                    c += w * phase_variogram(_ALPHA_TERM[alpha], lags + q * mk - p * mj, 1.0)
+                    c0j += w * phase_variogram(_ALPHA_TERM[alpha], (q - p) * mj[:, 0], 1.0)
+                    c0k += w * phase_variogram(_ALPHA_TERM[alpha], (q - p) * mk[:, 0], 1.0)
             self.profiles[it] = (np.where(used, c, 0.0)
                                  / np.sqrt(c0j * c0k)[:, None])
         # White PM: C_jk(l) = 1/2 sum_{p m_j - q m_k = l} b_p b_q, normalised
@@ -494,13 +536,9 @@ class _EstimateCorrelation:
         wpm_lag = []
         wpm_val = []
         for pair in range(n_pairs):
-            acc: dict = {}
-            for p in range(d + 1):
-                for q in range(d + 1):
-                    lag = p * int(mj[pair, 0]) - q * int(mk[pair, 0])
-                    acc[lag] = acc.get(lag, 0.0) + 0.5 * b[p] * b[q] / c0
-            wpm_lag.append(np.array(sorted(acc), dtype=float))
-            wpm_val.append(np.array([acc[key] for key in sorted(acc)]))
+            acc = spike_lags(b, int(mj[pair, 0]), int(mk[pair, 0]))
+            wpm_lag.append(np.array(list(acc), dtype=float))
+            wpm_val.append(0.5 * np.array(list(acc.values())) / c0)
         self.wpm_lag = wpm_lag
         self.wpm_val = wpm_val
         # the same, flattened, with the linear-interpolation position of each spike
@@ -843,6 +881,7 @@ def fit_noise_terms(result, edf_of_alpha: Callable[[np.ndarray], np.ndarray],
     values: dict = {}
     for j, term in enumerate(terms):
         c = TERM_CONSTANTS[kind][term]
+        assert c is not None                                   # blind terms were refused above
         name = _SI_NAME[term]
         values[name] = math.sqrt(a[j] / c)
         sigma = None

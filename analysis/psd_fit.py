@@ -37,6 +37,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from scipy import ndimage, optimize, signal, special, stats
@@ -183,7 +184,7 @@ def fit_psd(x, dt_s: float) -> PsdFit:
     nyq = 0.5 / dt
     fcs = np.geomspace(_LOWEST * nyq, _TOP * nyq, int(_PER_DECADE * math.log10(_TOP / _LOWEST)) + 1)
     prof = {}
-    best = (-math.inf, None, None, None, None)
+    best: tuple[float, Any, Any, Any, Any] = (-math.inf, None, None, None, None)
     for family in ("continuous", "digital"):
         scan = fcs if family == "continuous" else fcs[fcs < 0.98 * nyq]
         for order in (1, 2):

@@ -266,11 +266,11 @@ class _RWWhitener:
 
     def diff(self, *cols) -> np.ndarray:
         """Δ of the columns of the arrays ``cols`` ((n,) or (n, k) each), shape (m, K), Fortran order."""
-        cols = [np.asarray(c, dtype=float) for c in cols]
-        cols = [c[:, None] if c.ndim == 1 else c for c in cols]
-        out = np.empty((self.m, sum(c.shape[1] for c in cols)), order="F")
+        arrays = [np.asarray(c, dtype=float) for c in cols]
+        arrays = [c[:, None] if c.ndim == 1 else c for c in arrays]
+        out = np.empty((self.m, sum(c.shape[1] for c in arrays)), order="F")
         j = 0
-        for c in cols:
+        for c in arrays:
             for i in range(c.shape[1]):
                 if self.idx is None:
                     np.subtract(c[1:, i], c[:-1, i], out=out[:, j])

@@ -30,26 +30,8 @@ burst             maximum likelihood ratio over windows, calibrated null tail
 
 For a linear model with fixed Σ the Wald ratio is the signed root of the
 likelihood-ratio χ²(1); it is kept signed (a negative z says the data lie
-below ARW + RRW there). Measured under the null with the project's
-simulator, ARW and RRW drawn log-uniformly in 0.1–0.5 deg/√h and 10–600
-deg/h/√h for each seed, 100 Hz; A: 100 seeds × 4 gyros × 20 min,
-B: 30 seeds × 8 gyros × 46 min (per-gyro terms count every gyro):
-
-================  =====  =====  ====  =========  =====  =====  ====  =========
-z under the null  A: n   mean   sd    P(|z|>3)   B: n   mean   sd    P(|z|>3)
-================  =====  =====  ====  =========  =====  =====  ====  =========
-bias_instability  400    −0.11  0.89  0          240    −0.03  0.96  0
-quantization      400    −0.03  0.96  0.0025     240    +0.07  1.02  0.004
-rate_ramp         400    +0.09  1.08  0.0075     240    +0.03  0.96  0
-gauss_markov      400    −0.10  0.95  0.005      240    −0.11  0.93  0.004
-rho_arw           100    +0.14  1.03  0.01       30     +0.09  1.13  0
-rho_rrw           100    +0.03  0.81  0.01       30     −0.20  0.90  0
-burst             100    +0.09  1.05  0          30     −0.16  0.81  0
-================  =====  =====  ====  =========  =====  =====  ====  =========
-
-(N(0, 1): P(|z| > 3) = 0.0027. ``rho_rrw`` is 0, "not estimable", where
-the RRW of a 20-min record is not seen on two gyros.) Separately, 150
-records of 4 independent gyros gave sd(ρ̂/σ₀) = 1.00 (ARW) and 1.04 (RRW).
+below ARW + RRW there). The z of each effect as measured under the null:
+``benchmarks/stochastic_fit_validation.md``.
 
 Allan variance GLS (``bias_instability``, ``quantization``, ``gauss_markov``, baseline)
 --------------------------------------------------------------------------------------
@@ -74,19 +56,16 @@ variance is K²dt); flicker FM −t² ln|t|/π; Gauss–Markov the exact AR(1)
 variogram t(1+φ)/(1−φ) − 2φ(1−φᵗ)/(1−φ)²; white PM (quantization) spikes
 (1/dt²)Σ b_p b_q at the lags p m_j − q m_k. Mixtures add their C's before
 squaring. Lags on the integers when short, else 512 midpoints over
-±8(m_j + m_k). Its diagonal equals 2σ⁴/ν with Greenhall's EDF
-(:func:`~gyroarray.analysis.allan.edf`) within 0.7 % for one noise type,
-and 400 simulated ARW + RRW curves match its correlations (adjacent octaves
-0.60/0.76/0.85 at the crossover against 0.61/0.79/0.87 measured).
+±8(m_j + m_k).
 
-Why not ``noise_fit``'s covariance: its ``_structure`` gives random-walk and
-flicker FM the opposite sign to white FM (+|t|³ + |t|/2, +t² ln|t|; the
-generalised variograms are −|t|³ + |t| and −t² ln|t| up to positive
-factors). Within one term the sign cancels; in a mixture (the ARW–RRW
-crossover, where a flat term is decided) the terms subtract instead of
-adding: the model's adjacent-octave correlation there jumps 0.45 -> 0.94
-(measured 0.61 -> 0.79) and the Wald z of B had a standard deviation of
-1.6–1.8 instead of 1; with this covariance it is 0.97–1.09.
+The phase variograms and the white-PM spikes are those of
+:func:`~gyroarray.analysis.noise_fit.phase_variogram` and
+:func:`~gyroarray.analysis.noise_fit.spike_lags`, shared with the
+correlation model of :func:`~gyroarray.analysis.noise_fit.fit_noise_terms`
+(which works for any difference order, Hadamard included, but with the
+large-record weight √(min M/max M) instead of the exact w_jk(l), and
+without Gauss–Markov). In a mixture the signs of the generalised
+variograms decide whether terms add.
 
 Bias instability and quantization: one column more than the baseline, z =
 Â/σ_Â, the coefficient √Â with the 1σ of ``noise_fit`` (the larger distance
@@ -102,16 +81,6 @@ beyond 20 exceedances, the Šidák form 1 − (1 − Φ̄(w))^M with M the effec
 number of tests read at the 99th percentile. The estimate: τc refined
 (bounded Brent) around the best grid point, Σ from the fitted model, τc
 again, σ's from the whitened Jacobian in (N², K², σ², ln τc).
-
-Parameter pulls (fit − true)/σ measured over 30 fits (10 seeds × 3 gyros,
-46 min, ARW 0.2, RRW 30 or 10): B = 6 deg/h mean −0.32 sd 1.00 (the FFT
-flicker lacks the lowest frequencies); Q = 5e-5 deg +0.06, 0.86; R = 200
-deg/h² +0.05, 0.45 (conservative: K profiled); Gauss–Markov σ = 20 deg/h,
-τc = 10 s: σ −0.22, 1.14, τc −0.28, 1.32 (one of 30 at −5.3: the Jacobian
-σ of τc is optimistic by about 1.3, against 1.9 for the independent-τ fit
-:func:`~gyroarray.sim.effects.fit_gauss_markov_avar`; the estimate
-covariance is not the cause: 300 simulated Gauss–Markov curves match it
-within 7 %).
 
 Rate ramp (time domain)
 -----------------------
@@ -147,9 +116,7 @@ coefficients), σ₀ its exact σ without correlation (per-pair z), its 1σ
 mean of the pairs (uncorrelated without correlation, so its σ₀ is exact and
 gives z); its 1σ comes from the Olkin–Siotani covariance of correlation
 estimates at the common ρ. A family is used only on gyros where its
-coefficient is above 3σ (the RRW of a short record often is not). Measured
-(46 min, 8 gyros, ARW 0.2, RRW 300, ρ = 0.3/0.5, 15 seeds): ρᵃ 0.2999, sd
-0.0008, stated 0.0008; ρʳ 0.504, sd 0.021, stated 0.025.
+coefficient is above 3σ (the RRW of a short record often is not).
 
 Burst
 -----
@@ -175,24 +142,14 @@ z: the grid maximum of LR has, under the null, a distribution that depends
 on B only (the Gaussian limit; tested at 100 and 10 000 degrees of freedom
 per block: the same). It was simulated (40 000 maxima per B = 16 .. 256,
 1000 degrees of freedom per block) and fitted, over its upper 70 %, by
-P(max LR > x) = 1 − exp(−A x^β e^{−x/2}) (:data:`_BURST_NULL`): the fitted
-tail probability is within 10 % of the simulated one from 0.7 down to 3e-4
-(z = 3.4), a Bonferroni bound over the B²/2 windows would be 10–100 times
-too large at the 1 % level (2 times for B = 16, 15 times for B = 256).
+P(max LR > x) = 1 − exp(−A x^β e^{−x/2}) (:data:`_BURST_NULL`).
 Below the median z is approximate: the fitted p is a little small there, so
 z is pulled toward 0 (the null's 1 % quantile gives z ≈ −2.0 instead of
 −2.33).
 
 Cross-check: a fixed-window DAVAR (:func:`~gyroarray.analysis.davar.davar`,
 ARW read at τ0) of the most affected gyro, ``extra["davar"]``: its ARW²
-inside the window over outside agrees with ``variance_ratio`` (3.03–3.08
-for a simulated ratio of 3 over 600–900 s, against 2.97–3.02 fitted).
-
-Speed (46 min × 8 gyros × 100 Hz = 2.2 M samples, 2 cores shared with
-other jobs, load 2–3; ranges over repeated runs): :func:`fit_gyro_noise`
-0.03–0.10 s per gyro (0.25–0.82 s for all 8; the first call of a record
-length adds 0.03 s for the covariance profiles, cached), :func:`fit_correlation`
-0.23–0.40 s, :func:`fit_burst` 0.03–0.12 s (with the DAVAR check).
+inside the window over outside agrees with ``variance_ratio``.
 
 References
 ----------
@@ -222,10 +179,10 @@ from gyroarray import units
 from gyroarray.errors import InputError
 from gyroarray.physics import gauss_markov_avar
 
-from .allan import deviation, edf_simple
-from .davar import davar
-from .effect_fit import EffectFit, chi2_to_z, z_from_log_p
-from .noise_fit import term_basis
+from gyroarray.analysis.allan import deviation, edf_simple
+from gyroarray.analysis.davar import davar
+from gyroarray.analysis.effect_fit import EffectFit, chi2_to_z, z_from_log_p
+from gyroarray.analysis.noise_fit import phase_variogram, spike_lags, term_basis
 
 __all__ = ["fit_gyro_noise", "fit_correlation", "fit_burst"]
 
@@ -234,21 +191,6 @@ __all__ = ["fit_gyro_noise", "fit_correlation", "fit_burst"]
 # Covariance of overlapping Allan variance estimates (Gaussian noise, exact)
 
 _B2 = np.array([1.0, -2.0, 1.0])          # second difference of the phase
-
-
-def _d_white_fm(t, dt):            # phase = random walk: variogram |t| (per N² = 1)
-    return np.abs(t) / dt
-
-
-def _d_rw_fm(t, dt):               # sampled random-walk rate, generalized variogram (per K² = 1)
-    a = np.abs(t)
-    return -(dt / 6.0) * (a ** 3 - a)
-
-
-def _d_flicker_fm(t, dt):          # flicker rate, generalized variogram (per B² = 1)
-    a = np.abs(t)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        return np.where(a > 0, -(a * a * np.log(a)) / math.pi, 0.0)
 
 
 def _d_gauss_markov(t, dt, tau_c):  # AR(1) rate, variogram of the phase (per σ² = 1)
@@ -285,23 +227,18 @@ class _AvarCov:
         self.w = np.where(used, w, 0.0) * self.step[:, None]
         self.norm = 2.0 / (4.0 * (mj[:, 0] * mk[:, 0]) ** 2 * Mj[:, 0] * Mk[:, 0])
         self.lags, self.mj, self.mk, self.Mj, self.Mk = lags, mj, mk, Mj, Mk
-        self.profiles = {"n": self._profile(lambda t: _d_white_fm(t, dt)),
-                         "k": self._profile(lambda t: _d_rw_fm(t, dt)),
-                         "b": self._profile(lambda t: _d_flicker_fm(t, dt))}
+        self.profiles = {key: self._profile(lambda t, key=key: phase_variogram(key, t, dt))
+                         for key in ("n", "k", "b")}
         # white PM spikes: C(l) = (1/dt²) Σ b_p b_q [l = p m_j − q m_k], the nine
         # (p, q) merged where their lags coincide (unused slots get weight 0)
         n_pairs = self.j.size
         self.spike_lag = np.zeros((n_pairs, 9))
         self.spike_val = np.zeros((n_pairs, 9))
         for pair in range(n_pairs):
-            acc = {}
-            for p in range(3):
-                for q in range(3):
-                    lag = p * int(mj[pair, 0]) - q * int(mk[pair, 0])
-                    acc[lag] = acc.get(lag, 0.0) + _B2[p] * _B2[q] / dt ** 2
-            for slot, lag in enumerate(sorted(acc)):
+            acc = spike_lags(_B2, int(mj[pair, 0]), int(mk[pair, 0]))
+            for slot, (lag, val) in enumerate(acc.items()):
                 self.spike_lag[pair, slot] = lag
-                self.spike_val[pair, slot] = acc[lag]
+                self.spike_val[pair, slot] = val / dt ** 2
         self.spike_w = np.clip(np.minimum(Mj, Mk - self.spike_lag) - np.maximum(0.0, -self.spike_lag),
                                0.0, None) * (self.spike_val != 0)
         # linear interpolation of a profile at the spike lags (uniform grids)
@@ -384,7 +321,7 @@ class _Curve:
     m: np.ndarray
     y: np.ndarray             # Allan variance [(rad/s)²]
     cov: _AvarCov
-    caps: dict = None         # upper bounds of the capped coefficients (:func:`_caps`)
+    caps: dict | None = None  # upper bounds of the capped coefficients (:func:`_caps`)
 
 
 #: Covariance models by (samples, dt): the gyros of one record share one.

@@ -88,7 +88,9 @@ def main(n_fixed: int = 1_000_000, window: int = 60_000, repeats: int = 3,
     """
     import numba
 
-    from gyroarray.analysis.davar import AdaptiveWindow, davar, paper_signal
+    from davar_paper import paper_signal
+
+    from gyroarray.analysis.davar import AdaptiveWindow, davar
 
     rng = np.random.default_rng(seed)
     y_paper = paper_signal(rng, sigma_rad_s=1.0)

@@ -30,7 +30,7 @@ import stat
 import sys
 from pathlib import Path
 from types import MappingProxyType, ModuleType
-from typing import Iterable, Mapping
+from typing import Iterable, Mapping, NoReturn
 
 from gyroarray.errors import InputError
 from gyroarray.sim.protocol import Effect, Kind, Param, Stage
@@ -68,9 +68,9 @@ def get_effect(name: str) -> Effect:
                          f"(known: {', '.join(_EFFECTS)})") from None
 
 
-def _validate(cls: type, source: str) -> Effect:
+def _validate(cls: type[Effect], source: str) -> Effect:
     """An instance of an Effect subclass, its declarations checked."""
-    def bad(why: str):
+    def bad(why: str) -> NoReturn:
         raise InputError(f"effect class {cls.__name__}: {why}", file=source)
     name = getattr(cls, "name", "")
     if not isinstance(name, str) or not name.isidentifier() or name != name.lower():
@@ -112,7 +112,7 @@ def _effect_classes(module: ModuleType) -> list[type]:
     """The Effect subclasses a module defines (not imports) with a name."""
     return [obj for obj in vars(module).values()
             if inspect.isclass(obj) and issubclass(obj, Effect) and obj.__module__ == module.__name__
-            and getattr(obj, "name", "")]
+            and bool(getattr(obj, "name", ""))]
 
 
 def _load_builtins() -> None:
@@ -127,19 +127,13 @@ def _load_builtins() -> None:
 def installed_plugins() -> list[tuple[str, str]]:
     """(name, value) of the ``gyroarray.effects`` entry points of installed packages."""
     from importlib import metadata
-    try:
-        eps = metadata.entry_points(group=ENTRY_POINT_GROUP)
-    except TypeError:                        # pragma: no cover - Python < 3.10 API
-        eps = metadata.entry_points().get(ENTRY_POINT_GROUP, [])
+    eps = metadata.entry_points(group=ENTRY_POINT_GROUP)
     return sorted((ep.name, ep.value) for ep in eps)
 
 
 def _load_entry_points() -> None:
     from importlib import metadata
-    try:
-        eps = metadata.entry_points(group=ENTRY_POINT_GROUP)
-    except TypeError:                        # pragma: no cover
-        eps = metadata.entry_points().get(ENTRY_POINT_GROUP, [])
+    eps = metadata.entry_points(group=ENTRY_POINT_GROUP)
     for ep in sorted(eps, key=lambda e: e.name):
         source = f"entry point {ep.name} = {ep.value}"
         try:

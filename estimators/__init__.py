@@ -22,14 +22,15 @@ Usage::
     omega_hat = est.estimate(readings_rad_s)          # (n, 3) [rad/s]
 """
 
-from .base import (ENTRY_POINT_GROUP, Estimator, NotFittedError, available, get_estimator, make,
-                   register)
-from .bound import OfflineBound, efficiency
-from .fdi import FaultDetector
-from .kf_array import ArrayKF
-from .kf_single import SingleGyroKF, bandwidth_hz, paper002_relation, single_gyro_gain
-from .noise import ArrayNoise, array_noise
-from .simple import GLS, OLS, Naive
+from gyroarray.estimators.base import (ENTRY_POINT_GROUP, Estimator, NotFittedError, available,
+                                       get_estimator, make, register)
+from gyroarray.estimators.bound import OfflineBound, efficiency
+from gyroarray.estimators.fdi import FaultDetector
+from gyroarray.estimators.kf_array import ArrayKF
+from gyroarray.estimators.kf_single import (SingleGyroKF, bandwidth_hz, paper002_relation,
+                                            single_gyro_gain)
+from gyroarray.estimators.noise import ArrayNoise, array_noise
+from gyroarray.estimators.simple import GLS, OLS, Naive
 
 __all__ = ["ENTRY_POINT_GROUP", "Estimator", "NotFittedError", "available", "get_estimator", "make",
            "register", "OfflineBound", "efficiency", "FaultDetector", "ArrayKF", "SingleGyroKF", "bandwidth_hz",

@@ -33,7 +33,7 @@ import inspect
 import math
 from dataclasses import dataclass
 from importlib import metadata
-from typing import Any, Callable
+from typing import Any, Callable, TypeVar
 
 import numpy as np
 
@@ -113,6 +113,10 @@ class LinearSystem:
 
 
 
+#: An Estimator subclass (``fit`` returns the instance it was called on).
+_E = TypeVar("_E", bound="Estimator")
+
+
 class Estimator:
     """Base of every fusion estimator (scikit-learn's estimator contract).
 
@@ -156,7 +160,7 @@ class Estimator:
         return f"{type(self).__name__}({args})"
 
     # -- fitting -------------------------------------------------------------
-    def fit(self, layout: Layout, noise_model, dt_s: float) -> "Estimator":
+    def fit(self: _E, layout: Layout, noise_model, dt_s: float) -> _E:
         """Design the estimator for a layout, a noise model and a sample period.
 
         Parameters
@@ -173,7 +177,7 @@ class Estimator:
         -------
         self
         """
-        from .noise import ArrayNoise, array_noise
+        from gyroarray.estimators.noise import ArrayNoise, array_noise
         if not isinstance(layout, Layout):
             raise InputError(f"layout must be a gyroarray Layout, got {type(layout).__name__}")
         h = np.array(layout.H, dtype=float)

@@ -48,10 +48,10 @@ import numpy as np
 
 from gyroarray.errors import InputError
 
-from . import _bound_kernels
-from ._kalman import kf_step, state_model
-from .base import Estimator, _readonly, register
-from .kf_array import gls_weights, rate_psd
+from gyroarray.estimators import _bound_kernels
+from gyroarray.estimators._kalman import kf_step, state_model
+from gyroarray.estimators.base import Estimator, _readonly, register
+from gyroarray.estimators.kf_array import gls_weights, rate_psd
 
 __all__ = ["OfflineBound", "efficiency"]
 

@@ -81,6 +81,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from scipy import linalg, optimize, special, stats
@@ -90,9 +91,9 @@ from gyroarray.errors import InputError
 from gyroarray.layout import Layout
 from gyroarray.units import rad_s_to_deg_s
 
-from .base import Estimator, _readonly, check_readings, register
-from .kf_array import gls_weights
-from .noise import ArrayNoise, array_noise
+from gyroarray.estimators.base import Estimator, _readonly, check_readings, register
+from gyroarray.estimators.kf_array import gls_weights
+from gyroarray.estimators.noise import ArrayNoise, array_noise
 
 __all__ = ["FaultDetector", "ParityDesign", "Alarm", "FdiResult", "parity_matrix",
            "design_parity", "minimum_detectable", "minimum_detectable_step", "isolability",
@@ -213,7 +214,7 @@ class ParityDesign:
                 and self.far_per_h == other.far_per_h
                 and all(np.array_equal(getattr(self, k), getattr(other, k)) for k in arrays))
 
-    __hash__ = None
+    __hash__ = None  # type: ignore[assignment]
 
 
 def _groups(coef: np.ndarray) -> tuple:
@@ -235,7 +236,7 @@ def _groups(coef: np.ndarray) -> tuple:
     return tuple(out)
 
 
-def _pow2_scales(lo: int, hi: int) -> tuple:
+def _pow2_scales(lo: float, hi: float) -> tuple:
     lo = max(int(lo), 1)
     out = []
     L = 1
@@ -359,8 +360,8 @@ def _calibrate(design: ParityDesign, far_per_h: float, dt_s: float) -> None:
                 energies[(fam, j, L)] = E
                 rough.append(mr)
                 smooth.append(ms)
-        rough, smooth = np.array(rough), np.array(smooth)
-        rate = lambda u: float(np.sum(ff.clump_rate(u, rough, smooth)))   # noqa: E731
+        rough_a, smooth_a = np.array(rough), np.array(smooth)
+        rate = lambda u: float(np.sum(ff.clump_rate(u, rough_a, smooth_a)))   # noqa: E731
         u = _solve_level(rate, target)
         thresholds[fam] = u
         far[fam] = rate(u) * 3600.0 / dt_s
@@ -615,7 +616,10 @@ class FaultDetector(Estimator):
             raise InputError(f"time_s has shape {t.shape}, the readings {n} samples")
         hp = self._hyper()
         active = list(range(self.n_gyros_))
-        k0, alarms, excl, notes, tr = 0, [], [], [], {}
+        k0, tr = 0, {}
+        alarms: list[Alarm] = []
+        excl: list[tuple[int, int]] = []
+        notes: list[str] = []
         while n - k0 >= 3:
             design = self._design(self.H_, self.noise_, self.dt_s_, tuple(active), hp)
             eps = ff.rw_innovations(z[k0:, active] @ design.P.T, design.q)
@@ -664,9 +668,9 @@ def _window_stats(fam: str, wn, cs, design, reps, L, stop: int) -> np.ndarray:
 def _scan(eps: np.ndarray, design: ParityDesign, *, trace: bool = False) -> dict:
     """First sample where a statistic crosses its threshold, and which one."""
     n = eps.shape[0]
-    best = {"k": None}
+    best: dict[str, Any] = {"k": None}
     k_first = n                                                # earliest crossing so far
-    ratio = {f: np.zeros(n) for f in _FAMILIES} if trace else None
+    ratio = {f: np.zeros(n) for f in _FAMILIES} if trace else {}
     if n < 2:
         return {**best, "trace": ratio} if trace else best
     w = ff.reverse_ar1(eps, design.a)
@@ -786,7 +790,7 @@ def _characterize(z, t, k0, eps, design: ParityDesign, hit: dict, hp: dict, dt: 
     wait_s = max(hp["isolation_s"], L * dt)                   # a slow test's fault isolates slowly
     horizons = [0.0] + [2.0 ** i for i in range(0, 64) if 2.0 ** i < wait_s] + [wait_s]
     horizon = int(round(wait_s / dt))                          # data the final fit may use
-    fits = None
+    fits: dict[str, Any] = {}
     for h_s in horizons:
         E = min(n - 1, k + int(round(h_s / dt)))
         fits = _fit_segment(eps, design, lo, k, E)
@@ -812,7 +816,7 @@ def _fit_segment(eps, design: ParityDesign, lo: int, k: int, E: int) -> dict:
     """Profiles of step, drift and variance for every gyro, onset in [lo, k], fault to E."""
     seg = eps[lo:E + 1]
     onsets = np.arange(0, k - lo + 1)
-    out = {"lo": lo}
+    out: dict[str, Any] = {"lo": lo}
     for kind in ("step", "drift"):
         num, den, _, _ = ff.profile_means(seg, design.a, design.K, design.S, design.coef, kind,
                                           onsets)
@@ -869,7 +873,7 @@ def _kind_fit(fits, j: int, kind: str, design, dt: float):
 def _best_kind(fits, j: int) -> str:
     vals = {"step": fits["step"][2][:, j].max(), "drift": fits["drift"][2][:, j].max(),
             "noise": fits["noise"][2][:, j].max()}
-    return max(vals, key=vals.get)
+    return max(vals, key=lambda kind: vals[kind])
 
 
 def _alarm_fit(z, t, k0, design, hit, fits, gi, E, isolated, margin, dt, odds):

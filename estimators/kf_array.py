@@ -12,8 +12,9 @@ import numpy as np
 
 from gyroarray.errors import InputError
 
-from ._kalman import NoSteadyState, SteadyStateFilter, solve_log, state_model, steady_state
-from .base import Estimator, LinearSystem, _readonly, register
+from gyroarray.estimators._kalman import (NoSteadyState, SteadyStateFilter, solve_log, state_model,
+                                          steady_state)
+from gyroarray.estimators.base import Estimator, LinearSystem, _readonly, register
 
 __all__ = ["ArrayKF", "DEFAULT_BANDWIDTH_HZ", "gls_weights", "rate_psd"]
 

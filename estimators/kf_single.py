@@ -16,9 +16,9 @@ import numpy as np
 from gyroarray import units
 from gyroarray.errors import InputError
 
-from ._kalman import NoSteadyState, SteadyStateFilter, state_model, steady_state
-from .base import Estimator, LinearSystem, _readonly, register
-from .kf_array import filter_system, rate_psd
+from gyroarray.estimators._kalman import NoSteadyState, SteadyStateFilter, state_model, steady_state
+from gyroarray.estimators.base import Estimator, LinearSystem, _readonly, register
+from gyroarray.estimators.kf_array import filter_system, rate_psd
 
 __all__ = ["SingleGyroKF", "single_gyro_filter", "single_gyro_gain", "bandwidth_hz",
            "q_omega_for_bandwidth", "Paper002Relation", "paper002_relation"]

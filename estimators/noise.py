@@ -85,7 +85,7 @@ class ArrayNoise:
                 and all(np.array_equal(getattr(self, k), getattr(other, k))
                         for k in ("arw_rad_rt_s", "rrw_rad_s_rt_s", "corr_arw", "corr_rrw")))
 
-    __hash__ = None
+    __hash__ = None  # type: ignore[assignment]
 
     @property
     def n_gyros(self) -> int:

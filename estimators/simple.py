@@ -22,9 +22,9 @@ import numpy as np
 
 from gyroarray.errors import InputError
 
-from ._kalman import first_order_lowpass, lowpass_pole
-from .base import Estimator, LinearSystem, _readonly, register
-from .kf_array import gls_weights
+from gyroarray.estimators._kalman import first_order_lowpass, lowpass_pole
+from gyroarray.estimators.base import Estimator, LinearSystem, _readonly, register
+from gyroarray.estimators.kf_array import gls_weights
 
 __all__ = ["OLS", "GLS", "Naive"]
 

@@ -48,14 +48,15 @@ Metrics (per body axis; :mod:`gyroarray.analysis.metrics`):
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
+from typing import Any
 
 import numpy as np
 import pandas as pd
 
-from . import units
-from .analysis.allan import allan_analysis
-from .analysis.metrics import attenuation_and_lag, noise_density
-from .errors import InputError
+from gyroarray import units
+from gyroarray.analysis.allan import allan_analysis
+from gyroarray.analysis.metrics import attenuation_and_lag, noise_density
+from gyroarray.errors import InputError
 
 AXES = ("x", "y", "z")
 #: Filter start-up excluded from every metric [s].
@@ -156,7 +157,8 @@ def score(estimates: dict[str, np.ndarray], truth_rad_s: np.ndarray, readings_ra
                            for k in range(gyro_err.shape[1])])
     ref = single.mean(numeric_only=True)
 
-    swing_sel = swing_axes = None
+    swing_sel: np.ndarray | None = None
+    swing_axes: np.ndarray | None = None
     if swing is not None:
         freq, (t0, t1) = swing
         swing_sel = keep & (time_s >= t0) & (time_s <= t1)
@@ -164,7 +166,7 @@ def score(estimates: dict[str, np.ndarray], truth_rad_s: np.ndarray, readings_ra
         if span_s * freq < MIN_SWING_PERIODS:
             # the run was cut before (most of) the swing: nothing to attenuate
             swing, swing_sel = None, None
-    sensor = None
+    sensor: dict[str, Any] | None = None
     if swing is not None:
         amps = np.array([np.ptp(truth_rad_s[swing_sel, a]) for a in range(3)])
         swing_axes = amps >= SWING_SHARE * amps.max() if amps.max() > 0 else np.zeros(3, bool)
@@ -184,7 +186,8 @@ def score(estimates: dict[str, np.ndarray], truth_rad_s: np.ndarray, readings_ra
             att = lag = None
             split = {"sensor_amplitude_ratio": None, "sensor_phase_deg": None,
                      "estimator_amplitude_ratio": None, "estimator_phase_deg": None}
-            if swing_sel is not None and swing_axes[a]:
+            if swing_sel is not None and swing_axes is not None and sensor is not None \
+                    and swing_axes[a]:
                 att, lag_rad = attenuation_and_lag(time_s[swing_sel], est[swing_sel, a],
                                                    truth_rad_s[swing_sel, a], swing[0])
                 lag = float(units.rad_to_deg(lag_rad))
@@ -241,8 +244,8 @@ def _sensor_response(time_s, readings_rad_s, projected_rad_s, freq_hz: float) ->
 def _g_sensitivity_columns(result: RunResult, scenario, truth, fitted: dict, dt_s: float,
                            settle_s: float = SETTLE_S) -> RunResult:
     """Add the RMS rate error of the model's g-sensitivity on the run's motion (module docstring)."""
-    from .predict import g_sensitivity_coeffs, g_sensitivity_error, settle_start
-    from .sim.truth import specific_force
+    from gyroarray.predict import g_sensitivity_coeffs, g_sensitivity_error, settle_start
+    from gyroarray.sim.truth import specific_force
     N = scenario.layout.n_gyros
     coeff = g_sensitivity_coeffs(scenario.model, N)
     if coeff is None:
@@ -269,7 +272,7 @@ def _g_sensitivity_columns(result: RunResult, scenario, truth, fitted: dict, dt_
 
 def check_fusable(scenario) -> None:
     """Refuse a scenario whose layout cannot give a 3-axis rate, with the reason."""
-    from .design import unobservable_reason
+    from gyroarray.design import unobservable_reason
     why = unobservable_reason(scenario.layout.H)
     if why is not None:
         raise InputError(f"the layout cannot be fused: {why}", file=scenario.source,
@@ -297,8 +300,8 @@ def run_scenario(scenario, estimator_names=None, *, cache: bool = True,
     InputError
         Unknown estimator, or a layout whose axes leave a body axis unobservable.
     """
-    from .estimators import available, get_estimator
-    from .sim.scenario import simulate
+    from gyroarray.estimators import available, get_estimator
+    from gyroarray.sim.scenario import simulate
 
     explicit = bool(estimator_names)
     names = list(estimator_names) if explicit else [n for n in DEFAULT_ESTIMATORS if n in available()]
@@ -331,7 +334,7 @@ def run_scenario(scenario, estimator_names=None, *, cache: bool = True,
     result = replace(result, notes=tuple(notes))
     result = _g_sensitivity_columns(result, scenario, res.truth, fitted, dt)
     if "fdi" in estimates:                     # the fault detector's scores (issue 16)
-        from .analysis.fdi_score import add_fdi_metrics
+        from gyroarray.analysis.fdi_score import add_fdi_metrics
         result = add_fdi_metrics(result, scenario, res, fitted["fdi"])
     return result
 
@@ -428,7 +431,7 @@ class ReplicateResult:
         cols = [c for c in tables[0].columns if c not in ("estimator", "axis")]
         for name in dict.fromkeys(tables[0].estimator):
             for axis in AXES:
-                vals = {c: [] for c in cols}
+                vals: dict[str, list] = {c: [] for c in cols}
                 for t in tables:
                     row = t[(t.estimator == name) & (t.axis == axis)]
                     for c in cols:
@@ -496,9 +499,9 @@ def run_replicates(scenario, estimator_names=None, *, replicates: int, seed: int
     params : dict, optional
         Hyperparameters per estimator name (as :func:`run_scenario`).
     """
-    from .estimators import get_estimator
-    from .predict import predict as _predict
-    from .sim.truth import compute_truth
+    from gyroarray.estimators import get_estimator
+    from gyroarray.predict import predict as _predict
+    from gyroarray.sim.truth import compute_truth
     k = int(replicates)
     if k < 1:
         raise InputError(f"--replicates must be >= 1, got {replicates!r}")
@@ -512,7 +515,7 @@ def run_replicates(scenario, estimator_names=None, *, replicates: int, seed: int
         dt = 1.0 / scenario.sample_rate_hz
         f = None
         if any(e.effect == "g_sensitivity" for e in scenario.model.entries):
-            from .sim.truth import specific_force
+            from gyroarray.sim.truth import specific_force
             f = specific_force(truth, scenario.layout)
         for name in dict.fromkeys(runs[0].table.estimator):
             try:
@@ -535,7 +538,7 @@ def run_replicates(scenario, estimator_names=None, *, replicates: int, seed: int
 
 def _with_swing(pred, est, model, freq_hz: float):
     """Add the amplitude ratio and phase at the swing frequency (total, estimator, sensor)."""
-    from .predict import sensor_bandwidth, swing_response
+    from gyroarray.predict import sensor_bandwidth, swing_response
     resp = swing_response(est.linear_system(), np.array(est.H_),
                           sensor_bandwidth(model, est.n_gyros_, est.dt_s_), freq_hz, est.dt_s_)
     axes = {ax: dict(pred.axes[ax], **resp[ax]) for ax in AXES}

@@ -22,9 +22,9 @@ import math
 from dataclasses import replace
 from pathlib import Path
 
-from .analysis.fdi_score import FDI_METRICS
-from .errors import InputError
-from .tomlio import load_toml
+from gyroarray.analysis.fdi_score import FDI_METRICS
+from gyroarray.errors import InputError
+from gyroarray.tomlio import load_toml
 
 #: Metrics a check may bound (columns of :attr:`gyroarray.chain.RunResult.table`).
 METRICS = ("sigma_1_deg_s", "mean_error_deg_s", "rms_deg_s", "angle_error_deg", "reduction",
@@ -52,7 +52,7 @@ def _is_number(v) -> bool:
 
 def load_thresholds(path) -> list[dict]:
     """Read and strictly validate a thresholds file; InputError names the file and key."""
-    from .estimators import available
+    from gyroarray.estimators import available
     path = Path(path)
     f = str(path)
     data = load_toml(path, "thresholds file").data
@@ -132,8 +132,8 @@ def run_check(path=None, *, quick: bool = True) -> dict:
         ``{"passed": bool, "results": [{"scenario", "metric", "estimator", "axis",
         "bound", "value", "pass"}, ...]}``; a missing or non-finite value fails.
     """
-    from .chain import run_scenario
-    from .sim.scenario import load_scenario
+    from gyroarray.chain import run_scenario
+    from gyroarray.sim.scenario import load_scenario
     checks = load_thresholds(default_thresholds() if path is None else path)
     groups: dict[tuple, list[dict]] = {}
     for c in checks:

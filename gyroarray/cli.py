@@ -14,7 +14,7 @@ import os
 import sys
 import warnings
 from pathlib import Path
-from typing import Callable
+from typing import Any, Callable
 
 from .errors import InputError
 
@@ -23,6 +23,8 @@ EXIT_OK, EXIT_FAIL, EXIT_USAGE = 0, 1, 2
 
 class _Parser(argparse.ArgumentParser):
     """argparse that reports a usage error as one line and exit code 2."""
+
+    plugin_help = False          # True: --help lists the installed plugins
 
     def error(self, message: str):  # noqa: D401 - argparse API
         raise InputError(f"{message} (see '{self.prog} --help')")
@@ -140,7 +142,7 @@ def cmd_gdop(args) -> tuple[dict, str]:
     g = gdop(layout, args.rho)
     note = gdop_note(layout, args.rho)
     text = f"GDOP = {g:.6f}  (scheme {args.scheme}, N = {args.n}, alpha = {args.alpha:g} deg, rho = {args.rho:g})"
-    out = {"gdop": g}
+    out: dict[str, float | str] = {"gdop": g}
     if note:
         out["note"] = note
         text += f"\nnote: {note}"
@@ -581,11 +583,9 @@ def _format_allan(k: int, d: dict) -> str:
 
 def cmd_davar(args) -> tuple[dict, str]:
     from .analysis import davar as dv
-    if args.paper_table1:
-        table = dv.paper_table1(tuple(range(args.seeds)))
-        return table.to_json_dict(), dv.format_paper_table1(table)
     if args.measurement is None:
-        raise InputError("gyroarray davar: give MEAS.csv (or --paper-table1)")
+        raise InputError("gyroarray davar: give MEAS.csv (paper 000's Table 1: "
+                         "python benchmarks/davar_paper.py)")
     if args.gyro is None:
         raise InputError("gyroarray davar: --gyro K is required (one gyro at a time)")
     if args.window is not None and args.adaptive:
@@ -665,8 +665,9 @@ def cmd_simulate(args) -> tuple[dict, str]:
     scenario = load_scenario(args.scenario)
     csv_path, toml_path, result = simulate_to_files(scenario, args.out, cache=not args.no_cache,
                                                     force=args.force)
-    effects = [{"effect": e.effect, "gyro": e.gyro, "params": _plain_params(e.params)}
-               for e in scenario.model.entries]
+    effects: list[dict[str, Any]] = [{"effect": e.effect, "gyro": e.gyro,
+                                      "params": _plain_params(e.params)}
+                                     for e in scenario.model.entries]
     out = {"scenario": scenario.name, "measurement": str(csv_path), "sidecar": str(toml_path),
            "n_samples": int(result.truth.time_s.size), "n_gyros": scenario.layout.n_gyros,
            "sample_rate_hz": scenario.sample_rate_hz, "seed": scenario.seed,
@@ -1228,9 +1229,6 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--repair", action="store_true", help="repair short gaps, missing values, exact duplicate rows and a jittering clock (each listed)")
     p.add_argument("--plot", type=Path, metavar="OUT.png", help="heat map + ARW and window tracks")
     _add_force(p)
-    p.add_argument("--paper-table1", action="store_true",
-                   help="reproduce paper 000 Table 1 (simulated) over --seeds realisations")
-    p.add_argument("--seeds", type=_positive_int("--seeds"), default=20, metavar="N")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=cmd_davar)
 

@@ -21,13 +21,14 @@ import itertools
 import math
 from dataclasses import dataclass, replace
 from importlib import resources
+from typing import Any
 
 import numpy as np
 from scipy.optimize import minimize_scalar
 
-from .errors import InputError
-from .layout import Layout, conical_axes
-from .units import deg_to_rad, rad_to_deg
+from gyroarray.errors import InputError
+from gyroarray.layout import Layout, conical_axes
+from gyroarray.units import deg_to_rad, rad_to_deg
 
 
 def correlation_matrix(n: int, rho) -> np.ndarray:
@@ -313,8 +314,8 @@ def fault_tolerance(layout: Layout, rho=0.0, max_failures: int = 2) -> dict:
     h = np.asarray(layout.H, dtype=float)
     n = h.shape[0]
     chol = np.linalg.cholesky(correlation_matrix(n, rho))
-    out = {"gdop": _gdop(h, chol), "worst_gdop_after": {}, "three_axes_after": {},
-           "lost_axis_example": {}}
+    out: dict[str, Any] = {"gdop": _gdop(h, chol), "worst_gdop_after": {}, "three_axes_after": {},
+                           "lost_axis_example": {}}
     for k in range(1, max_failures + 1):
         if n - k < 3:
             out["worst_gdop_after"][str(k)] = math.inf
@@ -494,7 +495,7 @@ def _printed_unit(text: str) -> float:
 
 def load_paper003_tables() -> dict:
     """The cells of paper 003 Tables 1 and 2 as printed (data, not truth)."""
-    from .tomlio import loads_toml
+    from gyroarray.tomlio import loads_toml
     res = resources.files("gyroarray").joinpath("data/paper003_tables.toml")
     return loads_toml(res.read_text(encoding="utf-8"), "gyroarray/data/paper003_tables.toml")
 

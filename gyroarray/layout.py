@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .errors import InputError
+from gyroarray.errors import InputError
 
 #: Largest accepted deviation of an axis norm from 1 (files print axes with
 #: 4–6 decimals: ``[0.8165, 0, 0.5774]`` has norm 1.00003).

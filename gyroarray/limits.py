@@ -32,7 +32,7 @@ import stat
 import zlib
 from pathlib import Path
 
-from .errors import InputError
+from gyroarray.errors import InputError
 
 __all__ = ["MAX_RATE_DEG_S", "MEMORY_FRACTION", "max_memory", "set_max_memory", "memory_budget",
            "parse_size", "format_size", "check_memory", "open_regular", "read_regular",

@@ -85,12 +85,12 @@ import numpy as np
 import pandas as pd
 import tomli_w
 
-from . import __version__, units
-from .errors import InputError
-from .layout import UNIT_NORM_TOL, Layout, check_positions
-from .limits import (MAX_RATE_DEG_S, check_memory, format_size, gunzip_bounded, max_memory,
-                     read_regular)
-from .tomlio import TomlDoc, load_toml
+from gyroarray import __version__, units
+from gyroarray.errors import InputError
+from gyroarray.layout import UNIT_NORM_TOL, Layout, check_positions
+from gyroarray.limits import (MAX_RATE_DEG_S, check_memory, format_size, gunzip_bounded, max_memory,
+                              read_regular)
+from gyroarray.tomlio import TomlDoc, load_toml
 
 __all__ = [
     "Measurement",
@@ -695,7 +695,9 @@ def _read_csv_bytes(path: Path) -> tuple[bytes, list[str]]:
     if not raw.isascii():
         _utf8_text(raw, name)
     if b"\r" in raw and raw.count(b"\r") != raw.count(b"\r\n"):
-        pos = re.search(rb"\r(?!\n)", raw).start()
+        lone = re.search(rb"\r(?!\n)", raw)
+        assert lone is not None                                # more \r than \r\n
+        pos = lone.start()
         raise InputError("carriage return (\\r) inside a line: lines must end in \\n or "
                          "\\r\\n", file=name, line=raw.count(b"\n", 0, pos) + 1)
     return raw, notes
@@ -786,7 +788,7 @@ def _parse_header(text: str, name: str, line: int) -> tuple[_Columns, list[str]]
         fields = [f.strip() for f in next(csv.reader([text]))]
     except (csv.Error, StopIteration) as e:
         raise error(f"malformed header: {e}") from None
-    where = {}
+    where: dict[str, int] = {}
     for k, f in enumerate(fields, 1):
         if not f:
             raise error(f"header field {k} is empty (every column needs a name)", k)
@@ -957,7 +959,9 @@ def _parse_slow(lines: _Lines, cols: _Columns, name: str, rows=None) -> _Table:
     rows = lines.rows if rows is None else rows
     file_lines = rows + 1
     reader = csv.reader(lines.text(int(i)) for i in rows)
-    values, rec_lines, missing = [], [], {}
+    values: list = []
+    rec_lines: list[int] = []
+    missing: dict[tuple[int, int], str] = {}
     while True:
         first = reader.line_num
         try:
@@ -1314,6 +1318,7 @@ def _to_canonical(values: np.ndarray, cols: _Columns, declared: dict, toml_name:
     values, notes = values.copy(), []
     for key, unit in todo:
         convert = ACCEPTED_UNITS[key][unit]
+        assert convert is not None                             # todo keeps the converted units
         with np.errstate(over="ignore", under="ignore"):
             values[:, groups[key]] = convert(values[:, groups[key]])
         notes.append(f"{toml_name}: converted {key} from {unit} to {_CANONICAL_UNIT[key]} "

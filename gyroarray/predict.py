@@ -78,12 +78,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
+from typing import Any
 
 import numpy as np
 import scipy.fft as sfft
 
-from . import units
-from .errors import InputError
+from gyroarray import units
+from gyroarray.errors import InputError
 
 __all__ = ["NoiseSources", "noise_sources", "Prediction", "predict", "predict_system",
            "window_sums", "error_moments", "Swing", "swing_truth", "settle_start"]
@@ -146,7 +147,7 @@ def noise_sources(noise_model, n_gyros: int, dt_s: float) -> NoiseSources:
     dt_s : float
         Sample period [s].
     """
-    from .estimators.noise import _per_gyro, array_noise
+    from gyroarray.estimators.noise import _per_gyro, array_noise
     an = array_noise(noise_model, n_gyros)
     sig = np.nan_to_num(_per_gyro(noise_model, "gauss_markov", "sigma_rad_s", n_gyros))
     tau = np.nan_to_num(_per_gyro(noise_model, "gauss_markov", "tau_s", n_gyros), nan=1.0)
@@ -186,7 +187,7 @@ class SensorBandwidth:
     def sos(self, k: int) -> np.ndarray:
         """Gyro k's (0-based) digital filter as second-order sections
         (:func:`gyroarray.sim.sensor.bandwidth_sos`, the simulator's own)."""
-        from .sim.sensor import bandwidth_sos
+        from gyroarray.sim.sensor import bandwidth_sos
         return bandwidth_sos(float(self.cutoff_hz[k]), int(self.order[k]), self.dt_s)
 
     def response(self, freq_hz: float) -> np.ndarray:
@@ -194,14 +195,14 @@ class SensorBandwidth:
         from scipy import signal
         out = np.ones(self.order.size, dtype=complex)
         for k in np.flatnonzero(self.filtered):
-            _, h = signal.sosfreqz(self.sos(k), worN=[float(freq_hz)], fs=1.0 / self.dt_s)
+            _, h = signal.sosfreqz(self.sos(int(k)), worN=[float(freq_hz)], fs=1.0 / self.dt_s)
             out[k] = h[0]
         return out
 
     def apply(self, x: np.ndarray) -> np.ndarray:
         """The readings (n, N) through each gyro's filter, started at the first sample's
         steady state, as the simulator runs it (:func:`gyroarray.sim.sensor.bandwidth_filter`)."""
-        from .sim.sensor import bandwidth_filter
+        from gyroarray.sim.sensor import bandwidth_filter
         y = np.array(x, dtype=float)
         m = self.filtered
         if m.any():
@@ -236,7 +237,7 @@ def sensor_bandwidth(noise_model, n_gyros: int, dt_s: float) -> SensorBandwidth 
         fc[sel], order[sel] = float(e.si_params["cutoff_hz"]), int(e.si_params["order"])
     sb = SensorBandwidth(cutoff_hz=fc, order=order, dt_s=float(dt_s))
     for k in np.flatnonzero(sb.filtered):
-        sb.sos(k)                                                    # checks order and cut-off
+        sb.sos(int(k))                                               # checks order and cut-off
     return sb
 
 
@@ -258,7 +259,7 @@ def cascade(sys, sensor: SensorBandwidth | None):
     if sensor is None or not sensor.filtered.any():
         return sys
     from scipy.linalg import block_diag
-    from .estimators.base import LinearSystem
+    from gyroarray.estimators.base import LinearSystem
     N = sys.K.shape[1]
     blocks = []
     for k in range(N):
@@ -376,14 +377,15 @@ def g_sensitivity_error(coeff_rad_s_per_m_s2: np.ndarray, specific_force_m_s2: n
         ``fused_mean_deg_s`` (axis -> value; absent without a DC gain),
         RMS over the scored window.
     """
-    from .sim.sensor import g_sensitivity_bias
+    from gyroarray.sim.sensor import g_sensitivity_bias
     c = np.asarray(coeff_rad_s_per_m_s2, dtype=float)
     f = np.asarray(specific_force_m_s2, dtype=float)
     if f.ndim == 1:
         f = np.broadcast_to(f, (1, c.shape[0], 3))
     e = g_sensitivity_bias(c, f)[k0:]                                # (n, N) [rad/s]
     to = units.rad_s_to_deg_s
-    out = {"per_gyro_rms_deg_s": [float(to(v)) for v in np.sqrt(np.mean(e ** 2, axis=0))]}
+    out: dict[str, Any] = {"per_gyro_rms_deg_s": [float(to(v))
+                                                for v in np.sqrt(np.mean(e ** 2, axis=0))]}
     if dc_gain is not None:
         fe = e @ np.asarray(dc_gain, dtype=float).T                  # (n, 3)
         out["fused_rms_deg_s"] = {ax: float(to(v)) for ax, v in zip(AXES, np.sqrt(np.mean(fe ** 2, 0)))}
@@ -730,8 +732,8 @@ def predict(estimator, noise_model, *, n_samples: int, settle_s: float = 2.0,
             raise InputError(f"truth_rad_s must have shape ({n}, 3), got {omega.shape}")
     bias = gsens = None
     if noise.g_sensitivity_rad_s_per_m_s2 is not None:
-        from .constants import G0_M_S2
-        from .sim.sensor import g_sensitivity_bias
+        from gyroarray.constants import G0_M_S2
+        from gyroarray.sim.sensor import g_sensitivity_bias
         f = (np.broadcast_to([0.0, 0.0, G0_M_S2], (n, H.shape[0], 3)) if specific_force_m_s2 is None
              else np.asarray(specific_force_m_s2, dtype=float))
         if f.shape != (n, H.shape[0], 3):
@@ -767,15 +769,16 @@ def predict_system(sys, noise: NoiseSources, H: np.ndarray, *, n: int, settle_s:
     if n - k0 < 2:
         raise InputError(f"the run is too short: {n - k0} samples after the {settle_s:g} s start-up")
     nw = n - k0
-    parts = {"white": error_moments(sys, noise, n, k0, white=True, walk=False, gm=False),
-             "walk": error_moments(sys, noise, n, k0, white=False, walk=True, gm=False),
-             "gauss_markov": error_moments(sys, noise, n, k0, white=False, walk=False, gm=True)
-             if np.any(noise.gm_sigma_rad_s > 0) else None,
-             "flicker": flicker_moments(sys, noise.bi_rad_s, n, k0, dt)}
-    parts = {k: v for k, v in parts.items() if v is not None}
-    total = None
-    for m in parts.values():
-        total = m if total is None else total + m
+    raw = {"white": error_moments(sys, noise, n, k0, white=True, walk=False, gm=False),
+           "walk": error_moments(sys, noise, n, k0, white=False, walk=True, gm=False),
+           "gauss_markov": error_moments(sys, noise, n, k0, white=False, walk=False, gm=True)
+           if np.any(noise.gm_sigma_rad_s > 0) else None,
+           "flicker": flicker_moments(sys, noise.bi_rad_s, n, k0, dt)}
+    parts: dict[str, Moments] = {k: v for k, v in raw.items() if v is not None}
+    total = parts["white"]
+    for key, m in parts.items():
+        if key != "white":
+            total = total + m
     ms = np.diag(total.ms_window).copy()
     mean_sq = np.diag(total.sum_window) / nw ** 2
     angle_sq = np.diag(total.sum_full) * dt ** 2
@@ -860,18 +863,22 @@ def channel_filter(kind: str, dt_s: float, bandwidth_hz: float | None = None,
     and the gain splits as K = (1 − λ)[κ, 1 − κ] with κ = q_ω·dt/Q, the DC gain
     of the rate estimate.
     """
-    from .estimators._kalman import lowpass_pole
-    from .estimators.base import LinearSystem
+    from gyroarray.estimators._kalman import lowpass_pole
+    from gyroarray.estimators.base import LinearSystem
     one = np.ones((1, 1))
     if kind == "none":
         return LinearSystem(A=np.zeros((1, 1)), K=one, C=one, X0=np.zeros((1, 1)),
                             lam=np.zeros(1), S=one, S_inv=one)
+    if bandwidth_hz is None:
+        raise ValueError(f"channel filter {kind!r} needs bandwidth_hz")
     lam = lowpass_pole(float(bandwidth_hz), dt_s)
     if kind == "lowpass":
         return LinearSystem(A=lam * one, K=(1.0 - lam) * one, C=one, X0=one, lam=np.array([lam]),
                             S=one, S_inv=one)
     if kind != "kf":
         raise ValueError(f"unknown channel filter {kind!r}")
+    if ratio is None:
+        raise ValueError("the kf channel filter needs ratio")
     q_sum = (1.0 - lam) ** 2 / lam                                   # Q / r
     kappa = 1.0 - float(ratio) / q_sum
     if not kappa > 0.0:
@@ -972,7 +979,7 @@ def channel_response(sys, dt_s: float, n: int, k0: int, *, bi: bool = False,
             est += cs[0, i] * y
         e = np.real(est) - w
         mot = (np.mean(e[k0:] ** 2, axis=0), np.sum(e[k0:], axis=0), np.sum(e, axis=0))
-    split = {"amplitude_ratio": None, "phase_deg": None}
+    split: dict[str, float | None] = {"amplitude_ratio": None, "phase_deg": None}
     if swing_hz is not None:
         te = complex(est_sys.response(2.0 * np.pi * swing_hz * dt_s)[0, 0, 0])
         fs = 1.0 + 0j if sensor is None else complex(sensor.response(swing_hz)[0])

@@ -44,15 +44,17 @@ import math
 import time
 from dataclasses import dataclass, field, replace
 from functools import lru_cache
+from typing import Any
 
 import numpy as np
 from scipy.optimize import minimize_scalar
 
-from . import units
-from .design import correlation_matrix, fault_tolerance
-from .errors import InputError
-from .layout import Layout, conical_axes
-from .predict import (AXES, Swing, channel_filter, channel_response, settle_start, swing_truth)
+from gyroarray import units
+from gyroarray.design import correlation_matrix, fault_tolerance
+from gyroarray.errors import InputError
+from gyroarray.layout import Layout, conical_axes
+from gyroarray.predict import (AXES, Swing, channel_filter, channel_response, settle_start,
+                               swing_truth)
 
 __all__ = ["GyroNoise", "DesignSpace", "recommend", "ESTIMATORS", "DEFAULT_BANDWIDTH_HZ"]
 
@@ -118,7 +120,7 @@ class GyroNoise:
 
         A correlation matrix is reduced to the mean of its off-diagonal entries.
         """
-        from .estimators.noise import _per_gyro
+        from gyroarray.estimators.noise import _per_gyro
         n = max([e.gyro or 1 for e in model.entries] + [1])
 
         def qmean(effect, key):
@@ -139,14 +141,15 @@ class GyroNoise:
         tau = _per_gyro(model, "gauss_markov", "tau_s", n)
         tau = tau[np.isfinite(tau)]
         src = {k: source for k in ("arw", "rrw", "bi", "gauss_markov", "rho_arw", "rho_rrw")}
-        from .predict import MODELLED      # the sensor's own effects come in through DesignSpace
-        MODELLED = tuple(m for m in MODELLED if m not in ("bandwidth", "g_sensitivity"))
+        # the sensor's own effects come in through DesignSpace
+        from gyroarray.predict import MODELLED
+        modelled = tuple(m for m in MODELLED if m not in ("bandwidth", "g_sensitivity"))
         return cls(arw_deg_rt_h=arw,
                    rrw_deg_h_rt_h=units.rrw_rad_s_rt_s_to_deg_h_rt_h(qmean("rrw", "k_rad_s_rt_s")),
                    bi_deg_h=units.rad_s_to_deg_h(qmean("bias_instability", "b_rad_s")),
                    gm_sigma_deg_h=units.rad_s_to_deg_h(qmean("gauss_markov", "sigma_rad_s")),
                    gm_tau_s=float(np.mean(tau)) if tau.size else 0.0, sources=src,
-                   ignored=tuple(sorted({e.effect for e in model.entries} - set(MODELLED))), **rho)
+                   ignored=tuple(sorted({e.effect for e in model.entries} - set(modelled))), **rho)
 
     def with_rho(self, rho: float) -> "GyroNoise":
         """The same gyros with a common correlation ρ of ARW and RRW (the condition varied)."""
@@ -154,7 +157,7 @@ class GyroNoise:
 
     def noise_model(self, n_gyros: int):
         """This noise on every gyro of an N-gyro array, as a NoiseModel (for the simulator)."""
-        from .sim.model import ModelEntry, NoiseModel
+        from gyroarray.sim.model import ModelEntry, NoiseModel
         entries = [ModelEntry("arw", None, {"n_deg_rt_h": self.arw_deg_rt_h})]
         if self.rrw_deg_h_rt_h > 0:
             entries.append(ModelEntry("rrw", None, {"k_deg_h_rt_h": self.rrw_deg_h_rt_h}))
@@ -232,7 +235,7 @@ class DesignSpace:
 
     def __post_init__(self):
         if self.sensor_bandwidth is not None:
-            from .sim.sensor import bandwidth_sos
+            from gyroarray.sim.sensor import bandwidth_sos
             fc, order = self.sensor_bandwidth
             bandwidth_sos(fc, order, self.dt_s)                     # order 1/2, 0 < fc < Nyquist
 
@@ -242,7 +245,7 @@ class DesignSpace:
 
     def sensor(self, n_gyros: int = 1):
         """The gyros' own filter as :class:`gyroarray.predict.SensorBandwidth` (None: none)."""
-        from .predict import SensorBandwidth
+        from gyroarray.predict import SensorBandwidth
         if self.sensor_bandwidth is None:
             return None
         fc, order = self.sensor_bandwidth
@@ -251,7 +254,7 @@ class DesignSpace:
 
     def sensor_entries(self) -> tuple:
         """The sensor's ``bandwidth`` and ``g_sensitivity`` as model entries on every gyro."""
-        from .sim.model import ModelEntry
+        from gyroarray.sim.model import ModelEntry
         out = []
         if self.sensor_bandwidth is not None:
             out.append(ModelEntry("bandwidth", None, {"cutoff_hz": float(self.sensor_bandwidth[0]),
@@ -263,7 +266,7 @@ class DesignSpace:
 
     @property
     def n_samples(self) -> int:
-        from .sim.table import n_samples
+        from gyroarray.sim.table import n_samples
         return n_samples(self.horizon_s, self.rate_hz)
 
 
@@ -336,6 +339,7 @@ class _FilterBank:
         self.k0 = settle_start(self.n, space.dt_s, space.settle_s)
         self.gm_tau = gm_tau_s if gm_tau_s > 0 else None
         self.bi = bi
+        self.motion: np.ndarray | None
         if space.motion is not None:
             self.motion = np.asarray(space.motion, dtype=float)[:self.n]
         elif space.swing is not None:
@@ -359,7 +363,7 @@ def _filter_kind(est: str) -> str:
     return {"kf_array": "kf", "kf_single": "kf", "gls": "lowpass", "ols": "lowpass"}.get(est, "none")
 
 
-def _bandwidths(space: DesignSpace, est: str) -> list:
+def _bandwidths(space: DesignSpace, est: str) -> list[float | None]:
     """The bandwidths an estimator is tried at (None: its unfiltered form)."""
     if est == "naive":
         return [None]
@@ -369,7 +373,7 @@ def _bandwidths(space: DesignSpace, est: str) -> list:
     lo = min(lo, hi)
     grid = [lo] if lo == hi else list(np.geomspace(lo, hi, max(2, int(round(
         BW_PER_DECADE * math.log10(hi / lo))) + 1)))
-    out = [float(f) for f in grid if 0 < f < nyq]
+    out: list[float | None] = [float(f) for f in grid if 0 < f < nyq]
     if est in ("gls", "ols") and lo != hi:
         out.append(None)                                             # no low-pass
     return out
@@ -432,7 +436,7 @@ def _with_sensor(model, space: DesignSpace, *, g_sensitivity: bool = True):
     The Monte-Carlo check and the full predictor leave the g-sensitivity out
     (``g_sensitivity`` False), as the ranking does: it is reported on its own.
     """
-    from .sim.model import NoiseModel
+    from gyroarray.sim.model import NoiseModel
     extra = tuple(e for e in space.sensor_entries() if g_sensitivity or e.effect != "g_sensitivity")
     return model if not extra else NoiseModel(tuple(model.entries) + extra,
                                               description=model.description)
@@ -447,7 +451,7 @@ def _space_specific_force(space: DesignSpace) -> np.ndarray:
     """The specific force at the platform origin over the scored window (n, 3) [m/s²]:
     the motion profile's truth, else the level table at rest (a swing's few degrees of
     tilt are left out), [0, 0, g0]."""
-    from .constants import G0_M_S2
+    from gyroarray.constants import G0_M_S2
     if space.specific_force_m_s2 is not None:
         return np.asarray(space.specific_force_m_s2, dtype=float)[:space.n_samples]
     return np.array([[0.0, 0.0, G0_M_S2]])
@@ -457,7 +461,7 @@ def _g_sensitivity(space: DesignSpace, dc_gain: np.ndarray) -> dict:
     """``g_sensitivity``: the RMS rate error of the space's g-sensitivity on its motion, per
     gyro and fused through the design's DC gain T₀ (3, N) (:func:`gyroarray.predict.g_sensitivity_error`);
     {} without one."""
-    from .predict import g_sensitivity_error, settle_start as _k0
+    from gyroarray.predict import g_sensitivity_error, settle_start as _k0
     if space.g_sensitivity_deg_s_per_g is None:
         return {}
     T0 = np.asarray(dc_gain, dtype=float)
@@ -483,7 +487,7 @@ def _alpha_grid(scheme: int, points: int) -> np.ndarray:
 
 def _survives(H: np.ndarray, rho: float, k: int) -> np.ndarray:
     """Worst-case GDOP (G,) over every choice of k failed gyros (inf: an axis is lost)."""
-    from .design import _gdop_batch
+    from gyroarray.design import _gdop_batch
     G, N, _ = H.shape
     if k == 0:
         return _gdop_batch(H, np.linalg.cholesky(correlation_matrix(N, rho)))
@@ -496,7 +500,7 @@ def _survives(H: np.ndarray, rho: float, k: int) -> np.ndarray:
     return worst
 
 
-def _evaluate(est, resp_of, ch: _Channels, sel) -> tuple[np.ndarray, list]:
+def _evaluate(est, resp_of, ch: _Channels, sel) -> tuple[np.ndarray, _Moments]:
     """Objective (3-axis RMS² about the truth over the window) of channels ``sel``."""
     m = _combine(ch, sel, resp_of)
     ms, _, _ = _add_motion(m, resp_of)
@@ -522,6 +526,7 @@ def _responses(bank: _FilterBank, est: str, bw, ch: _Channels, idx=None) -> list
         kind = "none"
     if kind == "kf":
         if est == "kf_array":
+            assert ch.ratio is not None                              # _channels sets it for kf_array
             ratios = ch.ratio[0 if idx is None else idx]
         else:
             ratios = np.full(3, ch.kf_single_ratio)
@@ -538,6 +543,7 @@ def _search_one(bank, space, g: GyroNoise, scheme: int, n: int, est: str, rho: f
     ch = _channels(est, H, gr, space.dt_s)
     ch.kf_single_ratio = _single_ratio(g, space)
     if est == "kf_array" and ch.decoupled:
+        assert ch.ratio is not None                                  # _channels sets it for kf_array
         r0 = ch.ratio[alive][0] if alive.any() else ch.ratio[0]
         if np.any(np.abs(ch.ratio[alive] - r0) > 1e-9 * np.abs(r0) + 1e-300):
             ch.decoupled = False
@@ -625,8 +631,8 @@ def _design_dict(b: _Best, space: DesignSpace, g: GyroNoise, failures: int) -> d
 def _generic_design(scheme, n, est, alpha, bw, rho, space: DesignSpace, g: GyroNoise,
                     failures: int) -> dict:
     """A design predicted by the full predictor (used where the fast path does not apply)."""
-    from .estimators import get_estimator
-    from .predict import predict
+    from gyroarray.estimators import get_estimator
+    from gyroarray.predict import predict
     gr = g.with_rho(rho) if g.rho_arw == g.rho_rrw else g
     layout = Layout.conical(scheme, n, alpha)
     model = gr.noise_model(n)
@@ -689,7 +695,7 @@ def search(g: GyroNoise, space: DesignSpace, rho: float) -> tuple[list[dict], li
                 notes.append(f"scheme {scheme}, N = {n}: no cone angle keeps a 3-axis rate after "
                              f"{space.failures} failed gyro(s); left out")
                 continue
-            found = {}
+            found: dict[str, _Best | None] = {}
             for est in space.estimators:
                 best, ch = _search_one(bank, space, g, scheme, n, est, rho, alive, alphas, H)
                 if best is None and est == "kf_array" and not ch.decoupled:
@@ -858,12 +864,13 @@ def recommend(g: GyroNoise, space: DesignSpace, *, rhos=None) -> dict:
         raise InputError("no design meets the requirements (see the notes: failures, rho, bandwidth)")
     rec = designs[0]
     other = [d for d in designs[1:] if (d["scheme"], d["n"]) != (rec["scheme"], rec["n"])]
-    out = {"recommended": _short(rec), "runner_up": _short(other[0]) if other else None,
-           "designs": [_short(d) for d in designs],
-           "equivalent": equivalent_groups(designs),
-           "assumptions": assumptions(g, space, rho_list, single),
-           "what_changes_the_choice": _what_changes(designs, g, space, rho_list),
-           "notes": sorted(set(notes))}
+    out: dict[str, Any] = {"recommended": _short(rec),
+                           "runner_up": _short(other[0]) if other else None,
+                           "designs": [_short(d) for d in designs],
+                           "equivalent": equivalent_groups(designs),
+                           "assumptions": assumptions(g, space, rho_list, single),
+                           "what_changes_the_choice": _what_changes(designs, g, space, rho_list),
+                           "notes": sorted(set(notes))}
     lim = tracking_limit(rec, space, g)
     if lim is not None:
         out["tracking_limit"] = lim
@@ -931,7 +938,7 @@ def tracking_limit(d: dict, space: DesignSpace, g: GyroNoise | None = None) -> d
 def g_sensitivity_statement(d: dict, space: DesignSpace) -> str | None:
     """The g-sensitivity's rate error of a design beside its noise RMS, in words."""
     gs = d.get("g_sensitivity")
-    if gs is None:
+    if gs is None or space.g_sensitivity_deg_s_per_g is None:
         return None
     k = ", ".join(f"{v:g}" for v in space.g_sensitivity_deg_s_per_g)
     ratio = gs["fused_rms_3axis_deg_s"] / d["rms_3axis_deg_s"] if d["rms_3axis_deg_s"] > 0 else math.inf
@@ -1062,7 +1069,7 @@ def _robustness(per_rho: dict, g: GyroNoise, space: DesignSpace) -> list[dict]:
         if not ds:
             continue
         d = ds[0]
-        vals = {}
+        vals: dict[str, Any] = {}
         for r in per_rho:
             best_r = per_rho[r][0]["rms_3axis_deg_s"] if per_rho[r] else math.nan
             if r <= -1.0 / (d["n"] - 1):
@@ -1190,9 +1197,9 @@ def monte_carlo_check(designs: list[dict], g: GyroNoise, space: DesignSpace, *,
         difference of the runs' 3-axis mean square with its 95 % CI
         (``resolved``: the interval excludes 0).
     """
-    from .chain import mean_ci, replicate_rng, rms_ci
-    from .estimators import get_estimator
-    from .sim.effects import simulate_readings
+    from gyroarray.chain import mean_ci, replicate_rng, rms_ci
+    from gyroarray.estimators import get_estimator
+    from gyroarray.sim.effects import simulate_readings
     picked = _pick_for_check(designs, top)
     n, dt = space.n_samples, space.dt_s
     k0 = settle_start(n, dt, space.settle_s)
@@ -1214,7 +1221,7 @@ def monte_carlo_check(designs: list[dict], g: GyroNoise, space: DesignSpace, *,
             {"lowpass_hz": bw} if d["estimator"] in ("gls", "ols") else {})
         est = get_estimator(d["estimator"])(**kw).fit(layout, model, dt)
         setups.append((d, layout, model, est))
-    per = [[] for _ in setups]                                        # runs × (4 metrics × 3 axes)
+    per: list[list[np.ndarray]] = [[] for _ in setups]                                        # runs × (4 metrics × 3 axes)
     for r in range(int(replicates)):
         for j, (d, layout, model, est) in enumerate(setups):
             z = simulate_readings(model, truth, layout, dt, replicate_rng(seed, r), time_s=t)
@@ -1228,7 +1235,7 @@ def monte_carlo_check(designs: list[dict], g: GyroNoise, space: DesignSpace, *,
     out_designs = []
     for j, (d, *_rest) in enumerate(setups):
         arr = np.array(per[j])                                        # (R, 4, 3)
-        axes = {}
+        axes: dict[str, Any] = {}
         for a, ax in enumerate(AXES):
             axes[ax] = {}
             for m, key in enumerate(keys):

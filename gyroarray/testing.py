@@ -42,6 +42,7 @@ Effect checks
 
 from __future__ import annotations
 
+import functools
 import math
 from typing import Callable, Iterable
 
@@ -105,7 +106,7 @@ def _check_toml_round_trip(effect_cls) -> None:
     eff = _registered(effect_cls)
     gyro, params = _params_of(eff, np.random.default_rng(1))
     model = NoiseModel((ModelEntry(eff.name, gyro, params),))
-    from .tomlio import loads_toml
+    from gyroarray.tomlio import loads_toml
     again = NoiseModel.from_toml(loads_toml(model.to_toml(), f"{eff.name} model"), n_gyros=_layout().n_gyros)
     assert again.entries == model.entries, f"{eff.name}: {again.entries} != {model.entries}"
 
@@ -213,7 +214,7 @@ def parametrize_effect_checks(classes):
 def estimator_checks(estimator_cls) -> list[tuple[str, Callable[[], None]]]:
     """The estimator contract as (name, zero-argument callable) pairs (:mod:`gyroarray.estimators.checks`)."""
     from gyroarray.estimators import checks
-    return [(name, (lambda fn=fn: fn(estimator_cls))) for name, fn in checks.CHECKS]
+    return [(name, functools.partial(fn, estimator_cls)) for name, fn in checks.CHECKS]
 
 
 def check_estimator(estimator_cls) -> None:

@@ -23,14 +23,15 @@ there (a dependency for that version), imported here and nowhere else.
 from __future__ import annotations
 
 import re
+import sys
 from pathlib import Path
 
-from .errors import InputError
-from .limits import read_regular
+from gyroarray.errors import InputError
+from gyroarray.limits import read_regular
 
-try:  # Python >= 3.11
+if sys.version_info >= (3, 11):
     import tomllib
-except ModuleNotFoundError:  # pragma: no cover - Python 3.10: the same parser as a package
+else:  # pragma: no cover - Python 3.10: the same parser as a package
     import tomli as tomllib
 
 __all__ = ["MAX_TOML_BYTES", "MAX_DEPTH", "MAX_STRING_CHARS", "MAX_KEY_CHARS", "TomlDoc",
@@ -142,7 +143,7 @@ def _too_deep_at(text: str) -> tuple[int, int] | None:
 
 def _check_shape(data: dict, name: str, text: str) -> None:
     """Depth, string and key length of a parsed document (iterative: no recursion)."""
-    stack = [(data, 1, "")]
+    stack: list[tuple[dict | list, int, str]] = [(data, 1, "")]
     while stack:
         node, depth, path = stack.pop()
         if depth > MAX_DEPTH:

@@ -115,8 +115,8 @@ def decision_summary(res: dict) -> list[str]:
 
 def write_sections(doc, res: dict, top: int = 15) -> dict:
     """Add the decision, assumptions and evidence sections to a report document."""
-    from .design_plots import accuracy_vs_n_fig
-    from .report import _png
+    from gyroarray.reports.design_plots import accuracy_vs_n_fig
+    from gyroarray.reports.report import _png
     doc.h2("Decision")
     for s in decision_summary(res):
         doc.p(s, "decision")
@@ -296,7 +296,7 @@ def adev_section(doc, res: dict, *, seed: int = 20260413):
     from gyroarray.layout import Layout
     from gyroarray.predict import settle_start, swing_truth
     from gyroarray.sim.effects import simulate_readings
-    from .report import _figure, _png
+    from gyroarray.reports.report import _figure, _png
     g, space = noise_and_space(res["assumptions"])
     d = res["recommended"]
     gr = g.with_rho(d.get("rho", g.rho_arw)) if g.rho_arw == g.rho_rrw else g

@@ -6,10 +6,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ..design import correlation_matrix, gdop, gdop_vs_alpha, optimal_alpha
-from ..errors import InputError
-from ..layout import Layout
-from ..units import deg_to_rad, rad_to_deg
+from gyroarray.design import correlation_matrix, gdop, gdop_vs_alpha, optimal_alpha
+from gyroarray.errors import InputError
+from gyroarray.layout import Layout
+from gyroarray.units import deg_to_rad, rad_to_deg
 
 NS = (4, 5, 6, 8)
 

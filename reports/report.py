@@ -155,6 +155,7 @@ def _check_row_files(path: Path, ids: set) -> None:
         if schema is None:
             schema, first = names, f
         elif names != schema:
+            assert first is not None                           # set with schema
             diff = sorted(set(names) ^ set(schema))
             raise InputError(f"its columns differ from those of {first.name} ({', '.join(diff[:5])}): "
                              "not a result of this sweep; move it out of rows/", file=str(f))
@@ -188,7 +189,7 @@ def load_paper_values(path=None) -> list[dict]:
                                  f"one of {', '.join(_METRICS)} (single: {', '.join(_SINGLE_FROM)}),"
                                  f" value = number }}, got {v!r}", file=str(path),
                                  column=f"{where}.values[{j}]")
-        from .hypotheses import check_entry
+        from gyroarray.reports.hypotheses import check_entry
         checks = e.get("check", [])
         if not isinstance(checks, list):
             raise InputError(f"{where}.check must be an array of tables ([[experiment.check]])",
@@ -332,7 +333,7 @@ def _png(fig, dpi=96) -> bytes:
 def _ranking_fig(ranking: pd.DataFrame) -> bytes:
     """Best 1σ vs N per scheme and estimator, one panel per motion, at one ρ (the first
     listed; ρ is a condition, not a series), error bars: 95 % CI over the runs."""
-    from .design_plots import plot_series
+    from gyroarray.reports.design_plots import plot_series
     motions = list(dict.fromkeys(ranking.motion))
     fig, axs = _figure(5.2 * len(motions), 4.4, len(motions))
     for ax, motion in zip(axs, motions):
@@ -607,7 +608,7 @@ table.assumptions {{ background: #f7f7fb; }}
 
 
 def _section_design(doc: _Doc):
-    from .design_plots import design_fig
+    from gyroarray.reports.design_plots import design_fig
     doc.h2("Cone geometry: GDOP vs α and ρ (paper 003 Figs. 8–10)")
     doc.p("GDOP = √trace((Hᵀ C⁻¹ H)⁻¹): the fused rate error of a unit-noise gyro array, per "
           "layout (H) and ARW correlation (C). Dots mark each N's optimal cone angle.")
@@ -712,7 +713,7 @@ def _section_estimators(doc: _Doc, rows: pd.DataFrame):
 
 
 def _section_paper(doc: _Doc, paper: list[SweepData], values_path) -> list[dict]:
-    from .hypotheses import run_check
+    from gyroarray.reports.hypotheses import run_check
     doc.h2("Paper vs model")
     if not paper:
         doc.p("No paper reproduction sweep given (run scenarios/sweeps/paper_reproduction.toml, "
@@ -797,7 +798,7 @@ def write_report(dirs, out_html, out_md=None, *, design=None, paper_values=None,
         ``decision`` (the recommended design and the summary sentences, with
         ``design``), ``paper_vs_model`` (see :func:`paper_vs_model`), ``seconds``.
     """
-    from . import decision as dec
+    from gyroarray.reports import decision as dec
     t0 = time.perf_counter()
     dirs = [Path(d) for d in dirs]
     if not dirs and design is None:

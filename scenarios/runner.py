@@ -59,7 +59,7 @@ import multiprocessing as mp
 
 from gyroarray.errors import InputError
 
-from .sweep import ScenarioSpec, Sweep, load_sweep
+from gyroarray.scenarios.sweep import ScenarioSpec, Sweep, load_sweep
 
 __all__ = ["run_sweep", "load_results", "run_one", "verify_rows_file", "THREAD_ENV"]
 
@@ -143,7 +143,7 @@ def _recorded_checksums(out: Path) -> dict:
     """File name -> (sha256, rows) from ``rows.sha256``; the last record of a name wins,
     a torn last line (a crash while appending) is ignored."""
     path = out / CHECKSUMS
-    records = {}
+    records: dict[str, tuple[str, int]] = {}
     try:
         text = path.read_text(encoding="utf-8", errors="replace")
     except OSError:
@@ -379,12 +379,13 @@ def run_sweep(sweep, out_dir, *, workers: int = 1, scheduler: str | None = None,
             pending = set(futures)
             while pending:
                 finished, pending = wait(pending, return_when=FIRST_COMPLETED)
-                for f in sorted(finished, key=lambda f: futures[f].id):
-                    exc = f.exception()
-                    done(futures[f], None if exc else f.result(), exc)
+                for fut in sorted(finished, key=lambda fu: futures[fu].id):
+                    exc = fut.exception()
+                    done(futures[fut], None if exc else fut.result(), exc)
     elif todo:
         backend = "dask"
         from distributed import as_completed
+        assert scheduler is not None                          # the process pool took the None case
         client = _dask_client(scheduler)
         try:
             envs = client.run(lambda: {k: os.environ.get(k) for k in THREAD_ENV})
@@ -394,12 +395,12 @@ def run_sweep(sweep, out_dir, *, workers: int = 1, scheduler: str | None = None,
                              "may differ in the last bits from a local run")
             futures = {client.submit(run_one, s, sweep.estimators, sweep.name, key=f"sweep-{s.id}",
                                      pure=False): s for s in todo}
-            for f in as_completed(list(futures), loop=client.loop):
-                spec = futures[f]
-                if f.status == "error":
-                    done(spec, err=f.exception())
+            for dfut in as_completed(list(futures), loop=client.loop):
+                spec = futures[dfut]
+                if dfut.status == "error":
+                    done(spec, err=dfut.exception())
                 else:
-                    done(spec, f.result())
+                    done(spec, dfut.result())
         finally:
             client.close()
     else:

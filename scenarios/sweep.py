@@ -87,6 +87,7 @@ from dataclasses import dataclass, field
 from functools import lru_cache
 from importlib import resources
 from pathlib import Path
+from typing import TypeGuard
 
 import numpy as np
 
@@ -115,7 +116,7 @@ def _type(v) -> str:
             float: "float"}.get(type(v), type(v).__name__)
 
 
-def _is_num(v) -> bool:
+def _is_num(v) -> TypeGuard[float]:
     return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
 
 
@@ -245,14 +246,14 @@ class Sweep:
                 "excluded": [{"id": i, "reason": r} for i, r in self.excluded]}
 
 
-class _Prefixed:
+class _Prefixed(_Doc):
     """A scenario dict seen through the sweep file: keys named with a prefix (e.g. ``base.``)."""
 
     def __init__(self, doc: _Doc | None, data: dict, name: str, prefix: str):
-        self.doc, self.data, self.name, self.prefix = doc, data, name, prefix
-        self.text = doc.text if doc is not None else ""
+        super().__init__(name, doc.text if doc is not None else "", data)
+        self.doc, self.prefix = doc, prefix
 
-    def line_of(self, key: str):
+    def line_of(self, key: str) -> int | None:
         return None if self.doc is None else self.doc.line_of(self.prefix + key)
 
     def error(self, message: str, key: str) -> InputError:
@@ -380,9 +381,9 @@ def _check_value(key: str, v, where: str, doc: _Doc, effect_sets: dict):
 
 
 def _base_params(data: dict) -> dict:
-    lay = data.get("layout") if isinstance(data.get("layout"), dict) else {}
+    lay: dict = data["layout"] if isinstance(data.get("layout"), dict) else {}
     cone = "axes" not in lay
-    rho = {"rho_arw": None, "rho_rrw": None}
+    rho: dict[str, float | None] = {"rho_arw": None, "rho_rrw": None}
     for e in data.get("effects", []) or []:
         if isinstance(e, dict) and e.get("effect") == "correlation" and e.get("gyro") is None:
             for k in rho:
@@ -412,7 +413,7 @@ def _apply(base: dict, base_params: dict, given: dict, effect_sets: dict, sweep_
                 if k not in given:
                     p[k] = sp[k]
     # layout
-    lay = data.get("layout") if isinstance(data.get("layout"), dict) else {}
+    lay: dict = data["layout"] if isinstance(data.get("layout"), dict) else {}
     if any(k in given for k in ("scheme", "n_gyros", "alpha_deg")):
         if "axes" in lay:
             k = next(k for k in ("scheme", "n_gyros", "alpha_deg") if k in given)

@@ -293,6 +293,7 @@ def simulate_readings(model, truth_omega_body_rad_s, layout, dt_s: float,
         state = eff.simulate(state, act, streams)
     if state.x is None:
         state = _sense(state)
+    assert state.x is not None                                       # sensed
     return state.x
 
 

@@ -33,6 +33,7 @@ Units: SI inside; ``gyro_deg_s``/``ref_deg_s`` of the measurement in deg/s.
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 
@@ -164,7 +165,7 @@ def lab_run(model: NoiseModel, layout: Layout, rng: np.random.Generator, *,
     # the table session's room: a faster, larger warm-up with a slow wobble (practice README)
     temp = lab_temperature(t) if protocol == "steps" else lab_temperature(t, rise_c=12.0, wobble_c=0.5)
     site = None if latitude_deg is None else Site(latitude_deg * RAD_PER_DEG, heading_deg * RAD_PER_DEG)
-    kw = {"time_s": t, "temp_c": temp}
+    kw: dict[str, Any] = {"time_s": t, "temp_c": temp}
     if any(e.effect == "earth_rate" for e in model):
         kw["site"] = site
     if any(e.effect in ("earth_rate", "g_sensitivity") for e in model):

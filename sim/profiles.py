@@ -100,8 +100,9 @@ from __future__ import annotations
 import hashlib
 import math
 import re
-from dataclasses import dataclass, field, fields
+from dataclasses import KW_ONLY, dataclass, field, fields
 from pathlib import Path
+from typing import NoReturn
 
 import numpy as np
 
@@ -313,7 +314,8 @@ def _unit3(v, what: str) -> tuple[float, float, float]:
     if abs(n - 1.0) > AXIS_NORM_TOL:
         raise InputError(f"{what} {a.tolist()} is not a unit vector (norm {n:.6g}, "
                          f"allowed 1 ± {AXIS_NORM_TOL:g})")
-    return tuple(float(x) for x in a / n)
+    x, y, z = (float(c) for c in a / n)
+    return x, y, z
 
 
 def _positive(value, what: str, *, allow_zero: bool = False) -> float:
@@ -354,6 +356,7 @@ class Orientation:
         qc = np.asarray(q_current, dtype=float)
         if self.up_axis is not None:
             return gimbal_for_up_axis(self.up_axis, qc)
+        assert self.gimbal_rad is not None                      # one of the two is given
         return np.array([_nearest(g, c) for g, c in zip(self.gimbal_rad, qc)])
 
 
@@ -679,8 +682,9 @@ class _Piece:
 class _JointMove(_Piece):
     """Minimum-jerk move of all gimbals from q_from to q_to (a hold when equal)."""
 
-    q_from: np.ndarray = None
-    q_to: np.ndarray = None
+    _: KW_ONLY
+    q_from: np.ndarray
+    q_to: np.ndarray
 
     @property
     def is_hold(self) -> bool:
@@ -707,8 +711,9 @@ class _GimbalRamp(_Piece):
     or inner one (1, 2) for a tumble.
     """
 
-    q_base: np.ndarray = None
-    axis: np.ndarray = None     # the commanded body axis a (ω = rate · a)
+    _: KW_ONLY
+    q_base: np.ndarray
+    axis: np.ndarray            # the commanded body axis a (ω = rate · a)
     sign: float = 1.0           # σ: σ a is the gimbal's axis, q̇_joint = σ rate
     r0: float = 0.0
     r1: float = 0.0
@@ -731,8 +736,9 @@ class _GimbalRamp(_Piece):
 class _OuterSine(_Piece):
     """Outer gimbal only: body rate A sin(2π f t + φ) about ``axis``."""
 
-    q_base: np.ndarray = None
-    axis: np.ndarray = None
+    _: KW_ONLY
+    q_base: np.ndarray
+    axis: np.ndarray
     sign: float = 1.0
     amplitude: float = 0.0
     frequency_hz: float = 0.0
@@ -759,11 +765,12 @@ def _outer_motion(q_base, sign, axis, rate, angle, joint=0):
 class _CSVMotion(_Piece):
     """Gimbal angles integrated from commanded body rates (cubic Hermite between RK4 nodes)."""
 
-    t_nodes: np.ndarray = None
-    q_nodes: np.ndarray = None
-    qd_nodes: np.ndarray = None
-    t_csv: np.ndarray = None
-    w_csv: np.ndarray = None
+    _: KW_ONLY
+    t_nodes: np.ndarray
+    q_nodes: np.ndarray
+    qd_nodes: np.ndarray
+    t_csv: np.ndarray
+    w_csv: np.ndarray
 
     def eval(self, t_local):
         tn, qn, qdn = self.t_nodes, self.q_nodes, self.qd_nodes
@@ -816,7 +823,7 @@ class _Builder:
         self.t = 0.0
         self.pieces: list[_Piece] = []
 
-    def fail(self, i: int, seg, key: str, message: str):
+    def fail(self, i: int, seg, key: str, message: str) -> NoReturn:
         raise InputError(f"segment {i + 1} ({seg.kind}): {message}", file=self.source,
                          column=f"segment[{i + 1}].{key}")
 
@@ -1152,7 +1159,7 @@ class _Reader:
     def __init__(self, table: dict, index: int, kind: str, file: str, text: str):
         self.t, self.i, self.kind, self.file, self.text = table, index, kind, file, text
 
-    def fail(self, key: str, message: str):
+    def fail(self, key: str, message: str) -> NoReturn:
         raise InputError(f"segment {self.i} ({self.kind}): {message}", file=self.file,
                          line=_key_line(self.text, self.i, key),
                          column=f"segment[{self.i}].{key}")
@@ -1305,7 +1312,11 @@ def _parse_rate_csv(data: bytes, file: str):
         text = data.decode("utf-8-sig")
     except UnicodeDecodeError as e:
         raise InputError(f"not UTF-8 text ({e.reason})", file=file) from None
-    header, cols, times, rates, lines = None, None, [], [], []
+    header: list[str] | None = None
+    cols: list[int] = []
+    times: list[float] = []
+    rates: list[list[float]] = []
+    lines: list[int] = []
     for n, raw in enumerate(text.splitlines(), start=1):
         line = raw.strip()
         if not line or line.startswith("#"):
@@ -1406,7 +1417,8 @@ def load_profile(path) -> Profile:
     if not isinstance(tables, list) or not all(isinstance(t, dict) for t in tables):
         raise InputError("segment must be an array of tables ([[segment]])", file=file,
                          column="segment")
-    segments, csv_bytes = [], []
+    segments: list = []
+    csv_bytes: list[tuple[str, bytes]] = []
     for i, table in enumerate(tables, start=1):
         kind = table.get("kind")
         if kind is None:

@@ -248,8 +248,9 @@ class Mixer:
         """
         if self.chol is not None:
             return (z @ self.chol.T)[:, cols]                      # e = L z, per sample
-        r = self.common_rho
-        return math.sqrt(r) * self.common[:, None] + math.sqrt(1.0 - r) * z
+        r, common = self.common_rho, self.common
+        assert r is not None and common is not None        # common mode when not Cholesky
+        return math.sqrt(r) * common[:, None] + math.sqrt(1.0 - r) * z
 
 
 @dataclass(frozen=True, eq=False)
@@ -345,7 +346,7 @@ class Streams:
         key = (zlib.crc32(effect.encode("ascii")), int(gyro), int(source))
         return np.random.Generator(self.bit_generator(np.random.SeedSequence(self.root, spawn_key=key)))
 
-    def normals(self, effect: str, cols: Sequence[int], n: int) -> np.ndarray:
+    def normals(self, effect: str, cols: Sequence[int] | np.ndarray, n: int) -> np.ndarray:
         """Independent standard normals (n, m): column j from gyro ``cols[j] + 1``'s stream."""
         out = np.empty((len(cols), n))
         for j, c in enumerate(cols):
@@ -354,6 +355,7 @@ class Streams:
 
 
 def with_term(state: ChainState, cols: np.ndarray, term: np.ndarray) -> ChainState:
+    assert state.x is not None                               # after sensing
     if len(cols) == state.x.shape[1]:                        # cols sorted, unique: every gyro
         return replace(state, x=state.x + term)
     x = state.x.copy()
@@ -362,6 +364,7 @@ def with_term(state: ChainState, cols: np.ndarray, term: np.ndarray) -> ChainSta
 
 
 def with_cols(state: ChainState, cols: np.ndarray, values: np.ndarray) -> ChainState:
+    assert state.x is not None                               # after sensing
     if len(cols) == state.x.shape[1]:
         return replace(state, x=np.ascontiguousarray(values))
     x = state.x.copy()
@@ -493,7 +496,7 @@ class Effect:
 
     def placeholder(self) -> dict:
         """Valid parameters [spec units] for an entry that a fit then overwrites."""
-        out = {}
+        out: dict[str, Any] = {}
         for p in self.params:
             if not p.required:
                 continue
@@ -556,6 +559,7 @@ class Effect:
     def test(self, ctx: "FitContext", gyro: int | None) -> "EffectFit":
         """The candidate test when the model lacks the effect (default: :meth:`fit` on ``ctx.E``,
         through :meth:`FitContext.fitted`, which refits a ``slow`` effect)."""
+        assert ctx.E is not None                                 # set by the orchestrator
         return ctx.fitted(self, gyro, ctx.E)
 
     def predict(self, ctx: "FitContext", entry: "ModelEntry") -> np.ndarray | None:
@@ -799,6 +803,7 @@ class RegressionEffect(Effect):
         raise NotImplementedError
 
     def fit(self, ctx: FitContext, gyro: int | None, E: np.ndarray) -> "EffectFit":
+        assert gyro is not None and ctx.r is not None and ctx.q is not None   # per gyro, noise known
         g = int(gyro) - 1
         return self.regress(ctx, int(gyro), E[:, g], float(ctx.r[g]), float(ctx.q[g]))
 
@@ -818,6 +823,7 @@ class NoiseTermEffect(Effect):
     evidence_of: ClassVar[str] = "ADEV"
 
     def fit(self, ctx: FitContext, gyro: int | None, E: np.ndarray) -> "EffectFit":
+        assert gyro is not None                                  # a per-gyro term
         return ctx.gyro_noise(int(gyro))[self.name]
 
 
@@ -830,6 +836,7 @@ def same_noise_preference(mine_effect: RegressionEffect, mine: "EffectFit", othe
     own z's come from different tests. Both are fitted again on the residual
     under the same (r, q); the smaller χ² ranks first (one parameter each).
     """
+    assert mine.gyro is not None and ctx.E is not None and ctx.r is not None and ctx.q is not None
     g = int(mine.gyro) - 1
     other_effect = ctx.effect(other.effect)
     if not isinstance(other_effect, RegressionEffect):

@@ -69,9 +69,9 @@ from gyroarray.measurement import (Measurement, Site, _load_toml, _parse_layout,
                                    _toml_number, _toml_table, _toml_type, _TomlDoc,
                                    write_measurement)
 
-from .model import NoiseModel
-from .profiles import Profile, load_profile
-from .truth import Truth, compute_truth
+from gyroarray.sim.model import NoiseModel
+from gyroarray.sim.profiles import Profile, load_profile
+from gyroarray.sim.truth import Truth, compute_truth
 
 _TOP_KEYS = {"name", "description", "sample_rate_hz", "duration_s", "seed", "layout", "motion",
              "site", "temperature", "effects", "acc_columns"}
@@ -112,6 +112,7 @@ class TemperatureProfile:
             return np.interp(t, pts[:, 0], pts[:, 1])
         if self.constant_c is not None:
             return np.full(t.shape, float(self.constant_c))
+        assert self.start_c is not None and self.end_c is not None and self.tau_s is not None
         return self.end_c + (self.start_c - self.end_c) * np.exp(-t / self.tau_s)
 
 
@@ -323,7 +324,7 @@ def _check_effects_fit_run(scenario: Scenario, doc: _TomlDoc) -> None:
 
 def _check_table_limits(scenario: Scenario, doc: _TomlDoc) -> None:
     """Refuse a profile that commands the table beyond its rate or acceleration limits."""
-    from .table import TableParams
+    from gyroarray.sim.table import TableParams
     rate, accel = command_extremes(scenario.profile, run_duration_s(scenario))
     limits = TableParams
     for value, limit, what, unit in ((rate, limits.max_rate_deg_s, "gimbal rate", "deg/s"),
@@ -389,7 +390,7 @@ def resolve_profile(ref: str, base: Path, doc: _TomlDoc | None = None) -> Path:
             return candidate
         message = f"motion profile file {ref!r} not found (looked in {base})"
     else:
-        shipped = resources.files("gyroarray.scenarios").joinpath("profiles", ref + ".toml")
+        shipped = resources.files("gyroarray.scenarios").joinpath("profiles").joinpath(ref + ".toml")
         if shipped.is_file():
             return Path(str(shipped))
         message = (f"unknown shipped motion profile {ref!r} (shipped: {', '.join(shipped_profiles())}; "
@@ -479,7 +480,7 @@ def simulate(scenario: Scenario, *, cache: bool = True, rng: np.random.Generator
     rng : numpy.random.Generator, optional
         Overrides the scenario's seed (sweeps derive one per scenario).
     """
-    from .effects import simulate_readings
+    from gyroarray.sim.effects import simulate_readings
     truth = compute_truth(scenario.profile, scenario.sample_rate_hz,
                           duration_s=scenario.duration_s, cache=cache)
     temp = None if scenario.temperature is None else scenario.temperature.at(truth.time_s)

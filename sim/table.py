@@ -78,7 +78,7 @@ from gyroarray.errors import InputError
 from gyroarray.constants import G0_M_S2
 from gyroarray.units import rad_s_to_deg_s, rad_to_deg
 
-from .profiles import Profile, gimbal_quaternion, load_profile
+from gyroarray.sim.profiles import Profile, gimbal_quaternion, load_profile
 
 __all__ = ["TableParams", "RateTable", "TableRun", "Tracking", "SegmentTracking", "rotation_matrices",
            "tracking_report", "steps_per_sample", "n_samples"]

@@ -38,9 +38,9 @@ import numpy as np
 
 from gyroarray.errors import InputError
 
-from .profiles import Profile, load_profile
-from .sensor import rigid_body_specific_force
-from .table import RateTable, TableParams, Tracking, n_samples, rotation_matrices
+from gyroarray.sim.profiles import Profile, load_profile
+from gyroarray.sim.sensor import rigid_body_specific_force
+from gyroarray.sim.table import RateTable, TableParams, Tracking, n_samples, rotation_matrices
 
 __all__ = ["TRUTH_SCHEMA_VERSION", "Truth", "TruthMeta", "compute_truth", "project",
            "specific_force", "truth_key", "default_cache_dir"]
