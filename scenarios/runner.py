@@ -203,7 +203,12 @@ def load_results(out_dir):
 
 
 def _watch_parent(parent_pid: int) -> None:
-    """Worker initializer: exit as soon as the sweep process is gone (module docstring)."""
+    """Worker initializer: one numba thread; exit as soon as the sweep process is gone (module
+    docstring)."""
+    # numba's thread count is set here, in the worker, not in the parent's environment while the
+    # pool starts: a parent that launched numba's threads in that window would keep 1 and refuse
+    # the default later ("Cannot set NUMBA_NUM_THREADS ... once the threads have been launched")
+    os.environ["NUMBA_NUM_THREADS"] = "1"
     if sys.platform.startswith("linux"):
         try:
             import ctypes
@@ -372,7 +377,8 @@ def run_sweep(sweep, out_dir, *, workers: int = 1, scheduler: str | None = None,
     if todo and scheduler is None:
         backend = "processes"
         ctx = mp.get_context("spawn")
-        with _env(THREAD_ENV), ProcessPoolExecutor(max_workers=min(workers, len(todo)),
+        blas = {k: v for k, v in THREAD_ENV.items() if k != "NUMBA_NUM_THREADS"}
+        with _env(blas), ProcessPoolExecutor(max_workers=min(workers, len(todo)),
                                                    mp_context=ctx, initializer=_watch_parent,
                                                    initargs=(os.getpid(),)) as pool:
             futures = {pool.submit(run_one, s, sweep.estimators, sweep.name): s for s in todo}

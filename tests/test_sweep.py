@@ -325,7 +325,10 @@ def test_dask_cluster_equals_local(reference, tmp_path):
         from distributed import LocalCluster
     except ImportError as err:
         pytest.skip(f"dask.distributed not importable: {err}")
-    from gyroarray.scenarios.runner import THREAD_ENV as env       # OPENBLAS_NUM_THREADS=1 etc.
+    from gyroarray.scenarios.runner import THREAD_ENV       # OPENBLAS_NUM_THREADS=1 etc.
+    # numba's own count stays out of the nanny's pre-spawn environment, which it sets in this
+    # process too: numba threads launched here with 1 would refuse the default later
+    env = {k: v for k, v in THREAD_ENV.items() if k != "NUMBA_NUM_THREADS"}
     try:
         with dask.config.set({"distributed.nanny.pre-spawn-environ": env}):
             cluster = LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
