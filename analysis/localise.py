@@ -77,10 +77,9 @@ from typing import Any, Mapping
 import numpy as np
 from scipy import ndimage, optimize, signal, special
 
+from gyroarray.analysis.allan import deviation, edf
+from gyroarray.analysis.davar import davar
 from gyroarray.errors import InputError
-
-from .allan import deviation, edf
-from .davar import davar
 
 __all__ = ["Finding", "ChannelCorrelation", "Localisation", "localise", "critical_z", "chi2_z",
            "davar_window",

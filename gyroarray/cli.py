@@ -16,7 +16,7 @@ import warnings
 from pathlib import Path
 from typing import Any, Callable
 
-from .errors import InputError
+from gyroarray.errors import InputError
 
 EXIT_OK, EXIT_FAIL, EXIT_USAGE = 0, 1, 2
 
@@ -36,8 +36,8 @@ class _Parser(argparse.ArgumentParser):
 
 def _plugins_help() -> str:
     """What installed third-party code scenario, model and sweep files may load by name."""
-    from .effects import ENTRY_POINT_GROUP as EFFECTS, installed_plugins
-    from .estimators.base import ENTRY_POINT_GROUP as ESTIMATORS, _entry_points
+    from gyroarray.effects import ENTRY_POINT_GROUP as EFFECTS, installed_plugins
+    from gyroarray.estimators.base import ENTRY_POINT_GROUP as ESTIMATORS, _entry_points
     estimators = sorted((name, ep.value) for name, ep in _entry_points().items())
 
     def listed(pairs):
@@ -75,7 +75,7 @@ def _json_safe(obj):
 
 def _output(path, args, what: str, *, inputs=(), suffixes=None):
     """Check an output file the user named, before any work (:mod:`gyroarray.outputs`)."""
-    from .outputs import check_output
+    from gyroarray.outputs import check_output
     if path is None:
         return None
     return check_output(path, inputs=inputs, force=getattr(args, "force", False), what=what,
@@ -84,7 +84,7 @@ def _output(path, args, what: str, *, inputs=(), suffixes=None):
 
 def _measurement_inputs(args) -> list:
     """The files of a command's measurement and model arguments."""
-    from .outputs import measurement_files
+    from gyroarray.outputs import measurement_files
     files = measurement_files(args.measurement) if getattr(args, "measurement", None) else []
     if getattr(args, "model", None) is not None:
         files.append(args.model)
@@ -135,9 +135,9 @@ def _add_layout_args(p: argparse.ArgumentParser, *, alpha: bool, required: bool)
 
 
 def cmd_gdop(args) -> tuple[dict, str]:
-    from .design import gdop, gdop_note
-    from .layout import Layout
-    from .units import deg_to_rad
+    from gyroarray.design import gdop, gdop_note
+    from gyroarray.layout import Layout
+    from gyroarray.units import deg_to_rad
     layout = Layout.conical(args.scheme, args.n, deg_to_rad(args.alpha))
     g = gdop(layout, args.rho)
     note = gdop_note(layout, args.rho)
@@ -150,8 +150,8 @@ def cmd_gdop(args) -> tuple[dict, str]:
 
 
 def cmd_design(args) -> tuple[dict, str]:
-    from . import design
-    from .units import rad_to_deg
+    from gyroarray import design
+    from gyroarray.units import rad_to_deg
     if args.recommend:
         return _design_recommend(args)
     rec_only = [o for o, v in (("--model", args.model), ("--arw", args.arw), ("--rrw", args.rrw),
@@ -167,7 +167,7 @@ def cmd_design(args) -> tuple[dict, str]:
         raise InputError(f"gyroarray design: {rec_only[0]} goes with --recommend")
     out: dict = {}
     lines: list[str] = []
-    from .outputs import PLOT_SUFFIXES
+    from gyroarray.outputs import PLOT_SUFFIXES
     _output(args.plot, args, "--plot", suffixes=PLOT_SUFFIXES)
     rho = 0.0 if args.rho is None else args.rho
     if args.scheme is not None or args.n is not None:
@@ -178,7 +178,7 @@ def cmd_design(args) -> tuple[dict, str]:
         out.update({"alpha_opt_deg": rad_to_deg(opt.alpha_rad), "gdop_min": opt.gdop})
         lines.append(f"scheme {args.scheme}, N = {n}, rho = {rho:g}: "
                      f"optimal alpha = {rad_to_deg(opt.alpha_rad):.4f} deg, GDOP min = {opt.gdop:.6f}")
-        from .layout import Layout
+        from gyroarray.layout import Layout
         note = design.gdop_note(Layout.conical(args.scheme, n, opt.alpha_rad), rho)
         if note:
             out["note"] = f"no cone angle gives a 3-axis rate: {note}"
@@ -189,7 +189,7 @@ def cmd_design(args) -> tuple[dict, str]:
         out["cells_not_reproduced"] = sum(not c.reproduces for c in cells)
         lines.append(_format_paper_cells(cells))
     if args.plot is not None:
-        from .reports.design_plots import design_figure
+        from gyroarray.reports.design_plots import design_figure
         path = design_figure(args.plot, force=args.force)
         out["plot"] = str(path)
         lines.append(f"wrote {path}")
@@ -233,15 +233,15 @@ MAX_DESIGN_N = 24
 def _design_space(args):
     """The DesignSpace and GyroNoise of ``design --recommend`` (every default recorded)."""
     import numpy as np
-    from .predict import Swing
-    from .recommend import DEFAULT_BANDWIDTH_HZ, ESTIMATORS, DesignSpace, GyroNoise
-    from .units import deg_s_to_rad_s
+    from gyroarray.predict import Swing
+    from gyroarray.recommend import DEFAULT_BANDWIDTH_HZ, ESTIMATORS, DesignSpace, GyroNoise
+    from gyroarray.units import deg_s_to_rad_s
     src = {}
     if args.model is not None and any(v is not None for v in (args.arw, args.rrw, args.bi)):
         raise InputError("gyroarray design: give the noise as --model MODEL.toml or as a datasheet "
                          "(--arw, --rrw, --bi), not both")
     if args.model is not None:
-        from .sim.model import NoiseModel
+        from gyroarray.sim.model import NoiseModel
         g = GyroNoise.from_model(NoiseModel.from_toml(args.model), source=f"model {args.model}")
     elif args.arw is not None:
         g = GyroNoise(arw_deg_rt_h=args.arw, rrw_deg_h_rt_h=args.rrw or 0.0, bi_deg_h=args.bi or 0.0,
@@ -299,9 +299,9 @@ def _design_space(args):
         swing = Swing(deg_s_to_rad_s(vals[0]), vals[1])
         motion_name = f"swing {vals[0]:g} deg/s at {vals[1]:g} Hz about each axis"
     if args.motion is not None:
-        from .sim.profiles import load_profile
-        from .sim.scenario import resolve_profile
-        from .sim.truth import compute_truth
+        from gyroarray.sim.profiles import load_profile
+        from gyroarray.sim.scenario import resolve_profile
+        from gyroarray.sim.truth import compute_truth
         prof = load_profile(resolve_profile(args.motion, Path.cwd()))
         dur = min(horizon, prof.duration_s)
         if dur < horizon:
@@ -369,7 +369,7 @@ def _sensor_bandwidth_arg(args, rate: float):
     if args.sensor_bandwidth is not None:
         return parse_sensor_bandwidth(args.sensor_bandwidth, rate), "user"
     if args.model is not None:
-        from .sim.model import NoiseModel
+        from gyroarray.sim.model import NoiseModel
         ents = [e for e in NoiseModel.from_toml(args.model).entries if e.effect == "bandwidth"]
         if ents:
             e = min(ents, key=lambda e: float(e.params["cutoff_hz"]))
@@ -382,7 +382,7 @@ def _sensor_bandwidth_arg(args, rate: float):
 
 
 def _design_recommend(args) -> tuple[dict, str]:
-    from .recommend import monte_carlo_check, recommend
+    from gyroarray.recommend import monte_carlo_check, recommend
     _output(args.out, args, "--out", inputs=[args.model] if args.model is not None else [],
             suffixes=(".json",))
     g, space, rhos = _design_space(args)
@@ -398,12 +398,12 @@ def _design_recommend(args) -> tuple[dict, str]:
 
 def _write_json(path: Path, obj: dict, args) -> None:
     """The result as JSON at ``path``, atomically (checked before the work by _design_recommend)."""
-    from .outputs import write_text
+    from gyroarray.outputs import write_text
     write_text(path, json.dumps(_json_safe(obj), indent=1, allow_nan=False), force=args.force)
 
 
 def _recommend_text(res: dict) -> str:
-    from .recommend import _label
+    from gyroarray.recommend import _label
     r = res["recommended"]
     lines = ["Designs, best predicted 3-axis RMS about the truth first:",
              f"{'rank':>4} {'design':<62} {'RMS 3-axis':>11} {'worst GDOP':>10}"]
@@ -498,9 +498,9 @@ def allan_signal(meas, *, raw: bool = False):
 
 
 def cmd_allan(args) -> tuple[dict, str]:
-    from .analysis.allan import plot_allan
-    from .measurement import read_measurement
-    from .outputs import PLOT_SUFFIXES
+    from gyroarray.analysis.allan import plot_allan
+    from gyroarray.measurement import read_measurement
+    from gyroarray.outputs import PLOT_SUFFIXES
     taus = _parse_taus(args.taus)
     _output(args.plot, args, "--plot", inputs=_measurement_inputs(args), suffixes=PLOT_SUFFIXES)
     meas = read_measurement(args.measurement, repair=args.repair)
@@ -532,8 +532,8 @@ def _allan_each(meas, signal, gyros: list[int], taus, args) -> tuple[dict, dict]
     (one line, every reason) when no gyro can be analysed.
     """
     import numpy as np
-    from .analysis.allan import allan_analysis
-    from .measurement import constant_gyros, constant_note
+    from gyroarray.analysis.allan import allan_analysis
+    from gyroarray.measurement import constant_gyros, constant_note
     dead = set(constant_gyros(meas))
     analyses, skipped = {}, {}
     for k in gyros:
@@ -582,7 +582,7 @@ def _format_allan(k: int, d: dict) -> str:
 # -- davar --------------------------------------------------------------------
 
 def cmd_davar(args) -> tuple[dict, str]:
-    from .analysis import davar as dv
+    from gyroarray.analysis import davar as dv
     if args.measurement is None:
         raise InputError("gyroarray davar: give MEAS.csv (paper 000's Table 1: "
                          "python benchmarks/davar_paper.py)")
@@ -591,8 +591,8 @@ def cmd_davar(args) -> tuple[dict, str]:
     if args.window is not None and args.adaptive:
         raise InputError("gyroarray davar: --window L and --adaptive exclude each other "
                          "(the adaptive window runs between --l-min and --l-max)")
-    from .measurement import read_measurement
-    from .outputs import PLOT_SUFFIXES
+    from gyroarray.measurement import read_measurement
+    from gyroarray.outputs import PLOT_SUFFIXES
     _output(args.plot, args, "--plot", inputs=_measurement_inputs(args), suffixes=PLOT_SUFFIXES)
     meas = read_measurement(args.measurement, repair=args.repair)
     if not 1 <= args.gyro <= meas.n_gyros:
@@ -646,7 +646,7 @@ def _nonneg_int(name: str) -> Callable[[str], int]:
 
 def tracking_datasheet(tracking) -> list[dict]:
     """The rate table's tracking report per segment, in deg/s and deg (the CLI edge)."""
-    from .units import rad_s_to_deg_s, rad_to_deg
+    from gyroarray.units import rad_s_to_deg_s, rad_to_deg
 
     def opt(x, conv):
         return None if x is None else conv(x)
@@ -661,7 +661,7 @@ def tracking_datasheet(tracking) -> list[dict]:
 
 
 def cmd_simulate(args) -> tuple[dict, str]:
-    from .sim.scenario import load_scenario, simulate_to_files
+    from gyroarray.sim.scenario import load_scenario, simulate_to_files
     scenario = load_scenario(args.scenario)
     csv_path, toml_path, result = simulate_to_files(scenario, args.out, cache=not args.no_cache,
                                                     force=args.force)
@@ -696,8 +696,8 @@ _RUN_COLUMNS = (("sigma_1_deg_s", "1sigma[deg/s]", ".4g"), ("reduction", "reduct
 
 
 def cmd_run(args) -> tuple[dict, str]:
-    from .chain import run_scenario
-    from .sim.scenario import check_size, load_scenario
+    from gyroarray.chain import run_scenario
+    from gyroarray.sim.scenario import check_size, load_scenario
     names = [n.strip() for n in args.estimators.split(",") if n.strip()] if args.estimators else None
     scenario = load_scenario(args.scenario)
     check_size(scenario, "run")
@@ -755,7 +755,7 @@ _REP_COLUMNS = (("sigma_1_deg_s", "1sigma[deg/s]"), ("rms_deg_s", "RMS[deg/s]"),
 
 
 def _run_replicates(args, scenario, names) -> tuple[dict, str]:
-    from .chain import run_replicates
+    from gyroarray.chain import run_replicates
     k = 1 if args.replicates is None else args.replicates
     rep = run_replicates(scenario, names, replicates=k, seed=args.seed, cache=not args.no_cache)
     summ = rep.summary()
@@ -802,7 +802,7 @@ def _run_replicates(args, scenario, names) -> tuple[dict, str]:
 # -- sweep --------------------------------------------------------------------
 
 def cmd_sweep(args):
-    from .scenarios.runner import run_sweep
+    from gyroarray.scenarios.runner import run_sweep
     if args.workers is not None and args.scheduler is not None:
         raise InputError("gyroarray sweep: --workers and --scheduler exclude each other")
     summary = run_sweep(args.sweep, args.out, workers=args.workers or 1,
@@ -819,10 +819,10 @@ def cmd_sweep(args):
 # -- report -------------------------------------------------------------------
 
 def cmd_report(args):
-    from .reports.report import write_report
+    from gyroarray.reports.report import write_report
     if args.top < 1:
         raise InputError("gyroarray report: --top must be >= 1")
-    from .outputs import same_path
+    from gyroarray.outputs import same_path
     for i, d in enumerate(args.dirs):
         twice = next((e for e in args.dirs[:i] if same_path(d, e)), None)
         if twice is not None:
@@ -855,7 +855,7 @@ def cmd_report(args):
 # -- check --------------------------------------------------------------------
 
 def cmd_check(args):
-    from .check import format_check, run_check
+    from gyroarray.check import format_check, run_check
     result = run_check(args.thresholds, quick=not args.full)
     return result, format_check(result), (EXIT_OK if result["passed"] else EXIT_FAIL)
 
@@ -863,10 +863,10 @@ def cmd_check(args):
 # -- fdi ----------------------------------------------------------------------
 
 def cmd_fdi(args):
-    from .analysis.fdi_score import analyse_measurement, format_fdi, plot_fdi
-    from .measurement import read_measurement
-    from .outputs import PLOT_SUFFIXES
-    from .sim.model import NoiseModel
+    from gyroarray.analysis.fdi_score import analyse_measurement, format_fdi, plot_fdi
+    from gyroarray.measurement import read_measurement
+    from gyroarray.outputs import PLOT_SUFFIXES
+    from gyroarray.sim.model import NoiseModel
     _output(args.plot, args, "--plot", inputs=_measurement_inputs(args), suffixes=PLOT_SUFFIXES)
     meas = read_measurement(args.measurement, repair=args.repair)
     model = None if args.model is None else NoiseModel.from_toml(args.model, n_gyros=meas.n_gyros)
@@ -886,9 +886,9 @@ def cmd_fdi(args):
 def _comparison(args):
     """Check the outputs, read the measurement (and model) of a compare-family
     command; build the chain."""
-    from .compare import ModelComparison
-    from .measurement import read_measurement
-    from .sim.model import NoiseModel
+    from gyroarray.compare import ModelComparison
+    from gyroarray.measurement import read_measurement
+    from gyroarray.sim.model import NoiseModel
     inputs = _measurement_inputs(args)
     _output(getattr(args, "out", None), args, "--out", inputs=inputs,
             suffixes=(".toml",) if args.command == "fit" else (".html", ".htm"))
@@ -904,7 +904,7 @@ def _comparison(args):
 
 def _live_gyros(meas, model, args):
     """Leave constant (dead or stuck) gyros out of a comparison, saying so; refuse when none is left."""
-    from .measurement import constant_gyros, constant_note, without_gyros
+    from gyroarray.measurement import constant_gyros, constant_note, without_gyros
     dead = constant_gyros(meas)
     if not dead:
         return meas, model, []
@@ -957,7 +957,7 @@ def _diagnosis_text(a, head: str) -> str:
 
 
 def _write_report(comp, steps, args) -> dict:
-    from .reports.compare_report import write_compare_report
+    from gyroarray.reports.compare_report import write_compare_report
     title = None
     if getattr(args, "validate", False):
         title = f"Validation: does the model ({comp.given_model.description or args.model}) predict {comp.name}?"
@@ -966,8 +966,8 @@ def _write_report(comp, steps, args) -> dict:
 
 def _write_model(path: Path, model, args) -> str:
     """The fitted model as TOML at ``path`` (checked by :func:`_comparison`); returns the path."""
-    from .outputs import write_text
-    from .sim.model import NoiseModel
+    from gyroarray.outputs import write_text
+    from gyroarray.sim.model import NoiseModel
     model = NoiseModel(model.entries, description=f"fitted to {args.measurement} by gyroarray {args.command}")
     return str(write_text(path, model.to_toml(), force=args.force))
 
@@ -1039,7 +1039,7 @@ def cmd_diagnose(args):
 
 
 def cmd_fit(args):
-    from .compare import parse_add
+    from gyroarray.compare import parse_add
     comp = _comparison(args)
     add = [parse_add(x, comp.N) for x in (args.add or [])]
     before, after = comp.fit(add)
@@ -1061,7 +1061,7 @@ def cmd_ladder(args):
     comp = _comparison(args)
     held = None
     if args.holdout is not None:
-        from .compare import ModelComparison, split_measurement
+        from gyroarray.compare import ModelComparison, split_measurement
         first, rest = split_measurement(comp.m, args.holdout)
         comp = ModelComparison(first, comp.given_model, n_runs=args.runs, seed=args.seed,
                                ref_smooth_s=args.ref_smooth)
@@ -1083,8 +1083,8 @@ def cmd_ladder(args):
         res["model"] = _write_model(args.model_out, final.model, args)
     held_text = []
     if held is not None:
-        from .compare import ModelComparison
-        from .sim.model import NoiseModel
+        from gyroarray.compare import ModelComparison
+        from gyroarray.sim.model import NoiseModel
         model = NoiseModel(final.model.entries, description=f"the ladder on {comp.name}")
         v = ModelComparison(held.m, model, n_runs=args.runs, seed=args.seed, ref_smooth_s=args.ref_smooth)
         va = v.validate()
@@ -1338,7 +1338,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _size(text: str) -> int:
-    from .limits import parse_size
+    from gyroarray.limits import parse_size
     try:
         return parse_size(text)
     except InputError as err:
@@ -1346,13 +1346,13 @@ def _size(text: str) -> int:
 
 
 def _version() -> str:
-    from . import __version__
+    from gyroarray import __version__
     return __version__
 
 
 def main(argv: list[str] | None = None) -> int:
     """Run the CLI; returns the exit code (0 ok, 1 failure, 2 bad input)."""
-    from .limits import memory_budget
+    from gyroarray.limits import memory_budget
     parser = build_parser()
     try:
         with warnings.catch_warnings():
@@ -1360,7 +1360,7 @@ def main(argv: list[str] | None = None) -> int:
                 warnings.simplefilter("ignore")
             args = parser.parse_args(argv)
             if getattr(args, "plugin", None):
-                from .effects import plugin_effects
+                from gyroarray.effects import plugin_effects
                 plugin_effects(args.plugin)
             with memory_budget(getattr(args, "max_memory", None)):
                 result, text, *code = args.func(args)
