@@ -662,7 +662,7 @@ def psd_findings(freq_hz, psd, model_psd, nu: float, dt_s: float, *, z_crit: flo
     P, S = np.atleast_2d(psd), np.atleast_2d(model_psd)
     bins = _log_bins(f)
     z_fine = critical_z(f.size * P.shape[0])
-    out = []
+    out: list[Finding | None] = []
     for k in range(P.shape[0]):
         ok = S[k] > 0
         lines = _lines(f, P[k], np.where(ok, S[k], np.inf), nu, k + 1, z_fine)
@@ -683,7 +683,7 @@ def psd_findings(freq_hz, psd, model_psd, nu: float, dt_s: float, *, z_crit: flo
 
 def _grow(sign: np.ndarray, z: np.ndarray) -> list[tuple[int, int]]:
     """Runs of significant bins, each extended over its neighbours of the same sign with |z| > 2."""
-    out = []
+    out: list[tuple[int, int]] = []
     for a, b in _runs_of(sign):
         s = sign[a]
         while a > 0 and s * z[a - 1] > 2.0:
@@ -833,15 +833,15 @@ def lag_on_motion(residual_k, rate_k, dt_s: float, *, blocks: int = LAG_BLOCKS
     moving = np.flatnonzero(np.abs(ud) > 0.05 * peak)
     if moving.size < 100 * blocks:
         return None
-    taus = []
+    taus: list[float] = []
     for part in np.array_split(moving, blocks):
         X = np.column_stack([np.ones(part.size), ud[part], udd[part]])
         coef, _, rank, _ = np.linalg.lstsq(X, e[part], rcond=None)
         if rank < 3:
             return None
         taus.append(-coef[1])
-    taus = np.array(taus)
-    return float(taus.mean()), float(taus.std(ddof=1) / math.sqrt(blocks))
+    tau = np.array(taus)
+    return float(tau.mean()), float(tau.std(ddof=1) / math.sqrt(blocks))
 
 
 # =============================================================================
@@ -1068,7 +1068,7 @@ def _merge(findings: list[Finding]) -> list[Finding]:
     for f in sorted(findings, key=lambda x: -x.score):
         key, span = _merge_key(f)
         for gkey, gspan, members in groups:
-            if gkey == key and (span is None or _overlap(gspan, span)) and \
+            if gkey == key and (span is None or (gspan is not None and _overlap(gspan, span))) and \
                     not set(f.gyros) & {g for m in members for g in m.gyros}:
                 members.append(f)
                 break

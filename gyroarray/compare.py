@@ -246,7 +246,7 @@ class Analysis:
     def baseline_noise(self, gyro: int, sigma: bool = False):
         """(N [deg/√h], K [deg/h/√h]) of the gyro's calibrated baseline (None where not fitted);
         with ``sigma``: ((N, σ_N), (K, σ_K))."""
-        out = {"white": (None, None), "walk": (None, None)}
+        out: dict[str, tuple[float | None, float | None]] = {"white": (None, None), "walk": (None, None)}
         for eff in _baseline_effects():
             f = self.fits.get((eff.name, gyro))
             if f is None or eff.baseline_term not in out:
@@ -312,7 +312,7 @@ def _finding_dict(f, a: Analysis) -> dict:
          "details": _plain(f.details)}
     if f.kind == "lowpass" and f.details.get("causal") is False:
         with_bw = sorted({t.gyro for t in a.candidates if t.effect == "bandwidth" and a.significant(t)}
-                         | {e.gyro for e in a.model if e.effect == "bandwidth"})
+                         | {e.gyro for e in a.model if e.effect == "bandwidth" and e.gyro is not None})
         on = [g for g in f.gyros if g in with_bw]
         if on:
             fits = "its magnitude fits, but " if f.details.get("library_fits") else ""
@@ -343,7 +343,7 @@ def _prediction_error(t: Test, entry: ModelEntry) -> Test:
     for k in keys:
         s_m = entry.sigma.get(k, 0.0)
         s_t = f.sigma.get(k) if f is not None else None
-        if s_t is None or k not in f.params:
+        if f is None or s_t is None or k not in f.params:
             continue
         got = f.params[k]
         if absolute:                      # the refit is the parameter: its error is the difference
@@ -371,6 +371,12 @@ def _sigma_of(f: EffectFit, params: dict) -> dict:
         if a.size and np.all(np.isfinite(a)) and np.all(a >= 0):
             out[k] = float(a) if a.ndim == 0 else tuple(float(x) for x in a)
     return out
+
+
+def _model_of(ctx: FitContext) -> NoiseModel:
+    """The model ``ctx`` calibrates (:meth:`ModelComparison._context` always sets it)."""
+    assert ctx.model is not None, "a comparison's fit context carries the model it calibrates"
+    return ctx.model
 
 
 def _centred_mean(x: np.ndarray, length: int) -> np.ndarray:
@@ -477,7 +483,7 @@ class ModelComparison:
         self.longest = max(runs, key=lambda r: r[1] - r[0])
         self.moving = self.ref is not None and bool(np.any(~self.static))
         self._attitude = None
-        self._force = None
+        self._force: np.ndarray | None = None
 
     # -- set-up -----------------------------------------------------------
     def _keep_still_parts(self) -> None:
@@ -659,6 +665,7 @@ class ModelComparison:
         notes: list[str] = []
         self._leave_out(ctx, notes)
         fits = self.calibrate(ctx)
+        assert ctx.E is not None and ctx.r is not None and ctx.q is not None   # set by calibrate
         for e in model:                        # glitches the model knows of out of the record
             ctx.E = get_effect(e.effect).clean(ctx, e, ctx.E)
         tests = self._deterministic_candidates(ctx, notes)
@@ -748,7 +755,7 @@ class ModelComparison:
     def _leave_out(self, ctx: FitContext, notes: list) -> None:
         """Samples the regressions leave out, as the model's entries ask (a burst's window)."""
         masks = []
-        for e in ctx.model:
+        for e in _model_of(ctx):
             m = get_effect(e.effect).exclude(ctx, e)
             if m is not None and m.any():
                 masks.append(m)
@@ -762,10 +769,11 @@ class ModelComparison:
         The deterministic model is not known before r, q, nor r, q before it:
         two passes. Sets ``ctx.r``, ``ctx.q`` and ``ctx.E``; returns the fits.
         """
-        det = [e for e in ctx.model if get_effect(e.effect).predicts]
+        model = _model_of(ctx)
+        det = [e for e in model if get_effect(e.effect).predicts]
         preds = {(e.effect, e.gyro): _zeros_like_outputs(self.n, self.N) for e in det}
-        current = {(e.effect, e.gyro): e for e in ctx.model}
-        fits = {}
+        current = {(e.effect, e.gyro): e for e in model}
+        fits: dict[tuple[str, int | None], EffectFit] = {}
         r, q = np.zeros(self.N), np.zeros(self.N)
         ctx.r, ctx.q = r, q
         for it in range(2):
@@ -780,7 +788,9 @@ class ModelComparison:
                 others = sum((p for k, p in preds.items() if k != key), _zeros_like_outputs(self.n, self.N))
                 fits[key] = self._fitted(ctx, eff, e.gyro, self.E0 - others)
                 current[key] = self._entry_from_fit(eff, fits[key], e)
-                preds[key] = eff.predict(ctx, current[key])
+                pred = eff.predict(ctx, current[key])
+                assert pred is not None                  # det: only effects that predict
+                preds[key] = pred
         ctx.E = self.E0 - sum(preds.values(), _zeros_like_outputs(self.n, self.N))
         return fits
 
@@ -799,7 +809,7 @@ class ModelComparison:
 
     def _candidate_effects(self, ctx: FitContext, reads: str, notes: list) -> list:
         """(effect, gyros) of the candidates reading ``reads``; notes say which cannot be tested."""
-        in_model = {(e.effect, e.gyro) for e in ctx.model}
+        in_model = {(e.effect, e.gyro) for e in _model_of(ctx)}
         out = []
         for eff in REGISTRY.values():
             if eff.baseline or not eff.candidate or eff.reads != reads:
@@ -838,13 +848,14 @@ class ModelComparison:
         the stochastic record, one ADEV band per gyro), or when the model's
         noise depends on the motion.
         """
-        in_model = {(e.effect, e.gyro) for e in ctx.model}
+        model = _model_of(ctx)
+        in_model = {(e.effect, e.gyro) for e in model}
         n_stoch = self.N + sum(len(self._targets(eff, in_model)) for eff in REGISTRY.values()
                                if eff.candidate and not eff.baseline and eff.reads == "noise"
                                and not eff.why_not(ctx))
         det_z = [t.z for t in tests if np.isfinite(t.z)]
         det_sig = max(det_z, default=-math.inf) > critical_z(len(det_z) + n_stoch, self.alpha)
-        reasons = [get_effect(e.effect).static_noise for e in ctx.model if get_effect(e.effect).static_noise]
+        reasons = [get_effect(e.effect).static_noise for e in model if get_effect(e.effect).static_noise]
         ctx.static_record = bool(reasons)
         a, b = self.longest
         if det_sig or reasons:
@@ -854,20 +865,24 @@ class ModelComparison:
                          f"{b * self.dt + self.t[0]:.0f} s): {why}")
         else:
             ctx.rec = slice(0, self.n)
+        assert ctx.E is not None                         # set by calibrate
         Er = ctx.E[ctx.rec].copy()
         ctx.tr = self.t[ctx.rec]
-        for e in ctx.model:
+        for e in model:
             Er = get_effect(e.effect).whiten(ctx, e, Er, ctx.tr)
         ctx.Er = Er
 
     def _noise(self, ctx: FitContext, tests: list, notes: list, refit: bool = True) -> dict:
         """Step 5: the model's noise terms (``refit``) and the candidates that read the stochastic record."""
-        fits = {}
-        per_gyro, array_wide = [], []
+        model = _model_of(ctx)
+        assert ctx.E is not None                         # set by calibrate
+        fits: dict[tuple[str, int | None], EffectFit] = {}
+        per_gyro: list[tuple[Effect, list]] = []
+        array_wide: list[tuple[Effect, list]] = []
         for eff, targets in self._candidate_effects(ctx, "noise", notes):
             (per_gyro if eff.per_gyro else array_wide).append((eff, targets))
         for g in range(1, self.N + 1):
-            for e in ctx.model:
+            for e in model:
                 eff = get_effect(e.effect)
                 if refit and e.gyro == g and eff.kind is Kind.NOISE and not eff.predicts:
                     fits[(e.effect, g)] = eff.fit(ctx, g, ctx.E)
@@ -876,7 +891,7 @@ class ModelComparison:
                     self._test(ctx, eff, g, tests, notes)
         for eff, _ in array_wide:
             self._test(ctx, eff, None, tests, notes)
-        for e in ctx.model:
+        for e in model:
             eff = get_effect(e.effect)
             if refit and (e.effect, e.gyro) not in fits and not eff.predicts and eff.kind is not Kind.NOISE:
                 fits[(e.effect, e.gyro)] = eff.fit(ctx, e.gyro, ctx.E)
@@ -964,7 +979,7 @@ class ModelComparison:
             sensed = simulate_readings(det, truth, self.H, self.dt, np.random.default_rng(0), time_s=tr)
         mc = np.empty((self.n_runs, self.N, taus.size))
         nperseg = min(default_nperseg(self.n), n)
-        psd = []
+        psds: list[np.ndarray] = []
         for k in range(self.n_runs):
             rng = np.random.default_rng([self.seed, k])
             s = simulate_readings(sub, truth, self.H, self.dt, rng, time_s=tr) - sensed
@@ -973,7 +988,7 @@ class ModelComparison:
             for g in range(self.N):
                 mc[k, g] = oadev(s[:, g], self.dt, taus=taus).dev
             f_hz, p, _ = residual_psd(s, self.dt, nperseg)
-            psd.append(p)
+            psds.append(p)
         tests = []
         M = self.n_runs
         L = np.log(mc)
@@ -1002,7 +1017,7 @@ class ModelComparison:
                 ev = f"gyro {g + 1} ADEV within the model's 95 % band at every τ"
             tests.append(Test("adev_band", None, g + 1, z, ev,
                               extra={"t": tk.tolist(), "p_min": pmin}))
-        psd = np.array(psd)
+        psd = np.array(psds)
         band = {"taus_s": taus, "measured": meas, "mc": mc,
                 "lo": np.exp(mu - tq * sd), "hi": np.exp(mu + tq * sd), "median": np.exp(mu),
                 "psd_freq_hz": f_hz, "psd_nperseg": nperseg, "psd_mean": psd.mean(axis=0),
@@ -1076,7 +1091,7 @@ class ModelComparison:
         base = [e for e in self.model if get_effect(e.effect).baseline]
         extra = [e for e in self.model if not get_effect(e.effect).baseline]
         model = NoiseModel(tuple(base), description=self.model.description, source=self.model.source)
-        steps = [(None, self.analyse(model))]
+        steps: list[tuple[tuple | None, Analysis]] = [(None, self.analyse(model))]
         for e in extra:
             model = model.with_effect(e)
             steps.append(((e.effect, e.gyro), self.analyse(model)))
@@ -1105,9 +1120,9 @@ class ModelComparison:
         candidate is tried (at most ``max_tries`` per step), and the
         refusals are noted in the last analysis's ``notes``.
         """
-        steps = [(None, self.analyse())]
+        steps: list[tuple[tuple | None, Analysis]] = [(None, self.analyse())]
         model = self.model
-        refused = []
+        refused: list[str] = []
         for _ in range(max_steps):
             cur = steps[-1][1]
             if cur.consistent:
@@ -1158,14 +1173,14 @@ class _Services:
         return self.comp._fitted(self.ctx, eff, gyro, E)
 
     def _terms(self, gyro: int) -> list:
-        return [e for e in self.ctx.model if e.gyro == gyro and get_effect(e.effect).kind is Kind.NOISE
+        return [e for e in _model_of(self.ctx) if e.gyro == gyro and get_effect(e.effect).kind is Kind.NOISE
                 and not get_effect(e.effect).baseline and not get_effect(e.effect).predicts]
 
     def gyro_noise(self, gyro: int) -> dict:
         """The gyro's Allan fit on the stochastic record with the model's noise terms (cached)."""
         if gyro not in self._noise:
             kw: dict = {"model_terms": ()}
-            for e in self.ctx.model:
+            for e in _model_of(self.ctx):
                 if e.gyro != gyro:
                     continue
                 term = get_effect(e.effect).noise_term(self.ctx, e)
@@ -1174,6 +1189,7 @@ class _Services:
                     kw["gm_tau_s"] = term["gm_tau_s"]
                 if "min_tau_s" in term:
                     kw["min_tau_s"] = max(kw.get("min_tau_s", 0.0), term["min_tau_s"])
+            assert self.ctx.Er is not None               # set by the stochastic-record step
             fl = fit_gyro_noise(self.ctx.Er[:, gyro - 1], self.comp.dt, gyro, **kw)
             self._noise[gyro] = {f.effect: f for f in fl}
         return self._noise[gyro]
@@ -1207,6 +1223,8 @@ def _rank_rivals(ctx: FitContext, cands: list, z_crit: float) -> list:
     cache: dict = {}
 
     def beats(a: Test, b: Test) -> str | None:
+        # candidates with a fit (sig below): effect tests, their effect named
+        assert a.effect is not None and b.effect is not None and a.fit is not None and b.fit is not None
         key = (a.effect, a.gyro, b.effect, b.gyro)
         if key not in cache:
             ea, eb = get_effect(a.effect), get_effect(b.effect)
@@ -1219,6 +1237,7 @@ def _rank_rivals(ctx: FitContext, cands: list, z_crit: float) -> list:
         return cache[key]
 
     def related(a: Test, b: Test) -> bool:
+        assert a.effect is not None and b.effect is not None   # candidates: effect tests
         return b.effect in get_effect(a.effect).rivals or a.effect in get_effect(b.effect).rivals
 
     sig = [i for i, t in enumerate(out) if t.fit is not None and np.isfinite(t.z) and t.z > z_crit]

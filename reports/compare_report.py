@@ -179,7 +179,7 @@ def _header(fig, title: str, axs):
     if title:
         fig.text(0.06 / fig.get_figwidth(), 1 - 0.1 / fig.get_figheight(), title, fontsize=10,
                  va="top", ha="left")
-    seen = {}
+    seen: dict[str, object] = {}                       # label -> its first artist
     for ax in axs:
         for h, lab in zip(*ax.get_legend_handles_labels()):
             seen.setdefault(lab, h)
