@@ -126,12 +126,15 @@ class Bandwidth(RegressionEffect):
         # through a Welch estimate whose fit is biased by about 1 % in fc at these record sizes:
         # when the motion sees the filter clearly, it alone gives the cut-off
         use_motion = mgrid is not None and max(mgrid[1].max(), mgrid[2].max()) > 25.0
+        # the order from both: on a swing an order-2 filter at a higher cut-off lags and attenuates
+        # much like an order-1 filter (motion 2Δℓ within 0.4 %), its roll-off does not
+        both = {} if mgrid is None else {k: mgrid[k].max() + psd.lr_filter_order.get(k, 0.0) for k in (1, 2)}
         if use_motion:       # a best cut-off at the grid's end is no roll-off the motion measured
-            o = max((1, 2), key=lambda k: mgrid[k].max())
+            o = max((1, 2), key=lambda k: both[k])
             use_motion = 0 < int(np.argmax(mgrid[o])) < fcs.size - 1
 
         if use_motion:
-            fc, order, s_fc = self._motion_fit(motion, mgrid, fcs)
+            fc, order, s_fc = self._motion_fit(motion, {k: mgrid[k] for k in (o,)}, fcs)
         else:          # the spectrum's own fit: its better family (continuous or digital), refined
             fc, order, s_fc = psd.filter_cutoff_hz, psd.filter_order, psd.filter_cutoff_sigma_hz
             if not fc < 0.95 * nyq:      # the continuous family scans past Nyquist: no roll-off here
@@ -152,8 +155,9 @@ class Bandwidth(RegressionEffect):
 
     @staticmethod
     def _motion_fit(total, grid, fcs) -> tuple[float, int, float]:
-        """(cut-off [Hz], order, 1σ [Hz]) from the motion's likelihood on the grid, refined."""
-        order = max((1, 2), key=lambda o: grid[o].max())
+        """(cut-off [Hz], order, 1σ [Hz]) from the motion's likelihood on the grid (per order
+        given), refined."""
+        order = max(grid, key=lambda o: grid[o].max())
         i = int(np.argmax(grid[order]))
         fc, best = float(fcs[i]), float(grid[order][i])
         s_fc = math.nan
