@@ -1059,6 +1059,95 @@ def _logp_to_z(log_p: float) -> float:
     return chi2_to_z(-2.0 * log_p, 2)
 
 
+def _line_detection(series: np.ndarray, pos: np.ndarray, first: int, n_det: int, dt: float,
+                    r: float, q: float, q_angle_rad: float) -> tuple:
+    """Strongest Fourier bin among the first n_det whitened values: (p_max, n_bins, log FAP, z,
+    f_det [Hz])."""
+    m_det = int(np.searchsorted(pos - first, n_det))       # whitened values among them
+    n_bins = (n_det - 1) // 2                              # j = 1 .. ⌈N/2⌉ − 1
+    if n_bins < 1 or m_det < 1:
+        raise ValueError("too few samples for a periodogram")
+    tested = np.abs(sfft.rfft(series[:n_det])[1:n_bins + 1]) ** 2 / m_det
+    if q_angle_rad > 0:
+        c = 1.0 - np.cos(2.0 * np.pi * np.arange(1, n_bins + 1) / n_det)
+        tested /= 1.0 + (q_angle_rad / dt) ** 2 * (2.0 * c) ** 2 / (2.0 * r * c + q)
+    j = int(np.argmax(tested)) + 1
+    p_max = float(tested[j - 1])
+    log_keep = n_bins * math.log1p(-math.exp(-p_max)) if p_max < 700 else -n_bins * math.exp(-p_max)
+    log_fap = math.log(-math.expm1(log_keep)) if log_keep < -1e-300 else -p_max + math.log(n_bins)
+    z = _logp_to_z(log_fap)
+    f_det = j / (n_det * dt)
+    return p_max, n_bins, log_fap, z, f_det
+
+
+def _padded_peak(series: np.ndarray, big_n: int, n_det: int, dt: float, f_det: float) -> tuple:
+    """Parabolic peak of the zero-padded periodogram near f_det: (f1 [Hz], padded bin [Hz])."""
+    # refinement: zero-padded periodogram of the whole series around f_det, parabola
+    pad = 4 if big_n <= 2 ** 20 else 2
+    n_pad = sfft.next_fast_len(pad * big_n, real=True)
+    spec_pad = np.abs(sfft.rfft(series, n=n_pad)) ** 2
+    df_pad = 1.0 / (n_pad * dt)
+    centre = round(f_det / df_pad)
+    w = max(2, math.ceil(n_pad / n_det))
+    lo_i, hi_i = max(1, centre - w), min(spec_pad.size - 2, centre + w)
+    i = lo_i + int(np.argmax(spec_pad[lo_i:hi_i + 1]))
+    i = min(max(i, 1), spec_pad.size - 2)
+    pm_, p0, pp = spec_pad[i - 1], spec_pad[i], spec_pad[i + 1]
+    del spec_pad
+    den = pm_ - 2.0 * p0 + pp
+    delta = 0.5 * (pm_ - pp) / den if den < 0 else 0.0
+    f1 = (i + float(np.clip(delta, -0.5, 0.5))) * df_pad
+    return f1, df_pad
+
+
+def _refine_frequency(wh, ze: np.ndarray, t: np.ndarray, f1: float, df_pad: float, nyq: float,
+                      bin_hz: float) -> tuple:
+    """Brent search of the GLS χ² near f1, then Gauss–Newton with ∂/∂f: (f, fit, cov or None)."""
+    def lin(f):
+        arg = 2.0 * np.pi * f * t
+        sn, cs = np.sin(arg), np.cos(arg)
+        return wh.fit_whitened(ze, wh.whiten(sn, cs)), sn, cs
+
+    a_f = max(f1 - df_pad, 0.25 * df_pad)
+    b_f = min(f1 + df_pad, nyq - 0.25 * df_pad)
+    res = optimize.minimize_scalar(lambda f: lin(f)[0].chi2, bounds=(a_f, b_f), method="bounded",
+                                   options={"xatol": 0.02 * bin_hz})
+    f = float(res.x)
+    fit, sn, cs = lin(f)
+    cov = None
+    for it in range(5):                                    # Gauss–Newton polish, with ∂/∂f
+        a_s, a_c = fit.beta
+        dfx = 2.0 * np.pi * t * (a_s * cs - a_c * sn)      # ∂/∂f of a_s sin + a_c cos
+        try:
+            full = wh.fit_whitened(ze, wh.whiten(sn, cs, dfx))
+        except NotIdentifiableError:
+            cov = None
+            break
+        cov, step = full.cov, float(full.beta[2])          # cov at the current f
+        if it == 4 or not abs(step) > 1e-3 * math.sqrt(cov[2, 2]):
+            break
+        trial = lin(f + step)
+        if not (0.0 < f + step < nyq and trial[0].chi2 <= fit.chi2):
+            break
+        f, (fit, sn, cs) = f + step, trial
+    return f, fit, cov
+
+
+def _sinusoid_evidence(gyro: int, f: float, f_s: float, amp_d: float, amp_s: float,
+                       log_fap: float, n_bins: int, z: float) -> str:
+    """The sentence that reports the strongest line (or its absence)."""
+    fap_txt = f"{math.exp(log_fap):.2g}" if log_fap > -700 else f"1e{log_fap / math.log(10.0):.0f}"
+    if z >= Z_EVIDENT:
+        ev = (f"gyro {gyro} residual has a line at {_pm(f, f_s)} Hz of amplitude "
+              f"{_pm(amp_d, amp_s)} deg/s (false-alarm probability {fap_txt} over {n_bins} "
+              "frequencies); the model has no sinusoid")
+    else:
+        ev = (f"gyro {gyro} residual has no significant line: the strongest, at {f:.4g} Hz "
+              f"({_num(amp_d, 2)} deg/s), has false-alarm probability {fap_txt} over {n_bins} "
+              f"frequencies (z = {z:.1f})")
+    return ev
+
+
 def fit_sinusoid(e, time_s, dt_s: float, r: float, q: float, gyro: int, use=None, *,
                  q_angle_rad: float = 0.0) -> EffectFit:
     """Sinusoidal rate error: the strongest line of the whitened residual.
@@ -1139,64 +1228,11 @@ def fit_sinusoid(e, time_s, dt_s: float, r: float, q: float, gyro: int, use=None
     # detection on the largest fast FFT length (the first n_det positions; their
     # periodogram is as exact as the whole one's)
     n_det = _fast_len_below(big_n)
-    m_det = int(np.searchsorted(pos - first, n_det))       # whitened values among them
-    n_bins = (n_det - 1) // 2                              # j = 1 .. ⌈N/2⌉ − 1
-    if n_bins < 1 or m_det < 1:
-        raise ValueError("too few samples for a periodogram")
-    tested = np.abs(sfft.rfft(series[:n_det])[1:n_bins + 1]) ** 2 / m_det
-    if q_angle_rad > 0:
-        c = 1.0 - np.cos(2.0 * np.pi * np.arange(1, n_bins + 1) / n_det)
-        tested /= 1.0 + (q_angle_rad / dt) ** 2 * (2.0 * c) ** 2 / (2.0 * r * c + q)
-    j = int(np.argmax(tested)) + 1
-    p_max = float(tested[j - 1])
-    log_keep = n_bins * math.log1p(-math.exp(-p_max)) if p_max < 700 else -n_bins * math.exp(-p_max)
-    log_fap = math.log(-math.expm1(log_keep)) if log_keep < -1e-300 else -p_max + math.log(n_bins)
-    z = _logp_to_z(log_fap)
-    f_det = j / (n_det * dt)
-    # refinement: zero-padded periodogram of the whole series around f_det, parabola
-    pad = 4 if big_n <= 2 ** 20 else 2
-    n_pad = sfft.next_fast_len(pad * big_n, real=True)
-    spec_pad = np.abs(sfft.rfft(series, n=n_pad)) ** 2
-    df_pad = 1.0 / (n_pad * dt)
-    centre = round(f_det / df_pad)
-    w = max(2, math.ceil(n_pad / n_det))
-    lo_i, hi_i = max(1, centre - w), min(spec_pad.size - 2, centre + w)
-    i = lo_i + int(np.argmax(spec_pad[lo_i:hi_i + 1]))
-    i = min(max(i, 1), spec_pad.size - 2)
-    pm_, p0, pp = spec_pad[i - 1], spec_pad[i], spec_pad[i + 1]
-    del spec_pad
-    den = pm_ - 2.0 * p0 + pp
-    delta = 0.5 * (pm_ - pp) / den if den < 0 else 0.0
-    f1 = (i + float(np.clip(delta, -0.5, 0.5))) * df_pad
+    p_max, n_bins, log_fap, z, f_det = _line_detection(series, pos, first, n_det, dt, r, q,
+                                                       q_angle_rad)
+    f1, df_pad = _padded_peak(series, big_n, n_det, dt, f_det)
     bin_hz = 1.0 / (big_n * dt)
-
-    def lin(f):
-        arg = 2.0 * np.pi * f * t
-        sn, cs = np.sin(arg), np.cos(arg)
-        return wh.fit_whitened(ze, wh.whiten(sn, cs)), sn, cs
-
-    a_f = max(f1 - df_pad, 0.25 * df_pad)
-    b_f = min(f1 + df_pad, nyq - 0.25 * df_pad)
-    res = optimize.minimize_scalar(lambda f: lin(f)[0].chi2, bounds=(a_f, b_f), method="bounded",
-                                   options={"xatol": 0.02 * bin_hz})
-    f = float(res.x)
-    fit, sn, cs = lin(f)
-    cov = None
-    for it in range(5):                                    # Gauss–Newton polish, with ∂/∂f
-        a_s, a_c = fit.beta
-        dfx = 2.0 * np.pi * t * (a_s * cs - a_c * sn)      # ∂/∂f of a_s sin + a_c cos
-        try:
-            full = wh.fit_whitened(ze, wh.whiten(sn, cs, dfx))
-        except NotIdentifiableError:
-            cov = None
-            break
-        cov, step = full.cov, float(full.beta[2])          # cov at the current f
-        if it == 4 or not abs(step) > 1e-3 * math.sqrt(cov[2, 2]):
-            break
-        trial = lin(f + step)
-        if not (0.0 < f + step < nyq and trial[0].chi2 <= fit.chi2):
-            break
-        f, (fit, sn, cs) = f + step, trial
+    f, fit, cov = _refine_frequency(wh, ze, t, f1, df_pad, nyq, bin_hz)
     a_s, a_c = fit.beta
     if cov is None:
         cov = np.full((3, 3), np.nan)
@@ -1215,15 +1251,7 @@ def fit_sinusoid(e, time_s, dt_s: float, r: float, q: float, gyro: int, use=None
         sigma["freq_hz"] = f_s
     extra = _extra(fit, p_max=p_max, n_bins=n_bins, log10_fap=log_fap / math.log(10.0),
                    bin_hz=bin_hz, f_detected_hz=f_det, chi2_no_line=float(ze @ ze))
-    fap_txt = f"{math.exp(log_fap):.2g}" if log_fap > -700 else f"1e{log_fap / math.log(10.0):.0f}"
-    if z >= Z_EVIDENT:
-        ev = (f"gyro {gyro} residual has a line at {_pm(f, f_s)} Hz of amplitude "
-              f"{_pm(amp_d, amp_s)} deg/s (false-alarm probability {fap_txt} over {n_bins} "
-              "frequencies); the model has no sinusoid")
-    else:
-        ev = (f"gyro {gyro} residual has no significant line: the strongest, at {f:.4g} Hz "
-              f"({_num(amp_d, 2)} deg/s), has false-alarm probability {fap_txt} over {n_bins} "
-              f"frequencies (z = {z:.1f})")
+    ev = _sinusoid_evidence(gyro, f, f_s, amp_d, amp_s, log_fap, n_bins, z)
     return EffectFit("sinusoid", gyro, params, sigma, z, ev, extra)
 
 
