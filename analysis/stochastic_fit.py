@@ -719,6 +719,83 @@ def _as_dt(dt_s) -> float:
     return dt
 
 
+def _baseline_fits(cv, base, label: str, gyro: int, common: dict) -> list[EffectFit]:
+    """The ``arw`` and ``rrw`` entries: the baseline fit's N and K with their Wald ratios."""
+    out: list[EffectFit] = []
+    for j, (effect, key, conv, slope) in enumerate((
+            ("arw", "n_deg_rt_h", units.arw_rad_rt_s_to_deg_rt_h, "−1/2"),
+            ("rrw", "k_deg_h_rt_h", units.rrw_rad_s_rt_s_to_deg_h_rt_h, "+1/2"))):
+        a, sa = float(base.a[j]), float(math.sqrt(base.cov[j, j]))
+        p, sp = _root_sigma(a, sa)
+        share = _columns(cv, ("n", "k"))[:, j] * max(a, 0.0) / np.maximum(base.model, 1e-300)
+        where, meas, _ = _band_text(cv, _band(cv, share), base.model)
+        out.append(EffectFit(
+            effect=effect, gyro=gyro, params={key: float(conv(p))}, sigma={key: float(conv(sp))},
+            z=a / sa if sa > 0 else math.inf,
+            evidence=(f"{label} ADEV follows slope {slope} for {where} ({meas:.3g} deg/h): "
+                      f"{'N' if j == 0 else 'K'} = {conv(p):.3g} ± {conv(sp):.2g} {_UNIT[key]}"),
+            extra={"chi2": base.chi2, "dof": base.dof, **common}))
+    return out
+
+
+def _extra_column_fits(cv, base, terms: tuple, gm: tuple, gm_tau_s: float | None, label: str,
+                       gyro: int, common: dict) -> list[EffectFit]:
+    """The ``bias_instability`` and ``quantization`` entries: one more Allan column each."""
+    out: list[EffectFit] = []
+    for term, effect, key, conv, what in (
+            ("b", "bias_instability", "b_deg_h", units.rad_s_to_deg_h, "flattens"),
+            ("q", "quantization", "q_deg", units.rad_to_deg, "falls as τ^−1")):
+        names = ("n", "k") + tuple(t for t in terms if t != term) + gm + (term,)
+        if term in terms:
+            f = _gls(cv, names, gm_tau_s)
+        else:
+            f = _gls(cv, names, gm_tau_s, a0=np.append(base.a, 0.0))
+        a, sa = float(f.a[-1]), float(math.sqrt(f.cov[-1, -1]))
+        z = a / sa
+        p, sp = _root_sigma(a, sa)
+        g = term_basis("oadev", term, cv.taus)
+        rest = _columns(cv, names[:-1], gm_tau_s) @ np.maximum(f.a[:-1], 0.0)  # the rest of the fit
+        share = g * max(a, sa) / (np.maximum(rest, 0.0) + g * max(a, sa))
+        idx = _band(cv, share)
+        where, meas, pred = _band_text(cv, idx, rest)
+        sym = "B" if term == "b" else "Q"
+        fitted = f"{sym} = {conv(p):.3g} ± {conv(sp):.2g} {_UNIT[key]}"
+        if z > 3:
+            evidence = (f"{label} ADEV {what} at {meas:.3g} deg/h for {where} ({fitted}); "
+                        f"ARW + RRW alone predicts {pred:.3g} there")
+        else:
+            evidence = (f"{label} ADEV {meas:.3g} deg/h for {where} against {pred:.3g} from "
+                        f"ARW + RRW: no {effect.replace('_', ' ')} seen ({fitted}, z = {z:.1f})")
+        out.append(EffectFit(
+            effect=effect, gyro=gyro, params={key: float(conv(p))}, sigma={key: float(conv(sp))},
+            z=float(z), evidence=evidence,
+            extra={"chi2": f.chi2, "dof": f.dof, **_nk_extra(f),
+                   "band_s": [float(cv.taus[idx[0]]), float(cv.taus[idx[-1]])],
+                   "adev_deg_h": meas, "baseline_adev_deg_h": pred, **common}))
+    return out
+
+
+def _ramp_entry(r: float, sr: float, z_r: float, lr: float, span: float, label: str, gyro: int,
+                common: dict) -> EffectFit:
+    """The ``rate_ramp`` entry (time domain, signed: z from the two-sided tail)."""
+    if not (math.isfinite(r) and math.isfinite(sr) and math.isfinite(z_r)):
+        return EffectFit(effect="rate_ramp", gyro=gyro, params={"r_deg_h2": 0.0}, z=0.0,
+                         evidence=f"{label}: rate ramp not estimable (no ARW seen)",
+                         extra={"lr": lr, **common})
+    r_deg = float(units.ramp_rad_s2_to_deg_h2(r))
+    sr_deg = float(units.ramp_rad_s2_to_deg_h2(sr))
+    drift = f"{_deg_h(r * span):.3g} deg/h over the {span:.0f} s record"
+    if z_r > 3:
+        ev = (f"{label} rate drifts R = {r_deg:.3g} ± {sr_deg:.2g} deg/h² ({drift}); "
+              f"ARW + RRW alone give a ramp of 0 ± {sr_deg:.2g}")
+    else:
+        ev = (f"{label} shows no rate ramp beyond ARW + RRW: R = {r_deg:.3g} ± {sr_deg:.2g} deg/h² "
+              f"({drift}, z = {z_r:.1f})")
+    return EffectFit(effect="rate_ramp", gyro=gyro, params={"r_deg_h2": r_deg},
+                     sigma={"r_deg_h2": sr_deg}, z=float(z_r), evidence=ev,
+                     extra={"lr": lr, **common})
+
+
 def fit_gyro_noise(e, dt_s: float, gyro: int, *, model_terms: tuple = (),
                    gm_tau_s: float | None = None, min_tau_s: float = 0.0) -> list[EffectFit]:
     """Baseline noise and the non-baseline stochastic effects of one gyro.
@@ -803,75 +880,9 @@ def fit_gyro_noise(e, dt_s: float, gyro: int, *, model_terms: tuple = (),
         base = _gls(cv, base_names, gm_tau_s)
     common = {"chi2_baseline": base.chi2, "dof_baseline": base.dof, "ramp_removed": ramp_removed}
 
-    out = []
-    # -- baseline: ARW and RRW
-    for j, (effect, key, conv, slope) in enumerate((
-            ("arw", "n_deg_rt_h", units.arw_rad_rt_s_to_deg_rt_h, "−1/2"),
-            ("rrw", "k_deg_h_rt_h", units.rrw_rad_s_rt_s_to_deg_h_rt_h, "+1/2"))):
-        a, sa = float(base.a[j]), float(math.sqrt(base.cov[j, j]))
-        p, sp = _root_sigma(a, sa)
-        share = _columns(cv, ("n", "k"))[:, j] * max(a, 0.0) / np.maximum(base.model, 1e-300)
-        where, meas, _ = _band_text(cv, _band(cv, share), base.model)
-        out.append(EffectFit(
-            effect=effect, gyro=gyro, params={key: float(conv(p))}, sigma={key: float(conv(sp))},
-            z=a / sa if sa > 0 else math.inf,
-            evidence=(f"{label} ADEV follows slope {slope} for {where} ({meas:.3g} deg/h): "
-                      f"{'N' if j == 0 else 'K'} = {conv(p):.3g} ± {conv(sp):.2g} {_UNIT[key]}"),
-            extra={"chi2": base.chi2, "dof": base.dof, **common}))
-
-    # -- bias instability and quantization: one more Allan column each
-    for term, effect, key, conv, what in (
-            ("b", "bias_instability", "b_deg_h", units.rad_s_to_deg_h, "flattens"),
-            ("q", "quantization", "q_deg", units.rad_to_deg, "falls as τ^−1")):
-        names = ("n", "k") + tuple(t for t in terms if t != term) + gm + (term,)
-        if term in terms:
-            f = _gls(cv, names, gm_tau_s)
-        else:
-            f = _gls(cv, names, gm_tau_s, a0=np.append(base.a, 0.0))
-        a, sa = float(f.a[-1]), float(math.sqrt(f.cov[-1, -1]))
-        z = a / sa
-        p, sp = _root_sigma(a, sa)
-        g = term_basis("oadev", term, cv.taus)
-        rest = _columns(cv, names[:-1], gm_tau_s) @ np.maximum(f.a[:-1], 0.0)  # the rest of the fit
-        share = g * max(a, sa) / (np.maximum(rest, 0.0) + g * max(a, sa))
-        idx = _band(cv, share)
-        where, meas, pred = _band_text(cv, idx, rest)
-        sym = "B" if term == "b" else "Q"
-        fitted = f"{sym} = {conv(p):.3g} ± {conv(sp):.2g} {_UNIT[key]}"
-        if z > 3:
-            evidence = (f"{label} ADEV {what} at {meas:.3g} deg/h for {where} ({fitted}); "
-                        f"ARW + RRW alone predicts {pred:.3g} there")
-        else:
-            evidence = (f"{label} ADEV {meas:.3g} deg/h for {where} against {pred:.3g} from "
-                        f"ARW + RRW: no {effect.replace('_', ' ')} seen ({fitted}, z = {z:.1f})")
-        out.append(EffectFit(
-            effect=effect, gyro=gyro, params={key: float(conv(p))}, sigma={key: float(conv(sp))},
-            z=float(z), evidence=evidence,
-            extra={"chi2": f.chi2, "dof": f.dof, **_nk_extra(f),
-                   "band_s": [float(cv.taus[idx[0]]), float(cv.taus[idx[-1]])],
-                   "adev_deg_h": meas, "baseline_adev_deg_h": pred, **common}))
-
-    # -- rate ramp (time domain, signed: z from the two-sided tail)
-    if not (math.isfinite(r) and math.isfinite(sr) and math.isfinite(z_r)):
-        out.append(EffectFit(effect="rate_ramp", gyro=gyro, params={"r_deg_h2": 0.0}, z=0.0,
-                             evidence=f"{label}: rate ramp not estimable (no ARW seen)",
-                             extra={"lr": lr, **common}))
-        out.append(_fit_gauss_markov(cv, base, label, gyro, common, terms))
-        return out
-    r_deg = float(units.ramp_rad_s2_to_deg_h2(r))
-    sr_deg = float(units.ramp_rad_s2_to_deg_h2(sr))
-    span = n * dt
-    drift = f"{_deg_h(r * span):.3g} deg/h over the {span:.0f} s record"
-    if z_r > 3:
-        ev = (f"{label} rate drifts R = {r_deg:.3g} ± {sr_deg:.2g} deg/h² ({drift}); "
-              f"ARW + RRW alone give a ramp of 0 ± {sr_deg:.2g}")
-    else:
-        ev = (f"{label} shows no rate ramp beyond ARW + RRW: R = {r_deg:.3g} ± {sr_deg:.2g} deg/h² "
-              f"({drift}, z = {z_r:.1f})")
-    out.append(EffectFit(effect="rate_ramp", gyro=gyro, params={"r_deg_h2": r_deg},
-                         sigma={"r_deg_h2": sr_deg}, z=float(z_r), evidence=ev,
-                         extra={"lr": lr, **common}))
-
+    out = _baseline_fits(cv, base, label, gyro, common)                        # ARW, RRW
+    out += _extra_column_fits(cv, base, terms, gm, gm_tau_s, label, gyro, common)  # B, Q
+    out.append(_ramp_entry(r, sr, z_r, lr, n * dt, label, gyro, common))
     out.append(_fit_gauss_markov(cv, base, label, gyro, common, terms))
     return out
 
