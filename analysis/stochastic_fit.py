@@ -1177,6 +1177,53 @@ def _within_block_kurtosis(g: np.ndarray, edges: np.ndarray) -> float:
     return max(float(np.mean(np.concatenate(k))), 0.0) if k else 0.0
 
 
+def _refine_boundaries(cu: np.ndarray, r: int, edges: np.ndarray, a: int, b: int,
+                       blocks: int) -> tuple:
+    """Both boundaries of grid window (a, b) to one Haar sample: (i0, i1, s0, s1) [Haar samples]."""
+    lo0, hi0 = edges[max(a - 1, 0)], edges[min(a + 1, blocks)]
+    lo1, hi1 = edges[max(b - 1, 0)], edges[min(b + 1, blocks)]
+    i0, i1 = int(edges[a]), int(edges[b])
+    for _ in range(3):
+        i0, _, s0 = _profile_boundary(cu, r, lo0, hi0, i1, True)
+        i1, _, s1 = _profile_boundary(cu, r, lo1, hi1, i0, False)
+    return i0, i1, s0, s1
+
+
+def _per_gyro_ratios(h: np.ndarray, i0: int, i1: int, n2: int, heavy: float) -> tuple:
+    """Variance ratio of each gyro's raw Haar differences in/out of the window, and its z."""
+    hi_in = np.mean(h[i0:i1] ** 2, axis=0)
+    hi_out = (np.sum(h[:i0] ** 2, axis=0) + np.sum(h[i1:] ** 2, axis=0)) / max(n2 - (i1 - i0), 1)
+    per_gyro = hi_in / hi_out
+    per_sd = per_gyro * math.sqrt((2.0 / max(i1 - i0, 1) + 2.0 / max(n2 - (i1 - i0), 1)) / heavy)
+    per_z = (per_gyro - 1.0) / per_sd
+    return per_gyro, per_z
+
+
+def _burst_evidence(ratio: float, s_ratio: float, start_s: float, end_s: float,
+                    per_gyro: np.ndarray, per_z: np.ndarray, z: float) -> str:
+    """The sentence that reports the window (or that none stands out) and the gyros it shows on."""
+    up = ratio >= 1.0
+    rises = f"rises {math.sqrt(ratio):.3g}×" if up else f"drops to {math.sqrt(ratio):.3g}×"
+    sig = np.abs(per_z) > 3.0
+    each = ", ".join(f"{k + 1} ({math.sqrt(per_gyro[k]):.3g}×)" for k in np.flatnonzero(sig))
+    if sig.all():
+        who = f"on all gyros: {each}"
+    elif sig.any():
+        rest = np.sqrt(per_gyro[~sig])
+        who = (f"on gyro{'s' if sig.sum() > 1 else ''} {each}; the others "
+               + (f"{rest.min():.3g}–{rest.max():.3g}×" if rest.size > 1 else f"{rest[0]:.3g}×"))
+    else:
+        who = "on no single gyro"
+    if z > 3:
+        evidence = (f"ARW {rises} (variance {ratio:.3g} ± {s_ratio:.2g}×) between {start_s:.6g} s and "
+                    f"{end_s:.6g} s {who}")
+    else:
+        evidence = (f"no burst: the strongest change of the ARW variance, {ratio:.3g}× between "
+                    f"{start_s:.6g} s and {end_s:.6g} s, is within what a record of this length "
+                    f"shows by chance (z = {z:.1f})")
+    return evidence
+
+
 def fit_burst(E, time_s, dt_s: float) -> EffectFit:
     """Window of raised (or lowered) ARW variance common to all gyros.
 
@@ -1257,12 +1304,7 @@ def fit_burst(E, time_s, dt_s: float) -> EffectFit:
     a, b = int(ia[best]), int(ib[best])
 
     # refine both boundaries to one Haar sample (2 dt) within a block of the grid's
-    lo0, hi0 = edges[max(a - 1, 0)], edges[min(a + 1, blocks)]
-    lo1, hi1 = edges[max(b - 1, 0)], edges[min(b + 1, blocks)]
-    i0, i1 = int(edges[a]), int(edges[b])
-    for _ in range(3):
-        i0, _, s0 = _profile_boundary(cu, r, lo0, hi0, i1, True)
-        i1, _, s1 = _profile_boundary(cu, r, lo1, hi1, i0, False)
+    i0, i1, s0, s1 = _refine_boundaries(cu, r, edges, a, b, blocks)
     d_in = (i1 - i0) * float(r)
     d_out = (n2 - (i1 - i0)) * float(r)
     u_in = cu[i1] - cu[i0]
@@ -1278,32 +1320,10 @@ def fit_burst(E, time_s, dt_s: float) -> EffectFit:
     s_end = float(math.hypot(2.0 * dt * (s1 if math.isfinite(s1) else 0.0), res))
 
     # per gyro: variance ratio of the raw Haar differences on the same window
-    hi_in = np.mean(h[i0:i1] ** 2, axis=0)
-    hi_out = (np.sum(h[:i0] ** 2, axis=0) + np.sum(h[i1:] ** 2, axis=0)) / max(n2 - (i1 - i0), 1)
-    per_gyro = hi_in / hi_out
-    per_sd = per_gyro * math.sqrt((2.0 / max(i1 - i0, 1) + 2.0 / max(n2 - (i1 - i0), 1)) / heavy)
-    per_z = (per_gyro - 1.0) / per_sd
+    per_gyro, per_z = _per_gyro_ratios(h, i0, i1, n2, heavy)
     davar_check = _davar_check(X, dt, t, i0, i1, int(np.argmax(np.abs(per_z))))
 
-    up = ratio >= 1.0
-    rises = f"rises {math.sqrt(ratio):.3g}×" if up else f"drops to {math.sqrt(ratio):.3g}×"
-    sig = np.abs(per_z) > 3.0
-    each = ", ".join(f"{k + 1} ({math.sqrt(per_gyro[k]):.3g}×)" for k in np.flatnonzero(sig))
-    if sig.all():
-        who = f"on all gyros: {each}"
-    elif sig.any():
-        rest = np.sqrt(per_gyro[~sig])
-        who = (f"on gyro{'s' if sig.sum() > 1 else ''} {each}; the others "
-               + (f"{rest.min():.3g}–{rest.max():.3g}×" if rest.size > 1 else f"{rest[0]:.3g}×"))
-    else:
-        who = "on no single gyro"
-    if z > 3:
-        evidence = (f"ARW {rises} (variance {ratio:.3g} ± {s_ratio:.2g}×) between {start_s:.6g} s and "
-                    f"{end_s:.6g} s {who}")
-    else:
-        evidence = (f"no burst: the strongest change of the ARW variance, {ratio:.3g}× between "
-                    f"{start_s:.6g} s and {end_s:.6g} s, is within what a record of this length "
-                    f"shows by chance (z = {z:.1f})")
+    evidence = _burst_evidence(ratio, s_ratio, start_s, end_s, per_gyro, per_z, z)
     return EffectFit(
         effect="burst", gyro=None,
         params={"start_s": start_s, "end_s": end_s, "variance_ratio": ratio},
