@@ -979,6 +979,85 @@ def _olkin_siotani(r: np.ndarray, pairs: list, nu: np.ndarray) -> np.ndarray:
     return out
 
 
+def _pair_correlations(cav: np.ndarray, cov, coefs: list, G: np.ndarray, pairs: list) -> tuple:
+    """Per pair, the cross-covariance GLS normalised by the gyros' own coefficients: (rho, sigma
+    without correlation), each shape (2, pairs) [-]."""
+    rho = np.zeros((2, len(pairs)))
+    s0 = np.zeros((2, len(pairs)))
+    for p_, (i, k) in enumerate(pairs):
+        y = cav[:, i, k]
+        norm = np.array([math.sqrt(coefs[i]["n"] * coefs[k]["n"]),
+                         math.sqrt(coefs[i]["k"] * coefs[k]["k"])])
+        norm = np.where(norm > 0, norm, np.inf)
+        # Isserlis: cov(z_i z_k, z_i' z_k') = C^ii' C^kk' + C^ik' C^ki'; summed over
+        # the lags, Σ C^i C^k + Σ (C^ik)², where an auto-variance has 2 Σ C²:
+        # half of matrix(); without correlation only the first term
+        null = 0.5 * cov.matrix(coefs[i], other=(coefs[k], None))
+        a, cov0, _ = _solve(y, G, _whitener(null))
+        for _ in range(2):                    # Σ with the fitted cross-covariance
+            cross = {"n": float(a[0]), "k": float(a[1])}
+            a, _, _ = _solve(y, G, _whitener(null + 0.5 * cov.matrix(cross)))
+        rho[:, p_] = a / norm
+        s0[:, p_] = np.sqrt(np.diag(cov0)) / norm
+    return rho, s0
+
+
+def _family_correlation(fam: int, key: str, what: str, r: np.ndarray, sd0: np.ndarray,
+                        seen: np.ndarray, pairs: list, big_n: int) -> EffectFit:
+    """The entry of one family (0: ARW, 1: RRW) from the pairs' estimates r and null sigmas sd0."""
+    ok = (np.isfinite(r) & np.isfinite(sd0) & (sd0 > 0)
+          & np.array([seen[i, fam] and seen[k, fam] for i, k in pairs]))
+    mat = np.eye(big_n)
+    zmat = np.zeros((big_n, big_n))
+    smat = np.zeros((big_n, big_n))
+    for p_, (i, k) in enumerate(pairs):
+        mat[i, k] = mat[k, i] = r[p_]
+        zmat[i, k] = zmat[k, i] = chi2_to_z((r[p_] / sd0[p_]) ** 2, 1) if ok[p_] else math.nan
+        smat[i, k] = smat[k, i] = (1.0 - min(r[p_] ** 2, 0.99)) * sd0[p_]
+    if not ok.any():
+        return EffectFit(
+            effect="correlation", gyro=None, params={key: 0.0}, z=0.0,
+            evidence=(f"{what} correlation not estimable: the {what[:3]} term is not seen "
+                      f"(z > {_SEEN:g}) on two gyros"),
+            extra={"family": key, "estimable": False, "matrix": mat.tolist(),
+                   "seen": seen[:, fam].tolist()})
+    w = np.where(ok, 1.0 / np.where(ok, sd0, 1.0) ** 2, 0.0)
+    mean = float(np.sum(w * np.where(ok, r, 0.0)) / np.sum(w))
+    sigma0 = float(1.0 / math.sqrt(np.sum(w)))
+    z = chi2_to_z((mean / sigma0) ** 2, 1)
+    # 1σ of the weighted mean: the pairs' covariance under equicorrelation
+    # at the estimate (pairs sharing a gyro are correlated when ρ ≠ 0)
+    rho_c = float(np.clip(mean, -0.99, 0.99))
+    rc = np.full((big_n, big_n), rho_c)
+    np.fill_diagonal(rc, 1.0)
+    idx = [p_ for p_ in range(len(pairs)) if ok[p_]]
+    c_os = _olkin_siotani(rc, [pairs[p_] for p_ in idx], 1.0 / sd0[idx] ** 2)
+    wn = w[idx] / np.sum(w[idx])
+    sigma = float(math.sqrt(max(wn @ c_os @ wn, 0.0)))
+    # heterogeneity: the pairs around the common value, Fisher's (1 − ρ²)
+    # at the common ρ (pairs sharing a gyro are correlated when ρ ≠ 0: a
+    # guide, not an exact χ²)
+    het = float(np.sum(((r[idx] - mean) / ((1.0 - min(mean ** 2, 0.99)) * sd0[idx])) ** 2))
+    lo_ok = -1.0 / (big_n - 1) + 1e-3
+    value = float(np.clip(mean, lo_ok, 0.999))
+    rr = r[idx]
+    spread = (f"pairs {rr.min():.3g} to {rr.max():.3g}" if len(idx) > 1 else "one pair")
+    if z > 3:
+        evidence = (f"the gyros' {what} noise is correlated: {key} = {mean:.3g} ± {sigma:.2g} "
+                    f"over {len(idx)} pairs ({spread}, heterogeneity χ² = {het:.3g} for "
+                    f"{len(idx) - 1} dof)")
+    else:
+        evidence = (f"no {what} correlation between the gyros: {key} = {mean:.3g} ± {sigma:.2g} "
+                    f"over {len(idx)} pairs ({spread}, z = {z:.1f})")
+    return EffectFit(
+        effect="correlation", gyro=None, params={key: value}, sigma={key: sigma}, z=float(z),
+        evidence=evidence,
+        extra={"family": key, "estimable": True, "estimate": mean, "sigma_null": sigma0,
+               "seen": seen[:, fam].tolist(),
+               "matrix": mat.tolist(), "sigma_matrix": smat.tolist(), "z_matrix": zmat.tolist(),
+               "heterogeneity_chi2": het, "heterogeneity_dof": len(idx) - 1})
+
+
 def fit_correlation(E, dt_s: float) -> list[EffectFit]:
     """Cross-gyro correlation of the ARW and of the RRW (array-wide).
 
@@ -1031,80 +1110,9 @@ def fit_correlation(E, dt_s: float) -> list[EffectFit]:
     seen = np.array([[f.a[j] > _SEEN * math.sqrt(f.cov[j, j]) for j in (0, 1)] for f in fits])
     G = _columns(curves[0], ("n", "k"))
     pairs = [(i, k) for i in range(big_n) for k in range(i + 1, big_n)]
-    rho = np.zeros((2, len(pairs)))
-    s0 = np.zeros((2, len(pairs)))
-    for p_, (i, k) in enumerate(pairs):
-        y = cav[:, i, k]
-        norm = np.array([math.sqrt(coefs[i]["n"] * coefs[k]["n"]),
-                         math.sqrt(coefs[i]["k"] * coefs[k]["k"])])
-        norm = np.where(norm > 0, norm, np.inf)
-        # Isserlis: cov(z_i z_k, z_i' z_k') = C^ii' C^kk' + C^ik' C^ki'; summed over
-        # the lags, Σ C^i C^k + Σ (C^ik)², where an auto-variance has 2 Σ C²:
-        # half of matrix(); without correlation only the first term
-        null = 0.5 * cov.matrix(coefs[i], other=(coefs[k], None))
-        a, cov0, _ = _solve(y, G, _whitener(null))
-        for _ in range(2):                    # Σ with the fitted cross-covariance
-            cross = {"n": float(a[0]), "k": float(a[1])}
-            a, _, _ = _solve(y, G, _whitener(null + 0.5 * cov.matrix(cross)))
-        rho[:, p_] = a / norm
-        s0[:, p_] = np.sqrt(np.diag(cov0)) / norm
-
-    out = []
-    for fam, key, what in ((0, "rho_arw", "ARW (short τ)"), (1, "rho_rrw", "RRW (long τ)")):
-        r, sd0 = rho[fam], s0[fam]
-        ok = (np.isfinite(r) & np.isfinite(sd0) & (sd0 > 0)
-              & np.array([seen[i, fam] and seen[k, fam] for i, k in pairs]))
-        mat = np.eye(big_n)
-        zmat = np.zeros((big_n, big_n))
-        smat = np.zeros((big_n, big_n))
-        for p_, (i, k) in enumerate(pairs):
-            mat[i, k] = mat[k, i] = r[p_]
-            zmat[i, k] = zmat[k, i] = chi2_to_z((r[p_] / sd0[p_]) ** 2, 1) if ok[p_] else math.nan
-            smat[i, k] = smat[k, i] = (1.0 - min(r[p_] ** 2, 0.99)) * sd0[p_]
-        if not ok.any():
-            out.append(EffectFit(
-                effect="correlation", gyro=None, params={key: 0.0}, z=0.0,
-                evidence=(f"{what} correlation not estimable: the {what[:3]} term is not seen "
-                          f"(z > {_SEEN:g}) on two gyros"),
-                extra={"family": key, "estimable": False, "matrix": mat.tolist(),
-                       "seen": seen[:, fam].tolist()}))
-            continue
-        w = np.where(ok, 1.0 / np.where(ok, sd0, 1.0) ** 2, 0.0)
-        mean = float(np.sum(w * np.where(ok, r, 0.0)) / np.sum(w))
-        sigma0 = float(1.0 / math.sqrt(np.sum(w)))
-        z = chi2_to_z((mean / sigma0) ** 2, 1)
-        # 1σ of the weighted mean: the pairs' covariance under equicorrelation
-        # at the estimate (pairs sharing a gyro are correlated when ρ ≠ 0)
-        rho_c = float(np.clip(mean, -0.99, 0.99))
-        rc = np.full((big_n, big_n), rho_c)
-        np.fill_diagonal(rc, 1.0)
-        idx = [p_ for p_ in range(len(pairs)) if ok[p_]]
-        c_os = _olkin_siotani(rc, [pairs[p_] for p_ in idx], 1.0 / sd0[idx] ** 2)
-        wn = w[idx] / np.sum(w[idx])
-        sigma = float(math.sqrt(max(wn @ c_os @ wn, 0.0)))
-        # heterogeneity: the pairs around the common value, Fisher's (1 − ρ²)
-        # at the common ρ (pairs sharing a gyro are correlated when ρ ≠ 0: a
-        # guide, not an exact χ²)
-        het = float(np.sum(((r[idx] - mean) / ((1.0 - min(mean ** 2, 0.99)) * sd0[idx])) ** 2))
-        lo_ok = -1.0 / (big_n - 1) + 1e-3
-        value = float(np.clip(mean, lo_ok, 0.999))
-        rr = r[idx]
-        spread = (f"pairs {rr.min():.3g} to {rr.max():.3g}" if len(idx) > 1 else "one pair")
-        if z > 3:
-            evidence = (f"the gyros' {what} noise is correlated: {key} = {mean:.3g} ± {sigma:.2g} "
-                        f"over {len(idx)} pairs ({spread}, heterogeneity χ² = {het:.3g} for "
-                        f"{len(idx) - 1} dof)")
-        else:
-            evidence = (f"no {what} correlation between the gyros: {key} = {mean:.3g} ± {sigma:.2g} "
-                        f"over {len(idx)} pairs ({spread}, z = {z:.1f})")
-        out.append(EffectFit(
-            effect="correlation", gyro=None, params={key: value}, sigma={key: sigma}, z=float(z),
-            evidence=evidence,
-            extra={"family": key, "estimable": True, "estimate": mean, "sigma_null": sigma0,
-                   "seen": seen[:, fam].tolist(),
-                   "matrix": mat.tolist(), "sigma_matrix": smat.tolist(), "z_matrix": zmat.tolist(),
-                   "heterogeneity_chi2": het, "heterogeneity_dof": len(idx) - 1}))
-    return out
+    rho, s0 = _pair_correlations(cav, cov, coefs, G, pairs)
+    return [_family_correlation(fam, key, what, rho[fam], s0[fam], seen, pairs, big_n)
+            for fam, key, what in ((0, "rho_arw", "ARW (short τ)"), (1, "rho_rrw", "RRW (long τ)"))]
 
 
 # --------------------------------------------------------------------------
