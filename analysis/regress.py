@@ -667,6 +667,56 @@ def misalignment_basis(h) -> tuple[np.ndarray, np.ndarray]:
     return e1[0], e2[0]
 
 
+def _tilt_fit(wh, zy0: np.ndarray, zu: np.ndarray, za: np.ndarray, seen) -> tuple:
+    """GLS of the tilt components c on the whitened perpendicular rates (along ``seen`` only
+    when not None), the θ²/2·u term put back twice: (fit, c, cov, χ², dof)."""
+    one_way = seen is not None
+    cos_t = 1.0
+    for _ in range(3):                       # plain fit, then the θ²/2·u term put back twice
+        zy = zy0 + (1.0 - cos_t) * zu
+        if one_way:
+            fit = wh.fit_whitened(zy, (za @ seen)[:, None])
+            c = seen * fit.beta[0]
+            cov = np.outer(seen, seen) * fit.cov[0, 0]
+            chi2 = float(fit.beta[0] ** 2 / fit.cov[0, 0])
+            dof = 1
+        else:
+            fit = wh.fit_whitened(zy, za)
+            c, cov = fit.beta, fit.cov
+            chi2 = float(c @ np.linalg.solve(cov, c))
+            dof = 2
+        cos_t = math.sqrt(max(1.0 - float(c @ c), 0.0))
+    return fit, c, cov, chi2, dof
+
+
+def _tilt_sigmas(c: np.ndarray, cov: np.ndarray, cn: float, sin_t: float, dof: int) -> dict:
+    """1σ of the tilt [deg], and of its azimuth [deg] where the data measure it."""
+    sigma = {}
+    if cn > 0 and sin_t < 1.0:
+        gt = c / (cn * math.sqrt(1.0 - sin_t ** 2))       # dθ/dc
+        sigma["tilt_deg"] = float(rad_to_deg(math.sqrt(gt @ cov @ gt)))
+    else:
+        sigma["tilt_deg"] = float(rad_to_deg(math.sqrt(np.linalg.eigvalsh(cov)[-1])))
+    cn_sigma = math.sqrt(c @ cov @ c) / cn if cn > 0 else math.inf
+    if dof == 2 and cn > 3.0 * cn_sigma:                   # one direction: ψ is assumed, not measured
+        gp = np.array([-c[1], c[0]]) / cn ** 2            # dψ/dc
+        sigma["tilt_azimuth_deg"] = float(rad_to_deg(math.sqrt(gp @ cov @ gp)))
+    return sigma
+
+
+def _misalignment_evidence(gyro: int, z: float, tilt: float, psi: float, sigma: dict) -> str:
+    """The sentence that reports the tilt (or its absence)."""
+    if z >= Z_EVIDENT:
+        az = (f" toward azimuth {_pm(psi, sigma['tilt_azimuth_deg'])}° around it (0° = toward +z)"
+              if "tilt_azimuth_deg" in sigma else "")
+        ev = (f"gyro {gyro} residual follows the rate about axes perpendicular to its own: its true "
+              f"axis is tilted {_pm(tilt, sigma['tilt_deg'])}° from the nominal one{az}")
+    else:
+        ev = (f"gyro {gyro} residual shows no significant response to the rate about other axes "
+              f"(tilt {_pm(tilt, sigma['tilt_deg'])}°, z = {z:.1f})")
+    return ev
+
+
 def fit_misalignment(e, omega_ref_rad_s, h, time_s, dt_s: float, r: float, q: float, gyro: int,
                      *, use=None) -> EffectFit:
     """True sensitive axis: residual proportional to the rate about other axes.
@@ -741,21 +791,7 @@ def fit_misalignment(e, omega_ref_rad_s, h, time_s, dt_s: float, r: float, q: fl
     if one_way:
         seen = vec[:, 1]
         unseen = basis @ vec[:, 0]
-    cos_t = 1.0
-    for _ in range(3):                       # plain fit, then the θ²/2·u term put back twice
-        zy = zy0 + (1.0 - cos_t) * zu
-        if one_way:
-            fit = wh.fit_whitened(zy, (za @ seen)[:, None])
-            c = seen * fit.beta[0]
-            cov = np.outer(seen, seen) * fit.cov[0, 0]
-            chi2 = float(fit.beta[0] ** 2 / fit.cov[0, 0])
-            dof = 1
-        else:
-            fit = wh.fit_whitened(zy, za)
-            c, cov = fit.beta, fit.cov
-            chi2 = float(c @ np.linalg.solve(cov, c))
-            dof = 2
-        cos_t = math.sqrt(max(1.0 - float(c @ c), 0.0))
+    fit, c, cov, chi2, dof = _tilt_fit(wh, zy0, zu, za, seen if one_way else None)
     z = chi2_to_z(chi2, dof)
     cn = float(np.hypot(c[0], c[1]))
     sin_t = min(cn, 1.0)
@@ -764,27 +800,11 @@ def fit_misalignment(e, omega_ref_rad_s, h, time_s, dt_s: float, r: float, q: fl
     tilt = rad_to_deg(math.asin(sin_t))
     psi_rad = math.atan2(c[1], c[0])
     psi = rad_to_deg(psi_rad)
-    sigma = {}
-    if cn > 0 and sin_t < 1.0:
-        gt = c / (cn * math.sqrt(1.0 - sin_t ** 2))       # dθ/dc
-        sigma["tilt_deg"] = float(rad_to_deg(math.sqrt(gt @ cov @ gt)))
-    else:
-        sigma["tilt_deg"] = float(rad_to_deg(math.sqrt(np.linalg.eigvalsh(cov)[-1])))
-    cn_sigma = math.sqrt(c @ cov @ c) / cn if cn > 0 else math.inf
-    if dof == 2 and cn > 3.0 * cn_sigma:                   # one direction: ψ is assumed, not measured
-        gp = np.array([-c[1], c[0]]) / cn ** 2            # dψ/dc
-        sigma["tilt_azimuth_deg"] = float(rad_to_deg(math.sqrt(gp @ cov @ gp)))
+    sigma = _tilt_sigmas(c, cov, cn, sin_t, dof)
     # tilt + azimuth (not also ``axis``: a model entry takes one form or the other);
     # the true axis itself is in extra["axis"]
     params = {"tilt_deg": float(tilt), "tilt_azimuth_deg": float(psi)}
-    if z >= Z_EVIDENT:
-        az = (f" toward azimuth {_pm(psi, sigma['tilt_azimuth_deg'])}° around it (0° = toward +z)"
-              if "tilt_azimuth_deg" in sigma else "")
-        ev = (f"gyro {gyro} residual follows the rate about axes perpendicular to its own: its true "
-              f"axis is tilted {_pm(tilt, sigma['tilt_deg'])}° from the nominal one{az}")
-    else:
-        ev = (f"gyro {gyro} residual shows no significant response to the rate about other axes "
-              f"(tilt {_pm(tilt, sigma['tilt_deg'])}°, z = {z:.1f})")
+    ev = _misalignment_evidence(gyro, z, tilt, psi, sigma)
     extra = _extra(fit, c=[float(v) for v in c], cov_c=cov.tolist(), chi2_c=chi2, dof_c=dof,
                    axis=[float(v) for v in axis])
     if unseen is not None:
