@@ -816,6 +816,60 @@ def fit_misalignment(e, omega_ref_rad_s, h, time_s, dt_s: float, r: float, q: fl
 
 # -- latency ---------------------------------------------------------------------
 
+def _refine_delay(wh, ze: np.ndarray, e: np.ndarray, u: np.ndarray, du: np.ndarray, d: float,
+                  dt: float) -> tuple:
+    """Delay by χ² of the fractionally delayed rate: grid from the linear estimate d, Brent, one
+    Gauss–Newton step; (delay [s], 1σ [s], z, extra entries)."""
+    n = e.size
+    chi2_0 = float(ze @ ze)
+
+    def model(dd):
+        return fractional_delay(u[:, None], [dd / dt])[:, 0] - u
+
+    def chi2(dd):
+        zr = ze - wh.whiten(model(dd))
+        return float(zr @ zr)
+
+    lo, hi = max(0.0, 0.5 * d - dt), 2.0 * d + 2.0 * dt
+    grid = np.linspace(lo, hi, 9)
+    vals = np.array([chi2(g) for g in grid])
+    k = int(np.argmin(vals))
+    for _ in range(3):                                   # minimum at the top: look further
+        if k < grid.size - 1 or 2.0 * grid[-1] >= (n - 2) * dt:
+            break
+        grid = np.linspace(grid[-2], 2.0 * grid[-1], 9)
+        vals = np.array([chi2(g) for g in grid])
+        k = int(np.argmin(vals))
+    a, b = grid[max(k - 1, 0)], grid[min(k + 1, grid.size - 1)]
+    res = optimize.minimize_scalar(chi2, bounds=(a, b), method="bounded",
+                                   options={"xatol": 1e-3 * dt})
+    dd = float(res.x)
+    deriv = -fractional_delay(du[:, None], [dd / dt])[:, 0]
+    zg = wh.whiten(deriv, e - model(dd))
+    step = wh.fit_whitened(zg[:, 1], zg[:, :1])
+    d_new = dd + float(step.beta[0])
+    if d_new >= 0.0 and chi2(d_new) <= res.fun:
+        dd = d_new
+    chi2_d = chi2(dd)
+    d, sd = dd, float(step.sigma[0])
+    z = chi2_to_z(max(chi2_0 - chi2_d, 0.0), 1)
+    return d, sd, z, dict(refined=True, chi2=chi2_d, chi2_no_delay=chi2_0,
+                          grid_s=[float(g) for g in grid])
+
+
+def _latency_evidence(gyro: int, z: float, d: float, sd: float, dt: float) -> str:
+    """The sentence that reports the delay (or its absence)."""
+    samples = d / dt
+    if z >= Z_EVIDENT:
+        lead = "lags" if d > 0 else "leads"
+        ev = (f"gyro {gyro} residual follows the angular acceleration about its axis: the output "
+              f"{lead} the reference by {_pm(abs(d) * 1e3, sd * 1e3)} ms ({_num(abs(samples), 3)} samples)")
+    else:
+        ev = (f"gyro {gyro} residual shows no significant response to the angular acceleration "
+              f"about its axis (delay {_pm(d * 1e3, sd * 1e3)} ms, z = {z:.1f})")
+    return ev
+
+
 def fit_latency(e, omega_ref_rad_s, h, time_s, dt_s: float, r: float, q: float, gyro: int,
                 *, use=None, refine: bool = True) -> EffectFit:
     """Latency: residual proportional to the angular acceleration about the axis.
@@ -886,48 +940,9 @@ def fit_latency(e, omega_ref_rad_s, h, time_s, dt_s: float, r: float, q: float, 
     z = _z1(t)
     extra = _extra(fit, t=t, d_linear_s=d, sigma_linear_s=sd, refined=False)
     if refine and d > 0.5 * dt and abs(t) > 5.0:
-        ze = zz[:, 1]
-        chi2_0 = float(ze @ ze)
-
-        def model(dd):
-            return fractional_delay(u[:, None], [dd / dt])[:, 0] - u
-
-        def chi2(dd):
-            zr = ze - wh.whiten(model(dd))
-            return float(zr @ zr)
-
-        lo, hi = max(0.0, 0.5 * d - dt), 2.0 * d + 2.0 * dt
-        grid = np.linspace(lo, hi, 9)
-        vals = np.array([chi2(g) for g in grid])
-        k = int(np.argmin(vals))
-        for _ in range(3):                                   # minimum at the top: look further
-            if k < grid.size - 1 or 2.0 * grid[-1] >= (n - 2) * dt:
-                break
-            grid = np.linspace(grid[-2], 2.0 * grid[-1], 9)
-            vals = np.array([chi2(g) for g in grid])
-            k = int(np.argmin(vals))
-        a, b = grid[max(k - 1, 0)], grid[min(k + 1, grid.size - 1)]
-        res = optimize.minimize_scalar(chi2, bounds=(a, b), method="bounded",
-                                       options={"xatol": 1e-3 * dt})
-        dd = float(res.x)
-        deriv = -fractional_delay(du[:, None], [dd / dt])[:, 0]
-        zg = wh.whiten(deriv, e - model(dd))
-        step = wh.fit_whitened(zg[:, 1], zg[:, :1])
-        d_new = dd + float(step.beta[0])
-        if d_new >= 0.0 and chi2(d_new) <= res.fun:
-            dd = d_new
-        chi2_d = chi2(dd)
-        d, sd = dd, float(step.sigma[0])
-        z = chi2_to_z(max(chi2_0 - chi2_d, 0.0), 1)
-        extra.update(refined=True, chi2=chi2_d, chi2_no_delay=chi2_0, grid_s=[float(g) for g in grid])
-    samples = d / dt
-    if z >= Z_EVIDENT:
-        lead = "lags" if d > 0 else "leads"
-        ev = (f"gyro {gyro} residual follows the angular acceleration about its axis: the output "
-              f"{lead} the reference by {_pm(abs(d) * 1e3, sd * 1e3)} ms ({_num(abs(samples), 3)} samples)")
-    else:
-        ev = (f"gyro {gyro} residual shows no significant response to the angular acceleration "
-              f"about its axis (delay {_pm(d * 1e3, sd * 1e3)} ms, z = {z:.1f})")
+        d, sd, z, more = _refine_delay(wh, zz[:, 1], e, u, du, d, dt)
+        extra.update(more)
+    ev = _latency_evidence(gyro, z, d, sd, dt)
     return EffectFit("latency", gyro, {"delay_s": d}, {"delay_s": sd}, z, ev, extra)
 
 
