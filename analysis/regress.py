@@ -1303,6 +1303,46 @@ def _log_chi2_cdf(x: float, k: int) -> float:
     return a * math.log(0.5 * x) - 0.5 * x - special.gammaln(a + 1.0)
 
 
+def _inner_envelope(y: np.ndarray, u: np.ndarray, c_plus: float, c_minus: float,
+                    block: int) -> float:
+    """Largest |block median| of output − reference well inside the output range [rad/s]."""
+    inner = (u < 0.9 * c_plus) & (u > -0.9 * c_minus)
+    eres = (y - u)[inner]
+    nb = eres.size // block
+    if nb >= 1:
+        env = float(np.max(np.abs(np.median(eres[:nb * block].reshape(nb, block), axis=1))))
+    else:
+        env = float(abs(np.median(eres))) if eres.size else 0.0
+    return env
+
+
+def _plateau_test(yp: np.ndarray, ym: np.ndarray, nu: int, ymax: float, r: float) -> tuple:
+    """Spread of the outputs beyond the range about their means against the noise:
+    (sum of squares [rad²/s²], z from the lower χ²_ν tail)."""
+    s_sum = 0.0
+    for part in (yp, ym):
+        if part.size > 1:
+            s_sum += float(np.sum((part - part.mean()) ** 2))
+    floor = nu * (np.finfo(float).eps * ymax) ** 2
+    x = max(s_sum, floor) / r
+    z = _logp_to_z(_log_chi2_cdf(x, nu))
+    return s_sum, z
+
+
+def _saturation_evidence(gyro: int, z: float, rng: float, rng_s: float, count: int, frac: float,
+                         spread: float, extra: dict) -> str:
+    """The sentence that reports the plateau (or its absence)."""
+    if z >= Z_EVIDENT:
+        ev = (f"gyro {gyro} output sits at ±{_pm(rng, rng_s)} deg/s on {count} samples "
+              f"({_num(100 * frac, 2)} %) where the reference is beyond it (up to "
+              f"{_num(extra['u_max_deg_s'], 4)} deg/s), spread {_num(spread, 2)} deg/s against "
+              f"a noise σ of {_num(extra['arw_sigma_deg_s'], 2)} deg/s: clipped")
+    else:
+        ev = (f"gyro {gyro} output beyond ±{_num(rng, 4)} deg/s spreads {_num(spread, 2)} deg/s, "
+              f"like its noise σ {_num(extra['arw_sigma_deg_s'], 2)} deg/s: no plateau (z = {z:.1f})")
+    return ev
+
+
 def fit_saturation(gyro_rad_s, u_rad_s, r: float, gyro: int, *, use=None,
                    block: int = 256) -> EffectFit:
     """Clipping: the output sits on a plateau where the input is beyond it.
@@ -1370,13 +1410,7 @@ def fit_saturation(gyro_rad_s, u_rad_s, r: float, gyro: int, *, use=None,
     sig = math.sqrt(r)
     c_plus, c_minus = float(np.max(y)), float(-np.min(y))
     ymax = max(c_plus, c_minus)
-    inner = (u < 0.9 * c_plus) & (u > -0.9 * c_minus)
-    eres = (y - u)[inner]
-    nb = eres.size // block
-    if nb >= 1:
-        env = float(np.max(np.abs(np.median(eres[:nb * block].reshape(nb, block), axis=1))))
-    else:
-        env = float(abs(np.median(eres))) if eres.size else 0.0
+    env = _inner_envelope(y, u, c_plus, c_minus, block)
     mu = 3.0 * sig + env
     tp, tm = u > c_plus + mu, u < -c_minus - mu
     yp, ym = y[tp], y[tm]
@@ -1389,13 +1423,7 @@ def fit_saturation(gyro_rad_s, u_rad_s, r: float, gyro: int, *, use=None,
         ev = (f"gyro {gyro} output never sits on a plateau while the reference is beyond it "
               f"(max |output| {_num(rng, 4)} deg/s, reference up to {_num(extra['u_max_deg_s'], 4)} deg/s)")
         return EffectFit("saturation", gyro, {"range_deg_s": rng}, {}, 0.0, ev, extra)
-    s_sum = 0.0
-    for part in (yp, ym):
-        if part.size > 1:
-            s_sum += float(np.sum((part - part.mean()) ** 2))
-    floor = nu * (np.finfo(float).eps * ymax) ** 2
-    x = max(s_sum, floor) / r
-    z = _logp_to_z(_log_chi2_cdf(x, nu))
+    s_sum, z = _plateau_test(yp, ym, nu, ymax, r)
     mag = np.abs(np.concatenate([yp, ym]))
     c = float(mag.mean())
     c_s = float(mag.std(ddof=1) / math.sqrt(mag.size)) if mag.size > 1 else math.nan
@@ -1404,13 +1432,6 @@ def fit_saturation(gyro_rad_s, u_rad_s, r: float, gyro: int, *, use=None,
     spread = float(rad_s_to_deg_s(math.sqrt(s_sum / nu)))
     extra.update(spread_deg_s=spread, arw_sigma_deg_s=float(rad_s_to_deg_s(sig)), dof=nu)
     frac = mag.size / n
-    if z >= Z_EVIDENT:
-        ev = (f"gyro {gyro} output sits at ±{_pm(rng, rng_s)} deg/s on {mag.size} samples "
-              f"({_num(100 * frac, 2)} %) where the reference is beyond it (up to "
-              f"{_num(extra['u_max_deg_s'], 4)} deg/s), spread {_num(spread, 2)} deg/s against "
-              f"a noise σ of {_num(extra['arw_sigma_deg_s'], 2)} deg/s: clipped")
-    else:
-        ev = (f"gyro {gyro} output beyond ±{_num(rng, 4)} deg/s spreads {_num(spread, 2)} deg/s, "
-              f"like its noise σ {_num(extra['arw_sigma_deg_s'], 2)} deg/s: no plateau (z = {z:.1f})")
+    ev = _saturation_evidence(gyro, z, rng, rng_s, mag.size, frac, spread, extra)
     sigma = {"range_deg_s": rng_s} if math.isfinite(rng_s) else {}
     return EffectFit("saturation", gyro, {"range_deg_s": rng}, sigma, z, ev, extra)
