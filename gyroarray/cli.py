@@ -1153,12 +1153,8 @@ def _add_compare_args(p, *, out: bool):
     p.add_argument("--json", action="store_true", help="print one JSON object")
 
 
-def build_parser() -> argparse.ArgumentParser:
-    parser = _Parser(prog="gyroarray", description=__doc__.splitlines()[0])
-    parser.plugin_help = True
-    parser.add_argument("--version", action="version", version=f"gyroarray {_version()}")
-    sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
-
+def _add_design_parsers(sub) -> None:
+    """The ``gdop`` and ``design`` subcommands (layouts, cone angle, recommendation)."""
     p = sub.add_parser("gdop", help="GDOP of a conical layout")
     _add_layout_args(p, alpha=True, required=True)
     p.add_argument("--json", action="store_true", help="print one JSON object")
@@ -1222,6 +1218,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=cmd_design)
 
+
+def _add_deviation_parsers(sub) -> None:
+    """The ``allan`` and ``davar`` subcommands (Allan and dynamic Allan deviation)."""
     p = sub.add_parser("allan", help="Allan deviation with confidence intervals and noise fit")
     p.add_argument("measurement", type=Path, metavar="MEAS.csv")
     p.add_argument("--gyro", type=int, metavar="K", help="only gyro K (1-based)")
@@ -1256,6 +1255,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=cmd_davar)
 
+
+def _add_simulation_parsers(sub) -> None:
+    """The ``simulate``, ``run``, ``sweep`` and ``report`` subcommands."""
     p = sub.add_parser("simulate", help="simulate a scenario into a measurement (CSV.GZ + TOML)")
     p.add_argument("scenario", type=Path, metavar="SCENARIO.toml")
     p.add_argument("--out", type=Path, required=True, metavar="DIR", help="output directory")
@@ -1304,6 +1306,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=cmd_report)
 
+
+def _add_compare_parsers(sub) -> None:
+    """The ``compare``, ``diagnose``, ``fit`` and ``ladder`` subcommands (measurement vs model)."""
     p = sub.add_parser("compare", help="measurement vs model: calibrate, model band, diagnostics report")
     _add_compare_args(p, out=True)
     p.add_argument("--validate", action="store_true",
@@ -1335,6 +1340,9 @@ def build_parser() -> argparse.ArgumentParser:
                         "last FRACTION (e.g. 0.3)")
     p.set_defaults(func=cmd_ladder)
 
+
+def _add_fdi_and_check_parsers(sub) -> None:
+    """The ``fdi`` (fault detection) and ``check`` (regression thresholds) subcommands."""
     p = sub.add_parser("fdi", help="fault detection and isolation on a measurement (parity space)")
     p.add_argument("measurement", type=Path, metavar="MEAS.csv")
     p.add_argument("--model", type=Path, metavar="MODEL.toml",
@@ -1354,6 +1362,20 @@ def build_parser() -> argparse.ArgumentParser:
                    help="run each scenario at its full length (slow; default: the quick version)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=cmd_check)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The ``gyroarray`` argument parser: one subparser per subcommand, each with ``--max-memory``."""
+    parser = _Parser(prog="gyroarray", description=__doc__.splitlines()[0])
+    parser.plugin_help = True
+    parser.add_argument("--version", action="version", version=f"gyroarray {_version()}")
+    sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
+
+    _add_design_parsers(sub)
+    _add_deviation_parsers(sub)
+    _add_simulation_parsers(sub)
+    _add_compare_parsers(sub)
+    _add_fdi_and_check_parsers(sub)
     for p in sub.choices.values():
         p.add_argument("--max-memory", type=_size, metavar="SIZE",
                        help="memory gyroarray may plan to use, e.g. 8G (default: half the "
