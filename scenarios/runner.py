@@ -400,7 +400,7 @@ def run_sweep(sweep, out_dir, *, workers: int = 1, scheduler: str | None = None,
     (out / ROWS).mkdir(parents=True, exist_ok=True)
     _check_manifest(out, sweep)
     rows_dir = out / ROWS
-    notes = []
+    notes: list[str] = []
     records = _recorded_checksums(out)
     todo = _scenarios_to_run(sweep, rows_dir, records, notes)
     # longest first (a better finish on few workers); results do not depend on the order
