@@ -429,6 +429,87 @@ def _window_arw(kind: str, tau0: float, m: np.ndarray, adev: np.ndarray,
     return arw, low, high
 
 
+def _check_options(extension: str, arw: str, confidence: float, adaptive: bool,
+                   window, params) -> None:
+    """Refuse an unknown extension or ARW method, a confidence outside (0, 1) and a mix of the
+    fixed and adaptive windows' options."""
+    if extension not in EXTENSIONS:
+        raise InputError(f"unknown extension {extension!r}; expected one of "
+                         f"{EXTENSIONS}")
+    if arw not in ARW_METHODS:
+        raise InputError(f"unknown ARW method {arw!r}; expected one of "
+                         f"{ARW_METHODS}")
+    if not (0.0 < confidence < 1.0):
+        raise InputError(f"confidence must be in (0, 1), got {confidence!r}")
+    if adaptive and window is not None:
+        raise InputError("the window length is adaptive: give its bounds as "
+                         "params=AdaptiveWindow(l_max=..., l_min=...), not "
+                         "window")
+    if not adaptive and params is not None:
+        raise InputError("params are the adaptive window's; pass "
+                         "adaptive=True or drop them")
+
+
+def _adaptive_windows(y: np.ndarray, params: AdaptiveWindow, step: int | None,
+                      extension: str) -> tuple:
+    """A-DAVAR windows: (padded series, pad, starts, lengths, l_long, l_short, kurtosis,
+    contribution, unstable flag), starts and lengths [samples] every ``step`` centres."""
+    n = y.size
+    step = 1 if step is None else step
+    l_long, l_short = params.l_max, params.l_min
+    pad = (l_long + 1) // 2 + 1 if extension == "mirror" else 0
+    x = np.pad(y, pad, mode="symmetric") if pad else y
+    if extension == "mirror":
+        first, last = 0, n - 1               # centres, record indices
+    else:
+        first = l_long // 2
+        last = n - l_long + l_long // 2
+    count = last - first + 1
+    length = np.empty(count, dtype=np.int64)
+    kurt = np.empty(count)
+    contrib = np.empty(count)
+    flag = np.empty(count, dtype=np.bool_)
+    _adaptive_lengths(x, first + pad, count, params.l_max, params.l_min,
+                      params.k1, params.k2, params.s1, params.s2,
+                      params.l_tail, params.dl_shrink, params.dl_grow,
+                      length, kurt, contrib, flag)
+    keep = np.arange(0, count, step)
+    lengths = length[keep]
+    starts = first + keep - lengths // 2
+    kurt, contrib, flag = kurt[keep], contrib[keep], flag[keep]
+    return x, pad, starts, lengths, l_long, l_short, kurt, contrib, flag
+
+
+def _fixed_windows(y: np.ndarray, window: int | None, step: int | None, extension: str) -> tuple:
+    """Fixed windows (None: one over the record): (padded series, pad, starts, lengths, l_long,
+    l_short), starts and lengths [samples]."""
+    n = y.size
+    if window is None:
+        if step is not None:
+            raise InputError("step needs a window length: the default "
+                             "(window=None) is one window over the record")
+        x, pad = y, 0
+        l_long = l_short = n
+        starts = np.zeros(1, dtype=np.int64)
+        lengths = np.full(1, n, dtype=np.int64)
+    else:
+        big_l = _positive_int(window, "window")
+        if big_l > n:
+            raise InputError(f"window ({big_l} samples) is longer than the "
+                             f"record ({n} samples)")
+        step = max(1, big_l // 10) if step is None else step
+        l_long = l_short = big_l
+        if extension == "mirror":
+            pad = (big_l + 1) // 2 + 1
+            x = np.pad(y, pad, mode="symmetric")
+            starts = np.arange(0, n, step, dtype=np.int64) - big_l // 2
+        else:
+            x, pad = y, 0
+            starts = np.arange(0, n - big_l + 1, step, dtype=np.int64)
+        lengths = np.full(starts.size, big_l, dtype=np.int64)
+    return x, pad, starts, lengths, l_long, l_short
+
+
 def davar(rate_rad_s, tau0_s: float, *, window: int | None = None,
           adaptive: bool = False, step: int | None = None, taus="octave",
           kind: str = "oadev", extension: str = "mirror",
@@ -577,21 +658,7 @@ def davar(rate_rad_s, tau0_s: float, *, window: int | None = None,
     n = y.size
     if not np.all(np.isfinite(y)):
         raise first_non_finite(y, "rate")
-    if extension not in EXTENSIONS:
-        raise InputError(f"unknown extension {extension!r}; expected one of "
-                         f"{EXTENSIONS}")
-    if arw not in ARW_METHODS:
-        raise InputError(f"unknown ARW method {arw!r}; expected one of "
-                         f"{ARW_METHODS}")
-    if not (0.0 < confidence < 1.0):
-        raise InputError(f"confidence must be in (0, 1), got {confidence!r}")
-    if adaptive and window is not None:
-        raise InputError("the window length is adaptive: give its bounds as "
-                         "params=AdaptiveWindow(l_max=..., l_min=...), not "
-                         "window")
-    if not adaptive and params is not None:
-        raise InputError("params are the adaptive window's; pass "
-                         "adaptive=True or drop them")
+    _check_options(extension, arw, confidence, adaptive, window, params)
     if step is not None:
         step = _positive_int(step, "step")
 
@@ -604,51 +671,10 @@ def davar(rate_rad_s, tau0_s: float, *, window: int | None = None,
         if params.l_max > n:
             raise InputError(f"the longest window (l_max = {params.l_max}) "
                              f"is longer than the record ({n} samples)")
-        step = 1 if step is None else step
-        l_long, l_short = params.l_max, params.l_min
-        pad = (l_long + 1) // 2 + 1 if extension == "mirror" else 0
-        x = np.pad(y, pad, mode="symmetric") if pad else y
-        if extension == "mirror":
-            first, last = 0, n - 1               # centres, record indices
-        else:
-            first = l_long // 2
-            last = n - l_long + l_long // 2
-        count = last - first + 1
-        length = np.empty(count, dtype=np.int64)
-        kurt = np.empty(count)
-        contrib = np.empty(count)
-        flag = np.empty(count, dtype=np.bool_)
-        _adaptive_lengths(x, first + pad, count, params.l_max, params.l_min,
-                          params.k1, params.k2, params.s1, params.s2,
-                          params.l_tail, params.dl_shrink, params.dl_grow,
-                          length, kurt, contrib, flag)
-        keep = np.arange(0, count, step)
-        lengths = length[keep]
-        starts = first + keep - lengths // 2
-        kurt, contrib, flag = kurt[keep], contrib[keep], flag[keep]
-    elif window is None:
-        if step is not None:
-            raise InputError("step needs a window length: the default "
-                             "(window=None) is one window over the record")
-        x, pad = y, 0
-        l_long = l_short = n
-        starts = np.zeros(1, dtype=np.int64)
-        lengths = np.full(1, n, dtype=np.int64)
+        (x, pad, starts, lengths, l_long, l_short, kurt, contrib,
+         flag) = _adaptive_windows(y, params, step, extension)
     else:
-        big_l = _positive_int(window, "window")
-        if big_l > n:
-            raise InputError(f"window ({big_l} samples) is longer than the "
-                             f"record ({n} samples)")
-        step = max(1, big_l // 10) if step is None else step
-        l_long = l_short = big_l
-        if extension == "mirror":
-            pad = (big_l + 1) // 2 + 1
-            x = np.pad(y, pad, mode="symmetric")
-            starts = np.arange(0, n, step, dtype=np.int64) - big_l // 2
-        else:
-            x, pad = y, 0
-            starts = np.arange(0, n - big_l + 1, step, dtype=np.int64)
-        lengths = np.full(starts.size, big_l, dtype=np.int64)
+        x, pad, starts, lengths, l_long, l_short = _fixed_windows(y, window, step, extension)
 
     m = _factors(int(l_short), tau0, taus, kind)
     if arw == "tau0" and m[0] != 1:

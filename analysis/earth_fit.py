@@ -176,6 +176,52 @@ def _not_identifiable(why: str, **extra) -> EffectFit:
                      extra={"identifiable": False, "reason": why, **extra})
 
 
+def _attitude_change(att: np.ndarray) -> float:
+    """Largest rotation angle [rad] of the attitudes away from the first one."""
+    tr = np.einsum("nji,ji->n", att, att[0])                 # trace(R_0ᵀ R_i)
+    # acos loses precision near 0: use the skew part as well
+    rel = np.einsum("nji,jk->nik", att, att[0])              # R_iᵀ R_0
+    skew = 0.5 * np.stack([rel[:, 2, 1] - rel[:, 1, 2], rel[:, 0, 2] - rel[:, 2, 0],
+                           rel[:, 1, 0] - rel[:, 0, 1]], -1)
+    return float(np.max(np.arctan2(np.linalg.norm(skew, axis=1), 0.5 * (tr - 1.0))))
+
+
+def _pooled_information(e: np.ndarray, X: np.ndarray, rv: np.ndarray, qv: np.ndarray) -> tuple:
+    """Information matrix and vector of (c, s) summed over the gyros that see them, with the
+    residual χ², its dof and the number of gyros used."""
+    ng = e.shape[1]
+    info = np.zeros((2, 2))
+    vec = np.zeros(2)
+    chi2_res, dof_res, used = 0.0, 0, 0
+    for k in range(ng):
+        got = _gyro_information(e[:, k], X[:, k, :], float(rv[k]), float(qv[k]))
+        if got is None:
+            continue
+        ik, vk, c2, dof, _ = got
+        info += ik
+        vec += vk
+        chi2_res += c2
+        dof_res += dof
+        used += 1
+    return info, vec, chi2_res, dof_res, used
+
+
+def _latitude_and_magnitude(c: float, s: float, cov: np.ndarray) -> tuple:
+    """Latitude [deg] and magnitude [Ω] of (c, s) with their 1σ by the delta method."""
+    m2 = c * c + s * s
+    m = math.sqrt(m2)
+    lat = math.degrees(math.atan2(s, c))
+    if m > 0:
+        g_lat = np.array([-s, c]) / m2
+        g_mag = np.array([c, s]) / (m * EARTH_RATE_RAD_S)
+        lat_sig = math.degrees(math.sqrt(max(float(g_lat @ cov @ g_lat), 0.0)))
+        mag_sig = math.sqrt(max(float(g_mag @ cov @ g_mag), 0.0))
+    else:
+        lat_sig = mag_sig = float("inf")
+    mag = m / EARTH_RATE_RAD_S
+    return lat, lat_sig, mag, mag_sig
+
+
 def fit_earth_rate(E, H, ref_rad_s, time_s, dt_s: float, r, q, heading_deg: float,
                    latitude_deg_site: float | None = None, *, attitude=None) -> EffectFit:
     """Fit ``earth_rate`` (array-wide): offsets that change with attitude as Ω would.
@@ -236,32 +282,14 @@ def fit_earth_rate(E, H, ref_rad_s, time_s, dt_s: float, r, q, heading_deg: floa
         att = np.asarray(attitude, dtype=float)
         if att.shape != (n, 3, 3):
             raise ValueError(f"attitude must be ({n}, 3, 3), got shape {att.shape}")
-    # largest rotation angle away from the first attitude
-    tr = np.einsum("nji,ji->n", att, att[0])                 # trace(R_0ᵀ R_i)
-    # acos loses precision near 0: use the skew part as well
-    rel = np.einsum("nji,jk->nik", att, att[0])              # R_iᵀ R_0
-    skew = 0.5 * np.stack([rel[:, 2, 1] - rel[:, 1, 2], rel[:, 0, 2] - rel[:, 2, 0],
-                           rel[:, 1, 0] - rel[:, 0, 1]], -1)
-    change = float(np.max(np.arctan2(np.linalg.norm(skew, axis=1), 0.5 * (tr - 1.0))))
+    change = _attitude_change(att)
     site = {} if latitude_deg_site is None else {"site_latitude_deg": float(latitude_deg_site)}
     if not change > STATIC_ATTITUDE_RAD:
         return _not_identifiable(f"the record stays at one attitude (largest change "
                                  f"{change:.2g} rad)", attitude_change_rad=change, **site)
 
     X = earth_rate_regressors(att, h, heading_deg)
-    info = np.zeros((2, 2))
-    vec = np.zeros(2)
-    chi2_res, dof_res, used = 0.0, 0, 0
-    for k in range(ng):
-        got = _gyro_information(e[:, k], X[:, k, :], float(rv[k]), float(qv[k]))
-        if got is None:
-            continue
-        ik, vk, c2, dof, _ = got
-        info += ik
-        vec += vk
-        chi2_res += c2
-        dof_res += dof
-        used += 1
+    info, vec, chi2_res, dof_res, used = _pooled_information(e, X, rv, qv)
     scale = np.sqrt(np.diag(info))
     if used == 0 or not np.any(scale > 0):
         return _not_identifiable("the attitude changes leave the Earth's rate along the gyros "
@@ -277,17 +305,7 @@ def fit_earth_rate(E, H, ref_rad_s, time_s, dt_s: float, r, q, heading_deg: floa
     chi2_beta = float(beta @ info @ beta)
     z = chi2_to_z(chi2_beta, 2)
 
-    m2 = c * c + s * s
-    m = math.sqrt(m2)
-    lat = math.degrees(math.atan2(s, c))
-    if m > 0:
-        g_lat = np.array([-s, c]) / m2
-        g_mag = np.array([c, s]) / (m * EARTH_RATE_RAD_S)
-        lat_sig = math.degrees(math.sqrt(max(float(g_lat @ cov @ g_lat), 0.0)))
-        mag_sig = math.sqrt(max(float(g_mag @ cov @ g_mag), 0.0))
-    else:
-        lat_sig = mag_sig = float("inf")
-    mag = m / EARTH_RATE_RAD_S
+    lat, lat_sig, mag, mag_sig = _latitude_and_magnitude(c, s, cov)
 
     extra = {"identifiable": True, "c_rad_s": c, "s_rad_s": s, "cov_rad2_s2": cov.tolist(),
              "chi2_beta": chi2_beta, "dof_beta": 2, "magnitude_ratio": mag,

@@ -648,6 +648,90 @@ def _root_log_eps(excess: Callable[[float], float]) -> float:
     return hi
 
 
+def _checked_terms(kind: str, terms: Sequence[str] | None, n_taus: int,
+                   method: str, max_iter: int) -> tuple:
+    """The terms to fit in canonical order, after checking the fit options."""
+    if terms is None:
+        terms = tuple(t for t in TERMS if TERM_CONSTANTS[kind][t] is not None)
+    else:
+        terms = tuple(terms)
+        unknown = [t for t in terms if t not in TERMS]
+        if unknown or len(set(terms)) != len(terms) or not terms:
+            raise InputError(f"terms must be distinct names from {TERMS}, "
+                             f"got {terms!r}")
+        terms = tuple(t for t in TERMS if t in terms)  # canonical order
+    blind = [t for t in terms if TERM_CONSTANTS[kind][t] is None]
+    if blind:
+        raise InputError(f"the {kind} variance is blind to term(s) {blind}")
+    if n_taus < len(terms):
+        raise InputError(f"{n_taus} averaging times cannot determine "
+                         f"{len(terms)} noise terms; use more taus or fewer "
+                         "terms")
+    if method not in ("gls", "wls"):
+        raise InputError(f"unknown fit method {method!r}; expected 'gls' or "
+                         "'wls'")
+    if max_iter < 1:
+        raise InputError("max_iter must be at least 1")
+    return terms
+
+
+def _full_coefficients(terms: tuple, a: np.ndarray, active: np.ndarray,
+                       cov_active: np.ndarray | None) -> tuple:
+    """Coefficients and covariance of the fitted terms placed on all TERMS."""
+    coef = np.zeros(len(TERMS))
+    coef_cov = np.zeros((len(TERMS), len(TERMS)))
+    idx = np.array([TERMS.index(t) for t in terms])
+    coef[idx] = a
+    if cov_active is not None:
+        ia = idx[active]
+        coef_cov[np.ix_(ia, ia)] = cov_active
+    return coef, coef_cov
+
+
+def _term_values(kind: str, terms: tuple, a: np.ndarray, active: np.ndarray,
+                 cov_active: np.ndarray | None,
+                 cov_full: np.ndarray | None) -> dict:
+    """SI coefficient and 1-sigma of every term (None where not fitted)."""
+    values: dict = {}
+    for j, term in enumerate(terms):
+        c = TERM_CONSTANTS[kind][term]
+        assert c is not None                                   # blind terms were refused above
+        name = _SI_NAME[term]
+        values[name] = math.sqrt(a[j] / c)
+        sigma = None
+        if active[j] and cov_active is not None:
+            k = int(np.count_nonzero(active[:j]))
+            sigma = _coefficient_sigma(a[j], math.sqrt(cov_active[k, k]), c)
+        elif not active[j] and cov_full is not None and cov_full[j, j] > 0:
+            sigma = _coefficient_sigma(0.0, math.sqrt(cov_full[j, j]), c)
+        values[name + "_sigma"] = sigma
+    for term in TERMS:
+        values.setdefault(_SI_NAME[term], None)
+        values.setdefault(_SI_NAME[term] + "_sigma", None)
+    return values
+
+
+def _with_model_error(sol: _Solution, corr, g: np.ndarray, dof: int, iterate,
+                      max_iter: int) -> tuple:
+    """Refit with the relative model error eps that makes chi2 = dof: (solution, eps [-]).
+
+    The search holds the correlation between taus at that of the
+    model-error-free fit (it depends on the coefficients only through the
+    terms' shares at each tau): ~5x fewer matrix builds; the final fit
+    updates it again.
+    """
+    start = sol.a
+    fixed = None if corr is None else corr.matrix((g * start).T)
+
+    def excess(log_eps):
+        # chi2 to ~1e-6 is plenty for eps to the search's ~2 %
+        return iterate(start, corr, 10.0 ** log_eps, fixed, rtol=1e-6,
+                       cap=min(max_iter, 20)).chi2 - dof
+
+    model_error = 10.0 ** _root_log_eps(excess)
+    return iterate(start, corr, model_error), model_error
+
+
 def fit_noise_terms(result, edf_of_alpha: Callable[[np.ndarray], np.ndarray],
                     *, terms: Sequence[str] | None = None,
                     method: str = "gls", max_iter: int = 50) -> NoiseFit:
@@ -770,27 +854,7 @@ def fit_noise_terms(result, edf_of_alpha: Callable[[np.ndarray], np.ndarray],
     if not (np.all(np.isfinite(y)) and np.all(y > 0)):
         raise InputError("the deviation must be finite and positive at every "
                          "tau to fit noise terms (is the input constant?)")
-    if terms is None:
-        terms = tuple(t for t in TERMS if TERM_CONSTANTS[kind][t] is not None)
-    else:
-        terms = tuple(terms)
-        unknown = [t for t in terms if t not in TERMS]
-        if unknown or len(set(terms)) != len(terms) or not terms:
-            raise InputError(f"terms must be distinct names from {TERMS}, "
-                             f"got {terms!r}")
-        terms = tuple(t for t in TERMS if t in terms)  # canonical order
-    blind = [t for t in terms if TERM_CONSTANTS[kind][t] is None]
-    if blind:
-        raise InputError(f"the {kind} variance is blind to term(s) {blind}")
-    if taus.size < len(terms):
-        raise InputError(f"{taus.size} averaging times cannot determine "
-                         f"{len(terms)} noise terms; use more taus or fewer "
-                         "terms")
-    if method not in ("gls", "wls"):
-        raise InputError(f"unknown fit method {method!r}; expected 'gls' or "
-                         "'wls'")
-    if max_iter < 1:
-        raise InputError("max_iter must be at least 1")
+    terms = _checked_terms(kind, terms, taus.size, method, max_iter)
 
     # Columns tau^i: the fitted coefficients are the A_i of sum A_i tau^i.
     g = np.column_stack([taus ** TERM_EXPONENTS[t] for t in terms])
@@ -850,50 +914,15 @@ def fit_noise_terms(result, edf_of_alpha: Callable[[np.ndarray], np.ndarray],
     if dof > 0 and sol.chi2 > dof:
         # The model does not explain the scatter: add the relative model
         # error eps that makes chi2 = dof (Birge ratio idea).
-        # The search holds the correlation between taus at that of the
-        # model-error-free fit (it depends on the coefficients only through
-        # the terms' shares at each tau): ~5x fewer matrix builds; the final
-        # fit below updates it again.
-        start = sol.a
-        fixed = None if corr is None else corr.matrix((g * start).T)
-
-        def excess(log_eps):
-            # chi2 to ~1e-6 is plenty for eps to the search's ~2 %
-            return iterate(start, corr, 10.0 ** log_eps, fixed, rtol=1e-6,
-                           cap=min(max_iter, 20)).chi2 - dof
-
-        model_error = 10.0 ** _root_log_eps(excess)
-        sol = iterate(start, corr, model_error)
+        sol, model_error = _with_model_error(sol, corr, g, dof, iterate, max_iter)
     a, alpha, nu, x = sol.a, sol.alpha, sol.nu, sol.x
 
     active = a > 0
     cov_active = _covariance(x[:, active]) if active.any() else None
     cov_full = _covariance(x)
 
-    coef = np.zeros(len(TERMS))
-    coef_cov = np.zeros((len(TERMS), len(TERMS)))
-    idx = np.array([TERMS.index(t) for t in terms])
-    coef[idx] = a
-    if cov_active is not None:
-        ia = idx[active]
-        coef_cov[np.ix_(ia, ia)] = cov_active
-
-    values: dict = {}
-    for j, term in enumerate(terms):
-        c = TERM_CONSTANTS[kind][term]
-        assert c is not None                                   # blind terms were refused above
-        name = _SI_NAME[term]
-        values[name] = math.sqrt(a[j] / c)
-        sigma = None
-        if active[j] and cov_active is not None:
-            k = int(np.count_nonzero(active[:j]))
-            sigma = _coefficient_sigma(a[j], math.sqrt(cov_active[k, k]), c)
-        elif not active[j] and cov_full is not None and cov_full[j, j] > 0:
-            sigma = _coefficient_sigma(0.0, math.sqrt(cov_full[j, j]), c)
-        values[name + "_sigma"] = sigma
-    for term in TERMS:
-        values.setdefault(_SI_NAME[term], None)
-        values.setdefault(_SI_NAME[term] + "_sigma", None)
+    coef, coef_cov = _full_coefficients(terms, a, active, cov_active)
+    values = _term_values(kind, terms, a, active, cov_active, cov_full)
 
     dev = np.sqrt(y)
     return NoiseFit(

@@ -667,6 +667,56 @@ def misalignment_basis(h) -> tuple[np.ndarray, np.ndarray]:
     return e1[0], e2[0]
 
 
+def _tilt_fit(wh, zy0: np.ndarray, zu: np.ndarray, za: np.ndarray, seen) -> tuple:
+    """GLS of the tilt components c on the whitened perpendicular rates (along ``seen`` only
+    when not None), the θ²/2·u term put back twice: (fit, c, cov, χ², dof)."""
+    one_way = seen is not None
+    cos_t = 1.0
+    for _ in range(3):                       # plain fit, then the θ²/2·u term put back twice
+        zy = zy0 + (1.0 - cos_t) * zu
+        if one_way:
+            fit = wh.fit_whitened(zy, (za @ seen)[:, None])
+            c = seen * fit.beta[0]
+            cov = np.outer(seen, seen) * fit.cov[0, 0]
+            chi2 = float(fit.beta[0] ** 2 / fit.cov[0, 0])
+            dof = 1
+        else:
+            fit = wh.fit_whitened(zy, za)
+            c, cov = fit.beta, fit.cov
+            chi2 = float(c @ np.linalg.solve(cov, c))
+            dof = 2
+        cos_t = math.sqrt(max(1.0 - float(c @ c), 0.0))
+    return fit, c, cov, chi2, dof
+
+
+def _tilt_sigmas(c: np.ndarray, cov: np.ndarray, cn: float, sin_t: float, dof: int) -> dict:
+    """1σ of the tilt [deg], and of its azimuth [deg] where the data measure it."""
+    sigma = {}
+    if cn > 0 and sin_t < 1.0:
+        gt = c / (cn * math.sqrt(1.0 - sin_t ** 2))       # dθ/dc
+        sigma["tilt_deg"] = float(rad_to_deg(math.sqrt(gt @ cov @ gt)))
+    else:
+        sigma["tilt_deg"] = float(rad_to_deg(math.sqrt(np.linalg.eigvalsh(cov)[-1])))
+    cn_sigma = math.sqrt(c @ cov @ c) / cn if cn > 0 else math.inf
+    if dof == 2 and cn > 3.0 * cn_sigma:                   # one direction: ψ is assumed, not measured
+        gp = np.array([-c[1], c[0]]) / cn ** 2            # dψ/dc
+        sigma["tilt_azimuth_deg"] = float(rad_to_deg(math.sqrt(gp @ cov @ gp)))
+    return sigma
+
+
+def _misalignment_evidence(gyro: int, z: float, tilt: float, psi: float, sigma: dict) -> str:
+    """The sentence that reports the tilt (or its absence)."""
+    if z >= Z_EVIDENT:
+        az = (f" toward azimuth {_pm(psi, sigma['tilt_azimuth_deg'])}° around it (0° = toward +z)"
+              if "tilt_azimuth_deg" in sigma else "")
+        ev = (f"gyro {gyro} residual follows the rate about axes perpendicular to its own: its true "
+              f"axis is tilted {_pm(tilt, sigma['tilt_deg'])}° from the nominal one{az}")
+    else:
+        ev = (f"gyro {gyro} residual shows no significant response to the rate about other axes "
+              f"(tilt {_pm(tilt, sigma['tilt_deg'])}°, z = {z:.1f})")
+    return ev
+
+
 def fit_misalignment(e, omega_ref_rad_s, h, time_s, dt_s: float, r: float, q: float, gyro: int,
                      *, use=None) -> EffectFit:
     """True sensitive axis: residual proportional to the rate about other axes.
@@ -741,21 +791,7 @@ def fit_misalignment(e, omega_ref_rad_s, h, time_s, dt_s: float, r: float, q: fl
     if one_way:
         seen = vec[:, 1]
         unseen = basis @ vec[:, 0]
-    cos_t = 1.0
-    for _ in range(3):                       # plain fit, then the θ²/2·u term put back twice
-        zy = zy0 + (1.0 - cos_t) * zu
-        if one_way:
-            fit = wh.fit_whitened(zy, (za @ seen)[:, None])
-            c = seen * fit.beta[0]
-            cov = np.outer(seen, seen) * fit.cov[0, 0]
-            chi2 = float(fit.beta[0] ** 2 / fit.cov[0, 0])
-            dof = 1
-        else:
-            fit = wh.fit_whitened(zy, za)
-            c, cov = fit.beta, fit.cov
-            chi2 = float(c @ np.linalg.solve(cov, c))
-            dof = 2
-        cos_t = math.sqrt(max(1.0 - float(c @ c), 0.0))
+    fit, c, cov, chi2, dof = _tilt_fit(wh, zy0, zu, za, seen if one_way else None)
     z = chi2_to_z(chi2, dof)
     cn = float(np.hypot(c[0], c[1]))
     sin_t = min(cn, 1.0)
@@ -764,27 +800,11 @@ def fit_misalignment(e, omega_ref_rad_s, h, time_s, dt_s: float, r: float, q: fl
     tilt = rad_to_deg(math.asin(sin_t))
     psi_rad = math.atan2(c[1], c[0])
     psi = rad_to_deg(psi_rad)
-    sigma = {}
-    if cn > 0 and sin_t < 1.0:
-        gt = c / (cn * math.sqrt(1.0 - sin_t ** 2))       # dθ/dc
-        sigma["tilt_deg"] = float(rad_to_deg(math.sqrt(gt @ cov @ gt)))
-    else:
-        sigma["tilt_deg"] = float(rad_to_deg(math.sqrt(np.linalg.eigvalsh(cov)[-1])))
-    cn_sigma = math.sqrt(c @ cov @ c) / cn if cn > 0 else math.inf
-    if dof == 2 and cn > 3.0 * cn_sigma:                   # one direction: ψ is assumed, not measured
-        gp = np.array([-c[1], c[0]]) / cn ** 2            # dψ/dc
-        sigma["tilt_azimuth_deg"] = float(rad_to_deg(math.sqrt(gp @ cov @ gp)))
+    sigma = _tilt_sigmas(c, cov, cn, sin_t, dof)
     # tilt + azimuth (not also ``axis``: a model entry takes one form or the other);
     # the true axis itself is in extra["axis"]
     params = {"tilt_deg": float(tilt), "tilt_azimuth_deg": float(psi)}
-    if z >= Z_EVIDENT:
-        az = (f" toward azimuth {_pm(psi, sigma['tilt_azimuth_deg'])}° around it (0° = toward +z)"
-              if "tilt_azimuth_deg" in sigma else "")
-        ev = (f"gyro {gyro} residual follows the rate about axes perpendicular to its own: its true "
-              f"axis is tilted {_pm(tilt, sigma['tilt_deg'])}° from the nominal one{az}")
-    else:
-        ev = (f"gyro {gyro} residual shows no significant response to the rate about other axes "
-              f"(tilt {_pm(tilt, sigma['tilt_deg'])}°, z = {z:.1f})")
+    ev = _misalignment_evidence(gyro, z, tilt, psi, sigma)
     extra = _extra(fit, c=[float(v) for v in c], cov_c=cov.tolist(), chi2_c=chi2, dof_c=dof,
                    axis=[float(v) for v in axis])
     if unseen is not None:
@@ -795,6 +815,60 @@ def fit_misalignment(e, omega_ref_rad_s, h, time_s, dt_s: float, r: float, q: fl
 
 
 # -- latency ---------------------------------------------------------------------
+
+def _refine_delay(wh, ze: np.ndarray, e: np.ndarray, u: np.ndarray, du: np.ndarray, d: float,
+                  dt: float) -> tuple:
+    """Delay by χ² of the fractionally delayed rate: grid from the linear estimate d, Brent, one
+    Gauss–Newton step; (delay [s], 1σ [s], z, extra entries)."""
+    n = e.size
+    chi2_0 = float(ze @ ze)
+
+    def model(dd):
+        return fractional_delay(u[:, None], [dd / dt])[:, 0] - u
+
+    def chi2(dd):
+        zr = ze - wh.whiten(model(dd))
+        return float(zr @ zr)
+
+    lo, hi = max(0.0, 0.5 * d - dt), 2.0 * d + 2.0 * dt
+    grid = np.linspace(lo, hi, 9)
+    vals = np.array([chi2(g) for g in grid])
+    k = int(np.argmin(vals))
+    for _ in range(3):                                   # minimum at the top: look further
+        if k < grid.size - 1 or 2.0 * grid[-1] >= (n - 2) * dt:
+            break
+        grid = np.linspace(grid[-2], 2.0 * grid[-1], 9)
+        vals = np.array([chi2(g) for g in grid])
+        k = int(np.argmin(vals))
+    a, b = grid[max(k - 1, 0)], grid[min(k + 1, grid.size - 1)]
+    res = optimize.minimize_scalar(chi2, bounds=(a, b), method="bounded",
+                                   options={"xatol": 1e-3 * dt})
+    dd = float(res.x)
+    deriv = -fractional_delay(du[:, None], [dd / dt])[:, 0]
+    zg = wh.whiten(deriv, e - model(dd))
+    step = wh.fit_whitened(zg[:, 1], zg[:, :1])
+    d_new = dd + float(step.beta[0])
+    if d_new >= 0.0 and chi2(d_new) <= res.fun:
+        dd = d_new
+    chi2_d = chi2(dd)
+    d, sd = dd, float(step.sigma[0])
+    z = chi2_to_z(max(chi2_0 - chi2_d, 0.0), 1)
+    return d, sd, z, dict(refined=True, chi2=chi2_d, chi2_no_delay=chi2_0,
+                          grid_s=[float(g) for g in grid])
+
+
+def _latency_evidence(gyro: int, z: float, d: float, sd: float, dt: float) -> str:
+    """The sentence that reports the delay (or its absence)."""
+    samples = d / dt
+    if z >= Z_EVIDENT:
+        lead = "lags" if d > 0 else "leads"
+        ev = (f"gyro {gyro} residual follows the angular acceleration about its axis: the output "
+              f"{lead} the reference by {_pm(abs(d) * 1e3, sd * 1e3)} ms ({_num(abs(samples), 3)} samples)")
+    else:
+        ev = (f"gyro {gyro} residual shows no significant response to the angular acceleration "
+              f"about its axis (delay {_pm(d * 1e3, sd * 1e3)} ms, z = {z:.1f})")
+    return ev
+
 
 def fit_latency(e, omega_ref_rad_s, h, time_s, dt_s: float, r: float, q: float, gyro: int,
                 *, use=None, refine: bool = True) -> EffectFit:
@@ -866,48 +940,9 @@ def fit_latency(e, omega_ref_rad_s, h, time_s, dt_s: float, r: float, q: float, 
     z = _z1(t)
     extra = _extra(fit, t=t, d_linear_s=d, sigma_linear_s=sd, refined=False)
     if refine and d > 0.5 * dt and abs(t) > 5.0:
-        ze = zz[:, 1]
-        chi2_0 = float(ze @ ze)
-
-        def model(dd):
-            return fractional_delay(u[:, None], [dd / dt])[:, 0] - u
-
-        def chi2(dd):
-            zr = ze - wh.whiten(model(dd))
-            return float(zr @ zr)
-
-        lo, hi = max(0.0, 0.5 * d - dt), 2.0 * d + 2.0 * dt
-        grid = np.linspace(lo, hi, 9)
-        vals = np.array([chi2(g) for g in grid])
-        k = int(np.argmin(vals))
-        for _ in range(3):                                   # minimum at the top: look further
-            if k < grid.size - 1 or 2.0 * grid[-1] >= (n - 2) * dt:
-                break
-            grid = np.linspace(grid[-2], 2.0 * grid[-1], 9)
-            vals = np.array([chi2(g) for g in grid])
-            k = int(np.argmin(vals))
-        a, b = grid[max(k - 1, 0)], grid[min(k + 1, grid.size - 1)]
-        res = optimize.minimize_scalar(chi2, bounds=(a, b), method="bounded",
-                                       options={"xatol": 1e-3 * dt})
-        dd = float(res.x)
-        deriv = -fractional_delay(du[:, None], [dd / dt])[:, 0]
-        zg = wh.whiten(deriv, e - model(dd))
-        step = wh.fit_whitened(zg[:, 1], zg[:, :1])
-        d_new = dd + float(step.beta[0])
-        if d_new >= 0.0 and chi2(d_new) <= res.fun:
-            dd = d_new
-        chi2_d = chi2(dd)
-        d, sd = dd, float(step.sigma[0])
-        z = chi2_to_z(max(chi2_0 - chi2_d, 0.0), 1)
-        extra.update(refined=True, chi2=chi2_d, chi2_no_delay=chi2_0, grid_s=[float(g) for g in grid])
-    samples = d / dt
-    if z >= Z_EVIDENT:
-        lead = "lags" if d > 0 else "leads"
-        ev = (f"gyro {gyro} residual follows the angular acceleration about its axis: the output "
-              f"{lead} the reference by {_pm(abs(d) * 1e3, sd * 1e3)} ms ({_num(abs(samples), 3)} samples)")
-    else:
-        ev = (f"gyro {gyro} residual shows no significant response to the angular acceleration "
-              f"about its axis (delay {_pm(d * 1e3, sd * 1e3)} ms, z = {z:.1f})")
+        d, sd, z, more = _refine_delay(wh, zz[:, 1], e, u, du, d, dt)
+        extra.update(more)
+    ev = _latency_evidence(gyro, z, d, sd, dt)
     return EffectFit("latency", gyro, {"delay_s": d}, {"delay_s": sd}, z, ev, extra)
 
 
@@ -1059,6 +1094,95 @@ def _logp_to_z(log_p: float) -> float:
     return chi2_to_z(-2.0 * log_p, 2)
 
 
+def _line_detection(series: np.ndarray, pos: np.ndarray, first: int, n_det: int, dt: float,
+                    r: float, q: float, q_angle_rad: float) -> tuple:
+    """Strongest Fourier bin among the first n_det whitened values: (p_max, n_bins, log FAP, z,
+    f_det [Hz])."""
+    m_det = int(np.searchsorted(pos - first, n_det))       # whitened values among them
+    n_bins = (n_det - 1) // 2                              # j = 1 .. ⌈N/2⌉ − 1
+    if n_bins < 1 or m_det < 1:
+        raise ValueError("too few samples for a periodogram")
+    tested = np.abs(sfft.rfft(series[:n_det])[1:n_bins + 1]) ** 2 / m_det
+    if q_angle_rad > 0:
+        c = 1.0 - np.cos(2.0 * np.pi * np.arange(1, n_bins + 1) / n_det)
+        tested /= 1.0 + (q_angle_rad / dt) ** 2 * (2.0 * c) ** 2 / (2.0 * r * c + q)
+    j = int(np.argmax(tested)) + 1
+    p_max = float(tested[j - 1])
+    log_keep = n_bins * math.log1p(-math.exp(-p_max)) if p_max < 700 else -n_bins * math.exp(-p_max)
+    log_fap = math.log(-math.expm1(log_keep)) if log_keep < -1e-300 else -p_max + math.log(n_bins)
+    z = _logp_to_z(log_fap)
+    f_det = j / (n_det * dt)
+    return p_max, n_bins, log_fap, z, f_det
+
+
+def _padded_peak(series: np.ndarray, big_n: int, n_det: int, dt: float, f_det: float) -> tuple:
+    """Parabolic peak of the zero-padded periodogram near f_det: (f1 [Hz], padded bin [Hz])."""
+    # refinement: zero-padded periodogram of the whole series around f_det, parabola
+    pad = 4 if big_n <= 2 ** 20 else 2
+    n_pad = sfft.next_fast_len(pad * big_n, real=True)
+    spec_pad = np.abs(sfft.rfft(series, n=n_pad)) ** 2
+    df_pad = 1.0 / (n_pad * dt)
+    centre = round(f_det / df_pad)
+    w = max(2, math.ceil(n_pad / n_det))
+    lo_i, hi_i = max(1, centre - w), min(spec_pad.size - 2, centre + w)
+    i = lo_i + int(np.argmax(spec_pad[lo_i:hi_i + 1]))
+    i = min(max(i, 1), spec_pad.size - 2)
+    pm_, p0, pp = spec_pad[i - 1], spec_pad[i], spec_pad[i + 1]
+    del spec_pad
+    den = pm_ - 2.0 * p0 + pp
+    delta = 0.5 * (pm_ - pp) / den if den < 0 else 0.0
+    f1 = (i + float(np.clip(delta, -0.5, 0.5))) * df_pad
+    return f1, df_pad
+
+
+def _refine_frequency(wh, ze: np.ndarray, t: np.ndarray, f1: float, df_pad: float, nyq: float,
+                      bin_hz: float) -> tuple:
+    """Brent search of the GLS χ² near f1, then Gauss–Newton with ∂/∂f: (f, fit, cov or None)."""
+    def lin(f):
+        arg = 2.0 * np.pi * f * t
+        sn, cs = np.sin(arg), np.cos(arg)
+        return wh.fit_whitened(ze, wh.whiten(sn, cs)), sn, cs
+
+    a_f = max(f1 - df_pad, 0.25 * df_pad)
+    b_f = min(f1 + df_pad, nyq - 0.25 * df_pad)
+    res = optimize.minimize_scalar(lambda f: lin(f)[0].chi2, bounds=(a_f, b_f), method="bounded",
+                                   options={"xatol": 0.02 * bin_hz})
+    f = float(res.x)
+    fit, sn, cs = lin(f)
+    cov = None
+    for it in range(5):                                    # Gauss–Newton polish, with ∂/∂f
+        a_s, a_c = fit.beta
+        dfx = 2.0 * np.pi * t * (a_s * cs - a_c * sn)      # ∂/∂f of a_s sin + a_c cos
+        try:
+            full = wh.fit_whitened(ze, wh.whiten(sn, cs, dfx))
+        except NotIdentifiableError:
+            cov = None
+            break
+        cov, step = full.cov, float(full.beta[2])          # cov at the current f
+        if it == 4 or not abs(step) > 1e-3 * math.sqrt(cov[2, 2]):
+            break
+        trial = lin(f + step)
+        if not (0.0 < f + step < nyq and trial[0].chi2 <= fit.chi2):
+            break
+        f, (fit, sn, cs) = f + step, trial
+    return f, fit, cov
+
+
+def _sinusoid_evidence(gyro: int, f: float, f_s: float, amp_d: float, amp_s: float,
+                       log_fap: float, n_bins: int, z: float) -> str:
+    """The sentence that reports the strongest line (or its absence)."""
+    fap_txt = f"{math.exp(log_fap):.2g}" if log_fap > -700 else f"1e{log_fap / math.log(10.0):.0f}"
+    if z >= Z_EVIDENT:
+        ev = (f"gyro {gyro} residual has a line at {_pm(f, f_s)} Hz of amplitude "
+              f"{_pm(amp_d, amp_s)} deg/s (false-alarm probability {fap_txt} over {n_bins} "
+              "frequencies); the model has no sinusoid")
+    else:
+        ev = (f"gyro {gyro} residual has no significant line: the strongest, at {f:.4g} Hz "
+              f"({_num(amp_d, 2)} deg/s), has false-alarm probability {fap_txt} over {n_bins} "
+              f"frequencies (z = {z:.1f})")
+    return ev
+
+
 def fit_sinusoid(e, time_s, dt_s: float, r: float, q: float, gyro: int, use=None, *,
                  q_angle_rad: float = 0.0) -> EffectFit:
     """Sinusoidal rate error: the strongest line of the whitened residual.
@@ -1139,64 +1263,11 @@ def fit_sinusoid(e, time_s, dt_s: float, r: float, q: float, gyro: int, use=None
     # detection on the largest fast FFT length (the first n_det positions; their
     # periodogram is as exact as the whole one's)
     n_det = _fast_len_below(big_n)
-    m_det = int(np.searchsorted(pos - first, n_det))       # whitened values among them
-    n_bins = (n_det - 1) // 2                              # j = 1 .. ⌈N/2⌉ − 1
-    if n_bins < 1 or m_det < 1:
-        raise ValueError("too few samples for a periodogram")
-    tested = np.abs(sfft.rfft(series[:n_det])[1:n_bins + 1]) ** 2 / m_det
-    if q_angle_rad > 0:
-        c = 1.0 - np.cos(2.0 * np.pi * np.arange(1, n_bins + 1) / n_det)
-        tested /= 1.0 + (q_angle_rad / dt) ** 2 * (2.0 * c) ** 2 / (2.0 * r * c + q)
-    j = int(np.argmax(tested)) + 1
-    p_max = float(tested[j - 1])
-    log_keep = n_bins * math.log1p(-math.exp(-p_max)) if p_max < 700 else -n_bins * math.exp(-p_max)
-    log_fap = math.log(-math.expm1(log_keep)) if log_keep < -1e-300 else -p_max + math.log(n_bins)
-    z = _logp_to_z(log_fap)
-    f_det = j / (n_det * dt)
-    # refinement: zero-padded periodogram of the whole series around f_det, parabola
-    pad = 4 if big_n <= 2 ** 20 else 2
-    n_pad = sfft.next_fast_len(pad * big_n, real=True)
-    spec_pad = np.abs(sfft.rfft(series, n=n_pad)) ** 2
-    df_pad = 1.0 / (n_pad * dt)
-    centre = round(f_det / df_pad)
-    w = max(2, math.ceil(n_pad / n_det))
-    lo_i, hi_i = max(1, centre - w), min(spec_pad.size - 2, centre + w)
-    i = lo_i + int(np.argmax(spec_pad[lo_i:hi_i + 1]))
-    i = min(max(i, 1), spec_pad.size - 2)
-    pm_, p0, pp = spec_pad[i - 1], spec_pad[i], spec_pad[i + 1]
-    del spec_pad
-    den = pm_ - 2.0 * p0 + pp
-    delta = 0.5 * (pm_ - pp) / den if den < 0 else 0.0
-    f1 = (i + float(np.clip(delta, -0.5, 0.5))) * df_pad
+    p_max, n_bins, log_fap, z, f_det = _line_detection(series, pos, first, n_det, dt, r, q,
+                                                       q_angle_rad)
+    f1, df_pad = _padded_peak(series, big_n, n_det, dt, f_det)
     bin_hz = 1.0 / (big_n * dt)
-
-    def lin(f):
-        arg = 2.0 * np.pi * f * t
-        sn, cs = np.sin(arg), np.cos(arg)
-        return wh.fit_whitened(ze, wh.whiten(sn, cs)), sn, cs
-
-    a_f = max(f1 - df_pad, 0.25 * df_pad)
-    b_f = min(f1 + df_pad, nyq - 0.25 * df_pad)
-    res = optimize.minimize_scalar(lambda f: lin(f)[0].chi2, bounds=(a_f, b_f), method="bounded",
-                                   options={"xatol": 0.02 * bin_hz})
-    f = float(res.x)
-    fit, sn, cs = lin(f)
-    cov = None
-    for it in range(5):                                    # Gauss–Newton polish, with ∂/∂f
-        a_s, a_c = fit.beta
-        dfx = 2.0 * np.pi * t * (a_s * cs - a_c * sn)      # ∂/∂f of a_s sin + a_c cos
-        try:
-            full = wh.fit_whitened(ze, wh.whiten(sn, cs, dfx))
-        except NotIdentifiableError:
-            cov = None
-            break
-        cov, step = full.cov, float(full.beta[2])          # cov at the current f
-        if it == 4 or not abs(step) > 1e-3 * math.sqrt(cov[2, 2]):
-            break
-        trial = lin(f + step)
-        if not (0.0 < f + step < nyq and trial[0].chi2 <= fit.chi2):
-            break
-        f, (fit, sn, cs) = f + step, trial
+    f, fit, cov = _refine_frequency(wh, ze, t, f1, df_pad, nyq, bin_hz)
     a_s, a_c = fit.beta
     if cov is None:
         cov = np.full((3, 3), np.nan)
@@ -1215,15 +1286,7 @@ def fit_sinusoid(e, time_s, dt_s: float, r: float, q: float, gyro: int, use=None
         sigma["freq_hz"] = f_s
     extra = _extra(fit, p_max=p_max, n_bins=n_bins, log10_fap=log_fap / math.log(10.0),
                    bin_hz=bin_hz, f_detected_hz=f_det, chi2_no_line=float(ze @ ze))
-    fap_txt = f"{math.exp(log_fap):.2g}" if log_fap > -700 else f"1e{log_fap / math.log(10.0):.0f}"
-    if z >= Z_EVIDENT:
-        ev = (f"gyro {gyro} residual has a line at {_pm(f, f_s)} Hz of amplitude "
-              f"{_pm(amp_d, amp_s)} deg/s (false-alarm probability {fap_txt} over {n_bins} "
-              "frequencies); the model has no sinusoid")
-    else:
-        ev = (f"gyro {gyro} residual has no significant line: the strongest, at {f:.4g} Hz "
-              f"({_num(amp_d, 2)} deg/s), has false-alarm probability {fap_txt} over {n_bins} "
-              f"frequencies (z = {z:.1f})")
+    ev = _sinusoid_evidence(gyro, f, f_s, amp_d, amp_s, log_fap, n_bins, z)
     return EffectFit("sinusoid", gyro, params, sigma, z, ev, extra)
 
 
@@ -1238,6 +1301,46 @@ def _log_chi2_cdf(x: float, k: int) -> float:
         return v
     a = 0.5 * k
     return a * math.log(0.5 * x) - 0.5 * x - special.gammaln(a + 1.0)
+
+
+def _inner_envelope(y: np.ndarray, u: np.ndarray, c_plus: float, c_minus: float,
+                    block: int) -> float:
+    """Largest |block median| of output − reference well inside the output range [rad/s]."""
+    inner = (u < 0.9 * c_plus) & (u > -0.9 * c_minus)
+    eres = (y - u)[inner]
+    nb = eres.size // block
+    if nb >= 1:
+        env = float(np.max(np.abs(np.median(eres[:nb * block].reshape(nb, block), axis=1))))
+    else:
+        env = float(abs(np.median(eres))) if eres.size else 0.0
+    return env
+
+
+def _plateau_test(yp: np.ndarray, ym: np.ndarray, nu: int, ymax: float, r: float) -> tuple:
+    """Spread of the outputs beyond the range about their means against the noise:
+    (sum of squares [rad²/s²], z from the lower χ²_ν tail)."""
+    s_sum = 0.0
+    for part in (yp, ym):
+        if part.size > 1:
+            s_sum += float(np.sum((part - part.mean()) ** 2))
+    floor = nu * (np.finfo(float).eps * ymax) ** 2
+    x = max(s_sum, floor) / r
+    z = _logp_to_z(_log_chi2_cdf(x, nu))
+    return s_sum, z
+
+
+def _saturation_evidence(gyro: int, z: float, rng: float, rng_s: float, count: int, frac: float,
+                         spread: float, extra: dict) -> str:
+    """The sentence that reports the plateau (or its absence)."""
+    if z >= Z_EVIDENT:
+        ev = (f"gyro {gyro} output sits at ±{_pm(rng, rng_s)} deg/s on {count} samples "
+              f"({_num(100 * frac, 2)} %) where the reference is beyond it (up to "
+              f"{_num(extra['u_max_deg_s'], 4)} deg/s), spread {_num(spread, 2)} deg/s against "
+              f"a noise σ of {_num(extra['arw_sigma_deg_s'], 2)} deg/s: clipped")
+    else:
+        ev = (f"gyro {gyro} output beyond ±{_num(rng, 4)} deg/s spreads {_num(spread, 2)} deg/s, "
+              f"like its noise σ {_num(extra['arw_sigma_deg_s'], 2)} deg/s: no plateau (z = {z:.1f})")
+    return ev
 
 
 def fit_saturation(gyro_rad_s, u_rad_s, r: float, gyro: int, *, use=None,
@@ -1307,13 +1410,7 @@ def fit_saturation(gyro_rad_s, u_rad_s, r: float, gyro: int, *, use=None,
     sig = math.sqrt(r)
     c_plus, c_minus = float(np.max(y)), float(-np.min(y))
     ymax = max(c_plus, c_minus)
-    inner = (u < 0.9 * c_plus) & (u > -0.9 * c_minus)
-    eres = (y - u)[inner]
-    nb = eres.size // block
-    if nb >= 1:
-        env = float(np.max(np.abs(np.median(eres[:nb * block].reshape(nb, block), axis=1))))
-    else:
-        env = float(abs(np.median(eres))) if eres.size else 0.0
+    env = _inner_envelope(y, u, c_plus, c_minus, block)
     mu = 3.0 * sig + env
     tp, tm = u > c_plus + mu, u < -c_minus - mu
     yp, ym = y[tp], y[tm]
@@ -1326,13 +1423,7 @@ def fit_saturation(gyro_rad_s, u_rad_s, r: float, gyro: int, *, use=None,
         ev = (f"gyro {gyro} output never sits on a plateau while the reference is beyond it "
               f"(max |output| {_num(rng, 4)} deg/s, reference up to {_num(extra['u_max_deg_s'], 4)} deg/s)")
         return EffectFit("saturation", gyro, {"range_deg_s": rng}, {}, 0.0, ev, extra)
-    s_sum = 0.0
-    for part in (yp, ym):
-        if part.size > 1:
-            s_sum += float(np.sum((part - part.mean()) ** 2))
-    floor = nu * (np.finfo(float).eps * ymax) ** 2
-    x = max(s_sum, floor) / r
-    z = _logp_to_z(_log_chi2_cdf(x, nu))
+    s_sum, z = _plateau_test(yp, ym, nu, ymax, r)
     mag = np.abs(np.concatenate([yp, ym]))
     c = float(mag.mean())
     c_s = float(mag.std(ddof=1) / math.sqrt(mag.size)) if mag.size > 1 else math.nan
@@ -1341,13 +1432,6 @@ def fit_saturation(gyro_rad_s, u_rad_s, r: float, gyro: int, *, use=None,
     spread = float(rad_s_to_deg_s(math.sqrt(s_sum / nu)))
     extra.update(spread_deg_s=spread, arw_sigma_deg_s=float(rad_s_to_deg_s(sig)), dof=nu)
     frac = mag.size / n
-    if z >= Z_EVIDENT:
-        ev = (f"gyro {gyro} output sits at ±{_pm(rng, rng_s)} deg/s on {mag.size} samples "
-              f"({_num(100 * frac, 2)} %) where the reference is beyond it (up to "
-              f"{_num(extra['u_max_deg_s'], 4)} deg/s), spread {_num(spread, 2)} deg/s against "
-              f"a noise σ of {_num(extra['arw_sigma_deg_s'], 2)} deg/s: clipped")
-    else:
-        ev = (f"gyro {gyro} output beyond ±{_num(rng, 4)} deg/s spreads {_num(spread, 2)} deg/s, "
-              f"like its noise σ {_num(extra['arw_sigma_deg_s'], 2)} deg/s: no plateau (z = {z:.1f})")
+    ev = _saturation_evidence(gyro, z, rng, rng_s, mag.size, frac, spread, extra)
     sigma = {"range_deg_s": rng_s} if math.isfinite(rng_s) else {}
     return EffectFit("saturation", gyro, {"range_deg_s": rng}, sigma, z, ev, extra)

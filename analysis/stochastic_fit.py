@@ -719,6 +719,83 @@ def _as_dt(dt_s) -> float:
     return dt
 
 
+def _baseline_fits(cv, base, label: str, gyro: int, common: dict) -> list[EffectFit]:
+    """The ``arw`` and ``rrw`` entries: the baseline fit's N and K with their Wald ratios."""
+    out: list[EffectFit] = []
+    for j, (effect, key, conv, slope) in enumerate((
+            ("arw", "n_deg_rt_h", units.arw_rad_rt_s_to_deg_rt_h, "−1/2"),
+            ("rrw", "k_deg_h_rt_h", units.rrw_rad_s_rt_s_to_deg_h_rt_h, "+1/2"))):
+        a, sa = float(base.a[j]), float(math.sqrt(base.cov[j, j]))
+        p, sp = _root_sigma(a, sa)
+        share = _columns(cv, ("n", "k"))[:, j] * max(a, 0.0) / np.maximum(base.model, 1e-300)
+        where, meas, _ = _band_text(cv, _band(cv, share), base.model)
+        out.append(EffectFit(
+            effect=effect, gyro=gyro, params={key: float(conv(p))}, sigma={key: float(conv(sp))},
+            z=a / sa if sa > 0 else math.inf,
+            evidence=(f"{label} ADEV follows slope {slope} for {where} ({meas:.3g} deg/h): "
+                      f"{'N' if j == 0 else 'K'} = {conv(p):.3g} ± {conv(sp):.2g} {_UNIT[key]}"),
+            extra={"chi2": base.chi2, "dof": base.dof, **common}))
+    return out
+
+
+def _extra_column_fits(cv, base, terms: tuple, gm: tuple, gm_tau_s: float | None, label: str,
+                       gyro: int, common: dict) -> list[EffectFit]:
+    """The ``bias_instability`` and ``quantization`` entries: one more Allan column each."""
+    out: list[EffectFit] = []
+    for term, effect, key, conv, what in (
+            ("b", "bias_instability", "b_deg_h", units.rad_s_to_deg_h, "flattens"),
+            ("q", "quantization", "q_deg", units.rad_to_deg, "falls as τ^−1")):
+        names = ("n", "k") + tuple(t for t in terms if t != term) + gm + (term,)
+        if term in terms:
+            f = _gls(cv, names, gm_tau_s)
+        else:
+            f = _gls(cv, names, gm_tau_s, a0=np.append(base.a, 0.0))
+        a, sa = float(f.a[-1]), float(math.sqrt(f.cov[-1, -1]))
+        z = a / sa
+        p, sp = _root_sigma(a, sa)
+        g = term_basis("oadev", term, cv.taus)
+        rest = _columns(cv, names[:-1], gm_tau_s) @ np.maximum(f.a[:-1], 0.0)  # the rest of the fit
+        share = g * max(a, sa) / (np.maximum(rest, 0.0) + g * max(a, sa))
+        idx = _band(cv, share)
+        where, meas, pred = _band_text(cv, idx, rest)
+        sym = "B" if term == "b" else "Q"
+        fitted = f"{sym} = {conv(p):.3g} ± {conv(sp):.2g} {_UNIT[key]}"
+        if z > 3:
+            evidence = (f"{label} ADEV {what} at {meas:.3g} deg/h for {where} ({fitted}); "
+                        f"ARW + RRW alone predicts {pred:.3g} there")
+        else:
+            evidence = (f"{label} ADEV {meas:.3g} deg/h for {where} against {pred:.3g} from "
+                        f"ARW + RRW: no {effect.replace('_', ' ')} seen ({fitted}, z = {z:.1f})")
+        out.append(EffectFit(
+            effect=effect, gyro=gyro, params={key: float(conv(p))}, sigma={key: float(conv(sp))},
+            z=float(z), evidence=evidence,
+            extra={"chi2": f.chi2, "dof": f.dof, **_nk_extra(f),
+                   "band_s": [float(cv.taus[idx[0]]), float(cv.taus[idx[-1]])],
+                   "adev_deg_h": meas, "baseline_adev_deg_h": pred, **common}))
+    return out
+
+
+def _ramp_entry(r: float, sr: float, z_r: float, lr: float, span: float, label: str, gyro: int,
+                common: dict) -> EffectFit:
+    """The ``rate_ramp`` entry (time domain, signed: z from the two-sided tail)."""
+    if not (math.isfinite(r) and math.isfinite(sr) and math.isfinite(z_r)):
+        return EffectFit(effect="rate_ramp", gyro=gyro, params={"r_deg_h2": 0.0}, z=0.0,
+                         evidence=f"{label}: rate ramp not estimable (no ARW seen)",
+                         extra={"lr": lr, **common})
+    r_deg = float(units.ramp_rad_s2_to_deg_h2(r))
+    sr_deg = float(units.ramp_rad_s2_to_deg_h2(sr))
+    drift = f"{_deg_h(r * span):.3g} deg/h over the {span:.0f} s record"
+    if z_r > 3:
+        ev = (f"{label} rate drifts R = {r_deg:.3g} ± {sr_deg:.2g} deg/h² ({drift}); "
+              f"ARW + RRW alone give a ramp of 0 ± {sr_deg:.2g}")
+    else:
+        ev = (f"{label} shows no rate ramp beyond ARW + RRW: R = {r_deg:.3g} ± {sr_deg:.2g} deg/h² "
+              f"({drift}, z = {z_r:.1f})")
+    return EffectFit(effect="rate_ramp", gyro=gyro, params={"r_deg_h2": r_deg},
+                     sigma={"r_deg_h2": sr_deg}, z=float(z_r), evidence=ev,
+                     extra={"lr": lr, **common})
+
+
 def fit_gyro_noise(e, dt_s: float, gyro: int, *, model_terms: tuple = (),
                    gm_tau_s: float | None = None, min_tau_s: float = 0.0) -> list[EffectFit]:
     """Baseline noise and the non-baseline stochastic effects of one gyro.
@@ -803,75 +880,9 @@ def fit_gyro_noise(e, dt_s: float, gyro: int, *, model_terms: tuple = (),
         base = _gls(cv, base_names, gm_tau_s)
     common = {"chi2_baseline": base.chi2, "dof_baseline": base.dof, "ramp_removed": ramp_removed}
 
-    out = []
-    # -- baseline: ARW and RRW
-    for j, (effect, key, conv, slope) in enumerate((
-            ("arw", "n_deg_rt_h", units.arw_rad_rt_s_to_deg_rt_h, "−1/2"),
-            ("rrw", "k_deg_h_rt_h", units.rrw_rad_s_rt_s_to_deg_h_rt_h, "+1/2"))):
-        a, sa = float(base.a[j]), float(math.sqrt(base.cov[j, j]))
-        p, sp = _root_sigma(a, sa)
-        share = _columns(cv, ("n", "k"))[:, j] * max(a, 0.0) / np.maximum(base.model, 1e-300)
-        where, meas, _ = _band_text(cv, _band(cv, share), base.model)
-        out.append(EffectFit(
-            effect=effect, gyro=gyro, params={key: float(conv(p))}, sigma={key: float(conv(sp))},
-            z=a / sa if sa > 0 else math.inf,
-            evidence=(f"{label} ADEV follows slope {slope} for {where} ({meas:.3g} deg/h): "
-                      f"{'N' if j == 0 else 'K'} = {conv(p):.3g} ± {conv(sp):.2g} {_UNIT[key]}"),
-            extra={"chi2": base.chi2, "dof": base.dof, **common}))
-
-    # -- bias instability and quantization: one more Allan column each
-    for term, effect, key, conv, what in (
-            ("b", "bias_instability", "b_deg_h", units.rad_s_to_deg_h, "flattens"),
-            ("q", "quantization", "q_deg", units.rad_to_deg, "falls as τ^−1")):
-        names = ("n", "k") + tuple(t for t in terms if t != term) + gm + (term,)
-        if term in terms:
-            f = _gls(cv, names, gm_tau_s)
-        else:
-            f = _gls(cv, names, gm_tau_s, a0=np.append(base.a, 0.0))
-        a, sa = float(f.a[-1]), float(math.sqrt(f.cov[-1, -1]))
-        z = a / sa
-        p, sp = _root_sigma(a, sa)
-        g = term_basis("oadev", term, cv.taus)
-        rest = _columns(cv, names[:-1], gm_tau_s) @ np.maximum(f.a[:-1], 0.0)  # the rest of the fit
-        share = g * max(a, sa) / (np.maximum(rest, 0.0) + g * max(a, sa))
-        idx = _band(cv, share)
-        where, meas, pred = _band_text(cv, idx, rest)
-        sym = "B" if term == "b" else "Q"
-        fitted = f"{sym} = {conv(p):.3g} ± {conv(sp):.2g} {_UNIT[key]}"
-        if z > 3:
-            evidence = (f"{label} ADEV {what} at {meas:.3g} deg/h for {where} ({fitted}); "
-                        f"ARW + RRW alone predicts {pred:.3g} there")
-        else:
-            evidence = (f"{label} ADEV {meas:.3g} deg/h for {where} against {pred:.3g} from "
-                        f"ARW + RRW: no {effect.replace('_', ' ')} seen ({fitted}, z = {z:.1f})")
-        out.append(EffectFit(
-            effect=effect, gyro=gyro, params={key: float(conv(p))}, sigma={key: float(conv(sp))},
-            z=float(z), evidence=evidence,
-            extra={"chi2": f.chi2, "dof": f.dof, **_nk_extra(f),
-                   "band_s": [float(cv.taus[idx[0]]), float(cv.taus[idx[-1]])],
-                   "adev_deg_h": meas, "baseline_adev_deg_h": pred, **common}))
-
-    # -- rate ramp (time domain, signed: z from the two-sided tail)
-    if not (math.isfinite(r) and math.isfinite(sr) and math.isfinite(z_r)):
-        out.append(EffectFit(effect="rate_ramp", gyro=gyro, params={"r_deg_h2": 0.0}, z=0.0,
-                             evidence=f"{label}: rate ramp not estimable (no ARW seen)",
-                             extra={"lr": lr, **common}))
-        out.append(_fit_gauss_markov(cv, base, label, gyro, common, terms))
-        return out
-    r_deg = float(units.ramp_rad_s2_to_deg_h2(r))
-    sr_deg = float(units.ramp_rad_s2_to_deg_h2(sr))
-    span = n * dt
-    drift = f"{_deg_h(r * span):.3g} deg/h over the {span:.0f} s record"
-    if z_r > 3:
-        ev = (f"{label} rate drifts R = {r_deg:.3g} ± {sr_deg:.2g} deg/h² ({drift}); "
-              f"ARW + RRW alone give a ramp of 0 ± {sr_deg:.2g}")
-    else:
-        ev = (f"{label} shows no rate ramp beyond ARW + RRW: R = {r_deg:.3g} ± {sr_deg:.2g} deg/h² "
-              f"({drift}, z = {z_r:.1f})")
-    out.append(EffectFit(effect="rate_ramp", gyro=gyro, params={"r_deg_h2": r_deg},
-                         sigma={"r_deg_h2": sr_deg}, z=float(z_r), evidence=ev,
-                         extra={"lr": lr, **common}))
-
+    out = _baseline_fits(cv, base, label, gyro, common)                        # ARW, RRW
+    out += _extra_column_fits(cv, base, terms, gm, gm_tau_s, label, gyro, common)  # B, Q
+    out.append(_ramp_entry(r, sr, z_r, lr, n * dt, label, gyro, common))
     out.append(_fit_gauss_markov(cv, base, label, gyro, common, terms))
     return out
 
@@ -968,6 +979,85 @@ def _olkin_siotani(r: np.ndarray, pairs: list, nu: np.ndarray) -> np.ndarray:
     return out
 
 
+def _pair_correlations(cav: np.ndarray, cov, coefs: list, G: np.ndarray, pairs: list) -> tuple:
+    """Per pair, the cross-covariance GLS normalised by the gyros' own coefficients: (rho, sigma
+    without correlation), each shape (2, pairs) [-]."""
+    rho = np.zeros((2, len(pairs)))
+    s0 = np.zeros((2, len(pairs)))
+    for p_, (i, k) in enumerate(pairs):
+        y = cav[:, i, k]
+        norm = np.array([math.sqrt(coefs[i]["n"] * coefs[k]["n"]),
+                         math.sqrt(coefs[i]["k"] * coefs[k]["k"])])
+        norm = np.where(norm > 0, norm, np.inf)
+        # Isserlis: cov(z_i z_k, z_i' z_k') = C^ii' C^kk' + C^ik' C^ki'; summed over
+        # the lags, Σ C^i C^k + Σ (C^ik)², where an auto-variance has 2 Σ C²:
+        # half of matrix(); without correlation only the first term
+        null = 0.5 * cov.matrix(coefs[i], other=(coefs[k], None))
+        a, cov0, _ = _solve(y, G, _whitener(null))
+        for _ in range(2):                    # Σ with the fitted cross-covariance
+            cross = {"n": float(a[0]), "k": float(a[1])}
+            a, _, _ = _solve(y, G, _whitener(null + 0.5 * cov.matrix(cross)))
+        rho[:, p_] = a / norm
+        s0[:, p_] = np.sqrt(np.diag(cov0)) / norm
+    return rho, s0
+
+
+def _family_correlation(fam: int, key: str, what: str, r: np.ndarray, sd0: np.ndarray,
+                        seen: np.ndarray, pairs: list, big_n: int) -> EffectFit:
+    """The entry of one family (0: ARW, 1: RRW) from the pairs' estimates r and null sigmas sd0."""
+    ok = (np.isfinite(r) & np.isfinite(sd0) & (sd0 > 0)
+          & np.array([seen[i, fam] and seen[k, fam] for i, k in pairs]))
+    mat = np.eye(big_n)
+    zmat = np.zeros((big_n, big_n))
+    smat = np.zeros((big_n, big_n))
+    for p_, (i, k) in enumerate(pairs):
+        mat[i, k] = mat[k, i] = r[p_]
+        zmat[i, k] = zmat[k, i] = chi2_to_z((r[p_] / sd0[p_]) ** 2, 1) if ok[p_] else math.nan
+        smat[i, k] = smat[k, i] = (1.0 - min(r[p_] ** 2, 0.99)) * sd0[p_]
+    if not ok.any():
+        return EffectFit(
+            effect="correlation", gyro=None, params={key: 0.0}, z=0.0,
+            evidence=(f"{what} correlation not estimable: the {what[:3]} term is not seen "
+                      f"(z > {_SEEN:g}) on two gyros"),
+            extra={"family": key, "estimable": False, "matrix": mat.tolist(),
+                   "seen": seen[:, fam].tolist()})
+    w = np.where(ok, 1.0 / np.where(ok, sd0, 1.0) ** 2, 0.0)
+    mean = float(np.sum(w * np.where(ok, r, 0.0)) / np.sum(w))
+    sigma0 = float(1.0 / math.sqrt(np.sum(w)))
+    z = chi2_to_z((mean / sigma0) ** 2, 1)
+    # 1σ of the weighted mean: the pairs' covariance under equicorrelation
+    # at the estimate (pairs sharing a gyro are correlated when ρ ≠ 0)
+    rho_c = float(np.clip(mean, -0.99, 0.99))
+    rc = np.full((big_n, big_n), rho_c)
+    np.fill_diagonal(rc, 1.0)
+    idx = [p_ for p_ in range(len(pairs)) if ok[p_]]
+    c_os = _olkin_siotani(rc, [pairs[p_] for p_ in idx], 1.0 / sd0[idx] ** 2)
+    wn = w[idx] / np.sum(w[idx])
+    sigma = float(math.sqrt(max(wn @ c_os @ wn, 0.0)))
+    # heterogeneity: the pairs around the common value, Fisher's (1 − ρ²)
+    # at the common ρ (pairs sharing a gyro are correlated when ρ ≠ 0: a
+    # guide, not an exact χ²)
+    het = float(np.sum(((r[idx] - mean) / ((1.0 - min(mean ** 2, 0.99)) * sd0[idx])) ** 2))
+    lo_ok = -1.0 / (big_n - 1) + 1e-3
+    value = float(np.clip(mean, lo_ok, 0.999))
+    rr = r[idx]
+    spread = (f"pairs {rr.min():.3g} to {rr.max():.3g}" if len(idx) > 1 else "one pair")
+    if z > 3:
+        evidence = (f"the gyros' {what} noise is correlated: {key} = {mean:.3g} ± {sigma:.2g} "
+                    f"over {len(idx)} pairs ({spread}, heterogeneity χ² = {het:.3g} for "
+                    f"{len(idx) - 1} dof)")
+    else:
+        evidence = (f"no {what} correlation between the gyros: {key} = {mean:.3g} ± {sigma:.2g} "
+                    f"over {len(idx)} pairs ({spread}, z = {z:.1f})")
+    return EffectFit(
+        effect="correlation", gyro=None, params={key: value}, sigma={key: sigma}, z=float(z),
+        evidence=evidence,
+        extra={"family": key, "estimable": True, "estimate": mean, "sigma_null": sigma0,
+               "seen": seen[:, fam].tolist(),
+               "matrix": mat.tolist(), "sigma_matrix": smat.tolist(), "z_matrix": zmat.tolist(),
+               "heterogeneity_chi2": het, "heterogeneity_dof": len(idx) - 1})
+
+
 def fit_correlation(E, dt_s: float) -> list[EffectFit]:
     """Cross-gyro correlation of the ARW and of the RRW (array-wide).
 
@@ -1020,80 +1110,9 @@ def fit_correlation(E, dt_s: float) -> list[EffectFit]:
     seen = np.array([[f.a[j] > _SEEN * math.sqrt(f.cov[j, j]) for j in (0, 1)] for f in fits])
     G = _columns(curves[0], ("n", "k"))
     pairs = [(i, k) for i in range(big_n) for k in range(i + 1, big_n)]
-    rho = np.zeros((2, len(pairs)))
-    s0 = np.zeros((2, len(pairs)))
-    for p_, (i, k) in enumerate(pairs):
-        y = cav[:, i, k]
-        norm = np.array([math.sqrt(coefs[i]["n"] * coefs[k]["n"]),
-                         math.sqrt(coefs[i]["k"] * coefs[k]["k"])])
-        norm = np.where(norm > 0, norm, np.inf)
-        # Isserlis: cov(z_i z_k, z_i' z_k') = C^ii' C^kk' + C^ik' C^ki'; summed over
-        # the lags, Σ C^i C^k + Σ (C^ik)², where an auto-variance has 2 Σ C²:
-        # half of matrix(); without correlation only the first term
-        null = 0.5 * cov.matrix(coefs[i], other=(coefs[k], None))
-        a, cov0, _ = _solve(y, G, _whitener(null))
-        for _ in range(2):                    # Σ with the fitted cross-covariance
-            cross = {"n": float(a[0]), "k": float(a[1])}
-            a, _, _ = _solve(y, G, _whitener(null + 0.5 * cov.matrix(cross)))
-        rho[:, p_] = a / norm
-        s0[:, p_] = np.sqrt(np.diag(cov0)) / norm
-
-    out = []
-    for fam, key, what in ((0, "rho_arw", "ARW (short τ)"), (1, "rho_rrw", "RRW (long τ)")):
-        r, sd0 = rho[fam], s0[fam]
-        ok = (np.isfinite(r) & np.isfinite(sd0) & (sd0 > 0)
-              & np.array([seen[i, fam] and seen[k, fam] for i, k in pairs]))
-        mat = np.eye(big_n)
-        zmat = np.zeros((big_n, big_n))
-        smat = np.zeros((big_n, big_n))
-        for p_, (i, k) in enumerate(pairs):
-            mat[i, k] = mat[k, i] = r[p_]
-            zmat[i, k] = zmat[k, i] = chi2_to_z((r[p_] / sd0[p_]) ** 2, 1) if ok[p_] else math.nan
-            smat[i, k] = smat[k, i] = (1.0 - min(r[p_] ** 2, 0.99)) * sd0[p_]
-        if not ok.any():
-            out.append(EffectFit(
-                effect="correlation", gyro=None, params={key: 0.0}, z=0.0,
-                evidence=(f"{what} correlation not estimable: the {what[:3]} term is not seen "
-                          f"(z > {_SEEN:g}) on two gyros"),
-                extra={"family": key, "estimable": False, "matrix": mat.tolist(),
-                       "seen": seen[:, fam].tolist()}))
-            continue
-        w = np.where(ok, 1.0 / np.where(ok, sd0, 1.0) ** 2, 0.0)
-        mean = float(np.sum(w * np.where(ok, r, 0.0)) / np.sum(w))
-        sigma0 = float(1.0 / math.sqrt(np.sum(w)))
-        z = chi2_to_z((mean / sigma0) ** 2, 1)
-        # 1σ of the weighted mean: the pairs' covariance under equicorrelation
-        # at the estimate (pairs sharing a gyro are correlated when ρ ≠ 0)
-        rho_c = float(np.clip(mean, -0.99, 0.99))
-        rc = np.full((big_n, big_n), rho_c)
-        np.fill_diagonal(rc, 1.0)
-        idx = [p_ for p_ in range(len(pairs)) if ok[p_]]
-        c_os = _olkin_siotani(rc, [pairs[p_] for p_ in idx], 1.0 / sd0[idx] ** 2)
-        wn = w[idx] / np.sum(w[idx])
-        sigma = float(math.sqrt(max(wn @ c_os @ wn, 0.0)))
-        # heterogeneity: the pairs around the common value, Fisher's (1 − ρ²)
-        # at the common ρ (pairs sharing a gyro are correlated when ρ ≠ 0: a
-        # guide, not an exact χ²)
-        het = float(np.sum(((r[idx] - mean) / ((1.0 - min(mean ** 2, 0.99)) * sd0[idx])) ** 2))
-        lo_ok = -1.0 / (big_n - 1) + 1e-3
-        value = float(np.clip(mean, lo_ok, 0.999))
-        rr = r[idx]
-        spread = (f"pairs {rr.min():.3g} to {rr.max():.3g}" if len(idx) > 1 else "one pair")
-        if z > 3:
-            evidence = (f"the gyros' {what} noise is correlated: {key} = {mean:.3g} ± {sigma:.2g} "
-                        f"over {len(idx)} pairs ({spread}, heterogeneity χ² = {het:.3g} for "
-                        f"{len(idx) - 1} dof)")
-        else:
-            evidence = (f"no {what} correlation between the gyros: {key} = {mean:.3g} ± {sigma:.2g} "
-                        f"over {len(idx)} pairs ({spread}, z = {z:.1f})")
-        out.append(EffectFit(
-            effect="correlation", gyro=None, params={key: value}, sigma={key: sigma}, z=float(z),
-            evidence=evidence,
-            extra={"family": key, "estimable": True, "estimate": mean, "sigma_null": sigma0,
-                   "seen": seen[:, fam].tolist(),
-                   "matrix": mat.tolist(), "sigma_matrix": smat.tolist(), "z_matrix": zmat.tolist(),
-                   "heterogeneity_chi2": het, "heterogeneity_dof": len(idx) - 1}))
-    return out
+    rho, s0 = _pair_correlations(cav, cov, coefs, G, pairs)
+    return [_family_correlation(fam, key, what, rho[fam], s0[fam], seen, pairs, big_n)
+            for fam, key, what in ((0, "rho_arw", "ARW (short τ)"), (1, "rho_rrw", "RRW (long τ)"))]
 
 
 # --------------------------------------------------------------------------
@@ -1164,6 +1183,53 @@ def _within_block_kurtosis(g: np.ndarray, edges: np.ndarray) -> float:
         if m >= 4 and ok.any():
             k.append(m * np.sum(blk[:, ok] ** 4, axis=0) / s2[ok] ** 2 * (m + 2) / m - 3.0)
     return max(float(np.mean(np.concatenate(k))), 0.0) if k else 0.0
+
+
+def _refine_boundaries(cu: np.ndarray, r: int, edges: np.ndarray, a: int, b: int,
+                       blocks: int) -> tuple:
+    """Both boundaries of grid window (a, b) to one Haar sample: (i0, i1, s0, s1) [Haar samples]."""
+    lo0, hi0 = edges[max(a - 1, 0)], edges[min(a + 1, blocks)]
+    lo1, hi1 = edges[max(b - 1, 0)], edges[min(b + 1, blocks)]
+    i0, i1 = int(edges[a]), int(edges[b])
+    for _ in range(3):
+        i0, _, s0 = _profile_boundary(cu, r, lo0, hi0, i1, True)
+        i1, _, s1 = _profile_boundary(cu, r, lo1, hi1, i0, False)
+    return i0, i1, s0, s1
+
+
+def _per_gyro_ratios(h: np.ndarray, i0: int, i1: int, n2: int, heavy: float) -> tuple:
+    """Variance ratio of each gyro's raw Haar differences in/out of the window, and its z."""
+    hi_in = np.mean(h[i0:i1] ** 2, axis=0)
+    hi_out = (np.sum(h[:i0] ** 2, axis=0) + np.sum(h[i1:] ** 2, axis=0)) / max(n2 - (i1 - i0), 1)
+    per_gyro = hi_in / hi_out
+    per_sd = per_gyro * math.sqrt((2.0 / max(i1 - i0, 1) + 2.0 / max(n2 - (i1 - i0), 1)) / heavy)
+    per_z = (per_gyro - 1.0) / per_sd
+    return per_gyro, per_z
+
+
+def _burst_evidence(ratio: float, s_ratio: float, start_s: float, end_s: float,
+                    per_gyro: np.ndarray, per_z: np.ndarray, z: float) -> str:
+    """The sentence that reports the window (or that none stands out) and the gyros it shows on."""
+    up = ratio >= 1.0
+    rises = f"rises {math.sqrt(ratio):.3g}×" if up else f"drops to {math.sqrt(ratio):.3g}×"
+    sig = np.abs(per_z) > 3.0
+    each = ", ".join(f"{k + 1} ({math.sqrt(per_gyro[k]):.3g}×)" for k in np.flatnonzero(sig))
+    if sig.all():
+        who = f"on all gyros: {each}"
+    elif sig.any():
+        rest = np.sqrt(per_gyro[~sig])
+        who = (f"on gyro{'s' if sig.sum() > 1 else ''} {each}; the others "
+               + (f"{rest.min():.3g}–{rest.max():.3g}×" if rest.size > 1 else f"{rest[0]:.3g}×"))
+    else:
+        who = "on no single gyro"
+    if z > 3:
+        evidence = (f"ARW {rises} (variance {ratio:.3g} ± {s_ratio:.2g}×) between {start_s:.6g} s and "
+                    f"{end_s:.6g} s {who}")
+    else:
+        evidence = (f"no burst: the strongest change of the ARW variance, {ratio:.3g}× between "
+                    f"{start_s:.6g} s and {end_s:.6g} s, is within what a record of this length "
+                    f"shows by chance (z = {z:.1f})")
+    return evidence
 
 
 def fit_burst(E, time_s, dt_s: float) -> EffectFit:
@@ -1246,12 +1312,7 @@ def fit_burst(E, time_s, dt_s: float) -> EffectFit:
     a, b = int(ia[best]), int(ib[best])
 
     # refine both boundaries to one Haar sample (2 dt) within a block of the grid's
-    lo0, hi0 = edges[max(a - 1, 0)], edges[min(a + 1, blocks)]
-    lo1, hi1 = edges[max(b - 1, 0)], edges[min(b + 1, blocks)]
-    i0, i1 = int(edges[a]), int(edges[b])
-    for _ in range(3):
-        i0, _, s0 = _profile_boundary(cu, r, lo0, hi0, i1, True)
-        i1, _, s1 = _profile_boundary(cu, r, lo1, hi1, i0, False)
+    i0, i1, s0, s1 = _refine_boundaries(cu, r, edges, a, b, blocks)
     d_in = (i1 - i0) * float(r)
     d_out = (n2 - (i1 - i0)) * float(r)
     u_in = cu[i1] - cu[i0]
@@ -1267,32 +1328,10 @@ def fit_burst(E, time_s, dt_s: float) -> EffectFit:
     s_end = float(math.hypot(2.0 * dt * (s1 if math.isfinite(s1) else 0.0), res))
 
     # per gyro: variance ratio of the raw Haar differences on the same window
-    hi_in = np.mean(h[i0:i1] ** 2, axis=0)
-    hi_out = (np.sum(h[:i0] ** 2, axis=0) + np.sum(h[i1:] ** 2, axis=0)) / max(n2 - (i1 - i0), 1)
-    per_gyro = hi_in / hi_out
-    per_sd = per_gyro * math.sqrt((2.0 / max(i1 - i0, 1) + 2.0 / max(n2 - (i1 - i0), 1)) / heavy)
-    per_z = (per_gyro - 1.0) / per_sd
+    per_gyro, per_z = _per_gyro_ratios(h, i0, i1, n2, heavy)
     davar_check = _davar_check(X, dt, t, i0, i1, int(np.argmax(np.abs(per_z))))
 
-    up = ratio >= 1.0
-    rises = f"rises {math.sqrt(ratio):.3g}×" if up else f"drops to {math.sqrt(ratio):.3g}×"
-    sig = np.abs(per_z) > 3.0
-    each = ", ".join(f"{k + 1} ({math.sqrt(per_gyro[k]):.3g}×)" for k in np.flatnonzero(sig))
-    if sig.all():
-        who = f"on all gyros: {each}"
-    elif sig.any():
-        rest = np.sqrt(per_gyro[~sig])
-        who = (f"on gyro{'s' if sig.sum() > 1 else ''} {each}; the others "
-               + (f"{rest.min():.3g}–{rest.max():.3g}×" if rest.size > 1 else f"{rest[0]:.3g}×"))
-    else:
-        who = "on no single gyro"
-    if z > 3:
-        evidence = (f"ARW {rises} (variance {ratio:.3g} ± {s_ratio:.2g}×) between {start_s:.6g} s and "
-                    f"{end_s:.6g} s {who}")
-    else:
-        evidence = (f"no burst: the strongest change of the ARW variance, {ratio:.3g}× between "
-                    f"{start_s:.6g} s and {end_s:.6g} s, is within what a record of this length "
-                    f"shows by chance (z = {z:.1f})")
+    evidence = _burst_evidence(ratio, s_ratio, start_s, end_s, per_gyro, per_z, z)
     return EffectFit(
         effect="burst", gyro=None,
         params={"start_s": start_s, "end_s": end_s, "variance_ratio": ratio},

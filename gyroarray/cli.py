@@ -230,13 +230,11 @@ def _number_list(text: str, name: str, *, integer: bool = False) -> list:
 MAX_DESIGN_N = 24
 
 
-def _design_space(args):
-    """The DesignSpace and GyroNoise of ``design --recommend`` (every default recorded)."""
+def _design_noise(args):
+    """The GyroNoise of ``design --recommend`` (model file or datasheet, ρ) and the ρ range to
+    test (None: a single ρ)."""
     import numpy as np
-    from gyroarray.predict import Swing
-    from gyroarray.recommend import DEFAULT_BANDWIDTH_HZ, ESTIMATORS, DesignSpace, GyroNoise
-    from gyroarray.units import deg_s_to_rad_s
-    src = {}
+    from gyroarray.recommend import GyroNoise
     if args.model is not None and any(v is not None for v in (args.arw, args.rrw, args.bi)):
         raise InputError("gyroarray design: give the noise as --model MODEL.toml or as a datasheet "
                          "(--arw, --rrw, --bi), not both")
@@ -264,6 +262,64 @@ def _design_space(args):
         rhos = sorted(set(np.round(np.linspace(lo, hi, 5), 12).tolist() + ([0.0] if lo < 0 < hi else [])))
         g = GyroNoise(**{**g.with_rho(0.0).__dict__,
                          "sources": {**g.sources, "rho_arw": "user", "rho_rrw": "user"}})
+    return g, rhos
+
+
+def _design_motion(args, rate: float, horizon: float):
+    """(swing, motion [rad/s] or None, its name, its specific force [m/s²] or None) of ``design``."""
+    from gyroarray.predict import Swing
+    from gyroarray.units import deg_s_to_rad_s
+    force = None
+    swing, motion, motion_name = None, None, "at rest"
+    if args.swing is not None and args.motion is not None:
+        raise InputError("gyroarray design: --swing and --motion exclude each other")
+    if args.swing is not None:
+        vals = _number_list(args.swing, "--swing")
+        if len(vals) != 2 or not vals[0] > 0 or not 0 < vals[1] < 0.5 * rate:
+            raise InputError(f"--swing must be AMP_DPS,FREQ_HZ with AMP > 0 and 0 < FREQ < Nyquist, "
+                             f"got {args.swing!r}")
+        swing = Swing(deg_s_to_rad_s(vals[0]), vals[1])
+        motion_name = f"swing {vals[0]:g} deg/s at {vals[1]:g} Hz about each axis"
+    if args.motion is not None:
+        from gyroarray.sim.profiles import load_profile
+        from gyroarray.sim.scenario import resolve_profile
+        from gyroarray.sim.truth import compute_truth
+        prof = load_profile(resolve_profile(args.motion, Path.cwd()))
+        dur = min(horizon, prof.duration_s)
+        if dur < horizon:
+            raise InputError(f"--motion {args.motion} lasts {prof.duration_s:g} s, shorter than "
+                             f"--horizon-s {horizon:g}")
+        mtruth = compute_truth(prof, rate, duration_s=horizon)
+        motion = mtruth.omega_body_rad_s
+        motion_name = f"profile {args.motion} (rate-table truth)"
+        force = mtruth.specific_force_m_s2
+    return swing, motion, motion_name, force
+
+
+def _design_bandwidth(args, rate: float, at_rest: bool, src: dict) -> list:
+    """[LO, HI] of the rate band [Hz]: the user's, else the default at rest or 0.1 Hz to 0.45 fs
+    in motion."""
+    from gyroarray.recommend import DEFAULT_BANDWIDTH_HZ
+    if args.bandwidth_hz is not None:
+        bw = _number_list(args.bandwidth_hz, "--bandwidth-hz")
+        if len(bw) == 1:
+            bw = [bw[0], bw[0]]
+        if len(bw) != 2 or not 0 < bw[0] <= bw[1] < 0.5 * rate:
+            raise InputError(f"--bandwidth-hz must be F or LO,HI with 0 < LO <= HI < Nyquist "
+                             f"({0.5 * rate:g} Hz), got {args.bandwidth_hz!r}")
+        src["bandwidth_hz"] = "user"
+    elif at_rest:
+        bw = [DEFAULT_BANDWIDTH_HZ, DEFAULT_BANDWIDTH_HZ]
+    else:
+        bw = [0.1, 0.45 * rate]
+    return bw
+
+
+def _design_space(args):
+    """The DesignSpace and GyroNoise of ``design --recommend`` (every default recorded)."""
+    from gyroarray.recommend import ESTIMATORS, DesignSpace
+    src = {}
+    g, rhos = _design_noise(args)
     rate = 100.0 if args.rate_hz is None else args.rate_hz
     if not rate > 0:
         raise InputError(f"--rate-hz must be > 0, got {rate:g}")
@@ -288,40 +344,8 @@ def _design_space(args):
         if unknown or not ests:
             raise InputError(f"--estimators: {unknown[0] if unknown else '(none)'} is not one the "
                              f"design search predicts ({', '.join(ESTIMATORS)})")
-    swing, motion, motion_name = None, None, "at rest"
-    if args.swing is not None and args.motion is not None:
-        raise InputError("gyroarray design: --swing and --motion exclude each other")
-    if args.swing is not None:
-        vals = _number_list(args.swing, "--swing")
-        if len(vals) != 2 or not vals[0] > 0 or not 0 < vals[1] < 0.5 * rate:
-            raise InputError(f"--swing must be AMP_DPS,FREQ_HZ with AMP > 0 and 0 < FREQ < Nyquist, "
-                             f"got {args.swing!r}")
-        swing = Swing(deg_s_to_rad_s(vals[0]), vals[1])
-        motion_name = f"swing {vals[0]:g} deg/s at {vals[1]:g} Hz about each axis"
-    if args.motion is not None:
-        from gyroarray.sim.profiles import load_profile
-        from gyroarray.sim.scenario import resolve_profile
-        from gyroarray.sim.truth import compute_truth
-        prof = load_profile(resolve_profile(args.motion, Path.cwd()))
-        dur = min(horizon, prof.duration_s)
-        if dur < horizon:
-            raise InputError(f"--motion {args.motion} lasts {prof.duration_s:g} s, shorter than "
-                             f"--horizon-s {horizon:g}")
-        mtruth = compute_truth(prof, rate, duration_s=horizon)
-        motion = mtruth.omega_body_rad_s
-        motion_name = f"profile {args.motion} (rate-table truth)"
-    if args.bandwidth_hz is not None:
-        bw = _number_list(args.bandwidth_hz, "--bandwidth-hz")
-        if len(bw) == 1:
-            bw = [bw[0], bw[0]]
-        if len(bw) != 2 or not 0 < bw[0] <= bw[1] < 0.5 * rate:
-            raise InputError(f"--bandwidth-hz must be F or LO,HI with 0 < LO <= HI < Nyquist "
-                             f"({0.5 * rate:g} Hz), got {args.bandwidth_hz!r}")
-        src["bandwidth_hz"] = "user"
-    elif swing is None and motion is None:
-        bw = [DEFAULT_BANDWIDTH_HZ, DEFAULT_BANDWIDTH_HZ]
-    else:
-        bw = [0.1, 0.45 * rate]
+    swing, motion, motion_name, force = _design_motion(args, rate, horizon)
+    bw = _design_bandwidth(args, rate, swing is None and motion is None, src)
     sensor_bw, src["sensor_bandwidth"] = _sensor_bandwidth_arg(args, rate)
     gsens = None
     if args.g_sensitivity is not None:
@@ -339,7 +363,7 @@ def _design_space(args):
                         bandwidth_hz=(float(bw[0]), float(bw[1])), swing=swing, motion=motion,
                         motion_name=motion_name, sensor_bandwidth=sensor_bw,
                         g_sensitivity_deg_s_per_g=None if gsens is None else tuple(gsens),
-                        specific_force_m_s2=None if motion is None else mtruth.specific_force_m_s2)
+                        specific_force_m_s2=force)
     object.__setattr__(space, "_sources", src)
     return g, space, rhos
 
@@ -1129,12 +1153,8 @@ def _add_compare_args(p, *, out: bool):
     p.add_argument("--json", action="store_true", help="print one JSON object")
 
 
-def build_parser() -> argparse.ArgumentParser:
-    parser = _Parser(prog="gyroarray", description=__doc__.splitlines()[0])
-    parser.plugin_help = True
-    parser.add_argument("--version", action="version", version=f"gyroarray {_version()}")
-    sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
-
+def _add_design_parsers(sub) -> None:
+    """The ``gdop`` and ``design`` subcommands (layouts, cone angle, recommendation)."""
     p = sub.add_parser("gdop", help="GDOP of a conical layout")
     _add_layout_args(p, alpha=True, required=True)
     p.add_argument("--json", action="store_true", help="print one JSON object")
@@ -1198,6 +1218,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=cmd_design)
 
+
+def _add_deviation_parsers(sub) -> None:
+    """The ``allan`` and ``davar`` subcommands (Allan and dynamic Allan deviation)."""
     p = sub.add_parser("allan", help="Allan deviation with confidence intervals and noise fit")
     p.add_argument("measurement", type=Path, metavar="MEAS.csv")
     p.add_argument("--gyro", type=int, metavar="K", help="only gyro K (1-based)")
@@ -1232,6 +1255,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=cmd_davar)
 
+
+def _add_simulation_parsers(sub) -> None:
+    """The ``simulate``, ``run``, ``sweep`` and ``report`` subcommands."""
     p = sub.add_parser("simulate", help="simulate a scenario into a measurement (CSV.GZ + TOML)")
     p.add_argument("scenario", type=Path, metavar="SCENARIO.toml")
     p.add_argument("--out", type=Path, required=True, metavar="DIR", help="output directory")
@@ -1280,6 +1306,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=cmd_report)
 
+
+def _add_compare_parsers(sub) -> None:
+    """The ``compare``, ``diagnose``, ``fit`` and ``ladder`` subcommands (measurement vs model)."""
     p = sub.add_parser("compare", help="measurement vs model: calibrate, model band, diagnostics report")
     _add_compare_args(p, out=True)
     p.add_argument("--validate", action="store_true",
@@ -1311,6 +1340,9 @@ def build_parser() -> argparse.ArgumentParser:
                         "last FRACTION (e.g. 0.3)")
     p.set_defaults(func=cmd_ladder)
 
+
+def _add_fdi_and_check_parsers(sub) -> None:
+    """The ``fdi`` (fault detection) and ``check`` (regression thresholds) subcommands."""
     p = sub.add_parser("fdi", help="fault detection and isolation on a measurement (parity space)")
     p.add_argument("measurement", type=Path, metavar="MEAS.csv")
     p.add_argument("--model", type=Path, metavar="MODEL.toml",
@@ -1330,6 +1362,20 @@ def build_parser() -> argparse.ArgumentParser:
                    help="run each scenario at its full length (slow; default: the quick version)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=cmd_check)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The ``gyroarray`` argument parser: one subparser per subcommand, each with ``--max-memory``."""
+    parser = _Parser(prog="gyroarray", description=__doc__.splitlines()[0])
+    parser.plugin_help = True
+    parser.add_argument("--version", action="version", version=f"gyroarray {_version()}")
+    sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
+
+    _add_design_parsers(sub)
+    _add_deviation_parsers(sub)
+    _add_simulation_parsers(sub)
+    _add_compare_parsers(sub)
+    _add_fdi_and_check_parsers(sub)
     for p in sub.choices.values():
         p.add_argument("--max-memory", type=_size, metavar="SIZE",
                        help="memory gyroarray may plan to use, e.g. 8G (default: half the "

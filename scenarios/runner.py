@@ -311,6 +311,59 @@ def _dask_client(scheduler: str):
         raise InputError(f"cannot connect to the Dask scheduler {scheduler}: {err}") from None
 
 
+def _scenarios_to_run(sweep: Sweep, rows_dir: Path, records: dict, notes: list) -> list:
+    """The scenarios without a rows file or whose file fails its check (noted), in sweep order."""
+    todo = []
+    for s in sweep.scenarios:
+        f = rows_dir / f"{s.id}.parquet"
+        if not f.exists():
+            todo.append(s)
+            continue
+        why = verify_rows_file(f, records.get(f.name))
+        if why is not None:
+            notes.append(f"{f}: {why}; run again")
+            todo.append(s)
+    return todo
+
+
+def _run_in_processes(todo: list, sweep: Sweep, workers: int, done) -> None:
+    """Run ``todo`` on a local spawn process pool, reporting each result to ``done``."""
+    ctx = mp.get_context("spawn")
+    blas = {k: v for k, v in THREAD_ENV.items() if k != "NUMBA_NUM_THREADS"}
+    with _env(blas), ProcessPoolExecutor(max_workers=min(workers, len(todo)),
+                                         mp_context=ctx, initializer=_watch_parent,
+                                         initargs=(os.getpid(),)) as pool:
+        futures = {pool.submit(run_one, s, sweep.estimators, sweep.name): s for s in todo}
+        pending = set(futures)
+        while pending:
+            finished, pending = wait(pending, return_when=FIRST_COMPLETED)
+            for fut in sorted(finished, key=lambda fu: futures[fu].id):
+                exc = fut.exception()
+                done(futures[fut], None if exc else fut.result(), exc)
+
+
+def _run_on_dask(todo: list, sweep: Sweep, scheduler: str, done, notes: list) -> None:
+    """Run ``todo`` on a dask.distributed cluster, reporting each result to ``done``."""
+    from distributed import as_completed
+    client = _dask_client(scheduler)
+    try:
+        envs = client.run(lambda: {k: os.environ.get(k) for k in THREAD_ENV})
+        off = sorted(w for w, e in envs.items() if e.get("OPENBLAS_NUM_THREADS") != "1")
+        if off:
+            notes.append(f"{len(off)} Dask worker(s) without OPENBLAS_NUM_THREADS=1: results "
+                         "may differ in the last bits from a local run")
+        futures = {client.submit(run_one, s, sweep.estimators, sweep.name, key=f"sweep-{s.id}",
+                                 pure=False): s for s in todo}
+        for dfut in as_completed(list(futures), loop=client.loop):
+            spec = futures[dfut]
+            if dfut.status == "error":
+                done(spec, err=dfut.exception())
+            else:
+                done(spec, dfut.result())
+    finally:
+        client.close()
+
+
 def run_sweep(sweep, out_dir, *, workers: int = 1, scheduler: str | None = None,
               progress=None) -> dict:
     """Run (or resume) a sweep into ``out_dir``; one Parquet file per finished scenario.
@@ -347,18 +400,9 @@ def run_sweep(sweep, out_dir, *, workers: int = 1, scheduler: str | None = None,
     (out / ROWS).mkdir(parents=True, exist_ok=True)
     _check_manifest(out, sweep)
     rows_dir = out / ROWS
-    notes = []
+    notes: list[str] = []
     records = _recorded_checksums(out)
-    todo = []
-    for s in sweep.scenarios:
-        f = rows_dir / f"{s.id}.parquet"
-        if not f.exists():
-            todo.append(s)
-            continue
-        why = verify_rows_file(f, records.get(f.name))
-        if why is not None:
-            notes.append(f"{f}: {why}; run again")
-            todo.append(s)
+    todo = _scenarios_to_run(sweep, rows_dir, records, notes)
     # longest first (a better finish on few workers); results do not depend on the order
     todo.sort(key=lambda s: (-_cost(s), s.id))
     skipped = len(sweep.scenarios) - len(todo)
@@ -376,39 +420,11 @@ def run_sweep(sweep, out_dir, *, workers: int = 1, scheduler: str | None = None,
 
     if todo and scheduler is None:
         backend = "processes"
-        ctx = mp.get_context("spawn")
-        blas = {k: v for k, v in THREAD_ENV.items() if k != "NUMBA_NUM_THREADS"}
-        with _env(blas), ProcessPoolExecutor(max_workers=min(workers, len(todo)),
-                                                   mp_context=ctx, initializer=_watch_parent,
-                                                   initargs=(os.getpid(),)) as pool:
-            futures = {pool.submit(run_one, s, sweep.estimators, sweep.name): s for s in todo}
-            pending = set(futures)
-            while pending:
-                finished, pending = wait(pending, return_when=FIRST_COMPLETED)
-                for fut in sorted(finished, key=lambda fu: futures[fu].id):
-                    exc = fut.exception()
-                    done(futures[fut], None if exc else fut.result(), exc)
+        _run_in_processes(todo, sweep, workers, done)
     elif todo:
         backend = "dask"
-        from distributed import as_completed
         assert scheduler is not None                          # the process pool took the None case
-        client = _dask_client(scheduler)
-        try:
-            envs = client.run(lambda: {k: os.environ.get(k) for k in THREAD_ENV})
-            off = sorted(w for w, e in envs.items() if e.get("OPENBLAS_NUM_THREADS") != "1")
-            if off:
-                notes.append(f"{len(off)} Dask worker(s) without OPENBLAS_NUM_THREADS=1: results "
-                             "may differ in the last bits from a local run")
-            futures = {client.submit(run_one, s, sweep.estimators, sweep.name, key=f"sweep-{s.id}",
-                                     pure=False): s for s in todo}
-            for dfut in as_completed(list(futures), loop=client.loop):
-                spec = futures[dfut]
-                if dfut.status == "error":
-                    done(spec, err=dfut.exception())
-                else:
-                    done(spec, dfut.result())
-        finally:
-            client.close()
+        _run_on_dask(todo, sweep, scheduler, done, notes)
     else:
         backend = "none (all done)"
     bar.show(final=True)

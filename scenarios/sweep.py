@@ -497,70 +497,26 @@ def _load_base(base, sweep_dir: Path, doc: _Doc, key: str) -> _Base:
     return _Base(data=bdata, params=_base_params(bdata), file=bfile)
 
 
-def load_sweep(path) -> Sweep:
-    """Read, strictly validate and expand a sweep file (see the module docstring).
+def _check_estimators(estimators, doc: _Doc) -> tuple | None:
+    """The estimator names of the sweep (None: all), checked against the registry."""
+    if estimators is None:
+        return None
+    from gyroarray.estimators import available
+    if not (isinstance(estimators, list) and estimators
+            and all(isinstance(e, str) for e in estimators)):
+        raise doc.error(f"estimators must be a non-empty array of names, got "
+                        f"{_type(estimators)} {estimators!r}", "estimators")
+    bad = [e for e in estimators if e not in available()]
+    if bad:
+        raise doc.error(f"unknown estimator {bad[0]!r} (available: {', '.join(available())})",
+                        "estimators")
+    if len(set(estimators)) != len(estimators):
+        raise doc.error("estimators lists a name twice", "estimators")
+    return tuple(estimators)
 
-    Raises
-    ------
-    InputError
-        Naming the file and the key (and the line where it can be found).
-    """
-    path = Path(path)
-    doc = _read_doc(path, "sweep file")
-    d = doc.data
-    unknown = sorted(set(d) - _TOP_KEYS)
-    if unknown:
-        raise doc.error(f"unknown key {unknown[0]!r} (known: {', '.join(sorted(_TOP_KEYS))})",
-                        unknown[0])
-    if "scenarios" in d:
-        clash = sorted({"base", "grid", "points", "effect_sets"} & set(d))
-        if clash:
-            raise doc.error(f"scenarios (a list of scenario files) and {clash[0]} exclude each "
-                            "other", clash[0])
-    for key in ("name", "seed", "base" if "scenarios" not in d else "scenarios"):
-        if key not in d:
-            raise doc.error(f"{key} is missing", key)
-    name = d["name"]
-    if not (isinstance(name, str) and _NAME_RE.match(name)):
-        raise doc.error(f"name must be 1-100 characters of A-Z a-z 0-9 _ . -, got {_type(name)} "
-                        f"{name!r}", "name")
-    seed = d["seed"]
-    if not (isinstance(seed, int) and not isinstance(seed, bool) and 0 <= seed < 2**63):
-        raise doc.error(f"seed must be a whole number in [0, 2^63), got {_type(seed)} {seed!r}",
-                        "seed")
-    description = d.get("description", "")
-    if not isinstance(description, str):
-        raise doc.error(f"description must be a string, got {_type(description)}", "description")
-    estimators = d.get("estimators")
-    if estimators is not None:
-        from gyroarray.estimators import available
-        if not (isinstance(estimators, list) and estimators
-                and all(isinstance(e, str) for e in estimators)):
-            raise doc.error(f"estimators must be a non-empty array of names, got "
-                            f"{_type(estimators)} {estimators!r}", "estimators")
-        bad = [e for e in estimators if e not in available()]
-        if bad:
-            raise doc.error(f"unknown estimator {bad[0]!r} (available: {', '.join(available())})",
-                            "estimators")
-        if len(set(estimators)) != len(estimators):
-            raise doc.error("estimators lists a name twice", "estimators")
-        estimators = tuple(estimators)
 
-    replicates = d.get("replicates")
-    if replicates is not None and not (isinstance(replicates, int) and not isinstance(replicates, bool)
-                                       and 1 <= replicates <= MAX_REPLICATES):
-        raise doc.error(f"replicates must be a whole number from 1 to {MAX_REPLICATES}, got "
-                        f"{_type(replicates)} {replicates!r}", "replicates")
-    paired = d.get("paired", False)
-    if not isinstance(paired, bool):
-        raise doc.error(f"paired must be true or false, got {_type(paired)} {paired!r}", "paired")
-    skip_invalid = d.get("skip_invalid", False)
-    if not isinstance(skip_invalid, bool):
-        raise doc.error(f"skip_invalid must be true or false, got {_type(skip_invalid)} "
-                        f"{skip_invalid!r}", "skip_invalid")
-
-    # the base (or the listed scenario files)
-    sweep_dir = path.parent
+def _load_bases(d: dict, sweep_dir: Path, doc: _Doc) -> list[tuple[_Base, str | None]]:
+    """The base scenario, or the listed scenario files with their names."""
     bases: list[tuple[_Base, str | None]] = []
     if "scenarios" in d:
         refs = d["scenarios"]
@@ -573,8 +529,11 @@ def load_sweep(path) -> Sweep:
             bases.append((_load_base(ref, sweep_dir, doc, "scenarios"), ref.removesuffix(".toml")))
     else:
         bases.append((_load_base(d["base"], sweep_dir, doc, "base"), None))
+    return bases
 
-    # effect sets
+
+def _check_effect_sets(d: dict, doc: _Doc) -> dict:
+    """The named effect sets, each checked as a noise model."""
     effect_sets = d.get("effect_sets", {})
     if not isinstance(effect_sets, dict):
         raise doc.error(f"effect_sets must be a table, got {_type(effect_sets)}", "effect_sets")
@@ -591,50 +550,61 @@ def load_sweep(path) -> Sweep:
         except InputError as err:
             raise doc.error(err.message, f"effect_sets.{k}"
                             + (f".{err.column}" if isinstance(err.column, str) else "")) from None
+    return effect_sets
 
-    # grid and points
-    combos: list[tuple[dict, dict]] = []           # (given values, where each came from)
-    grid = d.get("grid")
-    if grid is not None:
-        if not isinstance(grid, dict):
-            raise doc.error(f"grid must be a table, got {_type(grid)}", "grid")
-        unknown = sorted(set(grid) - set(PARAM_KEYS))
+
+def _grid_combos(grid, doc: _Doc, effect_sets: dict) -> list[tuple[dict, dict]]:
+    """(given values, where each came from) of every point of the grid."""
+    combos: list[tuple[dict, dict]] = []
+    if not isinstance(grid, dict):
+        raise doc.error(f"grid must be a table, got {_type(grid)}", "grid")
+    unknown = sorted(set(grid) - set(PARAM_KEYS))
+    if unknown:
+        raise doc.error(f"unknown key grid.{unknown[0]} (known: {', '.join(PARAM_KEYS)})",
+                        f"grid.{unknown[0]}")
+    axes = []
+    for key in PARAM_KEYS:
+        if key not in grid:
+            continue
+        vals = grid[key]
+        if not isinstance(vals, list) or not vals:
+            raise doc.error(f"grid.{key} must be a non-empty array of values, got "
+                            f"{_type(vals)} {vals!r}", f"grid.{key}")
+        norm = [_check_value(key, v, f"grid.{key}", doc, effect_sets) for v in vals]
+        if len({json.dumps(v) for v in norm}) != len(norm):
+            raise doc.error(f"grid.{key} lists a value twice: {vals!r}", f"grid.{key}")
+        axes.append((key, norm))
+    n = math.prod(len(v) for _, v in axes)
+    if n > MAX_SCENARIOS:
+        raise doc.error(f"the grid has {n} scenarios (at most {MAX_SCENARIOS})", "grid")
+    for values in itertools.product(*[v for _, v in axes]):
+        given = dict(zip([k for k, _ in axes], values))
+        combos.append((given, {k: f"grid.{k}" for k in PARAM_KEYS}))
+    return combos
+
+
+def _point_combos(points, doc: _Doc, effect_sets: dict) -> list[tuple[dict, dict]]:
+    """(given values, where each came from) of every listed point."""
+    combos: list[tuple[dict, dict]] = []
+    if not isinstance(points, list) or not all(isinstance(p, dict) for p in points):
+        raise doc.error("points must be an array of tables ([[points]])", "points")
+    for i, pt in enumerate(points):
+        unknown = sorted(set(pt) - set(PARAM_KEYS))
         if unknown:
-            raise doc.error(f"unknown key grid.{unknown[0]} (known: {', '.join(PARAM_KEYS)})",
-                            f"grid.{unknown[0]}")
-        axes = []
-        for key in PARAM_KEYS:
-            if key not in grid:
-                continue
-            vals = grid[key]
-            if not isinstance(vals, list) or not vals:
-                raise doc.error(f"grid.{key} must be a non-empty array of values, got "
-                                f"{_type(vals)} {vals!r}", f"grid.{key}")
-            norm = [_check_value(key, v, f"grid.{key}", doc, effect_sets) for v in vals]
-            if len({json.dumps(v) for v in norm}) != len(norm):
-                raise doc.error(f"grid.{key} lists a value twice: {vals!r}", f"grid.{key}")
-            axes.append((key, norm))
-        n = math.prod(len(v) for _, v in axes)
-        if n > MAX_SCENARIOS:
-            raise doc.error(f"the grid has {n} scenarios (at most {MAX_SCENARIOS})", "grid")
-        for values in itertools.product(*[v for _, v in axes]):
-            given = dict(zip([k for k, _ in axes], values))
-            combos.append((given, {k: f"grid.{k}" for k in PARAM_KEYS}))
-    points = d.get("points")
-    if points is not None:
-        if not isinstance(points, list) or not all(isinstance(p, dict) for p in points):
-            raise doc.error("points must be an array of tables ([[points]])", "points")
-        for i, pt in enumerate(points):
-            unknown = sorted(set(pt) - set(PARAM_KEYS))
-            if unknown:
-                raise doc.error(f"unknown key points[{i}].{unknown[0]} (known: "
-                                f"{', '.join(PARAM_KEYS)})", f"points[{i}].{unknown[0]}")
-            given = {k: _check_value(k, pt[k], f"points[{i}].{k}", doc, effect_sets)
-                     for k in PARAM_KEYS if k in pt}
-            combos.append((given, {k: f"points[{i}].{k}" for k in PARAM_KEYS}))
-    if grid is None and points is None:
-        combos.append(({}, {k: "base" for k in PARAM_KEYS}))
+            raise doc.error(f"unknown key points[{i}].{unknown[0]} (known: "
+                            f"{', '.join(PARAM_KEYS)})", f"points[{i}].{unknown[0]}")
+        given = {k: _check_value(k, pt[k], f"points[{i}].{k}", doc, effect_sets)
+                 for k in PARAM_KEYS if k in pt}
+        combos.append((given, {k: f"points[{i}].{k}" for k in PARAM_KEYS}))
+    return combos
 
+
+def _expand_scenarios(path: Path, doc: _Doc, bases: list[tuple[_Base, str | None]],
+                      combos: list[tuple[dict, dict]], effect_sets: dict, seed: int,
+                      replicates: int | None, paired: bool, skip_invalid: bool
+                      ) -> tuple[dict[str, ScenarioSpec], dict[str, str]]:
+    """Every (base, combination, replicate) built and checked, by id; and the excluded ones."""
+    sweep_dir = path.parent
     specs: dict[str, ScenarioSpec] = {}
     excluded: dict[str, str] = {}
     reps = [None] if replicates is None else list(range(replicates))
@@ -678,6 +648,75 @@ def load_sweep(path) -> Sweep:
                                              else ", ".join(sorted(set(keys))) or err.column)
                                      ) from None
                 specs[sid] = spec
+    return specs, excluded
+
+
+def load_sweep(path) -> Sweep:
+    """Read, strictly validate and expand a sweep file (see the module docstring).
+
+    Raises
+    ------
+    InputError
+        Naming the file and the key (and the line where it can be found).
+    """
+    path = Path(path)
+    doc = _read_doc(path, "sweep file")
+    d = doc.data
+    unknown = sorted(set(d) - _TOP_KEYS)
+    if unknown:
+        raise doc.error(f"unknown key {unknown[0]!r} (known: {', '.join(sorted(_TOP_KEYS))})",
+                        unknown[0])
+    if "scenarios" in d:
+        clash = sorted({"base", "grid", "points", "effect_sets"} & set(d))
+        if clash:
+            raise doc.error(f"scenarios (a list of scenario files) and {clash[0]} exclude each "
+                            "other", clash[0])
+    for key in ("name", "seed", "base" if "scenarios" not in d else "scenarios"):
+        if key not in d:
+            raise doc.error(f"{key} is missing", key)
+    name = d["name"]
+    if not (isinstance(name, str) and _NAME_RE.match(name)):
+        raise doc.error(f"name must be 1-100 characters of A-Z a-z 0-9 _ . -, got {_type(name)} "
+                        f"{name!r}", "name")
+    seed = d["seed"]
+    if not (isinstance(seed, int) and not isinstance(seed, bool) and 0 <= seed < 2**63):
+        raise doc.error(f"seed must be a whole number in [0, 2^63), got {_type(seed)} {seed!r}",
+                        "seed")
+    description = d.get("description", "")
+    if not isinstance(description, str):
+        raise doc.error(f"description must be a string, got {_type(description)}", "description")
+    estimators = _check_estimators(d.get("estimators"), doc)
+
+    replicates = d.get("replicates")
+    if replicates is not None and not (isinstance(replicates, int) and not isinstance(replicates, bool)
+                                       and 1 <= replicates <= MAX_REPLICATES):
+        raise doc.error(f"replicates must be a whole number from 1 to {MAX_REPLICATES}, got "
+                        f"{_type(replicates)} {replicates!r}", "replicates")
+    paired = d.get("paired", False)
+    if not isinstance(paired, bool):
+        raise doc.error(f"paired must be true or false, got {_type(paired)} {paired!r}", "paired")
+    skip_invalid = d.get("skip_invalid", False)
+    if not isinstance(skip_invalid, bool):
+        raise doc.error(f"skip_invalid must be true or false, got {_type(skip_invalid)} "
+                        f"{skip_invalid!r}", "skip_invalid")
+
+    # the base (or the listed scenario files)
+    bases = _load_bases(d, path.parent, doc)
+    effect_sets = _check_effect_sets(d, doc)
+
+    # grid and points
+    combos: list[tuple[dict, dict]] = []           # (given values, where each came from)
+    grid = d.get("grid")
+    if grid is not None:
+        combos += _grid_combos(grid, doc, effect_sets)
+    points = d.get("points")
+    if points is not None:
+        combos += _point_combos(points, doc, effect_sets)
+    if grid is None and points is None:
+        combos.append(({}, {k: "base" for k in PARAM_KEYS}))
+
+    specs, excluded = _expand_scenarios(path, doc, bases, combos, effect_sets, seed, replicates,
+                                        paired, skip_invalid)
     if not specs:
         raise doc.error("the sweep has no valid scenario"
                         + (f" (first problem: {next(iter(excluded.values()))})" if excluded else ""),

@@ -549,40 +549,14 @@ class RateTable:
         """The compiled MuJoCo model (see :meth:`mjcf`)."""
         return mujoco.MjModel.from_xml_string(self.mjcf(layout, timestep_s=timestep_s))
 
-    def run(self, profile, sample_rate_hz: float, *, layout=None, duration_s: float | None = None,
-            skip_rest: bool = True) -> TableRun:
-        """Run a profile and read the sensors at ``sample_rate_hz``.
+    def _step_profile(self, model, profile: Profile, dt: float, K: int, n: int,
+                      skip_rest: bool) -> tuple:
+        """Step the servo-driven table through ``profile`` and keep every K-th step's sensors.
 
-        Parameters
-        ----------
-        profile : Profile or path
-            The motion profile (a path is read with ``load_profile``).
-        sample_rate_hz : float
-            Gyro sample rate fs [Hz]; samples at ``k / fs`` in [0, duration).
-        layout : Layout, optional
-            Also read one MuJoCo gyro per sensitive axis and one MuJoCo
-            accelerometer per gyro position.
-        duration_s : float, optional
-            Run only the first ``duration_s`` of the profile [s].
-        skip_rest : bool
-            Repeat a rest state that is a bitwise fixed point instead of
-            stepping it (exact; False steps everything, for checking).
-
-        Returns
-        -------
-        TableRun
+        Returns (sensordata (n, nsensordata), joint rates after each sample's step (n, nv),
+        steps stepped, steps repeated from a bitwise-fixed rest state).
         """
-        if not isinstance(profile, Profile):
-            profile = load_profile(profile)
-        fs = float(sample_rate_hz)
-        dt, K = self.timestep(fs)
-        T = profile.duration_s if duration_s is None else float(duration_s)
-        if not (math.isfinite(T) and 0 < T <= profile.duration_s * (1 + 1e-12)):
-            raise InputError(f"duration must be in (0, {profile.duration_s:g}] s, got {duration_s!r}",
-                             file=profile.source)
-        n = n_samples(T, fs)
         n_steps = (n - 1) * K + 1              # sensors of step j are at t = j dt (pre-step)
-        model = self.model(layout, timestep_s=dt)
         data = mujoco.MjData(model)
         spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
         nstate = mujoco.mj_stateSize(model, spec)
@@ -632,6 +606,42 @@ class RateTable:
                 repeated += hold_end - j
                 j = hold_end
                 x[0] = j * dt
+        return sens, qvel_next, stepped, repeated
+
+    def run(self, profile, sample_rate_hz: float, *, layout=None, duration_s: float | None = None,
+            skip_rest: bool = True) -> TableRun:
+        """Run a profile and read the sensors at ``sample_rate_hz``.
+
+        Parameters
+        ----------
+        profile : Profile or path
+            The motion profile (a path is read with ``load_profile``).
+        sample_rate_hz : float
+            Gyro sample rate fs [Hz]; samples at ``k / fs`` in [0, duration).
+        layout : Layout, optional
+            Also read one MuJoCo gyro per sensitive axis and one MuJoCo
+            accelerometer per gyro position.
+        duration_s : float, optional
+            Run only the first ``duration_s`` of the profile [s].
+        skip_rest : bool
+            Repeat a rest state that is a bitwise fixed point instead of
+            stepping it (exact; False steps everything, for checking).
+
+        Returns
+        -------
+        TableRun
+        """
+        if not isinstance(profile, Profile):
+            profile = load_profile(profile)
+        fs = float(sample_rate_hz)
+        dt, K = self.timestep(fs)
+        T = profile.duration_s if duration_s is None else float(duration_s)
+        if not (math.isfinite(T) and 0 < T <= profile.duration_s * (1 + 1e-12)):
+            raise InputError(f"duration must be in (0, {profile.duration_s:g}] s, got {duration_s!r}",
+                             file=profile.source)
+        n = n_samples(T, fs)
+        model = self.model(layout, timestep_s=dt)
+        sens, qvel_next, stepped, repeated = self._step_profile(model, profile, dt, K, n, skip_rest)
         _realised_acceleration_sensors(model, sens, qvel_next, dt)
         time_s = np.arange(n) / fs
         cmd = profile.command(time_s)
