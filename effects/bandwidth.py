@@ -55,6 +55,7 @@ class Bandwidth(RegressionEffect):
               Param("order", "-", "order", identity, lo=1.0, hi=2.0,
                     doc="1: H(s) = 1/(1 + s/ωc); 2: Butterworth"))
     refit_absolute = True           # the spectrum gives the cut-off itself, whatever the model
+    lowpass = True                  # the library's causal low-pass (where it fails names it)
     doc = "the gyro's own causal low-pass filter"
 
     def check(self, params, gyro, n_gyros):

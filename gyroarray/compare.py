@@ -305,18 +305,24 @@ def _finite(x):
     return x if math.isfinite(x) else None
 
 
+def _lowpass_effects() -> list[str]:
+    """The registry's causal low-pass effects (``Effect.lowpass``)."""
+    return [name for name, eff in REGISTRY.items() if eff.lowpass]
+
+
 def _finding_dict(f, a: Analysis) -> dict:
     """One localisation finding as ``Analysis.localisation`` keeps it; a non-causal low-pass on
     gyros where ``bandwidth`` is a significant candidate or in the model says what that misses."""
     d = {"kind": f.kind, "gyros": list(f.gyros), "score": float(f.score), "sentence": f.summary,
          "details": _plain(f.details)}
-    if f.kind == "lowpass" and f.details.get("causal") is False:
-        with_bw = sorted({t.gyro for t in a.candidates if t.effect == "bandwidth" and a.significant(t)}
-                         | {e.gyro for e in a.model if e.effect == "bandwidth" and e.gyro is not None})
+    lowpass = _lowpass_effects()
+    if f.kind == "lowpass" and f.details.get("causal") is False and lowpass:
+        with_bw = sorted({t.gyro for t in a.candidates if t.effect in lowpass and a.significant(t)}
+                         | {e.gyro for e in a.model if e.effect in lowpass and e.gyro is not None})
         on = [g for g in f.gyros if g in with_bw]
         if on:
             fits = "its magnitude fits, but " if f.details.get("library_fits") else ""
-            d["sentence"] += (f"; bandwidth (significant or in the model on gyro{'s' if len(on) > 1 else ''} "
+            d["sentence"] += (f"; {lowpass[0]} (significant or in the model on gyro{'s' if len(on) > 1 else ''} "
                               f"{', '.join(map(str, on))}): {fits}it is causal and would put a lag of "
                               f"≈ {f.details['expected_lag_s'] * 1e3:.3g} ms on the motion that the record "
                               "does not have (a zero-phase filter, e.g. a decimation filter applied "
@@ -1062,7 +1068,7 @@ class ModelComparison:
                         and f["details"].get("causal") is False for g in f["gyros"]})
         if not gyros:
             return set()
-        rivals = set(get_effect("bandwidth").rivals) | {"bandwidth"}
+        rivals = {r for name in _lowpass_effects() for r in (name, *get_effect(name).rivals)}
         out = set()
         for t in a.candidates:
             eff = get_effect(t.effect)

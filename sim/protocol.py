@@ -428,6 +428,10 @@ class Effect:
     predicts : bool
         It adds a deterministic part to the outputs (:meth:`predict`); in a
         model it is backfitted with the other deterministic effects.
+    lowpass : bool
+        It is the library's causal low-pass: where the localisation finds a
+        low-pass that does not lag on motion, the report says what this effect
+        misses, and the ladder adds neither it nor its rivals there.
     refit_absolute : bool
         Its test on what the model's prediction leaves still measures the
         parameters themselves, not their error (a filter read from the noise
@@ -465,6 +469,7 @@ class Effect:
     static_noise: ClassVar[str | None] = None
     predicts: ClassVar[bool] = False
     refit_absolute: ClassVar[bool] = False
+    lowpass: ClassVar[bool] = False
     reads: ClassVar[str] = "residual"
     changes_adev: ClassVar[bool] = False
     channel: ClassVar[str | None] = None
