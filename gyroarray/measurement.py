@@ -90,7 +90,7 @@ from gyroarray.errors import InputError
 from gyroarray.layout import UNIT_NORM_TOL, Layout, check_positions
 from gyroarray.limits import (MAX_RATE_DEG_S, check_memory, format_size, gunzip_bounded, max_memory,
                               read_regular)
-from gyroarray.tomlio import TomlDoc, load_toml
+from gyroarray.tomlio import TomlDoc, load_toml, utf8_text
 
 __all__ = [
     "Measurement",
@@ -468,18 +468,6 @@ def _read_bytes(path: Path, what: str) -> bytes:
     return read_regular(path, what)
 
 
-def _utf8_text(data: bytes, name: str) -> str:
-    """Decode UTF-8, or refuse naming the line and character column."""
-    try:
-        return data.decode("utf-8")
-    except UnicodeDecodeError as e:
-        line_start = data.rfind(b"\n", 0, e.start) + 1
-        line = data.count(b"\n", 0, e.start) + 1
-        column = len(data[line_start:e.start].decode("utf-8", "replace")) + 1
-        raise InputError(f"not valid UTF-8 text (byte 0x{data[e.start]:02x})",
-                         file=name, line=line, column=column) from None
-
-
 # -- the sidecar ------------------------------------------------------------
 @dataclass(frozen=True)
 class _Sidecar:
@@ -693,7 +681,7 @@ def _read_csv_bytes(path: Path) -> tuple[bytes, list[str]]:
         raw = raw[len(_BOM):]
         notes.append(f"{name}: skipped the UTF-8 byte-order mark")
     if not raw.isascii():
-        _utf8_text(raw, name)
+        utf8_text(raw, name)
     if b"\r" in raw and raw.count(b"\r") != raw.count(b"\r\n"):
         lone = re.search(rb"\r(?!\n)", raw)
         assert lone is not None                                # more \r than \r\n

@@ -34,7 +34,7 @@ if sys.version_info >= (3, 11):
 else:  # pragma: no cover - Python 3.10: the same parser as a package
     import tomli as tomllib
 
-__all__ = ["MAX_TOML_BYTES", "MAX_DEPTH", "MAX_STRING_CHARS", "MAX_KEY_CHARS", "TomlDoc",
+__all__ = ["MAX_TOML_BYTES", "MAX_DEPTH", "MAX_STRING_CHARS", "MAX_KEY_CHARS", "TomlDoc", "utf8_text",
            "load_toml", "loads_toml", "TOMLDecodeError"]
 
 #: Largest TOML file read [bytes] (the biggest shipped one is a few KiB).
@@ -98,7 +98,8 @@ class TomlDoc:
         return InputError(message, file=self.name, line=self.line_of(key), column=key)
 
 
-def _utf8(data: bytes, name: str) -> str:
+def utf8_text(data: bytes, name: str) -> str:
+    """Decode UTF-8, or refuse naming the file, line and character column."""
     try:
         return data.decode("utf-8")
     except UnicodeDecodeError as e:
@@ -204,5 +205,5 @@ def load_toml(path, what: str = "TOML file") -> TomlDoc:
     """
     name = str(path)
     raw = read_regular(Path(path), what, max_bytes=MAX_TOML_BYTES)
-    text = _utf8(raw, name)
+    text = utf8_text(raw, name)
     return TomlDoc(name, text, loads_toml(text, name), raw)
