@@ -329,7 +329,8 @@ _COV_CACHE: dict = {}
 
 
 def _factors(n: int, m_min: int = 1) -> np.ndarray:
-    """Octave averaging factors of the fits: m_min, 2·m_min, ... <= n·_M_MAX_FRACTION (m_min a power of 2)."""
+    """Octave averaging factors of the fits: m_min, 2·m_min, ... <= n·_M_MAX_FRACTION (m_min a power
+    of 2), or the longest 6 when m_min would leave fewer."""
     m_max = max(8, int(_M_MAX_FRACTION * n))
     m = 2 ** np.arange(int(math.log2(m_max)) + 1, dtype=np.int64)
     if m.size < 6 or n - 2 * m[-1] < 2:
@@ -859,9 +860,6 @@ def fit_gyro_noise(e, dt_s: float, gyro: int, *, model_terms: tuple = (),
     label = f"gyro {gyro}"
     n = x.size
     m_min = 1 if not min_tau_s > dt else 2 ** int(math.ceil(math.log2(min_tau_s / dt)))
-    # a start that would leave fewer than 6 octaves (a low cut-off on a short record) is moved
-    # back to the 6th-longest octave τ
-    m_min = int(min(m_min, _factors(n)[-6]))
     cv = _curve(x, dt, m_min=m_min)
     terms = tuple(t for t in ("b", "q") if t in model_terms)
     if set(model_terms) - {"b", "q"}:
