@@ -82,15 +82,6 @@ class PsdFit:
         W and R of the best filter fit (one-sided PSD coefficients; F, the flicker's, not kept).
     """
 
-    def filter_lr(self, cutoff_hz: float, order: int, dt_s: float, family: str = "digital") -> float:
-        """2·(ℓ − ℓ_null) of the filter model at one cut-off (W, R refitted)."""
-        f, p = self.freq_hz, self.psd
-        ff = f if family == "continuous" else bandwidth_warped_frequency(f, cutoff_hz, dt_s)
-        h2 = np.abs(bandwidth_response(ff, cutoff_hz, order)) ** 2
-        base = np.column_stack([np.ones_like(f), 1.0 / f, 1.0 / f ** 2])
-        _, ll = _linear_ml(p, base * h2[:, None], self.nu)
-        return 2.0 * (ll - self.loglik_null)
-
     freq_hz: np.ndarray
     psd: np.ndarray
     nu: float
@@ -183,6 +174,12 @@ def fit_psd(x, dt_s: float) -> PsdFit:
     c0, l0 = _linear_ml(p, base, nu)
     nyq = 0.5 / dt
     fcs = np.geomspace(_LOWEST * nyq, _TOP * nyq, int(_PER_DECADE * math.log10(_TOP / _LOWEST)) + 1)
+    def fit_at(fc: float, order: int, family: str) -> tuple[np.ndarray, float]:
+        """(W, F, R) and ℓ of the filter model at one cut-off."""
+        ff = f if family == "continuous" else bandwidth_warped_frequency(f, fc, dt)
+        h2 = np.abs(bandwidth_response(ff, fc, order)) ** 2
+        return _linear_ml(p, base * h2[:, None], nu)
+
     prof = {}
     best: tuple[float, Any, Any, Any, Any] = (-math.inf, None, None, None, None)
     for family in ("continuous", "digital"):
@@ -190,9 +187,7 @@ def fit_psd(x, dt_s: float) -> PsdFit:
         for order in (1, 2):
             ll = np.empty(scan.size)
             for i, fc in enumerate(scan):
-                ff = f if family == "continuous" else bandwidth_warped_frequency(f, fc, dt)
-                h2 = np.abs(bandwidth_response(ff, fc, order)) ** 2
-                c, ll[i] = _linear_ml(p, base * h2[:, None], nu)
+                c, ll[i] = fit_at(fc, order, family)
                 if ll[i] > best[0]:
                     best = (ll[i], fc, order, c, family)
             prof[(family, order)] = (scan, ll)
@@ -209,17 +204,13 @@ def fit_psd(x, dt_s: float) -> PsdFit:
             _, family, order, i = max(peaks)
             scan, ll = prof[(family, order)]
             fc = float(scan[i])
-            ff = f if family == "continuous" else bandwidth_warped_frequency(f, fc, dt)
-            cb, l_bw = _linear_ml(p, base * (np.abs(bandwidth_response(ff, fc, order)) ** 2)[:, None], nu)
+            cb, l_bw = fit_at(fc, order, family)
         else:
             l_bw, cb = l0, c0
     sigma_fc = math.nan
 
     def profile(log_fc: float) -> tuple[float, np.ndarray]:
-        c_ = math.exp(log_fc)
-        ff = f if family == "continuous" else bandwidth_warped_frequency(f, c_, dt)
-        h2 = np.abs(bandwidth_response(ff, c_, order)) ** 2
-        c, lv = _linear_ml(p, base * h2[:, None], nu)
+        c, lv = fit_at(math.exp(log_fc), order, family)
         return lv, c
 
     if 0 < i < scan.size - 1:                  # refine between the neighbours, then the curvature

@@ -127,15 +127,16 @@ class Bandwidth(RegressionEffect):
         # through a Welch estimate whose fit is biased by about 1 % in fc at these record sizes:
         # when the motion sees the filter clearly, it alone gives the cut-off
         use_motion = mgrid is not None and max(mgrid[1].max(), mgrid[2].max()) > 25.0
-        # the order from both: on a swing an order-2 filter at a higher cut-off lags and attenuates
-        # much like an order-1 filter (motion 2Δℓ within 0.4 %), its roll-off does not
-        both = {} if mgrid is None else {k: mgrid[k].max() + psd.lr_filter_order.get(k, 0.0) for k in (1, 2)}
-        if use_motion:       # a best cut-off at the grid's end is no roll-off the motion measured
-            o = max((1, 2), key=lambda k: both[k])
-            use_motion = 0 < int(np.argmax(mgrid[o])) < fcs.size - 1
+        order = 1
+        if use_motion:
+            # the order from both: on a swing an order-2 filter at a higher cut-off lags and
+            # attenuates much like an order-1 filter (motion 2Δℓ within 0.4 %), its roll-off does not
+            order = max((1, 2), key=lambda k: mgrid[k].max() + psd.lr_filter_order.get(k, 0.0))
+            # a best cut-off at the grid's end is no roll-off the motion measured
+            use_motion = 0 < int(np.argmax(mgrid[order])) < fcs.size - 1
 
         if use_motion:
-            fc, order, s_fc = self._motion_fit(motion, {k: mgrid[k] for k in (o,)}, fcs)
+            fc, s_fc = self._motion_fit(motion, mgrid[order], order, fcs)
         else:          # the spectrum's own fit: its better family (continuous or digital), refined
             fc, order, s_fc = psd.filter_cutoff_hz, psd.filter_order, psd.filter_cutoff_sigma_hz
             if not fc < 0.95 * nyq:      # the continuous family scans past Nyquist: no roll-off here
@@ -155,12 +156,11 @@ class Bandwidth(RegressionEffect):
                                              "lr_gm_psd": float(psd.lr_gm), "family": psd.filter_family})
 
     @staticmethod
-    def _motion_fit(total, grid, fcs) -> tuple[float, int, float]:
-        """(cut-off [Hz], order, 1σ [Hz]) from the motion's likelihood on the grid (per order
-        given), refined."""
-        order = max(grid, key=lambda o: grid[o].max())
-        i = int(np.argmax(grid[order]))
-        fc, best = float(fcs[i]), float(grid[order][i])
+    def _motion_fit(total, ll: np.ndarray, order: int, fcs) -> tuple[float, float]:
+        """(cut-off [Hz], 1σ [Hz]) of one order from the motion's likelihood ``ll`` on the grid
+        ``fcs``, refined."""
+        i = int(np.argmax(ll))
+        fc, best = float(fcs[i]), float(ll[i])
         s_fc = math.nan
         if 0 < i < fcs.size - 1:                       # refine between the neighbours, then the curvature
             lo, hi = math.log(fcs[i - 1]), math.log(fcs[i + 1])
@@ -172,7 +172,7 @@ class Bandwidth(RegressionEffect):
             d2 = (total(fc * math.exp(h), order) - 2 * best + total(fc * math.exp(-h), order)) / (2 * h * h)
             if d2 < 0:
                 s_fc = fc * math.sqrt(-1.0 / d2)
-        return fc, order, s_fc
+        return fc, s_fc
 
     def test(self, ctx, gyro):
         return self.fit(ctx, gyro, ctx.E)
