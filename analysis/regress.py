@@ -948,8 +948,48 @@ def fit_latency(e, omega_ref_rad_s, h, time_s, dt_s: float, r: float, q: float, 
 
 # -- temperature and rate ramp -------------------------------------------------------
 
+#: Smoothing times of the temperature reading before its derivative is taken [s] (a zero-phase
+#: second-order low-pass at 1/T_s): a thermometer's read noise is white, and its derivative
+#: would otherwise be noise (the CATS tag's reading: 0.028 °C rms, lag-1 correlation of its
+#: differences −0.50).
+LAG_SMOOTHING_S = (30.0, 100.0, 300.0, 1000.0)
+
+#: χ² drop at which the thermal-lag column enters the temperature fit: χ²(1) at 1 % after the
+#: choice among the smoothings of :data:`LAG_SMOOTHING_S` (Bonferroni, 0.25 % each).
+LAG_CHI2 = 9.14
+
+
+def temperature_rate(temp_c, dt_s: float, smoothing_s: float) -> np.ndarray:
+    """Derivative of the smoothed temperature reading [°C/s] (zero-phase second-order
+    Butterworth low-pass at 1/``smoothing_s``, then central differences)."""
+    from scipy import signal
+    temp = np.asarray(temp_c, dtype=float)
+    wn = min(2.0 * dt_s / smoothing_s, 0.99)            # cut-off over Nyquist
+    b, a = signal.butter(2, wn)
+    pad = min(temp.size - 1, int(3 * smoothing_s / dt_s))
+    return np.gradient(signal.filtfilt(b, a, temp, padtype="odd", padlen=pad), dt_s)
+
+
+def _lag_columns(e, temp, dt_s: float, r: float, q: float, use, base: GLSFit,
+                 smoothings=None) -> tuple[GLSFit, float | None]:
+    """The fit with the thermal-lag column dT/dt beside T − T_0, when it lowers χ² by more
+    than :data:`LAG_CHI2` (the best smoothing), else ``base`` and None."""
+    span = float(dt_s * temp.size)
+    best, best_s = base, None
+    for sm in (LAG_SMOOTHING_S if smoothings is None else smoothings):
+        if not 8.0 * dt_s <= sm <= span / 8.0:
+            continue
+        try:
+            fit = gls_rw(e, np.column_stack([temp - temp[0], temperature_rate(temp, dt_s, sm)]), r, q, use=use)
+        except NotIdentifiableError:     # dT/dt ∝ T − const (an exponential approach) or flat
+            continue
+        if fit.chi2 < best.chi2 - (LAG_CHI2 if best_s is None else 0.0):
+            best, best_s = fit, sm
+    return best, best_s
+
+
 def fit_temperature_bias(e, temp_c, time_s, dt_s: float, r: float, q: float, gyro: int,
-                         *, use=None) -> EffectFit:
+                         *, use=None, lag_smoothing_s: float | None = None) -> EffectFit:
     """Temperature-dependent bias: residual following the temperature.
 
     Parameters
@@ -957,7 +997,7 @@ def fit_temperature_bias(e, temp_c, time_s, dt_s: float, r: float, q: float, gyr
     e : array_like, shape (n,)
         Residual [rad/s].
     temp_c : array_like, shape (n,)
-        Temperature at the array [°C].
+        Temperature reading at the array [°C].
     time_s : array_like, shape (n,)
         Sample times [s].
     dt_s : float
@@ -968,23 +1008,42 @@ def fit_temperature_bias(e, temp_c, time_s, dt_s: float, r: float, q: float, gyr
         1-based gyro number.
     use : array_like of bool, shape (n,), optional
         Samples to include (:func:`gls_rw`).
+    lag_smoothing_s : float, optional
+        Take the thermal-lag column with this smoothing [s] (and no other): how a
+        fit on part of a record repeats the whole record's choice. Default: chosen
+        here (Notes).
 
     Returns
     -------
     EffectFit
         ``temperature_bias``: ``deg_h_per_c`` with sigma, and
-        ``t0_c = temp_c[0]`` without sigma.
+        ``t0_c = temp_c[0]`` without sigma. ``extra``: ``thermal_lag_s`` and its
+        ``thermal_lag_sigma_s``, ``lag_smoothing_s`` (None without the lag column).
 
     Notes
     -----
     ::
 
-        e_t = k·(T_t − T_0) + b_t + w_t,   T_0 = temp_c[0]
+        e_t = k·(T_t + τ·dT_t/dt − T_0) + b_t + w_t,   T_0 = temp_c[0]
 
     The temperature of zero bias t0 is not identifiable: k·(T − t0) =
     k·(T − T_0) + k·(T_0 − t0), and the constant joins the unknown starting
     bias. So ``t0_c`` is reported as the first temperature (the model then
     starts with the fitted starting bias, as the baseline does).
+
+    τ is a thermal lag between the thermometer and the gyro (first order: the
+    gyro's own temperature is T + τ·dT/dt). It is a nuisance: ``shared/spec``'s
+    ``temperature_bias`` has no lag, and the calibrated model predicts k·(T − t0).
+    Without it, a fast temperature change (the CATS tag: 16 → 9 °C in 10 min)
+    has a smaller response than the slow cycle, and the GLS, which reads the
+    coefficient from the changes, gives 60 deg/h/°C on its gyro 2 where the
+    levels give 96 and the sensor's two other periods 93 and 93; with the lag
+    column (τ ≈ 240 s) 89 ± 6. The column is dT/dt of the reading smoothed at
+    one of :data:`LAG_SMOOTHING_S` (the best, within [8·dt, span/8]), and it
+    enters only when it lowers the GLS χ² by more than :data:`LAG_CHI2` (a
+    pre-test at 1 %: without a lag the coefficient keeps the power of the
+    one-column fit). A first-order approach to a final temperature has dT/dt ∝
+    T − const: the lag is then not identifiable and the column stays out.
     """
     e = np.asarray(e, dtype=float)
     n = e.size
@@ -996,18 +1055,33 @@ def fit_temperature_bias(e, temp_c, time_s, dt_s: float, r: float, q: float, gyr
     except NotIdentifiableError as err:
         return _not_identifiable("temperature_bias", gyro, {"deg_h_per_c": 0.0, "t0_c": t0},
                                  "the temperature does not change", err)
+    fit, sm = _lag_columns(e, temp, dt_s, r, q, use, fit,
+                           None if lag_smoothing_s is None else (lag_smoothing_s,))
     b, s = float(fit.beta[0]), float(fit.sigma[0])
     k, ks = rad_s_to_deg_h(b), rad_s_to_deg_h(s)
     t = b / s
     z = _z1(t)
+    lag: float | None = None
+    lag_s = math.nan
+    if sm is not None:
+        lag = float(fit.beta[1] / b)
+        # delta method for c/k with the fit's covariance
+        c = float(fit.beta[1])
+        cov = fit.cov
+        lag_s = float(abs(lag) * math.sqrt(max(cov[1, 1] / c ** 2 + cov[0, 0] / b ** 2
+                                               - 2.0 * cov[0, 1] / (b * c), 0.0))) if c != 0 else math.inf
+    lag_txt = ("" if lag is None else
+               f", the gyro leading the temperature reading by {_pm(lag, lag_s)} s (a thermal lag, "
+               f"fitted as a dT/dt term on the reading smoothed over {sm:.0f} s)")
     if z >= Z_EVIDENT:
         ev = (f"gyro {gyro} residual follows the temperature: {_pm(k, ks)} deg/h per °C "
-              f"relative to {t0:.2f} °C; the model has no temperature term")
+              f"relative to {t0:.2f} °C{lag_txt}; the model has no temperature term")
     else:
         ev = (f"gyro {gyro} residual shows no significant temperature dependence "
-              f"({_pm(k, ks)} deg/h per °C, z = {z:.1f})")
+              f"({_pm(k, ks)} deg/h per °C, z = {z:.1f}{lag_txt})")
     return EffectFit("temperature_bias", gyro, {"deg_h_per_c": k, "t0_c": t0}, {"deg_h_per_c": ks},
-                     z, ev, _extra(fit, t=t))
+                     z, ev, _extra(fit, t=t, thermal_lag_s=lag, thermal_lag_sigma_s=None if lag is None else lag_s,
+                                   lag_smoothing_s=sm))
 
 
 def fit_rate_ramp(e, time_s, dt_s: float, r: float, q: float, gyro: int, *, use=None) -> EffectFit:

@@ -8,7 +8,7 @@ from dataclasses import replace
 import numpy as np
 
 from gyroarray.analysis.effect_fit import EffectFit
-from gyroarray.analysis.regress import NotIdentifiableError, fit_temperature_bias, gls_rw
+from gyroarray.analysis.regress import NotIdentifiableError, fit_temperature_bias, gls_rw, temperature_rate
 from gyroarray.effects import _draw
 from gyroarray.errors import InputError
 from gyroarray.sim.protocol import Param, RegressionEffect, Stage, identity, same_noise_preference, with_term
@@ -24,11 +24,11 @@ class TemperatureBias(RegressionEffect):
     """coeff·(temp_c − t0_c).
 
     Fit: the regression of the residual on the temperature under ARW + a
-    random-walk bias (:func:`gyroarray.analysis.regress.fit_temperature_bias`);
-    the levels' coefficient (an ordinary regression with an intercept, no random
-    walk) is reported beside it: the two differ where the record's slow part is
-    read as random walk by one and as temperature by the other (the CATS tag's
-    gyro 2: 59 ± 4 against 96; its two halves give 55 and 93 under either).
+    random-walk bias (:func:`gyroarray.analysis.regress.fit_temperature_bias`),
+    with a thermal-lag column (dT/dt of the smoothed reading) when the data ask
+    for it; the levels' coefficient (an ordinary regression with an intercept,
+    no random walk) is reported beside it. The CATS tag's gyro 2: 89 ± 6 with a
+    lag of about 240 s; without the lag column 60 ± 3, the levels 96.
     ``t0_c`` and a constant bias are one parameter: the fit returns the
     coefficient relative to the first temperature.
 
@@ -89,18 +89,21 @@ class TemperatureBias(RegressionEffect):
             return replace(whole, evidence=whole.evidence + f" (one half of the record spans less than "
                                                                f"{need:.2g} °C: no cross-half check)")
         r, q = float(ctx.r[g]), float(ctx.q[g])
+        sm = whole.extra.get("lag_smoothing_s")         # the whole fit's thermal-lag column, if any
+        X = (temp - temp[0])[:, None] if sm is None else \
+            np.column_stack([temp - temp[0], temperature_rate(temp, ctx.dt, sm)])
         betas, scores = [], []
         for fit_on, other in (halves, halves[::-1]):
             use_fit = None if ctx.use is None else ctx.use[fit_on]
             try:
-                fa = gls_rw(ctx.E[fit_on, g], temp[fit_on] - temp[fit_on][0], r, q, use=use_fit)
+                fa = gls_rw(ctx.E[fit_on, g], X[fit_on], r, q, use=use_fit)
             except (NotIdentifiableError, ValueError):
                 return None
             beta = float(fa.beta[0])
             betas.append(beta)
             use_other = None if ctx.use is None else ctx.use[other]
             try:                               # the score on the other half, in the direction found
-                fb = gls_rw(ctx.E[other, g], temp[other] - temp[other][0], r, q, use=use_other)
+                fb = gls_rw(ctx.E[other, g], X[other], r, q, use=use_other)
             except (NotIdentifiableError, ValueError):
                 return None
             scores.append(math.copysign(1.0, beta) * float(fb.beta[0] / fb.sigma[0]))

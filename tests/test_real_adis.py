@@ -80,24 +80,64 @@ def test_adis_needs_no_bias_instability_once_the_filter_hump_is_fitted():
         assert after.fits[("gauss_markov", g)].params["tau_s"] == pytest.approx(0.04, rel=0.1)
 
 
-@pytest.mark.skipif(not ADIS.exists(), reason="shared/measurements/real not present")
-@pytest.mark.xfail(strict=True, reason=(
-    "not met: the calibrated K is held at the 5 % family-wise upper confidence bound of the "
-    "measured Allan variance (185 / 296 / 265 deg/h/√h), which the few degrees of freedom at "
-    "long τ make loose; the point bound min ADEV(τ)·√(3/τ) is 42 / 141 / 152. The long-τ ADEV "
-    "rises and falls again (neither RRW nor BI); a point cap held K low on pure-RW records"))
-def test_adis_rrw_is_below_the_point_adev_bound():
-    """K·√(τ/3) ≤ ADEV(τ) at every octave τ up to a third of the record, ADEV from allantools."""
+def _point_bounds(m):
+    """min over octave τ (to a third of the record) of ADEV(τ)·√(3/τ) [deg/h/√h], ADEV from allantools."""
     import allantools
-
-    from gyroarray.compare import ModelComparison
-    from gyroarray.measurement import read_measurement
-
-    m = read_measurement(ADIS)
-    a = ModelComparison(m, n_runs=3).analyse()
+    out = []
     for g in (1, 2, 3):
         x = m.gyro_rad_s[:, g - 1] * (180.0 / np.pi) * 3600.0                      # deg/h
         octs = 2.0 ** np.arange(0, int(np.log2(x.size / 3)) + 1) * m.dt_s
         t, ad, _, _ = allantools.oadev(x, rate=1.0 / m.dt_s, data_type="freq", taus=octs)
-        bound = float(np.min(ad / np.sqrt(t / 3.0))) * 60.0                          # deg/h/√h
+        out.append(float(np.min(ad / np.sqrt(t / 3.0))) * 60.0)
+    return out
+
+
+@pytest.fixture(scope="module")
+def adis_analysis():
+    from gyroarray.compare import ModelComparison
+    from gyroarray.measurement import read_measurement
+    m = read_measurement(ADIS)
+    return m, ModelComparison(m, n_runs=3).analyse()
+
+
+@pytest.mark.skipif(not ADIS.exists(), reason="shared/measurements/real not present")
+def test_adis_rrw_respects_the_point_adev_bound_within_its_own_two_sigma(adis_analysis):
+    """The point bound (42 / 141 / 152 deg/h/√h) is itself read from the last octaves, with 2–3
+    degrees of freedom; K must not exceed it by more than its own 2σ. Before the K reference fit
+    (flicker column, octaves where ARW + RRW + flicker fit) K was 185 / 296 / 265 ± 18–21."""
+    m, a = adis_analysis
+    for g, bound in zip((1, 2, 3), _point_bounds(m)):
+        f = a.fits[("rrw", g)]
+        assert f.params["k_deg_h_rt_h"] <= bound + 2.0 * f.sigma["k_deg_h_rt_h"], (g, bound, f.params)
+
+
+@pytest.mark.skipif(not ADIS.exists(), reason="shared/measurements/real not present")
+@pytest.mark.xfail(strict=True, reason=(
+    "not met on gyros 1 and 3: K = 53 ± 37 and 200 ± 33 deg/h/√h against point bounds of 42 and "
+    "152 (gyro 2: 121 ± 42 against 141 holds). Gyro 3's ADEV rises from 33 to 67 deg/h between "
+    "328 and 1310 s, a +1/2 slope of K ≈ 185, and its last octave (2621 s, 75 deg/h, 2–3 degrees "
+    "of freedom) sets the bound; a cap at the point bound held K low on pure-RW records"))
+def test_adis_rrw_is_below_the_point_adev_bound(adis_analysis):
+    """K·√(τ/3) ≤ ADEV(τ) at every octave τ up to a third of the record, ADEV from allantools."""
+    m, a = adis_analysis
+    for g, bound in zip((1, 2, 3), _point_bounds(m)):
         assert a.fits[("rrw", g)].params["k_deg_h_rt_h"] <= bound, (g, bound)
+
+
+@pytest.mark.skipif(not ADIS.exists(), reason="shared/measurements/real not present")
+def test_adis_bias_instability_is_read_below_the_adev_floor(adis_analysis):
+    """A flicker floor's ADEV is 0.664·B and every other term adds to it, so min ADEV / 0.664
+    (allantools) bounds B from above: 38 and 46 deg/h on gyros 1–2. The test's own column,
+    fitted from the first octave, read 46–55 (and 107 in an earlier release); B is now read
+    beside K where ARW + RRW + flicker fit the curve."""
+    import allantools
+    m, a = adis_analysis
+    by = {(t.effect, t.gyro): t for t in a.tests}
+    for g in (1, 2):
+        x = m.gyro_rad_s[:, g - 1] * (180.0 / np.pi) * 3600.0
+        octs = 2.0 ** np.arange(0, int(np.log2(x.size / 3)) + 1) * m.dt_s
+        _, ad, _, _ = allantools.oadev(x, rate=1.0 / m.dt_s, data_type="freq", taus=octs)
+        ceiling = float(np.min(ad)) / 0.664
+        b = a.fits[("bias_instability", g)].params["b_deg_h"] if ("bias_instability", g) in a.fits else \
+            by[("bias_instability", g)].fit.params["b_deg_h"]
+        assert 0.5 * ceiling < b <= ceiling, (g, b, ceiling)
