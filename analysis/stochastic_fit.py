@@ -341,22 +341,15 @@ def _factors(n: int, m_min: int = 1) -> np.ndarray:
     return m[m >= m_min] if np.count_nonzero(m >= m_min) >= 6 else m[-6:]
 
 
-def _cov_model(n: int, dt_s: float, m_min: int = 1, long: bool = False) -> _AvarCov:
-    key = (int(n), float(dt_s), int(m_min), long)
+def _cov_model(n: int, dt_s: float, m_min: int = 1) -> _AvarCov:
+    key = (int(n), float(dt_s), int(m_min))
     cov = _COV_CACHE.get(key)
     if cov is None:
         if len(_COV_CACHE) >= 8:
             _COV_CACHE.clear()
-        m = _long_factors(n, m_min) if long else _factors(n, m_min)
+        m = _factors(n, m_min)
         cov = _COV_CACHE[key] = _AvarCov(m, (n + 1) - 2 * m, dt_s)
     return cov
-
-
-def _long_factors(n: int, m_min: int = 1) -> np.ndarray:
-    """The fit's octave factors continued to a third of the record (the K reference fit)."""
-    m = _factors(n, m_min)
-    more = 2 ** np.arange(int(math.log2(m[-1])) + 1, int(math.log2(max(n // 3, 1))) + 1)
-    return np.concatenate([m, more]).astype(np.int64)
 
 
 def _curve(x: np.ndarray, dt_s: float, cov: _AvarCov | None = None, m_min: int = 1) -> _Curve:
@@ -763,7 +756,7 @@ _REF_P = 1e-3
 _REF_FLOOR_Z = 3.0
 
 
-def _rrw_reference(x: np.ndarray, cv: _Curve, names: tuple, terms: tuple, gm_tau_s: float | None,
+def _rrw_reference(cv: _Curve, names: tuple, terms: tuple, gm_tau_s: float | None,
                    label: str, gyro: int, common: dict) -> tuple[EffectFit, tuple | None]:
     """The ``rrw`` entry: K read where the +1/2 slope is, not from what the model lacks.
 
@@ -774,21 +767,18 @@ def _rrw_reference(x: np.ndarray, cv: _Curve, names: tuple, terms: tuple, gm_tau
     reach only with a random walk), and short-τ structure
     the model does not describe (a sensor's filter, a hump): the octaves start
     at the first one from which the fit's χ² has a tail probability above
-    :data:`_REF_P` (never fewer than six octaves). The octaves go on to a third
-    of the record, where the bound a random walk must respect is read (the
-    other fits stop at an eighth): with Σ the exact covariance of the
-    estimates, the GLS stays unbiased where the last octaves have few, skewed
-    degrees of freedom. The ADIS16405, whose
+    :data:`_REF_P` (never fewer than six octaves). The octaves end where the
+    other fits' do, at an eighth of the record (continued to a third, where the
+    point bound is read, K on the ADIS16405 was 53 / 121 / 200, but on a
+    simulated 2400 s record K fell from 3.8 to 1.9 deg/h/√h on octaves of 2–3
+    degrees of freedom and the ADEV left the model's band). The ADIS16405, whose
     calibrated K was 185 / 296 / 265 deg/h/√h against point ADEV bounds
-    min ADEV(τ)·√(3/τ) of 42 / 141 / 152, reads 0 ± 59 / 122 ± 31 / 184 ± 29.
+    min ADEV(τ)·√(3/τ) of 42 / 141 / 152, reads 76 ± 33 / 125 ± 43 / 201 ± 33.
     On ARW + RRW records both changes almost never act (a flicker column always
     in would leave K unbiased but, K² clipped at 0 more often, read K 12 % low
     with 1.7 times the scatter on 2000 s records of K = 20 deg/h/√h).
     """
     given = tuple(nm for nm in names if nm != "b") if "b" not in terms else names
-    m = _long_factors(x.size, int(cv.m[0]))
-    cv = replace(cv, taus=m * cv.dt_s, m=m, y=deviation(x, cv.dt_s, "oadev", m * cv.dt_s).dev ** 2,
-                 cov=_cov_model(x.size, cv.dt_s, int(cv.m[0]), long=True))
     start = 0
     while True:
         sub = cv if start == 0 else replace(cv, taus=cv.taus[start:], m=cv.m[start:], y=cv.y[start:],
@@ -965,7 +955,7 @@ def fit_gyro_noise(e, dt_s: float, gyro: int, *, model_terms: tuple = (),
     common = {"chi2_baseline": base.chi2, "dof_baseline": base.dof, "ramp_removed": ramp_removed}
 
     out = _baseline_fits(cv, base, label, gyro, common)                        # ARW, RRW
-    out[1], ref_b = _rrw_reference(x - r * dt * np.arange(n) if ramp_removed else x, cv,
+    out[1], ref_b = _rrw_reference(cv,
                             base_names if "b" in terms else base_names + ("b",), terms, gm_tau_s,
                             label, gyro, common)
     extra = _extra_column_fits(cv, base, terms, gm, gm_tau_s, label, gyro, common)  # B, Q
