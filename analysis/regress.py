@@ -50,7 +50,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 from scipy import fft as sfft
-from scipy import optimize, special, stats
+from scipy import optimize, signal, special, stats
 
 from gyroarray.analysis.effect_fit import EffectFit, chi2_to_z
 from gyroarray.physics import fractional_delay, tilt_basis
@@ -959,28 +959,34 @@ LAG_SMOOTHING_S = (30.0, 100.0, 300.0, 1000.0)
 LAG_CHI2 = 9.14
 
 
-def temperature_rate(temp_c, dt_s: float, smoothing_s: float) -> np.ndarray:
-    """Derivative of the smoothed temperature reading [°C/s] (zero-phase second-order
-    Butterworth low-pass at 1/``smoothing_s``, then central differences)."""
-    from scipy import signal
+def temperature_rates(temp_c, dt_s: float) -> dict[float, np.ndarray]:
+    """The thermal-lag columns a record allows: dT/dt of the temperature reading [°C/s],
+    smoothed (zero-phase second-order Butterworth low-pass at 1/T_s, then central
+    differences), for each T_s of :data:`LAG_SMOOTHING_S` within [8·dt, span/8]."""
     temp = np.asarray(temp_c, dtype=float)
-    wn = min(2.0 * dt_s / smoothing_s, 0.99)            # cut-off over Nyquist
-    b, a = signal.butter(2, wn)
-    pad = min(temp.size - 1, int(3 * smoothing_s / dt_s))
-    return np.gradient(signal.filtfilt(b, a, temp, padtype="odd", padlen=pad), dt_s)
-
-
-def _lag_columns(e, temp, dt_s: float, r: float, q: float, use, base: GLSFit,
-                 smoothings=None) -> tuple[GLSFit, float | None]:
-    """The fit with the thermal-lag column dT/dt beside T − T_0, when it lowers χ² by more
-    than :data:`LAG_CHI2` (the best smoothing), else ``base`` and None."""
-    span = float(dt_s * temp.size)
-    best, best_s = base, None
-    for sm in (LAG_SMOOTHING_S if smoothings is None else smoothings):
-        if not 8.0 * dt_s <= sm <= span / 8.0:
+    out = {}
+    for sm in LAG_SMOOTHING_S:
+        if not 8.0 * dt_s <= sm <= dt_s * temp.size / 8.0:
             continue
+        b, a = signal.butter(2, min(2.0 * dt_s / sm, 0.99))     # cut-off over Nyquist
+        pad = min(temp.size - 1, int(3 * sm / dt_s))
+        out[sm] = np.gradient(signal.filtfilt(b, a, temp, padtype="odd", padlen=pad), dt_s)
+    return out
+
+
+def temperature_columns(temp: np.ndarray, rate: np.ndarray | None = None) -> np.ndarray:
+    """The temperature fit's regressors (n, 1 or 2): T − T_0, and the thermal-lag column."""
+    return (temp - temp[0])[:, None] if rate is None else np.column_stack([temp - temp[0], rate])
+
+
+def _lag_columns(e, temp, r: float, q: float, use, base: GLSFit,
+                 rates: dict) -> tuple[GLSFit, float | None]:
+    """The fit with the thermal-lag column beside T − T_0, when it lowers χ² by more than
+    :data:`LAG_CHI2` (the best smoothing of ``rates``), else ``base`` and None."""
+    best, best_s = base, None
+    for sm, rate in rates.items():
         try:
-            fit = gls_rw(e, np.column_stack([temp - temp[0], temperature_rate(temp, dt_s, sm)]), r, q, use=use)
+            fit = gls_rw(e, temperature_columns(temp, rate), r, q, use=use)
         except NotIdentifiableError:     # dT/dt ∝ T − const (an exponential approach) or flat
             continue
         if fit.chi2 < best.chi2 - (LAG_CHI2 if best_s is None else 0.0):
@@ -989,7 +995,7 @@ def _lag_columns(e, temp, dt_s: float, r: float, q: float, use, base: GLSFit,
 
 
 def fit_temperature_bias(e, temp_c, time_s, dt_s: float, r: float, q: float, gyro: int,
-                         *, use=None, lag_smoothing_s: float | None = None) -> EffectFit:
+                         *, use=None, rates: dict | None = None) -> EffectFit:
     """Temperature-dependent bias: residual following the temperature.
 
     Parameters
@@ -1008,10 +1014,10 @@ def fit_temperature_bias(e, temp_c, time_s, dt_s: float, r: float, q: float, gyr
         1-based gyro number.
     use : array_like of bool, shape (n,), optional
         Samples to include (:func:`gls_rw`).
-    lag_smoothing_s : float, optional
-        Take the thermal-lag column with this smoothing [s] (and no other): how a
-        fit on part of a record repeats the whole record's choice. Default: chosen
-        here (Notes).
+    rates : dict, optional
+        The thermal-lag columns, :func:`temperature_rates` of ``temp_c`` (a caller
+        fitting several gyros on one temperature computes them once). Default:
+        computed here.
 
     Returns
     -------
@@ -1038,7 +1044,7 @@ def fit_temperature_bias(e, temp_c, time_s, dt_s: float, r: float, q: float, gyr
     has a smaller response than the slow cycle, and the GLS, which reads the
     coefficient from the changes, gives 60 deg/h/°C on its gyro 2 where the
     levels give 96 and the sensor's two other periods 93 and 93; with the lag
-    column (τ ≈ 240 s) 89 ± 6. The column is dT/dt of the reading smoothed at
+    column (τ ≈ 246 s) 92 ± 8 in `compare`. The column is dT/dt of the reading smoothed at
     one of :data:`LAG_SMOOTHING_S` (the best, within [8·dt, span/8]), and it
     enters only when it lowers the GLS χ² by more than :data:`LAG_CHI2` (a
     pre-test at 1 %: without a lag the coefficient keeps the power of the
@@ -1055,24 +1061,20 @@ def fit_temperature_bias(e, temp_c, time_s, dt_s: float, r: float, q: float, gyr
     except NotIdentifiableError as err:
         return _not_identifiable("temperature_bias", gyro, {"deg_h_per_c": 0.0, "t0_c": t0},
                                  "the temperature does not change", err)
-    fit, sm = _lag_columns(e, temp, dt_s, r, q, use, fit,
-                           None if lag_smoothing_s is None else (lag_smoothing_s,))
+    fit, sm = _lag_columns(e, temp, r, q, use, fit, temperature_rates(temp, dt_s) if rates is None else rates)
     b, s = float(fit.beta[0]), float(fit.sigma[0])
     k, ks = rad_s_to_deg_h(b), rad_s_to_deg_h(s)
     t = b / s
     z = _z1(t)
-    lag: float | None = None
-    lag_s = math.nan
-    if sm is not None:
-        lag = float(fit.beta[1] / b)
-        # delta method for c/k with the fit's covariance
-        c = float(fit.beta[1])
-        cov = fit.cov
-        lag_s = float(abs(lag) * math.sqrt(max(cov[1, 1] / c ** 2 + cov[0, 0] / b ** 2
-                                               - 2.0 * cov[0, 1] / (b * c), 0.0))) if c != 0 else math.inf
-    lag_txt = ("" if lag is None else
-               f", the gyro leading the temperature reading by {_pm(lag, lag_s)} s (a thermal lag, "
-               f"fitted as a dT/dt term on the reading smoothed over {sm:.0f} s)")
+    lag = lag_s = None
+    lag_txt = ""
+    if sm is not None:                   # τ = c/k, its σ by the delta method from the fit's covariance
+        c, cov = float(fit.beta[1]), fit.cov
+        lag = c / b
+        lag_s = (abs(lag) * math.sqrt(max(cov[1, 1] / c ** 2 + cov[0, 0] / b ** 2 - 2.0 * cov[0, 1] / (b * c),
+                                          0.0))) if c != 0 else math.inf
+        lag_txt = (f", the gyro leading the temperature reading by {_pm(lag, lag_s)} s (a thermal lag, "
+                   f"fitted as a dT/dt term on the reading smoothed over {sm:.0f} s)")
     if z >= Z_EVIDENT:
         ev = (f"gyro {gyro} residual follows the temperature: {_pm(k, ks)} deg/h per °C "
               f"relative to {t0:.2f} °C{lag_txt}; the model has no temperature term")
@@ -1080,8 +1082,7 @@ def fit_temperature_bias(e, temp_c, time_s, dt_s: float, r: float, q: float, gyr
         ev = (f"gyro {gyro} residual shows no significant temperature dependence "
               f"({_pm(k, ks)} deg/h per °C, z = {z:.1f}{lag_txt})")
     return EffectFit("temperature_bias", gyro, {"deg_h_per_c": k, "t0_c": t0}, {"deg_h_per_c": ks},
-                     z, ev, _extra(fit, t=t, thermal_lag_s=lag, thermal_lag_sigma_s=None if lag is None else lag_s,
-                                   lag_smoothing_s=sm))
+                     z, ev, _extra(fit, t=t, thermal_lag_s=lag, thermal_lag_sigma_s=lag_s, lag_smoothing_s=sm))
 
 
 def fit_rate_ramp(e, time_s, dt_s: float, r: float, q: float, gyro: int, *, use=None) -> EffectFit:

@@ -756,55 +756,55 @@ _REF_P = 1e-3
 _REF_FLOOR_Z = 3.0
 
 
-def _rrw_reference(cv: _Curve, names: tuple, terms: tuple, gm_tau_s: float | None,
-                   label: str, gyro: int, common: dict) -> tuple[EffectFit, tuple | None]:
+def _rrw_reference(cv: _Curve, names: tuple, gm_tau_s: float | None, label: str, gyro: int,
+                   common: dict) -> tuple[EffectFit, tuple | None]:
     """The ``rrw`` entry: K read where the +1/2 slope is, not from what the model lacks.
 
-    Two things make ARW + RRW alone read a random walk the data rule out, and
-    both are kept out of K here: a flicker floor (the fit has a ``b`` column
-    beside N and K whether or not the model has one, kept when its Wald ratio is
-    above :data:`_REF_FLOOR_Z`: K is the +1/2 slope, not a floor ARW + RRW can
-    reach only with a random walk), and short-τ structure
-    the model does not describe (a sensor's filter, a hump): the octaves start
-    at the first one from which the fit's χ² has a tail probability above
-    :data:`_REF_P` (never fewer than six octaves). The octaves end where the
-    other fits' do, at an eighth of the record (continued to a third, where the
-    point bound is read, K on the ADIS16405 was 53 / 121 / 200, but on a
-    simulated 2400 s record K fell from 3.8 to 1.9 deg/h/√h on octaves of 2–3
-    degrees of freedom and the ADEV left the model's band). The ADIS16405, whose
-    calibrated K was 185 / 296 / 265 deg/h/√h against point ADEV bounds
-    min ADEV(τ)·√(3/τ) of 42 / 141 / 152, reads 76 ± 33 / 125 ± 43 / 201 ± 33.
-    On ARW + RRW records both changes almost never act (a flicker column always
-    in would leave K unbiased but, K² clipped at 0 more often, read K 12 % low
-    with 1.7 times the scatter on 2000 s records of K = 20 deg/h/√h).
+    ``names``: the baseline's columns. Two things make ARW + RRW alone read a
+    random walk the data rule out, and both are kept out of K here:
+
+    * a flicker floor: when the model has no ``b`` column, one is fitted beside
+      N and K and kept when its Wald ratio is above :data:`_REF_FLOOR_Z` (K is
+      the +1/2 slope, not a floor ARW + RRW can reach only with a random walk);
+    * short-τ structure the model does not describe (a sensor's filter, a
+      hump): the octaves start at the first one from which the fit's χ² has a
+      tail probability above :data:`_REF_P` (never fewer than six octaves).
+
+    The octaves end where the other fits' do, at an eighth of the record. On
+    the ADIS16405 (calibrated K 185 / 296 / 265 deg/h/√h against the point ADEV
+    bounds min ADEV(τ)·√(3/τ) of 42 / 141 / 152) K reads 76 ± 33 / 125 ± 43 /
+    201 ± 33. On ARW + RRW records neither change almost ever acts (a flicker
+    column always in would read K 12 % low with 1.7 times the scatter on 2000 s
+    records of K = 20 deg/h/√h: K² is clipped at 0 more often).
+
+    Returns the ``rrw`` entry and, when a flicker column was added here and
+    kept, (B and its 1σ as :func:`_root_sigma` gives them [rad/s], the first τ
+    [s]), else None.
     """
-    given = tuple(nm for nm in names if nm != "b") if "b" not in terms else names
     start = 0
     while True:
         sub = cv if start == 0 else replace(cv, taus=cv.taus[start:], m=cv.m[start:], y=cv.y[start:],
                                             cov=_SubCov(cv.cov, start))   # type: ignore[arg-type]
-        fit, used = _gls(sub, names, gm_tau_s), names
-        if "b" in names and "b" not in given:     # the floor's column only where there is a floor
-            j = names.index("b")
-            if not fit.a[j] > _REF_FLOOR_Z * math.sqrt(fit.cov[j, j]):
-                fit, used = _gls(sub, given, gm_tau_s), given
+        used = names if "b" in names else names + ("b",)
+        fit = _gls(sub, used, gm_tau_s)
+        if used is not names and not fit.a[-1] > _REF_FLOOR_Z * math.sqrt(fit.cov[-1, -1]):
+            fit, used = _gls(sub, names, gm_tau_s), names     # the floor's column only where there is one
         if fit.dof <= 0 or stats.chi2.sf(fit.chi2, fit.dof) > _REF_P or cv.m.size - start <= 6:
             break
         start += 1
     rrw = _baseline_fits(sub, fit, label, gyro, common)[1]
     rrw = replace(rrw, extra={**rrw.extra, "k_from_tau_s": float(sub.taus[0]),
                               "k_with_flicker_column": "b" in used})
-    if "b" not in used:
+    if used is names:
         return rrw, None
-    j = used.index("b")
-    return rrw, (*_root_sigma(float(fit.a[j]), float(math.sqrt(fit.cov[j, j]))), float(sub.taus[0]))
+    return rrw, (*_root_sigma(float(fit.a[-1]), float(math.sqrt(fit.cov[-1, -1]))), float(sub.taus[0]))
 
 
 def _with_reference_b(bi: EffectFit, ref_b: tuple | None) -> EffectFit:
     """The ``bias_instability`` entry with B read beside K in the reference fit (its z unchanged:
     the test is the baseline's). The test's own column, fitted from the first octave, reads a
     short-τ structure the model lacks as flicker (the ADIS16405's gyro 2: 55 deg/h, where its
-    ADEV minimum gives 46 and the reference fit 34)."""
+    ADEV minimum gives 46 and the reference fit 36)."""
     if ref_b is None or not bi.z > 3.0:     # no floor seen: the test's own reading stands
         return bi
     p, sp, tau0 = ref_b
@@ -955,11 +955,9 @@ def fit_gyro_noise(e, dt_s: float, gyro: int, *, model_terms: tuple = (),
     common = {"chi2_baseline": base.chi2, "dof_baseline": base.dof, "ramp_removed": ramp_removed}
 
     out = _baseline_fits(cv, base, label, gyro, common)                        # ARW, RRW
-    out[1], ref_b = _rrw_reference(cv,
-                            base_names if "b" in terms else base_names + ("b",), terms, gm_tau_s,
-                            label, gyro, common)
+    out[1], ref_b = _rrw_reference(cv, base_names, gm_tau_s, label, gyro, common)
     extra = _extra_column_fits(cv, base, terms, gm, gm_tau_s, label, gyro, common)  # B, Q
-    out += [_with_reference_b(extra[0], ref_b if "b" not in terms else None), extra[1]]
+    out += [_with_reference_b(extra[0], ref_b), extra[1]]
     out.append(_ramp_entry(r, sr, z_r, lr, n * dt, label, gyro, common))
     out.append(_fit_gauss_markov(cv, base, label, gyro, common, terms))
     return out

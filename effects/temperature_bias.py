@@ -8,7 +8,8 @@ from dataclasses import replace
 import numpy as np
 
 from gyroarray.analysis.effect_fit import EffectFit
-from gyroarray.analysis.regress import NotIdentifiableError, fit_temperature_bias, gls_rw, temperature_rate
+from gyroarray.analysis.regress import (NotIdentifiableError, fit_temperature_bias, gls_rw, temperature_columns,
+                                       temperature_rates)
 from gyroarray.effects import _draw
 from gyroarray.errors import InputError
 from gyroarray.sim.protocol import Param, RegressionEffect, Stage, identity, same_noise_preference, with_term
@@ -27,8 +28,8 @@ class TemperatureBias(RegressionEffect):
     random-walk bias (:func:`gyroarray.analysis.regress.fit_temperature_bias`),
     with a thermal-lag column (dT/dt of the smoothed reading) when the data ask
     for it; the levels' coefficient (an ordinary regression with an intercept,
-    no random walk) is reported beside it. The CATS tag's gyro 2: 89 ± 6 with a
-    lag of about 240 s; without the lag column 60 ± 3, the levels 96.
+    no random walk) is reported beside it. The CATS tag's gyro 2: 92 ± 8 with a
+    lag of about 246 s; without the lag column 60 ± 3, the levels 96.
     ``t0_c`` and a constant bias are one parameter: the fit returns the
     coefficient relative to the first temperature.
 
@@ -62,8 +63,15 @@ class TemperatureBias(RegressionEffect):
                              "pass temp_c (one value per sample, °C)")
         return with_term(state, act.cols, (temp[:, None] - act.p["t0_c"]) * act.p["rad_s_per_c"])
 
+    def _rates(self, ctx) -> dict:
+        """The record's thermal-lag columns (one temperature for every gyro and every refit)."""
+        key = ("temperature_rates",)
+        if key not in ctx.cache:
+            ctx.cache[key] = temperature_rates(ctx.temp, ctx.dt)
+        return ctx.cache[key]
+
     def regress(self, ctx, gyro, e, r, q):
-        f = fit_temperature_bias(e, ctx.temp, ctx.t, ctx.dt, r, q, gyro, use=ctx.use)
+        f = fit_temperature_bias(e, ctx.temp, ctx.t, ctx.dt, r, q, gyro, use=ctx.use, rates=self._rates(ctx))
         if not f.extra.get("identifiable", True):
             return f
         # the levels' coefficient beside it: an ordinary regression with an intercept, the
@@ -90,8 +98,7 @@ class TemperatureBias(RegressionEffect):
                                                                f"{need:.2g} °C: no cross-half check)")
         r, q = float(ctx.r[g]), float(ctx.q[g])
         sm = whole.extra.get("lag_smoothing_s")         # the whole fit's thermal-lag column, if any
-        X = (temp - temp[0])[:, None] if sm is None else \
-            np.column_stack([temp - temp[0], temperature_rate(temp, ctx.dt, sm)])
+        X = temperature_columns(temp, None if sm is None else self._rates(ctx)[sm])
         betas, scores = [], []
         for fit_on, other in (halves, halves[::-1]):
             use_fit = None if ctx.use is None else ctx.use[fit_on]

@@ -80,15 +80,25 @@ def test_adis_needs_no_bias_instability_once_the_filter_hump_is_fitted():
         assert after.fits[("gauss_markov", g)].params["tau_s"] == pytest.approx(0.04, rel=0.1)
 
 
-def _point_bounds(m):
-    """min over octave τ (to a third of the record) of ADEV(τ)·√(3/τ) [deg/h/√h], ADEV from allantools."""
+def _point_bounds(adev):
+    """min over octave τ of ADEV(τ)·√(3/τ) [deg/h/√h], per gyro."""
+    return [float(np.min(ad / np.sqrt(t / 3.0))) * 60.0 for t, ad in adev]
+
+
+@pytest.fixture(scope="module")
+def adis_adev():
+    """allantools' overlapping ADEV of gyros 1–3 at the octave τ up to a third of the record:
+    [(τ [s], ADEV [deg/h])]."""
     import allantools
+
+    from gyroarray.measurement import read_measurement
+    m = read_measurement(ADIS)
     out = []
     for g in (1, 2, 3):
         x = m.gyro_rad_s[:, g - 1] * (180.0 / np.pi) * 3600.0                      # deg/h
         octs = 2.0 ** np.arange(0, int(np.log2(x.size / 3)) + 1) * m.dt_s
         t, ad, _, _ = allantools.oadev(x, rate=1.0 / m.dt_s, data_type="freq", taus=octs)
-        out.append(float(np.min(ad / np.sqrt(t / 3.0))) * 60.0)
+        out.append((t, ad))
     return out
 
 
@@ -101,12 +111,12 @@ def adis_analysis():
 
 
 @pytest.mark.skipif(not ADIS.exists(), reason="shared/measurements/real not present")
-def test_adis_rrw_respects_the_point_adev_bound_within_its_own_two_sigma(adis_analysis):
+def test_adis_rrw_respects_the_point_adev_bound_within_its_own_two_sigma(adis_analysis, adis_adev):
     """The point bound (42 / 141 / 152 deg/h/√h) is itself read from the last octaves, with 2–3
     degrees of freedom; K must not exceed it by more than its own 2σ. Before the K reference fit
     (flicker column, octaves where ARW + RRW + flicker fit) K was 185 / 296 / 265 ± 18–21."""
-    m, a = adis_analysis
-    for g, bound in zip((1, 2, 3), _point_bounds(m)):
+    _, a = adis_analysis
+    for g, bound in zip((1, 2, 3), _point_bounds(adis_adev)):
         f = a.fits[("rrw", g)]
         assert f.params["k_deg_h_rt_h"] <= bound + 2.0 * f.sigma["k_deg_h_rt_h"], (g, bound, f.params)
 
@@ -117,27 +127,22 @@ def test_adis_rrw_respects_the_point_adev_bound_within_its_own_two_sigma(adis_an
     "152 (gyro 2: 125 ± 43 against 141 holds). Gyro 3's ADEV rises from 33 to 67 deg/h between "
     "328 and 1310 s, a +1/2 slope of K ≈ 185, and its last octave (2621 s, 75 deg/h, 2–3 degrees "
     "of freedom) sets the bound; a cap at the point bound held K low on pure-RW records"))
-def test_adis_rrw_is_below_the_point_adev_bound(adis_analysis):
+def test_adis_rrw_is_below_the_point_adev_bound(adis_analysis, adis_adev):
     """K·√(τ/3) ≤ ADEV(τ) at every octave τ up to a third of the record, ADEV from allantools."""
-    m, a = adis_analysis
-    for g, bound in zip((1, 2, 3), _point_bounds(m)):
+    _, a = adis_analysis
+    for g, bound in zip((1, 2, 3), _point_bounds(adis_adev)):
         assert a.fits[("rrw", g)].params["k_deg_h_rt_h"] <= bound, (g, bound)
 
 
 @pytest.mark.skipif(not ADIS.exists(), reason="shared/measurements/real not present")
-def test_adis_bias_instability_is_read_below_the_adev_floor(adis_analysis):
+def test_adis_bias_instability_is_read_below_the_adev_floor(adis_analysis, adis_adev):
     """A flicker floor's ADEV is 0.664·B and every other term adds to it, so min ADEV / 0.664
     (allantools) bounds B from above: 38 and 46 deg/h on gyros 1–2. The test's own column,
     fitted from the first octave, read 46–55 (and 107 in an earlier release); B is now read
     beside K where ARW + RRW + flicker fit the curve."""
-    import allantools
-    m, a = adis_analysis
+    _, a = adis_analysis
     by = {(t.effect, t.gyro): t for t in a.tests}
     for g in (1, 2):
-        x = m.gyro_rad_s[:, g - 1] * (180.0 / np.pi) * 3600.0
-        octs = 2.0 ** np.arange(0, int(np.log2(x.size / 3)) + 1) * m.dt_s
-        _, ad, _, _ = allantools.oadev(x, rate=1.0 / m.dt_s, data_type="freq", taus=octs)
-        ceiling = float(np.min(ad)) / 0.664
-        b = a.fits[("bias_instability", g)].params["b_deg_h"] if ("bias_instability", g) in a.fits else \
-            by[("bias_instability", g)].fit.params["b_deg_h"]
+        ceiling = float(np.min(adis_adev[g - 1][1])) / 0.664
+        b = by[("bias_instability", g)].fit.params["b_deg_h"]
         assert 0.5 * ceiling < b <= ceiling, (g, b, ceiling)

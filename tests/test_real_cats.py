@@ -23,9 +23,16 @@ pytestmark = pytest.mark.skipif(not CATS.exists(), reason="needs ../shared/measu
 
 
 @pytest.fixture(scope="module")
-def fitted():
+def comparison():
+    """The record, its analysis with the default model, and with gyro 2's temperature term fitted."""
     m = read_measurement(CATS)
-    _, after = ModelComparison(m, n_runs=5).fit([("temperature_bias", 2)])
+    before, after = ModelComparison(m, n_runs=5).fit([("temperature_bias", 2)])
+    return m, before, after
+
+
+@pytest.fixture(scope="module")
+def fitted(comparison):
+    m, _, after = comparison
     return m, after.fits[("temperature_bias", 2)]
 
 
@@ -62,10 +69,9 @@ def test_gyro_2_leads_its_temperature_reading(fitted):
     assert lag > 3 * s
 
 
-def test_gyro_1_temperature_coefficient_is_not_significant():
+def test_gyro_1_temperature_coefficient_is_not_significant(comparison):
     """Gyro 1's coefficient changes sign between the sensor's periods (−26 / −10 / +7 by plain
     regression): the test of a temperature term must not call it significant here."""
-    m = read_measurement(CATS)
-    a = ModelComparison(m, n_runs=3).analyse()
+    _, a, _ = comparison
     t = {(c.effect, c.gyro): c for c in a.candidates}[("temperature_bias", 1)]
     assert not a.significant(t), t.evidence
