@@ -28,6 +28,8 @@ from scipy.optimize import brentq, nnls
 from gyroarray import units
 from gyroarray.errors import InputError
 
+from gyroarray.analysis.avar_covariance import AvarCovariance
+
 __all__ = [
     "TERMS",
     "TERM_EXPONENTS",
@@ -37,8 +39,6 @@ __all__ = [
     "term_basis",
     "term_from_curve",
     "fit_noise_terms",
-    "phase_variogram",
-    "spike_lags",
 ]
 
 #: The five IEEE Std 952 terms, in order of the exponent of tau in the
@@ -414,188 +414,22 @@ def _covariance(x: np.ndarray) -> np.ndarray | None:
 # Correlation between the variance estimates at different taus
 
 
-def phase_variogram(term: str, t, dt_s: float) -> np.ndarray:
-    """Generalised variogram D(t) of the phase of one noise term, per unit coefficient.
-
-    The phase is the cumulative sum of the sampled rate; ``t`` is a lag in
-    samples. Terms of degree <= 2 in t are dropped (differences of order
-    >= 2 annihilate them), so only the covariances of such differences,
-    ``cov(z_j(i), z_k(i + l)) = -1/2 sum_pq b_p b_q D(l + q m_k - p m_j)``,
-    are meaningful. The signs matter once terms mix.
-
-    Parameters
-    ----------
-    term : {"n", "k", "b"}
-        White FM (angle random walk, per N² = 1): ``|t|/dt``, exact for
-        sampled white rate; random-walk FM (per K² = 1):
-        ``-dt (|t|³ - |t|)/6``, exact for a sampled random walk (the m = 1
-        Allan variance is K² dt); flicker FM (per B² = 1): ``-t² ln|t|/π``.
-    t : array_like
-        Lags [samples].
-    dt_s : float
-        Sampling step [s].
-
-    Returns
-    -------
-    ndarray
-        D(t) [rad² per unit coefficient].
-    """
-    a = np.abs(np.asarray(t, dtype=float))
-    if term == "n":
-        return a / dt_s
-    if term == "k":
-        return -(dt_s / 6.0) * (a ** 3 - a)
-    if term == "b":
-        with np.errstate(divide="ignore", invalid="ignore"):
-            return np.where(a > 0, -(a * a * np.log(a)) / math.pi, 0.0)
-    raise ValueError(f"no phase variogram for term {term!r}")
-
-
-#: The noise type whose phase variogram models each exponent of TERM_ALPHA (a rate
-#: ramp, alpha -2, is modelled as random-walk FM).
-_ALPHA_TERM = {0: "n", -1: "b", -2: "k"}
-
-
-def spike_lags(b: np.ndarray, m_j: int, m_k: int) -> dict:
-    """White-PM (quantization) covariance spikes of two phase differences.
-
-    ``z_j(i) = sum_p b_p x(i + p m_j)`` and ``z_k`` likewise with white
-    phase x: ``cov(z_j(i), z_k(i + l))`` is ``sum b_p b_q`` over the (p, q)
-    with ``l = p m_j - q m_k`` (per unit phase variance).
-
-    Returns
-    -------
-    dict
-        Lag [samples] -> ``sum b_p b_q`` [-], lags in increasing order.
-    """
-    acc: dict = {}
-    for p in range(len(b)):
-        for q in range(len(b)):
-            lag = p * int(m_j) - q * int(m_k)
-            acc[lag] = acc.get(lag, 0.0) + float(b[p] * b[q])
-    return {lag: acc[lag] for lag in sorted(acc)}
-
-
-class _EstimateCorrelation:
-    """Correlation matrix of variance estimates at several taus.
-
-    For the phase differences ``z_j(i) = sum_p b_p x(i + p m_j)`` (``b`` the
-    binomial weights of order d), the cross-covariance at lag l is
-    ``C_jk(l) = -1/2 sum_pq b_p b_q D(l + q m_k - p m_j)`` with D the phase
-    structure function.  For Gaussian noise ``cov(z^2, z'^2) = 2 C^2``, so
-    the estimates (means of ``M_j`` squares) have, for large ``M``,
-    ``cov_jk ~ 2 sum_l C_jk(l)^2 / max(M_j, M_k)`` and correlation
-    ``rho_jk = S_jk / sqrt(S_jj S_kk) * sqrt(min(M)/max(M))`` with
-    ``S_jk = sum_l C_jk(l)^2``.  Each noise term is an independent process,
-    so ``C`` is the sum over terms of ``sqrt(v_j v_k) r_jk(l)`` with ``v``
-    the term's variance at each tau and ``r`` its normalised
-    cross-covariance, precomputed here on a lag grid (integer lags when
-    short, else ``npts`` midpoints over ``|l| <= 4 d (m_j + m_k)``, wide
-    enough for the ``1/l^2`` tail of flicker noise).  White PM (``D`` = 1
-    off zero) gives isolated spikes at ``l = p m_j - q m_k``, summed
-    exactly.  A rate ramp is modelled as random-walk FM.
-    """
-
-    def __init__(self, m: np.ndarray, n_terms: np.ndarray, d: int,
-                 terms: tuple, npts: int = 512):
-        k = m.size
-        b = np.array([(-1) ** (d - p) * math.comb(d, p) for p in range(d + 1)],
-                     dtype=float)
-        self.j, self.k = np.triu_indices(k)
-        mj = m[self.j].astype(float)[:, None]
-        mk = m[self.k].astype(float)[:, None]
-        n_pairs = self.j.size
-        half = 4.0 * d * (mj + mk)                       # (pairs, 1)
-        exact = (2.0 * half + 1.0 <= npts)[:, 0]
-        self.step = np.where(exact, 1.0, 2.0 * half[:, 0] / npts)
-        idx = np.arange(npts, dtype=float)[None, :]
-        lags = np.where(exact[:, None], -half + idx,
-                        -half + self.step[:, None] * (idx + 0.5))
-        # integer grids use the first 2 half + 1 slots; the rest are masked
-        used = ~exact[:, None] | (idx <= 2.0 * half)
-        self.profiles = np.zeros((len(terms), n_pairs, npts))
-        self.is_wpm = np.array([TERM_ALPHA[t] == 2 for t in terms])
-        for it, term in enumerate(terms):
-            alpha = TERM_ALPHA[term]
-            if alpha == 2:
-                continue
-            c = np.zeros((n_pairs, npts))
-            c0j = np.zeros(n_pairs)
-            c0k = np.zeros(n_pairs)
-            for p in range(d + 1):
-                for q in range(d + 1):
-                    w = -0.5 * b[p] * b[q]
-                    c += w * phase_variogram(_ALPHA_TERM[alpha], lags + q * mk - p * mj, 1.0)
-                    c0j += w * phase_variogram(_ALPHA_TERM[alpha], (q - p) * mj[:, 0], 1.0)
-                    c0k += w * phase_variogram(_ALPHA_TERM[alpha], (q - p) * mk[:, 0], 1.0)
-            self.profiles[it] = (np.where(used, c, 0.0)
-                                 / np.sqrt(c0j * c0k)[:, None])
-        # White PM: C_jk(l) = 1/2 sum_{p m_j - q m_k = l} b_p b_q, normalised
-        # by C_jj(0) = 1/2 sum b_p^2.
-        c0 = 0.5 * float(b @ b)
-        wpm_lag = []
-        wpm_val = []
-        for pair in range(n_pairs):
-            acc = spike_lags(b, int(mj[pair, 0]), int(mk[pair, 0]))
-            wpm_lag.append(np.array(list(acc), dtype=float))
-            wpm_val.append(0.5 * np.array(list(acc.values())) / c0)
-        self.wpm_lag = wpm_lag
-        self.wpm_val = wpm_val
-        # the same, flattened, with the linear-interpolation position of each spike
-        # lag on its pair's uniform lag grid lags[pair, 0] + step[pair] * i
-        self.wpm_pair = np.concatenate([np.full(len(v), i) for i, v in enumerate(wpm_val)])
-        flat_lag = np.concatenate(wpm_lag)
-        self.wpm_val_flat = np.concatenate(wpm_val)
-        pos = (flat_lag - lags[self.wpm_pair, 0]) / self.step[self.wpm_pair]
-        self.wpm_inside = (pos >= 0.0) & (pos <= npts - 1)
-        i0 = np.clip(np.floor(pos), 0, npts - 2).astype(np.int64)
-        self.wpm_i0 = i0
-        self.wpm_w = np.where(self.wpm_inside, pos - i0, 0.0)
-        self.lags = lags
-        self.size = k
-        big_m = n_terms.astype(float)
-        self.m_factor = np.sqrt(np.minimum.outer(big_m, big_m)
-                                / np.maximum.outer(big_m, big_m))
-
-    def matrix(self, v: np.ndarray) -> np.ndarray:
-        """Correlation matrix for per-term variances ``v`` (terms, taus)."""
-        v = np.maximum(v, 0.0)
-        amp = np.sqrt(v[:, self.j] * v[:, self.k])      # (terms, pairs)
-        smooth = np.einsum("tp,tpl->pl", amp[~self.is_wpm],
-                           self.profiles[~self.is_wpm])
-        s = np.sum(smooth * smooth, axis=1) * self.step
-        if self.is_wpm.any():
-            a_w = amp[self.is_wpm].sum(axis=0)
-            pair = self.wpm_pair
-            spike = a_w[pair] * self.wpm_val_flat
-            # smooth part at the spike lags: linear interpolation, 0 outside the grid
-            # (np.interp(lag, lags[pair], smooth[pair], left=0, right=0), vectorised)
-            at = np.where(self.wpm_inside,
-                          (1.0 - self.wpm_w) * smooth[pair, self.wpm_i0]
-                          + self.wpm_w * smooth[pair, self.wpm_i0 + 1], 0.0)
-            s = s + np.bincount(pair, weights=spike * spike + 2.0 * spike * at,
-                                minlength=s.size)
-        big_s = np.zeros((self.size, self.size))
-        big_s[self.j, self.k] = s
-        big_s[self.k, self.j] = s
-        diag = np.sqrt(np.diag(big_s))
-        return big_s / np.outer(diag, diag) * self.m_factor
-
-
+#: Correlation models by (factors, counts, order): the chain fits many series of one length
+#: (building one costs ~25 ms).
 _CORR_CACHE: dict = {}
 
 
-def _estimate_correlation(m: np.ndarray, n_terms: np.ndarray, d: int,
-                          terms: tuple) -> "_EstimateCorrelation":
-    """:class:`_EstimateCorrelation`, reused for the same taus, counts, order and terms
-    (the chain fits many series of one length; building it costs ~25 ms)."""
-    key = (m.astype(np.int64).tobytes(), n_terms.astype(np.int64).tobytes(), d, tuple(terms))
+def _estimate_correlation(m: np.ndarray, n_terms: np.ndarray, d: int, terms: tuple):
+    """``v -> correlation matrix`` of the estimates (:meth:`AvarCovariance.correlation`),
+    the model reused for the same factors, counts and order."""
+    key = (m.astype(np.int64).tobytes(), n_terms.astype(np.int64).tobytes(), d)
     hit = _CORR_CACHE.get(key)
     if hit is None:
         if len(_CORR_CACHE) >= 16:
             _CORR_CACHE.pop(next(iter(_CORR_CACHE)))
-        hit = _CORR_CACHE[key] = _EstimateCorrelation(m, n_terms, d, terms)
-    return hit
+        hit = _CORR_CACHE[key] = AvarCovariance(m, n_terms, d)
+    terms = tuple(terms)
+    return lambda v: hit.correlation(v, terms)
 
 
 def _whitener(rel_cov: np.ndarray, scale: np.ndarray):
@@ -721,7 +555,7 @@ def _with_model_error(sol: _Solution, corr, g: np.ndarray, dof: int, iterate,
     updates it again.
     """
     start = sol.a
-    fixed = None if corr is None else corr.matrix((g * start).T)
+    fixed = None if corr is None else corr((g * start).T)
 
     def excess(log_eps):
         # chi2 to ~1e-6 is plenty for eps to the search's ~2 %
@@ -868,7 +702,7 @@ def fit_noise_terms(result, edf_of_alpha: Callable[[np.ndarray], np.ndarray],
     def solve(a, corr, eps, fixed=None):
         """Noise types and weights from ``a`` (None: the data), then refit.
 
-        ``fixed``: a correlation matrix to use instead of ``corr.matrix(a)``.
+        ``fixed``: a correlation matrix to use instead of ``corr(a)``.
         """
         if a is None:
             alpha = np.zeros(taus.size, dtype=np.int64)   # white FM
@@ -881,7 +715,7 @@ def fit_noise_terms(result, edf_of_alpha: Callable[[np.ndarray], np.ndarray],
         nu = edf_table[np.searchsorted(noise_types, alpha), columns]
         rel_sd = np.sqrt(2.0 / nu)        # sd of the estimate / variance
         rel_cov = (np.eye(taus.size) if corr is None
-                   else fixed if fixed is not None else corr.matrix((g * a).T))
+                   else fixed if fixed is not None else corr((g * a).T))
         rel_cov = rel_cov * np.outer(rel_sd, rel_sd) \
             + eps ** 2 * np.eye(taus.size)
         white = _whitener(rel_cov, model)

@@ -42,30 +42,13 @@ Q²) and :func:`~gyroarray.physics.gauss_markov_avar` (σ², exact sampled
 form), fitted by unconstrained GLS (coefficients may be negative, so Â/σ_Â
 is symmetric under the null), Σ recomputed from the fitted model three times.
 
-Σ is the exact covariance of the estimates for Gaussian noise (class
-``_AvarCov``): with z_j(i) = x(i + 2m_j) − 2x(i + m_j) + x(i) (x the
-cumulative rate) and M_j = n + 1 − 2m_j terms,
-
-    cov(σ̂²_j, σ̂²_k) = 2/(4 m_j² m_k² M_j M_k) · Σ_l w_jk(l) C_jk(l)²,
-    C_jk(l) = −½ Σ_pq b_p b_q D(l + q m_k − p m_j),   b = (1, −2, 1),
-
-w_jk(l) the number of index pairs at lag l (finite record) and D the
-generalised variogram of the phase, per unit coefficient: white FM
-|t|/dt; sampled random-walk FM −dt(|t|³ − |t|)/6 (exact: the m = 1
-variance is K²dt); flicker FM −t² ln|t|/π; Gauss–Markov the exact AR(1)
-variogram t(1+φ)/(1−φ) − 2φ(1−φᵗ)/(1−φ)²; white PM (quantization) spikes
-(1/dt²)Σ b_p b_q at the lags p m_j − q m_k. Mixtures add their C's before
-squaring. Lags on the integers when short, else 512 midpoints over
-±8(m_j + m_k).
-
-The phase variograms and the white-PM spikes are those of
-:func:`~gyroarray.analysis.noise_fit.phase_variogram` and
-:func:`~gyroarray.analysis.noise_fit.spike_lags`, shared with the
-correlation model of :func:`~gyroarray.analysis.noise_fit.fit_noise_terms`
-(which works for any difference order, Hadamard included, but with the
-large-record weight √(min M/max M) instead of the exact w_jk(l), and
-without Gauss–Markov). In a mixture the signs of the generalised
-variograms decide whether terms add.
+Σ is the exact finite-record covariance of the estimates for Gaussian noise,
+:meth:`~gyroarray.analysis.avar_covariance.AvarCovariance.covariance` (the
+model :func:`~gyroarray.analysis.noise_fit.fit_noise_terms` reads its
+large-record correlation from): white FM, random-walk FM, flicker FM, the
+exact AR(1) variogram of a sampled Gauss–Markov rate and the white-PM
+spikes of quantization, added before squaring; the cross-covariance of two
+series for the correlation test.
 
 Bias instability and quantization: one column more than the baseline, z =
 Â/σ_Â, the coefficient √Â with the 1σ of ``noise_fit`` (the larger distance
@@ -182,125 +165,10 @@ from gyroarray.physics import gauss_markov_avar
 from gyroarray.analysis.allan import deviation, edf_simple
 from gyroarray.analysis.davar import davar
 from gyroarray.analysis.effect_fit import EffectFit, chi2_to_z, z_from_log_p
-from gyroarray.analysis.noise_fit import phase_variogram, spike_lags, term_basis
+from gyroarray.analysis.avar_covariance import AvarCovariance
+from gyroarray.analysis.noise_fit import term_basis
 
 __all__ = ["fit_gyro_noise", "fit_correlation", "fit_burst"]
-
-
-# --------------------------------------------------------------------------
-# Covariance of overlapping Allan variance estimates (Gaussian noise, exact)
-
-_B2 = np.array([1.0, -2.0, 1.0])          # second difference of the phase
-
-
-def _d_gauss_markov(t, dt, tau_c):  # AR(1) rate, variogram of the phase (per σ² = 1)
-    a = np.abs(t)
-    u = -math.expm1(-dt / tau_c)                   # 1 − φ
-    return a * (2.0 - u) / u - 2.0 * (1.0 - u) * (-np.expm1(-a * dt / tau_c)) / (u * u)
-
-
-class _AvarCov:
-    """Exact covariance of overlapping Allan variance estimates at the
-    factors ``m`` for Gaussian noise (module docstring): per-term lag
-    profiles C_jk(l) are computed once; :meth:`matrix` combines them for a
-    model's coefficients."""
-
-    def __init__(self, m, n_terms, dt, npts=512):
-        m = np.asarray(m, dtype=np.int64)
-        big_m = np.asarray(n_terms, dtype=float)
-        self.dt = float(dt)
-        self.m = m
-        self.size = m.size
-        self.j, self.k = np.triu_indices(m.size)          # pairs of taus, j <= k
-        mj = m[self.j].astype(float)[:, None]
-        mk = m[self.k].astype(float)[:, None]
-        half = 8.0 * (mj + mk)
-        exact = (2.0 * half[:, 0] + 1.0 <= npts)
-        self.step = np.where(exact, 1.0, 2.0 * half[:, 0] / npts)
-        idx = np.arange(npts, dtype=float)[None, :]
-        lags = np.where(exact[:, None], -half + idx, -half + self.step[:, None] * (idx + 0.5))
-        used = ~exact[:, None] | (idx <= 2.0 * half)
-        Mj = big_m[self.j][:, None]
-        Mk = big_m[self.k][:, None]
-        # number of index pairs (i, i') with i' − i = l: the finite record
-        w = np.clip(np.minimum(Mj, Mk - lags) - np.maximum(0.0, -lags), 0.0, None)
-        self.w = np.where(used, w, 0.0) * self.step[:, None]
-        self.norm = 2.0 / (4.0 * (mj[:, 0] * mk[:, 0]) ** 2 * Mj[:, 0] * Mk[:, 0])
-        self.lags, self.mj, self.mk, self.Mj, self.Mk = lags, mj, mk, Mj, Mk
-        self.profiles = {key: self._profile(lambda t, key=key: phase_variogram(key, t, dt))
-                         for key in ("n", "k", "b")}
-        # white PM spikes: C(l) = (1/dt²) Σ b_p b_q [l = p m_j − q m_k], the nine
-        # (p, q) merged where their lags coincide (unused slots get weight 0)
-        n_pairs = self.j.size
-        self.spike_lag = np.zeros((n_pairs, 9))
-        self.spike_val = np.zeros((n_pairs, 9))
-        for pair in range(n_pairs):
-            acc = spike_lags(_B2, int(mj[pair, 0]), int(mk[pair, 0]))
-            for slot, (lag, val) in enumerate(acc.items()):
-                self.spike_lag[pair, slot] = lag
-                self.spike_val[pair, slot] = val / dt ** 2
-        self.spike_w = np.clip(np.minimum(Mj, Mk - self.spike_lag) - np.maximum(0.0, -self.spike_lag),
-                               0.0, None) * (self.spike_val != 0)
-        # linear interpolation of a profile at the spike lags (uniform grids)
-        pos = (self.spike_lag - lags[:, :1]) / self.step[:, None]
-        self.spike_i0 = np.clip(np.floor(pos).astype(np.int64), 0, npts - 2)
-        self.spike_f = pos - self.spike_i0
-        self.spike_in = (pos >= 0) & (pos <= npts - 1)
-        self._gm_cache = {}
-
-    def _profile(self, d):
-        # z_j(i) = Σ_p b_p x(i + p m_j); cov(z_j(i), z_k(i + l)) = −½ Σ_pq b_p b_q D(l + q m_k − p m_j)
-        c = np.zeros_like(self.lags)
-        for p in range(3):
-            for q in range(3):
-                c += -0.5 * _B2[p] * _B2[q] * d(self.lags + q * self.mk - p * self.mj)
-        return c
-
-    def gm_profile(self, tau_c):
-        key = float(tau_c)
-        if key not in self._gm_cache:
-            if len(self._gm_cache) > 64:
-                self._gm_cache.clear()
-            self._gm_cache[key] = self._profile(lambda t: _d_gauss_markov(t, self.dt, tau_c))
-        return self._gm_cache[key]
-
-    def _at_spikes(self, prof):
-        lo = np.take_along_axis(prof, self.spike_i0, axis=1)
-        hi = np.take_along_axis(prof, self.spike_i0 + 1, axis=1)
-        return np.where(self.spike_in, lo + self.spike_f * (hi - lo), 0.0)
-
-    def _smooth(self, coef, gm):
-        smooth = np.zeros_like(self.lags)
-        for key in ("n", "k", "b"):
-            a = coef.get(key, 0.0)
-            if a != 0:
-                smooth += a * self.profiles[key]
-        if gm is not None and gm[0] != 0:
-            smooth += gm[0] * self.gm_profile(gm[1])
-        return smooth
-
-    def matrix(self, coef, gm=None, other=None):
-        """Covariance of the Allan variance estimates at the factors ``m``.
-
-        ``coef`` = {"q": Q², "n": N², "b": B², "k": K²} (SI; the coefficient
-        of each :func:`term_basis` column), ``gm`` = (σ², τc) or None. With
-        ``other`` = (coef2, gm2): the covariance of the *cross* estimates
-        mean(z¹_j z²_j)/(2m_j²) of two independent series with these models
-        (Σ C¹C² instead of Σ C²).
-        """
-        s1 = self._smooth(coef, gm)
-        coef2, gm2 = (coef, gm) if other is None else other
-        s2 = s1 if other is None else self._smooth(coef2, gm2)
-        s = np.sum(self.w * s1 * s2, axis=1)
-        q1, q2 = coef.get("q", 0.0), coef2.get("q", 0.0)
-        if q1 != 0 or q2 != 0:
-            sp1, sp2 = q1 * self.spike_val, q2 * self.spike_val
-            s += np.sum(self.spike_w * (sp1 * sp2 + sp1 * self._at_spikes(s2)
-                                        + sp2 * self._at_spikes(s1)), axis=1)
-        cov = np.zeros((self.size, self.size))
-        cov[self.j, self.k] = s * self.norm
-        cov[self.k, self.j] = s * self.norm
-        return cov
 
 
 # --------------------------------------------------------------------------
@@ -320,7 +188,7 @@ class _Curve:
     taus: np.ndarray          # [s]
     m: np.ndarray
     y: np.ndarray             # Allan variance [(rad/s)²]
-    cov: _AvarCov
+    cov: AvarCovariance
     caps: dict | None = None  # upper bounds of the capped coefficients (:func:`_caps`)
 
 
@@ -341,18 +209,18 @@ def _factors(n: int, m_min: int = 1) -> np.ndarray:
     return m[m >= m_min] if np.count_nonzero(m >= m_min) >= 6 else m[-6:]
 
 
-def _cov_model(n: int, dt_s: float, m_min: int = 1) -> _AvarCov:
+def _cov_model(n: int, dt_s: float, m_min: int = 1) -> AvarCovariance:
     key = (int(n), float(dt_s), int(m_min))
     cov = _COV_CACHE.get(key)
     if cov is None:
         if len(_COV_CACHE) >= 8:
             _COV_CACHE.clear()
         m = _factors(n, m_min)
-        cov = _COV_CACHE[key] = _AvarCov(m, (n + 1) - 2 * m, dt_s)
+        cov = _COV_CACHE[key] = AvarCovariance(m, (n + 1) - 2 * m, 2, dt_s)
     return cov
 
 
-def _curve(x: np.ndarray, dt_s: float, cov: _AvarCov | None = None, m_min: int = 1) -> _Curve:
+def _curve(x: np.ndarray, dt_s: float, cov: AvarCovariance | None = None, m_min: int = 1) -> _Curve:
     m = _factors(x.size, m_min)
     res = deviation(x, dt_s, "oadev", m * float(dt_s))
     # the bounds read the octaves up to a third of the record (the fit stops at an eighth)
@@ -478,7 +346,7 @@ def _gls(cv: _Curve, names: tuple, tau_c: float | None = None, n_iter: int = 3,
     fixed: dict = {}
     for _ in range(n_iter):
         coef, gm = _split(names, a, tau_c)
-        sigma = cv.cov.matrix(coef, gm)
+        sigma = cv.cov.covariance(coef, gm)
         if not np.all(np.diag(sigma) > 0):
             sigma = np.diag((cv.y * 1e-3) ** 2)
         white = _whitener(sigma)
@@ -739,16 +607,6 @@ def _baseline_fits(cv, base, label: str, gyro: int, common: dict) -> list[Effect
     return out
 
 
-class _SubCov:
-    """The covariance model of a curve's octaves from ``start`` on (a sub-block of the whole)."""
-
-    def __init__(self, cov: _AvarCov, start: int):
-        self.cov, self.start = cov, start
-
-    def matrix(self, coef, gm=None, other=None):
-        return self.cov.matrix(coef, gm, other)[self.start:, self.start:]
-
-
 #: χ² tail probability at which the K reference fit takes its octaves as described (:func:`_rrw_reference`).
 _REF_P = 1e-3
 
@@ -784,7 +642,7 @@ def _rrw_reference(cv: _Curve, names: tuple, gm_tau_s: float | None, label: str,
     start = 0
     while True:
         sub = cv if start == 0 else replace(cv, taus=cv.taus[start:], m=cv.m[start:], y=cv.y[start:],
-                                            cov=_SubCov(cv.cov, start))   # type: ignore[arg-type]
+                                            cov=cv.cov.block(start))
         used = names if "b" in names else names + ("b",)
         fit = _gls(sub, used, gm_tau_s)
         if used is not names and not fit.a[-1] > _REF_FLOOR_Z * math.sqrt(fit.cov[-1, -1]):
@@ -1067,12 +925,12 @@ def _pair_correlations(cav: np.ndarray, cov, coefs: list, G: np.ndarray, pairs: 
         norm = np.where(norm > 0, norm, np.inf)
         # Isserlis: cov(z_i z_k, z_i' z_k') = C^ii' C^kk' + C^ik' C^ki'; summed over
         # the lags, Σ C^i C^k + Σ (C^ik)², where an auto-variance has 2 Σ C²:
-        # half of matrix(); without correlation only the first term
-        null = 0.5 * cov.matrix(coefs[i], other=(coefs[k], None))
+        # half of covariance(); without correlation only the first term
+        null = 0.5 * cov.covariance(coefs[i], other=(coefs[k], None))
         a, cov0, _ = _solve(y, G, _whitener(null))
         for _ in range(2):                    # Σ with the fitted cross-covariance
             cross = {"n": float(a[0]), "k": float(a[1])}
-            a, _, _ = _solve(y, G, _whitener(null + 0.5 * cov.matrix(cross)))
+            a, _, _ = _solve(y, G, _whitener(null + 0.5 * cov.covariance(cross)))
         rho[:, p_] = a / norm
         s0[:, p_] = np.sqrt(np.diag(cov0)) / norm
     return rho, s0

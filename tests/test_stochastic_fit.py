@@ -26,6 +26,7 @@ import numpy as np
 import pytest
 
 from gyroarray.analysis import stochastic_fit as sf
+from gyroarray.analysis.avar_covariance import AvarCovariance
 from gyroarray.analysis.allan import edf
 from gyroarray.analysis.effect_fit import EffectFit, z_from_log_p
 from gyroarray.analysis.noise_fit import term_basis
@@ -75,10 +76,10 @@ def test_estimate_covariance_agrees_with_greenhall_edf():
     the sampled random walk's Allan variance exceeds the continuous K²τ/3)."""
     n = N_20MIN
     m = sf._factors(n)
-    cov = sf._AvarCov(m, n + 1 - 2 * m, DT)
+    cov = AvarCovariance(m, n + 1 - 2 * m, 2, DT)
     taus = m * DT
     for key, alpha in (("n", 0), ("b", -1), ("q", 2), ("k", -2)):
-        var = np.diag(cov.matrix({key: 1.0}))
+        var = np.diag(cov.covariance({key: 1.0}))
         expect = 2.0 * term_basis("oadev", key, taus) ** 2 / edf("oadev", n + 1, m, np.full(m.size, alpha))
         use = m >= 8 if key == "k" else np.ones(m.size, bool)
         np.testing.assert_allclose(var[use], expect[use], rtol=0.015)
