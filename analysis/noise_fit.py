@@ -566,6 +566,63 @@ def _with_model_error(sol: _Solution, corr, g: np.ndarray, dof: int, iterate,
     return iterate(start, corr, model_error), model_error
 
 
+class _Reweighting(NamedTuple):
+    """The reweighting loop of :func:`fit_noise_terms` (its steps 1–3 and the GLS step 4)."""
+
+    g: np.ndarray             # columns tau^i: the fitted A_i are those of sum A_i tau^i
+    y: np.ndarray             # variance at each tau
+    term_alpha: np.ndarray    # noise type of each term
+    noise_types: np.ndarray   # every type that can occur, sorted
+    edf_table: np.ndarray     # EDF of every point for each of them (computed once)
+    max_iter: int
+
+    @classmethod
+    def build(cls, taus, y, terms, edf_of_alpha, max_iter) -> "_Reweighting":
+        term_alpha = np.array([TERM_ALPHA[t] for t in terms])
+        noise_types = np.unique(np.append(term_alpha, 0))
+        edf_table = np.array([np.asarray(edf_of_alpha(np.full(taus.size, a)), dtype=float)
+                              for a in noise_types])
+        g = np.column_stack([taus ** TERM_EXPONENTS[t] for t in terms])
+        return cls(g, y, term_alpha, noise_types, edf_table, max_iter)
+
+    def solve(self, a, corr, eps, fixed=None):
+        """Noise types and weights from ``a`` (None: the data), then refit.
+
+        ``fixed``: a correlation matrix to use instead of ``corr(a)``.
+        """
+        g, y = self.g, self.y
+        size = y.size
+        if a is None:
+            alpha = np.zeros(size, dtype=np.int64)   # white FM
+            model = y
+        else:
+            contrib = g * a
+            alpha = self.term_alpha[np.argmax(contrib, axis=1)]
+            model = contrib.sum(axis=1)
+            model = np.where(model > 0, model, y)
+        nu = self.edf_table[np.searchsorted(self.noise_types, alpha), np.arange(size)]
+        rel_sd = np.sqrt(2.0 / nu)        # sd of the estimate / variance
+        rel_cov = (np.eye(size) if corr is None
+                   else fixed if fixed is not None else corr((g * a).T))
+        rel_cov = rel_cov * np.outer(rel_sd, rel_sd) + eps ** 2 * np.eye(size)
+        white = _whitener(rel_cov, model)
+        a_new, x = _whitened_nnls(g, y, white)
+        return a_new, alpha, nu, x, white
+
+    def iterate(self, a, corr, eps, fixed=None, rtol=1e-9, cap=None) -> _Solution:
+        """Reweight until the noise types and coefficients settle."""
+        alpha = None
+        for n_iter in range(1, (self.max_iter if cap is None else cap) + 1):
+            a_new, new_alpha, nu, x, white = self.solve(a, corr, eps, fixed)
+            settled = (a is not None and np.array_equal(new_alpha, alpha)
+                       and np.allclose(a_new, a, rtol=rtol, atol=0.0))
+            a, alpha = a_new, new_alpha
+            if settled:
+                break
+        resid = white(self.g @ a - self.y)
+        return _Solution(a, alpha, nu, x, white, float(resid @ resid), n_iter)
+
+
 def fit_noise_terms(result, edf_of_alpha: Callable[[np.ndarray], np.ndarray],
                     *, terms: Sequence[str] | None = None,
                     method: str = "gls", max_iter: int = 50) -> NoiseFit:
@@ -690,52 +747,8 @@ def fit_noise_terms(result, edf_of_alpha: Callable[[np.ndarray], np.ndarray],
                          "tau to fit noise terms (is the input constant?)")
     terms = _checked_terms(kind, terms, taus.size, method, max_iter)
 
-    # Columns tau^i: the fitted coefficients are the A_i of sum A_i tau^i.
-    g = np.column_stack([taus ** TERM_EXPONENTS[t] for t in terms])
-    term_alpha = np.array([TERM_ALPHA[t] for t in terms])
-    # EDF of every point for each noise type that can occur (computed once)
-    noise_types = np.unique(np.append(term_alpha, 0))
-    edf_table = np.array([np.asarray(edf_of_alpha(np.full(taus.size, a)),
-                                     dtype=float) for a in noise_types])
-    columns = np.arange(taus.size)
-
-    def solve(a, corr, eps, fixed=None):
-        """Noise types and weights from ``a`` (None: the data), then refit.
-
-        ``fixed``: a correlation matrix to use instead of ``corr(a)``.
-        """
-        if a is None:
-            alpha = np.zeros(taus.size, dtype=np.int64)   # white FM
-            model = y
-        else:
-            contrib = g * a
-            alpha = term_alpha[np.argmax(contrib, axis=1)]
-            model = contrib.sum(axis=1)
-            model = np.where(model > 0, model, y)
-        nu = edf_table[np.searchsorted(noise_types, alpha), columns]
-        rel_sd = np.sqrt(2.0 / nu)        # sd of the estimate / variance
-        rel_cov = (np.eye(taus.size) if corr is None
-                   else fixed if fixed is not None else corr((g * a).T))
-        rel_cov = rel_cov * np.outer(rel_sd, rel_sd) \
-            + eps ** 2 * np.eye(taus.size)
-        white = _whitener(rel_cov, model)
-        a_new, x = _whitened_nnls(g, y, white)
-        return a_new, alpha, nu, x, white
-
-    def iterate(a, corr, eps, fixed=None, rtol=1e-9, cap=max_iter):
-        """Reweight until the noise types and coefficients settle."""
-        alpha = None
-        for n_iter in range(1, cap + 1):
-            a_new, new_alpha, nu, x, white = solve(a, corr, eps, fixed)
-            settled = (a is not None and np.array_equal(new_alpha, alpha)
-                       and np.allclose(a_new, a, rtol=rtol, atol=0.0))
-            a, alpha = a_new, new_alpha
-            if settled:
-                break
-        resid = white(g @ a - y)
-        return _Solution(a, alpha, nu, x, white, float(resid @ resid),
-                         n_iter)
-
+    rw = _Reweighting.build(taus, y, terms, edf_of_alpha, max_iter)
+    g, iterate = rw.g, rw.iterate
     sol = iterate(None, None, 0.0)
     corr = None
     if method == "gls":

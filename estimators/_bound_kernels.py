@@ -90,6 +90,82 @@ def _cholesky_solve_packed(L, n, rdiag, v):  # pragma: no cover - compiled
 
 
 @njit(cache=True, error_model="numpy")
+def _innovation(Pp, Hr, R, p, Ut, S, Sf):      # pragma: no cover - compiled
+    """U' = H P and S = H P H' + R for H = [Hr I] (S full and packed in ``Sf``)."""
+    N, D = Ut.shape
+    # U' = H P, H = [Hr I]
+    for m in range(N):
+        for j in range(D):
+            Ut[m, j] = Pp[p + m, j]
+        for c_ in range(p):
+            c = Hr[m, c_]
+            for j in range(D):
+                Ut[m, j] += c * Pp[c_, j]
+    # S = H P H' + R (symmetric: lower triangle, mirrored)
+    t = 0
+    for i in range(N):
+        for m in range(i + 1):
+            s = Ut[m, p + i] + R[i, m]
+            for c_ in range(p):
+                s += Hr[i, c_] * Ut[m, c_]
+            S[i, m] = s                                              # S = H P H' + R
+            S[m, i] = s
+            Sf[t] = s
+            t += 1
+
+
+@njit(cache=True, error_model="numpy")
+def _gain(Ut, Sf, rs, Kt):      # pragma: no cover - compiled
+    """K' = S⁻¹ U' from the packed factor Ls of S (``rs`` its inverse diagonal)."""
+    N, D = Ut.shape
+    # K' = S⁻¹ U': Ls Y = U', then Lsᵀ K' = Y, on the D columns at once
+    for i in range(N):
+        ri = i * (i + 1) // 2
+        for j in range(D):
+            Kt[i, j] = Ut[i, j]
+        for m in range(i):
+            c = Sf[ri + m]
+            for j in range(D):
+                Kt[i, j] -= c * Kt[m, j]
+        r = rs[i]
+        for j in range(D):
+            Kt[i, j] *= r
+    for i in range(N - 1, -1, -1):
+        ri = i * (i + 1) // 2
+        r = rs[i]
+        for j in range(D):
+            Kt[i, j] *= r
+        for m in range(i):
+            c = Sf[ri + m]
+            for j in range(D):
+                Kt[m, j] -= c * Kt[i, j]                             # K = P H' S⁻¹
+
+
+@njit(cache=True, error_model="numpy")
+def _joseph(P, Pp, Ut, Kt, S, Gt):      # pragma: no cover - compiled
+    """Joseph update of P in place from the predicted ``Pp`` (see :func:`forward`)."""
+    N, D = Ut.shape
+    # Joseph form: P = (I−KH) P (I−KH)' + K R K' = P − K U' − G K'
+    for m in range(N):
+        for j in range(D):
+            Gt[m, j] = Ut[m, j]
+        for q in range(N):
+            c = S[m, q]
+            for j in range(D):
+                Gt[m, j] -= c * Kt[q, j]                             # G = U − K S = (I−KH)P H' − K R
+    for i in range(D):
+        for j in range(i + 1):
+            P[i, j] = Pp[i, j]
+        for m in range(N):
+            c1 = Kt[m, i]
+            c2 = Gt[m, i]
+            for j in range(i + 1):
+                P[i, j] -= c1 * Ut[m, j] + c2 * Kt[m, j]             # P = P − K U' − G K'
+        for j in range(i):
+            P[j, i] = P[i, j]
+
+
+@njit(cache=True, error_model="numpy")
 def forward(z, x0, P0, Hr, R, Q, xs, lfac):  # pragma: no cover - compiled
     """Time-varying KF over the readings; returns -1, or the failing sample.
 
@@ -152,48 +228,10 @@ def forward(z, x0, P0, Hr, R, Q, xs, lfac):  # pragma: no cover - compiled
                     t += 1
             if not _cholesky_packed(lk, D, rp):                      # P_k|k-1 = L Lᵀ (for C_{k−1})
                 return k
-        # U' = H P, H = [Hr I]
-        for m in range(N):
-            for j in range(D):
-                Ut[m, j] = Pp[p + m, j]
-            for c_ in range(p):
-                c = Hr[m, c_]
-                for j in range(D):
-                    Ut[m, j] += c * Pp[c_, j]
-        # S = H P H' + R (symmetric: lower triangle, mirrored)
-        t = 0
-        for i in range(N):
-            for m in range(i + 1):
-                s = Ut[m, p + i] + R[i, m]
-                for c_ in range(p):
-                    s += Hr[i, c_] * Ut[m, c_]
-                S[i, m] = s                                          # S = H P H' + R
-                S[m, i] = s
-                Sf[t] = s
-                t += 1
+        _innovation(Pp, Hr, R, p, Ut, S, Sf)                         # U' = H P, S = H P H' + R
         if not _cholesky_packed(Sf, N, rs):                          # S = Ls Lsᵀ
             return k
-        # K' = S⁻¹ U': Ls Y = U', then Lsᵀ K' = Y, on the D columns at once
-        for i in range(N):
-            ri = i * (i + 1) // 2
-            for j in range(D):
-                Kt[i, j] = Ut[i, j]
-            for m in range(i):
-                c = Sf[ri + m]
-                for j in range(D):
-                    Kt[i, j] -= c * Kt[m, j]
-            r = rs[i]
-            for j in range(D):
-                Kt[i, j] *= r
-        for i in range(N - 1, -1, -1):
-            ri = i * (i + 1) // 2
-            r = rs[i]
-            for j in range(D):
-                Kt[i, j] *= r
-            for m in range(i):
-                c = Sf[ri + m]
-                for j in range(D):
-                    Kt[m, j] -= c * Kt[i, j]                         # K = P H' S⁻¹
+        _gain(Ut, Sf, rs, Kt)                                        # K = P H' S⁻¹
         # x = x + K (z − H x)
         for m in range(N):
             s = z[k, m] - x[p + m]
@@ -206,24 +244,7 @@ def forward(z, x0, P0, Hr, R, Q, xs, lfac):  # pragma: no cover - compiled
                 x[j] += c * Kt[m, j]                                 # x = x + K y
         for j in range(D):
             xs[k, j] = x[j]
-        # Joseph form: P = (I−KH) P (I−KH)' + K R K' = P − K U' − G K'
-        for m in range(N):
-            for j in range(D):
-                Gt[m, j] = Ut[m, j]
-            for q in range(N):
-                c = S[m, q]
-                for j in range(D):
-                    Gt[m, j] -= c * Kt[q, j]                         # G = U − K S = (I−KH)P H' − K R
-        for i in range(D):
-            for j in range(i + 1):
-                P[i, j] = Pp[i, j]
-            for m in range(N):
-                c1 = Kt[m, i]
-                c2 = Gt[m, i]
-                for j in range(i + 1):
-                    P[i, j] -= c1 * Ut[m, j] + c2 * Kt[m, j]         # P = P − K U' − G K'
-            for j in range(i):
-                P[j, i] = P[i, j]
+        _joseph(P, Pp, Ut, Kt, S, Gt)                                # P = P − K U' − G K'
     return -1
 
 

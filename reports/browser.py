@@ -279,6 +279,83 @@ def _log_tail(path: Path, n: int = 15) -> str:
     return "\n".join(lines[-n:])
 
 
+def _spawn_browser(exe: str, workdir: Path, log_path: Path, fds: list[int]) -> tuple[int, int, int]:
+    """Start Chromium with the DevTools pipe on fds 3/4: (pid, our command fd, our event fd).
+
+    The pipe ends we keep are appended to ``fds`` (the caller closes them)."""
+    cmd_r, cmd_w = os.pipe()  # we write commands, the browser reads them on fd 3
+    fds += [cmd_r, cmd_w]
+    ev_r, ev_w = os.pipe()  # the browser writes on fd 4, we read
+    fds += [ev_r, ev_w]
+    # The child-side ends go >= 10 so that the dup2 actions below cannot
+    # overwrite one with the other (os.pipe may well return fds 3 and 4).
+    for old in (cmd_r, ev_w):
+        new = fcntl.fcntl(old, fcntl.F_DUPFD_CLOEXEC, 10)
+        fds[fds.index(old)] = new
+        os.close(old)
+    cmd_r, cmd_w, ev_r, ev_w = fds
+    argv = [exe, *CHROMIUM_FLAGS, f"--user-data-dir={workdir / 'profile'}", "about:blank"]
+    env = dict(os.environ)
+    env.setdefault("HOME", str(workdir))  # the Debian wrapper looks under $HOME
+    pid = os.posix_spawn(
+        exe,
+        argv,
+        env,
+        file_actions=[
+            (os.POSIX_SPAWN_OPEN, 0, os.devnull, os.O_RDONLY, 0),
+            (os.POSIX_SPAWN_OPEN, 1, str(log_path), os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600),
+            (os.POSIX_SPAWN_DUP2, 1, 2),
+            (os.POSIX_SPAWN_DUP2, cmd_r, 3),
+            (os.POSIX_SPAWN_DUP2, ev_w, 4),
+        ],
+        setsid=True,
+        setsigdef=(signal.SIGPIPE, signal.SIGXFSZ),  # Python ignores SIGPIPE; don't pass that on
+    )
+    # The child holds its own copies; close ours so EOF means "browser gone".
+    for fd in (cmd_r, ev_w):
+        fds.remove(fd)
+        os.close(fd)
+    return pid, cmd_w, ev_r
+
+
+def _load_and_check(cdp: "_CDPPipe", path: Path, url: str, settle_ms: int, timeout_s: float,
+                    log_path: Path) -> tuple[dict[str, Any], str]:
+    """Open ``url`` in a new target over ``cdp`` and run the image/SVG status script:
+    (its result, the CDP session id)."""
+    stage = "starting the browser"
+    try:
+        target = cdp.send("Target.createTarget", {"url": "about:blank"})["targetId"]
+        session = cdp.send("Target.attachToTarget", {"targetId": target, "flatten": True})["sessionId"]
+        stage = "enabling CDP domains"
+        for domain in ("Runtime", "Log", "Network", "Page"):
+            cdp.send(f"{domain}.enable", session=session)
+        try:  # experimental CDP method; requests are recorded even if it goes away
+            cdp.send("Network.setBlockedURLs", {"urls": list(BLOCKED_URL_PATTERNS)}, session=session)
+        except RuntimeError:
+            pass
+        stage = f"loading {url}"
+        cdp.events.clear()
+        nav = cdp.send("Page.navigate", {"url": url}, session=session)
+        if nav.get("errorText"):
+            raise RuntimeError(f"{path}: navigation failed: {nav['errorText']}")
+        cdp.wait_for("Page.loadEventFired", session=session)
+        stage = "checking images"
+        res = cdp.send(
+            "Runtime.evaluate",
+            {"expression": _STATUS_JS % {"settle_ms": settle_ms}, "awaitPromise": True, "returnByValue": True},
+            session=session,
+        )
+    except TimeoutError:
+        raise RuntimeError(
+            f"{path}: headless Chromium timed out after {timeout_s:g} s while {stage}\n{_log_tail(log_path)}"
+        ) from None
+    except EOFError as exc:
+        raise RuntimeError(f"{path}: {exc} while {stage}\n{_log_tail(log_path)}") from None
+    if "exceptionDetails" in res:
+        raise RuntimeError(f"{path}: image check script failed: {res['exceptionDetails']}")
+    return res["result"]["value"], session
+
+
 def render_check(html_path: str | os.PathLike[str], *, timeout_s: float = 60, settle_ms: int = 100) -> BrowserCheck:
     """Open ``html_path`` in headless Chromium and report images, console errors, requests.
 
@@ -300,72 +377,9 @@ def render_check(html_path: str | os.PathLike[str], *, timeout_s: float = 60, se
     pid: int | None = None
     fds: list[int] = []  # our open pipe ends, closed in `finally`
     try:
-        cmd_r, cmd_w = os.pipe()  # we write commands, the browser reads them on fd 3
-        fds += [cmd_r, cmd_w]
-        ev_r, ev_w = os.pipe()  # the browser writes on fd 4, we read
-        fds += [ev_r, ev_w]
-        # The child-side ends go >= 10 so that the dup2 actions below cannot
-        # overwrite one with the other (os.pipe may well return fds 3 and 4).
-        for old in (cmd_r, ev_w):
-            new = fcntl.fcntl(old, fcntl.F_DUPFD_CLOEXEC, 10)
-            fds[fds.index(old)] = new
-            os.close(old)
-        cmd_r, cmd_w, ev_r, ev_w = fds
-        argv = [exe, *CHROMIUM_FLAGS, f"--user-data-dir={workdir / 'profile'}", "about:blank"]
-        env = dict(os.environ)
-        env.setdefault("HOME", str(workdir))  # the Debian wrapper looks under $HOME
-        pid = os.posix_spawn(
-            exe,
-            argv,
-            env,
-            file_actions=[
-                (os.POSIX_SPAWN_OPEN, 0, os.devnull, os.O_RDONLY, 0),
-                (os.POSIX_SPAWN_OPEN, 1, str(log_path), os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600),
-                (os.POSIX_SPAWN_DUP2, 1, 2),
-                (os.POSIX_SPAWN_DUP2, cmd_r, 3),
-                (os.POSIX_SPAWN_DUP2, ev_w, 4),
-            ],
-            setsid=True,
-            setsigdef=(signal.SIGPIPE, signal.SIGXFSZ),  # Python ignores SIGPIPE; don't pass that on
-        )
-        # The child holds its own copies; close ours so EOF means "browser gone".
-        for fd in (cmd_r, ev_w):
-            fds.remove(fd)
-            os.close(fd)
-
+        pid, cmd_w, ev_r = _spawn_browser(exe, workdir, log_path, fds)
         cdp = _CDPPipe(cmd_w, ev_r, t0 + timeout_s, what=str(path))
-        stage = "starting the browser"
-        try:
-            target = cdp.send("Target.createTarget", {"url": "about:blank"})["targetId"]
-            session = cdp.send("Target.attachToTarget", {"targetId": target, "flatten": True})["sessionId"]
-            stage = "enabling CDP domains"
-            for domain in ("Runtime", "Log", "Network", "Page"):
-                cdp.send(f"{domain}.enable", session=session)
-            try:  # experimental CDP method; requests are recorded even if it goes away
-                cdp.send("Network.setBlockedURLs", {"urls": list(BLOCKED_URL_PATTERNS)}, session=session)
-            except RuntimeError:
-                pass
-            stage = f"loading {url}"
-            cdp.events.clear()
-            nav = cdp.send("Page.navigate", {"url": url}, session=session)
-            if nav.get("errorText"):
-                raise RuntimeError(f"{path}: navigation failed: {nav['errorText']}")
-            cdp.wait_for("Page.loadEventFired", session=session)
-            stage = "checking images"
-            res = cdp.send(
-                "Runtime.evaluate",
-                {"expression": _STATUS_JS % {"settle_ms": settle_ms}, "awaitPromise": True, "returnByValue": True},
-                session=session,
-            )
-        except TimeoutError:
-            raise RuntimeError(
-                f"{path}: headless Chromium timed out after {timeout_s:g} s while {stage}\n{_log_tail(log_path)}"
-            ) from None
-        except EOFError as exc:
-            raise RuntimeError(f"{path}: {exc} while {stage}\n{_log_tail(log_path)}") from None
-        if "exceptionDetails" in res:
-            raise RuntimeError(f"{path}: image check script failed: {res['exceptionDetails']}")
-        status: dict[str, Any] = res["result"]["value"]
+        status, session = _load_and_check(cdp, path, url, settle_ms, timeout_s, log_path)
         errors, requests = _collect(cdp.events, session)
         seconds = time.monotonic() - t0
         _close_browser(cdp, pid)
