@@ -75,10 +75,11 @@ from types import MappingProxyType
 from typing import Any, Mapping
 
 import numpy as np
-from scipy import ndimage, optimize, signal, special
+from scipy import ndimage, optimize, special
 
 from gyroarray.analysis.allan import deviation, edf
 from gyroarray.analysis.davar import davar
+from gyroarray.analysis.spectrum import welch
 from gyroarray.errors import InputError
 
 __all__ = ["Finding", "ChannelCorrelation", "Localisation", "localise", "critical_z", "chi2_z",
@@ -321,8 +322,7 @@ def residual_psd(residual, dt_s: float, nperseg: int | None = None
     n = e.shape[0]
     if nperseg is None:
         nperseg = default_nperseg(n)
-    f, p = signal.welch(e, fs=1.0 / dt_s, window="hann", nperseg=nperseg,
-                        noverlap=nperseg // 2, detrend="constant", axis=0)
+    f, p = welch(e, 1.0 / dt_s, nperseg, nperseg // 2, window="hann", detrend="constant", axis=0)
     k = 1 + (n - nperseg) // (nperseg // 2)
     nu = 2.0 * k / (1.0 + 2.0 * _HANN_OVERLAP_C ** 2)
     return f, p.T, float(nu)

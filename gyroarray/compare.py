@@ -62,7 +62,9 @@ from gyroarray.analysis.regress import _RWWhitener
 from gyroarray.analysis.stochastic_fit import fit_gyro_noise
 from gyroarray.effects import REGISTRY, did_you_mean, effect_names, get_effect
 from gyroarray.errors import InputError
+from gyroarray.limits import max_memory
 from gyroarray.measurement import Measurement, _runs, relative_time_s
+from gyroarray.parallel import available_cpus, map_runs
 from gyroarray.sim.effects import simulate_readings
 from gyroarray.sim.model import ModelEntry, NoiseModel
 from gyroarray.sim.protocol import Effect, FitContext, Kind
@@ -74,6 +76,9 @@ __all__ = ["ALPHA", "Test", "Analysis", "ModelComparison", "baseline_model", "cr
 
 #: Family-wise false-alarm rate of the discrepancy.
 ALPHA = 0.01
+
+#: Samples (record × gyros × runs) from which the Monte-Carlo band runs on every CPU.
+_PARALLEL_MIN_SAMPLES = 20_000_000
 
 #: Relative rise of D a ladder step may cause: the Monte-Carlo band's scatter between
 #: two calibrations (ADIS16405: a 19.6 Hz line added on gyro 3 moved D 3.71 -> 3.73,
@@ -421,6 +426,9 @@ class ModelComparison:
         anything reads it (``--ref-smooth``): a reference with noise of its own (a
         differentiated encoder) is an errors-in-variables problem, and its noise would be
         read as the gyros'. 0: the reference as recorded.
+    workers : int, optional
+        Threads for the Monte-Carlo band (same bits for any number); default every CPU
+        on large records (:meth:`_workers`), one on small ones.
 
     A record whose reference never stands still (no static part of ``MIN_STATIC``
     samples) is calibrated on what the reference does not explain over the whole
@@ -430,8 +438,10 @@ class ModelComparison:
     """
 
     def __init__(self, measurement: Measurement, model: NoiseModel | None = None, *,
-                 n_runs: int = N_RUNS, seed: int = 0, alpha: float = ALPHA, ref_smooth_s: float = 0.0):
+                 n_runs: int = N_RUNS, seed: int = 0, alpha: float = ALPHA, ref_smooth_s: float = 0.0,
+                 workers: int | None = None):
         self.m = measurement
+        self.workers = workers
         self.name = measurement.source or "measurement"
         self.n_runs = int(n_runs)
         self.seed = int(seed)
@@ -529,6 +539,17 @@ class ModelComparison:
         self.acc = None if self.acc is None else self.acc[idx]
         self.n = idx.size
         self.t = self.t_sim = self.t[0] + np.arange(self.n) * self.dt
+
+    def _workers(self, n: int) -> int:
+        """Threads for the Monte-Carlo band of an n-sample record: ``workers`` when given, else
+        every CPU once the band is big enough to repay them (about 2e7 samples), as many as the
+        memory budget holds (a run keeps about 16 arrays of the record's size)."""
+        if self.workers is not None:
+            return max(int(self.workers), 1)
+        if n * self.N * self.n_runs < _PARALLEL_MIN_SAMPLES:
+            return 1
+        per_run = 16 * 8 * n * self.N
+        return max(1, min(available_cpus(), int(max_memory() // per_run)))
 
     def _like_parts(self, x: np.ndarray) -> np.ndarray:
         """A simulated record treated as the stitched one: each part's mean set to the first part's."""
@@ -983,18 +1004,21 @@ class ModelComparison:
         det = NoiseModel(tuple(e for e in sub if get_effect(e.effect).predicts))
         if len(det.entries):
             sensed = simulate_readings(det, truth, self.H, self.dt, np.random.default_rng(0), time_s=tr)
-        mc = np.empty((self.n_runs, self.N, taus.size))
         nperseg = min(default_nperseg(self.n), n)
-        psds: list[np.ndarray] = []
-        for k in range(self.n_runs):
+
+        def one_run(k: int) -> tuple[np.ndarray, np.ndarray]:
+            """Run k of the band: the ADEV of each gyro (N, taus) and its Welch PSD (N, freqs)."""
             rng = np.random.default_rng([self.seed, k])
             s = simulate_readings(sub, truth, self.H, self.dt, rng, time_s=tr) - sensed
             if rec == slice(0, self.n):
                 s = self._like_parts(s)
-            for g in range(self.N):
-                mc[k, g] = oadev(s[:, g], self.dt, taus=taus).dev
-            f_hz, p, _ = residual_psd(s, self.dt, nperseg)
-            psds.append(p)
+            dev = np.array([oadev(s[:, g], self.dt, taus=taus).dev for g in range(self.N)])
+            return dev, residual_psd(s, self.dt, nperseg)[1]
+
+        runs = map_runs(one_run, self.n_runs, self._workers(n))
+        mc = np.array([r[0] for r in runs])
+        psds = [r[1] for r in runs]
+        f_hz = np.fft.rfftfreq(nperseg, self.dt)
         tests = []
         M = self.n_runs
         L = np.log(mc)
