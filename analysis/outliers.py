@@ -15,6 +15,10 @@ burst) moves the MAD of a whole stretch and does not.
   record shows a spike with probability 1 %), and at least 6: real noise has
   heavier tails than a Gaussian (the Xsens MTi-G record: 19 000 samples
   beyond 4σ̂, 2 000 beyond 6σ̂, its source's ~2 000 spikes).
+  Each candidate is then judged again against the median of its nearest
+  neighbours that are not candidates (two spikes three samples apart would
+  otherwise lift the median of the samples between them, flag those, and
+  be "cleaned" into each other); the same neighbours replace it.
 * Significance (is there an excess?): on the second difference
   d₂ = x_i − (x_{i−1} + x_{i+1})/2, linear and so Gaussian for any Gaussian
   noise however coloured (the median's d is not, on low-passed noise), the
@@ -49,6 +53,17 @@ def _neighbour_median(x: np.ndarray) -> np.ndarray:
     nb = np.stack([p[:-4], p[1:-3], p[3:-1], p[4:]], axis=1)
     nb.sort(axis=1)
     return 0.5 * (nb[:, 1] + nb[:, 2])
+
+
+def _clean_neighbour_median(x: np.ndarray, bad: np.ndarray, index: np.ndarray) -> np.ndarray:
+    """At each sample of ``index``: the median of the two samples on each side of it that are not
+    ``bad`` (two spikes a few samples apart would otherwise stand in each other's median)."""
+    good = np.flatnonzero(~bad)
+    if good.size == 0:
+        return x[index]
+    pos = np.searchsorted(good, index)
+    cols = np.clip(pos[:, None] + np.array([-2, -1, 0, 1]), 0, good.size - 1)
+    return np.median(x[good[cols]], axis=1)
 #: Threshold of the count test [σ̂].
 COUNT_THRESHOLD = 4.5
 #: Lowest detection threshold [σ̂].
@@ -167,6 +182,16 @@ def find_spikes(x, alpha: float = 0.01) -> Spikes:
                       math.nan, 0.0, kurt)
     c = max(float(-special.ndtri(0.5 * alpha / max(n, 1))), MIN_THRESHOLD)   # Bonferroni, two-sided
     idx = np.flatnonzero(np.abs(d) > c * local)
+    for _ in range(3):
+        # spikes a few samples apart raise the median of the samples between them: each candidate is
+        # judged again against its neighbours that are not candidates themselves
+        bad = np.zeros(n, bool)
+        bad[idx] = True
+        d[idx] = x[idx] - _clean_neighbour_median(x, bad, idx)
+        keep = np.abs(d[idx]) > c * local[idx]
+        if keep.all():
+            break
+        idx = idx[keep]
     k, lam, z = _count_test(x, sigma)
     size, s_size, rate = math.nan, math.nan, 0.0
     if idx.size:
@@ -188,8 +213,12 @@ def find_spikes(x, alpha: float = 0.01) -> Spikes:
 
 
 def clean_spikes(x, index) -> np.ndarray:
-    """``x`` with the samples at ``index`` replaced by the median of their four neighbours."""
+    """``x`` with the samples at ``index`` replaced by the median of their four nearest neighbours
+    that are not in ``index``."""
     x = np.array(x, dtype=float, copy=True)
-    if len(index):
-        x[index] = _neighbour_median(x)[index]
+    index = np.asarray(index, dtype=np.int64)
+    if index.size:
+        bad = np.zeros(x.size, bool)
+        bad[index] = True
+        x[index] = _clean_neighbour_median(x, bad, index)
     return x

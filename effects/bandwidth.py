@@ -8,7 +8,7 @@ import numpy as np
 from scipy import optimize
 
 from gyroarray.analysis.effect_fit import EffectFit
-from gyroarray.analysis.psd_fit import filter_z, fit_psd, shortest_clean_tau
+from gyroarray.analysis.psd_fit import EFFECTIVE_TESTS, filter_z, fit_psd, shortest_clean_tau
 from gyroarray.analysis.regress import _RWWhitener
 from gyroarray.effects import _draw
 from gyroarray.errors import InputError
@@ -143,7 +143,7 @@ class Bandwidth(RegressionEffect):
                 fc, s_fc = 0.95 * nyq, math.nan
         lr_motion = 0.0 if motion is None else max(motion(fc, order), 0.0)
         lr = max(psd.lr_filter, 0.0) + lr_motion
-        z = filter_z(lr, n_tests=3.0 if motion is None else 6.0)
+        z = filter_z(lr, n_tests=EFFECTIVE_TESTS if motion is None else 2.0 * EFFECTIVE_TESTS)
         sigma = {"cutoff_hz": float(s_fc)} if math.isfinite(s_fc) else {}
         where = "the noise spectrum" + (" and the motion" if lr_motion > 0 else "")
         if z > 3:

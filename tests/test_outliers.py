@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gyroarray.analysis.outliers import find_spikes
+from gyroarray.analysis.outliers import clean_spikes, find_spikes
 from gyroarray.compare import ModelComparison
 from gyroarray.measurement import read_measurement
 from gyroarray.sim.effects import simulate_readings
@@ -74,3 +74,18 @@ def test_xsens_spikes_are_named_counted_and_not_a_burst():
     assert strict <= n_spikes <= loose, (strict, n_spikes, loose)
     burst = next(t for t in a.candidates if t.effect == "burst")
     assert "no longer seen" in burst.evidence
+
+
+def test_close_spikes_are_found_and_cleaned_separately():
+    """Two spikes three samples apart: each is found, the samples between them (whose
+    four-neighbour median holds one spike) are not, and cleaning leaves every sample within
+    the noise (the plain neighbour median would put half a spike into the samples between)."""
+    rng = np.random.default_rng(3)
+    x = rng.normal(0.0, 1.0, 20_000)
+    x[5000] += 80.0
+    x[5003] -= 150.0
+    s = find_spikes(x)
+    assert list(s.index) == [5000, 5003]
+    cleaned = clean_spikes(x, s.index)
+    assert np.abs(cleaned[4995:5010]).max() < 5.0
+    np.testing.assert_array_equal(cleaned[5001:5003], x[5001:5003])
