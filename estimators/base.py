@@ -39,6 +39,7 @@ import numpy as np
 
 from gyroarray.design import unobservable_reason
 from gyroarray.errors import InputError
+from gyroarray.estimators.noise import ArrayNoise, array_noise
 from gyroarray.layout import Layout
 
 __all__ = ["Estimator", "NotFittedError", "LinearSystem", "register", "get_estimator", "available",
@@ -177,7 +178,6 @@ class Estimator:
         -------
         self
         """
-        from gyroarray.estimators.noise import ArrayNoise, array_noise
         if not isinstance(layout, Layout):
             raise InputError(f"layout must be a gyroarray Layout, got {type(layout).__name__}")
         h = np.array(layout.H, dtype=float)
@@ -282,7 +282,7 @@ def _readonly(a) -> np.ndarray:
 
 
 def _unknown(what: str, key, names) -> str:
-    from gyroarray.effects import did_you_mean
+    from gyroarray.effects import did_you_mean  # lazy: loads gyroarray.effects and its plugins
     return f"unknown {what}{did_you_mean(key, names)} (known: {', '.join(names) or 'none'})"
 
 

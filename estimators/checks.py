@@ -15,6 +15,7 @@ from __future__ import annotations
 import numpy as np
 
 from gyroarray.errors import InputError
+from gyroarray.estimators import Estimator, NotFittedError
 from gyroarray.layout import Layout
 
 __all__ = ["CHECKS", "DT", "LAYOUT", "model", "readings"]
@@ -25,7 +26,7 @@ LAYOUT = Layout.conical(2, 5, np.deg2rad(65.9))
 
 def model():
     """A model with unequal ARW, RRW and correlated noise: what every estimator must accept."""
-    from gyroarray.sim.model import ModelEntry, NoiseModel
+    from gyroarray.sim.model import ModelEntry, NoiseModel  # lazy: loads gyroarray.effects and its plugins
     return NoiseModel((ModelEntry("arw", None, {"n_deg_rt_h": 0.1}),
                        ModelEntry("arw", 3, {"n_deg_rt_h": 0.2}),
                        ModelEntry("rrw", None, {"k_deg_h_rt_h": 600.0}),
@@ -62,7 +63,6 @@ def _raises(exc, fn, *args, match: str | None = None, what: str = ""):
 
 
 def check_class_metadata(cls):
-    from gyroarray.estimators import Estimator
     assert issubclass(cls, Estimator), "not a gyroarray.estimators.Estimator"
     assert isinstance(cls.name, str) and cls.name.isidentifier(), f"bad name {cls.name!r}"
     assert isinstance(cls.description, str) and cls.description and "\n" not in cls.description, \
@@ -135,12 +135,11 @@ def check_bad_readings_refused(cls):
 
 
 def check_unfitted_refused(cls):
-    from gyroarray.estimators import NotFittedError
     _raises(NotFittedError, cls().estimate, readings(10), match="not fitted", what="estimate before fit")
 
 
 def check_bad_fit_inputs_refused(cls):
-    from gyroarray.sim.model import ModelEntry, NoiseModel
+    from gyroarray.sim.model import ModelEntry, NoiseModel  # lazy: loads gyroarray.effects and its plugins
     m = model()
     _raises(InputError, cls().fit, LAYOUT, m, 0.0, what="fit with dt = 0")
     _raises(InputError, cls().fit, LAYOUT, m, float("nan"), what="fit with dt = NaN")

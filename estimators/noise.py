@@ -162,7 +162,7 @@ def array_noise(noise_model, n_gyros: int) -> ArrayNoise:
         or an ARW correlation whose covariance is singular (``common_mode``
         with ρ = 1: every gyro sees the same white noise).
     """
-    from gyroarray.sim.model import NoiseModel
+    from gyroarray.sim.model import NoiseModel  # lazy: loads gyroarray.effects and its plugins
     if not isinstance(noise_model, NoiseModel):
         raise InputError(f"noise_model must be a NoiseModel, got {type(noise_model).__name__}")
     noise_model.check(n_gyros)

@@ -55,8 +55,13 @@ import pandas as pd
 
 from gyroarray import units
 from gyroarray.analysis.allan import allan_analysis
+from gyroarray.analysis.fdi_score import add_fdi_metrics
 from gyroarray.analysis.metrics import attenuation_and_lag, noise_density
+from gyroarray.design import unobservable_reason
 from gyroarray.errors import InputError
+from gyroarray.estimators import available, get_estimator
+from gyroarray.predict import (g_sensitivity_coeffs, g_sensitivity_error, predict as _predict,
+                               sensor_bandwidth, settle_start, swing_response)
 
 AXES = ("x", "y", "z")
 #: Filter start-up excluded from every metric [s].
@@ -244,8 +249,7 @@ def _sensor_response(time_s, readings_rad_s, projected_rad_s, freq_hz: float) ->
 def _g_sensitivity_columns(result: RunResult, scenario, truth, fitted: dict, dt_s: float,
                            settle_s: float = SETTLE_S) -> RunResult:
     """Add the RMS rate error of the model's g-sensitivity on the run's motion (module docstring)."""
-    from gyroarray.predict import g_sensitivity_coeffs, g_sensitivity_error, settle_start
-    from gyroarray.sim.truth import specific_force
+    from gyroarray.sim.truth import specific_force  # lazy: loads mujoco
     N = scenario.layout.n_gyros
     coeff = g_sensitivity_coeffs(scenario.model, N)
     if coeff is None:
@@ -272,7 +276,6 @@ def _g_sensitivity_columns(result: RunResult, scenario, truth, fitted: dict, dt_
 
 def check_fusable(scenario) -> None:
     """Refuse a scenario whose layout cannot give a 3-axis rate, with the reason."""
-    from gyroarray.design import unobservable_reason
     why = unobservable_reason(scenario.layout.H)
     if why is not None:
         raise InputError(f"the layout cannot be fused: {why}", file=scenario.source,
@@ -300,8 +303,7 @@ def run_scenario(scenario, estimator_names=None, *, cache: bool = True,
     InputError
         Unknown estimator, or a layout whose axes leave a body axis unobservable.
     """
-    from gyroarray.estimators import available, get_estimator
-    from gyroarray.sim.scenario import simulate
+    from gyroarray.sim.scenario import simulate  # lazy: loads mujoco
 
     explicit = bool(estimator_names)
     names = list(estimator_names) if explicit else [n for n in DEFAULT_ESTIMATORS if n in available()]
@@ -334,7 +336,6 @@ def run_scenario(scenario, estimator_names=None, *, cache: bool = True,
     result = replace(result, notes=tuple(notes))
     result = _g_sensitivity_columns(result, scenario, res.truth, fitted, dt)
     if "fdi" in estimates:                     # the fault detector's scores (issue 16)
-        from gyroarray.analysis.fdi_score import add_fdi_metrics
         result = add_fdi_metrics(result, scenario, res, fitted["fdi"])
     return result
 
@@ -499,9 +500,7 @@ def run_replicates(scenario, estimator_names=None, *, replicates: int, seed: int
     params : dict, optional
         Hyperparameters per estimator name (as :func:`run_scenario`).
     """
-    from gyroarray.estimators import get_estimator
-    from gyroarray.predict import predict as _predict
-    from gyroarray.sim.truth import compute_truth
+    from gyroarray.sim.truth import compute_truth  # lazy: loads mujoco
     k = int(replicates)
     if k < 1:
         raise InputError(f"--replicates must be >= 1, got {replicates!r}")
@@ -515,7 +514,7 @@ def run_replicates(scenario, estimator_names=None, *, replicates: int, seed: int
         dt = 1.0 / scenario.sample_rate_hz
         f = None
         if any(e.effect == "g_sensitivity" for e in scenario.model.entries):
-            from gyroarray.sim.truth import specific_force
+            from gyroarray.sim.truth import specific_force  # lazy: loads mujoco
             f = specific_force(truth, scenario.layout)
         for name in dict.fromkeys(runs[0].table.estimator):
             try:
@@ -538,7 +537,6 @@ def run_replicates(scenario, estimator_names=None, *, replicates: int, seed: int
 
 def _with_swing(pred, est, model, freq_hz: float):
     """Add the amplitude ratio and phase at the swing frequency (total, estimator, sensor)."""
-    from gyroarray.predict import sensor_bandwidth, swing_response
     resp = swing_response(est.linear_system(), np.array(est.H_),
                           sensor_bandwidth(model, est.n_gyros_, est.dt_s_), freq_hz, est.dt_s_)
     axes = {ax: dict(pred.axes[ax], **resp[ax]) for ax in AXES}

@@ -52,7 +52,7 @@ def _is_number(v) -> bool:
 
 def load_thresholds(path) -> list[dict]:
     """Read and strictly validate a thresholds file; InputError names the file and key."""
-    from gyroarray.estimators import available
+    from gyroarray.estimators import available  # lazy: loads numba
     path = Path(path)
     f = str(path)
     data = load_toml(path, "thresholds file").data
@@ -132,8 +132,8 @@ def run_check(path=None, *, quick: bool = True) -> dict:
         ``{"passed": bool, "results": [{"scenario", "metric", "estimator", "axis",
         "bound", "value", "pass"}, ...]}``; a missing or non-finite value fails.
     """
-    from gyroarray.chain import run_scenario
-    from gyroarray.sim.scenario import load_scenario
+    from gyroarray.chain import run_scenario  # lazy: loads numba, pandas
+    from gyroarray.sim.scenario import load_scenario  # lazy: loads mujoco, numba, pandas
     checks = load_thresholds(default_thresholds() if path is None else path)
     groups: dict[tuple, list[dict]] = {}
     for c in checks:

@@ -28,6 +28,7 @@ from scipy.optimize import minimize_scalar
 
 from gyroarray.errors import InputError
 from gyroarray.layout import Layout, conical_axes
+from gyroarray.tomlio import loads_toml
 from gyroarray.units import deg_to_rad, rad_to_deg
 
 
@@ -495,7 +496,6 @@ def _printed_unit(text: str) -> float:
 
 def load_paper003_tables() -> dict:
     """The cells of paper 003 Tables 1 and 2 as printed (data, not truth)."""
-    from gyroarray.tomlio import loads_toml
     res = resources.files("gyroarray").joinpath("data/paper003_tables.toml")
     return loads_toml(res.read_text(encoding="utf-8"), "gyroarray/data/paper003_tables.toml")
 

@@ -90,6 +90,7 @@ from gyroarray.errors import InputError
 from gyroarray.layout import UNIT_NORM_TOL, Layout, check_positions
 from gyroarray.limits import (MAX_RATE_DEG_S, check_memory, format_size, gunzip_bounded, max_memory,
                               read_regular)
+from gyroarray.outputs import measurement_files, same_path, write_bytes
 from gyroarray.tomlio import TomlDoc, load_toml, utf8_text
 
 __all__ = [
@@ -1392,14 +1393,12 @@ def write_measurement(m: Measurement, path, *, force: bool = True) -> tuple[Path
     if low.endswith(".gz"):
         text = gzip.compress(text, compresslevel=6, mtime=0)
     sidecar = tomli_w.dumps(_sidecar_dict(m)).encode("utf-8")
-    from gyroarray.outputs import write_bytes
     for target, content in ((csv_path, text), (toml_path, sidecar)):
         write_bytes(target, content, force=force)
     return csv_path, toml_path
 
 
 def _refuse_overwriting_source(m: Measurement, targets) -> None:
-    from gyroarray.outputs import measurement_files, same_path
     if m.source is None:
         return
     for target in targets:

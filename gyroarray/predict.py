@@ -84,6 +84,7 @@ import numpy as np
 import scipy.fft as sfft
 
 from gyroarray import units
+from gyroarray.constants import G0_M_S2
 from gyroarray.errors import InputError
 
 __all__ = ["NoiseSources", "noise_sources", "Prediction", "predict", "predict_system",
@@ -147,7 +148,7 @@ def noise_sources(noise_model, n_gyros: int, dt_s: float) -> NoiseSources:
     dt_s : float
         Sample period [s].
     """
-    from gyroarray.estimators.noise import _per_gyro, array_noise
+    from gyroarray.estimators.noise import _per_gyro, array_noise  # lazy: loads numba
     an = array_noise(noise_model, n_gyros)
     sig = np.nan_to_num(_per_gyro(noise_model, "gauss_markov", "sigma_rad_s", n_gyros))
     tau = np.nan_to_num(_per_gyro(noise_model, "gauss_markov", "tau_s", n_gyros), nan=1.0)
@@ -187,7 +188,7 @@ class SensorBandwidth:
     def sos(self, k: int) -> np.ndarray:
         """Gyro k's (0-based) digital filter as second-order sections
         (:func:`gyroarray.sim.sensor.bandwidth_sos`, the simulator's own)."""
-        from gyroarray.sim.sensor import bandwidth_sos
+        from gyroarray.sim.sensor import bandwidth_sos  # lazy: loads scipy.signal
         return bandwidth_sos(float(self.cutoff_hz[k]), int(self.order[k]), self.dt_s)
 
     def response(self, freq_hz: float) -> np.ndarray:
@@ -202,7 +203,7 @@ class SensorBandwidth:
     def apply(self, x: np.ndarray) -> np.ndarray:
         """The readings (n, N) through each gyro's filter, started at the first sample's
         steady state, as the simulator runs it (:func:`gyroarray.sim.sensor.bandwidth_filter`)."""
-        from gyroarray.sim.sensor import bandwidth_filter
+        from gyroarray.sim.sensor import bandwidth_filter  # lazy: loads scipy.signal
         y = np.array(x, dtype=float)
         m = self.filtered
         if m.any():
@@ -259,7 +260,7 @@ def cascade(sys, sensor: SensorBandwidth | None):
     if sensor is None or not sensor.filtered.any():
         return sys
     from scipy.linalg import block_diag
-    from gyroarray.estimators.base import LinearSystem
+    from gyroarray.estimators.base import LinearSystem  # lazy: loads numba
     N = sys.K.shape[1]
     blocks = []
     for k in range(N):
@@ -377,7 +378,7 @@ def g_sensitivity_error(coeff_rad_s_per_m_s2: np.ndarray, specific_force_m_s2: n
         ``fused_mean_deg_s`` (axis -> value; absent without a DC gain),
         RMS over the scored window.
     """
-    from gyroarray.sim.sensor import g_sensitivity_bias
+    from gyroarray.sim.sensor import g_sensitivity_bias  # lazy: loads scipy.signal
     c = np.asarray(coeff_rad_s_per_m_s2, dtype=float)
     f = np.asarray(specific_force_m_s2, dtype=float)
     if f.ndim == 1:
@@ -732,8 +733,7 @@ def predict(estimator, noise_model, *, n_samples: int, settle_s: float = 2.0,
             raise InputError(f"truth_rad_s must have shape ({n}, 3), got {omega.shape}")
     bias = gsens = None
     if noise.g_sensitivity_rad_s_per_m_s2 is not None:
-        from gyroarray.constants import G0_M_S2
-        from gyroarray.sim.sensor import g_sensitivity_bias
+        from gyroarray.sim.sensor import g_sensitivity_bias  # lazy: loads scipy.signal
         f = (np.broadcast_to([0.0, 0.0, G0_M_S2], (n, H.shape[0], 3)) if specific_force_m_s2 is None
              else np.asarray(specific_force_m_s2, dtype=float))
         if f.shape != (n, H.shape[0], 3):
@@ -863,8 +863,8 @@ def channel_filter(kind: str, dt_s: float, bandwidth_hz: float | None = None,
     and the gain splits as K = (1 − λ)[κ, 1 − κ] with κ = q_ω·dt/Q, the DC gain
     of the rate estimate.
     """
-    from gyroarray.estimators._kalman import lowpass_pole
-    from gyroarray.estimators.base import LinearSystem
+    from gyroarray.estimators._kalman import lowpass_pole  # lazy: loads numba
+    from gyroarray.estimators.base import LinearSystem  # lazy: loads numba
     one = np.ones((1, 1))
     if kind == "none":
         return LinearSystem(A=np.zeros((1, 1)), K=one, C=one, X0=np.zeros((1, 1)),

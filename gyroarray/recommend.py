@@ -50,11 +50,12 @@ import numpy as np
 from scipy.optimize import minimize_scalar
 
 from gyroarray import units
-from gyroarray.design import correlation_matrix, fault_tolerance
+from gyroarray.constants import G0_M_S2
+from gyroarray.design import _gdop_batch, correlation_matrix, fault_tolerance
 from gyroarray.errors import InputError
 from gyroarray.layout import Layout, conical_axes
-from gyroarray.predict import (AXES, Swing, channel_filter, channel_response, settle_start,
-                               swing_truth)
+from gyroarray.predict import (AXES, MODELLED, SensorBandwidth, Swing, channel_filter, channel_response,
+                               g_sensitivity_error, predict, settle_start, swing_truth)
 
 __all__ = ["GyroNoise", "DesignSpace", "recommend", "ESTIMATORS", "DEFAULT_BANDWIDTH_HZ"]
 
@@ -120,7 +121,7 @@ class GyroNoise:
 
         A correlation matrix is reduced to the mean of its off-diagonal entries.
         """
-        from gyroarray.estimators.noise import _per_gyro
+        from gyroarray.estimators.noise import _per_gyro  # lazy: loads numba
         n = max([e.gyro or 1 for e in model.entries] + [1])
 
         def qmean(effect, key):
@@ -142,7 +143,6 @@ class GyroNoise:
         tau = tau[np.isfinite(tau)]
         src = {k: source for k in ("arw", "rrw", "bi", "gauss_markov", "rho_arw", "rho_rrw")}
         # the sensor's own effects come in through DesignSpace
-        from gyroarray.predict import MODELLED
         modelled = tuple(m for m in MODELLED if m not in ("bandwidth", "g_sensitivity"))
         return cls(arw_deg_rt_h=arw,
                    rrw_deg_h_rt_h=units.rrw_rad_s_rt_s_to_deg_h_rt_h(qmean("rrw", "k_rad_s_rt_s")),
@@ -157,7 +157,7 @@ class GyroNoise:
 
     def noise_model(self, n_gyros: int):
         """This noise on every gyro of an N-gyro array, as a NoiseModel (for the simulator)."""
-        from gyroarray.sim.model import ModelEntry, NoiseModel
+        from gyroarray.sim.model import ModelEntry, NoiseModel  # lazy: loads numba
         entries = [ModelEntry("arw", None, {"n_deg_rt_h": self.arw_deg_rt_h})]
         if self.rrw_deg_h_rt_h > 0:
             entries.append(ModelEntry("rrw", None, {"k_deg_h_rt_h": self.rrw_deg_h_rt_h}))
@@ -235,7 +235,7 @@ class DesignSpace:
 
     def __post_init__(self):
         if self.sensor_bandwidth is not None:
-            from gyroarray.sim.sensor import bandwidth_sos
+            from gyroarray.sim.sensor import bandwidth_sos  # lazy: loads scipy.signal
             fc, order = self.sensor_bandwidth
             bandwidth_sos(fc, order, self.dt_s)                     # order 1/2, 0 < fc < Nyquist
 
@@ -245,7 +245,6 @@ class DesignSpace:
 
     def sensor(self, n_gyros: int = 1):
         """The gyros' own filter as :class:`gyroarray.predict.SensorBandwidth` (None: none)."""
-        from gyroarray.predict import SensorBandwidth
         if self.sensor_bandwidth is None:
             return None
         fc, order = self.sensor_bandwidth
@@ -254,7 +253,7 @@ class DesignSpace:
 
     def sensor_entries(self) -> tuple:
         """The sensor's ``bandwidth`` and ``g_sensitivity`` as model entries on every gyro."""
-        from gyroarray.sim.model import ModelEntry
+        from gyroarray.sim.model import ModelEntry  # lazy: loads numba
         out = []
         if self.sensor_bandwidth is not None:
             out.append(ModelEntry("bandwidth", None, {"cutoff_hz": float(self.sensor_bandwidth[0]),
@@ -266,7 +265,7 @@ class DesignSpace:
 
     @property
     def n_samples(self) -> int:
-        from gyroarray.sim.table import n_samples
+        from gyroarray.sim.table import n_samples  # lazy: loads mujoco
         return n_samples(self.horizon_s, self.rate_hz)
 
 
@@ -436,7 +435,7 @@ def _with_sensor(model, space: DesignSpace, *, g_sensitivity: bool = True):
     The Monte-Carlo check and the full predictor leave the g-sensitivity out
     (``g_sensitivity`` False), as the ranking does: it is reported on its own.
     """
-    from gyroarray.sim.model import NoiseModel
+    from gyroarray.sim.model import NoiseModel  # lazy: loads numba
     extra = tuple(e for e in space.sensor_entries() if g_sensitivity or e.effect != "g_sensitivity")
     return model if not extra else NoiseModel(tuple(model.entries) + extra,
                                               description=model.description)
@@ -451,7 +450,6 @@ def _space_specific_force(space: DesignSpace) -> np.ndarray:
     """The specific force at the platform origin over the scored window (n, 3) [m/s²]:
     the motion profile's truth, else the level table at rest (a swing's few degrees of
     tilt are left out), [0, 0, g0]."""
-    from gyroarray.constants import G0_M_S2
     if space.specific_force_m_s2 is not None:
         return np.asarray(space.specific_force_m_s2, dtype=float)[:space.n_samples]
     return np.array([[0.0, 0.0, G0_M_S2]])
@@ -461,7 +459,6 @@ def _g_sensitivity(space: DesignSpace, dc_gain: np.ndarray) -> dict:
     """``g_sensitivity``: the RMS rate error of the space's g-sensitivity on its motion, per
     gyro and fused through the design's DC gain T₀ (3, N) (:func:`gyroarray.predict.g_sensitivity_error`);
     {} without one."""
-    from gyroarray.predict import g_sensitivity_error, settle_start as _k0
     if space.g_sensitivity_deg_s_per_g is None:
         return {}
     T0 = np.asarray(dc_gain, dtype=float)
@@ -470,7 +467,7 @@ def _g_sensitivity(space: DesignSpace, dc_gain: np.ndarray) -> dict:
                                                                dtype=float)), (N, 1))
     f0 = _space_specific_force(space)
     f = np.broadcast_to(f0[:, None, :], (f0.shape[0], N, 3))
-    k0 = _k0(f0.shape[0], space.dt_s, space.settle_s) if f0.shape[0] > 1 else 0
+    k0 = settle_start(f0.shape[0], space.dt_s, space.settle_s) if f0.shape[0] > 1 else 0
     r = g_sensitivity_error(k, f, T0, k0)
     fused = r["fused_rms_deg_s"]
     return {"g_sensitivity": {"per_gyro_rms_deg_s": float(np.mean(r["per_gyro_rms_deg_s"])),
@@ -487,7 +484,6 @@ def _alpha_grid(scheme: int, points: int) -> np.ndarray:
 
 def _survives(H: np.ndarray, rho: float, k: int) -> np.ndarray:
     """Worst-case GDOP (G,) over every choice of k failed gyros (inf: an axis is lost)."""
-    from gyroarray.design import _gdop_batch
     G, N, _ = H.shape
     if k == 0:
         return _gdop_batch(H, np.linalg.cholesky(correlation_matrix(N, rho)))
@@ -631,8 +627,7 @@ def _design_dict(b: _Best, space: DesignSpace, g: GyroNoise, failures: int) -> d
 def _generic_design(scheme, n, est, alpha, bw, rho, space: DesignSpace, g: GyroNoise,
                     failures: int) -> dict:
     """A design predicted by the full predictor (used where the fast path does not apply)."""
-    from gyroarray.estimators import get_estimator
-    from gyroarray.predict import predict
+    from gyroarray.estimators import get_estimator  # lazy: loads numba
     gr = g.with_rho(rho) if g.rho_arw == g.rho_rrw else g
     layout = Layout.conical(scheme, n, alpha)
     model = gr.noise_model(n)
@@ -1197,9 +1192,9 @@ def monte_carlo_check(designs: list[dict], g: GyroNoise, space: DesignSpace, *,
         difference of the runs' 3-axis mean square with its 95 % CI
         (``resolved``: the interval excludes 0).
     """
-    from gyroarray.chain import mean_ci, replicate_rng, rms_ci
-    from gyroarray.estimators import get_estimator
-    from gyroarray.sim.effects import simulate_readings
+    from gyroarray.chain import mean_ci, replicate_rng, rms_ci  # lazy: loads numba, pandas
+    from gyroarray.estimators import get_estimator  # lazy: loads numba
+    from gyroarray.sim.effects import simulate_readings  # lazy: loads numba
     picked = _pick_for_check(designs, top)
     n, dt = space.n_samples, space.dt_s
     k0 = settle_start(n, dt, space.settle_s)

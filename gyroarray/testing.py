@@ -49,6 +49,10 @@ from typing import Callable, Iterable
 import numpy as np
 
 from gyroarray.errors import InputError
+from gyroarray.layout import Layout
+from gyroarray.sim.protocol import Effect
+from gyroarray.tomlio import loads_toml
+from gyroarray.units import RAD_PER_DEG
 
 __all__ = ["effect_checks", "check_effect", "parametrize_effect_checks", "estimator_checks",
            "check_estimator", "parametrize_estimator_checks"]
@@ -58,7 +62,7 @@ STATIC_S, MOTION_S, TAIL_S, RATE_HZ = 600.0, 900.0, 300.0, 50.0
 
 
 def _registered(effect_cls):
-    from gyroarray.effects import REGISTRY, register
+    from gyroarray.effects import REGISTRY, register  # lazy: loads numba
     if not (isinstance(effect_cls, type)):
         raise TypeError(f"check_effect takes the Effect class, got {effect_cls!r}")
     eff = REGISTRY.get(getattr(effect_cls, "name", ""))
@@ -68,13 +72,11 @@ def _registered(effect_cls):
 
 
 def _layout():
-    from gyroarray.layout import Layout
     return Layout.conical(1, 6, math.acos(1.0 / math.sqrt(3.0)))
 
 
 def _example(eff, rng):
-    from gyroarray.sim.lab import table_profile
-    from gyroarray.units import RAD_PER_DEG
+    from gyroarray.sim.lab import table_profile  # lazy: loads numba, pandas
     layout = _layout()
     t = np.arange(0.0, STATIC_S + MOTION_S + TAIL_S, 1.0 / RATE_HZ)
     max_rate = np.abs(table_profile(t, STATIC_S, MOTION_S) @ layout.H.T).max(axis=0) / RAD_PER_DEG
@@ -82,8 +84,8 @@ def _example(eff, rng):
 
 
 def _record(extra_entries, seed: int):
-    from gyroarray.sim.lab import lab_run
-    from gyroarray.sim.model import ModelEntry, NoiseModel
+    from gyroarray.sim.lab import lab_run  # lazy: loads numba, pandas
+    from gyroarray.sim.model import ModelEntry, NoiseModel  # lazy: loads numba
     rng = np.random.default_rng([20261123, seed])
     base = (ModelEntry("arw", None, {"n_deg_rt_h": 0.15}), ModelEntry("rrw", None, {"k_deg_h_rt_h": 5.0}))
     return lab_run(NoiseModel(base + tuple(extra_entries)), _layout(), rng, rate_hz=RATE_HZ,
@@ -91,7 +93,6 @@ def _record(extra_entries, seed: int):
 
 
 def _has_example(eff) -> bool:
-    from gyroarray.sim.protocol import Effect
     return type(eff).example is not Effect.example
 
 
@@ -102,17 +103,16 @@ def _params_of(eff, rng) -> tuple:
 
 
 def _check_toml_round_trip(effect_cls) -> None:
-    from gyroarray.sim.model import ModelEntry, NoiseModel
+    from gyroarray.sim.model import ModelEntry, NoiseModel  # lazy: loads numba
     eff = _registered(effect_cls)
     gyro, params = _params_of(eff, np.random.default_rng(1))
     model = NoiseModel((ModelEntry(eff.name, gyro, params),))
-    from gyroarray.tomlio import loads_toml
     again = NoiseModel.from_toml(loads_toml(model.to_toml(), f"{eff.name} model"), n_gyros=_layout().n_gyros)
     assert again.entries == model.entries, f"{eff.name}: {again.entries} != {model.entries}"
 
 
 def _check_bad_parameters(effect_cls) -> None:
-    from gyroarray.sim.model import ModelEntry
+    from gyroarray.sim.model import ModelEntry  # lazy: loads numba
     eff = _registered(effect_cls)
     gyro, good = _params_of(eff, np.random.default_rng(1))
 
@@ -142,8 +142,8 @@ def _check_bad_parameters(effect_cls) -> None:
 
 
 def _check_simulate_then_fit(effect_cls) -> None:
-    from gyroarray.compare import ModelComparison
-    from gyroarray.sim.model import ModelEntry
+    from gyroarray.compare import ModelComparison  # lazy: loads numba, pandas
+    from gyroarray.sim.model import ModelEntry  # lazy: loads numba
     eff = _registered(effect_cls)
     if not _has_example(eff):
         raise AssertionError(f"{eff.name}: define example(rng, n_gyros, max_rate_deg_s) so the check "
@@ -167,7 +167,7 @@ def _check_simulate_then_fit(effect_cls) -> None:
 
 
 def _check_absent_z(effect_cls, n_seeds: int = 5) -> None:
-    from gyroarray.compare import ModelComparison
+    from gyroarray.compare import ModelComparison  # lazy: loads numba, pandas
     eff = _registered(effect_cls)
     zs = []
     for seed in range(n_seeds):
@@ -213,7 +213,7 @@ def parametrize_effect_checks(classes):
 
 def estimator_checks(estimator_cls) -> list[tuple[str, Callable[[], None]]]:
     """The estimator contract as (name, zero-argument callable) pairs (:mod:`gyroarray.estimators.checks`)."""
-    from gyroarray.estimators import checks
+    from gyroarray.estimators import checks  # lazy: loads numba
     return [(name, functools.partial(fn, estimator_cls)) for name, fn in checks.CHECKS]
 
 

@@ -53,6 +53,9 @@ from pathlib import Path
 import numpy as np
 
 from gyroarray import units
+from gyroarray.analysis.davar import davar
+from gyroarray.analysis.localise import record_channels
+from gyroarray.compare import Analysis
 from gyroarray.effects import REGISTRY, get_effect
 from gyroarray.errors import InputError
 from gyroarray.reports.report import _Doc, _figure, _fmt, _png
@@ -606,7 +609,6 @@ def _xcorr_fig(comp, analysis) -> tuple[bytes, str]:
 
 def _arw_track_fig(comp, analysis) -> tuple[bytes, str]:
     """ARW in sliding windows (dynamic Allan deviation at τ₀) per gyro, with the burst candidate."""
-    from gyroarray.analysis.davar import davar
     E = np.asarray(analysis.residual_rad_s, float)
     n, N = E.shape
     dt = comp.dt
@@ -813,7 +815,6 @@ def _localise_psd_fig(comp, final) -> bytes:
 
 def _localise_channels_fig(comp, final) -> bytes:
     """Binned residual (mean removed) against every channel of the record, all gyros per panel."""
-    from gyroarray.analysis.localise import record_channels
     loc = final.localised
     rate = None if comp.ref is None else comp.ref @ comp.H.T
     chans = record_channels(comp.n, comp.N, rate, None, comp.acc, comp.temp, comp.t, comp.dt, None)
@@ -976,7 +977,6 @@ def _section_notes(doc: _Doc, comp, steps):
 
 
 def _check_steps(comp, steps):
-    from gyroarray.compare import Analysis
     if not isinstance(steps, (list, tuple)) or not steps:
         raise InputError("steps must be the non-empty list of (added, Analysis) of comp.ladder()")
     for i, s in enumerate(steps):

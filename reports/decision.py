@@ -27,7 +27,12 @@ from pathlib import Path
 import numpy as np
 
 from gyroarray import units
+from gyroarray.design import gdop_robustness, minmax_alpha, optimal_alpha
 from gyroarray.errors import InputError
+from gyroarray.layout import Layout
+from gyroarray.predict import Swing, settle_start, swing_truth
+from gyroarray.recommend import DesignSpace, GyroNoise, _label as _recommend_label
+from gyroarray.reports.design_plots import accuracy_vs_n_fig
 
 __all__ = ["load_design", "write_sections", "decision_summary"]
 
@@ -51,8 +56,7 @@ def load_design(path) -> dict:
 
 
 def _label(d: dict) -> str:
-    from gyroarray.recommend import _label as lab
-    return lab(d)
+    return _recommend_label(d)
 
 
 def _ci_text(mc: dict | None, digits: int = 4) -> str:
@@ -115,8 +119,7 @@ def decision_summary(res: dict) -> list[str]:
 
 def write_sections(doc, res: dict, top: int = 15) -> dict:
     """Add the decision, assumptions and evidence sections to a report document."""
-    from gyroarray.reports.design_plots import accuracy_vs_n_fig
-    from gyroarray.reports.report import _png
+    from gyroarray.reports.report import _png  # lazy: loads pandas; cycle: report imports decision
     doc.h2("Decision")
     for s in decision_summary(res):
         doc.p(s, "decision")
@@ -265,7 +268,6 @@ def _rho(doc, res: dict):
 
 
 def _gdop_robustness(doc, rhos):
-    from gyroarray.design import gdop_robustness, minmax_alpha, optimal_alpha
     rows = []
     for scheme in (1, 2):
         for n in (4, 5, 6, 8):
@@ -291,12 +293,10 @@ def adev_section(doc, res: dict, *, seed: int = 20260413):
     One run of the design's horizon (at least 600 s), re-simulated; dashed: each single
     gyro's ADEV × √(3/N) (what averaging N alike gyros gives per axis at long τ).
     """
-    from gyroarray.analysis.allan import allan_analysis
-    from gyroarray.estimators import get_estimator
-    from gyroarray.layout import Layout
-    from gyroarray.predict import settle_start, swing_truth
-    from gyroarray.sim.effects import simulate_readings
-    from gyroarray.reports.report import _figure, _png
+    from gyroarray.analysis.allan import allan_analysis  # lazy: loads numba
+    from gyroarray.estimators import get_estimator  # lazy: loads numba
+    from gyroarray.sim.effects import simulate_readings  # lazy: loads numba
+    from gyroarray.reports.report import _figure, _png  # lazy: loads pandas; cycle: report imports decision
     g, space = noise_and_space(res["assumptions"])
     d = res["recommended"]
     gr = g.with_rho(d.get("rho", g.rho_arw)) if g.rho_arw == g.rho_rrw else g
@@ -350,8 +350,6 @@ def adev_section(doc, res: dict, *, seed: int = 20260413):
 
 def noise_and_space(a: dict):
     """The GyroNoise and DesignSpace of a result's assumptions (for re-simulation)."""
-    from gyroarray.predict import Swing
-    from gyroarray.recommend import DesignSpace, GyroNoise
     gm = a["gauss_markov"]["value"]
     rho = a["rho"]["value"]
     r0 = 0.0 if isinstance(rho, list) else float(rho)

@@ -9,6 +9,7 @@ import numpy as np
 from gyroarray.design import correlation_matrix, gdop, gdop_vs_alpha, optimal_alpha
 from gyroarray.errors import InputError
 from gyroarray.layout import Layout
+from gyroarray.outputs import PLOT_SUFFIXES, check_output_dir, save_figure
 from gyroarray.units import deg_to_rad, rad_to_deg
 
 NS = (4, 5, 6, 8)
@@ -34,7 +35,6 @@ def design_figure(path, *, force: bool = True) -> Path:
     Path
         The file written.
     """
-    from gyroarray.outputs import PLOT_SUFFIXES, check_output_dir, save_figure
     path = Path(path)
     if path.suffix.lower() not in PLOT_SUFFIXES:
         raise InputError(f"plot must end in .png, .svg or .pdf, got {path.name!r}", file=str(path))

@@ -28,6 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
+from gyroarray.check import scenarios_dir
 from gyroarray.errors import InputError
 
 __all__ = ["METRICS", "check_entry", "run_check", "MIN_RUNS"]
@@ -71,7 +72,7 @@ def check_entry(c, where: str, file: str) -> dict:
                              f"{', '.join(METRICS)}, value = number }}", file=file,
                              column=f"{where}.values[{j}]")
     try:
-        from gyroarray.sim.model import NoiseModel
+        from gyroarray.sim.model import NoiseModel  # lazy: loads numba
         NoiseModel.from_toml({"effects": c.get("effects", [])})
     except InputError as err:
         raise InputError(err.message, file=file, column=f"{where}.effects") from None
@@ -79,8 +80,7 @@ def check_entry(c, where: str, file: str) -> dict:
 
 
 def _scenario(ref: str, base: Path | None):
-    from gyroarray.check import scenarios_dir
-    from gyroarray.sim.scenario import load_scenario
+    from gyroarray.sim.scenario import load_scenario  # lazy: loads mujoco, numba
     for folder in ([base] if base is not None else []) + [Path(scenarios_dir())]:
         f = folder / f"{ref}.toml"
         if f.is_file():
@@ -117,8 +117,8 @@ def run_check(experiment: dict, check: dict, *, shipped_rows=None, base: Path | 
         "changed_mean", "shipped_low", "shipped_high", "inside"}], ``verdict``.
     """
     from dataclasses import replace
-    from gyroarray.chain import run_replicates
-    from gyroarray.sim.model import NoiseModel
+    from gyroarray.chain import run_replicates  # lazy: loads numba, pandas
+    from gyroarray.sim.model import NoiseModel  # lazy: loads numba
     sc = _scenario(experiment["scenario"], base)
     new = NoiseModel.from_toml({"effects": check.get("effects", [])})
     replaced = {e.effect for e in new.entries}

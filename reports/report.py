@@ -52,6 +52,13 @@ import pandas as pd
 from gyroarray import units
 from gyroarray import outputs
 from gyroarray.errors import InputError
+from gyroarray.limits import read_regular
+from gyroarray.reports import decision as dec
+from gyroarray.reports.design_plots import design_fig, plot_series
+from gyroarray.reports.hypotheses import check_entry, run_check
+from gyroarray.scenarios.runner import MANIFEST, load_results
+from gyroarray.scenarios.sweep import load_sweep
+from gyroarray.tomlio import load_toml
 
 __all__ = ["SweepData", "load_sweep_dir", "design_ranking", "estimator_comparison",
            "paper_vs_model", "load_paper_values", "write_report", "default_paper_values"]
@@ -96,8 +103,6 @@ class SweepData:
 
 def load_sweep_dir(path) -> SweepData:
     """Read a ``gyroarray sweep`` output folder (complete scenario files only)."""
-    from gyroarray.limits import read_regular
-    from gyroarray.scenarios.runner import MANIFEST, load_results
 
     path = Path(path)
     man = path / MANIFEST
@@ -169,7 +174,6 @@ def default_paper_values() -> Path:
 def load_paper_values(path=None) -> list[dict]:
     """The experiments of a paper-values file (see the file's header), checked."""
     path = Path(path) if path is not None else default_paper_values()
-    from gyroarray.tomlio import load_toml
     data = load_toml(path, "paper values file").data
     exps = data.get("experiment")
     if not isinstance(exps, list) or not exps:
@@ -189,7 +193,6 @@ def load_paper_values(path=None) -> list[dict]:
                                  f"one of {', '.join(_METRICS)} (single: {', '.join(_SINGLE_FROM)}),"
                                  f" value = number }}, got {v!r}", file=str(path),
                                  column=f"{where}.values[{j}]")
-        from gyroarray.reports.hypotheses import check_entry
         checks = e.get("check", [])
         if not isinstance(checks, list):
             raise InputError(f"{where}.check must be an array of tables ([[experiment.check]])",
@@ -219,7 +222,7 @@ def design_ranking(rows: pd.DataFrame) -> pd.DataFrame:
     runs; ``rank`` within the motion and ρ. The offline ``bound`` is not a
     design choice and is left out.
     """
-    from gyroarray.chain import mean_ci
+    from gyroarray.chain import mean_ci  # lazy: loads numba
     df = rows[rows.estimator != "bound"].copy()
     df = df.assign(**{k: df[k].astype(object).where(df[k].notna(), "none")
                       for k in ("scheme", "rho_arw", "rho_rrw")})
@@ -333,7 +336,6 @@ def _png(fig, dpi=96) -> bytes:
 def _ranking_fig(ranking: pd.DataFrame) -> bytes:
     """Best 1σ vs N per scheme and estimator, one panel per motion, at one ρ (the first
     listed; ρ is a condition, not a series), error bars: 95 % CI over the runs."""
-    from gyroarray.reports.design_plots import plot_series
     motions = list(dict.fromkeys(ranking.motion))
     fig, axs = _figure(5.2 * len(motions), 4.4, len(motions))
     for ax, motion in zip(axs, motions):
@@ -402,10 +404,10 @@ class _Adev:
 
 def _adev_fig(title: str, spec, estimator: str) -> _Adev:
     """Re-simulate one sweep scenario: ADEV of the single gyros and of the fused axes."""
-    from gyroarray.analysis.allan import allan_analysis
-    from gyroarray.chain import SETTLE_S
-    from gyroarray.estimators import get_estimator
-    from gyroarray.sim.scenario import simulate
+    from gyroarray.analysis.allan import allan_analysis  # lazy: loads numba
+    from gyroarray.chain import SETTLE_S  # lazy: loads numba
+    from gyroarray.estimators import get_estimator  # lazy: loads numba
+    from gyroarray.sim.scenario import simulate  # lazy: loads mujoco, numba
 
     sc = spec.build()
     res = simulate(sc)
@@ -452,7 +454,6 @@ def _adev_fig(title: str, spec, estimator: str) -> _Adev:
 
 def _find_spec(data: SweepData, pick):
     """The ScenarioSpec of the sweep's own file for a chosen result row (None: not found)."""
-    from gyroarray.scenarios.sweep import load_sweep
 
     if data._specs is None:
         data._specs, data._specs_why = {}, ""
@@ -608,7 +609,6 @@ table.assumptions {{ background: #f7f7fb; }}
 
 
 def _section_design(doc: _Doc):
-    from gyroarray.reports.design_plots import design_fig
     doc.h2("Cone geometry: GDOP vs α and ρ (paper 003 Figs. 8–10)")
     doc.p("GDOP = √trace((Hᵀ C⁻¹ H)⁻¹): the fused rate error of a unit-noise gyro array, per "
           "layout (H) and ARW correlation (C). Dots mark each N's optimal cone angle.")
@@ -713,7 +713,6 @@ def _section_estimators(doc: _Doc, rows: pd.DataFrame):
 
 
 def _section_paper(doc: _Doc, paper: list[SweepData], values_path) -> list[dict]:
-    from gyroarray.reports.hypotheses import run_check
     doc.h2("Paper vs model")
     if not paper:
         doc.p("No paper reproduction sweep given (run scenarios/sweeps/paper_reproduction.toml, "
@@ -798,7 +797,6 @@ def write_report(dirs, out_html, out_md=None, *, design=None, paper_values=None,
         ``decision`` (the recommended design and the summary sentences, with
         ``design``), ``paper_vs_model`` (see :func:`paper_vs_model`), ``seconds``.
     """
-    from gyroarray.reports import decision as dec
     t0 = time.perf_counter()
     dirs = [Path(d) for d in dirs]
     if not dirs and design is None:

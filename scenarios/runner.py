@@ -77,7 +77,7 @@ def run_one(spec: ScenarioSpec, estimators, sweep_name: str):
     """Run one scenario (in a worker): its rows as a DataFrame with a fixed schema."""
     import pandas as pd
 
-    from gyroarray.chain import run_scenario
+    from gyroarray.chain import run_scenario  # lazy: loads numba
 
     result = run_scenario(spec.build(), list(estimators) if estimators else None)
     table = result.table.copy()

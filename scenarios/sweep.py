@@ -91,8 +91,10 @@ from typing import TypeGuard
 
 import numpy as np
 
+from gyroarray.design import optimal_alpha
 from gyroarray.errors import InputError
-from gyroarray.measurement import _TomlDoc
+from gyroarray.measurement import _parse_layout, _parse_site, _TomlDoc
+from gyroarray.sim.profiles import load_profile
 from gyroarray.tomlio import load_toml
 
 __all__ = ["Sweep", "ScenarioSpec", "load_sweep", "scenario_id", "scenario_seed", "PARAM_KEYS"]
@@ -173,7 +175,6 @@ def scenario_seed(sweep_seed: int, sid: str) -> int:
 
 @lru_cache(maxsize=1024)
 def _optimal_alpha_deg(scheme: int, n: int, rho: float) -> float:
-    from gyroarray.design import optimal_alpha
     return math.degrees(optimal_alpha(scheme, n, rho).alpha_rad)
 
 
@@ -262,9 +263,9 @@ class _Prefixed(_Doc):
 
 def _build_scenario(data: dict, name: str, seed: int, file: str, doc: _Doc | None = None,
                     prefix: str = ""):
-    from gyroarray.measurement import _parse_layout, _parse_site
-    from gyroarray.sim.model import NoiseModel
-    from gyroarray.sim.scenario import Scenario, _parse_temperature, resolve_profile, validate_scenario
+    from gyroarray.sim.model import NoiseModel  # lazy: loads numba
+    from gyroarray.sim.scenario import (Scenario, _parse_temperature,  # lazy: loads mujoco, numba
+                                        resolve_profile, validate_scenario)
 
     view = _Prefixed(doc, data, file, prefix)
     rate = data.get("sample_rate_hz")
@@ -309,7 +310,6 @@ _PROFILES: dict = {}
 def _cached_profile(path: Path):
     """:func:`~gyroarray.sim.profiles.load_profile`, once per file version (a grid names a few
     profiles thousands of times)."""
-    from gyroarray.sim.profiles import load_profile
     try:
         st = path.stat()
         key = (str(path.resolve()), st.st_mtime_ns, st.st_size)
@@ -400,7 +400,7 @@ def _base_params(data: dict) -> dict:
 def _apply(base: dict, base_params: dict, given: dict, effect_sets: dict, sweep_dir: Path,
            doc: _Doc, where: dict) -> tuple[dict, dict]:
     """(params, scenario data) of one point: ``given`` values over the base."""
-    from gyroarray.sim.scenario import resolve_profile
+    from gyroarray.sim.scenario import resolve_profile  # lazy: loads mujoco, numba
 
     p = dict(base_params)
     p.update(given)
@@ -501,7 +501,7 @@ def _check_estimators(estimators, doc: _Doc) -> tuple | None:
     """The estimator names of the sweep (None: all), checked against the registry."""
     if estimators is None:
         return None
-    from gyroarray.estimators import available
+    from gyroarray.estimators import available  # lazy: loads numba
     if not (isinstance(estimators, list) and estimators
             and all(isinstance(e, str) for e in estimators)):
         raise doc.error(f"estimators must be a non-empty array of names, got "
@@ -545,7 +545,7 @@ def _check_effect_sets(d: dict, doc: _Doc) -> dict:
             raise doc.error(f"effect_sets.{k} must be an array of effect tables, got {_type(v)}",
                             f"effect_sets.{k}")
         try:
-            from gyroarray.sim.model import NoiseModel
+            from gyroarray.sim.model import NoiseModel  # lazy: loads numba
             NoiseModel.from_toml({"effects": v})
         except InputError as err:
             raise doc.error(err.message, f"effect_sets.{k}"

@@ -37,6 +37,7 @@ from typing import Any
 
 import numpy as np
 
+from gyroarray.analysis.earth_fit import attitude_from_rates
 from gyroarray.layout import Layout
 from gyroarray.measurement import Measurement, Site
 from gyroarray.sim.effects import simulate_readings
@@ -154,8 +155,6 @@ def lab_run(model: NoiseModel, layout: Layout, rng: np.random.Generator, *,
     -------
     Measurement
     """
-    from gyroarray.analysis.earth_fit import attitude_from_rates
-
     dt = 1.0 / float(rate_hz)
     n = int(round((static_s + motion_s + tail_s) * rate_hz))
     t = np.arange(n) * dt

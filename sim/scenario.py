@@ -65,12 +65,15 @@ import numpy as np
 from gyroarray import units
 from gyroarray.errors import InputError
 from gyroarray.layout import Layout
+from gyroarray.limits import MAX_RATE_DEG_S, check_memory
 from gyroarray.measurement import (Measurement, Site, _load_toml, _parse_layout, _parse_site,
                                    _toml_number, _toml_table, _toml_type, _TomlDoc,
                                    write_measurement)
-
+from gyroarray.outputs import check_output, check_output_dir
+from gyroarray.sim.effects import simulate_readings
 from gyroarray.sim.model import NoiseModel
 from gyroarray.sim.profiles import Profile, load_profile
+from gyroarray.sim.table import TableParams
 from gyroarray.sim.truth import Truth, compute_truth
 
 _TOP_KEYS = {"name", "description", "sample_rate_hz", "duration_s", "seed", "layout", "motion",
@@ -290,7 +293,6 @@ def check_size(scenario: Scenario, what: str = "simulate", doc: _TomlDoc | None 
     InputError
         Naming the scenario file, the size needed and the way out.
     """
-    from gyroarray.limits import check_memory
     duration = run_duration_s(scenario)
     hours = f"{duration / 3600:g} h" if duration >= 3600 else f"{duration:g} s"
     key = "duration_s" if scenario.duration_s is not None else "sample_rate_hz"
@@ -324,7 +326,6 @@ def _check_effects_fit_run(scenario: Scenario, doc: _TomlDoc) -> None:
 
 def _check_table_limits(scenario: Scenario, doc: _TomlDoc) -> None:
     """Refuse a profile that commands the table beyond its rate or acceleration limits."""
-    from gyroarray.sim.table import TableParams
     rate, accel = command_extremes(scenario.profile, run_duration_s(scenario))
     limits = TableParams
     for value, limit, what, unit in ((rate, limits.max_rate_deg_s, "gimbal rate", "deg/s"),
@@ -480,7 +481,6 @@ def simulate(scenario: Scenario, *, cache: bool = True, rng: np.random.Generator
     rng : numpy.random.Generator, optional
         Overrides the scenario's seed (sweeps derive one per scenario).
     """
-    from gyroarray.sim.effects import simulate_readings
     truth = compute_truth(scenario.profile, scenario.sample_rate_hz,
                           duration_s=scenario.duration_s, cache=cache)
     temp = None if scenario.temperature is None else scenario.temperature.at(truth.time_s)
@@ -497,7 +497,6 @@ def simulate(scenario: Scenario, *, cache: bool = True, rng: np.random.Generator
 
 def _check_readings(scenario: Scenario, readings_rad_s: np.ndarray) -> None:
     """Refuse a run whose effects drive a gyro beyond what any gyro can output."""
-    from gyroarray.limits import MAX_RATE_DEG_S
     with np.errstate(all="ignore"):
         peak = float(np.max(np.abs(units.rad_s_to_deg_s(readings_rad_s)), initial=0.0))
     if not peak <= MAX_RATE_DEG_S:
@@ -528,7 +527,6 @@ def simulate_to_files(scenario: Scenario, out_dir, *, cache: bool = True, force:
     ``force``); an existing output is replaced only with ``force``
     (:mod:`gyroarray.outputs`). The paths are checked before simulating.
     """
-    from gyroarray.outputs import check_output, check_output_dir
     out = check_output_dir(out_dir)
     for path in output_files(scenario, out):
         check_output(path, inputs=scenario_files(scenario), force=force)
