@@ -36,6 +36,7 @@ from scipy import special
 
 from gyroarray import units
 from gyroarray.errors import InputError
+from gyroarray.outputs import save_figure
 
 from gyroarray.analysis import _kernels
 from gyroarray.analysis.noise_fit import NoiseFit, fit_noise_terms
@@ -999,6 +1000,5 @@ def plot_allan(analyses: Mapping[str, AllanAnalysis], path, *, force: bool = Tru
     ax.legend(fontsize="small")
     first = next(iter(analyses.values()))
     ax.set_title(f"shaded: {first.confidence:.1%} confidence")
-    from gyroarray.outputs import save_figure
     return save_figure(fig, path, force=force, dpi=120)
 

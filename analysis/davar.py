@@ -44,6 +44,7 @@ from scipy import special
 
 from gyroarray import units
 from gyroarray.errors import InputError
+from gyroarray.outputs import save_figure
 
 from gyroarray.analysis import _kernels
 from gyroarray.analysis.allan import (KINDS, ONE_SIGMA, AllanResult, as_series, check_kind,
@@ -905,5 +906,4 @@ def plot_davar(result: DavarResult, path, *, title: str | None = None,
                  f"{name}: one window of {int(result.window_length[0])} "
                  "samples")
     fig.suptitle(title)
-    from gyroarray.outputs import save_figure
     return save_figure(fig, path, force=force, dpi=120)

@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from gyroarray.errors import InputError
+from gyroarray.outputs import save_figure
 from gyroarray.units import rad_s_to_deg_s
 
 __all__ = ["FDI_METRICS", "analyse_measurement", "format_fdi", "plot_fdi", "recovery_errors",
@@ -255,7 +256,6 @@ def plot_fdi(result, path, title: str = "", *, force: bool = True) -> Path:
     ax.set_title(title or "parity statistics (dashed: fitted onset, dotted: alarm)")
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize="small", loc="upper left")
-    from gyroarray.outputs import save_figure
     return save_figure(fig, path, force=force, dpi=120)
 
 

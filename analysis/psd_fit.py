@@ -44,7 +44,7 @@ import numpy as np
 from scipy import ndimage, optimize, signal, special, stats
 
 from gyroarray.analysis.spectrum import welch
-from gyroarray.sim.sensor import bandwidth_response, bandwidth_warped_frequency
+from gyroarray.sim.sensor import bandwidth_response, bandwidth_sos, bandwidth_warped_frequency
 
 __all__ = ["PsdFit", "fit_psd", "filter_z", "EFFECTIVE_TESTS"]
 
@@ -300,7 +300,6 @@ def shortest_clean_tau(cutoff_hz: float, order: int, dt_s: float, tol: float = 0
     D(m) = m R(0) + 2 Σ_{k<m} (m − k) R(k) (per dt², unit input), and
     σ²(m) ∝ (4 D(m) − D(2m))/(2m²), against 1/m for white noise.
     """
-    from gyroarray.sim.sensor import bandwidth_sos
     sos = bandwidth_sos(cutoff_hz, order, dt_s)
     length = int(min(max(64, 40.0 / (cutoff_hz * dt_s)), 1 << 20))
     imp = np.zeros(length)

@@ -33,13 +33,14 @@ from types import MappingProxyType, ModuleType
 from typing import Iterable, Mapping, NoReturn
 
 from gyroarray.errors import InputError
+from gyroarray.plugins import EFFECTS_GROUP, installed
 from gyroarray.sim.protocol import Effect, Kind, Param, Stage
 
 __all__ = ["REGISTRY", "ENTRY_POINT_GROUP", "effect_names", "get_effect", "did_you_mean", "register",
            "load_plugin", "plugin_effects", "installed_plugins"]
 
 #: Entry-point group of installed packages that add effects.
-ENTRY_POINT_GROUP = "gyroarray.effects"
+ENTRY_POINT_GROUP = EFFECTS_GROUP
 
 _EFFECTS: dict[str, Effect] = {}
 _SOURCE: dict[str, str] = {}
@@ -126,9 +127,7 @@ def _load_builtins() -> None:
 
 def installed_plugins() -> list[tuple[str, str]]:
     """(name, value) of the ``gyroarray.effects`` entry points of installed packages."""
-    from importlib import metadata
-    eps = metadata.entry_points(group=ENTRY_POINT_GROUP)
-    return sorted((ep.name, ep.value) for ep in eps)
+    return installed(ENTRY_POINT_GROUP)
 
 
 def _load_entry_points() -> None:

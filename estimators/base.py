@@ -41,12 +41,13 @@ from gyroarray.design import unobservable_reason
 from gyroarray.errors import InputError
 from gyroarray.estimators.noise import ArrayNoise, array_noise
 from gyroarray.layout import Layout
+from gyroarray.plugins import ESTIMATORS_GROUP
 
 __all__ = ["Estimator", "NotFittedError", "LinearSystem", "register", "get_estimator", "available",
            "make", "ENTRY_POINT_GROUP", "unobservable_reason"]
 
 #: Entry-point group of third-party estimators.
-ENTRY_POINT_GROUP = "gyroarray.estimators"
+ENTRY_POINT_GROUP = ESTIMATORS_GROUP
 
 _BUILTIN: dict[str, type] = {}
 _LOADED_PLUGINS: dict[str, type] = {}

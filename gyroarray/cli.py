@@ -36,16 +36,14 @@ class _Parser(argparse.ArgumentParser):
 
 def _plugins_help() -> str:
     """What installed third-party code scenario, model and sweep files may load by name."""
-    from gyroarray.effects import ENTRY_POINT_GROUP as EFFECTS, installed_plugins
-    from gyroarray.estimators.base import ENTRY_POINT_GROUP as ESTIMATORS, _entry_points
-    estimators = sorted((name, ep.value) for name, ep in _entry_points().items())
+    from gyroarray.plugins import EFFECTS_GROUP as EFFECTS, ESTIMATORS_GROUP as ESTIMATORS, installed
 
     def listed(pairs):
         return "\n".join(f"  {name} = {value}" for name, value in pairs) or "  (none installed)"
     return (f"\ninstalled effect plugins (entry-point group {EFFECTS!r}; imported when the effect "
-            f"registry loads, named by scenario and model files):\n{listed(installed_plugins())}\n"
+            f"registry loads, named by scenario and model files):\n{listed(installed(EFFECTS))}\n"
             f"installed estimator plugins (group {ESTIMATORS!r}; imported when --estimators or a "
-            f"sweep file names one):\n{listed(estimators)}\n"
+            f"sweep file names one):\n{listed(installed(ESTIMATORS))}\n"
             "--plugin PATH.py runs that file. --scheduler tcp://... exchanges pickled tasks: use only "
             "a scheduler you trust (README: 'What gyroarray trusts').\n")
 
