@@ -24,7 +24,7 @@ class ScaleNonlinearity(RegressionEffect):
     order = 10
     stage = Stage.SCALE
     needs = frozenset({"ref", "motion"})
-    rivals = ("scale_factor",)
+    rivals = ("scale_factor", "misalignment")
     channel = "rate2"
     params = (Param("k2_per_deg_s", "1/(deg/s)", "k2_per_rad_s", per_deg_s_to_per_rad_s,
                     doc="quadratic coefficient: output += k2·input² (deg/s)"),)
@@ -37,6 +37,9 @@ class ScaleNonlinearity(RegressionEffect):
         return fit_scale_nonlinearity(e, ctx.ref, ctx.H[gyro - 1], ctx.t, ctx.dt, r, q, gyro, use=ctx.use)
 
     def prefer(self, mine, other, ctx):
+        if other.effect == "misalignment":
+            # a curvature and a tilted axis both follow the motion's rates: the better fit (AIC)
+            return super().prefer(mine, other, ctx)
         if other.effect != "scale_factor":
             return None
         zj = mine.extra.get("ppm_joint_z", math.inf)

@@ -9,7 +9,7 @@ import numpy as np
 from gyroarray.analysis.regress import fit_sinusoid
 from gyroarray.effects import _draw
 from gyroarray.errors import InputError
-from gyroarray.sim.protocol import Param, RegressionEffect, Stage, identity, with_term
+from gyroarray.sim.protocol import Param, RegressionEffect, Stage, explains_away, identity, with_term
 from gyroarray.units import RAD_PER_DEG, deg_s_to_rad_s, deg_to_rad
 
 
@@ -33,6 +33,7 @@ class Sinusoid(RegressionEffect):
               Param("phase_deg", "deg", "phase_rad", deg_to_rad, required=False, default=0.0,
                     doc="phase of amp·sin(2π f t + phase), t = time_s"))
     doc = "sinusoidal rate error"
+    rivals = ("gauss_markov", "bias_instability")
 
     def simulate(self, state, act, streams):
         ctx = state.ctx
@@ -50,6 +51,11 @@ class Sinusoid(RegressionEffect):
         g = int(gyro) - 1
         return fit_sinusoid(ctx.Er[:, g], ctx.tr, ctx.dt, float(ctx.r[g]), float(ctx.q[g]), int(gyro),
                             q_angle_rad=_white_angle_noise(ctx, int(gyro)))
+
+    def prefer(self, mine, other, ctx):
+        """A tone of a few Hz is also an ADEV hump near τ = 1/(2.6 f): the line wins when, taken
+        out of the record, the rival is no longer seen."""
+        return explains_away(self, mine, other, ctx)
 
     def example(self, rng, n_gyros, max_rate_deg_s):
         return _draw.gyro(rng, n_gyros), {"amp_deg_s": _draw.u(rng, 0.01, 0.06, True),
