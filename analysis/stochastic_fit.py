@@ -190,6 +190,7 @@ class _Curve:
     y: np.ndarray             # Allan variance [(rad/s)²]
     cov: AvarCovariance
     caps: dict | None = None  # upper bounds of the capped coefficients (:func:`_caps`)
+    white: np.ndarray | None = None  # the white term's Allan variance over N²/τ at each factor (a filter)
 
 
 #: Covariance models by (samples, dt): the gyros of one record share one.
@@ -220,7 +221,8 @@ def _cov_model(n: int, dt_s: float, m_min: int = 1) -> AvarCovariance:
     return cov
 
 
-def _curve(x: np.ndarray, dt_s: float, cov: AvarCovariance | None = None, m_min: int = 1) -> _Curve:
+def _curve(x: np.ndarray, dt_s: float, cov: AvarCovariance | None = None, m_min: int = 1,
+           white_shape=None) -> _Curve:
     m = _factors(x.size, m_min)
     res = deviation(x, dt_s, "oadev", m * float(dt_s))
     # the bounds read the octaves up to a third of the record (the fit stops at an eighth)
@@ -229,7 +231,8 @@ def _curve(x: np.ndarray, dt_s: float, cov: AvarCovariance | None = None, m_min:
     return _Curve(dt_s=float(dt_s), n=int(x.size), taus=m * float(dt_s), m=m,
                   y=res.dev ** 2, cov=_cov_model(x.size, dt_s, m_min) if cov is None else cov,
                   caps=_caps(int(x.size), np.concatenate([m, m_long]) * float(dt_s),
-                             np.concatenate([m, m_long]), np.concatenate([res.dev ** 2, y_long])))
+                             np.concatenate([m, m_long]), np.concatenate([res.dev ** 2, y_long])),
+                  white=None if white_shape is None else np.asarray(white_shape(m), dtype=float))
 
 
 def _cross_avar(X: np.ndarray, m: np.ndarray) -> np.ndarray:
@@ -299,6 +302,8 @@ def _columns(cv: _Curve, names: tuple, tau_c: float | None = None) -> np.ndarray
     for name in names:
         if name == "gm":
             cols.append(gauss_markov_avar(cv.taus, 1.0, tau_c, cv.dt_s))
+        elif name == "n" and cv.white is not None:      # white noise through the sensor's filter
+            cols.append(term_basis("oadev", name, cv.taus) * cv.white)
         else:
             cols.append(term_basis("oadev", name, cv.taus))
     return np.column_stack(cols)
@@ -642,6 +647,7 @@ def _rrw_reference(cv: _Curve, names: tuple, gm_tau_s: float | None, label: str,
     start = 0
     while True:
         sub = cv if start == 0 else replace(cv, taus=cv.taus[start:], m=cv.m[start:], y=cv.y[start:],
+                                            white=None if cv.white is None else cv.white[start:],
                                             cov=cv.cov.block(start))
         used = names if "b" in names else names + ("b",)
         fit = _gls(sub, used, gm_tau_s)
@@ -732,7 +738,8 @@ def _ramp_entry(r: float, sr: float, z_r: float, lr: float, span: float, label: 
 
 
 def fit_gyro_noise(e, dt_s: float, gyro: int, *, model_terms: tuple = (),
-                   gm_tau_s: float | None = None, min_tau_s: float = 0.0) -> list[EffectFit]:
+                   gm_tau_s: float | None = None, min_tau_s: float = 0.0,
+                   white_shape=None) -> list[EffectFit]:
     """Baseline noise and the non-baseline stochastic effects of one gyro.
 
     Parameters
@@ -758,6 +765,12 @@ def fit_gyro_noise(e, dt_s: float, gyro: int, *, model_terms: tuple = (),
         first power-of-two multiple of dt at or above it): what the model
         shapes below it (a sensor's own low-pass) is left out; never later
         than the sixth-longest octave τ (the fit needs 6).
+    white_shape : callable, optional
+        ``white_shape(m)``: the white term's Allan variance over N²/τ at the
+        averaging factors ``m`` [-] (a sensor's own low-pass:
+        :func:`~gyroarray.analysis.psd_fit.filtered_white_avar_ratio`); it
+        multiplies the N² column, so N is the noise before the filter even
+        where the filter still lowers the variance by a few per cent.
 
     Returns
     -------
@@ -794,7 +807,7 @@ def fit_gyro_noise(e, dt_s: float, gyro: int, *, model_terms: tuple = (),
     label = f"gyro {gyro}"
     n = x.size
     m_min = 1 if not min_tau_s > dt else 2 ** int(math.ceil(math.log2(min_tau_s / dt)))
-    cv = _curve(x, dt, m_min=m_min)
+    cv = _curve(x, dt, m_min=m_min, white_shape=white_shape)
     terms = tuple(t for t in ("b", "q") if t in model_terms)
     if set(model_terms) - {"b", "q"}:
         raise ValueError(f"model_terms must be a subset of ('b', 'q'), got {model_terms!r}")
@@ -808,7 +821,7 @@ def fit_gyro_noise(e, dt_s: float, gyro: int, *, model_terms: tuple = (),
     z_r = chi2_to_z(lr, 1) if math.isfinite(lr) else math.nan
     ramp_removed = bool(z_r > 3.0)
     if ramp_removed:
-        cv = _curve(x - r * dt * np.arange(n), dt, cov=cv.cov, m_min=m_min)
+        cv = _curve(x - r * dt * np.arange(n), dt, cov=cv.cov, m_min=m_min, white_shape=white_shape)
         base = _gls(cv, base_names, gm_tau_s)
     common = {"chi2_baseline": base.chi2, "dof_baseline": base.dof, "ramp_removed": ramp_removed}
 

@@ -3,12 +3,14 @@
 from __future__ import annotations
 
 import math
+from functools import partial
 
 import numpy as np
 from scipy import optimize
 
 from gyroarray.analysis.effect_fit import EffectFit
-from gyroarray.analysis.psd_fit import EFFECTIVE_TESTS, filter_z, fit_psd, shortest_clean_tau
+from gyroarray.analysis.psd_fit import (EFFECTIVE_TESTS, filter_z, filtered_white_avar_ratio, fit_psd,
+                                        shortest_clean_tau)
 from gyroarray.analysis.regress import _RWWhitener
 from gyroarray.effects import _draw
 from gyroarray.errors import InputError
@@ -73,11 +75,14 @@ class Bandwidth(RegressionEffect):
         return params
 
     def noise_term(self, ctx, entry):
-        """The gyro's Allan fits start where the filter has let the white noise be: the
-        shortest octave τ at which filtered white noise has an Allan variance within 5 % of
-        the unfiltered (:func:`shortest_clean_tau`)."""
-        return {"min_tau_s": shortest_clean_tau(float(entry.params["cutoff_hz"]),
-                                                int(entry.params["order"]), ctx.dt)}
+        """The gyro's Allan fits start where the filter has let the white noise be (the shortest
+        octave τ at which filtered white noise has an Allan variance within 5 % of the
+        unfiltered, :func:`shortest_clean_tau`), and their white column is the filtered one
+        (:func:`filtered_white_avar_ratio`): N is read before the filter, not a few per cent
+        low, and the model's band at short τ matches the record."""
+        fc, order = float(entry.params["cutoff_hz"]), int(entry.params["order"])
+        return {"min_tau_s": shortest_clean_tau(fc, order, ctx.dt),
+                "white_shape": partial(filtered_white_avar_ratio, fc, order, ctx.dt)}
 
     def simulate(self, state, act, streams):
         try:

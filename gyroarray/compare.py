@@ -654,10 +654,11 @@ class ModelComparison:
         clean = E - eff.predict(ctx, entry)
         q2 = np.array(ctx.q, dtype=float, copy=True)
         for g in (range(self.N) if gyro is None else [gyro - 1]):
-            q2[g] = self._noise_rq(clean[:, g], g + 1, self._min_tau(ctx, ctx.model, g + 1, 1))[1]
+            q2[g] = self._noise_rq(clean[:, g], g + 1, **self._allan_shape(ctx, ctx.model, g + 1, 1))[1]
         return eff.fit(replace(ctx, q=q2), gyro, E)
 
-    def _noise_rq(self, e: np.ndarray, gyro: int, min_tau_s: float = 0.0) -> tuple[float, float]:
+    def _noise_rq(self, e: np.ndarray, gyro: int, min_tau_s: float = 0.0,
+                  white_shape=None) -> tuple[float, float]:
         """White variance r = N²/dt and random-walk increment variance q = K²·dt [rad²/s²] of one gyro.
 
         r from the Allan fit of the longest static part (ARW is always well
@@ -668,11 +669,12 @@ class ModelComparison:
         and (b) the Allan fit's K + 2σ_K: a drift the Allan variance cannot
         tell from RRW (a flicker floor, a short record where K is 0 ± σ) must
         not make a slow regressor (temperature, ramp, Earth rate) significant.
-        ``min_tau_s``: the Allan fit starts there (what the model shapes below
-        it, a sensor's own filter, is not white noise).
+        ``min_tau_s``, ``white_shape``: the Allan fit starts there and reads its
+        white column so (what the model shapes at short τ, a sensor's own filter,
+        is not white noise: :meth:`_allan_shape`).
         """
         a, b = self.longest
-        base = fit_gyro_noise(e[a:b], self.dt, gyro, min_tau_s=min_tau_s)
+        base = fit_gyro_noise(e[a:b], self.dt, gyro, min_tau_s=min_tau_s, white_shape=white_shape)
         n_rad = arw_deg_rt_h_to_rad_rt_s(base[0].params["n_deg_rt_h"])
         if self.continuous:                    # the white level from a high-pass: first differences
             d = np.diff(e)
@@ -806,7 +808,7 @@ class ModelComparison:
         for it in range(2):
             E = self.E0 - sum(preds.values(), _zeros_like_outputs(self.n, self.N))
             for g in range(self.N):
-                r[g], q[g] = self._noise_rq(E[:, g], g + 1, self._min_tau(ctx, current.values(), g + 1, it))
+                r[g], q[g] = self._noise_rq(E[:, g], g + 1, **self._allan_shape(ctx, current.values(), g + 1, it))
             if not det:
                 break
             for e in det:
@@ -822,12 +824,22 @@ class ModelComparison:
         return fits
 
     @staticmethod
-    def _min_tau(ctx: FitContext, entries, gyro: int, it: int) -> float:
-        """The shortest τ of the gyro's Allan fits its model entries allow (0 before they are fitted)."""
+    def _allan_shape(ctx: FitContext, entries, gyro: int, it: int) -> dict:
+        """What the gyro's model entries change in its Allan fits (none before they are fitted):
+        the shortest τ (``min_tau_s``, the largest asked) and the white column's shape
+        (``white_shape``)."""
+        kw: dict = {}
         if it == 0:
-            return 0.0
-        return max((get_effect(e.effect).noise_term(ctx, e).get("min_tau_s", 0.0)
-                    for e in entries if e.gyro == gyro), default=0.0)
+            return kw
+        for e in entries:
+            if e.gyro != gyro:
+                continue
+            term = get_effect(e.effect).noise_term(ctx, e)
+            if "min_tau_s" in term:
+                kw["min_tau_s"] = max(kw.get("min_tau_s", 0.0), term["min_tau_s"])
+            if "white_shape" in term:
+                kw["white_shape"] = term["white_shape"]
+        return kw
 
     def _targets(self, eff: Effect, in_model: set) -> list:
         """The gyros (or None for the array) an effect would be tested on, not in the model."""
@@ -1219,6 +1231,8 @@ class _Services:
                     kw["gm_tau_s"] = term["gm_tau_s"]
                 if "min_tau_s" in term:
                     kw["min_tau_s"] = max(kw.get("min_tau_s", 0.0), term["min_tau_s"])
+                if "white_shape" in term:
+                    kw["white_shape"] = term["white_shape"]
             assert self.ctx.Er is not None               # set by the stochastic-record step
             fl = fit_gyro_noise(self.ctx.Er[:, gyro - 1], self.comp.dt, gyro, **kw)
             self._noise[gyro] = {f.effect: f for f in fl}

@@ -585,7 +585,9 @@ class Effect:
 
     def noise_term(self, ctx: "FitContext", entry: "ModelEntry") -> dict:
         """For an effect in the model: what it changes in its gyro's Allan fit (a term of the
-        baseline, ``terms``/``gm_tau_s``; the shortest τ to use, ``min_tau_s``)."""
+        baseline, ``terms``/``gm_tau_s``; the shortest τ to use, ``min_tau_s``; the white
+        column's shape, ``white_shape(m)``, see
+        :func:`~gyroarray.analysis.stochastic_fit.fit_gyro_noise`)."""
         return {}
 
     def exclude(self, ctx: "FitContext", entry: "ModelEntry") -> np.ndarray | None:
