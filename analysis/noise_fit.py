@@ -611,15 +611,16 @@ class _Reweighting(NamedTuple):
 
     def iterate(self, a, corr, eps, fixed=None, rtol=1e-9, cap=None) -> _Solution:
         """Reweight until the noise types and coefficients settle."""
-        alpha = None
+        alpha: np.ndarray | None = None
         for n_iter in range(1, (self.max_iter if cap is None else cap) + 1):
             a_new, new_alpha, nu, x, white = self.solve(a, corr, eps, fixed)
-            settled = (a is not None and np.array_equal(new_alpha, alpha)
+            settled = (a is not None and alpha is not None and np.array_equal(new_alpha, alpha)
                        and np.allclose(a_new, a, rtol=rtol, atol=0.0))
             a, alpha = a_new, new_alpha
             if settled:
                 break
         resid = white(self.g @ a - self.y)
+        assert alpha is not None                     # the loop ran at least once
         return _Solution(a, alpha, nu, x, white, float(resid @ resid), n_iter)
 
 
