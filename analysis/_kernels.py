@@ -38,7 +38,8 @@ Nothing here validates its input; :mod:`gyroarray.analysis.allan` does.
 from __future__ import annotations
 
 import numpy as np
-from numba import njit, prange
+
+from gyroarray._numba import njit, prange
 
 #: Samples per cache block (512 KiB of float64 per window).
 BLOCK = 65536

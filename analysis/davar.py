@@ -37,11 +37,10 @@ import numbers
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
-import numba
 import numpy as np
-from numba import njit
 from scipy import special
 
+from gyroarray._numba import numba, njit
 from gyroarray import units
 from gyroarray.errors import InputError
 from gyroarray.outputs import save_figure

@@ -30,7 +30,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+
+from gyroarray._numba import njit
 from gyroarray.constants import EARTH_RATE_RAD_S
 
 from gyroarray.analysis.effect_fit import EffectFit, chi2_to_z

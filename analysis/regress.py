@@ -48,10 +48,10 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit
 from scipy import fft as sfft
 from scipy import optimize, signal, special, stats
 
+from gyroarray._numba import njit
 from gyroarray.analysis.effect_fit import EffectFit, chi2_to_z
 from gyroarray.physics import fractional_delay, tilt_basis
 from gyroarray.units import (RAD_PER_DEG, per_rad_s_to_per_deg_s, rad_s_to_deg_h, rad_s_to_deg_s,

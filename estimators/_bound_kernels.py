@@ -36,7 +36,8 @@ kernel for every N). Nothing here validates its input:
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+
+from gyroarray._numba import njit
 
 
 @njit(cache=True, error_model="numpy")
