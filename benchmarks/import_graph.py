@@ -28,7 +28,7 @@ FOLDERS = {"gyroarray": "gyroarray", "gyroarray.analysis": "analysis", "gyroarra
 
 #: The bottom of the house: modules of ``gyroarray`` itself that import nothing above them.
 BOTTOM = {"units", "constants", "errors", "physics", "tomlio", "formatting", "layout", "limits",
-          "design", "measurement", "outputs"}
+          "design", "measurement", "outputs", "_numba", "plugins", "parallel"}
 
 
 def modules(root: Path) -> dict:
@@ -46,6 +46,8 @@ def modules(root: Path) -> dict:
 
 
 def layer(name: str) -> str:
+    if name == "gyroarray":                     # the package root: its version string only
+        return "core-bottom"
     parts = name.split(".")
     if len(parts) > 1 and f"gyroarray.{parts[1]}" in FOLDERS:
         return parts[1]
