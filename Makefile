@@ -61,7 +61,7 @@ bench: $(STAMP)
 score: $(STAMP)
 	mkdir -p bench_out
 	OPENBLAS_NUM_THREADS=1 $(PY) -m pytest -q -n $(WORKERS) -m slow
-	OPENBLAS_NUM_THREADS=1 $(PY) benchmarks/diagnosis_score.py --seeds 2 --json bench_out/diagnosis_score.json
+	OPENBLAS_NUM_THREADS=1 $(PY) benchmarks/diagnosis_score.py --seeds 6 --json bench_out/diagnosis_score.json
 	OPENBLAS_NUM_THREADS=1 $(PY) benchmarks/predictor_check.py --replicates 30 --json bench_out/predictor_check.json
 
 # mypy on the package as installed: the folders mapped by pyproject.toml's package-dir are
