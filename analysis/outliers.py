@@ -38,6 +38,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import ndimage, optimize, special, stats
 
+from gyroarray.analysis._memo import by_content
 from gyroarray.analysis.effect_fit import z_from_log_p
 
 __all__ = ["Spikes", "find_spikes", "clean_spikes", "COUNT_THRESHOLD", "MEDIAN_WINDOW"]
@@ -167,6 +168,7 @@ def _count_test(x: np.ndarray, sigma: float) -> tuple[int, float, float]:
     return k, lam, _poisson_z(k, lam)
 
 
+@by_content()
 def find_spikes(x, alpha: float = 0.01) -> Spikes:
     """Spikes of the series ``x`` (n,) (module docstring)."""
     x = np.asarray(x, dtype=float)

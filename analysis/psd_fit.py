@@ -43,6 +43,7 @@ from typing import Any
 import numpy as np
 from scipy import ndimage, optimize, signal, special, stats
 
+from gyroarray.analysis._memo import by_content
 from gyroarray.analysis.spectrum import welch
 from gyroarray.sim.sensor import bandwidth_response, bandwidth_sos, bandwidth_warped_frequency
 
@@ -186,6 +187,7 @@ def _line_free(p: np.ndarray, nu: float, alpha: float = 0.01) -> np.ndarray:
     return keep
 
 
+@by_content()
 def fit_psd(x, dt_s: float) -> PsdFit:
     """Fit the three spectral models to the residual ``x`` (n,) [rad/s] (module docstring).
 

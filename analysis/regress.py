@@ -52,6 +52,7 @@ from scipy import fft as sfft
 from scipy import optimize, signal, special, stats
 
 from gyroarray._numba import njit
+from gyroarray.analysis._memo import by_content
 from gyroarray.analysis.effect_fit import EffectFit, chi2_to_z
 from gyroarray.physics import fractional_delay, tilt_basis
 from gyroarray.units import (RAD_PER_DEG, per_rad_s_to_per_deg_s, rad_s_to_deg_h, rad_s_to_deg_s,
@@ -1258,6 +1259,7 @@ def _sinusoid_evidence(gyro: int, f: float, f_s: float, amp_d: float, amp_s: flo
     return ev
 
 
+@by_content()
 def fit_sinusoid(e, time_s, dt_s: float, r: float, q: float, gyro: int, use=None, *,
                  q_angle_rad: float = 0.0) -> EffectFit:
     """Sinusoidal rate error: the strongest line of the whitened residual.
