@@ -61,6 +61,6 @@ def by_content(maxsize: int = 16):
                     cache.popitem(last=False)
             return out
 
-        wrapper.cache_clear = cache.clear  # type: ignore[attr-defined]
+        wrapper.cache_clear = cache.clear
         return wrapper
     return deco
