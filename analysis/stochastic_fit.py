@@ -886,7 +886,15 @@ def _fit_gauss_markov(cv: _Curve, base: _Gls, label: str, gyro, common: dict,
     where, meas, pred = _band_text(cv, idx, rest)
     fitted = (f"σ = {params['sigma_deg_h']:.3g} ± {sigma['sigma_deg_h']:.2g} deg/h, τc = {tc:.3g}"
               + (f" ± {sigma['tau_s']:.2g} s" if "tau_s" in sigma else " s"))
-    if z > 3:
+    if z > 3 and not a > 0:
+        # the scan's score (against the baseline's Σ) sees an excess, but refitted with the hump's
+        # own Σ the amplitude is not positive: the excess is not of this shape, and the hump is
+        # not a candidate (its z becomes the refitted amplitude's Wald ratio, <= 0)
+        evidence = (f"{label} ADEV exceeds ARW + RRW ({meas:.3g} against {pred:.3g} deg/h for {where}; "
+                    f"scan z = {z:.1f}), but a Gauss–Markov hump does not fit it: its σ² comes out "
+                    f"<= 0 ({fitted})")
+        z = a / sa if sa > 0 else 0.0
+    elif z > 3:
         evidence = (f"{label} ADEV has a hump near 1.9·τc = {1.89 * tc:.3g} s: {meas:.3g} deg/h for "
                     f"{where} where ARW + RRW alone predict {pred:.3g} ({fitted})")
     else:

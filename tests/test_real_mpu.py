@@ -61,3 +61,18 @@ def test_scale_factor_and_latency_of_the_z_gyro_agree_with_plain_estimates(analy
     lat = next(t for t in a.candidates if (t.effect, t.gyro) == ("latency", 3))
     assert a.significant(lat)
     assert abs(lat.fit.params["delay_s"] - plain_lag_s) <= 0.005, (lat.fit.params["delay_s"], plain_lag_s)
+
+
+def test_a_significant_gauss_markov_hump_has_a_positive_amplitude(analysis):
+    """The rate runs continuously, so the ADEV of gyros 1 and 2 exceeds ARW + RRW sevenfold at
+    0.3–20 s. The Gauss–Markov scan's score sees that excess, but refitted, the hump's σ² comes
+    out <= 0. A Gauss–Markov ADEV is proportional to σ², so a zero amplitude cannot explain an
+    excess: such a hump is not named significant, and it says why."""
+    _, a = analysis
+    gms = [t for t in a.tests if t.effect == "gauss_markov" and t.fit is not None]
+    assert gms
+    for t in gms:
+        if a.significant(t):
+            assert t.fit.params["sigma_deg_h"] > 0
+    flat = [t for t in gms if "does not fit it" in t.evidence]
+    assert flat and all(not a.significant(t) for t in flat)
