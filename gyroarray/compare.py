@@ -315,6 +315,24 @@ def _lowpass_effects() -> list[str]:
     return [name for name, eff in REGISTRY.items() if eff.lowpass]
 
 
+def _noise_term_kwargs(ctx: FitContext, entries, gyro: int) -> dict:
+    """:func:`fit_gyro_noise`'s keywords from the gyro's model entries (``Effect.noise_term``):
+    their baseline terms, a Gauss–Markov τc, the shortest τ (the largest asked) and the white
+    column's shape."""
+    kw: dict = {"model_terms": ()}
+    for e in entries:
+        if e.gyro != gyro:
+            continue
+        term = get_effect(e.effect).noise_term(ctx, e)
+        kw["model_terms"] += tuple(term.get("terms", ()))
+        for key in ("gm_tau_s", "white_shape"):
+            if key in term:
+                kw[key] = term[key]
+        if "min_tau_s" in term:
+            kw["min_tau_s"] = max(kw.get("min_tau_s", 0.0), term["min_tau_s"])
+    return kw
+
+
 def _finding_dict(f, a: Analysis) -> dict:
     """One localisation finding as ``Analysis.localisation`` keeps it; a non-causal low-pass on
     gyros where ``bandwidth`` is a significant candidate or in the model says what that misses."""
@@ -829,21 +847,12 @@ class ModelComparison:
 
     @staticmethod
     def _allan_shape(ctx: FitContext, entries, gyro: int, it: int) -> dict:
-        """What the gyro's model entries change in its Allan fits (none before they are fitted):
-        the shortest τ (``min_tau_s``, the largest asked) and the white column's shape
-        (``white_shape``)."""
-        kw: dict = {}
+        """What the gyro's model entries change in its calibration's Allan fit (none before they
+        are fitted): the shortest τ and the white column's shape (:func:`_noise_term_kwargs`)."""
         if it == 0:
-            return kw
-        for e in entries:
-            if e.gyro != gyro:
-                continue
-            term = get_effect(e.effect).noise_term(ctx, e)
-            if "min_tau_s" in term:
-                kw["min_tau_s"] = max(kw.get("min_tau_s", 0.0), term["min_tau_s"])
-            if "white_shape" in term:
-                kw["white_shape"] = term["white_shape"]
-        return kw
+            return {}
+        kw = _noise_term_kwargs(ctx, entries, gyro)
+        return {k: kw[k] for k in ("min_tau_s", "white_shape") if k in kw}
 
     def _targets(self, eff: Effect, in_model: set) -> list:
         """The gyros (or None for the array) an effect would be tested on, not in the model."""
@@ -1227,20 +1236,9 @@ class _Services:
     def gyro_noise(self, gyro: int) -> dict:
         """The gyro's Allan fit on the stochastic record with the model's noise terms (cached)."""
         if gyro not in self._noise:
-            kw: dict = {"model_terms": ()}
-            for e in _model_of(self.ctx):
-                if e.gyro != gyro:
-                    continue
-                term = get_effect(e.effect).noise_term(self.ctx, e)
-                kw["model_terms"] += tuple(term.get("terms", ()))
-                if "gm_tau_s" in term:
-                    kw["gm_tau_s"] = term["gm_tau_s"]
-                if "min_tau_s" in term:
-                    kw["min_tau_s"] = max(kw.get("min_tau_s", 0.0), term["min_tau_s"])
-                if "white_shape" in term:
-                    kw["white_shape"] = term["white_shape"]
             assert self.ctx.Er is not None               # set by the stochastic-record step
-            fl = fit_gyro_noise(self.ctx.Er[:, gyro - 1], self.comp.dt, gyro, **kw)
+            fl = fit_gyro_noise(self.ctx.Er[:, gyro - 1], self.comp.dt, gyro,
+                                **_noise_term_kwargs(self.ctx, _model_of(self.ctx), gyro))
             self._noise[gyro] = {f.effect: f for f in fl}
         return self._noise[gyro]
 
