@@ -28,6 +28,8 @@ class _Uncacheable(Exception):
 
 def _part(v):
     if isinstance(v, np.ndarray):
+        if v.dtype.hasobject:
+            raise _Uncacheable
         a = np.ascontiguousarray(v)
         return ("nd", a.dtype.str, a.shape, hashlib.blake2b(a.view(np.uint8).reshape(-1),
                                                              digest_size=16).digest())

@@ -65,6 +65,8 @@ def _clean_neighbour_median(x: np.ndarray, bad: np.ndarray, index: np.ndarray) -
     pos = np.searchsorted(good, index)
     cols = np.clip(pos[:, None] + np.array([-2, -1, 0, 1]), 0, good.size - 1)
     return np.median(x[good[cols]], axis=1)
+
+
 #: Threshold of the count test [σ̂].
 COUNT_THRESHOLD = 4.5
 #: Lowest detection threshold [σ̂].

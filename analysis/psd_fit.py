@@ -202,6 +202,7 @@ def fit_psd(x, dt_s: float) -> PsdFit:
     c0, l0 = _linear_ml(p, base, nu)
     nyq = 0.5 / dt
     fcs = np.geomspace(_LOWEST * nyq, _TOP * nyq, int(_PER_DECADE * math.log10(_TOP / _LOWEST)) + 1)
+
     def fit_at(fc: float, order: int, family: str) -> tuple[np.ndarray, float]:
         """(W, F, R) and ℓ of the filter model at one cut-off."""
         ff = f if family == "continuous" else bandwidth_warped_frequency(f, fc, dt)
@@ -293,6 +294,11 @@ def filter_z(lr: float, n_tests: float = EFFECTIVE_TESTS) -> float:
     return float(math.sqrt(-2.0 * log_p))
 
 
+def _response_length(cutoff_hz: float, dt_s: float) -> int:
+    """Samples of the filter's impulse response followed: 40 time constants, 64 to 2^20."""
+    return int(min(max(64, 40.0 / (cutoff_hz * dt_s)), 1 << 20))
+
+
 def filtered_white_avar_ratio(cutoff_hz: float, order: int, dt_s: float, m) -> np.ndarray:
     """Allan variance of white noise through the ``bandwidth`` filter over that of the unfiltered
     noise, at the averaging factors ``m`` [-].
@@ -306,7 +312,7 @@ def filtered_white_avar_ratio(cutoff_hz: float, order: int, dt_s: float, m) -> n
     """
     m = np.atleast_1d(np.asarray(m, dtype=np.int64))
     sos = bandwidth_sos(cutoff_hz, order, dt_s)
-    length = int(min(max(64, 40.0 / (cutoff_hz * dt_s)), 1 << 20))
+    length = _response_length(cutoff_hz, dt_s)
     imp = np.zeros(length)
     imp[0] = 1.0
     h = signal.sosfilt(sos, imp)
@@ -320,6 +326,7 @@ def filtered_white_avar_ratio(cutoff_hz: float, order: int, dt_s: float, m) -> n
         j = np.asarray(j, dtype=np.int64)
         jj = np.minimum(j - 1, length - 1)
         return j * r[0] + 2.0 * (j * c_r[jj] - c_kr[jj])
+
     out = (4.0 * big_d(m) - big_d(2 * m)) / (2.0 * m)               # × m / m²
     return np.where(2 * m < length, out, 1.0)
 
@@ -327,8 +334,7 @@ def filtered_white_avar_ratio(cutoff_hz: float, order: int, dt_s: float, m) -> n
 def shortest_clean_tau(cutoff_hz: float, order: int, dt_s: float, tol: float = 0.05) -> float:
     """The shortest octave τ = 2^k·dt [s] at which white noise through the ``bandwidth`` filter
     has an Allan variance within ``tol`` of the unfiltered one (:func:`filtered_white_avar_ratio`)."""
-    length = int(min(max(64, 40.0 / (cutoff_hz * dt_s)), 1 << 20))
-    m = 2 ** np.arange(int(math.log2(length)) + 1)
+    m = 2 ** np.arange(int(math.log2(_response_length(cutoff_hz, dt_s))) + 1)
     ratio = filtered_white_avar_ratio(cutoff_hz, order, dt_s, m)
     ok = np.flatnonzero(np.abs(ratio - 1.0) < tol)
     return float((m[ok[0]] if ok.size else m[-1]) * dt_s)

@@ -56,6 +56,8 @@ def welch(x, fs: float, nperseg: int, noverlap: int | None = None, *, window="ha
     step = nperseg - (nperseg // 2 if noverlap is None else int(noverlap))
     if not 0 < nperseg <= n or step <= 0:
         raise ValueError(f"need 0 < nperseg <= {n} and noverlap < nperseg")
+    if detrend not in ("constant", "linear", False):
+        raise ValueError(f"detrend must be 'constant', 'linear' or False, got {detrend!r}")
     win = signal.get_window(window, nperseg)
     k = 1 + (n - nperseg) // step
     segs = sliding_window_view(a, nperseg, axis=-1)[..., ::step, :][..., :k, :]
@@ -65,12 +67,10 @@ def welch(x, fs: float, nperseg: int, noverlap: int | None = None, *, window="ha
     acc = np.zeros(a.shape[:-1] + (nperseg // 2 + 1,))
     for i0 in range(0, k, _BLOCK):
         s = segs[..., i0:i0 + _BLOCK, :]
-        if detrend in ("constant", "linear"):
+        if detrend:
             s = s - s.mean(axis=-1, keepdims=True)
             if detrend == "linear":                       # least-squares line: mean and slope
                 s = s - (s @ t)[..., None] * t
-        elif detrend is not False:
-            raise ValueError(f"detrend must be 'constant', 'linear' or False, got {detrend!r}")
         spec = np.fft.rfft(s * win, axis=-1)
         acc += (spec.real ** 2 + spec.imag ** 2).sum(axis=-2)
     acc *= 1.0 / (fs * float(win @ win) * k)
