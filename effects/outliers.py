@@ -9,7 +9,7 @@ import numpy as np
 from gyroarray.analysis.effect_fit import EffectFit
 from gyroarray.analysis.outliers import clean_spikes, find_spikes
 from gyroarray.effects import _draw
-from gyroarray.sim.protocol import Effect, Kind, Param, Stage, with_term
+from gyroarray.sim.protocol import Effect, Explained, Kind, Param, Stage, with_term
 from gyroarray.units import deg_s_to_rad_s, rad_s_to_deg_s
 
 #: Seconds per hour (the rate's unit).
@@ -122,7 +122,8 @@ class Outliers(Effect):
         pred[:, g - 1] = x - clean_spikes(x, idx)           # the spikes, as a "prediction" taken out
         left = ctx.effect(other.effect).test(ctx.without(pred), other.gyro)
         if np.isfinite(left.z) and left.z <= ctx.z_crit:
-            return f"; but with the {idx.size} spikes of gyro {g} taken out it is no longer seen (z = {left.z:.1f})"
+            return Explained(f"; but with the {idx.size} spikes of gyro {g} taken out it is no longer seen "
+                             f"(z = {left.z:.1f})")
         return None
 
     def example(self, rng, n_gyros, max_rate_deg_s):

@@ -67,7 +67,7 @@ from gyroarray.measurement import Measurement, _runs, relative_time_s
 from gyroarray.parallel import available_cpus, map_runs
 from gyroarray.sim.effects import sim_context, simulate_on, simulate_readings
 from gyroarray.sim.model import ModelEntry, NoiseModel
-from gyroarray.sim.protocol import Effect, FitContext, Kind
+from gyroarray.sim.protocol import Effect, Explained, FitContext, Kind
 from gyroarray.sim.sensor import gravity_specific_force, rigid_body_specific_force
 from gyroarray.units import RAD_PER_DEG, arw_deg_rt_h_to_rad_rt_s, rad_s_to_deg_h, rrw_deg_h_rt_h_to_rad_s_rt_s
 
@@ -158,6 +158,9 @@ class Test:
     evidence: str
     fit: EffectFit | None = None
     extra: dict = field(default_factory=dict)
+    #: (effect, gyro) of a higher-ranked rival that explains this candidate away: with the
+    #: rival's fit taken out of the record its test is no longer significant.
+    explained_by: tuple | None = None
 
 
 @dataclass
@@ -230,7 +233,8 @@ class Analysis:
         return float(sum((t.z - self.z_crit) ** 2 for t in self.tests if self.significant(t)))
 
     def significant(self, test: Test) -> bool:
-        return bool(np.isfinite(test.z) and test.z > self.z_crit)
+        """z above the critical z, and not explained away by a higher-ranked rival."""
+        return bool(np.isfinite(test.z) and test.z > self.z_crit and test.explained_by is None)
 
     def unexplained(self) -> list[str]:
         """Plain sentences for significant ADEV-band tests on gyros without a significant candidate.
@@ -268,7 +272,10 @@ class Analysis:
             "discrepancy": _finite(self.discrepancy),
             "consistent": self.consistent,
             "candidates": [{"effect": t.effect, "gyro": t.gyro, "score": _finite(t.z),
-                            "significant": self.significant(t), "evidence": t.evidence}
+                            "significant": self.significant(t),
+                            "explained_by": None if t.explained_by is None else
+                            {"effect": t.explained_by[0], "gyro": t.explained_by[1]},
+                            "evidence": t.evidence}
                            for t in self.candidates],
             "z_crit": self.z_crit,
             "n_tests": len(self.tests),
@@ -1263,7 +1270,10 @@ def _rank_rivals(ctx: FitContext, cands: list, z_crit: float) -> list:
     the significant rivals of one gyro, an effect ranks above another it
     declares as a rival when its :meth:`~gyroarray.sim.protocol.Effect.prefer`
     gives a reason; the winner takes the place of the first of them and each
-    one it beats says why it ranks lower. (On the scoring runs of
+    one it beats says why it ranks lower. A reason that is an
+    :class:`~gyroarray.sim.protocol.Explained` (with the winner taken out the
+    rival's test is no longer significant) marks the rival ``explained_by`` the
+    winner: it is then not a significant candidate of its own. (On the scoring runs of
     benchmarks/diagnosis_score.py: true B gave χ² 9–13 against 26–42 for the
     hump; a true hump 4–10 against 59–158 for the flat term, on 11 dof.)
     """
@@ -1320,7 +1330,8 @@ def _rank_rivals(ctx: FitContext, cands: list, z_crit: float) -> list:
                 why = beats(champ, t)
                 if why and (t.effect, t.gyro) not in noted:
                     noted.add((t.effect, t.gyro))
-                    t = replace(t, evidence=t.evidence + why)
+                    t = replace(t, evidence=t.evidence + why,
+                                explained_by=(champ.effect, champ.gyro) if isinstance(why, Explained) else None)
                 rest.append(t)
             remaining = rest
         for p, t in zip(positions, ordered):

@@ -51,7 +51,8 @@ if TYPE_CHECKING:                                    # pragma: no cover - types 
     from gyroarray.sim.model import ModelEntry, NoiseModel
 
 __all__ = ["Stage", "Kind", "NEEDS", "Param", "Effect", "SimContext", "ChainState", "Active", "Mixer",
-           "WhiteShaping", "Streams", "FitContext", "RegressionEffect", "NoiseTermEffect", "same_noise_preference", "explains_away", "with_term", "with_cols", "unit_draws", "identity"]
+           "WhiteShaping", "Streams", "FitContext", "RegressionEffect", "NoiseTermEffect", "same_noise_preference",
+           "explains_away", "Explained", "with_term", "with_cols", "unit_draws", "identity"]
 
 #: What an effect may need from a record: the reference rates, a part where the
 #: table turns, the temperature, the site (heading), the specific force (``acc_*``
@@ -607,7 +608,9 @@ class Effect:
         """Why ``other`` (a rival) ranks below ``mine`` on the same excess, or None.
 
         Default: the smaller AIC, χ² + 2·(free parameters), when both fits
-        report a ``chi2`` (``extra``).
+        report a ``chi2`` (``extra``). A reason that is an :class:`Explained`
+        says more: ``other`` is no longer significant once ``mine`` is taken out
+        (it is then not a significant candidate of its own).
         """
         if "chi2" not in mine.extra or "chi2" not in other.extra:
             return None
@@ -857,6 +860,15 @@ def same_noise_preference(mine_effect: RegressionEffect, mine: "EffectFit", othe
     return None
 
 
+class Explained(str):
+    """A rival's reason (:meth:`Effect.prefer`) that also says the rival is not needed: with the
+    winner taken out of the record its test is no longer significant. The ranking then marks the
+    rival ``explained_by`` the winner, and it is not a significant candidate of its own (spikes
+    are never also a burst)."""
+
+    __slots__ = ()
+
+
 def explains_away(mine_effect: Effect, mine: "EffectFit", other: "EffectFit", ctx: FitContext) -> str | None:
     """Why ``other`` ranks below ``mine``: with ``mine``'s fit taken out of the record, ``other`` is
     no longer significant (its test on what is left has z <= z_crit), or None.
@@ -879,7 +891,7 @@ def explains_away(mine_effect: Effect, mine: "EffectFit", other: "EffectFit", ct
         return None
     left = ctx.effect(other.effect).test(ctx.without(pred), other.gyro)
     if np.isfinite(left.z) and left.z <= ctx.z_crit:
-        return (f"; but with the {mine_effect.name.replace('_', ' ')} removed it is no longer seen "
-                f"(z = {left.z:.1f})")
+        return Explained(f"; but with the {mine_effect.name.replace('_', ' ')} removed it is no longer seen "
+                         f"(z = {left.z:.1f})")
     return None
 

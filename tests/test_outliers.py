@@ -73,7 +73,11 @@ def test_xsens_spikes_are_named_counted_and_not_a_burst():
     assert abs(n_spikes - 2000) <= 0.2 * 2000, n_spikes            # the source's ~2 000
     assert strict <= n_spikes <= loose, (strict, n_spikes, loose)
     burst = next(t for t in a.candidates if t.effect == "burst")
-    assert "no longer seen" in burst.evidence
+    # the burst's own z is above the critical z (the spikes raise a window's variance), but with
+    # the spikes out it is not: a burst is never a significant candidate beside them
+    assert "no longer seen" in burst.evidence and burst.z > a.z_crit
+    assert burst.explained_by == ("outliers", 1) and not a.significant(burst)
+    assert not any(c["effect"] == "burst" and c["significant"] for c in a.to_json_dict()["candidates"])
 
 
 def test_close_spikes_are_found_and_cleaned_separately():
