@@ -287,8 +287,11 @@ class _RWWhitener:
         b *= 1.0 / math.sqrt(self.s)
         return b[:, 0] if (len(cols) == 1 and np.ndim(cols[0]) == 1) else b
 
-    def fit_whitened(self, zy: np.ndarray, za: np.ndarray) -> GLSFit:
-        """GLS from whitened data zy (m,) and regressors za (m, p)."""
+    def fit_whitened(self, zy: np.ndarray, za: np.ndarray, zi: np.ndarray | None = None) -> GLSFit:
+        """GLS from whitened data zy (m,) and regressors za (m, p); with whitened instruments
+        ``zi`` (m, p), the instrumental-variables estimate (:meth:`fit_iv_whitened`)."""
+        if zi is not None:
+            return self.fit_iv_whitened(zy, za, zi)
         p = za.shape[1]
         if self.m < p + 1:
             raise ValueError(f"{self.m} differences cannot fit {p} parameters")
@@ -325,13 +328,59 @@ class _RWWhitener:
         return GLSFit(beta=beta, cov=cov, chi2=chi2, loglik=loglik, n=self.n_used,
                       n_diff=self.m, n_segments=self.n_segments)
 
-    def fit(self, y, x) -> GLSFit:
-        """GLS of y (n,) on x (n, p)."""
-        z = self.whiten(x, y)
-        return self.fit_whitened(z[:, -1], z[:, :-1])
+    def fit_iv_whitened(self, zy: np.ndarray, za: np.ndarray, zi: np.ndarray) -> GLSFit:
+        """Instrumental-variables GLS from whitened data zy (m,), regressors za (m, p) and
+        instruments zi (m, p): β = (ZᵀA)⁻¹Zᵀz, χ² = |z − Aβ|², cov = c·(ZᵀA)⁻¹ZᵀZ(AᵀZ)⁻¹ with
+        c = max(χ²/(m − p), 1).
+
+        For regressors read from a reference with noise of its own (errors in
+        variables): the instruments are the same columns read from a smoothed
+        reference, correlated with the motion and not with the reference's noise,
+        so β is not pulled toward 0 (or beyond) by that noise.
+        """
+        p = za.shape[1]
+        if self.m < p + 1:
+            raise ValueError(f"{self.m} differences cannot fit {p} parameters")
+        if zi.shape != za.shape:
+            raise ValueError(f"instruments must have the regressors' shape {za.shape}, got {zi.shape}")
+        zia = zi.T @ za
+        if not (np.all(np.isfinite(zia)) and np.all(np.isfinite(zy))):
+            raise ValueError("y, X and the instruments must be finite on the used samples")
+        d = np.sqrt(np.abs(np.diag(zia)))
+        if not np.all(d > 0):
+            raise NotIdentifiableError(f"instrument(s) {np.flatnonzero(~(d > 0)).tolist()} do not see their "
+                                       "regressor after differencing")
+        gn = zia / np.outer(d, d)
+        sv = np.linalg.svd(gn, compute_uv=False)
+        if not sv[-1] > sv[0] / MAX_COND:
+            raise NotIdentifiableError(f"instruments and regressors are collinear (condition number "
+                                       f"{sv[0] / sv[-1] if sv[-1] > 0 else math.inf:.3g})")
+        inv = np.linalg.inv(gn) / np.outer(d, d)             # (ZᵀA)⁻¹
+        beta = inv @ (zi.T @ zy)
+        res = zy - za @ beta
+        beta = beta + inv @ (zi.T @ res)                     # one step of iterative refinement
+        res = zy - za @ beta
+        chi2 = float(res @ res)
+        # the residual also holds the reference's own noise, which the baseline's (r, q) do not
+        # describe: the covariance is scaled by χ²/dof when that is above 1
+        scale = max(chi2 / max(self.m - p, 1), 1.0)
+        cov = scale * (inv @ (zi.T @ zi) @ inv.T)
+        cov = 0.5 * (cov + cov.T)
+        loglik = -0.5 * (self.m * math.log(2.0 * math.pi) + self.logdet + chi2)
+        return GLSFit(beta=beta, cov=cov, chi2=chi2, loglik=loglik, n=self.n_used,
+                      n_diff=self.m, n_segments=self.n_segments)
+
+    def fit(self, y, x, z=None) -> GLSFit:
+        """GLS of y (n,) on x (n, p); with instruments z (n, p), the IV estimate."""
+        if z is None:
+            w = self.whiten(x, y)
+            return self.fit_whitened(w[:, -1], w[:, :-1])
+        w = self.whiten(x, z, y)
+        p = w.shape[1] // 2
+        return self.fit_iv_whitened(w[:, -1], w[:, :p], w[:, p:2 * p])
 
 
-def gls_rw(y, X, r: float, q: float, *, use=None) -> GLSFit:
+def gls_rw(y, X, r: float, q: float, *, use=None, Z=None) -> GLSFit:
     """Exact GLS for a regression under white noise plus a random-walk bias.
 
     Parameters
@@ -350,6 +399,10 @@ def gls_rw(y, X, r: float, q: float, *, use=None) -> GLSFit:
         used samples that are adjacent in time; each run of used samples is
         an independent piece with its own unknown start (a run of one sample
         carries no information).
+    Z : array_like, shape of X, optional
+        Instruments, one per regressor: the instrumental-variables GLS
+        (:meth:`_RWWhitener.fit_iv_whitened`), for regressors with errors of
+        their own (read from a noisy reference).
 
     Returns
     -------
@@ -414,7 +467,13 @@ def gls_rw(y, X, r: float, q: float, *, use=None) -> GLSFit:
         xv = xv[:, None]
     if xv.ndim != 2 or xv.shape[0] != n:
         raise ValueError(f"X must be ({n}, p), got shape {np.shape(X)}")
-    return _RWWhitener(n, r, q, use).fit(yv, xv)
+    zv = None
+    if Z is not None:
+        zv = np.asarray(Z, dtype=float)
+        zv = zv[:, None] if zv.ndim == 1 else zv
+        if zv.shape != xv.shape:
+            raise ValueError(f"Z must have the shape of X {xv.shape}, got {zv.shape}")
+    return _RWWhitener(n, r, q, use).fit(yv, xv, zv)
 
 
 # -- helpers of the fits -------------------------------------------------------
@@ -477,7 +536,7 @@ def _extra(fit: GLSFit, **kw) -> dict:
 # -- scale factor and nonlinearity ---------------------------------------------
 
 def fit_scale_factor(e, omega_ref_rad_s, h, time_s, dt_s: float, r: float, q: float, gyro: int,
-                     *, use=None) -> EffectFit:
+                     *, use=None, instrument=None) -> EffectFit:
     """Scale-factor error: residual proportional to the rate about the axis.
 
     Parameters
@@ -500,6 +559,10 @@ def fit_scale_factor(e, omega_ref_rad_s, h, time_s, dt_s: float, r: float, q: fl
         1-based gyro number (for the result).
     use : array_like of bool, shape (n,), optional
         Samples to include (:func:`gls_rw`).
+    instrument : array_like, shape (n, 3), optional
+        The reference rate smoothed [rad/s]: a noisy reference (errors in
+        variables) is fitted by instrumental variables, the columns read from
+        ``omega_ref_rad_s`` instrumented by the same columns read from this.
 
     Returns
     -------
@@ -516,11 +579,12 @@ def fit_scale_factor(e, omega_ref_rad_s, h, time_s, dt_s: float, r: float, q: fl
     n = e.size
     _vec(time_s, n, "time_s")
     _, u = _projected_rate(omega_ref_rad_s, h, n)
+    ui = None if instrument is None else _projected_rate(instrument, h, n)[1]
     try:
-        fit = gls_rw(e, u, r, q, use=use)
+        fit = gls_rw(e, u, r, q, use=use, Z=ui)
     except NotIdentifiableError as err:
         return _not_identifiable("scale_factor", gyro, {"ppm": 0.0}, "there is no rate about its axis", err)
-    return _scale_fit(fit, 0, gyro, joint_with_nonlinearity=False)
+    return _scale_fit(fit, 0, gyro, joint_with_nonlinearity=False, instrumented=ui is not None)
 
 
 def _scale_fit(fit: GLSFit, i: int, gyro: int, **extra) -> EffectFit:
@@ -539,7 +603,7 @@ def _scale_fit(fit: GLSFit, i: int, gyro: int, **extra) -> EffectFit:
 
 
 def fit_scale_and_nonlinearity(e, omega_ref_rad_s, h, time_s, dt_s: float, r: float, q: float,
-                               gyro: int, *, use=None) -> tuple[EffectFit, EffectFit]:
+                               gyro: int, *, use=None, instrument=None) -> tuple[EffectFit, EffectFit]:
     """Scale factor and quadratic nonlinearity fitted jointly.
 
     Parameters
@@ -560,6 +624,10 @@ def fit_scale_and_nonlinearity(e, omega_ref_rad_s, h, time_s, dt_s: float, r: fl
         1-based gyro number.
     use : array_like of bool, shape (n,), optional
         Samples to include (:func:`gls_rw`).
+    instrument : array_like, shape (n, 3), optional
+        The reference rate smoothed [rad/s]: a noisy reference (errors in
+        variables) is fitted by instrumental variables, the columns read from
+        ``omega_ref_rad_s`` instrumented by the same columns read from this.
 
     Returns
     -------
@@ -583,14 +651,16 @@ def fit_scale_and_nonlinearity(e, omega_ref_rad_s, h, time_s, dt_s: float, r: fl
     n = e.size
     _vec(time_s, n, "time_s")
     _, u = _projected_rate(omega_ref_rad_s, h, n)
+    ui = None if instrument is None else _projected_rate(instrument, h, n)[1]
     try:
-        fit = gls_rw(e, np.column_stack([u, u * u]), r, q, use=use)
+        fit = gls_rw(e, np.column_stack([u, u * u]), r, q, use=use,
+                     Z=None if ui is None else np.column_stack([ui, ui * ui]))
     except NotIdentifiableError as err:
         why = "the rate about its axis does not vary enough to separate u from u²"
         return (_not_identifiable("scale_factor", gyro, {"ppm": 0.0}, why, err),
                 _not_identifiable("scale_nonlinearity", gyro, {"k2_per_deg_s": 0.0}, why, err))
     corr = float(fit.cov[0, 1] / (fit.sigma[0] * fit.sigma[1]))
-    sf = _scale_fit(fit, 0, gyro, joint_with_nonlinearity=True, corr=corr)
+    sf = _scale_fit(fit, 0, gyro, joint_with_nonlinearity=True, corr=corr, instrumented=ui is not None)
     b, s = float(fit.beta[1]), float(fit.sigma[1])
     k2, k2_s = per_rad_s_to_per_deg_s(b), per_rad_s_to_per_deg_s(s)
     t = b / s
@@ -606,12 +676,13 @@ def fit_scale_and_nonlinearity(e, omega_ref_rad_s, h, time_s, dt_s: float, r: fl
         ev = (f"gyro {gyro} residual shows no significant curvature with the rate about its axis "
               f"(k2 = {_pm(k2, k2_s)} per deg/s, z = {z:.1f})")
     nl = EffectFit("scale_nonlinearity", gyro, {"k2_per_deg_s": k2}, {"k2_per_deg_s": k2_s}, z, ev,
-                   _extra(fit, t=t, corr=corr, ppm_joint=sf.params["ppm"], ppm_joint_z=float(sf.z)))
+                   _extra(fit, t=t, corr=corr, ppm_joint=sf.params["ppm"], ppm_joint_z=float(sf.z),
+                          instrumented=ui is not None))
     return sf, nl
 
 
 def fit_scale_nonlinearity(e, omega_ref_rad_s, h, time_s, dt_s: float, r: float, q: float,
-                           gyro: int, *, use=None) -> EffectFit:
+                           gyro: int, *, use=None, instrument=None) -> EffectFit:
     """Quadratic nonlinearity ``k2_per_deg_s``, fitted jointly with the scale factor.
 
     Parameters
@@ -632,6 +703,10 @@ def fit_scale_nonlinearity(e, omega_ref_rad_s, h, time_s, dt_s: float, r: float,
         1-based gyro number.
     use : array_like of bool, shape (n,), optional
         Samples to include.
+    instrument : array_like, shape (n, 3), optional
+        The reference rate smoothed [rad/s]: a noisy reference (errors in
+        variables) is fitted by instrumental variables, the columns read from
+        ``omega_ref_rad_s`` instrumented by the same columns read from this.
 
     Returns
     -------
@@ -644,7 +719,8 @@ def fit_scale_nonlinearity(e, omega_ref_rad_s, h, time_s, dt_s: float, r: float,
 
         e_t = s·u_t + k2_SI·u_t² + b_t + w_t,   k2 = k2_SI · π/180
     """
-    return fit_scale_and_nonlinearity(e, omega_ref_rad_s, h, time_s, dt_s, r, q, gyro, use=use)[1]
+    return fit_scale_and_nonlinearity(e, omega_ref_rad_s, h, time_s, dt_s, r, q, gyro, use=use,
+                                      instrument=instrument)[1]
 
 
 # -- misalignment ----------------------------------------------------------------
@@ -668,21 +744,22 @@ def misalignment_basis(h) -> tuple[np.ndarray, np.ndarray]:
     return e1[0], e2[0]
 
 
-def _tilt_fit(wh, zy0: np.ndarray, zu: np.ndarray, za: np.ndarray, seen) -> tuple:
+def _tilt_fit(wh, zy0: np.ndarray, zu: np.ndarray, za: np.ndarray, seen, zi=None) -> tuple:
     """GLS of the tilt components c on the whitened perpendicular rates (along ``seen`` only
-    when not None), the θ²/2·u term put back twice: (fit, c, cov, χ², dof)."""
+    when not None; instrumented by ``zi`` when given), the θ²/2·u term put back twice:
+    (fit, c, cov, χ², dof)."""
     one_way = seen is not None
     cos_t = 1.0
     for _ in range(3):                       # plain fit, then the θ²/2·u term put back twice
         zy = zy0 + (1.0 - cos_t) * zu
         if one_way:
-            fit = wh.fit_whitened(zy, (za @ seen)[:, None])
+            fit = wh.fit_whitened(zy, (za @ seen)[:, None], None if zi is None else (zi @ seen)[:, None])
             c = seen * fit.beta[0]
             cov = np.outer(seen, seen) * fit.cov[0, 0]
             chi2 = float(fit.beta[0] ** 2 / fit.cov[0, 0])
             dof = 1
         else:
-            fit = wh.fit_whitened(zy, za)
+            fit = wh.fit_whitened(zy, za, zi)
             c, cov = fit.beta, fit.cov
             chi2 = float(c @ np.linalg.solve(cov, c))
             dof = 2
@@ -719,7 +796,7 @@ def _misalignment_evidence(gyro: int, z: float, tilt: float, psi: float, sigma: 
 
 
 def fit_misalignment(e, omega_ref_rad_s, h, time_s, dt_s: float, r: float, q: float, gyro: int,
-                     *, use=None) -> EffectFit:
+                     *, use=None, instrument=None) -> EffectFit:
     """True sensitive axis: residual proportional to the rate about other axes.
 
     Parameters
@@ -740,6 +817,10 @@ def fit_misalignment(e, omega_ref_rad_s, h, time_s, dt_s: float, r: float, q: fl
         1-based gyro number.
     use : array_like of bool, shape (n,), optional
         Samples to include (:func:`gls_rw`).
+    instrument : array_like, shape (n, 3), optional
+        The reference rate smoothed [rad/s]: a noisy reference (errors in
+        variables) is fitted by instrumental variables, the columns read from
+        ``omega_ref_rad_s`` instrumented by the same columns read from this.
 
     Returns
     -------
@@ -781,6 +862,7 @@ def fit_misalignment(e, omega_ref_rad_s, h, time_s, dt_s: float, r: float, q: fl
     wh = _RWWhitener(n, r, q, use)
     zx = wh.whiten(x, e, w @ hv)
     za, zy0, zu = zx[:, :2], zx[:, 2], zx[:, 3]
+    zi = None if instrument is None else wh.whiten(_projected_rate(instrument, hv, n)[0] @ basis)
     g = za.T @ za
     lam, vec = np.linalg.eigh(g)
     unseen = None
@@ -792,7 +874,7 @@ def fit_misalignment(e, omega_ref_rad_s, h, time_s, dt_s: float, r: float, q: fl
     if one_way:
         seen = vec[:, 1]
         unseen = basis @ vec[:, 0]
-    fit, c, cov, chi2, dof = _tilt_fit(wh, zy0, zu, za, seen if one_way else None)
+    fit, c, cov, chi2, dof = _tilt_fit(wh, zy0, zu, za, seen if one_way else None, zi)
     z = chi2_to_z(chi2, dof)
     cn = float(np.hypot(c[0], c[1]))
     sin_t = min(cn, 1.0)
@@ -807,7 +889,7 @@ def fit_misalignment(e, omega_ref_rad_s, h, time_s, dt_s: float, r: float, q: fl
     params = {"tilt_deg": float(tilt), "tilt_azimuth_deg": float(psi)}
     ev = _misalignment_evidence(gyro, z, tilt, psi, sigma)
     extra = _extra(fit, c=[float(v) for v in c], cov_c=cov.tolist(), chi2_c=chi2, dof_c=dof,
-                   axis=[float(v) for v in axis])
+                   axis=[float(v) for v in axis], instrumented=zi is not None)
     if unseen is not None:
         extra["unseen"] = [float(v) for v in unseen]
         ev += "; the motion does not show a tilt toward " + \
@@ -858,6 +940,33 @@ def _refine_delay(wh, ze: np.ndarray, e: np.ndarray, u: np.ndarray, du: np.ndarr
                           grid_s=[float(g) for g in grid])
 
 
+def _refine_delay_iv(wh, e: np.ndarray, u: np.ndarray, du: np.ndarray, dui: np.ndarray, d: float,
+                     dt: float) -> tuple:
+    """Delay by the instrumental-variables moment of the fractionally delayed rate: Gauss–Newton
+    steps on Zᵀ(e − m(d)) = 0 with Z = −D_d u̇ of the smoothed reference (the χ² of
+    :func:`_refine_delay` would read the reference's own noise); (delay [s], 1σ [s], z, extra)."""
+    def at(dd):
+        m = fractional_delay(u[:, None], [dd / dt])[:, 0] - u
+        zg = wh.whiten(-fractional_delay(du[:, None], [dd / dt])[:, 0], e - m,
+                       -fractional_delay(dui[:, None], [dd / dt])[:, 0])
+        return zg[:, 0], zg[:, 1], zg[:, 2]
+
+    d0, lo, hi = d, max(0.0, 0.5 * d - dt), 2.0 * d + 2.0 * dt      # the bracket of the χ² search
+    for _ in range(6):
+        zj, zr, zi = at(d)
+        step = float(zi @ zr) / float(zi @ zj)
+        d += step
+        if not lo <= d <= hi:                      # the moment has no root near the start: keep it
+            d = d0
+            break
+        if abs(step) < 1e-4 * dt:
+            break
+    zj, zr, zi = at(d)
+    chi2 = float(zr @ zr)
+    sd = math.sqrt(float(zi @ zi) * max(chi2 / max(zr.size - 1, 1), 1.0)) / abs(float(zi @ zj))
+    return d, sd, _z1(d / sd), dict(refined=d != d0, chi2=chi2, instrumented=True)
+
+
 def _latency_evidence(gyro: int, z: float, d: float, sd: float, dt: float) -> str:
     """The sentence that reports the delay (or its absence)."""
     samples = d / dt
@@ -872,7 +981,7 @@ def _latency_evidence(gyro: int, z: float, d: float, sd: float, dt: float) -> st
 
 
 def fit_latency(e, omega_ref_rad_s, h, time_s, dt_s: float, r: float, q: float, gyro: int,
-                *, use=None, refine: bool = True) -> EffectFit:
+                *, use=None, refine: bool = True, instrument=None) -> EffectFit:
     """Latency: residual proportional to the angular acceleration about the axis.
 
     Parameters
@@ -896,6 +1005,11 @@ def fit_latency(e, omega_ref_rad_s, h, time_s, dt_s: float, r: float, q: float, 
     refine : bool
         Refine a significant delay longer than half a sample by the
         nonlinear search below.
+    instrument : array_like, shape (n, 3), optional
+        The reference rate smoothed [rad/s]: a noisy reference (errors in
+        variables); −u̇ is instrumented by the smoothed −u̇ and the refinement
+        solves the instrumented moment (:func:`_refine_delay_iv`), z is then
+        the Wald ratio d/σ.
 
     Returns
     -------
@@ -929,19 +1043,21 @@ def fit_latency(e, omega_ref_rad_s, h, time_s, dt_s: float, r: float, q: float, 
     _, u = _projected_rate(omega_ref_rad_s, h, n)
     dt = float(dt_s)
     du = np.gradient(u, dt)
+    dui = None if instrument is None else np.gradient(_projected_rate(instrument, h, n)[1], dt)
     wh = _RWWhitener(n, r, q, use)
-    zz = wh.whiten(-du, e)
+    zz = wh.whiten(-du, e) if dui is None else wh.whiten(-du, e, -dui)
     try:
-        fit = wh.fit_whitened(zz[:, 1], zz[:, :1])
+        fit = wh.fit_whitened(zz[:, 1], zz[:, :1], None if dui is None else zz[:, 2:3])
     except NotIdentifiableError as err:
         return _not_identifiable("latency", gyro, {"delay_s": 0.0},
                                  "the rate about its axis never changes", err)
     d, sd = float(fit.beta[0]), float(fit.sigma[0])
     t = d / sd
     z = _z1(t)
-    extra = _extra(fit, t=t, d_linear_s=d, sigma_linear_s=sd, refined=False)
+    extra = _extra(fit, t=t, d_linear_s=d, sigma_linear_s=sd, refined=False, instrumented=dui is not None)
     if refine and d > 0.5 * dt and abs(t) > 5.0:
-        d, sd, z, more = _refine_delay(wh, zz[:, 1], e, u, du, d, dt)
+        d, sd, z, more = (_refine_delay(wh, zz[:, 1], e, u, du, d, dt) if dui is None else
+                          _refine_delay_iv(wh, e, u, du, dui, d, dt))
         extra.update(more)
     ev = _latency_evidence(gyro, z, d, sd, dt)
     return EffectFit("latency", gyro, {"delay_s": d}, {"delay_s": sd}, z, ev, extra)

@@ -33,7 +33,8 @@ class Latency(RegressionEffect):
         return with_cols(state, act.cols, fractional_delay(state.x[:, act.cols], d))
 
     def regress(self, ctx, gyro, e, r, q):
-        return fit_latency(e, ctx.ref, ctx.H[gyro - 1], ctx.t, ctx.dt, r, q, gyro, use=ctx.use)
+        e, ref, inst = self.against_reference(ctx, gyro, e)
+        return fit_latency(e, ref, ctx.H[gyro - 1], ctx.t, ctx.dt, r, q, gyro, use=ctx.use, instrument=inst)
 
     def channel_line(self, fit, x, xm, ym):
         return -fit.params["delay_s"] * x * 3600.0, "delay " + self._label(fit, "delay_s", 1e3, " ms")

@@ -76,7 +76,8 @@ class Misalignment(RegressionEffect):
         return replace(state, axes=axes)
 
     def regress(self, ctx, gyro, e, r, q):
-        return fit_misalignment(e, ctx.ref, ctx.H[gyro - 1], ctx.t, ctx.dt, r, q, gyro, use=ctx.use)
+        e, ref, inst = self.against_reference(ctx, gyro, e)
+        return fit_misalignment(e, ref, ctx.H[gyro - 1], ctx.t, ctx.dt, r, q, gyro, use=ctx.use, instrument=inst)
 
     def entry_params(self, fit, old):
         params = super().entry_params(fit, old)

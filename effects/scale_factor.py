@@ -25,7 +25,8 @@ class ScaleFactor(RegressionEffect):
         return with_term(state, act.cols, act.p["ratio"] * state.u[:, act.cols])          # s·u
 
     def regress(self, ctx, gyro, e, r, q):
-        return fit_scale_factor(e, ctx.ref, ctx.H[gyro - 1], ctx.t, ctx.dt, r, q, gyro, use=ctx.use)
+        e, ref, inst = self.against_reference(ctx, gyro, e)
+        return fit_scale_factor(e, ref, ctx.H[gyro - 1], ctx.t, ctx.dt, r, q, gyro, use=ctx.use, instrument=inst)
 
     def channel_line(self, fit, x, xm, ym):
         return fit.params["ppm"] * 1e-6 * x * 3600.0, self._label(fit, "ppm", unit=" ppm")

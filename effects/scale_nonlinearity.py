@@ -34,7 +34,8 @@ class ScaleNonlinearity(RegressionEffect):
         return with_term(state, act.cols, act.p["k2_per_rad_s"] * state.u[:, act.cols] ** 2)  # k2·u²
 
     def regress(self, ctx, gyro, e, r, q):
-        return fit_scale_nonlinearity(e, ctx.ref, ctx.H[gyro - 1], ctx.t, ctx.dt, r, q, gyro, use=ctx.use)
+        e, ref, inst = self.against_reference(ctx, gyro, e)
+        return fit_scale_nonlinearity(e, ref, ctx.H[gyro - 1], ctx.t, ctx.dt, r, q, gyro, use=ctx.use, instrument=inst)
 
     def prefer(self, mine, other, ctx):
         if other.effect == "misalignment":

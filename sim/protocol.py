@@ -674,7 +674,10 @@ class FitContext:
     force at the platform origin [m/s²] or None, ``positions`` (N, 3) [m] or
     None, ``site`` (the measurement's :class:`~gyroarray.measurement.Site`) or
     None, ``static`` (n,) bool, ``longest`` (a, b) the longest static part,
-    ``moving`` (the table turns somewhere), ``name`` (the file, for messages).
+    ``moving`` (the table turns somewhere), ``name`` (the file, for messages),
+    ``ref_raw`` (n, 3) [rad/s] the reference as recorded when ``ref`` is it
+    smoothed (``--ref-smooth``), else None, and ``ref_instrument`` (n, 3)
+    [rad/s] the instrument of the regressions on it then.
 
     Analysis (one calibration): ``model`` (the model being calibrated),
     ``r`` and ``q`` (N,) white and random-walk increment variances per sample
@@ -715,6 +718,8 @@ class FitContext:
     static_record: bool = False
     z_crit: float = math.inf
     cache: dict = field(default_factory=dict)
+    ref_raw: np.ndarray | None = None
+    ref_instrument: np.ndarray | None = None
 
     @property
     def n(self) -> int:
@@ -811,6 +816,22 @@ class RegressionEffect(Effect):
     def regress(self, ctx: FitContext, gyro: int, e: np.ndarray, r: float, q: float) -> "EffectFit":
         """Fit on gyro ``gyro``'s residual ``e`` (n,) [rad/s] under noise (r, q)."""
         raise NotImplementedError
+
+    @staticmethod
+    def against_reference(ctx: FitContext, gyro: int, e: np.ndarray) -> tuple:
+        """(residual, reference, instrument) for a regression on the reference rate.
+
+        As recorded: (``e``, ``ctx.ref``, None). With a smoothed reference
+        (``ctx.ref_raw`` set), the errors-in-variables form: the residual against
+        the recorded reference, the recorded reference as the regressor and
+        ``ctx.ref_instrument`` as its instrument (the smoothing's own distortion
+        of the motion, at the turns, then biases nothing: it is in the
+        instrument only).
+        """
+        if ctx.ref_raw is None:
+            return e, ctx.ref, None
+        h = ctx.H[gyro - 1]
+        return e - (ctx.ref_raw - ctx.ref) @ h, ctx.ref_raw, ctx.ref_instrument
 
     def fit(self, ctx: FitContext, gyro: int | None, E: np.ndarray) -> "EffectFit":
         assert gyro is not None and ctx.r is not None and ctx.q is not None   # per gyro, noise known
