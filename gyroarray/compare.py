@@ -362,9 +362,10 @@ def _finding_dict(f, a: Analysis) -> dict:
 
 
 def _entry_params(entry: ModelEntry) -> dict:
+    """The entry's parameters only (its 1σ, which the model file also carries, is ``sigma`` beside)."""
     d = entry.to_dict()
-    d.pop("effect", None)
-    d.pop("gyro", None)
+    for key in ("effect", "gyro", "sigma"):
+        d.pop(key, None)
     return d
 
 

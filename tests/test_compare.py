@@ -368,6 +368,7 @@ def test_cli_diagnose_fit_and_model_round_trip(sf_files, tmp_path, cli):
     assert f["discrepancy_after"] <= 0.5 * f["discrepancy_before"] and f["consistent"] is True
     sf = next(e for e in f["effects"] if e["effect"] == "scale_factor")
     assert sf["gyro"] == 2 and abs(sf["params"]["ppm"] - 2500) <= max(250, 2 * sf["sigma"]["ppm"])
+    assert set(sf["params"]) == {"ppm"} and set(sf["sigma"]) == {"ppm"}      # the 1σ beside, not inside
     again = json.loads(cli("diagnose", sf_files, "--runs", 10, "--model", out, "--json").stdout)
     assert again["consistent"] is True
     assert again["discrepancy"] == pytest.approx(f["discrepancy_after"], rel=1e-6)

@@ -126,9 +126,19 @@ def test_adis_rrw_respects_the_point_adev_bound_within_its_own_two_sigma(adis_an
     "not met on gyros 1 and 3: K = 76 ± 33 and 201 ± 33 deg/h/√h against point bounds of 42 and "
     "152 (gyro 2: 125 ± 43 against 141 holds). Gyro 3's ADEV rises from 33 to 67 deg/h between "
     "328 and 1310 s, a +1/2 slope of K ≈ 185, and its last octave (2621 s, 75 deg/h, 2–3 degrees "
-    "of freedom) sets the bound; a cap at the point bound held K low on pure-RW records"))
+    "of freedom) sets the bound. The point bound is no bound for the truth: on records of pure "
+    "ARW + RRW like these (numpy + allantools, benchmarks/rrw_point_bound.py) it is below the K "
+    "that made the record on 70-75 % of them, so a fit that is right exceeds it as often"))
 def test_adis_rrw_is_below_the_point_adev_bound(adis_analysis, adis_adev):
-    """K·√(τ/3) ≤ ADEV(τ) at every octave τ up to a third of the record, ADEV from allantools."""
+    """K·√(τ/3) ≤ ADEV(τ) at every octave τ up to a third of the record, ADEV from allantools.
+
+    Kept as the issue states it, and expected to fail: benchmarks/rrw_point_bound.py simulates
+    1e6-sample records of ARW 2.5 deg/√h + RRW K = 76 / 125 / 200 deg/h/√h with plain numpy
+    (40 each) and reads the bound with allantools: it falls below the true K on 75 / 70 / 72 %
+    of them (median bound/K 0.79 / 0.84 / 0.68). gyroarray's fit is unbiased there (mean 75.7 /
+    125.2 / 204.5, sd 11.8 / 17.0 / 18.0 against a mean 1σ of 13.1 / 16.2 / 20.3) and exceeds the
+    bound on 70 / 75 / 88 % of them; capping it at the bound would bias it low by design.
+    The bound that holds is the one with its own 2σ (the test above)."""
     _, a = adis_analysis
     for g, bound in zip((1, 2, 3), _point_bounds(adis_adev)):
         assert a.fits[("rrw", g)].params["k_deg_h_rt_h"] <= bound, (g, bound)
