@@ -884,6 +884,7 @@ def _fit_gauss_markov(cv: _Curve, base: _Gls, label: str, gyro, common: dict,
     share = g * max(a, sa) / (np.maximum(rest, 0.0) + g * max(a, sa))
     idx = _band(cv, share)
     where, meas, pred = _band_text(cv, idx, rest)
+    peak: dict = {}
     fitted = (f"σ = {params['sigma_deg_h']:.3g} ± {sigma['sigma_deg_h']:.2g} deg/h, τc = {tc:.3g}"
               + (f" ± {sigma['tau_s']:.2g} s" if "tau_s" in sigma else " s"))
     if z > 3 and not a > 0:
@@ -895,8 +896,16 @@ def _fit_gauss_markov(cv: _Curve, base: _Gls, label: str, gyro, common: dict,
                     f"<= 0 ({fitted})")
         z = a / sa if sa > 0 else 0.0
     elif z > 3:
-        evidence = (f"{label} ADEV has a hump near 1.9·τc = {1.89 * tc:.3g} s: {meas:.3g} deg/h for "
-                    f"{where} where ARW + RRW alone predict {pred:.3g} ({fitted})")
+        # read at the hump's peak (the octave nearest 1.89·τc): a band average mixes τ where the
+        # rest of the fit is above the data with τ where it is below
+        k = int(np.argmin(np.abs(np.log(cv.taus / (1.89 * tc)))))
+        at = (float(_deg_h(math.sqrt(cv.y[k]))), float(_deg_h(math.sqrt(max(rest[k], 0.0)))),
+              float(_deg_h(math.sqrt(max(rest[k] + max(a, 0.0) * g[k], 0.0)))))
+        peak = {"peak_tau_s": float(cv.taus[k]), "peak_adev_deg_h": at[0], "peak_rest_adev_deg_h": at[1],
+                "peak_model_adev_deg_h": at[2]}
+        evidence = (f"{label} ADEV has a hump near 1.9·τc = {1.89 * tc:.3g} s: {at[0]:.3g} deg/h at "
+                    f"τ = {cv.taus[k]:.3g} s, where the fit's ARW + RRW give {at[1]:.3g} and with the "
+                    f"hump {at[2]:.3g} ({fitted}; {where})")
     else:
         evidence = (f"{label} ADEV shows no Gauss–Markov hump: best τc = {tc:.3g} s gives {fitted} "
                     f"(z = {z:.1f} after the scan over {grid.size} correlation times)")
@@ -906,7 +915,7 @@ def _fit_gauss_markov(cv: _Curve, base: _Gls, label: str, gyro, common: dict,
                             "n_eff_tests": float(m_eff),
                             "tau_grid_s": [float(grid[0]), float(grid[-1])],
                             "band_s": [float(cv.taus[idx[0]]), float(cv.taus[idx[-1]])],
-                            "adev_deg_h": meas, "baseline_adev_deg_h": pred, **common})
+                            "adev_deg_h": meas, "baseline_adev_deg_h": pred, **peak, **common})
 
 
 # --------------------------------------------------------------------------

@@ -132,6 +132,16 @@ def test_gauss_markov_is_found():
     assert close(f.params["tau_s"], 10.0, f.sigma["tau_s"]), (f.params, f.sigma)
     assert "hump" in f.evidence
     check_valid_entry(f)
+    # the sentence's numbers at the hump's peak: the measured ADEV is allantools' there, and the
+    # fitted model with the hump is within 10 % of it (the ADEV's own 1σ there is ~1 %)
+    import allantools
+    x = np.degrees(y[:, 0]) * 3600.0
+    _, ad, _, _ = allantools.oadev(x, rate=1.0 / DT, data_type="freq", taus=[f.extra["peak_tau_s"]])
+    assert abs(f.extra["peak_tau_s"] / (1.89 * f.params["tau_s"]) - 1.0) < 0.5           # the nearest octave
+    assert f.extra["peak_adev_deg_h"] == pytest.approx(float(ad[0]), rel=1e-9)
+    assert f.extra["peak_model_adev_deg_h"] == pytest.approx(float(ad[0]), rel=0.1)
+    assert f.extra["peak_rest_adev_deg_h"] < 0.9 * f.extra["peak_adev_deg_h"]
+    assert f"{f.extra['peak_adev_deg_h']:.3g} deg/h at τ = {f.extra['peak_tau_s']:.3g} s" in f.evidence
 
 
 def test_correlation_of_arw_and_rrw_is_found():
