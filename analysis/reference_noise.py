@@ -23,7 +23,7 @@ import numpy as np
 
 from gyroarray.units import rad_s_to_deg_s
 
-__all__ = ["reference_own_noise", "RATIO", "MIN_FRACTION"]
+__all__ = ["reference_own_noise", "describe", "RATIO", "MIN_FRACTION"]
 
 #: Ratio P_rr·(1 − C)/P_gg above which a frequency bin holds the reference's own noise.
 RATIO = 2.0
@@ -91,3 +91,12 @@ def reference_own_noise(ref_rad_s, gyro_rad_s, axes, dt_s: float) -> list[dict]:
                     "band_hz": (float(f[over].min()), float(f[over].max())),
                     "excess_rms_deg_s": float(rad_s_to_deg_s(math.sqrt(excess)))})
     return out
+
+
+def describe(d: dict) -> str:
+    """The sentence for one flagged axis of :func:`reference_own_noise` (no remedy: the caller's)."""
+    lo, hi = d["band_hz"]
+    return (f"the reference about {'xyz'[d['axis']]} carries noise of its own: in {100 * d['fraction']:.0f} % of "
+            f"the frequency bins ({lo:.3g}–{hi:.3g} Hz) it holds power the gyros do not see, up to "
+            f"{d['max_ratio']:.2g}× theirs at {d['peak_hz']:.3g} Hz (at least {d['excess_rms_deg_s']:.2g} deg/s rms "
+            "beyond them)")

@@ -532,7 +532,8 @@ def cmd_allan(args) -> tuple[dict, str]:
     gyros = [args.gyro] if args.gyro is not None else list(range(1, meas.n_gyros + 1))
     signal, what = allan_signal(meas, raw=args.raw)
     analyses, skipped = _allan_each(meas, signal, gyros, taus, args)
-    notes = [*meas.notes, *skipped.values()]
+    notes = [*meas.notes, *_reference_noise_notes(meas, what != "gyro output", gyros),
+             *skipped.values()]
     out = {"gyros": {str(k): a.to_json_dict() for k, a in analyses.items()},
            "signal": what, "notes": notes,
            "not_analysed": {str(k): why for k, why in skipped.items()}}
@@ -545,6 +546,24 @@ def cmd_allan(args) -> tuple[dict, str]:
         out["plot"] = str(path)
         lines.append(f"wrote {path}")
     return out, "\n".join(lines)
+
+
+def _reference_noise_notes(meas, minus_ref: bool, gyros: list[int]) -> list[str]:
+    """Notes for a reference with noise of its own that the analysed signal (output minus
+    layout·ref) holds: which gyros read it (:mod:`~gyroarray.analysis.reference_noise`)."""
+    if not minus_ref:
+        return []
+    import numpy as np
+    from gyroarray.analysis.reference_noise import describe, reference_own_noise
+    out = []
+    for d in reference_own_noise(meas.ref_rad_s, meas.gyro_rad_s, meas.layout.H, meas.dt_s):
+        hit = [k for k in gyros if abs(float(np.asarray(meas.layout.H)[k - 1, d["axis"]])) > 0.1]
+        if hit:
+            out.append(describe(d) + f": the ADEV of gyro{'s' if len(hit) > 1 else ''} "
+                       f"{', '.join(map(str, hit))} (output minus layout·ref) holds it, and its short-τ terms "
+                       "(quantization, white noise) are then the reference's, not the gyro's; --raw analyses "
+                       "the output alone")
+    return out
 
 
 def _allan_each(meas, signal, gyros: list[int], taus, args) -> tuple[dict, dict]:

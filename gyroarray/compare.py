@@ -58,6 +58,7 @@ from gyroarray.analysis.effect_fit import EffectFit, chi2_to_z, z_from_log_p
 from gyroarray.analysis.localise import Localisation, _plain, default_nperseg, residual_psd
 from gyroarray.analysis.localise import localise as localise_residual
 from gyroarray.analysis.motion import still_mask
+from gyroarray.analysis.reference_noise import describe as describe_own_noise
 from gyroarray.analysis.reference_noise import reference_own_noise
 from gyroarray.analysis.regress import _RWWhitener
 from gyroarray.analysis.stochastic_fit import fit_gyro_noise
@@ -419,13 +420,9 @@ def _model_of(ctx: FitContext) -> NoiseModel:
 
 def _own_noise_note(d: dict) -> str:
     """The note for a reference axis with noise of its own (:func:`reference_own_noise`)."""
-    lo, hi = d["band_hz"]
-    return (f"the reference about {'xyz'[d['axis']]} carries noise of its own: in {100 * d['fraction']:.0f} % of "
-            f"the frequency bins ({lo:.3g}–{hi:.3g} Hz) it holds power the gyros do not see, up to "
-            f"{d['max_ratio']:.2g}× theirs at {d['peak_hz']:.3g} Hz (at least {d['excess_rms_deg_s']:.2g} deg/s rms "
-            "beyond them). Scale factor, nonlinearity, misalignment and latency fitted against it are pulled "
-            "off by it (errors in variables): --ref-smooth SECONDS (e.g. 0.2) fits them with the smoothed "
-            "reference as instrument")
+    return (describe_own_noise(d) + ". Scale factor, nonlinearity, misalignment and latency fitted against it "
+            "are pulled off by it (errors in variables): --ref-smooth SECONDS (e.g. 0.2) fits them with the "
+            "smoothed reference as instrument")
 
 
 def _centred_mean(x: np.ndarray, length: int) -> np.ndarray:

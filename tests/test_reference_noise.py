@@ -68,3 +68,16 @@ def test_the_mpu_encoder_is_flagged_and_the_note_names_the_flag():
     assert any("noise of its own" in n and "--ref-smooth" in n for n in notes)
     smoothed = ModelComparison(m, n_runs=1, ref_smooth_s=0.2).setup_notes
     assert not any("noise of its own" in n for n in smoothed)
+
+
+@pytest.mark.skipif(not MPU.exists(), reason="needs ../shared/measurements/real")
+def test_allan_says_which_gyro_reads_the_reference_noise(cli):
+    """`allan --repair` on the MPU-6050 record fits Q ≈ 1.6° to gyro 3 (output minus the encoder
+    rate): the note says that this gyro's ADEV holds the reference's noise; with --raw it is not
+    said (the output alone)."""
+    import json
+    d = json.loads(cli("allan", MPU, "--repair", "--json").stdout)
+    own = [n for n in d["notes"] if "noise of its own" in n]
+    assert len(own) == 1 and "reference about z" in own[0] and "ADEV of gyro 3 " in own[0]
+    raw = json.loads(cli("allan", MPU, "--repair", "--raw", "--json").stdout)
+    assert not any("noise of its own" in n for n in raw["notes"])
