@@ -1161,7 +1161,9 @@ def _add_compare_args(p, *, out: bool):
     p.add_argument("--repair", action="store_true", help="repair short gaps, missing values, exact duplicate rows and a jittering clock (each listed)")
     p.add_argument("--ref-smooth", type=_finite_float("--ref-smooth"), default=0.0, metavar="SECONDS",
                    help="smooth a noisy reference rate (a differentiated encoder) by a centred moving "
-                        "average of this length before comparing (0: as recorded)")
+                        "average of this length before comparing; scale factor, nonlinearity, misalignment "
+                        "and latency are then fitted against the recorded reference with the smoothed one "
+                        "as instrument (0: as recorded)")
     _add_plugin(p)
     if out:
         _add_force(p)
