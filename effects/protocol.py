@@ -205,7 +205,7 @@ class SimContext:
     @functools.cached_property
     def specific_force_m_s2(self) -> np.ndarray:
         """Specific force at each gyro (n, N, 3) [m/s²] (see the class notes)."""
-        from gyroarray.sim.sensor import rigid_body_specific_force  # lazy: loads scipy.signal
+        from gyroarray.sensor import rigid_body_specific_force  # lazy: loads scipy.signal
         a = rigid_body_specific_force(self.specific_force_origin_m_s2, self.omega_body_rad_s,
                                       self.angular_accel_rad_s2, self.positions_m)
         a = np.array(a, dtype=float, copy=True)

@@ -2,9 +2,11 @@
 
 Pure functions (SI inside: rad/s, m/s², s, Hz for frequencies) for the two
 sensor-response effects of ``shared/spec/effects.md``, and the rigid-body
-kinematics that gives the specific force at each gyro. The registry in
-:mod:`gyroarray.sim.effects` wraps them (``bandwidth``, ``g_sensitivity``);
-the fit side reads the same definitions.
+kinematics that gives the specific force at each gyro. The effects
+``bandwidth`` and ``g_sensitivity`` (:mod:`gyroarray.effects`) wrap them; the
+fit side (:mod:`gyroarray.analysis.psd_fit`) reads the same definitions, so
+they sit at the bottom of the package (``gyroarray.sim.sensor`` re-exports
+them).
 
 ``bandwidth``
     The gyro's internal low-pass filter, acting on everything the sensing
