@@ -689,7 +689,8 @@ class FitContext:
     ``z_crit``.
 
     Services (set by the orchestrator): :meth:`simulate_entry`,
-    :meth:`noise_rq`, :meth:`gyro_noise`, :meth:`effect`, :attr:`attitude`.
+    :meth:`noise_rq`, :meth:`gyro_noise`, :meth:`effect`, :meth:`model_entry`,
+    :attr:`attitude`.
     """
 
     name: str
@@ -759,6 +760,10 @@ class FitContext:
     def effect(self, name: str) -> Effect:
         """The registered effect called ``name``."""
         return self.services.effect(name)
+
+    def model_entry(self, effect: str, gyro: int | None, params: Mapping[str, Any]) -> "ModelEntry":
+        """A validated model entry (:class:`~gyroarray.sim.model.ModelEntry`); InputError if invalid."""
+        return self.services.model_entry(effect, gyro, params)
 
     def simulate_entry(self, entry: "ModelEntry") -> np.ndarray:
         """One model entry simulated alone on the record's reference, minus the sensed reference (n, N)."""
@@ -899,12 +904,11 @@ def explains_away(mine_effect: Effect, mine: "EffectFit", other: "EffectFit", ct
     Gauss–Markov one), and their fit statistics are not comparable; what is
     comparable is whether one still sees the other once it is removed.
     """
-    from gyroarray.sim.model import ModelEntry  # cycle: model imports protocol
     if not mine_effect.predicts:
         return None
     try:
-        entry = ModelEntry(mine_effect.name, mine.gyro,
-                           mine_effect.clip(mine_effect.entry_params(mine, mine_effect.placeholder())))
+        entry = ctx.model_entry(mine_effect.name, mine.gyro,
+                                mine_effect.clip(mine_effect.entry_params(mine, mine_effect.placeholder())))
     except InputError:
         return None
     pred = mine_effect.predict(ctx, entry)

@@ -1253,6 +1253,9 @@ class _Services:
     def effect(self, name: str) -> Effect:
         return get_effect(name)
 
+    def model_entry(self, effect: str, gyro: int | None, params) -> ModelEntry:
+        return ModelEntry(effect, gyro, params)
+
     def simulate_entry(self, entry: ModelEntry) -> np.ndarray:
         return self.comp.simulate_entry(entry)
 
