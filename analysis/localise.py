@@ -545,7 +545,7 @@ def _lowpass_free(ff, A, lr, w):
 
 
 def bandwidth_gain2(freq_hz, cutoff_hz: float, order: int, dt_s: float) -> np.ndarray:
-    """|H|² of the library's discrete ``bandwidth`` filter (:func:`gyroarray.sim.sensor.bandwidth_sos`).
+    """|H|² of the library's discrete ``bandwidth`` filter (:func:`gyroarray.sensor.bandwidth_sos`).
 
     The bilinear transform pre-warped at fc maps the analog Butterworth onto
     1/(1 + (tan(π f dt)/tan(π fc dt))^(2·order)) exactly (what ``sosfreqz``

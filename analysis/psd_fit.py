@@ -12,10 +12,10 @@ Welch periodogram of a residual with
   colored noise at low frequency from reading as a roll-off at high ones);
 * ``filter``: S(f) = (W + F/f + R/f²)·|H(f)|² with the ``bandwidth`` response
   of order 1 or 2 at cut-off fc, in two families: the spec's continuous
-  H (:func:`gyroarray.sim.sensor.bandwidth_response`), scanned beyond the
+  H (:func:`gyroarray.sensor.bandwidth_response`), scanned beyond the
   Nyquist frequency, where |H| → 1 and the filter becomes the null, so the
   two are nested; and the digital H_d of the bilinear transform
-  (:func:`gyroarray.sim.sensor.bandwidth_sos`: a zero at Nyquist, not
+  (:func:`gyroarray.sensor.bandwidth_sos`: a zero at Nyquist, not
   nested, but what a digital filter is). The better of the two gives the
   estimate (a digitally filtered record fits H_d: order and cut-off right;
   H would trade a lower cut-off for a higher order);
@@ -45,7 +45,7 @@ from scipy import ndimage, optimize, signal, special, stats
 
 from gyroarray.analysis._memo import by_content
 from gyroarray.analysis.spectrum import welch
-from gyroarray.sim.sensor import bandwidth_response, bandwidth_sos, bandwidth_warped_frequency
+from gyroarray.sensor import bandwidth_response, bandwidth_sos, bandwidth_warped_frequency
 
 __all__ = ["PsdFit", "fit_psd", "filter_z", "EFFECTIVE_TESTS"]
 

@@ -8,8 +8,10 @@ the layers, the count of ``gyroarray`` imports made inside functions, and
 the cycles among modules (module-level imports only: what Python resolves
 at import time). The layers are the order the project aims for::
 
-    physics/units/constants/errors  <-  sim / analysis / estimators  <-  effects
+    physics/units/constants/errors/sensor  <-  analysis  <-  effects  <-  sim
         <-  chain / compare / design ...  <-  cli / reports
+
+(estimators and scenarios sit beside effects and sim: on analysis and on sim).
 
 Used for the closing note of issue 13 (before/after); not part of the tests.
 """
@@ -28,7 +30,8 @@ FOLDERS = {"gyroarray": "gyroarray", "gyroarray.analysis": "analysis", "gyroarra
 
 #: The bottom of the house: modules of ``gyroarray`` itself that import nothing above them.
 BOTTOM = {"units", "constants", "errors", "physics", "tomlio", "formatting", "layout", "limits",
-          "design", "measurement", "outputs", "_numba", "plugins", "parallel"}
+          "design", "measurement", "outputs", "_numba", "plugins", "parallel",
+          "sensor"}    # the bandwidth filter and g-sensitivity: shared by sim, effects and analysis
 
 
 def modules(root: Path) -> dict:

@@ -1,7 +1,7 @@
 """The physical effects, one module each, and the registry that finds them.
 
 Each module of this package defines one effect of ``shared/spec/effects.md``
-as a subclass of :class:`gyroarray.sim.protocol.Effect` (simulate side, fit
+as a subclass of :class:`gyroarray.effects.protocol.Effect` (simulate side, fit
 side, how it enters a model; see that module). The registry is every such
 class found here, plus
 
@@ -13,9 +13,11 @@ class found here, plus
 
 Adding an effect is one new file: nothing else names it. The folder is its
 own top-level package (mapped to ``gyroarray.effects``) because an effect
-owns both its simulate side (``sim``) and its fit side (``analysis``), so it
-sits above both and below the chains that use it (``gyroarray.compare``,
-``gyroarray.sim.effects``).
+owns both its simulate side and its fit side (``analysis``): it sits above
+``analysis`` and below the simulator and the chains that use it
+(``gyroarray.sim``, ``gyroarray.compare``). The protocol an effect implements
+is :mod:`gyroarray.effects.protocol` (also importable as
+``gyroarray.sim.protocol``); it needs nothing from this registry.
 """
 
 from __future__ import annotations
@@ -34,7 +36,7 @@ from typing import Iterable, Mapping, NoReturn
 
 from gyroarray.errors import InputError
 from gyroarray.plugins import EFFECTS_GROUP, installed
-from gyroarray.sim.protocol import Effect, Kind, Param, Stage
+from gyroarray.effects.protocol import Effect, Kind, Param, Stage
 
 __all__ = ["REGISTRY", "ENTRY_POINT_GROUP", "effect_names", "get_effect", "did_you_mean", "register",
            "load_plugin", "plugin_effects", "installed_plugins"]
@@ -152,7 +154,7 @@ def load_plugin(path) -> list[str]:
     """Run the Python file ``path`` (the user named it) and register the effects it defines.
 
     Returns the names of its effects. The file must be a regular ``.py`` file
-    that defines at least one :class:`~gyroarray.sim.protocol.Effect` subclass
+    that defines at least one :class:`~gyroarray.effects.protocol.Effect` subclass
     with a ``name``. Loading the same file twice registers nothing new.
 
     Raises

@@ -1,7 +1,7 @@
 """What the four fault effects share (``fault_step``, ``fault_drift``, ``fault_stuck``, ``fault_noise``).
 
 A fault starts at ``start_s`` on one gyro (``gyro`` required) and lasts to
-the end of the record. The physics is in :mod:`gyroarray.sim.faults`, the fit
+the end of the record. The physics is in :mod:`gyroarray.effects._fault_physics`, the fit
 (onset and size with 1σ, z ≈ N(0, 1) when absent) in
 :func:`gyroarray.analysis.fault_fit.fit_fault`. The faults are not diagnosis
 candidates (``candidate = False``): a model comparison fits one when asked
@@ -16,7 +16,7 @@ from typing import ClassVar
 from gyroarray.analysis.effect_fit import EffectFit
 from gyroarray.analysis.fault_fit import fit_fault
 from gyroarray.errors import InputError
-from gyroarray.sim.protocol import Effect, Kind, Param, Stage, identity
+from gyroarray.effects.protocol import Effect, Kind, Param, Stage, identity
 
 #: The fault's start parameter, shared by the four.
 START = Param("start_s", "s", "start_s", identity, doc="fault start (time_s); it lasts to the end")

@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 
 from gyroarray.effects import _draw
-from gyroarray.sim.protocol import NoiseTermEffect, Param, Stage, unit_draws, with_term
+from gyroarray.effects.protocol import NoiseTermEffect, Param, Stage, unit_draws, with_term
 from gyroarray.units import arw_deg_rt_h_to_rad_rt_s
 
 

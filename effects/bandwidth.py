@@ -14,8 +14,8 @@ from gyroarray.analysis.psd_fit import (EFFECTIVE_TESTS, filter_z, filtered_whit
 from gyroarray.analysis.regress import _RWWhitener
 from gyroarray.effects import _draw
 from gyroarray.errors import InputError
-from gyroarray.sim.protocol import Param, RegressionEffect, Stage, explains_away, identity, with_cols
-from gyroarray.sim.sensor import bandwidth_filter
+from gyroarray.effects.protocol import Param, RegressionEffect, Stage, explains_away, identity, with_cols
+from gyroarray.sensor import bandwidth_filter
 
 
 class Bandwidth(RegressionEffect):
@@ -24,7 +24,7 @@ class Bandwidth(RegressionEffect):
     before quantization and saturation): order 1 H(s) = 1/(1 + s/ωc), order 2
     the Butterworth; simulated by the bilinear transform pre-warped at the
     cut-off, the state started at the first sample's steady state
-    (:func:`gyroarray.sim.sensor.bandwidth_filter`).
+    (:func:`gyroarray.sensor.bandwidth_filter`).
 
     Fit, from what the record has:
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from gyroarray.effects import _draw
 from gyroarray.physics import flicker_noise
-from gyroarray.sim.protocol import NoiseTermEffect, Param, Stage, with_term
+from gyroarray.effects.protocol import NoiseTermEffect, Param, Stage, with_term
 from gyroarray.units import deg_h_to_rad_s
 
 

@@ -10,7 +10,7 @@ import numpy as np
 from gyroarray.analysis.stochastic_fit import fit_burst
 from gyroarray.effects import _draw
 from gyroarray.errors import InputError
-from gyroarray.sim.protocol import Effect, Kind, Param, Stage, identity
+from gyroarray.effects.protocol import Effect, Kind, Param, Stage, identity
 
 
 class Burst(Effect):

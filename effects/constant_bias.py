@@ -7,7 +7,7 @@ import math
 import numpy as np
 
 from gyroarray.analysis.effect_fit import EffectFit
-from gyroarray.sim.protocol import Param, RegressionEffect, Stage, with_term
+from gyroarray.effects.protocol import Param, RegressionEffect, Stage, with_term
 from gyroarray.units import deg_h_to_rad_s, rad_s_to_deg_h
 
 

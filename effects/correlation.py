@@ -13,7 +13,7 @@ from gyroarray.analysis.stochastic_fit import fit_correlation
 from gyroarray.design import correlation_matrix
 from gyroarray.effects import _draw
 from gyroarray.errors import InputError
-from gyroarray.sim.protocol import Effect, Kind, Mixer, Param, Stage
+from gyroarray.effects.protocol import Effect, Kind, Mixer, Param, Stage
 
 
 def _rho_si(x):

@@ -11,7 +11,7 @@ from gyroarray.analysis.earth_fit import fit_earth_rate
 from gyroarray.effects import _draw
 from gyroarray.errors import InputError
 from gyroarray.physics import earth_rate_platform
-from gyroarray.sim.protocol import Effect, Kind, Param, Stage
+from gyroarray.effects.protocol import Effect, Kind, Param, Stage
 from gyroarray.units import RAD_PER_DEG, deg_to_rad
 
 

@@ -8,8 +8,8 @@ from dataclasses import replace
 import numpy as np
 
 from gyroarray.effects._fault import START, FaultEffect
-from gyroarray.sim import faults
-from gyroarray.sim.protocol import Param, Stage, identity
+from gyroarray.effects import _fault_physics as faults
+from gyroarray.effects.protocol import Param, Stage, identity
 
 
 class FaultNoise(FaultEffect):

@@ -3,8 +3,8 @@
 from __future__ import annotations
 
 from gyroarray.effects._fault import START, FaultEffect
-from gyroarray.sim import faults
-from gyroarray.sim.protocol import Param, with_cols
+from gyroarray.effects import _fault_physics as faults
+from gyroarray.effects.protocol import Param, with_cols
 from gyroarray.units import deg_s_to_rad_s
 
 

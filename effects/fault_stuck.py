@@ -4,8 +4,8 @@ from __future__ import annotations
 
 from gyroarray.effects._fault import START, FaultEffect
 from gyroarray.errors import InputError
-from gyroarray.sim import faults
-from gyroarray.sim.protocol import with_cols
+from gyroarray.effects import _fault_physics as faults
+from gyroarray.effects.protocol import with_cols
 
 
 class FaultStuck(FaultEffect):

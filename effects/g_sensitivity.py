@@ -9,8 +9,8 @@ import numpy as np
 from gyroarray.analysis.effect_fit import EffectFit, chi2_to_z
 from gyroarray.analysis.regress import NotIdentifiableError, gls_rw
 from gyroarray.effects import _draw
-from gyroarray.sim.protocol import Param, RegressionEffect, Stage, explains_away, with_term
-from gyroarray.sim.sensor import g_sensitivity_bias
+from gyroarray.effects.protocol import Param, RegressionEffect, Stage, explains_away, with_term
+from gyroarray.sensor import g_sensitivity_bias
 from gyroarray.units import deg_s_per_g_to_rad_s_per_m_s2, rad_s_per_m_s2_to_deg_s_per_g
 
 #: A component of the specific force that moves less than this [m/s²] over the record
@@ -25,7 +25,7 @@ def _g_sens_si(x):
 class GSensitivity(RegressionEffect):
     """bias = (``deg_s_per_g`` · f_k)/g0 [deg/s], f_k = f_0 + α × r_k + ω × (ω × r_k)
     the specific force at gyro k, platform frame (``shared/spec/effects.md``;
-    :mod:`gyroarray.sim.sensor`).
+    :mod:`gyroarray.sensor`).
 
     Fit: the residual regressed on the three components of f_k under ARW +
     a random-walk bias (:func:`gyroarray.analysis.regress.gls_rw`); f_0 from

@@ -8,7 +8,7 @@ from gyroarray.analysis.regress import fit_latency
 from gyroarray.effects import _draw
 from gyroarray.errors import InputError
 from gyroarray.physics import fractional_delay
-from gyroarray.sim.protocol import Param, RegressionEffect, Stage, identity, with_cols
+from gyroarray.effects.protocol import Param, RegressionEffect, Stage, identity, with_cols
 
 
 class Latency(RegressionEffect):

@@ -11,7 +11,7 @@ from gyroarray.analysis.regress import fit_misalignment
 from gyroarray.effects import _draw
 from gyroarray.errors import InputError
 from gyroarray.physics import tilted_axes
-from gyroarray.sim.protocol import Param, RegressionEffect, Stage
+from gyroarray.effects.protocol import Param, RegressionEffect, Stage
 from gyroarray.units import deg_to_rad
 
 

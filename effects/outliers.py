@@ -9,7 +9,7 @@ import numpy as np
 from gyroarray.analysis.effect_fit import EffectFit
 from gyroarray.analysis.outliers import clean_spikes, find_spikes
 from gyroarray.effects import _draw
-from gyroarray.sim.protocol import Effect, Explained, Kind, Param, Stage, with_term
+from gyroarray.effects.protocol import Effect, Explained, Kind, Param, Stage, with_term
 from gyroarray.units import deg_s_to_rad_s, rad_s_to_deg_s
 
 #: Seconds per hour (the rate's unit).

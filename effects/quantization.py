@@ -7,7 +7,7 @@ import math
 import numpy as np
 
 from gyroarray.effects import _draw
-from gyroarray.sim.protocol import NoiseTermEffect, Param, Stage, with_term
+from gyroarray.effects.protocol import NoiseTermEffect, Param, Stage, with_term
 from gyroarray.units import deg_to_rad
 
 

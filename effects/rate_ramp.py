@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from gyroarray.analysis.regress import fit_rate_ramp
 from gyroarray.effects import _draw
-from gyroarray.sim.protocol import Kind, Param, RegressionEffect, Stage, same_noise_preference, with_term
+from gyroarray.effects.protocol import Kind, Param, RegressionEffect, Stage, same_noise_preference, with_term
 from gyroarray.units import ramp_deg_h2_to_rad_s2
 
 

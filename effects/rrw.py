@@ -7,7 +7,7 @@ import math
 import numpy as np
 
 from gyroarray.effects import _draw
-from gyroarray.sim.protocol import NoiseTermEffect, Param, Stage, unit_draws, with_term
+from gyroarray.effects.protocol import NoiseTermEffect, Param, Stage, unit_draws, with_term
 from gyroarray.units import rrw_deg_h_rt_h_to_rad_s_rt_s
 
 

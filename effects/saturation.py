@@ -9,7 +9,7 @@ import numpy as np
 
 from gyroarray.analysis.regress import fit_saturation
 from gyroarray.effects import _draw
-from gyroarray.sim.protocol import Param, RegressionEffect, Stage, with_cols
+from gyroarray.effects.protocol import Param, RegressionEffect, Stage, with_cols
 from gyroarray.units import RAD_PER_DEG, deg_s_to_rad_s
 
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from gyroarray.analysis.regress import fit_scale_factor
 from gyroarray.effects import _draw
-from gyroarray.sim.protocol import Param, RegressionEffect, Stage, with_term
+from gyroarray.effects.protocol import Param, RegressionEffect, Stage, with_term
 from gyroarray.units import ppm_to_ratio
 
 

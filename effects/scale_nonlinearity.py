@@ -6,7 +6,7 @@ import math
 
 from gyroarray.analysis.regress import fit_scale_nonlinearity
 from gyroarray.effects import _draw
-from gyroarray.sim.protocol import Param, RegressionEffect, Stage, with_term
+from gyroarray.effects.protocol import Param, RegressionEffect, Stage, with_term
 from gyroarray.units import per_deg_s_to_per_rad_s
 
 

@@ -9,7 +9,7 @@ import numpy as np
 from gyroarray.analysis.regress import fit_sinusoid
 from gyroarray.effects import _draw
 from gyroarray.errors import InputError
-from gyroarray.sim.protocol import Param, RegressionEffect, Stage, explains_away, identity, with_term
+from gyroarray.effects.protocol import Param, RegressionEffect, Stage, explains_away, identity, with_term
 from gyroarray.units import RAD_PER_DEG, deg_s_to_rad_s, deg_to_rad
 
 

@@ -12,7 +12,7 @@ from gyroarray.analysis.regress import (NotIdentifiableError, fit_temperature_bi
                                        temperature_rates)
 from gyroarray.effects import _draw
 from gyroarray.errors import InputError
-from gyroarray.sim.protocol import Param, RegressionEffect, Stage, identity, same_noise_preference, with_term
+from gyroarray.effects.protocol import Param, RegressionEffect, Stage, identity, same_noise_preference, with_term
 from gyroarray.units import deg_h_to_rad_s, rad_s_to_deg_h
 
 #: Each half of a record must span this much temperature [°C], and this share of the whole

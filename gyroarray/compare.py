@@ -4,7 +4,7 @@ The chain (after pvlib's ModelChain: one object, named steps, every
 intermediate kept in the :class:`Analysis` a report can show). It never names
 an effect: it loops over the registry (:mod:`gyroarray.effects`), and each
 effect says what it needs, how it is fitted and how it enters the model
-(:mod:`gyroarray.sim.protocol`).
+(:mod:`gyroarray.effects.protocol`).
 
 1. **residual** ``E = gyro − H·ref`` [rad/s] of every gyro (``H`` the
    layout's axes, ``ref`` the table's reference rate; without a reference
@@ -22,7 +22,7 @@ effect says what it needs, how it is fitted and how it enters the model
    longest static part (an unexplained scale factor would otherwise read as
    noise); also the static part when the model's noise depends on the motion
    (an effect's ``static_noise``); brought back to the model's stationary
-   level (:meth:`~gyroarray.sim.protocol.Effect.whiten`);
+   level (:meth:`~gyroarray.effects.protocol.Effect.whiten`);
 5. **noise**: each gyro's Allan fit with the model's noise terms, and the
    candidates that read the stochastic record;
 6. **model band**: the calibrated stochastic part of the model simulated
@@ -69,8 +69,8 @@ from gyroarray.measurement import Measurement, _runs, relative_time_s
 from gyroarray.parallel import available_cpus, map_runs
 from gyroarray.sim.effects import sim_context, simulate_on, simulate_readings
 from gyroarray.sim.model import ModelEntry, NoiseModel
-from gyroarray.sim.protocol import Effect, Explained, FitContext, Kind
-from gyroarray.sim.sensor import gravity_specific_force, rigid_body_specific_force
+from gyroarray.effects.protocol import Effect, Explained, FitContext, Kind
+from gyroarray.sensor import gravity_specific_force, rigid_body_specific_force
 from gyroarray.units import RAD_PER_DEG, arw_deg_rt_h_to_rad_rt_s, rad_s_to_deg_h, rrw_deg_h_rt_h_to_rad_s_rt_s
 
 __all__ = ["ALPHA", "Test", "Analysis", "ModelComparison", "baseline_model", "critical_z", "parse_add",
@@ -1251,6 +1251,9 @@ class _Services:
     def effect(self, name: str) -> Effect:
         return get_effect(name)
 
+    def model_entry(self, effect: str, gyro: int | None, params) -> ModelEntry:
+        return ModelEntry(effect, gyro, params)
+
     def simulate_entry(self, entry: ModelEntry) -> np.ndarray:
         return self.comp.simulate_entry(entry)
 
@@ -1292,10 +1295,10 @@ def _rank_rivals(ctx: FitContext, cands: list, z_crit: float) -> list:
     Gauss–Markov hump; a scale factor and a tilted axis; a curvature that
     also looks like a slope; a warm-up temperature and a rate ramp). Among
     the significant rivals of one gyro, an effect ranks above another it
-    declares as a rival when its :meth:`~gyroarray.sim.protocol.Effect.prefer`
+    declares as a rival when its :meth:`~gyroarray.effects.protocol.Effect.prefer`
     gives a reason; the winner takes the place of the first of them and each
     one it beats says why it ranks lower. A reason that is an
-    :class:`~gyroarray.sim.protocol.Explained` (with the winner taken out the
+    :class:`~gyroarray.effects.protocol.Explained` (with the winner taken out the
     rival's test is no longer significant) marks the rival ``explained_by`` the
     winner: it is then not a significant candidate of its own. (On the scoring runs of
     benchmarks/diagnosis_score.py: true B gave χ² 9–13 against 26–42 for the

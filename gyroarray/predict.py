@@ -187,8 +187,8 @@ class SensorBandwidth:
 
     def sos(self, k: int) -> np.ndarray:
         """Gyro k's (0-based) digital filter as second-order sections
-        (:func:`gyroarray.sim.sensor.bandwidth_sos`, the simulator's own)."""
-        from gyroarray.sim.sensor import bandwidth_sos  # lazy: loads scipy.signal
+        (:func:`gyroarray.sensor.bandwidth_sos`, the simulator's own)."""
+        from gyroarray.sensor import bandwidth_sos  # lazy: loads scipy.signal
         return bandwidth_sos(float(self.cutoff_hz[k]), int(self.order[k]), self.dt_s)
 
     def response(self, freq_hz: float) -> np.ndarray:
@@ -202,8 +202,8 @@ class SensorBandwidth:
 
     def apply(self, x: np.ndarray) -> np.ndarray:
         """The readings (n, N) through each gyro's filter, started at the first sample's
-        steady state, as the simulator runs it (:func:`gyroarray.sim.sensor.bandwidth_filter`)."""
-        from gyroarray.sim.sensor import bandwidth_filter  # lazy: loads scipy.signal
+        steady state, as the simulator runs it (:func:`gyroarray.sensor.bandwidth_filter`)."""
+        from gyroarray.sensor import bandwidth_filter  # lazy: loads scipy.signal
         y = np.array(x, dtype=float)
         m = self.filtered
         if m.any():
@@ -378,7 +378,7 @@ def g_sensitivity_error(coeff_rad_s_per_m_s2: np.ndarray, specific_force_m_s2: n
         ``fused_mean_deg_s`` (axis -> value; absent without a DC gain),
         RMS over the scored window.
     """
-    from gyroarray.sim.sensor import g_sensitivity_bias  # lazy: loads scipy.signal
+    from gyroarray.sensor import g_sensitivity_bias  # lazy: loads scipy.signal
     c = np.asarray(coeff_rad_s_per_m_s2, dtype=float)
     f = np.asarray(specific_force_m_s2, dtype=float)
     if f.ndim == 1:
@@ -733,7 +733,7 @@ def predict(estimator, noise_model, *, n_samples: int, settle_s: float = 2.0,
             raise InputError(f"truth_rad_s must have shape ({n}, 3), got {omega.shape}")
     bias = gsens = None
     if noise.g_sensitivity_rad_s_per_m_s2 is not None:
-        from gyroarray.sim.sensor import g_sensitivity_bias  # lazy: loads scipy.signal
+        from gyroarray.sensor import g_sensitivity_bias  # lazy: loads scipy.signal
         f = (np.broadcast_to([0.0, 0.0, G0_M_S2], (n, H.shape[0], 3)) if specific_force_m_s2 is None
              else np.asarray(specific_force_m_s2, dtype=float))
         if f.shape != (n, H.shape[0], 3):

@@ -235,7 +235,7 @@ class DesignSpace:
 
     def __post_init__(self):
         if self.sensor_bandwidth is not None:
-            from gyroarray.sim.sensor import bandwidth_sos  # lazy: loads scipy.signal
+            from gyroarray.sensor import bandwidth_sos  # lazy: loads scipy.signal
             fc, order = self.sensor_bandwidth
             bandwidth_sos(fc, order, self.dt_s)                     # order 1/2, 0 < fc < Nyquist
 

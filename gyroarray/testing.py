@@ -1,6 +1,6 @@
 """Conformance checks for plugin authors, like scikit-learn's ``parametrize_with_checks``.
 
-An effect of your own (:class:`gyroarray.sim.protocol.Effect`) and an
+An effect of your own (:class:`gyroarray.effects.protocol.Effect`) and an
 estimator of your own (:class:`gyroarray.estimators.Estimator`) are
 registered only if they pass the same checks as the built-ins. Run them in
 your package's tests::
@@ -50,7 +50,6 @@ import numpy as np
 
 from gyroarray.errors import InputError
 from gyroarray.layout import Layout
-from gyroarray.sim.protocol import Effect
 from gyroarray.tomlio import loads_toml
 from gyroarray.units import RAD_PER_DEG
 
@@ -93,6 +92,7 @@ def _record(extra_entries, seed: int):
 
 
 def _has_example(eff) -> bool:
+    from gyroarray.effects.protocol import Effect  # lazy: runs the effect registry (numba)
     return type(eff).example is not Effect.example
 
 

@@ -58,7 +58,8 @@ from gyroarray.analysis.localise import record_channels
 from gyroarray.compare import Analysis
 from gyroarray.effects import REGISTRY, get_effect
 from gyroarray.errors import InputError
-from gyroarray.reports.report import _Doc, _figure, _fmt, _png
+from gyroarray.reports.design_plots import _figure, _png
+from gyroarray.reports.report import _Doc, _fmt
 
 __all__ = ["ARW_WINDOW_S", "BIAS_BLOCK_S", "REGRESSORS", "write_compare_report"]
 

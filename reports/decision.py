@@ -32,7 +32,7 @@ from gyroarray.errors import InputError
 from gyroarray.layout import Layout
 from gyroarray.predict import Swing, settle_start, swing_truth
 from gyroarray.recommend import DesignSpace, GyroNoise, _label as _recommend_label
-from gyroarray.reports.design_plots import accuracy_vs_n_fig
+from gyroarray.reports.design_plots import _figure, _png, accuracy_vs_n_fig
 
 __all__ = ["load_design", "write_sections", "decision_summary"]
 
@@ -119,7 +119,6 @@ def decision_summary(res: dict) -> list[str]:
 
 def write_sections(doc, res: dict, top: int = 15) -> dict:
     """Add the decision, assumptions and evidence sections to a report document."""
-    from gyroarray.reports.report import _png  # lazy: loads pandas; cycle: report imports decision
     doc.h2("Decision")
     for s in decision_summary(res):
         doc.p(s, "decision")
@@ -296,7 +295,6 @@ def adev_section(doc, res: dict, *, seed: int = 20260413):
     from gyroarray.analysis.allan import allan_analysis  # lazy: loads numba
     from gyroarray.estimators import get_estimator  # lazy: loads numba
     from gyroarray.sim.effects import simulate_readings  # lazy: loads numba
-    from gyroarray.reports.report import _figure, _png  # lazy: loads pandas; cycle: report imports decision
     g, space = noise_and_space(res["assumptions"])
     d = res["recommended"]
     gr = g.with_rho(d.get("rho", g.rho_arw)) if g.rho_arw == g.rho_rrw else g

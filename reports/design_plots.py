@@ -1,7 +1,8 @@
-"""GDOP design figures (paper 003 Figs. 8–10)."""
+"""GDOP design figures (paper 003 Figs. 8–10) and the figure helpers the reports share."""
 
 from __future__ import annotations
 
+import io
 from pathlib import Path
 
 import numpy as np
@@ -20,6 +21,23 @@ def _rho_grid(n: int, count: int = 200) -> np.ndarray:
     lo = -1.0 / (n - 1)
     eps = 1e-3
     return np.linspace(lo + eps, 1.0 - eps, count)
+
+
+def _figure(w=9.0, h=5.0, ncols=1):
+    """A figure of ``ncols`` panels side by side on an Agg canvas (no pyplot state), and its axes."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+    fig = Figure(figsize=(w, h), layout="constrained")
+    FigureCanvasAgg(fig)
+    axs = fig.subplots(1, ncols, squeeze=False)[0]
+    return fig, axs
+
+
+def _png(fig, dpi=96) -> bytes:
+    """The figure as PNG bytes."""
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=dpi)
+    return buf.getvalue()
 
 
 def design_figure(path, *, force: bool = True) -> Path:

@@ -38,7 +38,6 @@ from __future__ import annotations
 
 import base64
 import html
-import io
 import json
 import math
 import time
@@ -54,7 +53,7 @@ from gyroarray import outputs
 from gyroarray.errors import InputError
 from gyroarray.limits import read_regular
 from gyroarray.reports import decision as dec
-from gyroarray.reports.design_plots import design_fig, plot_series
+from gyroarray.reports.design_plots import _figure, _png, design_fig, plot_series
 from gyroarray.reports.hypotheses import check_entry, run_check
 from gyroarray.scenarios.runner import MANIFEST, load_results
 from gyroarray.scenarios.sweep import load_sweep
@@ -317,21 +316,6 @@ def paper_vs_model(rows: pd.DataFrame, experiments: list[dict]) -> list[dict]:
 
 
 # -- figures -------------------------------------------------------------------
-
-def _figure(w=9.0, h=5.0, ncols=1):
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
-    fig = Figure(figsize=(w, h), layout="constrained")
-    FigureCanvasAgg(fig)
-    axs = fig.subplots(1, ncols, squeeze=False)[0]
-    return fig, axs
-
-
-def _png(fig, dpi=96) -> bytes:
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=dpi)
-    return buf.getvalue()
-
 
 def _ranking_fig(ranking: pd.DataFrame) -> bytes:
     """Best 1σ vs N per scheme and estimator, one panel per motion, at one ρ (the first

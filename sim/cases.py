@@ -27,7 +27,7 @@ from gyroarray.layout import Layout
 from gyroarray.measurement import Measurement
 from gyroarray.sim.lab import lab_run, table_profile
 from gyroarray.sim.model import ModelEntry, NoiseModel
-from gyroarray.sim.protocol import Effect
+from gyroarray.effects.protocol import Effect
 from gyroarray.units import RAD_PER_DEG
 
 __all__ = ["LAYOUTS", "EFFECTS", "NOT_SCORED", "draw_effect", "Case", "single_effect_case"]

@@ -3,7 +3,7 @@
 Every effect of ``shared/spec/effects.md`` is one object of the registry
 (:data:`REGISTRY`, :mod:`gyroarray.effects`: one module per effect, plus
 plugins), looked up by its spec name; the protocol it follows (parameters,
-stage, ``simulate``, fit side) is :mod:`gyroarray.sim.protocol`. A noise
+stage, ``simulate``, fit side) is :mod:`gyroarray.effects.protocol`. A noise
 model (:class:`gyroarray.sim.model.NoiseModel`) is a list of entries naming
 effects; :func:`simulate_readings` runs the chain below over it. Adding a
 missing effect is one new module in ``effects/`` (or a plugin file).
@@ -100,8 +100,8 @@ import numpy as np
 from gyroarray.effects import REGISTRY, did_you_mean, effect_names, get_effect
 from gyroarray.errors import InputError
 from gyroarray.layout import Layout
-from gyroarray.sim.protocol import Active, ChainState, Effect, Stage, Streams, SimContext
-from gyroarray.sim.sensor import gravity_specific_force
+from gyroarray.effects.protocol import Active, ChainState, Effect, Stage, Streams, SimContext
+from gyroarray.sensor import gravity_specific_force
 
 __all__ = ["REGISTRY", "effect_names", "get_effect", "did_you_mean", "simulate_readings", "sim_context",
            "simulate_on", "resolve"]

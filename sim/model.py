@@ -46,7 +46,7 @@ import numpy as np
 from gyroarray.errors import InputError
 from gyroarray.layout import UNIT_NORM_TOL
 from gyroarray.effects import REGISTRY, did_you_mean, get_effect
-from gyroarray.sim.protocol import Effect, Param
+from gyroarray.effects.protocol import Effect, Param
 from gyroarray.limits import MAX_RATE_DEG_S
 from gyroarray.tomlio import load_toml
 

@@ -39,7 +39,7 @@ import numpy as np
 from gyroarray.errors import InputError
 
 from gyroarray.sim.profiles import Profile, load_profile
-from gyroarray.sim.sensor import rigid_body_specific_force
+from gyroarray.sensor import rigid_body_specific_force
 from gyroarray.sim.table import RateTable, TableParams, Tracking, n_samples, rotation_matrices
 
 __all__ = ["TRUTH_SCHEMA_VERSION", "Truth", "TruthMeta", "compute_truth", "project",

@@ -13,6 +13,8 @@ public conformance check accepts the example and rejects a broken effect.
 from __future__ import annotations
 
 import json
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -102,6 +104,21 @@ def test_a_plugin_cannot_replace_a_builtin(tmp_path, capsys):
     notpy.write_text("")
     code, _, err = run(capsys, "diagnose", "nothing.csv", "--plugin", notpy)
     assert code == 2 and "ending in .py" in err
+
+
+def test_the_former_protocol_path_gives_the_same_objects():
+    """``gyroarray.sim.protocol`` (the protocol's former home) and ``gyroarray.sim.sensor`` re-export the
+    very objects of ``gyroarray.effects.protocol`` and ``gyroarray.sensor``; each protocol path imports
+    first in a fresh interpreter (the registry the package runs needs nothing from ``sim``)."""
+    import gyroarray.effects.protocol as new
+    import gyroarray.sensor as new_sensor
+    import gyroarray.sim.protocol as old
+    import gyroarray.sim.sensor as old_sensor
+    assert old.Effect is new.Effect
+    for a, b in ((old, new), (old_sensor, new_sensor)):
+        assert a.__all__ == b.__all__ and all(getattr(a, k) is getattr(b, k) for k in b.__all__)
+    for mod in ("gyroarray.sim.protocol", "gyroarray.effects.protocol"):
+        subprocess.run([sys.executable, "-c", f"import {mod}; {mod}.Effect"], check=True)
 
 
 def test_the_example_passes_the_public_conformance_check():

@@ -42,8 +42,8 @@ from scipy import special
 
 from gyroarray.analysis.effect_fit import EffectFit, chi2_to_z
 from gyroarray.analysis.regress import NotIdentifiableError, gls_rw
+from gyroarray.effects.protocol import Param, RegressionEffect, Stage, explains_away, identity, with_term
 from gyroarray.errors import InputError
-from gyroarray.sim.protocol import Param, RegressionEffect, Stage, explains_away, identity, with_term
 from gyroarray.units import deg_h_to_rad_s, rad_s_to_deg_h
 
 
