@@ -79,7 +79,7 @@ def _validate(cls: type[Effect], source: str) -> Effect:
     if not isinstance(name, str) or not name.isidentifier() or name != name.lower():
         bad(f"name must be a lower-case identifier, got {name!r}")
     if not isinstance(cls.params, tuple) or not all(isinstance(p, Param) for p in cls.params):
-        bad("params must be a tuple of gyroarray.sim.protocol.Param")
+        bad("params must be a tuple of gyroarray.effects.protocol.Param")
     if len({p.name for p in cls.params}) != len(cls.params) or any(p.name == "gyro" for p in cls.params):
         bad("parameter names must be unique and not 'gyro'")
     if not isinstance(cls.stage, Stage) or not isinstance(cls.kind, Kind):
@@ -195,7 +195,7 @@ def load_plugin(path) -> list[str]:
         raise InputError(f"the plugin raised {type(err).__name__}: {err}", file=where, line=line) from None
     classes = _effect_classes(module)
     if not classes:
-        raise InputError("the plugin defines no effect (a subclass of gyroarray.sim.protocol.Effect "
+        raise InputError("the plugin defines no effect (a subclass of gyroarray.effects.protocol.Effect "
                          "with a name)", file=where)
     names = [register(cls, source=where).name for cls in classes]
     _PLUGINS[key] = names
