@@ -67,8 +67,13 @@ class Case:
     layout_name: str
 
 
-def single_effect_case(effect: str, seed: int, case: int | None = None) -> Case:
-    """The lab run of ``effect`` hidden in a random baseline (``case`` defaults to the effect's index)."""
+def single_effect_case(effect: str, seed: int, case: int | None = None, noise_seed: int | None = None) -> Case:
+    """The lab run of ``effect`` hidden in a random baseline (``case`` defaults to the effect's index).
+
+    ``noise_seed``: the same layout and parameters (drawn from ``(seed, case)``) recorded with
+    another noise realisation, from ``numpy.random.default_rng([seed, case, noise_seed])``;
+    None: the case's own generator draws the record too.
+    """
     case = EFFECTS.index(effect) if case is None else case
     rng = np.random.default_rng([seed, case])
     scheme, n, alpha = LAYOUTS[int(rng.integers(len(LAYOUTS)))]
@@ -79,6 +84,8 @@ def single_effect_case(effect: str, seed: int, case: int | None = None) -> Case:
     max_rate = np.abs(table_profile(t, STATIC_S, MOTION_S) @ np.asarray(layout.axes).T).max(axis=0) / RAD_PER_DEG
     gyro, params = draw_effect(effect, rng, n, max_rate)
     model = NoiseModel(tuple(base) + (ModelEntry(effect, gyro, params),))
+    if noise_seed is not None:
+        rng = np.random.default_rng([seed, case, int(noise_seed)])
     m = lab_run(model, layout, rng, rate_hz=RATE_HZ, static_s=STATIC_S, motion_s=MOTION_S, tail_s=TAIL_S,
                 protocol="table")
     return Case(m, effect, gyro, params, f"S{scheme} N{n}")

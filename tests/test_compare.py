@@ -206,6 +206,20 @@ RIVALS = {
 }
 
 
+def test_case_noise_seed_redraws_the_noise_only():
+    # seed 103's gauss_markov case (S2 N6, gyro 1, σ 52.04 deg/h, τc 1.301 s): another noise
+    # seed keeps the layout and the hidden parameters and changes every output sample; None is
+    # the case as scored (bit for bit)
+    c = single_effect_case("gauss_markov", 103)
+    same = single_effect_case("gauss_markov", 103, noise_seed=None)
+    other = single_effect_case("gauss_markov", 103, noise_seed=1)
+    assert (c.layout_name, c.gyro) == (other.layout_name, other.gyro) == ("S2 N6", 1)
+    assert c.params == other.params and c.params["tau_s"] == pytest.approx(1.3012, abs=1e-4)
+    assert np.array_equal(c.measurement.gyro_deg_s, same.measurement.gyro_deg_s)
+    assert np.array_equal(c.measurement.ref_deg_s, other.measurement.ref_deg_s)
+    assert np.all(c.measurement.gyro_deg_s != other.measurement.gyro_deg_s)
+
+
 # every effect once (seed 100) and the rival cases; the parameters are checked
 # by `make score` (benchmarks/diagnosis_score.py), which reports them per case
 SHAPED = sorted({(e, 100) for e in EFFECTS} | set(RIVALS))
