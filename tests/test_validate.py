@@ -101,3 +101,42 @@ def test_a_filter_read_from_the_spectrum_is_compared_with_the_model_not_taken_as
     other = ModelComparison(_filtered(5.0, 2), fitted, n_runs=10).validate()
     worst = other.candidates[0]
     assert (worst.effect, worst.gyro) == ("bandwidth", 3) and other.significant(worst), worst.evidence
+
+
+def test_a_model_whose_white_noise_is_in_another_term_is_not_read_against_zero():
+    """A fitted model may carry its white noise in a short Gauss–Markov term and have N = 0 (the
+    ADIS16405's gyro 3 did). Its own record, validated, is predicted: the tests whiten with the
+    record's white level (its Allan fit), not with r = N²/dt = 0, which made a 3.7σ line a false
+    alarm of probability 1e-4278. Closed forms that bracket that white level: sample to sample a
+    Gauss–Markov of σ and τc has first differences of variance 2σ²(1 − e^(−dt/τc)) (r = σ²(1 − φ)),
+    and far beyond τc it reads as white noise of N² = 2σ²τc (r = 2σ²τc/dt); the Allan fit over
+    the octaves between lies between the two."""
+    sigma_deg_h, tau_s = 600.0, 0.04
+    model = NoiseModel((ModelEntry("arw", None, {"n_deg_rt_h": 0.0}), ModelEntry("rrw", None, {"k_deg_h_rt_h": 5.0}),
+                        ModelEntry("gauss_markov", None, {"sigma_deg_h": sigma_deg_h, "tau_s": tau_s})))
+    m = lab_run(model, LAYOUT, np.random.default_rng(4), static_s=300.0, motion_s=240.0, tail_s=60.0)
+    a = ModelComparison(m, model, n_runs=20).validate()
+    s2 = math.radians(sigma_deg_h / 3600.0) ** 2                                        # [rad²/s²]
+    lo, hi = s2 * (1.0 - math.exp(-m.dt_s / tau_s)), 2.0 * s2 * tau_s / m.dt_s
+    assert np.all((lo <= a.r) & (a.r <= hi)), (a.r, lo, hi)
+    # a noise that is all Gauss–Markov at τc = 2 samples is not white at the sample level, so the
+    # regressions' tests are not N(0, 1) here (up to z ≈ 17 on the spectral one); whitened with
+    # r = 0 they were beyond 1e5
+    worst = max(t.z for t in a.tests if t.kind == "effect" and np.isfinite(t.z))
+    assert worst < 50.0, worst
+
+
+def test_a_line_found_again_elsewhere_is_as_evident_as_the_line():
+    """A model's line (sinusoid, 2.0 Hz) that the new record has at 2.3 Hz: the refit on the residual
+    finds the 2.3 Hz line; its 'error' against the model's frequency is thousands of its σ, but the
+    prediction error is no more evident than the line left in the residual (the refit's own z)."""
+    base = (ModelEntry("arw", None, {"n_deg_rt_h": 0.15}), ModelEntry("rrw", None, {"k_deg_h_rt_h": 5.0}))
+    line = {"amp_deg_s": 0.01, "phase_deg": 0.0}
+    monday_model = NoiseModel(base + (ModelEntry("sinusoid", 1, {**line, "freq_hz": 2.0}),))
+    tuesday = lab_run(NoiseModel(base + (ModelEntry("sinusoid", 1, {**line, "freq_hz": 2.3}),)), LAYOUT,
+                      np.random.default_rng(5), static_s=300.0, motion_s=240.0, tail_s=60.0)
+    a = ModelComparison(tuesday, monday_model, n_runs=10).validate()
+    t = next(t for t in a.tests if t.effect == "sinusoid" and t.gyro == 1)
+    assert t.fit.params["freq_hz"] == pytest.approx(2.0, abs=0.35)        # one of the two lines
+    assert t.z <= t.extra["z_without_model_sigma"] and not a.consistent
+    assert t.z < 1e3
