@@ -113,3 +113,20 @@ def test_fitted_scale_factor_does_not_depend_on_the_smoothing(smooth_s):
     f = after.fits[("scale_factor", 3)]
     plain_ppm = _plateau_ppm(m, int(round(after.fits[("latency", 3)].params["delay_s"] / m.dt_s)))
     assert abs(f.params["ppm"] - plain_ppm) <= 2.0 * f.sigma["ppm"], (f.params, f.sigma, plain_ppm)
+
+
+def test_without_the_flag_the_noisy_reference_is_instrumented_and_said():
+    """No --ref-smooth: the reference's own noise is found (analysis.reference_noise), the note
+    says so, and the regressions are instrumented anyway. The scale factor candidate is within
+    1500 ppm (about 2σ) of the plateau regression, where plainly it read -10 200 ppm; the
+    latency (12.15 ms) within the issue's independent 10–14 ms."""
+    m = read_measurement(MPU, repair=True)
+    comp = ModelComparison(m, n_runs=3)
+    assert comp.ref_instrument is not None and comp.ref_raw is comp.ref
+    a = comp.analyse()
+    assert any("noise of its own" in n and "as instrument" in n for n in a.notes)
+    sf = next(t for t in a.candidates if (t.effect, t.gyro) == ("scale_factor", 3))
+    assert sf.fit.extra["instrumented"] and a.significant(sf)
+    assert abs(sf.fit.params["ppm"] - _plateau_ppm(m, 1)) <= 1500.0, sf.fit.params
+    lat = next(t for t in a.candidates if (t.effect, t.gyro) == ("latency", 3))
+    assert 0.010 <= lat.fit.params["delay_s"] <= 0.014, lat.fit.params
