@@ -565,6 +565,7 @@ class ModelComparison:
         self.longest = max(runs, key=lambda r: r[1] - r[0])
         self.moving = self.ref is not None and bool(np.any(~self.static))
         if self.moving and self.ref_raw is None:
+            assert self.ref is not None                # moving: the reference says so
             own = reference_own_noise(self.ref, self.y, self.H, self.dt)
             if own:
                 # errors in variables: the regressions on the reference are instrumented by it
