@@ -77,9 +77,11 @@ def reference_own_noise(ref_rad_s, gyro_rad_s, axes, dt_s: float) -> list[dict]:
             continue
         f, prr = signal.welch(r, fs=fs, nperseg=nper)
         _, pgg = signal.welch(est[:, a], fs=fs, nperseg=nper)
-        _, coh = signal.coherence(r, est[:, a], fs=fs, nperseg=nper)
-        own = prr * (1.0 - coh)
-        ok = pgg > 0
+        _, prg = signal.csd(r, est[:, a], fs=fs, nperseg=nper)
+        ok = (pgg > 0) & (prr > 0)
+        # P_rr·(1 − C), C = |P_rg|²/(P_rr·P_gg) the magnitude-squared coherence (scipy's coherence
+        # from the same three spectra)
+        own = np.where(ok, prr - np.abs(prg) ** 2 / np.where(ok, pgg, 1.0), 0.0)
         ratio = np.where(ok, own / np.where(ok, pgg, 1.0), 0.0)
         over = ratio > RATIO
         frac = float(np.mean(over))

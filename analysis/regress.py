@@ -899,6 +899,11 @@ def fit_misalignment(e, omega_ref_rad_s, h, time_s, dt_s: float, r: float, q: fl
 
 # -- latency ---------------------------------------------------------------------
 
+def _delay_bracket(d: float, dt: float) -> tuple[float, float]:
+    """Where a delay refined from the linear estimate d [s] is looked for [s]."""
+    return max(0.0, 0.5 * d - dt), 2.0 * d + 2.0 * dt
+
+
 def _refine_delay(wh, ze: np.ndarray, e: np.ndarray, u: np.ndarray, du: np.ndarray, d: float,
                   dt: float) -> tuple:
     """Delay by χ² of the fractionally delayed rate: grid from the linear estimate d, Brent, one
@@ -913,7 +918,7 @@ def _refine_delay(wh, ze: np.ndarray, e: np.ndarray, u: np.ndarray, du: np.ndarr
         zr = ze - wh.whiten(model(dd))
         return float(zr @ zr)
 
-    lo, hi = max(0.0, 0.5 * d - dt), 2.0 * d + 2.0 * dt
+    lo, hi = _delay_bracket(d, dt)
     grid = np.linspace(lo, hi, 9)
     vals = np.array([chi2(g) for g in grid])
     k = int(np.argmin(vals))
@@ -951,7 +956,7 @@ def _refine_delay_iv(wh, e: np.ndarray, u: np.ndarray, du: np.ndarray, dui: np.n
                        -fractional_delay(dui[:, None], [dd / dt])[:, 0])
         return zg[:, 0], zg[:, 1], zg[:, 2]
 
-    d0, lo, hi = d, max(0.0, 0.5 * d - dt), 2.0 * d + 2.0 * dt      # the bracket of the χ² search
+    d0, (lo, hi) = d, _delay_bracket(d, dt)                           # the χ² search's bracket
     for _ in range(6):
         zj, zr, zi = at(d)
         step = float(zi @ zr) / float(zi @ zj)

@@ -835,6 +835,8 @@ class RegressionEffect(Effect):
         """
         if ctx.ref_raw is None:
             return e, ctx.ref, None
+        if ctx.ref_raw is ctx.ref:                # instrumented, the residual as recorded already
+            return e, ctx.ref, ctx.ref_instrument
         h = ctx.H[gyro - 1]
         return e - (ctx.ref_raw - ctx.ref) @ h, ctx.ref_raw, ctx.ref_instrument
 

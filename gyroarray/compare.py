@@ -445,6 +445,15 @@ def _own_noise_note(d: dict, instrument_s: float) -> str:
             "(--ref-smooth SECONDS smooths it for them too)")
 
 
+def _smoothed_and_instrument(ref: np.ndarray, length: int) -> tuple[np.ndarray, np.ndarray]:
+    """The reference's centred mean over ``length`` samples and the instrument of the regressions
+    on it: that mean taken twice (a triangle), whose side lobes pass the square of the single
+    mean's (a reference's noise line at 15 Hz: 0.2 % instead of 4.7 % through 21 samples at
+    100 Hz); what it does to the turns biases nothing, being only in the instrument."""
+    once = _centred_mean(ref, length)
+    return once, _centred_mean(once, length)
+
+
 def _centred_mean(x: np.ndarray, length: int) -> np.ndarray:
     """Centred moving average of each column over ``length`` samples (odd; shrinking at the ends)."""
     if length <= 1:
@@ -516,11 +525,7 @@ class ModelComparison:
         if ref_smooth_s and self.ref is not None:
             self.ref_raw = self.ref
             k = max(int(round(ref_smooth_s / self.dt)), 1)
-            self.ref = _centred_mean(self.ref, k)
-            # the instrument: the mean taken twice (a triangle), whose side lobes pass the square
-            # of the single mean's (a reference's noise line at 15 Hz: 0.2 % instead of 4.7 %
-            # through 21 samples at 100 Hz); what it does to the turns biases nothing
-            self.ref_instrument = _centred_mean(self.ref, k)
+            self.ref, self.ref_instrument = _smoothed_and_instrument(self.ref, k)
             self.setup_notes.append(
                 f"the reference rate is smoothed by a centred {ref_smooth_s:g} s moving average (--ref-smooth): "
                 "its own noise is not read as the gyros'; motion faster than about "
@@ -572,7 +577,7 @@ class ModelComparison:
                 # averaged twice over INSTRUMENT_S, the other tests read it as recorded
                 k = max(int(round(INSTRUMENT_S / self.dt)), 5)
                 self.ref_raw = self.ref
-                self.ref_instrument = _centred_mean(_centred_mean(self.ref, k), k)
+                self.ref_instrument = _smoothed_and_instrument(self.ref, k)[1]
                 self.setup_notes += [_own_noise_note(d, k * self.dt) for d in own]
         self._attitude = None
         self._force: np.ndarray | None = None
@@ -754,18 +759,24 @@ class ModelComparison:
         white column so (what the model shapes at short τ, a sensor's own filter,
         is not white noise: :meth:`_allan_shape`).
         """
+        r, base = self._white_r(e, gyro, min_tau_s, white_shape)
+        k_up = rrw_deg_h_rt_h_to_rad_s_rt_s(base[1].params["k_deg_h_rt_h"]
+                                            + 2.0 * base[1].sigma.get("k_deg_h_rt_h", 0.0))
+        q_up = max(k_up ** 2 * self.dt, 1e-12 * r)
+        q_ml = _ml_q(e, r, q_up, np.ones(self.n, bool) if self.continuous else self.static)
+        return r, max(q_ml, q_up)
+
+    def _white_r(self, e: np.ndarray, gyro: int, min_tau_s: float = 0.0, white_shape=None) -> tuple:
+        """(r = N²/dt [rad²/s²], the baseline Allan fit it came from) of :meth:`_noise_rq`: N from the
+        fit of the longest static part, or, on a record that never stands still, from a
+        high-pass (the robust spread of the first differences)."""
         a, b = self.longest
         base = fit_gyro_noise(e[a:b], self.dt, gyro, min_tau_s=min_tau_s, white_shape=white_shape)
         n_rad = arw_deg_rt_h_to_rad_rt_s(base[0].params["n_deg_rt_h"])
         if self.continuous:                    # the white level from a high-pass: first differences
             d = np.diff(e)
             n_rad = 1.4826 * float(np.median(np.abs(d - np.median(d)))) / math.sqrt(2.0) * math.sqrt(self.dt)
-        k_up = rrw_deg_h_rt_h_to_rad_s_rt_s(base[1].params["k_deg_h_rt_h"]
-                                            + 2.0 * base[1].sigma.get("k_deg_h_rt_h", 0.0))
-        r = max(n_rad ** 2 / self.dt, 1e-30)
-        q_up = max(k_up ** 2 * self.dt, 1e-12 * r)
-        q_ml = _ml_q(e, r, q_up, np.ones(self.n, bool) if self.continuous else self.static)
-        return r, max(q_ml, q_up)
+        return max(n_rad ** 2 / self.dt, 1e-30), base
 
     # -- the chain, step by step -----------------------------------------------
     def analyse(self, model: NoiseModel | None = None) -> Analysis:
@@ -850,16 +861,17 @@ class ModelComparison:
 
     def _test_white_level(self, r_model: np.ndarray, E: np.ndarray) -> np.ndarray:
         """The white variance the validation's tests whiten with [rad²/s²]: the larger of the
-        model's ARW and this record's white level (its Allan fit, as :meth:`analyse` reads it).
+        model's ARW and this record's white level (:meth:`_white_r`, as the calibration reads it).
 
         A test's white level is the noise its statistic is judged against, not a parameter the
         validation checks (the band does that). A model may carry its white noise in another
         term: the ADIS16405's gyro 3, fitted with a 0.04 s Gauss–Markov hump, has N = 0, and
         whitening with r = 0 made a 0.003 deg/s line (3.7σ by a plain least-squares fit) a
-        false alarm of probability 1e-4278."""
+        false alarm of probability 1e-4278. The record's level is its baseline fit without the
+        model's shapes (a filter's white shape would raise it by a few per cent)."""
         r = np.array(r_model, dtype=float, copy=True)
         for g in range(self.N):
-            r[g] = max(r[g], self._noise_rq(E[:, g], g + 1)[0])
+            r[g] = max(r[g], self._white_r(E[:, g], g + 1)[0])
         return r
 
     def _model_rq(self, model: NoiseModel) -> tuple[np.ndarray, np.ndarray]:
