@@ -9,8 +9,7 @@ import numpy as np
 from scipy import optimize
 
 from gyroarray.analysis.effect_fit import EffectFit
-from gyroarray.analysis.psd_fit import (EFFECTIVE_TESTS, filter_z, filtered_white_avar_ratio, fit_psd,
-                                        shortest_clean_tau)
+from gyroarray.analysis.psd_fit import EFFECTIVE_TESTS, filter_z, filtered_white_avar_ratio, fit_psd
 from gyroarray.analysis.regress import _RWWhitener
 from gyroarray.effects import _draw
 from gyroarray.errors import InputError
@@ -75,14 +74,14 @@ class Bandwidth(RegressionEffect):
         return params
 
     def noise_term(self, ctx, entry):
-        """The gyro's Allan fits start where the filter has let the white noise be (the shortest
-        octave τ at which filtered white noise has an Allan variance within 5 % of the
-        unfiltered, :func:`shortest_clean_tau`), and their white column is the filtered one
-        (:func:`filtered_white_avar_ratio`): N is read before the filter, not a few per cent
-        low, and the model's band at short τ matches the record."""
+        """The gyro's Allan fits read every τ with the filtered white column
+        (:func:`filtered_white_avar_ratio`, exact for the sampled filter): N is read before the
+        filter, and where the filter acts most (τ = dt, where the record's ADEV is known to a
+        fraction of a per cent) the model's band is the record's. Started at the 5 %-clean τ
+        instead, N had 2.5× the spread and the band at τ = dt failed on 3 of 12 scored cases
+        (z up to 6.6), while a quantization after the filter was not seen at all."""
         fc, order = float(entry.params["cutoff_hz"]), int(entry.params["order"])
-        return {"min_tau_s": shortest_clean_tau(fc, order, ctx.dt),
-                "white_shape": partial(filtered_white_avar_ratio, fc, order, ctx.dt)}
+        return {"white_shape": partial(filtered_white_avar_ratio, fc, order, ctx.dt)}
 
     def simulate(self, state, act, streams):
         try:

@@ -339,11 +339,6 @@ def _noise_term_kwargs(ctx: FitContext, entries, gyro: int) -> dict:
                 kw[key] = term[key]
         if "min_tau_s" in term:
             kw["min_tau_s"] = max(kw.get("min_tau_s", 0.0), term["min_tau_s"])
-    if "q" in kw["model_terms"] and "white_shape" in kw:
-        # quantization acts after the sensor's filter (spec) and lives at the shortest τ: started
-        # above them its Q is not seen, and the band at τ = dt showed twice the record's ADEV.
-        # The white column carries the filter's exact shape, so the fit can read every τ.
-        kw.pop("min_tau_s", None)
     return kw
 
 
