@@ -220,6 +220,20 @@ def test_case_noise_seed_redraws_the_noise_only():
     assert np.all(c.measurement.gyro_deg_s != other.measurement.gyro_deg_s)
 
 
+def test_a_scale_factor_after_a_curvature_is_tested_jointly():
+    """Seed 109's curvature (gyro 1, k2 = −2.6e-5 per deg/s, no scale factor): after the fit its
+    gyro's scale-factor test is the joint fit's (the slope the curvature's fit left behind, over
+    its own σ; :func:`test_a_slope_after_a_curvature_is_tested_with_the_joint_sigma` has the
+    statistics). Tested alone it read z = 4.17 and the right model was 'not consistent'."""
+    c = single_effect_case("scale_nonlinearity", 109)
+    _, after = ModelComparison(c.measurement, n_runs=20).fit([("scale_nonlinearity", c.gyro)])
+    sf = next(t for t in after.tests if (t.effect, t.gyro) == ("scale_factor", c.gyro))
+    assert sf.fit.extra["joint_with_nonlinearity"] and abs(sf.z) < 3.0
+    others = [t for t in after.tests if t.effect == "scale_factor" and t.gyro != c.gyro]
+    assert others and not any(t.fit.extra.get("joint_with_nonlinearity") for t in others)
+    assert after.consistent
+
+
 # every effect once (seed 100) and the rival cases; the parameters are checked
 # by `make score` (benchmarks/diagnosis_score.py), which reports them per case
 SHAPED = sorted({(e, 100) for e in EFFECTS} | set(RIVALS))
