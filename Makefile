@@ -59,7 +59,8 @@ bench: $(STAMP)
 # diagnose names a hidden effect right (not a speed benchmark; ~15 min), the
 # analytic predictor against 30 simulated runs of every quick-sweep design (~3 min), and
 # how often a pure random walk breaks the ADEV "point bound" on K (~3 min), and the 1σ
-# coverage of a Gauss-Markov fit through the chain on 40 drawn cases (~5 min)
+# coverage of a Gauss-Markov fit through the chain on 40 drawn cases (~5 min), and how often
+# the Gauss-Markov scan calls a hump in pure ARW + RRW (~8 min)
 score: $(STAMP)
 	mkdir -p bench_out
 	OPENBLAS_NUM_THREADS=1 $(PY) -m pytest -q -n $(WORKERS) -m slow
@@ -67,6 +68,7 @@ score: $(STAMP)
 	OPENBLAS_NUM_THREADS=1 $(PY) benchmarks/predictor_check.py --replicates 30 --json bench_out/predictor_check.json
 	OPENBLAS_NUM_THREADS=1 $(PY) benchmarks/rrw_point_bound.py --records 40
 	OPENBLAS_NUM_THREADS=1 $(PY) benchmarks/gm_tau_coverage.py --cases 40 --json bench_out/gm_tau_coverage.json
+	OPENBLAS_NUM_THREADS=1 $(PY) benchmarks/gm_null_tail.py --records 3000 --json bench_out/gm_null_tail.json
 
 # mypy on the package as installed: the folders mapped by pyproject.toml's package-dir are
 # linked into build/typecheck/gyroarray (mypy cannot read the mapping itself), ~20 s.
