@@ -234,6 +234,29 @@ def test_a_scale_factor_after_a_curvature_is_tested_jointly():
     assert after.consistent
 
 
+def test_spikes_are_counted_at_the_noise_level_of_a_burst_in_the_model():
+    """Seed 111's burst (180.65–439.29 s, variance × 5.70, every gyro). With the burst fitted,
+    no gyro shows spikes: the count reads the record at the model's level. Read as it is, the
+    running median at the burst's edges mixed the two levels and gyro 3 showed 6 clusters
+    against 0.82 expected (z 3.69: the right model 'not consistent'). Outside check, plain
+    numpy: the first differences of gyro 3's residual have an excess kurtosis of about 3 (a
+    two-level mixture: 3·(p·r² + 1 − p)/(p·r + 1 − p)² − 3 = 2.8 at p = 0.108, r = 5.7), and
+    with the window's samples divided by √5.70 it is within 0.1 of 0 (its sd is √(24/n) =
+    0.014)."""
+    from scipy import stats
+    c = single_effect_case("burst", 111)
+    _, after = ModelComparison(c.measurement, n_runs=20).fit([("burst", None)])
+    outl = [t for t in after.tests if t.effect == "outliers"]
+    assert len(outl) == 6 and max(t.z for t in outl) < 3.0
+    e = after.residual_rad_s[:, 2]
+    t = c.measurement.time_s - c.measurement.time_s[0]
+    inside = (t >= c.params["start_s"]) & (t < c.params["end_s"])
+    assert stats.kurtosis(np.diff(e)) > 2.0
+    w = np.where(inside, e / math.sqrt(c.params["variance_ratio"]), e)
+    assert abs(stats.kurtosis(np.diff(w))) < 0.1
+    assert after.consistent
+
+
 # every effect once (seed 100) and the rival cases; the parameters are checked
 # by `make score` (benchmarks/diagnosis_score.py), which reports them per case
 SHAPED = sorted({(e, 100) for e in EFFECTS} | set(RIVALS))
