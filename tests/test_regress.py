@@ -478,7 +478,7 @@ def test_a_slope_after_a_curvature_is_tested_with_the_joint_sigma():
     joint slope. Tested with the joint fit (what ``scale_factor`` does with a curvature of its
     gyro in the model) its z has sd 1: 400 draws put a right sd in [0.90, 1.10] with 95.4 %
     (sd of a sample sd ≈ 1/√800). Tested alone, as before, the sd is σ_joint/σ_alone, read off
-    the same fits (here about 3): a third of such records had a 'significant' scale factor."""
+    the same fits (here about 12, rates of 40–80 deg/s): 81 % of such records had |z| > 3."""
     n, dt = 2000, 0.02
     t = np.arange(n) * dt
     w = np.zeros((n, 3))
