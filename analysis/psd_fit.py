@@ -210,11 +210,14 @@ def fit_psd(x, dt_s: float) -> PsdFit:
     nyq = 0.5 / dt
     fcs = np.geomspace(_LOWEST * nyq, _TOP * nyq, int(_PER_DECADE * math.log10(_TOP / _LOWEST)) + 1)
 
+    def cols_at(fc: float, order: int, family: str) -> np.ndarray:
+        """The (W, F, R) columns through the filter's |H|² at one cut-off."""
+        ff = f if family == "continuous" else bandwidth_warped_frequency(f, fc, dt)
+        return base * (np.abs(bandwidth_response(ff, fc, order)) ** 2)[:, None]
+
     def fit_at(fc: float, order: int, family: str) -> tuple[np.ndarray, float]:
         """(W, F, R) and ℓ of the filter model at one cut-off."""
-        ff = f if family == "continuous" else bandwidth_warped_frequency(f, fc, dt)
-        h2 = np.abs(bandwidth_response(ff, fc, order)) ** 2
-        return _linear_ml(p, base * h2[:, None], nu)
+        return _linear_ml(p, cols_at(fc, order, family), nu)
 
     prof = {}
     best: tuple[float, Any, Any, Any, Any] = (-math.inf, None, None, None, None)
@@ -266,11 +269,7 @@ def fit_psd(x, dt_s: float) -> PsdFit:
     # about the fit more than S·χ²_ν/ν does, and the profile's curvature alone then claims a
     # precision the record does not have (the ADIS16405's gyro 3: ±0.08 Hz on each half of the
     # record, whose cut-offs differ by 1.1 Hz; dispersion 600–700)
-    if cb is c0:
-        s_best = base @ c0
-    else:
-        ff = f if family == "continuous" else bandwidth_warped_frequency(f, fc, dt)
-        s_best = (base * (np.abs(bandwidth_response(ff, fc, order)) ** 2)[:, None]) @ cb
+    s_best = base @ c0 if cb is c0 else cols_at(fc, order, family) @ cb
     pearson = (p / np.maximum(s_best, 1e-300) - 1.0) * math.sqrt(nu / 2.0)
     dispersion = float((1.4826 * np.median(np.abs(pearson - np.median(pearson)))) ** 2)
     if math.isfinite(sigma_fc) and dispersion > 1.0:

@@ -69,8 +69,11 @@ class Outliers(Effect):
     def fit(self, ctx, gyro, E):
         g = int(gyro)
         in_model = any(e.effect == self.name and e.gyro == g for e in ctx.entries(self.name))
-        # in the model its spikes are already out of the residual: they are counted on the raw one
-        x = self._at_level(ctx, ctx.E0 if in_model else E)[:, g - 1]
+        # in the model its spikes are already out of the residual: they are counted on the raw one.
+        # A spike is judged against the noise around it (a running median), and at a burst's
+        # edges that median mixes the two levels: the first samples inside read as a crowd of
+        # spikes (scored burst cases, right model: z 3.7 on one gyro). The model knows the level.
+        x = ctx.at_model_level(ctx.E0 if in_model else E, ctx.t)[:, g - 1]
         sp = self._spikes(ctx, g, x, "raw" if in_model else "residual")
         span_h = x.size * ctx.dt / _S_PER_H
         rate = sp.rate * x.size / span_h if span_h > 0 else 0.0
@@ -93,17 +96,6 @@ class Outliers(Effect):
 
     def test(self, ctx, gyro):
         return self.fit(ctx, gyro, ctx.E)
-
-    @staticmethod
-    def _at_level(ctx, x: np.ndarray) -> np.ndarray:
-        """The record (n, N) brought to the model's stationary noise level (``Effect.whiten``: a
-        burst in the model, a fault's noise ratio). A spike is judged against the noise around it
-        (a running median), and at a burst's edges that median mixes the two levels: the first
-        samples inside read as a crowd of spikes (scored burst cases, right model: z 3.7 on one
-        gyro, excess kurtosis 3.1). The model knows the level; the count reads it."""
-        for e in ctx.model or ():
-            x = ctx.effect(e.effect).whiten(ctx, e, x, ctx.t)
-        return x
 
     def _clean_index(self, ctx, entry, x: np.ndarray) -> np.ndarray:
         return find_spikes(x).index

@@ -586,8 +586,7 @@ class Effect:
 
     def noise_term(self, ctx: "FitContext", entry: "ModelEntry") -> dict:
         """For an effect in the model: what it changes in its gyro's Allan fit (a term of the
-        baseline, ``terms``/``gm_tau_s``; the shortest τ to use, ``min_tau_s``; the white
-        column's shape, ``white_shape(m)``, see
+        baseline, ``terms``/``gm_tau_s``; the white column's shape, ``white_shape(m)``, see
         :func:`~gyroarray.analysis.stochastic_fit.fit_gyro_noise`)."""
         return {}
 
@@ -792,6 +791,24 @@ class FitContext:
         """Fits of the model's per-gyro noise terms of ``gyro`` (beyond the baseline)."""
         return self.services.noise_terms(gyro)
 
+    def at_model_level(self, x: np.ndarray, t: np.ndarray) -> np.ndarray:
+        """A record (m, N) at times ``t`` [s] brought to the model's stationary noise level: every
+        entry's :meth:`Effect.whiten` (a burst, a fault's noise ratio), in model order."""
+        for e in self.model or ():
+            x = self.effect(e.effect).whiten(self, e, x, t)
+        return x
+
+    def fit_prediction(self, effect: Effect, fit: "EffectFit") -> np.ndarray | None:
+        """What ``fit`` of a predicting ``effect`` would take out of the record as a model entry
+        (n, N) [rad/s], or None (the effect does not predict, or its parameters make no entry)."""
+        if not effect.predicts:
+            return None
+        try:
+            entry = self.model_entry(effect.name, fit.gyro, effect.clip(effect.entry_params(fit, effect.placeholder())))
+        except InputError:
+            return None
+        return effect.predict(self, entry)
+
     def without(self, prediction: np.ndarray) -> "FitContext":
         """The same analysis with ``prediction`` (n, N) [rad/s] taken out of the residual
         (and of the stochastic record): what the record would show without it."""
@@ -906,14 +923,7 @@ def explains_away(mine_effect: Effect, mine: "EffectFit", other: "EffectFit", ct
     Gauss–Markov one), and their fit statistics are not comparable; what is
     comparable is whether one still sees the other once it is removed.
     """
-    if not mine_effect.predicts:
-        return None
-    try:
-        entry = ctx.model_entry(mine_effect.name, mine.gyro,
-                                mine_effect.clip(mine_effect.entry_params(mine, mine_effect.placeholder())))
-    except InputError:
-        return None
-    pred = mine_effect.predict(ctx, entry)
+    pred = ctx.fit_prediction(mine_effect, mine)
     if pred is None:
         return None
     left = ctx.effect(other.effect).test(ctx.without(pred), other.gyro)

@@ -326,8 +326,7 @@ def _lowpass_effects() -> list[str]:
 
 def _noise_term_kwargs(ctx: FitContext, entries, gyro: int) -> dict:
     """:func:`fit_gyro_noise`'s keywords from the gyro's model entries (``Effect.noise_term``):
-    their baseline terms, a Gauss–Markov τc, the shortest τ (the largest asked) and the white
-    column's shape."""
+    their baseline terms, a Gauss–Markov τc and the white column's shape."""
     kw: dict = {"model_terms": ()}
     for e in entries:
         if e.gyro != gyro:
@@ -337,8 +336,6 @@ def _noise_term_kwargs(ctx: FitContext, entries, gyro: int) -> dict:
         for key in ("gm_tau_s", "white_shape"):
             if key in term:
                 kw[key] = term[key]
-        if "min_tau_s" in term:
-            kw["min_tau_s"] = max(kw.get("min_tau_s", 0.0), term["min_tau_s"])
     return kw
 
 
@@ -738,8 +735,7 @@ class ModelComparison:
             q2[g] = self._noise_rq(clean[:, g], g + 1, **self._allan_shape(ctx, ctx.model, g + 1, 1))[1]
         return eff.fit(replace(ctx, q=q2), gyro, E)
 
-    def _noise_rq(self, e: np.ndarray, gyro: int, min_tau_s: float = 0.0,
-                  white_shape=None) -> tuple[float, float]:
+    def _noise_rq(self, e: np.ndarray, gyro: int, white_shape=None) -> tuple[float, float]:
         """White variance r = N²/dt and random-walk increment variance q = K²·dt [rad²/s²] of one gyro.
 
         r from the Allan fit of the longest static part (ARW is always well
@@ -750,23 +746,23 @@ class ModelComparison:
         and (b) the Allan fit's K + 2σ_K: a drift the Allan variance cannot
         tell from RRW (a flicker floor, a short record where K is 0 ± σ) must
         not make a slow regressor (temperature, ramp, Earth rate) significant.
-        ``min_tau_s``, ``white_shape``: the Allan fit starts there and reads its
-        white column so (what the model shapes at short τ, a sensor's own filter,
-        is not white noise: :meth:`_allan_shape`).
+        ``white_shape``: the Allan fit reads its white column so (what the model
+        shapes at short τ, a sensor's own filter, is not white noise:
+        :meth:`_allan_shape`).
         """
-        r, base = self._white_r(e, gyro, min_tau_s, white_shape)
+        r, base = self._white_r(e, gyro, white_shape)
         k_up = rrw_deg_h_rt_h_to_rad_s_rt_s(base[1].params["k_deg_h_rt_h"]
                                             + 2.0 * base[1].sigma.get("k_deg_h_rt_h", 0.0))
         q_up = max(k_up ** 2 * self.dt, 1e-12 * r)
         q_ml = _ml_q(e, r, q_up, np.ones(self.n, bool) if self.continuous else self.static)
         return r, max(q_ml, q_up)
 
-    def _white_r(self, e: np.ndarray, gyro: int, min_tau_s: float = 0.0, white_shape=None) -> tuple:
+    def _white_r(self, e: np.ndarray, gyro: int, white_shape=None) -> tuple:
         """(r = N²/dt [rad²/s²], the baseline Allan fit it came from) of :meth:`_noise_rq`: N from the
         fit of the longest static part, or, on a record that never stands still, from a
         high-pass (the robust spread of the first differences)."""
         a, b = self.longest
-        base = fit_gyro_noise(e[a:b], self.dt, gyro, min_tau_s=min_tau_s, white_shape=white_shape)
+        base = fit_gyro_noise(e[a:b], self.dt, gyro, white_shape=white_shape)
         n_rad = arw_deg_rt_h_to_rad_rt_s(base[0].params["n_deg_rt_h"])
         if self.continuous:                    # the white level from a high-pass: first differences
             d = np.diff(e)
@@ -929,11 +925,11 @@ class ModelComparison:
     @staticmethod
     def _allan_shape(ctx: FitContext, entries, gyro: int, it: int) -> dict:
         """What the gyro's model entries change in its calibration's Allan fit (none before they
-        are fitted): the shortest τ and the white column's shape (:func:`_noise_term_kwargs`)."""
+        are fitted): the white column's shape (:func:`_noise_term_kwargs`)."""
         if it == 0:
             return {}
         kw = _noise_term_kwargs(ctx, entries, gyro)
-        return {k: kw[k] for k in ("min_tau_s", "white_shape") if k in kw}
+        return {k: kw[k] for k in ("white_shape",) if k in kw}
 
     def _targets(self, eff: Effect, in_model: set) -> list:
         """The gyros (or None for the array) an effect would be tested on, not in the model."""
@@ -987,7 +983,8 @@ class ModelComparison:
                                if eff.candidate and not eff.baseline and eff.reads == "noise"
                                and not eff.why_not(ctx))
         det_z = [t.z for t in tests if np.isfinite(t.z)]
-        det_sig = max(det_z, default=-math.inf) > critical_z(len(det_z) + n_stoch, self.alpha)
+        zc = critical_z(len(det_z) + n_stoch, self.alpha)
+        det_sig = max(det_z, default=-math.inf) > zc
         reasons = [get_effect(e.effect).static_noise for e in model if get_effect(e.effect).static_noise]
         ctx.static_record = bool(reasons)
         a, b = self.longest
@@ -999,7 +996,7 @@ class ModelComparison:
             # Gauss–Markov hump 12x its own z, which no model could lower by adding the line
             # beside it). Their own tests, and the band, still read the residual as it is.
             ctx.rec = slice(0, self.n)
-            E, taken = self._provisional_clean(ctx, tests, critical_z(len(det_z) + n_stoch, self.alpha))
+            E, taken = self._provisional_clean(ctx, tests, zc)
             notes.append("stochastic tests on the whole record (no static part) with the fits of the "
                          f"significant deterministic candidates taken out: {', '.join(taken) or 'none'}")
         elif det_sig or reasons:
@@ -1009,11 +1006,8 @@ class ModelComparison:
                          f"{b * self.dt + self.t[0]:.0f} s): {why}")
         else:
             ctx.rec = slice(0, self.n)
-        Er = E[ctx.rec].copy()
         ctx.tr = self.t[ctx.rec]
-        for e in model:
-            Er = get_effect(e.effect).whiten(ctx, e, Er, ctx.tr)
-        ctx.Er = Er
+        ctx.Er = ctx.at_model_level(E[ctx.rec].copy(), ctx.tr)
 
     @staticmethod
     def _provisional_clean(ctx: FitContext, tests: list, z_crit: float) -> tuple[np.ndarray, list]:
@@ -1028,11 +1022,7 @@ class ModelComparison:
             f = eff.test(cur, t.gyro)
             if not (np.isfinite(f.z) and f.z > z_crit):
                 continue
-            try:
-                entry = cur.model_entry(eff.name, f.gyro, eff.clip(eff.entry_params(f, eff.placeholder())))
-            except InputError:
-                continue
-            pred = eff.predict(cur, entry)
+            pred = cur.fit_prediction(eff, f)
             if pred is None:
                 continue
             cur = cur.without(pred)

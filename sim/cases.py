@@ -65,7 +65,6 @@ class Case:
     gyro: int | None
     params: dict
     layout_name: str
-    model: NoiseModel | None = None     # everything the record was made with (studies read the truth)
 
 
 def single_effect_case(effect: str, seed: int, case: int | None = None, noise_seed: int | None = None) -> Case:
@@ -89,4 +88,4 @@ def single_effect_case(effect: str, seed: int, case: int | None = None, noise_se
         rng = np.random.default_rng([seed, case, int(noise_seed)])
     m = lab_run(model, layout, rng, rate_hz=RATE_HZ, static_s=STATIC_S, motion_s=MOTION_S, tail_s=TAIL_S,
                 protocol="table")
-    return Case(m, effect, gyro, params, f"S{scheme} N{n}", model)
+    return Case(m, effect, gyro, params, f"S{scheme} N{n}")
