@@ -638,7 +638,8 @@ class ModelComparison:
 
     def _with_baseline(self, model: NoiseModel) -> NoiseModel:
         """The model with the baseline on every gyro and per-gyro entries for every all-gyros one."""
-        have = {(e.effect, e.gyro) for e in model}
+        own = {(e.effect, e.gyro) for e in model}            # the entries the model names per gyro
+        have = set(own)
         for e in model:
             if get_effect(e.effect).baseline and e.gyro is None:
                 have |= {(e.effect, g) for g in range(1, self.N + 1)}
@@ -649,9 +650,9 @@ class ModelComparison:
                     out = out.with_effect(ModelEntry(eff.name, g, eff.placeholder()))
         entries = []
         for e in out:
-            if e.gyro is None and get_effect(e.effect).per_gyro:
+            if e.gyro is None and get_effect(e.effect).per_gyro:    # a gyro's own entry wins
                 entries += [ModelEntry(e.effect, g, dict(e.params)) for g in range(1, self.N + 1)
-                            if (e.effect, g) not in have]
+                            if (e.effect, g) not in own]
             else:
                 entries.append(e)
         return NoiseModel(tuple(entries), description=model.description, source=model.source)

@@ -10,6 +10,8 @@ is known; the held-out record never saw the fit.
 
 from __future__ import annotations
 
+import warnings
+
 import json
 import math
 
@@ -124,6 +126,26 @@ def test_a_model_whose_white_noise_is_in_another_term_is_not_read_against_zero()
     # r = 0 they were beyond 1e5
     worst = max(t.z for t in a.tests if t.kind == "effect" and np.isfinite(t.z))
     assert worst < 50.0, worst
+
+
+def test_an_all_gyros_baseline_entry_reaches_every_gyro_and_a_gyros_own_entry_wins():
+    """A model file may give ARW and RRW once for all gyros (no gyro). They used to be dropped
+    when the model was spread per gyro, so validation simulated a band with no noise at all (an
+    ADEV of exactly 0, log 0 in the band test). Each gyro now gets the all-gyros value, except a
+    gyro the model names itself."""
+    base = (ModelEntry("arw", None, {"n_deg_rt_h": 0.15}), ModelEntry("rrw", None, {"k_deg_h_rt_h": 5.0}),
+            ModelEntry("arw", 2, {"n_deg_rt_h": 0.4}))
+    rec = lab_run(NoiseModel(base), LAYOUT, np.random.default_rng(3), static_s=300.0, motion_s=60.0,
+                  tail_s=60.0)
+    comp = ModelComparison(rec, NoiseModel(base), n_runs=5)
+    n = {e.gyro: e.params["n_deg_rt_h"] for e in comp.model if e.effect == "arw"}
+    k = {e.gyro: e.params["k_deg_h_rt_h"] for e in comp.model if e.effect == "rrw"}
+    gyros = list(range(1, LAYOUT.n_gyros + 1))
+    assert n == {g: (0.4 if g == 2 else 0.15) for g in gyros} and k == {g: 5.0 for g in gyros}
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        a = comp.validate()
+    assert a.consistent and np.isfinite(a.discrepancy), a.discrepancy
 
 
 def test_a_line_found_again_elsewhere_is_as_evident_as_the_line():
