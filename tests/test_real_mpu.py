@@ -141,7 +141,7 @@ def test_a_line_added_on_continuous_motion_lowers_the_discrepancy():
     the line (the ladder's first seven steps in the model) took D from 51 to 440: with the line
     gone, the square wave of the tilt was read as a Gauss–Markov hump of z 1480. The significant
     deterministic candidates' fits are now taken out of what the stochastic tests read, so the
-    line lowers D (56.6 -> 35.4) and the tilt is what is left, as it should be."""
+    line lowers D (44.7 -> 35.4) and the tilt is what is left, as it should be."""
     m = read_measurement(MPU, repair=True)
     y2, wz = np.radians(m.gyro_deg_s[:, 1]), np.radians(m.ref_deg_s[:, 2])
     slope = np.linalg.lstsq(np.column_stack([np.ones_like(wz), wz]), y2, rcond=None)[0][1]

@@ -401,6 +401,47 @@ def test_sinusoid_is_found_through_gaps():
     assert abs(f.params["freq_hz"] - freq) <= 2 * f.sigma["freq_hz"]
 
 
+@pytest.mark.parametrize("baseline", ["white", "level_off", "low_pass", "burst"])
+def test_line_test_keeps_its_null_when_the_baseline_is_off(baseline, monkeypatch):
+    """A line is a bin above its neighbours. Plain numpy/scipy records, no line, told the level
+    σ² of white noise (N = 20 000 at 100 Hz, 150 records): white as told; 1.2 times it; through
+    a 2nd-order 10 Hz Butterworth (scipy, gain 1.6: half the band below the told level, half
+    above); or a 4-fold variance for a sixth of the record. Each bin read against its local level
+    gives no more false alarms than N(0, 1): at most 9 of 150 with z > 2 (expected 3.4; P(X >= 10)
+    = 0.003) and a mean below 0.25 (3.2 standard errors of 150 draws); and z ~ N(0, 1) where the
+    level is flat: mean within 0.25 and sd in [0.82, 1.18] (3.5 standard errors). Through the
+    filter it is conservative (mean −0.69, sd 1.22: at 28 dB below the pass band the
+    periodogram's leakage from it sets the bins, fewer independent than M). Read against the told
+    level (the old test), the three wrong baselines put the mean above 2 (z ≈ 2.6, 4.3, 2.8
+    measured), so the check can fail."""
+    from scipy import signal
+
+    import gyroarray.analysis.regress as reg
+    n, dt, sig, reps = 20_000, 0.01, 1e-3, 150
+    t = np.arange(n) * dt
+    rng = np.random.default_rng(17)
+    sos = signal.butter(2, 10.0, fs=1.0 / dt, output="sos")
+    records = []
+    for _ in range(reps):
+        w = rng.standard_normal(n) * sig
+        if baseline == "level_off":
+            w *= 1.2
+        elif baseline == "low_pass":
+            w = signal.sosfilt(sos, w) * 1.6
+        elif baseline == "burst":
+            w[8000:11_333] *= 2.0
+        records.append(w)
+    z = np.array([fit_sinusoid(w, t, dt, sig ** 2, 0.0, 1).z for w in records])
+    assert np.sum(z > 2.0) <= 9 and z.mean() <= 0.25, z
+    if baseline != "low_pass":
+        assert abs(z.mean()) <= 0.25 and 0.82 <= z.std() <= 1.18, (z.mean(), z.std())
+    if baseline != "white":
+        monkeypatch.setattr(reg, "_LOCAL_LEVEL", False)
+        uncached = fit_sinusoid.__wrapped__                # the switch is not in the cache's key
+        z_told = np.array([uncached(w, t, dt, sig ** 2, 0.0, 1).z for w in records[:40]])
+        assert z_told.mean() > 2.0, z_told.mean()
+
+
 def test_saturation_is_found():
     tt = np.arange(N) * DT
     om = np.zeros((N, 3))
