@@ -191,9 +191,6 @@ class _Curve:
     cov: AvarCovariance
     caps: dict | None = None  # upper bounds of the capped coefficients (:func:`_caps`)
     white: np.ndarray | None = None  # the white term's Allan variance over N²/τ at each factor (a filter)
-    #: the octaves beyond the fit's up to a third of the record, which the bounds read: factors,
-    #: Allan variance [(rad/s)²], white shape (None without a filter)
-    long: tuple = (np.zeros(0, np.int64), np.zeros(0), None)
 
 
 #: Covariance models by (samples, dt): the gyros of one record share one.
@@ -213,14 +210,13 @@ def _factors(n: int, m_min: int = 1) -> np.ndarray:
     return m[m >= m_min] if np.count_nonzero(m >= m_min) >= 6 else m[-6:]
 
 
-def _cov_model(n: int, dt_s: float, m_min: int = 1, m: np.ndarray | None = None) -> AvarCovariance:
-    """The covariance model of the fit's factors (``m`` None) or of the factors ``m``."""
-    m = _factors(n, m_min) if m is None else np.asarray(m, dtype=np.int64)
-    key = (int(n), float(dt_s), tuple(int(v) for v in m))
+def _cov_model(n: int, dt_s: float, m_min: int = 1) -> AvarCovariance:
+    key = (int(n), float(dt_s), int(m_min))
     cov = _COV_CACHE.get(key)
     if cov is None:
         if len(_COV_CACHE) >= 8:
             _COV_CACHE.clear()
+        m = _factors(n, m_min)
         cov = _COV_CACHE[key] = AvarCovariance(m, (n + 1) - 2 * m, 2, dt_s)
     return cov
 
@@ -232,26 +228,11 @@ def _curve(x: np.ndarray, dt_s: float, cov: AvarCovariance | None = None, m_min:
     # the bounds read the octaves up to a third of the record (the fit stops at an eighth)
     m_long = 2 ** np.arange(int(math.log2(m[-1])) + 1, int(math.log2(max(x.size // 3, 1))) + 1)
     y_long = deviation(x, dt_s, "oadev", m_long * float(dt_s)).dev ** 2 if m_long.size else np.array([])
-    white = None if white_shape is None else np.asarray(white_shape(np.concatenate([m, m_long])), dtype=float)
     return _Curve(dt_s=float(dt_s), n=int(x.size), taus=m * float(dt_s), m=m,
                   y=res.dev ** 2, cov=_cov_model(x.size, dt_s, m_min) if cov is None else cov,
                   caps=_caps(int(x.size), np.concatenate([m, m_long]) * float(dt_s),
                              np.concatenate([m, m_long]), np.concatenate([res.dev ** 2, y_long])),
-                  white=None if white is None else white[:m.size],
-                  long=(m_long, y_long, None if white is None else white[m.size:]))
-
-
-def _to_a_third(cv: _Curve) -> _Curve:
-    """``cv`` with the octaves the bounds read (:attr:`_Curve.long`, to a third of the record)
-    joined to the fit's, with their covariance model."""
-    m_long, y_long, w_long = cv.long
-    if not m_long.size:
-        return cv
-    m = np.concatenate([cv.m, m_long])
-    return replace(cv, taus=m * cv.dt_s, m=m, y=np.concatenate([cv.y, y_long]),
-                   cov=_cov_model(cv.n, cv.dt_s, m=m),
-                   white=None if cv.white is None else np.concatenate([cv.white, w_long]),
-                   long=(m_long[:0], y_long[:0], None))
+                  white=None if white_shape is None else np.asarray(white_shape(m), dtype=float))
 
 
 def _cross_avar(X: np.ndarray, m: np.ndarray) -> np.ndarray:
@@ -652,25 +633,17 @@ def _rrw_reference(cv: _Curve, names: tuple, gm_tau_s: float | None, label: str,
       hump): the octaves start at the first one from which the fit's χ² has a
       tail probability above :data:`_REF_P` (never fewer than six octaves).
 
-    The octaves end where the bounds of :func:`_caps` read, at a third of the
-    record (the other fits stop at an eighth): the octaves between, with 2–6
-    degrees of freedom each, are where a random walk shows most and a bounded
-    wander least, and their covariance is the same exact model's. On the
-    ADIS16405 (calibrated K 185 / 296 / 265 deg/h/√h against the point ADEV
-    bounds min ADEV(τ)·√(3/τ) of 42 / 141 / 152) K reads 53 ± 37 / 121 ± 42 /
-    200 ± 33 (76 / 125 / 201 with the octaves to an eighth). On ARW + RRW
-    records the two octaves more leave K as it was (benchmarks/rrw_point_bound.py:
-    mean, sd and 1σ within 0.1 deg/h/√h on 120 records; the long octaves are
-    strongly correlated with the shorter ones), and neither change above
-    almost ever acts (a flicker column always in would read K 12 % low with
-    1.7 times the scatter on 2000 s records of K = 20 deg/h/√h: K² is clipped
-    at 0 more often).
+    The octaves end where the other fits' do, at an eighth of the record. On
+    the ADIS16405 (calibrated K 185 / 296 / 265 deg/h/√h against the point ADEV
+    bounds min ADEV(τ)·√(3/τ) of 42 / 141 / 152) K reads 76 ± 33 / 125 ± 43 /
+    201 ± 33. On ARW + RRW records neither change almost ever acts (a flicker
+    column always in would read K 12 % low with 1.7 times the scatter on 2000 s
+    records of K = 20 deg/h/√h: K² is clipped at 0 more often).
 
     Returns the ``rrw`` entry and, when a flicker column was added here and
     kept, (B and its 1σ as :func:`_root_sigma` gives them [rad/s], the first τ
     [s]), else None.
     """
-    cv = _to_a_third(cv)
     start = 0
     while True:
         sub = cv if start == 0 else replace(cv, taus=cv.taus[start:], m=cv.m[start:], y=cv.y[start:],
