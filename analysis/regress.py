@@ -1300,7 +1300,11 @@ _LEVEL_HALF = 2000
 #: Bins above this many times the first pass's level are left out of the second (other lines).
 _LEVEL_CLIP = 30.0
 
-#: False: the level is the model's (the study of benchmarks/null_z.py compares the two).
+#: Periodograms of fewer bins keep the model's level (a window needs neighbours).
+_LEVEL_MIN_BINS = 400
+
+#: False: the model's level, as before (tests/test_regress.py shows the two apart). Read in this
+#: process only, and not part of :func:`fit_sinusoid`'s cache key: a study calls ``__wrapped__``.
 _LOCAL_LEVEL = True
 
 
@@ -1327,7 +1331,7 @@ def _local_level(p: np.ndarray) -> tuple:
     i = np.arange(p.size)
     # centred on the bin (a level that slopes, a filter's roll-off, averages to its value there),
     # so narrower towards the band's ends, never below 40 bins
-    half = np.maximum(np.minimum(min(_LEVEL_HALF, max(40, p.size // 20)), np.minimum(i, p.size - 1 - i)), 40)
+    half = np.clip(np.minimum(i, p.size - 1 - i), 40, min(_LEVEL_HALF, max(40, p.size // 20)))
     guard = np.maximum(2, half // 10)
     level, _ = _window_mean(p, np.ones(p.size, bool), half, guard)
     return _window_mean(p, p <= _LEVEL_CLIP * level, half, guard)
@@ -1345,7 +1349,7 @@ def _line_detection(series: np.ndarray, pos: np.ndarray, first: int, n_det: int,
     if q_angle_rad > 0:
         c = 1.0 - np.cos(2.0 * np.pi * np.arange(1, n_bins + 1) / n_det)
         tested /= 1.0 + (q_angle_rad / dt) ** 2 * (2.0 * c) ** 2 / (2.0 * r * c + q)
-    if _LOCAL_LEVEL and n_bins >= 400:
+    if _LOCAL_LEVEL and n_bins >= _LEVEL_MIN_BINS:
         level, k = _local_level(tested)
         ratio = tested / np.maximum(level, np.finfo(float).tiny)
         log_tail = -k * np.log1p(ratio / k)                # P(F(2, 2k) > x) = (1 + x/k)^(−k)
@@ -1486,15 +1490,14 @@ def fit_sinusoid(e, time_s, dt_s: float, r: float, q: float, gyro: int, use=None
     power there), and in a second pass those above 30 times the first
     pass's level too (other lines): x_j = P_j/L_j is F(2, 2k_j) when the
     k_j bins are Exp(λ) about j, whatever λ, with the tail
-    p_j = (1 + x_j/k_j)^(−k_j). So a baseline
-    that is off, in level or in shape (a sensor's low-pass, a burst, a
-    quantizer's Q read a few per cent off, spikes, a hump the model lacks),
-    moves no bin's statistic: with the model's level instead, white noise
-    1.2 times the model's read z ≈ 2.6 on every record, and a 10 Hz
-    Butterworth's roll-off z ≈ 4.3. The price is power: a line at the
-    threshold needs a few per cent more amplitude. With p_min the smallest tail over
-    the M bins (records of fewer than 400 bins keep the model's level,
-    p_j = e^{−P_j}),
+    p_j = (1 + x_j/k_j)^(−k_j). So a baseline that is off, in level or in
+    shape (a sensor's low-pass, a burst, a quantizer's Q read a few per cent
+    off, spikes, a hump the model lacks), moves no bin's statistic: with the
+    model's level instead, white noise 1.2 times the model's read z ≈ 2.6 on
+    every record, and a 10 Hz Butterworth's roll-off z ≈ 4.3. The price is
+    power: a line at the threshold needs a few per cent more amplitude. With
+    p_min the smallest tail over the M bins (records of fewer than 400 bins
+    keep the model's level, p_j = e^{−P_j}),
 
         FAP = 1 − (1 − p_min)^M,    z = Φ⁻¹(1 − FAP)
 

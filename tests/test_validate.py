@@ -10,10 +10,9 @@ is known; the held-out record never saw the fit.
 
 from __future__ import annotations
 
-import warnings
-
 import json
 import math
+import warnings
 
 import numpy as np
 import pytest
