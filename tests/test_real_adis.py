@@ -5,8 +5,10 @@ so a change that alters the finding is noticed: ARW + RRW alone does not
 explain the record (D far above 1); gyros 1 and 2 have an ADEV excess that a bias
 instability (z > 30) and a short-τc Gauss–Markov term (the sensor's internal
 low-pass filter: τc ≈ 0.04 s, 4 samples) both pick up, the Gauss–Markov
-far better (z ≈ 106 against ≈ 42, and it ranks first) — with it fitted, no
-bias instability is needed any more; no gyro needs quantization (the ADEV at
+far better (z ≈ 106 against ≈ 42, and it ranks first); with it fitted, a
+flicker floor at τ 40–330 s is still there on gyros 1 and 2, and the ADEV
+says so without gyroarray (allantools' ADEV against the other fitted terms'
+closed forms); no gyro needs quantization (the ADEV at
 the shortest τ is *below* the white-noise extrapolation, z << 0). The z's of
 a 10 000 s record are far from the thresholds, so the assertions hold for
 any band seed.
@@ -90,7 +92,19 @@ def test_adis_cut_off_sigma_holds_up_on_the_other_half():
 
 @pytest.mark.slow
 @pytest.mark.skipif(not ADIS.exists(), reason="shared/measurements/real not present")
-def test_adis_needs_no_bias_instability_once_the_filter_hump_is_fitted():
+def test_adis_keeps_a_flicker_floor_once_the_filter_hump_is_fitted(adis_adev):
+    """With the 0.04 s hump fitted, gyros 1 and 2 still show a flicker floor (B) at τ 80–330 s.
+
+    Independent reading: allantools' ADEV there, less the closed forms of the
+    other fitted terms (N²/τ, K²τ/3 and the first-order Gauss–Markov Allan
+    variance σ²(τc/τ)²(2τ/τc − 3 + 4e^(−τ/τc) − e^(−2τ/τc))), is the floor's
+    (2 ln 2/π)·B². That B agrees with the fitted B within 30 %: each octave's
+    ADEV has 70–140 degrees of freedom (±8–12 % in B²) and the other terms'
+    1σ move the remainder by about 10 %. (Until the flicker test read the
+    octaves the model describes, it found no floor here: its baseline, fitted
+    where the model misses the short τ by χ² 1394 for 15 dof, read the floor as
+    K = 186 deg/h/√h, and the calibrated model then lay 40 % below the ADEV at
+    164–328 s on gyro 1.)"""
     from gyroarray.compare import ModelComparison
     from gyroarray.measurement import read_measurement
 
@@ -98,8 +112,19 @@ def test_adis_needs_no_bias_instability_once_the_filter_hump_is_fitted():
     _, after = comp.fit([("gauss_markov", 1), ("gauss_markov", 2)])
     by = {(t.effect, t.gyro): t for t in after.candidates}
     for g in (1, 2):
-        assert not after.significant(by[("bias_instability", g)])
+        bi = by[("bias_instability", g)]
+        assert after.significant(bi), bi.evidence
         assert after.fits[("gauss_markov", g)].params["tau_s"] == pytest.approx(0.04, rel=0.1)
+        n = after.fits[("arw", g)].params["n_deg_rt_h"] * 60.0              # deg/h·√s
+        k = after.fits[("rrw", g)].params["k_deg_h_rt_h"] / 60.0            # deg/h/√s
+        gm = after.fits[("gauss_markov", g)].params
+        s2, tc = gm["sigma_deg_h"] ** 2, gm["tau_s"]
+        t, ad = adis_adev[g - 1]
+        sel = (t > 60.0) & (t < 400.0)                                        # 82, 164, 328 s
+        r = t[sel] / tc
+        others = n ** 2 / t[sel] + k ** 2 * t[sel] / 3.0 + s2 / r ** 2 * (2 * r - 3 + 4 * np.exp(-r) - np.exp(-2 * r))
+        b_plain = math.sqrt(np.mean(ad[sel] ** 2 - others) / (2.0 * math.log(2.0) / math.pi))
+        assert bi.fit.params["b_deg_h"] == pytest.approx(b_plain, rel=0.3), (g, b_plain)
 
 
 def _point_bounds(adev):
