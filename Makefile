@@ -60,11 +60,13 @@ bench: $(STAMP)
 # analytic predictor against 30 simulated runs of every quick-sweep design (~3 min), and
 # how often a pure random walk breaks the ADEV "point bound" on K (~3 min), and the 1σ
 # coverage of a Gauss-Markov fit through the chain on 40 drawn cases (~5 min), and how often
-# the Gauss-Markov scan calls a hump in pure ARW + RRW (~8 min)
+# the Gauss-Markov scan calls a hump in pure ARW + RRW (~8 min); the same diagnosis score on
+# records of an independent generator written from shared/spec alone (~5 min)
 score: $(STAMP)
 	mkdir -p bench_out
 	OPENBLAS_NUM_THREADS=1 $(PY) -m pytest -q -n $(WORKERS) -m slow
 	OPENBLAS_NUM_THREADS=1 $(PY) benchmarks/diagnosis_score.py --seeds 6 --json bench_out/diagnosis_score.json
+	OPENBLAS_NUM_THREADS=1 $(PY) benchmarks/independent_score.py --seeds 2 --json bench_out/independent_score.json
 	OPENBLAS_NUM_THREADS=1 $(PY) benchmarks/predictor_check.py --replicates 30 --json bench_out/predictor_check.json
 	OPENBLAS_NUM_THREADS=1 $(PY) benchmarks/rrw_point_bound.py --records 40
 	OPENBLAS_NUM_THREADS=1 $(PY) benchmarks/gm_tau_coverage.py --cases 40 --json bench_out/gm_tau_coverage.json

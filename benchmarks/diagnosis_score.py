@@ -29,9 +29,19 @@ from gyroarray.sim.cases import EFFECTS, NOT_SCORED, single_effect_case
 def score_case(effect: str, seed: int, n_runs: int = 20) -> dict:
     """Diagnose and fit one case; the row of the score table."""
     c = single_effect_case(effect, seed)
-    gyro, params = c.gyro, c.params
+    return score_measurement(c.measurement, effect, c.gyro, c.params, c.layout_name, n_runs, seed=seed)
+
+
+def score_measurement(m, effect: str, gyro, params: dict, layout_name: str, n_runs: int = 20, *,
+                      seed=None, keep: bool = False) -> dict:
+    """Diagnose and fit one measurement whose hidden effect is known; the row of the score table.
+
+    Shared with ``benchmarks/independent_score.py`` (records of an
+    independent generator). ``keep=True`` adds the two analyses as
+    ``_before``/``_after`` for callers that want more than the row.
+    """
     t0 = time.perf_counter()
-    before, after = ModelComparison(c.measurement, n_runs=n_runs).fit([(effect, gyro)])
+    before, after = ModelComparison(m, n_runs=n_runs).fit([(effect, gyro)])
     secs = time.perf_counter() - t0
     top = before.candidates[0]
     fit = after.fits.get((effect, gyro))
@@ -49,13 +59,16 @@ def score_case(effect: str, seed: int, n_runs: int = 20) -> dict:
         detail[k] = (np.round(wants, 6).tolist(), np.round(gots, 6).tolist(), np.round(sigs, 6).tolist())
     rank = next((i for i, t in enumerate(before.candidates) if (t.effect, t.gyro) == (effect, gyro)), -1)
     worst = sorted(after.tests, key=lambda t: -t.z if np.isfinite(t.z) else math.inf)[:2]
-    return {"effect": effect, "gyro": gyro, "seed": seed, "layout": c.layout_name, "params": params,
-            "top": [top.effect, top.gyro, round(float(top.z), 2)], "rank": rank,
-            "found": (top.effect, top.gyro) == (effect, gyro) and before.significant(top),
-            "d_before": round(before.discrepancy, 3), "d_after": round(after.discrepancy, 3),
-            "falls": after.discrepancy <= 0.5 * before.discrepancy, "consistent_after": after.consistent,
-            "param_ok": bool(param_ok), "fit": detail, "seconds": round(secs, 1),
-            "after_worst": [[t.effect, t.gyro, round(float(t.z), 2)] for t in worst]}
+    row = {"effect": effect, "gyro": gyro, "seed": seed, "layout": layout_name, "params": params,
+           "top": [top.effect, top.gyro, round(float(top.z), 2)], "rank": rank,
+           "found": (top.effect, top.gyro) == (effect, gyro) and before.significant(top),
+           "d_before": round(before.discrepancy, 3), "d_after": round(after.discrepancy, 3),
+           "falls": after.discrepancy <= 0.5 * before.discrepancy, "consistent_after": after.consistent,
+           "param_ok": bool(param_ok), "fit": detail, "seconds": round(secs, 1),
+           "after_worst": [[t.effect, t.gyro, round(float(t.z), 2)] for t in worst]}
+    if keep:
+        row["_before"], row["_after"] = before, after
+    return row
 
 
 def main(argv=None) -> dict:
