@@ -89,12 +89,18 @@ def main(argv=None) -> dict:
                   f"rank {r['rank']} D {r['d_before']:.2f} -> {r['d_after']:.2f} "
                   f"cons {r['consistent_after']} param {r['param_ok']} {r['fit']} "
                   f"after-worst {r['after_worst']} ({r['seconds']} s)", flush=True)
-    keys = ["found", "falls", "consistent_after", "param_ok"]
-    summary = {k: sum(r[k] for r in rows) for k in keys}
+    return summarise(rows, a.json)
+
+
+def summarise(rows: list, json_path=None, **extra) -> dict:
+    """Count the rows that pass each check, print the summary, write rows and summary to
+    ``json_path``; ``extra``: more counts (name -> per-row predicate)."""
+    summary = {k: sum(bool(r[k]) for r in rows) for k in ("found", "falls", "consistent_after", "param_ok")}
+    summary.update({k: sum(bool(ok(r)) for r in rows) for k, ok in extra.items()})
     summary["cases"] = len(rows)
     print("summary:", summary)
-    if a.json:
-        with open(a.json, "w") as fh:
+    if json_path:
+        with open(json_path, "w") as fh:
             json.dump({"summary": summary, "rows": rows}, fh, indent=1, default=str)
     return summary
 

@@ -23,7 +23,6 @@ Usage: ``python benchmarks/independent_score.py [--seeds 2] [--first-seed 500]
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import sys
 import tempfile
@@ -35,7 +34,7 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 
 import _indep_gen as gen  # noqa: E402
-from diagnosis_score import NOT_SCORED, score_measurement  # noqa: E402
+from diagnosis_score import NOT_SCORED, score_measurement, summarise  # noqa: E402
 
 from gyroarray.measurement import read_measurement  # noqa: E402
 
@@ -131,15 +130,7 @@ def main(argv=None) -> dict:
                 print(f"    fitted {d['fitted_all']}")
                 for w in d["after_worst5"]:
                     print(f"    after {w}")
-    keys = ["found", "falls", "consistent_after", "param_ok"]
-    summary = {k: sum(bool(r[k]) for r in rows) for k in keys}
-    summary["all_ok"] = sum(_ok(r) for r in rows)
-    summary["cases"] = len(rows)
-    print("summary:", summary)
-    if a.json:
-        with open(a.json, "w") as fh:
-            json.dump({"summary": summary, "rows": rows}, fh, indent=1, default=str)
-    return summary
+    return summarise(rows, a.json, all_ok=_ok)
 
 
 if __name__ == "__main__":
