@@ -67,7 +67,10 @@ outside generator and gyroarray could differ -- see the report):
   with the attitude integrated from the reference rates.
 * g_sensitivity: f_0 = gravity specific force C^T [0, 0, g0] from the same
   attitude (positions zero, so no centripetal/tangential term); no acc_*
-  columns are written.
+  columns are written. With :data:`LEVER_ARMS` the gyros sit at random
+  ``positions_m`` (±0.25 m per component), f_k = f_0 + α × r_k + ω × (ω × r_k)
+  with α the centred difference of the analytic rate, and f_0 is written as
+  ``acc_x/y/z``.
 * Misalignment: ``axis`` = the nominal axis tilted by ``tilt_deg`` towards a
   random direction perpendicular to it.
 """
@@ -92,6 +95,7 @@ EARTH_RATE_RAD_S = 7.2921150e-5   # rad/s
 DEG = math.pi / 180.0             # rad per deg
 BANDWIDTH_METHOD = "foh"          # or "bilinear_prewarp", "bilinear" (any cont2discrete method)
 QUANTIZATION_METHOD = "round"     # or "white" (the IEEE-952 model: iid uniform angle error)
+LEVER_ARMS = False                # g_sensitivity: gyros at positions_m (±0.25 m) and acc_* columns
 
 EFFECTS = ["bias_instability", "quantization", "rate_ramp", "gauss_markov", "sinusoid",
            "scale_factor", "scale_nonlinearity", "misalignment", "temperature_bias", "latency",
@@ -439,10 +443,21 @@ def make_case(effect: str, seed: int) -> dict:
         out[:, gyro - 1] += k2_si * sensed[:, gyro - 1] ** 2
 
     # 3. additive terms
+    positions = acc = None
     if effect == "g_sensitivity":
         f0 = np.einsum("kji,j->ki", C, np.array([0.0, 0.0, G0]))  # m/s^2, platform frame
         d = np.asarray(params["deg_s_per_g"]) * DEG               # rad/s per g
-        out[:, gyro - 1] += f0 @ d / G0
+        fk = f0
+        if LEVER_ARMS:
+            # the spec's f_k = f_0 + α × r_k + ω × (ω × r_k), r_k from positions_m; f_0 is
+            # written as acc_x/y/z; α from the analytic rate by a centred difference
+            positions = np.random.default_rng([seed, 7919]).uniform(-0.25, 0.25, (N, 3))
+            r = positions[gyro - 1]
+            h = 1e-4
+            alpha = (ref_rate_deg_s(t + h) - ref_rate_deg_s(t - h)) * DEG / (2.0 * h)
+            fk = f0 + np.cross(alpha, r) + np.cross(omega, np.cross(omega, r))
+            acc = f0
+        out[:, gyro - 1] += fk @ d / G0
     out += deg_h_to_rad_s(bias)[None, :]
     for k in range(N):
         out[:, k] += random_walk(rng, n, rrw_step_rad_s(rrw[k], dt))
@@ -492,7 +507,7 @@ def make_case(effect: str, seed: int) -> dict:
     return {"stem": f"indep_{effect}_{seed}", "effect": effect, "gyro": gyro, "params": params,
             "layout": lay, "layout_name": name, "axes": axes, "site": site,
             "sample_rate_hz": FS_HZ, "time_s": t, "gyro_deg_s": out / DEG, "ref_deg_s": ref,
-            "temp_c": temp,
+            "temp_c": temp, "positions_m": positions, "acc_m_s2": acc,
             "baseline": {"arw_deg_rt_h": arw.tolist(), "rrw_deg_h_rt_h": rrw.tolist(),
                          "bias_deg_h": bias.tolist()}}
 
@@ -515,13 +530,21 @@ def write_case(case: dict, directory) -> Path:
                       + ["ref_x", "ref_y", "ref_z", "temp_c"])
     data = np.column_stack([case["time_s"], case["gyro_deg_s"], case["ref_deg_s"], case["temp_c"]])
     fmt = ["%.4f"] + ["%.9e"] * N + ["%.7f"] * 3 + ["%.4f"]
+    if case.get("acc_m_s2") is not None:
+        header += ",acc_x,acc_y,acc_z"
+        data = np.column_stack([data, case["acc_m_s2"]])
+        fmt += ["%.7f"] * 3
     with gzip.open(csv, "wt", compresslevel=3, newline="\n") as fh:
         np.savetxt(fh, data, fmt=fmt, delimiter=",", header=header, comments="")
     lay, site = case["layout"], case["site"]
     toml = (f"sample_rate_hz = {case['sample_rate_hz']:.1f}\n"
             f"description = \"independent generator: {case['effect']} seed {case['stem']}\"\n\n"
             f"[layout]\nscheme = {lay['scheme']}\nn_gyros = {lay['n_gyros']}\n"
-            f"alpha_deg = {lay['alpha_deg']}\n\n"
+            f"alpha_deg = {lay['alpha_deg']}\n"
+            + ("" if case.get("positions_m") is None else
+               "positions_m = [" + ", ".join("[" + ", ".join(f"{v:.6f}" for v in p) + "]"
+                                            for p in case["positions_m"]) + "]\n")
+            + "\n"
             f"[site]\nlatitude_deg = {site['latitude_deg']!r}\nheading_deg = {site['heading_deg']!r}\n")
     (d / f"{case['stem']}.toml").write_text(toml)
     return csv

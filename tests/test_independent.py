@@ -75,3 +75,22 @@ def test_a_line_near_nyquist_is_not_read_as_quantization(tmp_path):
     want = gen.effect_params(case)
     assert top.fit.params["freq_hz"] == pytest.approx(want["freq_hz"], abs=1e-3)
     assert abs(top.fit.params["amp_deg_s"] - want["amp_deg_s"]) <= 3.0 * top.fit.sigma["amp_deg_s"]
+
+
+def test_g_sensitivity_with_lever_arms_and_accelerometer_columns(tmp_path, monkeypatch):
+    """Seed 501 with the gyros at ±0.25 m (``positions_m``) and the specific force at the origin
+    in ``acc_x/y/z``: the generator adds the spec's f_k = f_0 + α × r_k + ω × (ω × r_k) itself.
+    gyroarray's fit takes the record to consistent with the vector set (each component within
+    3σ, σ ≈ 0.0006 deg/s/g). With the generator's lever terms of the wrong sign the fit stays
+    inconsistent (D 3.2: slope and tilt left on gyro 4), so the lever-arm convention is what
+    this checks."""
+    monkeypatch.setattr(gen, "LEVER_ARMS", True)
+    case, comp = _analysis("g_sensitivity", 501, tmp_path)
+    assert comp.m.has_acc and comp.m.layout.positions_m is not None
+    g = case["gyro"]
+    _, after = comp.fit([("g_sensitivity", g)])
+    assert after.consistent, after.discrepancy
+    fit = after.fits[("g_sensitivity", g)]
+    got, sig = np.asarray(fit.params["deg_s_per_g"]), np.asarray(fit.sigma["deg_s_per_g"])
+    want = np.asarray(gen.effect_params(case)["deg_s_per_g"])
+    assert np.all(np.abs(got - want) <= 3.0 * sig), (got, sig, want)
