@@ -892,6 +892,11 @@ def time_windows(residual, dt_s: float, time_s, *, z_crit: float, moving=None,
     for k in range(e.shape[1]):
         d = davar(e[:, k], dt, window=L, taus=[dt], step=max(L // 2, 1), extension="none")
         v = d.adev_rad_s[:, 0] ** 2
+        # a window whose output does not change at all (a stuck gyro) has v = 0: floored so
+        # its z is finite (a log of 0 made z and the score −inf/inf, and the JSON invalid)
+        frozen = v <= 0.0
+        pos = v[~frozen]
+        v = np.maximum(v, 1e-12 * (float(np.median(pos)) if pos.size else 1.0))
         frac_w = np.array([mv[s0:s0 + ln].mean() for s0, ln in zip(d.start, d.window_length)])
         still = frac_w < MOVING_FRACTION
         ref = np.log(v[still] if np.count_nonzero(still) >= 3 else v)
@@ -906,7 +911,8 @@ def time_windows(residual, dt_s: float, time_s, *, z_crit: float, moving=None,
             i1 = int(min(d.start[b - 1] + d.window_length[b - 1], n))
             frac = float(np.mean(mv[i0:i1]))
             ratio = float(np.exp(np.mean(np.log(v[a:b] / base))))
-            what = ("while the table moves: a motion-driven residual (see the channels), "
+            what = ("the output stops changing (stuck)" if np.any(frozen[a:b]) else
+                    "while the table moves: a motion-driven residual (see the channels), "
                     "not a change of noise level" if frac >= MOVING_FRACTION else
                     f"noise level × {math.sqrt(ratio):.2f} (short-τ ADEV)")
             out.append(Finding("time_window", (k + 1,), float(np.abs(z[a:b]).max()),

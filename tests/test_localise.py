@@ -225,3 +225,26 @@ def test_a_flat_deficit_is_the_models_level_not_a_lowpass():
     assert not loc.of_kind("lowpass")
     (deficit,) = loc.of_kind("band_deficit")
     assert deficit.gyros == (1, 2, 3, 4) and 0.5 < deficit.details["ratio"] < 1 / 1.6
+
+
+def test_a_stuck_output_is_a_finite_finding_named_stuck():
+    """A gyro that stops changing (a stuck output: every window after the onset has an Allan
+    variance of exactly 0) is one finding named so, with a finite score, not log 0 (which made
+    the score infinite and the JSON invalid)."""
+    import json
+    import warnings
+
+    from gyroarray.analysis.localise import time_windows
+
+    rng = np.random.default_rng(4)
+    dt, n = 0.02, 60_000
+    e = 1e-3 * rng.standard_normal((n, 2))
+    e[40_000:, 1] = e[40_000, 1]                                   # gyro 2 stuck from 800 s
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        found = time_windows(e, dt, np.arange(n) * dt, z_crit=4.0)
+    stuck = [f for f in found if f.gyros == (2,)]
+    assert stuck and all("stuck" in f.summary and math.isfinite(f.score) for f in stuck)
+    assert min(f.details["t0_s"] for f in stuck) == pytest.approx(800.0, abs=30.0)
+    assert not [f for f in found if f.gyros == (1,)]
+    json.dumps([f.score for f in found], allow_nan=False)
