@@ -1597,6 +1597,37 @@ def _plateau_test(yp: np.ndarray, ym: np.ndarray, nu: int, ymax: float, r: float
     return s_sum, z
 
 
+def _tie_tol(ymax: float) -> float:
+    """Two outputs this close are one output code [rad/s] (a few rounding units of the CSV)."""
+    return 1e-9 * max(ymax, 1e-300)
+
+
+def _tie_test(y: np.ndarray, yp: np.ndarray, ym: np.ndarray, c_plus: float, c_minus: float,
+              sig: float) -> tuple[float, int, float]:
+    """(z, count, δ [rad/s]) of exact repeats of the output's extreme codes where the reference is beyond.
+
+    A digital clip outputs the same full-scale code on every clipped sample. Without clipping,
+    an output quantized at δ (its smallest step between distinct values, the LSB) with noise σ
+    takes one code with probability at most δ/(√(2π)·σ) (the largest mass of a normal binned at
+    δ), so the count of samples at the extreme is at most Binomial(|T|, p₀) under "no clip";
+    z from its upper tail. A float output (δ tiny) never repeats a value by chance."""
+    tol = _tie_tol(max(c_plus, c_minus))
+    n_t = yp.size + ym.size
+    n_tie = int(np.count_nonzero(yp >= c_plus - tol) + np.count_nonzero(ym <= -c_minus + tol))
+    if n_t == 0 or n_tie <= 1 or not sig > 0:
+        return 0.0, n_tie, 0.0
+    vals = np.unique(y)
+    gaps = np.diff(vals)
+    gaps = gaps[gaps > tol]
+    delta = float(gaps.min()) if gaps.size else tol
+    p0 = min(0.5, max(delta, tol) / (math.sqrt(2.0 * math.pi) * sig))
+    log_p = float(stats.binom.logsf(n_tie - 1, n_t, p0))
+    if not math.isfinite(log_p):            # beyond the float range: the Chernoff bound −n·KL(k/n ‖ p₀)
+        k = n_tie / n_t
+        log_p = -n_t * (k * math.log(k / p0) + ((1 - k) * math.log((1 - k) / (1 - p0)) if k < 1 else 0.0))
+    return _logp_to_z(log_p), n_tie, delta
+
+
 def _saturation_evidence(gyro: int, z: float, rng: float, rng_s: float, count: int, frac: float,
                          spread: float, extra: dict) -> str:
     """The sentence that reports the plateau (or its absence)."""
@@ -1696,6 +1727,16 @@ def fit_saturation(gyro_rad_s, u_rad_s, r: float, gyro: int, *, use=None,
     c = float(mag.mean())
     c_s = float(mag.std(ddof=1) / math.sqrt(mag.size)) if mag.size > 1 else math.nan
     c_s = max(c_s, np.finfo(float).eps * c)                 # an exact plateau: one rounding unit
+    z_tie, n_tie, lsb = _tie_test(y, yp, ym, c_plus, c_minus, sig)
+    extra.update(z_spread=float(z), n_at_extreme=int(n_tie), z_ties=float(z_tie))
+    if z_tie > max(z, 3.0):
+        # the output repeats its extreme code where the reference is beyond it: the clip, even
+        # where the input dips back under it between (a vibrating plateau); its level is that code
+        z = z_tie
+        at_p = int(np.count_nonzero(yp >= c_plus - _tie_tol(ymax)))
+        at_m = int(np.count_nonzero(ym <= -c_minus + _tie_tol(ymax)))
+        c = (at_p * c_plus + at_m * c_minus) / max(at_p + at_m, 1)
+        c_s = max(abs(c_plus - c_minus) / 2.0 if at_p and at_m else 0.0, lsb / 2.0, np.finfo(float).eps * c)
     rng, rng_s = float(rad_s_to_deg_s(c)), float(rad_s_to_deg_s(c_s))
     spread = float(rad_s_to_deg_s(math.sqrt(s_sum / nu)))
     extra.update(spread_deg_s=spread, arw_sigma_deg_s=float(rad_s_to_deg_s(sig)), dof=nu)

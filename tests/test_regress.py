@@ -513,6 +513,34 @@ def test_without_saturation_z_stays_small():
         assert f.z <= 3.0, (seed, f.z, f.evidence)
 
 
+def test_a_vibrating_plateau_is_read_by_its_repeated_full_scale_code():
+    """Plain numpy: a ±300 deg/s sweep measured by a noisy reference (white, σ 15 deg/s: a
+    differentiated encoder), the true rate vibrating ±80 deg/s about it (a stepper), the output
+    clipped at ±250 deg/s and quantized at 1/131 deg/s (an MPU-6050's LSB). The true rate dips
+    under the range on part of each plateau, so the output there spreads like the noise and the
+    spread test alone reads no plateau (z < 0). The output repeats its full-scale code where the
+    reference is beyond it, which an unclipped output of that noise does with probability
+    below LSB/(√(2π)σ) per sample: found, the range that code exactly. Unclipped, the same
+    record repeats no extreme code: z 0."""
+    rng = np.random.default_rng(11)
+    n, dt, lsb = 60_000, 0.01, 1.0 / 131.0
+    t = np.arange(n) * dt
+    u = 300.0 * np.sign(np.sin(2 * np.pi * 0.05 * t))                       # deg/s, plateaus
+    true = u + 80.0 * np.sin(2 * np.pi * 7.0 * t)
+    ref = u + 15.0 * rng.standard_normal(n)
+    noisy = true + 0.05 * rng.standard_normal(n)
+    r = deg_s_to_rad_s(8.0) ** 2                           # what the reference leaves, per sample
+    for clip in (250.0, None):
+        y = noisy if clip is None else np.clip(noisy, -clip, clip)
+        y = lsb * np.round(y / lsb)
+        f = fit_saturation(deg_s_to_rad_s(y), deg_s_to_rad_s(ref), r, 3)
+        if clip is None:
+            assert f.z <= 3.0, f.evidence
+        else:
+            assert f.extra["z_spread"] < 3.0 and f.z > 10.0, f.evidence
+            assert f.params["range_deg_s"] == pytest.approx(250.0, abs=lsb)
+
+
 def test_a_slope_after_a_curvature_is_tested_with_the_joint_sigma():
     """A curvature alone (no scale factor) on rates of one sign, 400 draws of white noise. The
     curvature's fit is joint with a slope the model does not keep, so its residual holds the
