@@ -1603,8 +1603,9 @@ def _tie_tol(ymax: float) -> float:
 
 
 def _tie_test(y: np.ndarray, yp: np.ndarray, ym: np.ndarray, c_plus: float, c_minus: float,
-              sig: float) -> tuple[float, int, float]:
-    """(z, count, δ [rad/s]) of exact repeats of the output's extreme codes where the reference is beyond.
+              sig: float) -> tuple[float, int, int, float]:
+    """(z, count at +c₊, count at −c₋, δ [rad/s]) of exact repeats of the output's extreme codes
+    where the reference is beyond.
 
     A digital clip outputs the same full-scale code on every clipped sample. Without clipping,
     an output quantized at δ (its smallest step between distinct values, the LSB) with noise σ
@@ -1613,9 +1614,10 @@ def _tie_test(y: np.ndarray, yp: np.ndarray, ym: np.ndarray, c_plus: float, c_mi
     z from its upper tail. A float output (δ tiny) never repeats a value by chance."""
     tol = _tie_tol(max(c_plus, c_minus))
     n_t = yp.size + ym.size
-    n_tie = int(np.count_nonzero(yp >= c_plus - tol) + np.count_nonzero(ym <= -c_minus + tol))
+    at_p, at_m = int(np.count_nonzero(yp >= c_plus - tol)), int(np.count_nonzero(ym <= -c_minus + tol))
+    n_tie = at_p + at_m
     if n_t == 0 or n_tie <= 1 or not sig > 0:
-        return 0.0, n_tie, 0.0
+        return 0.0, at_p, at_m, 0.0
     vals = np.unique(y)
     gaps = np.diff(vals)
     gaps = gaps[gaps > tol]
@@ -1625,7 +1627,7 @@ def _tie_test(y: np.ndarray, yp: np.ndarray, ym: np.ndarray, c_plus: float, c_mi
     if not math.isfinite(log_p):            # beyond the float range: the Chernoff bound −n·KL(k/n ‖ p₀)
         k = n_tie / n_t
         log_p = -n_t * (k * math.log(k / p0) + ((1 - k) * math.log((1 - k) / (1 - p0)) if k < 1 else 0.0))
-    return _logp_to_z(log_p), n_tie, delta
+    return _logp_to_z(log_p), at_p, at_m, delta
 
 
 def _saturation_evidence(gyro: int, z: float, rng: float, rng_s: float, count: int, frac: float,
@@ -1727,14 +1729,12 @@ def fit_saturation(gyro_rad_s, u_rad_s, r: float, gyro: int, *, use=None,
     c = float(mag.mean())
     c_s = float(mag.std(ddof=1) / math.sqrt(mag.size)) if mag.size > 1 else math.nan
     c_s = max(c_s, np.finfo(float).eps * c)                 # an exact plateau: one rounding unit
-    z_tie, n_tie, lsb = _tie_test(y, yp, ym, c_plus, c_minus, sig)
-    extra.update(z_spread=float(z), n_at_extreme=int(n_tie), z_ties=float(z_tie))
+    z_tie, at_p, at_m, lsb = _tie_test(y, yp, ym, c_plus, c_minus, sig)
+    extra.update(z_spread=float(z), n_at_extreme=at_p + at_m, z_ties=float(z_tie))
     if z_tie > max(z, 3.0):
         # the output repeats its extreme code where the reference is beyond it: the clip, even
         # where the input dips back under it between (a vibrating plateau); its level is that code
         z = z_tie
-        at_p = int(np.count_nonzero(yp >= c_plus - _tie_tol(ymax)))
-        at_m = int(np.count_nonzero(ym <= -c_minus + _tie_tol(ymax)))
         c = (at_p * c_plus + at_m * c_minus) / max(at_p + at_m, 1)
         c_s = max(abs(c_plus - c_minus) / 2.0 if at_p and at_m else 0.0, lsb / 2.0, np.finfo(float).eps * c)
     rng, rng_s = float(rad_s_to_deg_s(c)), float(rad_s_to_deg_s(c_s))

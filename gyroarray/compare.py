@@ -756,7 +756,7 @@ class ModelComparison:
         k_up = rrw_deg_h_rt_h_to_rad_s_rt_s(base[1].params["k_deg_h_rt_h"]
                                             + 2.0 * base[1].sigma.get("k_deg_h_rt_h", 0.0))
         q_up = max(k_up ** 2 * self.dt, 1e-12 * r)
-        q_ml = _ml_q(e, r, q_up, np.ones(self.n, bool) if self.continuous else self.static)
+        q_ml = _ml_q(e, r, np.ones(self.n, bool) if self.continuous else self.static)
         return r, max(q_ml, q_up)
 
     def _white_r(self, e: np.ndarray, gyro: int, white_shape=None) -> tuple:
@@ -1300,7 +1300,7 @@ class ModelComparison:
             blocked = self._mimics(cur, refused)
             for t in [t for t in cur.candidates if cur.significant(t)
                       and (t.effect, t.gyro) not in blocked
-                      and not t.z <= refused_z.get((t.effect, t.gyro), -math.inf) + 1.0][:max_tries]:
+                      and t.z > refused_z.get((t.effect, t.gyro), -math.inf) + 1.0][:max_tries]:
                 trial = self.analyse(model.with_effect(self.entry_for(t.effect, t.gyro, cur)))
                 if (trial.excess < cur.excess
                         and trial.discrepancy <= cur.discrepancy * (1.0 + LADDER_D_SLACK)):
@@ -1450,7 +1450,7 @@ def _rank_rivals(ctx: FitContext, cands: list, z_crit: float) -> list:
 
 
 @by_content(maxsize=16)
-def _ml_q(e: np.ndarray, r: float, q0: float, use: np.ndarray) -> float:
+def _ml_q(e: np.ndarray, r: float, use: np.ndarray) -> float:
     """Maximum-likelihood random-walk increment variance q of ``e`` on the ``use`` samples, r fixed.
 
     Cached by content: a ladder step leaves most gyros' residuals as they were (0.14 s per call
