@@ -26,7 +26,9 @@ Method (Willsky & Jones' GLR on Kalman innovations)
    * noise × ratio:      innovation variance λ_b → λ_a, λ_a/λ_b = 1 + (ratio² − 1)·w,
      w = 2/((2 − K)·S) the share of the innovation variance that is this
      white noise (both levels free: a calibration on the faulty record has
-     neither);
+     neither); the scan finds the onset on the innovations, the ratio is then
+     read from the first differences, which need neither r nor q
+     (:func:`_difference_ratio`);
    * stuck: the output stops moving (white noise ratio 0 and no bias walk);
      with the raw output at hand, the exact run of repeated values.
 3. For every candidate onset θ the size is the least-squares fit of the
@@ -67,6 +69,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import optimize, signal, special, stats
 
+from gyroarray.analysis._memo import by_content
 from gyroarray.errors import InputError
 from gyroarray.units import rad_s_to_deg_s
 
@@ -150,6 +153,7 @@ def rw_gains(q: float, n: int) -> tuple[np.ndarray, np.ndarray]:
     return K, S
 
 
+@by_content(maxsize=8)
 def rw_innovations(y, q) -> np.ndarray:
     """Normalised innovations of the diffuse bias tracker, per column.
 
@@ -181,6 +185,7 @@ def rw_innovations(y, q) -> np.ndarray:
     out = np.zeros_like(Y)
     for j in range(m):
         out[:, j] = _innovations_1(Y[:, j], float(qs[j]))
+    out.flags.writeable = False                              # cached by content: shared, never changed
     return out[:, 0] if one else out
 
 
@@ -370,11 +375,46 @@ def chi2_glr_pvalue(g: float, L: int, sides: str = "both") -> float:
     return float(p_lo + p_hi)
 
 
+#: Onsets beyond which :func:`_analytic_max_p` sums the clump rates on a grid (the rates change
+#: with the distance to either end of the record, fast only near the ends).
+_EXACT_ONSETS = 4096
+
+
+def _onset_grid(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """(indices, weights) whose weighted sum of a function of the onset that changes smoothly
+    with the distance to either end stands for its sum over all n onsets: every onset within
+    256 of an end, a geometric grid between, trapezoid weights (the sum of the weights is n)."""
+    d = np.unique(np.round(np.geomspace(256, n, 512)).astype(np.int64))
+    idx = np.unique(np.concatenate([np.arange(min(256, n)), d[d < n], n - 1 - d[d < n],
+                                    np.arange(max(n - 256, 0), n)]))
+    idx = idx[(idx >= 0) & (idx < n)]
+    gaps = np.diff(idx).astype(float)
+    w = np.zeros(idx.size)
+    w[:-1] += 0.5 * gaps
+    w[1:] += 0.5 * gaps
+    w[0] += 0.5
+    w[-1] += 0.5
+    return idx, w
+
+
 def _analytic_max_p(y_abs: float, mu_rough, mu_smooth=0.0) -> float:
-    """Tail approximation of P(max |Y| >= y): 1 − exp(−(2Φ̄(y) + Σ clump rates))."""
+    """Tail approximation of P(max |Y| >= y): 1 − exp(−(2Φ̄(y) + Σ clump rates)).
+
+    Beyond 4096 onsets the sum is taken on :func:`_onset_grid` (0.02 s per
+    call on 1.2e5 onsets otherwise: Owen's T at every onset, and a diagnosis
+    asks for it dozens of times; the grid's sum agrees to < 0.1 % of p,
+    ``tests/test_faults.py``)."""
     if not np.isfinite(y_abs):
         return 0.0
-    expected = 2.0 * special.ndtr(-y_abs) + float(np.sum(clump_rate(y_abs, mu_rough, mu_smooth)))
+    mr = np.asarray(mu_rough, dtype=float)
+    ms = np.asarray(mu_smooth, dtype=float)
+    if mr.ndim == 1 and mr.size > _EXACT_ONSETS:
+        idx, w = _onset_grid(mr.size)
+        rates = clump_rate(y_abs, mr[idx], ms[idx] if ms.ndim == 1 and ms.size == mr.size else ms)
+        total = float(np.sum(w * rates))
+    else:
+        total = float(np.sum(clump_rate(y_abs, mr, ms)))
+    expected = 2.0 * special.ndtr(-y_abs) + total
     return float(-np.expm1(-expected))
 
 
@@ -420,7 +460,7 @@ def _null_maxima(kind: str, n: int, q: float, draws: int) -> np.ndarray:
     return out
 
 
-def _null_pvalue(stat: float, null: np.ndarray, tail) -> float:
+def _null_pvalue(stat: float, null: np.ndarray, tail, anchors: dict | None = None) -> float:
     """P(max >= stat): the Monte Carlo in the bulk, the analytic tail beyond its 95 % point.
 
     ``tail(y)`` is an analytic tail approximation; beyond the Monte Carlo's
@@ -431,7 +471,12 @@ def _null_pvalue(stat: float, null: np.ndarray, tail) -> float:
     if stat <= q95:                                           # mid-p: ties (a mass at 0) count half
         return (1.0 + np.sum(null > stat) + 0.5 * np.sum(null == stat)) / (1.0 + R)
     anchor = (1.0 + np.sum(null >= q95)) / (1.0 + R)
-    t_anchor = tail(q95)
+    if anchors is not None:                                   # tail(q95) of one record shape, once
+        if q95 not in anchors:
+            anchors[q95] = tail(q95)
+        t_anchor = anchors[q95]
+    else:
+        t_anchor = tail(q95)
     if not t_anchor > 0:
         return anchor * 1e-3
     return float(min(anchor, tail(stat) * anchor / t_anchor))
@@ -442,6 +487,95 @@ def _z_of_p(p: float) -> float:
     if p <= 0.0:
         return math.inf
     return float(-special.ndtri(min(max(p, 1e-16), 1.0 - 1e-16)))
+
+
+#: Below this p-value the z of a scan statistic is read from the statistic itself (:func:`_z_of_scan`).
+_P_FLOOR = 1e-16
+
+
+def _z_of_logp(log_p: float) -> float:
+    """z with log Φ̄(z) = ``log_p`` (natural log), finite down to any log_p (a diagnosis ranks
+    a fault against effects whose z runs into the thousands)."""
+    if log_p >= math.log(_P_FLOOR):
+        return _z_of_p(math.exp(log_p))
+    f = lambda z: float(special.log_ndtr(-z)) - log_p         # noqa: E731  decreasing in z
+    hi = math.sqrt(-2.0 * log_p) + 1.0                        # log Φ̄(z) < −z²/2 for z > 1
+    return float(optimize.brentq(f, 8.0, hi))
+
+
+def _anchors(key) -> dict:
+    """The tail(q95) cache of one record shape (bounded: a long session sees many shapes)."""
+    if len(_ANCHORS) > 256:
+        _ANCHORS.clear()
+    return _ANCHORS.setdefault(key, {})
+
+
+def _solve_y16(pvalue, stat: float) -> float:
+    """y with p(y) = 1e-16 in (0, stat]: regula falsi on ln p against y² (nearly linear in the
+    tail, so a few evaluations of the costly p), bisection where that stalls."""
+    target = math.log(_P_FLOOR)
+
+    def f(y):
+        p = pvalue(y)
+        return (math.log(p) if p > 0.0 else -1e300) - target
+
+    lo, hi = 0.0, float(stat)                                 # f(lo) > 0 >= f(hi)
+    flo, fhi = math.inf, f(hi)
+    y, side = min(9.0, 0.5 * hi), 0
+    for _ in range(60):
+        fy = f(y)
+        if abs(fy) < 1e-3:                                    # ln p within 0.1 %: y within ~1e-4
+            return y
+        if fy >= 0.0:
+            lo, flo = y, fy
+            if side == 1:                                     # Illinois: the stale end counts half
+                fhi *= 0.5
+            side = 1
+        else:
+            hi, fhi = y, fy
+            if side == -1:
+                flo *= 0.5
+            side = -1
+        if hi - lo <= 1e-6 * hi:
+            break
+        if math.isfinite(flo) and fhi > -1e299:               # false position in y²
+            y = math.sqrt(lo * lo + flo * (hi * hi - lo * lo) / (flo - fhi))
+            if not lo < y < hi:
+                y = 0.5 * (lo + hi)
+        else:
+            y = 0.5 * (lo + hi)
+    return 0.5 * (lo + hi)
+
+
+#: y₁₆ of :func:`_z_of_scan` per record shape (kind, samples, tracker): the tail's p(y) is costly
+#: (an up-crossing sum over every onset) and a diagnosis fits the same gyro many times.
+_Y16: dict = {}
+#: tail(q95) of :func:`_null_pvalue` per record shape (same keys).
+_ANCHORS: dict = {}
+
+
+def _z_of_scan(stat: float, pvalue, key=None) -> float:
+    """z of a scan statistic (the maximum over the onset of a signed-root likelihood ratio).
+
+    ``pvalue(y)`` is P(max >= y) under no fault. Where it is at least 1e-16,
+    z = Φ⁻¹(1 − p). Beyond, the tail of a Gaussian maximum is
+    log p = −y²/2 + O(log y), as is log Φ̄(z) = −z²/2 + O(log z), so
+    z² − y² tends to a constant: it is read where p = 1e-16 and carried on,
+    z = √(z₁₆² + y² − y₁₆²). z then keeps ranking larger faults higher
+    instead of stopping at 8.3 (or jumping to inf where p underflows).
+    """
+    p = pvalue(stat)
+    if p >= _P_FLOOR or not np.isfinite(stat):
+        return _z_of_p(p) if np.isfinite(stat) else math.inf
+    y16 = _Y16.get(key) if key is not None else None
+    if y16 is None:
+        y16 = _solve_y16(pvalue, stat)
+        if key is not None:
+            if len(_Y16) > 256:
+                _Y16.clear()
+            _Y16[key] = y16
+    z16 = float(-special.ndtri(_P_FLOOR))
+    return float(math.sqrt(max(z16 * z16 + stat * stat - y16 * y16, z16 * z16)))
 
 
 # -- profiles over the onset -------------------------------------------------
@@ -679,7 +813,8 @@ def _check_series(residual, dt_s, r, q, time_s):
 
 
 def fit_fault(kind: str, residual_rad_s, dt_s: float, r: float, q: float, *, time_s=None,
-              output_rad_s=None, bias_memory_s: float = DEFAULT_BIAS_MEMORY_S) -> FaultFit:
+              output_rad_s=None, bias_memory_s: float = DEFAULT_BIAS_MEMORY_S,
+              skip=None) -> FaultFit:
     """Fit one fault (onset and size with 1σ, and z) to one gyro's residual.
 
     Parameters
@@ -703,6 +838,10 @@ def fit_fault(kind: str, residual_rad_s, dt_s: float, r: float, q: float, *, tim
         variance collapse of the residual (static records only).
     bias_memory_s : float
         Longest bias-tracker time constant [s] (module docstring).
+    skip : array_like of bool, shape (n,), optional
+        Samples without the gyro's noise (a clip's plateau, where a model
+        already explains the output): the noise scan leaves them out (their
+        innovations and the differences that touch them).
 
     Returns
     -------
@@ -726,7 +865,10 @@ def fit_fault(kind: str, residual_rad_s, dt_s: float, r: float, q: float, *, tim
     if kind in ("step", "drift"):
         return _fit_mean(kind, eps[1:], a, K, S, qn, t[1:], dt, r)
     if kind == "noise":
-        return _fit_noise(eps[1:], K, S, t[1:], dt)
+        if skip is None:
+            return _difference_ratio(_fit_noise(eps[1:], K, S, t[1:], dt), y, t)
+        keep = ~np.asarray(skip, bool)
+        return _difference_ratio(_fit_noise(eps[1:][keep[1:]], K, S, t[1:][keep[1:]], dt), y, t, keep)
     if output_rad_s is not None:
         out = np.asarray(output_rad_s, dtype=float)
         if out.shape != y.shape:
@@ -746,8 +888,14 @@ def _fit_mean(kind, eps, a, K, S, qn, t, dt, r) -> FaultFit:
     best, sig_k = onset_sigma(dll)
     size = num[best] / den[best] * math.sqrt(r)               # rad/s (step) or rad/s per sample
     sigma = math.sqrt(r / den[best])
-    null = _null_maxima(kind, eps.size, qn, NULL_DRAWS)
-    z = _z_of_p(_null_pvalue(math.sqrt(2.0 * dll[best]), null, lambda y: _analytic_max_p(y, mr, ms)))
+    # the null's law moves with n·K only, smoothly: q to 2 digits lets the gyros and the ladder's steps
+    # share one simulation (a deterministic function of its arguments, so the bits do not depend on
+    # what ran before)
+    null = _null_maxima(kind, eps.size, float(f"{qn:.2g}"), NULL_DRAWS)
+    key = (kind, eps.size, float(qn))
+    anchors = _anchors(key)
+    z = _z_of_scan(math.sqrt(2.0 * dll[best]),
+                   lambda y: _null_pvalue(y, null, lambda u: _analytic_max_p(u, mr, ms), anchors), key=key)
     onset, onset_sig = float(t[best]), sig_k * dt
     if kind == "step":
         params = {"start_s": onset, "size_deg_s": float(rad_s_to_deg_s(size))}
@@ -760,6 +908,35 @@ def _fit_mean(kind, eps, a, K, S, qn, t, dt, r) -> FaultFit:
                     params, psig)
 
 
+def _difference_ratio(fit: FaultFit, y: np.ndarray, t: np.ndarray, keep=None) -> FaultFit:
+    """The noise fault's ratio read from the residual's first differences at the fitted onset.
+
+    Differences remove the bias and its walk: var(Δy) = 2r + q, q ≪ r for a
+    MEMS gyro at its sample rate (K = 8 deg/h/√h and N = 0.1 deg/√h at 50 Hz:
+    q/r ≈ 2e-7), so ratio² = var(Δy after)/var(Δy before) needs neither r nor
+    q. The innovations' ratio needs both, and a calibration on the faulty
+    record inflates q (the raised tail reads as random walk): 5.1 for 3.1 set.
+    1σ: the sample variance of white noise's differences (lag-one correlation
+    −1/2) has var(s²)/σ⁴ = 2(1 + 2·¼)/n = 3/n, so σ(ln λ) = √(3/n_a + 3/n_b).
+    The onset, its 1σ and z stay the innovations' (a scan with the bias tracked).
+    """
+    d, td = np.diff(y), t[1:]
+    if keep is not None:                                      # differences between kept samples only
+        both = keep[1:] & keep[:-1]
+        d, td = d[both], td[both]
+    k = int(np.searchsorted(td, fit.onset_s))                 # first difference after the onset
+    na, nb = d.size - k, k
+    if na < 2 or nb < 2:
+        return fit
+    va, vb = float(np.mean((d[k:] - d[k:].mean()) ** 2)), float(np.mean((d[:k] - d[:k].mean()) ** 2))
+    if not (va > 0.0 and vb > 0.0):
+        return fit
+    ratio = math.sqrt(va / vb)
+    sig = 0.5 * ratio * math.sqrt(3.0 / na + 3.0 / nb)
+    return FaultFit("noise", fit.onset_s, fit.onset_sigma_s, ratio, sig, fit.z, fit.dll,
+                    {**fit.params, "ratio": ratio}, {**fit.params_sigma, "ratio": sig}, fit.notes)
+
+
 def noise_share(K: float, S: float) -> float:
     """w = 2/((2 − K)·S): share of the innovation variance that is the white noise itself."""
     return 2.0 / ((2.0 - K) * S)
@@ -770,9 +947,75 @@ def _variance_onsets(n: int) -> np.ndarray:
     return np.arange(MIN_VARIANCE_SAMPLES, max(n - MIN_VARIANCE_SAMPLES, MIN_VARIANCE_SAMPLES + 1))
 
 
+#: Lags summed by :func:`_variance_dof_factor` (a sensor filter at a tenth of the sample rate
+#: correlates its noise over a few samples; 64 keeps the estimate's own noise, 64/n, small).
+_DOF_LAGS = 64
+
+
+def _variance_dof_factor(eps: np.ndarray) -> float:
+    """1 + 2 Σₖ ρₖ² (k = 1…64): how much a sample variance of ``eps`` scatters more than the
+    white-noise χ² the variance scan assumes (var(s²) = 2σ⁴(1 + 2Σρₖ²)/n for a Gaussian series).
+
+    A gyro's own low-pass (or a Gauss–Markov) leaves its innovations
+    correlated: the scan's log-likelihood ratio is then a quasi-likelihood
+    inflated by this factor, and it is divided by it (a 4.7 Hz 2nd-order
+    filter at 50 Hz read as a noise drop of 0.61 at z 4.9 in its last
+    second). A change of the variance alone correlates nothing, so a real
+    noise fault keeps its ratio.
+    """
+    x = np.asarray(eps, float) - float(np.mean(eps))
+    n = x.size
+    lags = min(_DOF_LAGS, n // 8)
+    if lags < 1:
+        return 1.0
+    c0 = float(x @ x)
+    if not c0 > 0.0:
+        return 1.0
+    rho = np.array([float(x[:-k] @ x[k:]) for k in range(1, lags + 1)]) / c0   # 64 dots: 3x an FFT's speed
+    return float(1.0 + 2.0 * np.sum(rho * rho))
+
+
+#: Longest record the variance scan's null is simulated on (:func:`_variance_null_pvalue`).
+_VARIANCE_NULL_MAX_N = 1 << 17
+
+
+def _variance_null_pvalue(sides: str, n: int, rr: np.ndarray, anchors: dict):
+    """p(y) = P(max over the onsets of the variance scan >= y) with no fault, on n samples.
+
+    Up to 2¹⁷ samples: the Monte Carlo null of :func:`_null_pvalue`. Longer
+    (the ADIS16405's 1e6: 200 draws of 1e6 normals and their scans, 6 s): it
+    is simulated on m = 2¹⁷ and carried to n by the clumps. The maximum
+    exceeds y when at least one excursion does, and excursions are nearly a
+    Poisson count, so −ln(1 − p) is their expected number, which grows with
+    the record as the analytic clump sum Λ(y) does:
+    −ln(1 − p_n(y)) = −ln(1 − p_m(y))·Λ_n(y)/Λ_m(y). Only a ratio of the
+    analytic sums enters, not their level.
+    """
+    kind = "stuck" if sides == "down" else "noise"
+    if n <= _VARIANCE_NULL_MAX_N:
+        null = _null_maxima(kind, n, 0.0, NULL_DRAWS)
+        return lambda y: _null_pvalue(y, null, lambda u: _analytic_max_p(u, rr), anchors)
+    m = _VARIANCE_NULL_MAX_N
+    null = _null_maxima(kind, m, 0.0, NULL_DRAWS)
+    ma = m - _variance_onsets(m).astype(float)                # the scan's count on m samples, as rr's
+    rr_m = 1.0 - np.sqrt(ma[1:] / ma[:-1])
+    sub = _anchors((sides, m))
+
+    def p(y):
+        pm = _null_pvalue(y, null, lambda u: _analytic_max_p(u, rr_m), sub)
+        if pm >= 1.0:
+            return 1.0
+        lam_n, lam_m = -math.log1p(-_analytic_max_p(y, rr)), -math.log1p(-_analytic_max_p(y, rr_m))
+        if not lam_m > 0.0:
+            return pm
+        return float(-math.expm1(math.log1p(-pm) * lam_n / lam_m))
+    return p
+
+
 def _fit_noise(eps, K, S, t, dt, sides: str = "both") -> FaultFit:
     onsets = _variance_onsets(eps.size)
     dll, lam, count = profile_variance_change(eps, onsets)
+    dll = dll / _variance_dof_factor(eps)
     if sides == "down":
         dll = np.where(lam < 1.0, dll, 0.0)
     best, sig_k = onset_sigma(dll, onsets)
@@ -782,8 +1025,9 @@ def _fit_noise(eps, K, S, t, dt, sides: str = "both") -> FaultFit:
     lam_sig = lam[best] * math.sqrt(2.0 / count[best] + 2.0 / before)   # ratio of two χ² means
     ratio_sig = lam_sig / (2.0 * w * max(ratio, 1e-12))
     rr = 1.0 - np.sqrt(count[1:] / count[:-1])                # 1 − corr of running sums of x²
-    null = _null_maxima("stuck" if sides == "down" else "noise", eps.size, 0.0, NULL_DRAWS)
-    z = _z_of_p(_null_pvalue(math.sqrt(2.0 * dll[best]), null, lambda y: _analytic_max_p(y, rr)))
+    key = (sides, eps.size)
+    anchors = _anchors(key)
+    z = _z_of_scan(math.sqrt(2.0 * dll[best]), _variance_null_pvalue(sides, eps.size, rr, anchors), key=key)
     onset, onset_sig = float(t[onsets[best]]), sig_k * dt
     params = {"start_s": onset, "ratio": ratio}
     psig = {"start_s": onset_sig, "ratio": ratio_sig}
@@ -797,9 +1041,9 @@ def _fit_stuck_output(out: np.ndarray, t: np.ndarray, dt: float) -> FaultFit:
     same = int(np.sum(before[1:] == before[:-1]))
     p0 = (same + 1.0) / (before.size + 1.0)                   # Laplace: never 0
     log_p = (run - 1) * math.log(p0)                          # P(run − 1 repeats) = p0^(run−1)
-    p = math.exp(log_p) if log_p > -700 else 0.0
-    p_max = -math.expm1(-out.size * p)                        # anywhere in the record
-    z = _z_of_p(min(p_max, 1.0)) if run >= 2 else -math.inf
+    log_np = math.log(out.size) + log_p                       # anywhere in the record:
+    log_pmax = math.log(-math.expm1(-math.exp(log_np))) if log_np > -20 else log_np   # 1 − e^(−n·p)
+    z = _z_of_logp(min(log_pmax, 0.0)) if run >= 2 else -math.inf
     onset_i = min(start + 1, out.size - 1)
     onset = float(t[onset_i])
     sig = dt / math.sqrt(12.0)

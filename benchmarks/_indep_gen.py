@@ -12,7 +12,8 @@ What a case is (:func:`make_case`): a 50 Hz record of a conical array on a
 3-axis rate table -- 20 min static, rate steps about z (10, 30, 50, 80 deg/s),
 +-30 deg/s about x and about y, two swings about z, 5 min static -- while the
 temperature rises from 25 degC. Every gyro has ARW, RRW and a turn-on bias,
-plus ONE hidden effect from the spec with random parameters.
+plus ONE hidden effect from the spec with random parameters (one of the
+spec's effects, or one of its four faults on one gyro: :data:`FAULTS`).
 :func:`write_case` writes ``<stem>.csv.gz`` + ``<stem>.toml``.
 
 The signal chain of one gyro (the spec's order, followed to the letter):
@@ -26,7 +27,11 @@ The signal chain of one gyro (the spec's order, followed to the letter):
    across gyros, ``burst`` window), bias instability, Gauss-Markov, rate
    ramp, sinusoid, temperature bias, outliers;
 4. ``bandwidth``: causal low-pass on all of the above;
-5. ``quantization`` (of the integrated angle), then ``saturation``.
+5. ``quantization`` (of the integrated angle), then ``saturation``;
+6. faults, on the final output: ``fault_step`` adds ``size_deg_s``,
+   ``fault_drift`` adds ``rate_deg_s2``*(t - ``start_s``), ``fault_stuck``
+   repeats the last output before ``start_s``; ``fault_noise`` is the
+   exception: it multiplies the white (ARW) draw of step 3 by ``ratio``.
 
 Conventions chosen here where the spec leaves room (each is a place where an
 outside generator and gyroarray could differ -- see the report):
@@ -73,6 +78,19 @@ outside generator and gyroarray could differ -- see the report):
   ``acc_x/y/z``.
 * Misalignment: ``axis`` = the nominal axis tilted by ``tilt_deg`` towards a
   random direction perpendicular to it.
+* Faults (spec, "Faults"): one gyro, from ``start_s`` to the end of the
+  record. ``start_s`` is drawn in whole seconds, so it falls on a sample
+  (50 Hz); the onset sample is the first with t >= ``start_s`` (that sample is
+  already faulty), :func:`fault_onset_index`. Drift: t - ``start_s`` with t
+  the record's own time (0 at the onset sample). Stuck: every sample from the
+  onset equals the final output (after quantization and saturation) of the
+  sample before it, bit for bit in the CSV. Noise: ``ratio`` scales the
+  white draw's amplitude (its standard deviation, not its variance --
+  unlike ``burst``'s ``variance_ratio``); RRW, bias and the rate are
+  unchanged. Ranges (record 2184 s): step +-(0.02-0.2) deg/s, drift
+  +-(2e-5-2e-4) deg/s^2 (magnitudes log-uniform), noise ratio 2-5; onset
+  uniform in 10-90 % of the record (drift 10-75 %, so at least 546 s of it,
+  >= 0.011 deg/s at the end).
 """
 
 from __future__ import annotations
@@ -101,6 +119,8 @@ EFFECTS = ["bias_instability", "quantization", "rate_ramp", "gauss_markov", "sin
            "scale_factor", "scale_nonlinearity", "misalignment", "temperature_bias", "latency",
            "saturation", "correlation", "earth_rate", "burst", "bandwidth", "g_sensitivity",
            "outliers"]
+FAULTS = ["fault_step", "fault_drift", "fault_stuck", "fault_noise"]   # spec "Faults": one gyro each
+EFFECTS = EFFECTS + FAULTS
 ARRAY_WIDE = {"correlation", "earth_rate", "burst"}
 
 # spec units -> SI
@@ -173,6 +193,43 @@ def quantize_angle(rate: np.ndarray, dt: float, q_ieee_rad: float, rng=None) -> 
     tq = step * np.round(theta / step)
     return np.diff(tq, prepend=0.0) / dt
 
+
+# ---------------------------------------------------------------------------
+# faults (spec "Faults"): one gyro, from start_s to the end of the record
+# ---------------------------------------------------------------------------
+def fault_onset_index(t: np.ndarray, start_s: float) -> int:
+    """Index of the first sample with t >= ``start_s`` [s] (1 us slack for the float time grid)."""
+    return int(np.searchsorted(t, start_s - 1e-6, side="left"))
+
+
+def fault_on_output(y: np.ndarray, t: np.ndarray, effect: str, params: dict) -> np.ndarray:
+    """``fault_step`` / ``fault_drift`` / ``fault_stuck`` on one gyro's FINAL output.
+
+    ``y`` [rad/s] is the gyro's output after quantization and saturation,
+    ``t`` [s] the record's time; ``params`` in spec units (deg/s, deg/s^2, s).
+    Returns a new array: from the onset sample on, y + size (step),
+    y + rate*(t - start_s) (drift), or y[onset - 1] (stuck).
+    """
+    k0 = fault_onset_index(t, params["start_s"])
+    out = np.array(y, float, copy=True)
+    if effect == "fault_step":
+        out[k0:] += params["size_deg_s"] * DEG
+    elif effect == "fault_drift":
+        out[k0:] += params["rate_deg_s2"] * DEG * np.clip(t[k0:] - params["start_s"], 0.0, None)
+    elif effect == "fault_stuck":
+        if k0 < 1:
+            raise ValueError("fault_stuck needs a sample before start_s")
+        out[k0:] = out[k0 - 1]
+    else:
+        raise ValueError(f"not an output fault: {effect!r}")
+    return out
+
+
+def fault_noise_gain(t: np.ndarray, start_s: float, ratio: float) -> np.ndarray:
+    """Per-sample factor on one gyro's white (ARW) draw: 1 before ``start_s`` [s], ``ratio`` from it on."""
+    g = np.ones(len(t))
+    g[fault_onset_index(t, start_s):] = ratio
+    return g
 
 
 def lowpass_coeffs(cutoff_hz: float, order: int, fs: float, method: str | None = None):
@@ -319,6 +376,11 @@ def _signed(rng, lo, hi):
     return float(rng.uniform(lo, hi) * rng.choice([-1.0, 1.0]))
 
 
+def _signed_log(rng, lo, hi):
+    """Random sign times a log-uniform magnitude in [lo, hi]."""
+    return float(np.exp(rng.uniform(np.log(lo), np.log(hi))) * rng.choice([-1.0, 1.0]))
+
+
 def _draw_layout(rng) -> dict:
     if rng.uniform() < 0.7:
         n = int(rng.choice([4, 5, 6, 8]))
@@ -382,11 +444,24 @@ def _draw_params(effect: str, rng, T: float) -> dict:
         return {"deg_s_per_g": [float(x) for x in mag]}
     if effect == "outliers":
         return {"rate_per_h": float(u(50, 750)), "size_deg_s": float(u(0.4, 3.5))}
+    # faults: onset in whole seconds (on a sample), 10-90 % of the record (drift 10-75 %)
+    if effect == "fault_step":
+        return {"start_s": float(np.round(u(0.1 * T, 0.9 * T))), "size_deg_s": _signed_log(rng, 0.02, 0.2)}
+    if effect == "fault_drift":
+        return {"start_s": float(np.round(u(0.1 * T, 0.75 * T))), "rate_deg_s2": _signed_log(rng, 2e-5, 2e-4)}
+    if effect == "fault_stuck":
+        return {"start_s": float(np.round(u(0.1 * T, 0.9 * T)))}
+    if effect == "fault_noise":
+        return {"start_s": float(np.round(u(0.1 * T, 0.9 * T))), "ratio": float(u(2.0, 5.0))}
     raise ValueError(f"unknown effect {effect!r}")
 
 
-def make_case(effect: str, seed: int) -> dict:
+def make_case(effect: str, seed: int, with_fault: bool = True) -> dict:
     """One record with ARW + RRW + turn-on bias on every gyro and ONE hidden ``effect``.
+
+    ``with_fault=False`` (a fault effect only; for :func:`selfcheck`) draws
+    everything as usual but leaves the fault out, so the difference of the
+    two records is the fault alone.
 
     Returns a dict: ``stem``, ``effect``, ``gyro`` (1-based or None),
     ``params`` (spec units, as in answers.json), ``layout`` (sidecar table),
@@ -469,6 +544,8 @@ def make_case(effect: str, seed: int) -> dict:
     if effect == "burst":
         win = (t >= params["start_s"]) & (t < params["end_s"])
         wn[win] *= math.sqrt(params["variance_ratio"])
+    if effect == "fault_noise" and with_fault:
+        wn[:, gyro - 1] *= fault_noise_gain(t, params["start_s"], params["ratio"])
     out += wn
     k = None if gyro is None else gyro - 1
     if effect == "bias_instability":
@@ -502,6 +579,11 @@ def make_case(effect: str, seed: int) -> dict:
         params["peak_deg_s"] = peak
         rng_si = params["range_deg_s"] * DEG
         out[:, k] = np.clip(out[:, k], -rng_si, rng_si)
+    # 6. faults on the final output (fault_noise acted on the white draw in 3.)
+    if effect in ("fault_step", "fault_drift", "fault_stuck") and with_fault:
+        out[:, k] = fault_on_output(out[:, k], t, effect, params)
+        if effect == "fault_stuck":
+            params["stuck_value_deg_s"] = float(out[fault_onset_index(t, params["start_s"]), k] / DEG)
 
     name = f"S{lay['scheme']}N{N}a{lay['alpha_deg']:.1f}"
     return {"stem": f"indep_{effect}_{seed}", "effect": effect, "gyro": gyro, "params": params,
@@ -513,7 +595,7 @@ def make_case(effect: str, seed: int) -> dict:
 
 
 # names in ``params`` that are bookkeeping, not effect parameters
-BOOKKEEPING = {"n_spikes", "peak_deg_s"}
+BOOKKEEPING = {"n_spikes", "peak_deg_s", "stuck_value_deg_s"}
 
 
 def effect_params(case: dict) -> dict:
@@ -562,6 +644,91 @@ def _oadev(y: np.ndarray, dt: float, taus_s) -> np.ndarray:
         d = x[2 * m:] - 2 * x[m:-m] + x[:-2 * m]
         out.append(math.sqrt(np.mean(d * d) / (2.0 * (m * dt) ** 2)))
     return np.array(out)
+
+
+def _fault_checks(rng, dt: float, n: int) -> dict:
+    """The four faults against closed forms: on a synthetic gyro, then through :func:`make_case`.
+
+    Synthetic gyro (deg/s): 100 deg/h bias + ARW 0.2 deg/sqrt(h) (+ RRW
+    4 deg/h/sqrt(h) and the quantizer where the check allows it), n samples,
+    onset at 40 % of the record.
+
+    * step: mean after - mean before = size, SE sigma sqrt(1/n1 + 1/n2);
+    * drift: least-squares slope after the onset = rate, SE sigma/sqrt(S_tt);
+    * stuck: peak-to-peak from the onset = 0 and the onset value equals the
+      last sample before it, exactly;
+    * noise: std of first differences after/before = ratio; 95 % CI
+      1.96 ratio sqrt(3/4 (1/n1 + 1/n2)) (the variance of a first-difference
+      sample variance is 3 sigma_d^4/n: lag-1 correlation -1/2);
+    * make_case at seed 510, with and without the fault (same draws): the
+      difference is size (step) / rate (t - start) (drift) on the fault's
+      gyro from the onset and 0 everywhere else; stuck: constant from the
+      onset, equal to the sample before, other gyros untouched; noise: the
+      difference is (ratio - 1) x the white draw, whose std must be the
+      gyro's ARW sigma N/60/sqrt(dt) (95 % CI 1.96/sqrt(2 n)), and 0 before.
+    """
+    res = {}
+    t = np.arange(n) * dt
+    start = float(np.round(0.4 * n * dt))
+    sig = arw_sigma_rad_s(0.2, dt) / DEG                                   # deg/s per sample
+    base = 100.0 / 3600.0 + white(rng, n, sig * DEG) / DEG                 # deg/s
+    k0 = fault_onset_index(t, start)
+    n1, n2 = k0, n - k0
+    # step
+    size = 0.03
+    y = fault_on_output(base * DEG, t, "fault_step", {"start_s": start, "size_deg_s": size}) / DEG
+    shift, se = float(y[k0:].mean() - y[:k0].mean()), sig * math.sqrt(1.0 / n1 + 1.0 / n2)
+    res["fault_step mean shift [deg/s] (got, SE)"] = ((round(shift, 6), round(se, 6)), size)
+    # drift
+    rate = 1e-4
+    y = fault_on_output(base * DEG, t, "fault_drift", {"start_s": start, "rate_deg_s2": rate}) / DEG
+    u = t[k0:] - start
+    uc = u - u.mean()
+    slope = float(np.sum(uc * (y[k0:] - y[k0:].mean())) / np.sum(uc * uc))
+    res["fault_drift slope after onset [deg/s^2] (got, SE)"] = (
+        (float(f"{slope:.5g}"), float(f"{sig / math.sqrt(np.sum(uc * uc)):.2g}")), rate)
+    res["fault_drift max |change| before onset [deg/s]"] = (float(np.max(np.abs(y[:k0] - base[:k0]))), 0.0)
+    # stuck, on a realistic output: RRW, ARW and the quantizer
+    yq = quantize_angle(base * DEG + random_walk(rng, n, rrw_step_rad_s(4.0, dt)), dt, 1e-3 * DEG, rng)
+    y = fault_on_output(yq, t, "fault_stuck", {"start_s": start}) / DEG
+    res["fault_stuck ptp after onset, onset - last before [deg/s]"] = (
+        (float(np.ptp(y[k0:])), float(y[k0] - yq[k0 - 1] / DEG)), (0.0, 0.0))
+    # noise
+    ratio = 3.0
+    w = white(rng, n, sig * DEG) * fault_noise_gain(t, start, ratio)
+    y = (w + random_walk(rng, n, rrw_step_rad_s(4.0, dt))) / DEG
+    got = float(np.std(np.diff(y[k0:])) / np.std(np.diff(y[:k0])))
+    ci = 1.96 * ratio * math.sqrt(0.75 * (1.0 / n1 + 1.0 / n2))
+    res["fault_noise first-diff std ratio after/before (got, 95% CI)"] = ((round(got, 4), round(ci, 4)), ratio)
+    # through make_case: the fault alone is the difference of the two records
+    for eff in FAULTS:
+        c, c0 = make_case(eff, 510), make_case(eff, 510, with_fault=False)
+        p, g = effect_params(c), c["gyro"] - 1
+        tt = c["time_s"]
+        j0 = fault_onset_index(tt, p["start_s"])
+        d = c["gyro_deg_s"] - c0["gyro_deg_s"]
+        other = np.delete(d, g, axis=1)
+        rest = max(float(np.max(np.abs(other))), float(np.max(np.abs(d[:j0, g]))))
+        if eff == "fault_step":
+            got = (float(np.max(np.abs(d[j0:, g] - p["size_deg_s"]))), rest)
+            res[f"make_case {eff} max|diff - size|, max|diff| elsewhere [deg/s]"] = (got, (0.0, 0.0))
+        elif eff == "fault_drift":
+            want = p["rate_deg_s2"] * (tt[j0:] - p["start_s"])
+            got = (float(np.max(np.abs(d[j0:, g] - want))), rest)
+            res[f"make_case {eff} max|diff - rate(t-start)|, max|diff| elsewhere [deg/s]"] = (got, (0.0, 0.0))
+        elif eff == "fault_stuck":
+            yk = c["gyro_deg_s"][:, g]
+            got = (float(np.ptp(yk[j0:])), float(yk[j0] - yk[j0 - 1]), rest,
+                   float(np.std(c0["gyro_deg_s"][j0:, g])))
+            res[f"make_case {eff} ptp after, onset-before, max|diff| elsewhere, "
+                "std unfaulted after [deg/s]"] = (got, (0.0, 0.0, 0.0, "> 0"))
+        else:
+            sw = float(np.std(d[j0:, g]) / (p["ratio"] - 1.0))
+            want = arw_sigma_rad_s(c["baseline"]["arw_deg_rt_h"][g], dt) / DEG
+            ci = 1.96 * want / math.sqrt(2.0 * (len(tt) - j0))
+            res[f"make_case {eff} std(diff)/(ratio-1) (got, 95% CI), max|diff| elsewhere [deg/s]"] = (
+                (round(sw, 6), round(ci, 6), rest), round(want, 6))
+    return res
 
 
 def selfcheck(verbose: bool = True) -> dict:
@@ -623,6 +790,7 @@ def selfcheck(verbose: bool = True) -> dict:
     r = ref_rate_deg_s(tt)
     res["max |ref| [deg/s], max |ang acc| [deg/s^2]"] = (
         (float(np.abs(r).max()), float(np.abs(np.diff(r, axis=0)).max() / dt)), None)
+    res.update(_fault_checks(rng, dt, n))
     if verbose:
         for k, (got, want) in res.items():
             print(f"{k:<50} got {got}   want {want}")

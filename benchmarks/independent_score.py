@@ -14,9 +14,19 @@ Misalignment: the generator sets the true ``axis`` and ``tilt_deg``; the
 shared rule scores the fitted ``tilt_deg`` (``axis`` is in NOT_SCORED, and
 the fit returns a tilt and its azimuth, not an axis).
 
+Faults (``fault_step``, ``fault_drift``, ``fault_stuck``, ``fault_noise``; one
+gyro, from ``start_s`` [s] to the end): the same rule, ``start_s`` included
+(within max(10 % of ``start_s``, 2σ)). The shared rule skips a parameter the
+fit does not return; for a fault that would pass ``fault_stuck`` (whose only
+parameter is ``start_s``) without checking anything, so here a fault whose fit
+leaves out a parameter set by the generator fails ``param_ok``.
+
 Usage: ``python benchmarks/independent_score.py [--seeds 2] [--first-seed 500]
 [--effects a,b] [--runs 20] [--json F] [--keep DIR]
 [--bandwidth-method foh|bilinear|bilinear_prewarp] [--quantization-method round|white]``.
+``--effects`` defaults to every effect of the generator, its four faults
+included; ``--effects fault_step,fault_drift,fault_stuck,fault_noise`` scores
+the faults alone.
 """
 
 from __future__ import annotations
@@ -70,6 +80,8 @@ def score_indep(effect: str, seed: int, n_runs: int = 20, keep_dir=None) -> dict
     row["bookkeeping"] = {k: v for k, v in case["params"].items() if k in gen.BOOKKEEPING}
     row["not_returned"] = sorted(k for k in params if (effect, k) not in NOT_SCORED
                                  and k not in row["fit"])
+    if effect in gen.FAULTS and row["not_returned"]:
+        row["param_ok"] = False               # e.g. fault_stuck: start_s is its only parameter
     row["details"] = _details(row)
     return row
 

@@ -10,7 +10,7 @@ import numpy as np
 from gyroarray.analysis.stochastic_fit import fit_burst
 from gyroarray.effects import _draw
 from gyroarray.errors import InputError
-from gyroarray.effects.protocol import Effect, Kind, Param, Stage, identity
+from gyroarray.effects.protocol import Effect, Kind, Param, Stage, identity, terminal_cut
 
 
 class Burst(Effect):
@@ -66,8 +66,12 @@ class Burst(Effect):
 
     def fit(self, ctx, gyro, E):
         if ctx.static_record:
-            return fit_burst(E[ctx.rec], ctx.t[ctx.rec], ctx.dt)
-        return fit_burst(E, ctx.t, ctx.dt)
+            x, t = E[ctx.rec], ctx.t[ctx.rec]
+        else:                             # not what the model leaves out to the end (a frozen gyro)
+            end = terminal_cut(ctx.use) or ctx.n
+            x, t = E[:end], ctx.t[:end]
+        # at the model's level (a noise fault in the model is no burst), but not its own
+        return fit_burst(ctx.at_model_level(x, t, but=(self.name, None)), t, ctx.dt)
 
     def _window(self, t, entry) -> np.ndarray:
         return (t >= float(entry.params["start_s"])) & (t < float(entry.params["end_s"]))

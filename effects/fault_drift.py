@@ -2,7 +2,8 @@
 
 from __future__ import annotations
 
-from gyroarray.effects._fault import START, FaultEffect
+from gyroarray.effects import _draw
+from gyroarray.effects._fault import MEAN_RIVALS, START, FaultEffect, rank_against
 from gyroarray.effects import _fault_physics as faults
 from gyroarray.effects.protocol import Param, with_cols
 
@@ -20,6 +21,7 @@ class FaultDrift(FaultEffect):
     order = 22
     fault_kind = "drift"
     predicts = True
+    rivals = MEAN_RIVALS + ("fault_step",)
     params = (START, Param("rate_deg_s2", "deg/s²", "rate_rad_s2", faults.deg_s2_to_rad_s2,
                            doc="drift rate: output + rate·(t − start_s)"))
     doc = "fault: output + rate·(t − start_s) from start_s on"
@@ -28,3 +30,14 @@ class FaultDrift(FaultEffect):
         x = state.x[:, act.cols]
         return with_cols(state, act.cols, faults.drift(x, state.ctx.time_s, act.p["start_s"],
                                                        act.p["rate_rad_s2"]))
+
+    def prefer(self, mine, other, ctx):
+        return rank_against(self, mine, other, ctx)
+
+    def concede(self, mine, other, ctx):
+        return rank_against(ctx.effect(other.effect), other, mine, ctx)
+
+    def example(self, rng, n_gyros, max_rate_deg_s):
+        g = _draw.gyro(rng, n_gyros)
+        return g, {"start_s": _draw.u(rng, 200.0, 1800.0),
+                   "rate_deg_s2": _draw.sign(rng) * _draw.u(rng, 2e-5, 2e-4, True)}

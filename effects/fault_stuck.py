@@ -2,10 +2,15 @@
 
 from __future__ import annotations
 
-from gyroarray.effects._fault import START, FaultEffect
+from dataclasses import replace
+
+import numpy as np
+
+from gyroarray.effects import _draw
+from gyroarray.effects._fault import MEAN_RIVALS, START, FaultEffect
 from gyroarray.errors import InputError
 from gyroarray.effects import _fault_physics as faults
-from gyroarray.effects.protocol import with_cols
+from gyroarray.effects.protocol import Explained, with_cols
 
 
 class FaultStuck(FaultEffect):
@@ -15,12 +20,21 @@ class FaultStuck(FaultEffect):
     its z from the run's length against how often the gyro repeated a value
     before (:func:`gyroarray.analysis.fault_fit.fit_fault`). In a model the
     samples from the onset on carry no information on the noise: the
-    regressions leave them out (:meth:`exclude`).
+    regressions leave them out (:meth:`exclude`), the stochastic tests end
+    at the onset, and its prediction (the reference's projection frozen at
+    the onset, minus the projection) takes the rate out of the residual there,
+    for the tests that read the whole record.
     """
 
     name = "fault_stuck"
     order = 23
     fault_kind = "stuck"
+    predicts = True
+    #: a frozen output is a flat residual that is minus the rate: it reads as a clip, a scale
+    #: factor of −100 %, a tilt, a step, a drop of the noise, ...; its run of identical values
+    #: is what nothing else makes
+    rivals = MEAN_RIVALS + ("fault_step", "fault_drift", "fault_noise", "quantization", "gauss_markov",
+                            "bias_instability", "outliers")
     params = (START,)
     doc = "fault: the last value before start_s, forever"
 
@@ -34,3 +48,26 @@ class FaultStuck(FaultEffect):
     def exclude(self, ctx, entry):
         after = ctx.t >= float(entry.params["start_s"])
         return after if after.any() and not after.all() else None
+
+    def prefer(self, mine, other, ctx):
+        """A significant frozen run ranks first on its gyro: every other fit there reads the frozen
+        output. Explained when the other's test, with the samples from the onset left out, is no
+        longer significant."""
+        if not (np.isfinite(mine.z) and mine.z > ctx.z_crit) or other.gyro not in (None, mine.gyro):
+            return None
+        start = float(mine.params["start_s"])
+        after = ctx.t >= start
+        what = f"; but gyro {mine.gyro}'s output is frozen from {start:.2f} s on, and this fit reads it"
+        if not after.any() or after.all():
+            return what
+        keep = ~after if ctx.use is None else (ctx.use & ~after)
+        cut = replace(ctx, use=keep, cache={})
+        cut.services = ctx.services.derive(cut)
+        left = ctx.effect(other.effect).test(cut, other.gyro)
+        if np.isfinite(left.z) and left.z <= ctx.z_crit:
+            return Explained(f"; but with gyro {mine.gyro}'s frozen output from {start:.2f} s left out it "
+                             f"is no longer seen (z = {left.z:.1f})")
+        return what
+
+    def example(self, rng, n_gyros, max_rate_deg_s):
+        return _draw.gyro(rng, n_gyros), {"start_s": _draw.u(rng, 300.0, 2200.0)}

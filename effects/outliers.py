@@ -9,7 +9,7 @@ import numpy as np
 from gyroarray.analysis.effect_fit import EffectFit
 from gyroarray.analysis.outliers import clean_spikes, find_spikes
 from gyroarray.effects import _draw
-from gyroarray.effects.protocol import Effect, Explained, Kind, Param, Stage, with_term
+from gyroarray.effects.protocol import Effect, Explained, Kind, Param, Stage, with_term, terminal_cut
 from gyroarray.units import deg_s_to_rad_s, rad_s_to_deg_s
 
 #: Seconds per hour (the rate's unit).
@@ -40,7 +40,7 @@ class Outliers(Effect):
     stage = Stage.QUANTIZE          # after the filter and the quantization noise, before saturation
     kind = Kind.TIME
     reads = "noise"
-    rivals = ("burst", "gauss_markov", "bias_instability", "sinusoid")
+    rivals = ("burst", "gauss_markov", "bias_instability", "sinusoid", "fault_noise")
     params = (Param("rate_per_h", "1/h", "rate_per_s", lambda x: x / _S_PER_H, lo=0.0,
                     doc="spikes per hour (mean of a Poisson count)"),
               Param("size_deg_s", "deg/s", "size_rad_s", deg_s_to_rad_s, lo=0.0,
@@ -74,6 +74,7 @@ class Outliers(Effect):
         # edges that median mixes the two levels: the first samples inside read as a crowd of
         # spikes (scored burst cases, right model: z 3.7 on one gyro). The model knows the level.
         x = ctx.at_model_level(ctx.E0 if in_model else E, ctx.t)[:, g - 1]
+        x = x[:terminal_cut(ctx.use) or ctx.n]          # not what the model leaves out to the end (frozen)
         sp = self._spikes(ctx, g, x, "raw" if in_model else "residual")
         span_h = x.size * ctx.dt / _S_PER_H
         rate = sp.rate * x.size / span_h if span_h > 0 else 0.0

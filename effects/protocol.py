@@ -52,7 +52,7 @@ if TYPE_CHECKING:                                    # pragma: no cover - types 
 
 __all__ = ["Stage", "Kind", "NEEDS", "Param", "Effect", "SimContext", "ChainState", "Active", "Mixer",
            "WhiteShaping", "Streams", "FitContext", "RegressionEffect", "NoiseTermEffect", "same_noise_preference",
-           "explains_away", "Explained", "with_term", "with_cols", "unit_draws", "identity"]
+           "explains_away", "Explained", "terminal_cut", "with_term", "with_cols", "unit_draws", "identity"]
 
 #: What an effect may need from a record: the reference rates, a part where the
 #: table turns, the temperature, the site (heading), the specific force (``acc_*``
@@ -594,6 +594,11 @@ class Effect:
         """Samples (bool, n) the regressions should leave out with this entry in the model."""
         return None
 
+    def silent(self, ctx: "FitContext", entry: "ModelEntry") -> np.ndarray | None:
+        """Samples (bool, (n, N)) where this entry leaves a gyro's output without its noise (a clip
+        on its plateau), which a test of the noise level must not read; None: none."""
+        return None
+
     def clean(self, ctx: "FitContext", entry: "ModelEntry", x: np.ndarray) -> np.ndarray:
         """The residual (n, N) with what this entry models as glitches taken out (spikes), before any
         test reads it (default: as is)."""
@@ -791,11 +796,13 @@ class FitContext:
         """Fits of the model's per-gyro noise terms of ``gyro`` (beyond the baseline)."""
         return self.services.noise_terms(gyro)
 
-    def at_model_level(self, x: np.ndarray, t: np.ndarray) -> np.ndarray:
+    def at_model_level(self, x: np.ndarray, t: np.ndarray, but: tuple | None = None) -> np.ndarray:
         """A record (m, N) at times ``t`` [s] brought to the model's stationary noise level: every
-        entry's :meth:`Effect.whiten` (a burst, a fault's noise ratio), in model order."""
+        entry's :meth:`Effect.whiten` (a burst, a fault's noise ratio), in model order; ``but``
+        (effect, gyro): not that entry (the record its own refit reads)."""
         for e in self.model or ():
-            x = self.effect(e.effect).whiten(self, e, x, t)
+            if but is None or (e.effect, e.gyro) != tuple(but):
+                x = self.effect(e.effect).whiten(self, e, x, t)
         return x
 
     def fit_prediction(self, effect: Effect, fit: "EffectFit") -> np.ndarray | None:
@@ -903,6 +910,17 @@ def same_noise_preference(mine_effect: RegressionEffect, mine: "EffectFit", othe
         return (f"; but {mine_effect.name.replace('_', ' ')} fits this drift better under the same noise "
                 f"(χ² {a:.1f} against {b:.1f}; the two are nearly collinear on this record)")
     return None
+
+
+def terminal_cut(use: np.ndarray | None) -> int | None:
+    """The first sample of the run that ``use`` (samples the regressions use) leaves out to the end
+    of the record (a gyro frozen from its onset on), or None."""
+    if use is None or use[-1]:
+        return None
+    kept = np.flatnonzero(use)
+    if not kept.size or not np.all(use[:kept[-1] + 1]):
+        return None
+    return int(kept[-1]) + 1
 
 
 class Explained(str):

@@ -58,6 +58,14 @@ class Saturation(RegressionEffect):
         out[:, g] = np.clip(u, -c, c) - u
         return out
 
+    def silent(self, ctx, entry):
+        """The samples at the clip: the output sits on its full-scale code, no noise on it."""
+        g = entry.gyro - 1
+        c = float(entry.params["range_deg_s"]) * RAD_PER_DEG
+        out = np.zeros((ctx.n, ctx.N), bool)
+        out[:, g] = np.abs(ctx.y[:, g]) >= c * (1.0 - 1e-9)
+        return out if out.any() else None
+
     def example(self, rng, n_gyros, max_rate_deg_s):
         g = _draw.gyro(rng, n_gyros)
         return g, {"range_deg_s": _draw.u(rng, 0.5, 0.85) * float(max_rate_deg_s[g - 1])}

@@ -254,3 +254,89 @@ def test_z_is_standard_normal_without_a_fault():
         # mean of 48 N(0, 1) within 3/√48 = 0.43 (+ 0.15 for the 200-draw null);
         # sd within [0.65, 1.35] (χ²₄₇ 0.5–99.5 % is [0.70, 1.32] in sd, plus the null's)
         assert abs(v.mean()) < 0.58 and 0.65 < v.std() < 1.35, (k, v.mean(), v.std())
+
+
+# -- z beyond p = 1e-16, and the speed-ups of the tail (diagnosis ranks faults against other effects)
+
+@pytest.mark.parametrize("log_p", [-40.0, -1000.0, -1e5])
+def test_z_of_log_p_inverts_the_normal_tail(log_p):
+    z = ff._z_of_logp(log_p)
+    assert stats.norm.logsf(z) == pytest.approx(log_p, rel=1e-9)
+
+
+def test_scan_z_carries_on_past_the_float_floor_continuously():
+    """p(y) = 1000·2Φ̄(y) (a scan over many onsets): its z solves ln Φ̄(z) = ln 2000 + ln Φ̄(y),
+    computable exactly in logs; the carried z = √(z₁₆² + y² − y₁₆²) agrees to 0.05 out to y = 50
+    and has no jump where p crosses 1e-16 (it used to stop at 8.3, then jump to inf)."""
+    def p(y):
+        return min(1.0, 2000.0 * float(stats.norm.sf(y)))
+
+    for y in (12.0, 20.0, 50.0):
+        exact = ff._z_of_logp(math.log(2000.0) + stats.norm.logsf(y))
+        assert ff._z_of_scan(y, p) == pytest.approx(exact, abs=0.05)
+    y16 = ff._solve_y16(p, 40.0)
+    assert p(y16) == pytest.approx(1e-16, rel=1e-2)
+    below, above = ff._z_of_scan(y16 - 1e-6, p), ff._z_of_scan(y16 + 1e-6, p)
+    assert abs(above - below) < 1e-3
+    zs = [ff._z_of_scan(y, p) for y in np.linspace(5.0, 60.0, 40)]
+    assert np.all(np.diff(zs) > 0)
+
+
+def test_the_tail_sum_on_the_onset_grid_equals_the_full_sum():
+    """The clump rates summed on the grid (ends dense, geometric between) against every onset."""
+    rng = np.random.default_rng(3)
+    n = 60000
+    for kind, qn in (("step", 1e-7), ("step", 1e-2), ("drift", 1e-4)):
+        K, S = (float(v) for v in ff.steady_gain(qn))
+        _, _, mr, ms = ff.profile_means(rng.standard_normal((n, 1)), [1.0 - K], [K], [S],
+                                        np.ones((1, 1)), kind, np.arange(n - 1))
+        for y in (3.0, 6.0, 10.0):
+            full = float(np.sum(ff.clump_rate(y, mr[:, 0], ms[:, 0])))
+            idx, w = ff._onset_grid(mr.shape[0])
+            grid = float(np.sum(w * ff.clump_rate(y, mr[idx, 0], ms[idx, 0])))
+            assert grid == pytest.approx(full, rel=1e-4)
+
+
+def test_noise_fault_ratio_holds_when_the_random_walk_is_overestimated():
+    """A calibration on the faulty record inflates q (the raised tail reads as a walk): the ratio
+    read from the first differences does not care. 40 records of 20 000 samples, ratio 3 from the
+    middle, q given 1e6 times too large: the mean ratio is within 3 standard errors of 3, and the
+    reported 1σ matches the spread over the records within its sampling error (χ², 39 dof: ±35 %)."""
+    r, q_true, n = 1.0, 1e-8, 20000
+    rng = np.random.default_rng(11)
+    got, sig = [], []
+    for _ in range(40):
+        w = rng.standard_normal(n)
+        w[n // 2:] *= 3.0
+        y = w + np.cumsum(rng.standard_normal(n) * math.sqrt(q_true))
+        f = ff.fit_fault("noise", y, 0.01, r, 1e6 * q_true)
+        got.append(f.params["ratio"])
+        sig.append(f.params_sigma["ratio"])
+    got = np.asarray(got)
+    assert abs(got.mean() - 3.0) < 3.0 * got.std(ddof=1) / math.sqrt(got.size)
+    assert 0.65 < got.std(ddof=1) / np.mean(sig) < 1.35
+
+
+def test_variance_scan_is_deflated_by_the_noise_colour():
+    """1 + 2Σρₖ² of an AR(1) with coefficient φ is 1 + 2φ²/(1 − φ²) (closed form)."""
+    rng = np.random.default_rng(4)
+    phi = 0.8
+    from scipy import signal as sg
+    x = sg.lfilter([1.0], [1.0, -phi], rng.standard_normal(400000))
+    assert ff._variance_dof_factor(x) == pytest.approx(1.0 + 2.0 * phi ** 2 / (1.0 - phi ** 2), rel=0.05)
+    assert ff._variance_dof_factor(rng.standard_normal(400000)) == pytest.approx(1.0, abs=0.01)
+
+
+def test_variance_null_carried_to_a_longer_record_matches_its_monte_carlo():
+    """Beyond 2¹⁷ samples the null is simulated on 2¹⁷ and carried by the clump ratio. Against 200
+    direct draws on 2¹⁸: the carried p at the draws' 50/80/90 % quantiles is within 3 binomial σ."""
+    n = 1 << 18
+    onsets = ff._variance_onsets(n)
+    rng = np.random.default_rng(8)
+    mx = np.sort([math.sqrt(2.0 * ff.profile_variance_change(rng.standard_normal(n), onsets)[0].max())
+                  for _ in range(200)])
+    ma = n - onsets.astype(float)
+    p = ff._variance_null_pvalue("both", n, 1.0 - np.sqrt(ma[1:] / ma[:-1]), {})
+    for q in (0.5, 0.8, 0.9):
+        want = 1.0 - q
+        assert abs(p(float(mx[int(q * 199)])) - want) < 3.0 * math.sqrt(want * q / 200)
