@@ -118,3 +118,16 @@ class FaultEffect(Effect):
 
     def free_parameters(self, fit):
         return 2                                         # the onset and the size
+
+
+class MeanFault(FaultEffect):
+    """A step or a drift: a fault that moves the gyro's mean, ranked against the deterministic
+    effects that move it too by explaining away both ways (:func:`rank_against`)."""
+
+    predicts = True
+
+    def prefer(self, mine, other, ctx):
+        return rank_against(self, mine, other, ctx)
+
+    def concede(self, mine, other, ctx):
+        return rank_against(ctx.effect(other.effect), other, mine, ctx)

@@ -3,12 +3,12 @@
 from __future__ import annotations
 
 from gyroarray.effects import _draw
-from gyroarray.effects._fault import MEAN_RIVALS, START, FaultEffect, rank_against
+from gyroarray.effects._fault import MEAN_RIVALS, START, MeanFault
 from gyroarray.effects import _fault_physics as faults
 from gyroarray.effects.protocol import Param, with_cols
 
 
-class FaultDrift(FaultEffect):
+class FaultDrift(MeanFault):
     """A ramp on the final output (after quantization and saturation).
 
     Fit: the GLR of a ramp over the onset on the gyro's residual, its bias
@@ -20,7 +20,6 @@ class FaultDrift(FaultEffect):
     name = "fault_drift"
     order = 22
     fault_kind = "drift"
-    predicts = True
     rivals = MEAN_RIVALS + ("fault_step",)
     params = (START, Param("rate_deg_s2", "deg/s²", "rate_rad_s2", faults.deg_s2_to_rad_s2,
                            doc="drift rate: output + rate·(t − start_s)"))
@@ -30,12 +29,6 @@ class FaultDrift(FaultEffect):
         x = state.x[:, act.cols]
         return with_cols(state, act.cols, faults.drift(x, state.ctx.time_s, act.p["start_s"],
                                                        act.p["rate_rad_s2"]))
-
-    def prefer(self, mine, other, ctx):
-        return rank_against(self, mine, other, ctx)
-
-    def concede(self, mine, other, ctx):
-        return rank_against(ctx.effect(other.effect), other, mine, ctx)
 
     def example(self, rng, n_gyros, max_rate_deg_s):
         g = _draw.gyro(rng, n_gyros)

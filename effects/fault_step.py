@@ -3,13 +3,13 @@
 from __future__ import annotations
 
 from gyroarray.effects import _draw
-from gyroarray.effects._fault import MEAN_RIVALS, START, FaultEffect, rank_against
+from gyroarray.effects._fault import MEAN_RIVALS, START, MeanFault
 from gyroarray.effects import _fault_physics as faults
 from gyroarray.effects.protocol import Param, with_cols
 from gyroarray.units import deg_s_to_rad_s
 
 
-class FaultStep(FaultEffect):
+class FaultStep(MeanFault):
     """A step on the final output (after quantization and saturation).
 
     Fit: the GLR of a step over the onset on the gyro's residual, its
@@ -20,7 +20,6 @@ class FaultStep(FaultEffect):
     name = "fault_step"
     order = 21
     fault_kind = "step"
-    predicts = True
     rivals = MEAN_RIVALS + ("fault_drift",)
     params = (START, Param("size_deg_s", "deg/s", "size_rad_s", deg_s_to_rad_s,
                            doc="step added to the output"))
@@ -30,12 +29,6 @@ class FaultStep(FaultEffect):
         x = state.x[:, act.cols]
         return with_cols(state, act.cols, faults.step(x, state.ctx.time_s, act.p["start_s"],
                                                       act.p["size_rad_s"]))
-
-    def prefer(self, mine, other, ctx):
-        return rank_against(self, mine, other, ctx)
-
-    def concede(self, mine, other, ctx):
-        return rank_against(ctx.effect(other.effect), other, mine, ctx)
 
     def example(self, rng, n_gyros, max_rate_deg_s):
         g = _draw.gyro(rng, n_gyros)
