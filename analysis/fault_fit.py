@@ -880,6 +880,24 @@ def fit_fault(kind: str, residual_rad_s, dt_s: float, r: float, q: float, *, tim
                     ("no raw output: onset from the collapse of the residual's noise (static records)",))
 
 
+#: Grid of n·K on which the step and drift nulls are simulated, points per decade.
+_NK_PER_DECADE = 16
+
+
+def _null_q(n: int, K: float) -> float:
+    """The q (per unit r) whose tracker gain puts n·K on a grid of 16 points per decade.
+
+    The null's law moves with n·K only (:func:`_null_maxima`), and slowly (the
+    maximum of a scan grows like √(2 ln(n·K))): a 15 % step in n·K moves its
+    quantiles by < 1 %. On the grid the gyros of a record, and the records of one
+    length, share one simulation (0.07 s each, ten per analysis otherwise); the
+    grid point is a function of (n, K), so the bits never depend on what ran before.
+    """
+    nk = max(n * K, 1e-300)
+    Kq = min(10.0 ** (round(math.log10(nk) * _NK_PER_DECADE) / _NK_PER_DECADE) / n, 0.5)
+    return Kq * Kq / (1.0 - Kq)                               # K = P/(P + 1), q = P²/(P + 1), P = K/(1 − K)
+
+
 def _fit_mean(kind, eps, a, K, S, qn, t, dt, r) -> FaultFit:
     onsets = np.arange(eps.size - 1)
     num, den, mr, ms = profile_means(eps[:, None], [a], [K], [S], np.ones((1, 1)), kind, onsets)
@@ -888,10 +906,7 @@ def _fit_mean(kind, eps, a, K, S, qn, t, dt, r) -> FaultFit:
     best, sig_k = onset_sigma(dll)
     size = num[best] / den[best] * math.sqrt(r)               # rad/s (step) or rad/s per sample
     sigma = math.sqrt(r / den[best])
-    # the null's law moves with n·K only, smoothly: q to 2 digits lets the gyros and the ladder's steps
-    # share one simulation (a deterministic function of its arguments, so the bits do not depend on
-    # what ran before)
-    null = _null_maxima(kind, eps.size, float(f"{qn:.2g}"), NULL_DRAWS)
+    null = _null_maxima(kind, eps.size, _null_q(eps.size, K), NULL_DRAWS)
     key = (kind, eps.size, float(qn))
     anchors = _anchors(key)
     z = _z_of_scan(math.sqrt(2.0 * dll[best]),
