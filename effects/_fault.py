@@ -29,7 +29,7 @@ from gyroarray.analysis._memo import by_content
 from gyroarray.analysis.effect_fit import EffectFit
 from gyroarray.analysis.fault_fit import fit_fault
 from gyroarray.errors import InputError
-from gyroarray.effects.protocol import (Effect, Explained, Kind, Param, Stage, explains_away, identity,
+from gyroarray.effects.protocol import (Effect, Kind, Param, Stage, explains_away, identity,
                                        terminal_cut)
 
 #: The per-gyro deterministic effects whose fits also move a gyro's residual mean, rivals of a
