@@ -510,18 +510,24 @@ def _anchors(key) -> dict:
     return _ANCHORS.setdefault(key, {})
 
 
-def _solve_y16(pvalue, stat: float) -> float:
-    """y with p(y) = 1e-16 in (0, stat]: regula falsi on ln p against y² (nearly linear in the
-    tail, so a few evaluations of the costly p), bisection where that stalls."""
+def _solve_y16(pvalue) -> float:
+    """y with p(y) = 1e-16: regula falsi on ln p against y² (nearly linear in the tail, so a few
+    evaluations of the costly p), bisection where that stalls. A function of ``pvalue`` alone
+    (its bracket does not depend on the statistic that asked), so the cached y₁₆ and every z
+    read from it are the same bits whatever fit came first."""
     target = math.log(_P_FLOOR)
 
     def f(y):
         p = pvalue(y)
         return (math.log(p) if p > 0.0 else -1e300) - target
 
-    lo, hi = 0.0, float(stat)                                 # f(lo) > 0 >= f(hi)
-    flo, fhi = math.inf, f(hi)
-    y, side = min(9.0, 0.5 * hi), 0
+    lo, hi = 0.0, 64.0                                        # f(lo) > 0 >= f(hi)
+    fhi = f(hi)
+    while fhi >= 0.0:                                         # a scan over very many onsets
+        lo, hi = hi, 2.0 * hi
+        fhi = f(hi)
+    flo = math.inf
+    y, side = (9.0 if lo == 0.0 else 0.5 * (lo + hi)), 0
     for _ in range(60):
         fy = f(y)
         if abs(fy) < 1e-3:                                    # ln p within 0.1 %: y within ~1e-4
@@ -564,12 +570,14 @@ def _z_of_scan(stat: float, pvalue, key=None) -> float:
     z = √(z₁₆² + y² − y₁₆²). z then keeps ranking larger faults higher
     instead of stopping at 8.3 (or jumping to inf where p underflows).
     """
+    if not np.isfinite(stat):
+        return math.inf
     p = pvalue(stat)
-    if p >= _P_FLOOR or not np.isfinite(stat):
-        return _z_of_p(p) if np.isfinite(stat) else math.inf
+    if p >= _P_FLOOR:
+        return _z_of_p(p)
     y16 = _Y16.get(key) if key is not None else None
     if y16 is None:
-        y16 = _solve_y16(pvalue, stat)
+        y16 = _solve_y16(pvalue)
         if key is not None:
             if len(_Y16) > 256:
                 _Y16.clear()

@@ -29,8 +29,7 @@ from gyroarray.analysis._memo import by_content
 from gyroarray.analysis.effect_fit import EffectFit
 from gyroarray.analysis.fault_fit import fit_fault
 from gyroarray.errors import InputError
-from gyroarray.effects.protocol import (Effect, Kind, Param, Stage, explains_away, identity,
-                                       terminal_cut)
+from gyroarray.effects.protocol import Effect, Kind, Param, Stage, explains_away, identity
 
 #: The per-gyro deterministic effects whose fits also move a gyro's residual mean, rivals of a
 #: step or a drift (each one's fit predicts what it takes out of the record).
@@ -81,7 +80,7 @@ class FaultEffect(Effect):
         # samples the model leaves out at the end (a frozen gyro from its onset on) are cut off;
         # a window inside the record (a burst) is read as it is: the scan needs a uniform clock.
         # Not for a frozen output's own fit: it reads the whole run (cut, it found its last sample)
-        n = ctx.n if self.fault_kind == "stuck" else (terminal_cut(ctx.use) or ctx.n)
+        n = ctx.n if self.fault_kind == "stuck" else ctx.noise_end
         out = ctx.y[:n, g] if self.fault_kind == "stuck" else None
         # a noise fault in the model brought back to its level (not this fault's own entry: it is
         # what this fit reads)

@@ -10,7 +10,7 @@ import numpy as np
 from gyroarray.analysis.stochastic_fit import fit_burst
 from gyroarray.effects import _draw
 from gyroarray.errors import InputError
-from gyroarray.effects.protocol import Effect, Kind, Param, Stage, identity, terminal_cut
+from gyroarray.effects.protocol import Effect, Kind, Param, Stage, identity
 
 
 class Burst(Effect):
@@ -68,8 +68,7 @@ class Burst(Effect):
         if ctx.static_record:
             x, t = E[ctx.rec], ctx.t[ctx.rec]
         else:                             # not what the model leaves out to the end (a frozen gyro)
-            end = terminal_cut(ctx.use) or ctx.n
-            x, t = E[:end], ctx.t[:end]
+            x, t = E[:ctx.noise_end], ctx.t[:ctx.noise_end]
         # at the model's level (a noise fault in the model is no burst), but not its own
         return fit_burst(ctx.at_model_level(x, t, but=(self.name, None)), t, ctx.dt)
 

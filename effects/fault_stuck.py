@@ -2,15 +2,13 @@
 
 from __future__ import annotations
 
-from dataclasses import replace
-
 import numpy as np
 
 from gyroarray.effects import _draw
 from gyroarray.effects._fault import MEAN_RIVALS, START, FaultEffect
 from gyroarray.errors import InputError
 from gyroarray.effects import _fault_physics as faults
-from gyroarray.effects.protocol import Explained, with_cols
+from gyroarray.effects.protocol import no_longer_seen, with_cols
 
 
 class FaultStuck(FaultEffect):
@@ -60,14 +58,8 @@ class FaultStuck(FaultEffect):
         what = f"; but gyro {mine.gyro}'s output is frozen from {start:.2f} s on, and this fit reads it"
         if not after.any() or after.all():
             return what
-        keep = ~after if ctx.use is None else (ctx.use & ~after)
-        cut = replace(ctx, use=keep, cache={})
-        cut.services = ctx.services.derive(cut)
-        left = ctx.effect(other.effect).test(cut, other.gyro)
-        if np.isfinite(left.z) and left.z <= ctx.z_crit:
-            return Explained(f"; but with gyro {mine.gyro}'s frozen output from {start:.2f} s left out it "
-                             f"is no longer seen (z = {left.z:.1f})")
-        return what
+        return no_longer_seen(ctx.leaving_out(after), other, ctx,
+                              f"gyro {mine.gyro}'s frozen output from {start:.2f} s left out") or what
 
     def example(self, rng, n_gyros, max_rate_deg_s):
         return _draw.gyro(rng, n_gyros), {"start_s": _draw.u(rng, 300.0, 2200.0)}

@@ -9,7 +9,7 @@ import numpy as np
 from gyroarray.analysis.effect_fit import EffectFit
 from gyroarray.analysis.outliers import clean_spikes, find_spikes
 from gyroarray.effects import _draw
-from gyroarray.effects.protocol import Effect, Explained, Kind, Param, Stage, with_term, terminal_cut
+from gyroarray.effects.protocol import Effect, Kind, Param, Stage, no_longer_seen, with_term
 from gyroarray.units import deg_s_to_rad_s, rad_s_to_deg_s
 
 #: Seconds per hour (the rate's unit).
@@ -74,7 +74,7 @@ class Outliers(Effect):
         # edges that median mixes the two levels: the first samples inside read as a crowd of
         # spikes (scored burst cases, right model: z 3.7 on one gyro). The model knows the level.
         x = ctx.at_model_level(ctx.E0 if in_model else E, ctx.t)[:, g - 1]
-        x = x[:terminal_cut(ctx.use) or ctx.n]          # not what the model leaves out to the end (frozen)
+        x = x[:ctx.noise_end]                           # not what the model leaves out to the end (frozen)
         sp = self._spikes(ctx, g, x, "raw" if in_model else "residual")
         span_h = x.size * ctx.dt / _S_PER_H
         rate = sp.rate * x.size / span_h if span_h > 0 else 0.0
@@ -124,11 +124,7 @@ class Outliers(Effect):
             return None
         pred = np.zeros_like(ctx.E)
         pred[:, g - 1] = x - clean_spikes(x, idx)           # the spikes, as a "prediction" taken out
-        left = ctx.effect(other.effect).test(ctx.without(pred), other.gyro)
-        if np.isfinite(left.z) and left.z <= ctx.z_crit:
-            return Explained(f"; but with the {idx.size} spikes of gyro {g} taken out it is no longer seen "
-                             f"(z = {left.z:.1f})")
-        return None
+        return no_longer_seen(ctx.without(pred), other, ctx, f"the {idx.size} spikes of gyro {g} taken out")
 
     def example(self, rng, n_gyros, max_rate_deg_s):
         return _draw.gyro(rng, n_gyros), {"rate_per_h": _draw.u(rng, 60.0, 600.0, True),

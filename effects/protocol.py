@@ -52,7 +52,7 @@ if TYPE_CHECKING:                                    # pragma: no cover - types 
 
 __all__ = ["Stage", "Kind", "NEEDS", "Param", "Effect", "SimContext", "ChainState", "Active", "Mixer",
            "WhiteShaping", "Streams", "FitContext", "RegressionEffect", "NoiseTermEffect", "same_noise_preference",
-           "explains_away", "Explained", "terminal_cut", "with_term", "with_cols", "unit_draws", "identity"]
+           "explains_away", "no_longer_seen", "Explained", "terminal_cut", "with_term", "with_cols", "unit_draws", "identity"]
 
 #: What an effect may need from a record: the reference rates, a part where the
 #: table turns, the temperature, the site (heading), the specific force (``acc_*``
@@ -824,6 +824,20 @@ class FitContext:
         ctx.services = self.services.derive(ctx)
         return ctx
 
+    def leaving_out(self, samples: np.ndarray) -> "FitContext":
+        """The same analysis with the regressions also leaving out ``samples`` (bool, n): what the
+        record would show without them."""
+        use = ~samples if self.use is None else (self.use & ~samples)
+        ctx = replace(self, use=use, cache={})
+        ctx.services = self.services.derive(ctx)
+        return ctx
+
+    @property
+    def noise_end(self) -> int:
+        """Samples before the run the model leaves out to the end of the record (a gyro frozen from
+        its onset on: no noise record of it there), all of them without one (:func:`terminal_cut`)."""
+        return terminal_cut(self.use) or self.n
+
     def entries(self, name: str) -> list:
         """The model's entries of the effect ``name``."""
         return [] if self.model is None else [e for e in self.model if e.effect == name]
@@ -944,9 +958,14 @@ def explains_away(mine_effect: Effect, mine: "EffectFit", other: "EffectFit", ct
     pred = ctx.fit_prediction(mine_effect, mine)
     if pred is None:
         return None
-    left = ctx.effect(other.effect).test(ctx.without(pred), other.gyro)
+    return no_longer_seen(ctx.without(pred), other, ctx, f"the {mine_effect.name.replace('_', ' ')} removed")
+
+
+def no_longer_seen(cut: FitContext, other: "EffectFit", ctx: FitContext, what: str) -> Explained | None:
+    """``other``'s test on ``cut`` (the record with something taken out, ``what``): Explained when
+    it is no longer significant there, else None."""
+    left = ctx.effect(other.effect).test(cut, other.gyro)
     if np.isfinite(left.z) and left.z <= ctx.z_crit:
-        return Explained(f"; but with the {mine_effect.name.replace('_', ' ')} removed it is no longer seen "
-                         f"(z = {left.z:.1f})")
+        return Explained(f"; but with {what} it is no longer seen (z = {left.z:.1f})")
     return None
 

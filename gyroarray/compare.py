@@ -70,7 +70,7 @@ from gyroarray.measurement import Measurement, _runs, relative_time_s
 from gyroarray.parallel import available_cpus, map_runs
 from gyroarray.sim.effects import sim_context, simulate_on, simulate_readings
 from gyroarray.sim.model import ModelEntry, NoiseModel
-from gyroarray.effects.protocol import Effect, Explained, FitContext, Kind, terminal_cut
+from gyroarray.effects.protocol import Effect, Explained, FitContext, Kind
 from gyroarray.sensor import gravity_specific_force, rigid_body_specific_force
 from gyroarray.units import RAD_PER_DEG, arw_deg_rt_h_to_rad_rt_s, rad_s_to_deg_h, rrw_deg_h_rt_h_to_rad_s_rt_s
 
@@ -1008,9 +1008,9 @@ class ModelComparison:
                          f"{b * self.dt + self.t[0]:.0f} s): {why}")
         else:
             ctx.rec = slice(0, self.n)
-        end = terminal_cut(ctx.use)
+        end = ctx.noise_end
         lo, hi, _ = ctx.rec.indices(self.n)
-        if end is not None and lo < end < hi and end - lo >= MIN_STATIC:
+        if lo < end < hi and end - lo >= MIN_STATIC:
             # a part the model leaves out to the end (a gyro frozen from its onset on) is no noise
             # record of that gyro: the stochastic tests read what comes before it
             ctx.rec = slice(lo, end)

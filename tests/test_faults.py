@@ -274,7 +274,7 @@ def test_scan_z_carries_on_past_the_float_floor_continuously():
     for y in (12.0, 20.0, 50.0):
         exact = ff._z_of_logp(math.log(2000.0) + stats.norm.logsf(y))
         assert ff._z_of_scan(y, p) == pytest.approx(exact, abs=0.05)
-    y16 = ff._solve_y16(p, 40.0)
+    y16 = ff._solve_y16(p)
     assert p(y16) == pytest.approx(1e-16, rel=1e-2)
     below, above = ff._z_of_scan(y16 - 1e-6, p), ff._z_of_scan(y16 + 1e-6, p)
     assert abs(above - below) < 1e-3
