@@ -53,6 +53,11 @@ def rank_against(mine_effect: Effect, mine, other, ctx) -> str | None:
 #: for bit (1.2 s of fault tests per analysis of the ADIS16405's 1e6 samples otherwise).
 _fit_fault = by_content(maxsize=32)(fit_fault)
 
+#: Samples a fault must have on each side of its onset to be told from a glitch at an end of the
+#: record: fewer carry its size or its variance ratio on a handful of values (a variance ratio
+#: on 31 degrees of freedom already has a 1σ of 25 %).
+MIN_RUN = 32
+
 #: The fault's start parameter, shared by the four.
 START = Param("start_s", "s", "start_s", identity, doc="fault start (time_s); it lasts to the end")
 
@@ -105,15 +110,29 @@ class FaultEffect(Effect):
         noise change a warm-up (the CATS tag's first 89 ± 102 s). Asked of a fit beyond z = 3
         only: one that sees nothing has no onset to speak of. A drift's onset is loose (± 50–200 s
         on the scoring records) and a drift from the start is a rate ramp, its rival: the ranking
-        decides that."""
+        decides that.
+
+        Nor is a step or noise change whose onset lies within :data:`MIN_RUN` samples of the start,
+        nor any of the three whose onset lies within :data:`MIN_RUN` samples of the end or whose
+        whole life after its onset lies within the onset's own 1σ: what it reads is a handful of
+        samples, which a glitch makes as well (the MPU-6050 record ends in a reversal of its stepper, and its
+        last three samples read as a step and a drift on gyros 1 and 2 from 1499.87 ± 10–120 s of
+        1499.91). 1σ at the end, not 3σ: a drift's onset is loose, and a real one from 1800 ± 200 s
+        of a 2200 s record is still there to see."""
         f = super().test(ctx, gyro)
+        if not (self.fault_kind != "stuck" and np.isfinite(f.z) and f.z > 3.0):
+            return f
         start, sig = float(f.params.get("start_s", math.nan)), float(f.extra.get("onset_sigma_s", 0.0))
-        if self.fault_kind in ("step", "noise") and np.isfinite(f.z) and f.z > 3.0 \
-                and start - float(ctx.t[0]) < 3.0 * sig:
-            return replace(f, extra={**f.extra, "identifiable": False,
-                                     "reason": f"onset {start:.3g} ± {sig:.2g} s, not told from the record's "
-                                               "start: a turn-on transient, not a fault"})
-        return f
+        end = float(ctx.t[ctx.noise_end - 1]) + ctx.dt
+        if self.fault_kind != "drift" and start - float(ctx.t[0]) < max(3.0 * sig, MIN_RUN * ctx.dt):
+            why = "not told from the record's start: a turn-on transient, not a fault"
+        elif end - start < max(sig, MIN_RUN * ctx.dt):
+            why = (f"{end - start:.3g} s before the record's end ({end:.6g} s): too few samples after "
+                   "it to tell a fault from a glitch of the last ones")
+        else:
+            return f
+        return replace(f, extra={**f.extra, "identifiable": False,
+                                 "reason": f"onset {start:.6g} ± {sig:.2g} s, {why}"})
 
     def free_parameters(self, fit):
         return 2                                         # the onset and the size

@@ -340,3 +340,43 @@ def test_variance_null_carried_to_a_longer_record_matches_its_monte_carlo():
     for q in (0.5, 0.8, 0.9):
         want = 1.0 - q
         assert abs(p(float(mx[int(q * 199)])) - want) < 3.0 * math.sqrt(want * q / 200)
+
+
+def _static_triad(n: int, seed: int):
+    """A plain-numpy static triad [rad/s]: white 0.5 deg/s per sample and a random walk of
+    1e-4 deg/s per sample, no gyroarray simulator."""
+    rng = np.random.default_rng(seed)
+    w = 0.5 * rng.standard_normal((n, 3)) + np.cumsum(1e-4 * rng.standard_normal((n, 3)), axis=0)
+    return deg_s_to_rad_s(w)
+
+
+def test_a_step_on_the_first_or_last_samples_is_not_called_a_fault():
+    """A jump of the last three samples (the MPU-6050 record ends in its stepper's reversal) and
+    of the first three (a turn-on transient) put a fault's onset within a few samples of an end
+    of the record: not identifiable as faults, and said so (the first three also read as a
+    noise drop from 0.22 s). The same step 3000 samples before the end is a fault,
+    and its onset is where the record (plain numpy, written here) puts it."""
+    from gyroarray.compare import ModelComparison
+    from gyroarray.measurement import Measurement
+
+    n = 30000
+    y = _static_triad(n, 11)
+    y[-3:, 1] += deg_s_to_rad_s(4.0)                    # gyro 2: the last three samples
+    y[:3, 2] += deg_s_to_rad_s(4.0)                     # gyro 3: the first three
+    y[n - 3000:, 0] += deg_s_to_rad_s(0.3)              # gyro 1: a real step, 30 s before the end
+    m = Measurement(time_s=DT * np.arange(n), gyro_deg_s=np.degrees(y), layout=Layout.triad(),
+                    sample_rate_hz=1 / DT)
+    a = ModelComparison(m, n_runs=3).analyse()
+    notes = " ".join(a.notes)
+    assert re.search(r"fault_step on gyro 2: not identifiable \(onset 299\.9\d* ± [^)]*record's end", notes), notes
+    assert re.search(r"fault_step on gyro 3: not identifiable \(onset 0\.0\d* ± [^)]*record's start", notes), notes
+    assert re.search(r"fault_noise on gyro 3: not identifiable \(onset 0\.\d* ± [^)]*record's start", notes), notes
+    by = {(t.effect, t.gyro): t for t in a.candidates}
+    # z 11–13 before: step, drift and noise on gyro 2, noise on gyro 3
+    assert not {("fault_step", 2), ("fault_drift", 2), ("fault_noise", 2), ("fault_step", 3),
+                ("fault_noise", 3)} & set(by)
+    assert not any(a.significant(t) for t in a.candidates if t.effect.startswith("fault_") and t.gyro != 1)
+    step = by[("fault_step", 1)]
+    assert a.significant(step)
+    start, sig = step.fit.params["start_s"], step.fit.extra["onset_sigma_s"]
+    assert abs(start - DT * (n - 3000)) <= max(3.0 * sig, DT), (start, sig)

@@ -156,3 +156,24 @@ def test_a_line_added_on_continuous_motion_lowers_the_discrepancy():
     top = with_line.candidates[0]
     assert (top.effect, top.gyro) == ("misalignment", 2) and gm2.z < top.z
     assert any("taken out: misalignment on gyro 2" in n for n in with_line.notes)
+
+
+def test_the_stepper_reversal_in_the_last_samples_is_not_a_fault():
+    """The record ends in a reversal of the stepper: gyro 3 goes from −152 to +181 deg/s in its
+    last two samples (read plainly below), and with the ladder's eleven effects in the model the
+    last three samples read as a step and a drift on gyros 1 and 2 (z 3.9–5.8, onsets
+    1499.87–1499.88 s of 1499.91). Three samples cannot tell a fault from a glitch: not
+    identifiable, and said so; no fault is significant."""
+    import pandas as pd
+    raw = pd.read_csv(MPU, comment="#")["gyro3"].to_numpy()[-2:]
+    assert raw[0] < -100.0 and raw[1] > 100.0
+    m = read_measurement(MPU, repair=True)
+    adds = [("correlation", None), ("latency", 3), ("quantization", 1), ("quantization", 3), ("sinusoid", 3),
+            ("sinusoid", 2), ("sinusoid", 1), ("bandwidth", 3), ("misalignment", 1), ("misalignment", 2),
+            ("gauss_markov", 1)]
+    _, a = ModelComparison(m, n_runs=5).fit(adds)
+    for kind in ("step", "drift"):
+        for g in (1, 2):
+            assert any(n.startswith(f"fault_{kind} on gyro {g}: not identifiable (onset 1499.8")
+                       and "record's end" in n for n in a.notes), (kind, g, a.notes)
+    assert not any(a.significant(t) for t in a.candidates if t.effect.startswith("fault_"))
