@@ -36,6 +36,12 @@ class RateRamp(RegressionEffect):
     def test(self, ctx, gyro):
         return ctx.gyro_noise(int(gyro))[self.name]
 
+    def noise_term(self, ctx, entry):
+        """The ramp's regression took part of the random walk out with it (its slope): the Allan
+        fit's K column says so when it reads the whole record the ramp was fitted on."""
+        start, stop, _ = ctx.rec.indices(ctx.n)
+        return {"ramp_taken_out": True} if (start, stop) == (0, ctx.n) else {}
+
     def prefer(self, mine, other, ctx):
         return same_noise_preference(self, mine, other, ctx)
 

@@ -327,14 +327,14 @@ def _lowpass_effects() -> list[str]:
 
 def _noise_term_kwargs(ctx: FitContext, entries, gyro: int) -> dict:
     """:func:`fit_gyro_noise`'s keywords from the gyro's model entries (``Effect.noise_term``):
-    their baseline terms, a Gauss–Markov τc and the white column's shape."""
+    their baseline terms, a Gauss–Markov τc, the white column's shape and a ramp taken out."""
     kw: dict = {"model_terms": ()}
     for e in entries:
         if e.gyro != gyro:
             continue
         term = get_effect(e.effect).noise_term(ctx, e)
         kw["model_terms"] += tuple(term.get("terms", ()))
-        for key in ("gm_tau_s", "white_shape"):
+        for key in ("gm_tau_s", "white_shape", "ramp_taken_out"):
             if key in term:
                 kw[key] = term[key]
     return kw
