@@ -85,8 +85,10 @@ class Outliers(Effect):
             if math.isfinite(sp.size_sigma):
                 sigma["size_deg_s"] = float(rad_s_to_deg_s(sp.size_sigma))
         if sp.z > 3:
+            held = (f"; at most, since the size is held at the threshold/1.96: those seen are too few "
+                    "to say how many lie below it") if sp.size_at_floor else ""
             ev = (f"gyro {g} has {sp.index.size} isolated spikes (rms {size:.3g} deg/s, {rate:.3g} per hour "
-                  f"counting those below the {sp.threshold:.1f}σ threshold; {sp.count_excess} second-difference "
+                  f"counting those below the {sp.threshold:.1f}σ threshold{held}; {sp.count_excess} second-difference "
                   f"clusters beyond {4.5:g}σ against {sp.expected:.2g} expected; first differences' excess kurtosis "
                   f"{sp.kurtosis:.3g})")
         else:

@@ -93,3 +93,20 @@ def test_close_spikes_are_found_and_cleaned_separately():
     cleaned = clean_spikes(x, s.index)
     assert np.abs(cleaned[4995:5010]).max() < 5.0
     np.testing.assert_array_equal(cleaned[5001:5003], x[5001:5003])
+
+
+def test_a_few_values_just_beyond_the_threshold_do_not_make_an_impossible_rate():
+    """Two values of 7.5σ in plain Gaussian noise (6.98 and 8.19 σ̂ of the detector's differences): the truncated normal's likelihood would read
+    them as the tail of tiny spikes and the rate as one spike per sample or more (the MPU-6050's
+    gyro 3 read 4.8e12 per hour at 100 Hz). The size is held at the threshold/1.96, so at least
+    5 % of the spikes lie beyond it: the rate is at most 20 × 2 over the record, and the size's
+    σ, a bound's and not a curvature's, is not given."""
+    rng = np.random.default_rng(8)
+    x = rng.standard_normal(200_000)
+    x[[50_000, 150_000]] = [7.5, -7.5]
+    sp = find_spikes(x)
+    assert set(sp.index.tolist()) == {50_000, 150_000}
+    assert sp.size_at_floor and math.isnan(sp.size_sigma)
+    # the floor: the threshold in the detector's σ̂ (its local value ≈ the record's), over 1.96
+    assert sp.size == pytest.approx(sp.threshold * sp.sigma / 1.959964, rel=0.05)
+    assert sp.rate * x.size <= 20.0 * 2 * 1.001
