@@ -205,7 +205,7 @@ def find_spikes(x, alpha: float = 0.01) -> Spikes:
             break
         idx = idx[keep]
     k, lam, z = _count_test(x, sigma)
-    size, s_size, rate = math.nan, math.nan, 0.0
+    size, s_size, rate, at_floor = math.nan, math.nan, 0.0, False
     if idx.size:
         v = d[idx]
         cut = c * float(np.median(local[idx]))
@@ -225,8 +225,7 @@ def find_spikes(x, alpha: float = 0.01) -> Spikes:
             s_size = math.nan                            # a bound, not a likelihood's curvature
         p_seen = float(special.erfc(cut / (size * math.sqrt(2))))
         rate = idx.size / p_seen / n
-        return Spikes(idx, d[idx], sigma, c, k, lam, z, size, s_size, rate, kurt, at_floor)
-    return Spikes(idx, d[idx], sigma, c, k, lam, z, size, s_size, rate, kurt)
+    return Spikes(idx, d[idx], sigma, c, k, lam, z, size, s_size, rate, kurt, at_floor)
 
 
 def clean_spikes(x, index) -> np.ndarray:
