@@ -43,7 +43,9 @@ from gyroarray.analysis.noise_fit import NoiseFit, fit_noise_terms
 
 __all__ = [
     "KINDS",
+    "MAX_FIT_TAUS",
     "ONE_SIGMA",
+    "fit_tau_count",
     "AllanResult",
     "AllanAnalysis",
     "averaging_factors",
@@ -71,6 +73,11 @@ ONE_SIGMA = math.erf(1.0 / math.sqrt(2.0))
 _NORM = {2: 2.0, 3: 6.0}
 # Smallest number of summands of a reported point (as allantools).
 _MIN_TERMS = 2
+
+#: Most taus :func:`allan_analysis` fits at once: the generalised least-squares noise fit
+#: costs about the cube of the number of taus per iteration (3000 samples: 43 taus 1 s,
+#: 136 taus over a minute; a dense curve beyond this shows nothing an octave grid hides).
+MAX_FIT_TAUS = 64
 
 
 # --------------------------------------------------------------------------
@@ -226,6 +233,54 @@ def averaging_factors(n_phase: int, tau0_s: float, taus="octave",
                          f"{n_phase - 1} samples: the largest is "
                          f"{m_max * tau0!r} s (m = {m_max})")
     return m.astype(np.int64)
+
+
+def fit_tau_count(n_phase: int, tau0_s: float, count: int, kind: str = "oadev"
+                  ) -> tuple[int, str | None]:
+    """The count of log-spaced taus to ask :func:`allan_analysis` for, and a note when it is
+    not ``count``.
+
+    A count gives at most as many distinct averaging factors as the record holds (``m`` up to
+    about a half (Allan) or a third (Hadamard) of the samples, each an integer), and the noise
+    fit takes at most :data:`MAX_FIT_TAUS`. Beyond either, the largest count within both is
+    used and the note says what was asked and what is analysed.
+
+    Parameters
+    ----------
+    n_phase : int
+        Number of phase points (rate samples + 1).
+    tau0_s : float
+        Sample interval [s].
+    count : int
+        Log-spaced taus asked for (>= 1).
+    kind : {"oadev", "ohdev"}
+
+    Returns
+    -------
+    (int, str or None)
+        The count to pass as ``taus``; the note (None: ``count`` as asked).
+    """
+    def distinct(c: int) -> int:
+        return int(averaging_factors(n_phase, tau0_s, int(c), kind).size)
+
+    got = distinct(count)
+    if got >= count:
+        return count, None
+    samples = f"{n_phase - 1} samples give"
+    if got <= MAX_FIT_TAUS:
+        return count, (f"--taus {count}: {samples} only {got} distinct log-spaced averaging "
+                       f"times for {kind} (integer multiples of the sample interval up to the "
+                       f"longest the record holds); analysed those {got}")
+    lo, hi = 1, count                       # the largest count with <= MAX_FIT_TAUS distinct
+    while lo < hi:
+        mid = (lo + hi + 1) // 2
+        if distinct(mid) <= MAX_FIT_TAUS:
+            lo = mid
+        else:
+            hi = mid - 1
+    return lo, (f"--taus {count}: {samples} {got} distinct log-spaced averaging times for "
+                f"{kind}; analysed {distinct(lo)} of them, the most the noise fit takes "
+                f"({MAX_FIT_TAUS}; its cost grows with the cube of the count)")
 
 
 def _deviation_of_phase(x: np.ndarray, dev_scale: float, tau0: float,

@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from gyroarray.errors import InputError
+from gyroarray.limits import check_memory
 from gyroarray.outputs import save_figure
 from gyroarray.units import rad_s_to_deg_s
 
@@ -56,19 +57,67 @@ def analyse_measurement(meas, model=None, *, far_per_h: float = 0.01, p_md: floa
     out : dict
         ``{"alarms": [...], "far_per_h", "minimum_detectable": {gyro: {kind: ...}}, "notes"}``.
     result : FdiResult
-    detector : FaultDetector
+    detector : FaultDetector or None
+        None for a record whose parity is zero (below), analysed without a model.
+
+    Raises
+    ------
+    InputError
+        Checked before any work: ``far_per_h`` outside :func:`far_range_per_h`
+        (the argument and its range named), fewer than 4 gyros, fewer than
+        :data:`~gyroarray.estimators.fdi.MIN_RECORD_SAMPLES` samples, more
+        memory than the budget (:func:`gyroarray.limits.check_memory`); a
+        model the detector cannot use (named with its file).
+
+    Notes
+    -----
+    The test windows are bounded by the record: the drift and variance
+    windows (600 s and 40 s) are cut to the record's span, and every window
+    to :data:`~gyroarray.estimators.fdi.MAX_WINDOW_SAMPLES` samples, so the
+    work and memory grow with the record, never with the sample rate alone.
+
+    A record whose outputs are exactly consistent with one body rate at
+    every sample (identical gyros, constant or noise-free outputs:
+    :func:`~gyroarray.estimators.fdi.parity_is_zero`) has **no fault**: any
+    single-gyro fault would make the parity non-zero. That is the answer,
+    with a note; the statistics are not run (they would read the missing
+    noise as a fault of every direction at once). Without a model its
+    minimum detectable faults are null (no noise to size them from).
     """
-    from gyroarray.estimators.fdi import FaultDetector, estimate_noise, minimum_detectable
-    if not (math.isfinite(far_per_h) and far_per_h > 0):
-        raise InputError(f"--far-per-h must be a rate > 0 [1/h], got {far_per_h!r}")
+    from gyroarray.estimators.fdi import (MIN_RECORD_SAMPLES, FaultDetector, estimate_noise,
+                                          far_range_per_h, minimum_detectable, parity_is_zero)
     z = meas.gyro_rad_s
     dt = meas.dt_s
+    far_lo, far_hi = far_range_per_h(dt)
+    if not (math.isfinite(far_per_h) and far_per_h > 0):
+        raise InputError(f"--far-per-h must be a rate > 0 [1/h] (between {far_lo:g} and "
+                         f"{far_hi:.4g} for this record), got {far_per_h!r}")
+    if not far_lo <= far_per_h <= far_hi:
+        raise InputError(f"--far-per-h must be between {far_lo:g} and {far_hi:.4g} false alarms/h "
+                         f"at this record's {1.0 / dt:.6g} Hz (at most one per 100 samples), got "
+                         f"{far_per_h!r}", file=meas.source)
     notes = list(meas.notes)
     if meas.n_gyros < 4:
         raise InputError(f"fault detection needs at least 4 gyros, the measurement has {meas.n_gyros}",
                          file=meas.source)
+    n = z.shape[0]
+    if n < MIN_RECORD_SAMPLES:
+        raise InputError(f"fault detection needs at least {MIN_RECORD_SAMPLES} samples (one "
+                         f"{MIN_RECORD_SAMPLES - 1}-sample variance block after the first), the "
+                         f"record has {n}: give a longer record", file=meas.source)
+    check_memory(_memory_needed(n, meas.n_gyros),
+                 f"fault detection on {n} samples x {meas.n_gyros} gyros",
+                 "split the record into shorter ones", file=meas.source)
+    span_s = (n - 1) * dt                                      # windows bounded by the record
+    detector = FaultDetector(far_per_h=far_per_h, drift_window_s=min(600.0, span_s),
+                             variance_window_s=min(40.0, span_s))
+    if parity_is_zero(z, meas.layout.H):
+        return _no_parity_noise(meas, model, detector, far_per_h, p_md, notes)
     if model is None:
-        noise, more = estimate_noise(z, meas.layout, dt, meas.ref_rad_s)
+        try:
+            noise, more = estimate_noise(z, meas.layout, dt, meas.ref_rad_s)
+        except InputError as err:
+            raise InputError(err.message, file=meas.source) from None
         notes += more
     else:
         noise = model
@@ -76,7 +125,7 @@ def analyse_measurement(meas, model=None, *, far_per_h: float = 0.01, p_md: floa
         if faults:
             notes.append(f"the model's {', '.join(faults)} entries are not used: the detector "
                          "looks for faults, it does not assume them")
-    det = FaultDetector(far_per_h=far_per_h).fit(meas.layout, noise, dt)
+    det = _fit(detector, meas, noise, model)
     other = [e for e in det.noise_.ignored_effects if not e.startswith("fault_")]
     if other:
         notes.append("the detector models ARW, RRW and their correlation only; also in the model: "
@@ -96,6 +145,55 @@ def analyse_measurement(meas, model=None, *, far_per_h: float = 0.01, p_md: floa
     out = {"alarms": [a.to_json_dict() for a in res.alarms], "far_per_h": float(far_per_h),
            "minimum_detectable": _md_json(md), "notes": notes}
     return out, res, det
+
+
+def _memory_needed(n: int, n_gyros: int) -> float:
+    """Peak memory of fault detection on n samples of N gyros [bytes] (generous).
+
+    The scan, the fits after an alarm and the recovery each keep about a
+    dozen (n, N) arrays of float64; the window weights of the thresholds are
+    at most n × (N − 3) (windows bounded by the record).
+    """
+    return 8.0 * n * (16.0 * n_gyros + 48.0)
+
+
+def _fit(detector, meas, noise, model):
+    """``detector.fit`` with a refusal that names the model's file (or the record's)."""
+    try:
+        return detector.fit(meas.layout, noise, meas.dt_s)
+    except InputError as err:
+        if err.file is not None:
+            raise
+        src = getattr(model, "source", None) if model is not None else None
+        raise InputError(err.message, file=src or meas.source) from None
+
+
+def _no_parity_noise(meas, model, detector, far_per_h, p_md, notes):
+    """The answer for a record whose parity is zero at every sample: no fault (see Notes above)."""
+    from gyroarray.estimators.fdi import FdiResult, isolability, minimum_detectable
+    notes.append("the gyros' outputs are exactly consistent with one body rate at every sample "
+                 "(parity zero to rounding: identical, constant or noise-free outputs?): no "
+                 "single-gyro fault is present, since any would make the parity non-zero")
+    res = FdiResult(alarms=(), exclusions=(), time_s=np.asarray(meas.time_s), trace={},
+                    notes=())
+    if model is None:
+        iso = isolability(meas.layout)                         # as minimum_detectable's
+        single = {j for g in iso["groups"] if len(g) == 1 for j in g}
+        md = {str(g): {"step_deg_s": None, "drift_deg_s2": None, "noise_ratio": None,
+                       "stuck_static_s": None, "isolable": iso["parity_dim"] >= 2 and g in single}
+              for g in range(1, meas.n_gyros + 1)}
+        notes.append("minimum_detectable: not available, the record has no noise to size the "
+                     "thresholds from (give --model MODEL.toml with the gyros' ARW and RRW)")
+        return ({"alarms": [], "far_per_h": float(far_per_h), "minimum_detectable": md,
+                 "notes": notes}, res, None)
+    det = _fit(detector, meas, model, model)
+    md = minimum_detectable(meas.layout, det.noise_, far_per_h, p_md, dt_s=meas.dt_s,
+                            design=det.design_)
+    notes.append(f"minimum_detectable: found with probability {1 - p_md:g} at {far_per_h:g} false "
+                 f"alarms/h; drift within {md['drift_window_s']:g} s; stuck_static_s for a gyro "
+                 "stuck at rest; the record itself has none of the noise the model gives")
+    return ({"alarms": [], "far_per_h": float(far_per_h), "minimum_detectable": _md_json(md),
+             "notes": notes}, res, det)
 
 
 def _md_json(md: dict) -> dict:

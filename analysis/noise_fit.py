@@ -384,11 +384,17 @@ class NoiseFit:
 def _whitened_nnls(g: np.ndarray, y: np.ndarray, white) -> tuple:
     """NNLS of ``W (g a - y)`` (``W = white(.)``), columns scaled to unit norm.
 
-    Returns the coefficients and the whitened design matrix ``W g``.
+    Returns the coefficients and the whitened design matrix ``W g``. An
+    empty system (no rows or no terms) gives zeros without calling NNLS (its
+    native code aborts the process on one); an all-zero column gets 0.
     """
     x = white(g)
+    if x.ndim != 2 or x.shape[0] == 0 or x.shape[1] == 0:
+        return np.zeros(x.shape[1] if x.ndim == 2 else 0), x
     scale = np.linalg.norm(x, axis=0)
-    a_scaled, _ = nnls(x / scale, white(y))
+    if not np.all(scale > 0):
+        scale = np.where(scale > 0, scale, np.inf)              # its coefficient: 0
+    a_scaled, _ = nnls(np.where(np.isinf(scale), 0.0, x / scale), white(y))
     return a_scaled / scale, x
 
 

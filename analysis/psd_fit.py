@@ -150,7 +150,11 @@ def _loglik(p: np.ndarray, s: np.ndarray, nu: float) -> float:
 
 def _linear_ml(p: np.ndarray, cols: np.ndarray, nu: float, iters: int = 8) -> tuple[np.ndarray, float]:
     """Non-negative coefficients of S = cols @ c by iteratively reweighted NNLS of the Welch
-    likelihood (weights 1/S: the score of Σ ln S + P/S); (c, ℓ)."""
+    likelihood (weights 1/S: the score of Σ ln S + P/S); (c, ℓ). An empty system (no bins
+    or no terms) gives zero coefficients without calling NNLS (its native code aborts on one)."""
+    if cols.ndim != 2 or cols.shape[0] == 0 or cols.shape[1] == 0:
+        c = np.zeros(cols.shape[1] if cols.ndim == 2 else 0)
+        return c, _loglik(p, np.zeros(np.shape(p)), nu)
     scale = np.maximum(np.abs(cols).max(axis=0), 1e-300)
     A = cols / scale
     w = 1.0 / np.maximum(p, 1e-300)

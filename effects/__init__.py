@@ -36,7 +36,7 @@ from typing import Iterable, Mapping, NoReturn
 
 from gyroarray.errors import InputError
 from gyroarray.plugins import EFFECTS_GROUP, installed
-from gyroarray.effects.protocol import Effect, Kind, Param, Stage
+from gyroarray.effects.protocol import RECORD_NEEDS, Effect, Kind, Param, Stage
 
 __all__ = ["REGISTRY", "ENTRY_POINT_GROUP", "effect_names", "get_effect", "did_you_mean", "register",
            "load_plugin", "plugin_effects", "installed_plugins"]
@@ -84,6 +84,10 @@ def _validate(cls: type[Effect], source: str) -> Effect:
         bad("parameter names must be unique and not 'gyro'")
     if not isinstance(cls.stage, Stage) or not isinstance(cls.kind, Kind):
         bad("stage must be a Stage and kind a Kind")
+    for attr in ("model_needs", "predict_needs"):
+        got = getattr(cls, attr, frozenset())
+        if not isinstance(got, (frozenset, set, tuple)) or not set(got) <= set(RECORD_NEEDS):
+            bad(f"{attr} must be a frozenset of {', '.join(RECORD_NEEDS)}, got {got!r}")
     if cls.simulate is Effect.simulate:
         bad("it has no simulate(state, act, streams)")
     try:

@@ -37,6 +37,7 @@ class EarthRate(Effect):
     predicts = True
     slow = True
     needs = frozenset({"ref", "motion", "site"})
+    model_needs = frozenset({"ref"})      # calibrated: the attitude comes from the reference rate
     params = (Param("latitude_deg", "deg", "latitude_rad", deg_to_rad, lo=-90.0, hi=90.0,
                     doc="site latitude (heading from the site)"),)
     doc = "Earth's rotation sensed through the table attitude"

@@ -20,6 +20,7 @@ class Latency(RegressionEffect):
     order = 13
     stage = Stage.DELAY
     needs = frozenset({"ref", "motion"})
+    model_needs = frozenset({"ref"})      # calibrated: regressed on the reference rate
     channel = "accel"
     params = (Param("delay_s", "s", "delay_s", identity, lo=0.0, doc="delay of the sensed input"),)
     doc = "output lags the input"

@@ -35,6 +35,7 @@ class Misalignment(RegressionEffect):
     order = 11
     stage = Stage.SENSE
     needs = frozenset({"ref", "motion"})
+    model_needs = frozenset({"ref"})      # calibrated: regressed on the reference rate
     rivals = ("scale_factor",)
     channel = "other"
     scored = ("tilt_deg", "tilt_azimuth_deg")

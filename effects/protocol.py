@@ -50,7 +50,7 @@ if TYPE_CHECKING:                                    # pragma: no cover - types 
     from gyroarray.analysis.effect_fit import EffectFit
     from gyroarray.sim.model import ModelEntry, NoiseModel
 
-__all__ = ["Stage", "Kind", "NEEDS", "Param", "Effect", "SimContext", "ChainState", "Active", "Mixer",
+__all__ = ["Stage", "Kind", "NEEDS", "RECORD_NEEDS", "Param", "Effect", "SimContext", "ChainState", "Active", "Mixer",
            "WhiteShaping", "Streams", "FitContext", "RegressionEffect", "NoiseTermEffect", "same_noise_preference",
            "explains_away", "no_longer_seen", "Explained", "terminal_cut", "with_term", "with_cols", "unit_draws", "identity"]
 
@@ -58,6 +58,10 @@ __all__ = ["Stage", "Kind", "NEEDS", "Param", "Effect", "SimContext", "ChainStat
 #: table turns, the temperature, the site (heading), the specific force (``acc_*``
 #: or gravity through the attitude), a static part, the gyro positions.
 NEEDS = ("ref", "motion", "temp", "site", "acc", "static", "positions")
+
+#: The part of :data:`NEEDS` that is data a record holds or lacks (columns, sidecar
+#: tables), which a model entry may need (``Effect.model_needs``, ``Effect.predict_needs``).
+RECORD_NEEDS = ("ref", "temp", "site", "acc", "positions")
 
 
 def identity(x):
@@ -409,6 +413,17 @@ class Effect:
     needs : frozenset of str
         Inputs of :data:`NEEDS` its fit side requires; without them it is not
         tested, and :meth:`why_not` says why.
+    model_needs : frozenset of str
+        Record data of :data:`RECORD_NEEDS` an entry of this effect in a
+        given model needs to be calibrated on a record (its parameters
+        fitted): ``compare``, ``diagnose``, ``fit`` and ``ladder`` refuse a
+        model with such an entry on a record without it, before any work
+        (:func:`gyroarray.compare.check_record_needs`).
+    predict_needs : frozenset of str
+        The same for an entry whose parameters are kept fixed (``--validate``):
+        what its prediction cannot do without. A record without a reference is
+        analysed as static (its still parts), where an effect acting through
+        the table's motion predicts nothing, so ``ref`` is rarely here.
     rivals : tuple of str
         Effects that explain the same excess in a record (ranked against it
         by :meth:`prefer`).
@@ -461,6 +476,8 @@ class Effect:
     kind: ClassVar[Kind] = Kind.DETERMINISTIC
     order: ClassVar[float] = 1000.0
     needs: ClassVar[frozenset] = frozenset()
+    model_needs: ClassVar[frozenset] = frozenset()
+    predict_needs: ClassVar[frozenset] = frozenset()
     rivals: ClassVar[tuple[str, ...]] = ()
     baseline: ClassVar[bool] = False
     baseline_term: ClassVar[str | None] = None

@@ -27,6 +27,7 @@ class Saturation(RegressionEffect):
     order = 14
     stage = Stage.SATURATE
     needs = frozenset({"ref", "motion"})
+    model_needs = frozenset({"ref"})      # calibrated: the clip is read against the reference rate
     static_noise = "the model clips the output (no noise on the plateau)"
     channel = "rate"
     params = (Param("range_deg_s", "deg/s", "range_rad_s", deg_s_to_rad_s, lo=0.0, lo_open=True,

@@ -15,6 +15,7 @@ class ScaleFactor(RegressionEffect):
     order = 9
     stage = Stage.SCALE
     needs = frozenset({"ref", "motion"})
+    model_needs = frozenset({"ref"})      # calibrated: regressed on the reference rate
     rivals = ("misalignment",)
     channel = "rate"
     params = (Param("ppm", "ppm", "ratio", ppm_to_ratio, lo=-1e6, lo_open=True,

@@ -24,6 +24,7 @@ class ScaleNonlinearity(RegressionEffect):
     order = 10
     stage = Stage.SCALE
     needs = frozenset({"ref", "motion"})
+    model_needs = frozenset({"ref"})      # calibrated: regressed on the reference rate
     rivals = ("scale_factor", "misalignment")
     channel = "rate2"
     params = (Param("k2_per_deg_s", "1/(deg/s)", "k2_per_rad_s", per_deg_s_to_per_rad_s,

@@ -45,6 +45,7 @@ class TemperatureBias(RegressionEffect):
     order = 12
     stage = Stage.ADD
     needs = frozenset({"temp"})
+    model_needs = predict_needs = frozenset({"temp"})     # bias = k·(temp_c − t0): nothing without it
     slow = True
     rivals = ("rate_ramp",)
     channel = "temp"

@@ -131,6 +131,10 @@ class Estimator:
     name: str = ""
     #: One-line description.
     description: str = ""
+    #: Whether the estimator needs every gyro's white-noise level (``arw``) to be designed;
+    #: False for estimators that only use the layout (``ols``, ``naive``), which then also run
+    #: on a model without ARW (e.g. RRW only), with a zero white-noise covariance.
+    needs_arw: bool = True
 
     # -- hyperparameters (scikit-learn) ------------------------------------
     @classmethod
@@ -197,7 +201,7 @@ class Estimator:
                 raise InputError(f"the noise is for {noise_model.n_gyros} gyros, the layout has {n}")
             noise = noise_model
         else:
-            noise = array_noise(noise_model, n)
+            noise = array_noise(noise_model, n, require_arw=self.needs_arw)
         for key in [k for k in vars(self) if k.endswith("_") and not k.startswith("_")]:
             delattr(self, key)
         self._fit(h, noise, dt)

@@ -97,7 +97,8 @@ from gyroarray.estimators.noise import ArrayNoise, array_noise
 
 __all__ = ["FaultDetector", "ParityDesign", "Alarm", "FdiResult", "parity_matrix",
            "design_parity", "minimum_detectable", "minimum_detectable_step", "isolability",
-           "estimate_noise", "KIND_UNITS"]
+           "estimate_noise", "far_range_per_h", "parity_is_zero", "KIND_UNITS",
+           "MIN_RECORD_SAMPLES", "MAX_WINDOW_SAMPLES"]
 
 #: Unit of ``Alarm.size`` per kind (JSON ``size_unit``).
 KIND_UNITS = {"step": "deg/s", "drift": "deg/s^2", "stuck": "deg/s", "noise": "ratio"}
@@ -113,6 +114,32 @@ REFERENCE_SPAN_S = 60.0
 
 #: Probability a stuck run of repeated outputs may have under the gyro's normal behaviour.
 STUCK_RUN_P = 1e-9
+
+#: Fewest samples ``gyroarray fdi`` analyses: one shortest variance block after the first
+#: innovation (ε₀ is skipped), so every test family can run at least once; it also gives the
+#: noise estimate (:func:`estimate_noise`) three octaves of adjacent means for its two unknowns.
+MIN_RECORD_SAMPLES = VARIANCE_MIN_BLOCK + 1
+
+#: Fewest samples the noise estimate fits on (two octaves, m = 1 and 2, of >= 8 means each).
+MIN_NOISE_SAMPLES = 16
+
+#: Longest test window [samples], whatever the windows in seconds and the sample rate: the
+#: thresholds are calibrated on signature weights of that length (memory ∝ window × N), so
+#: 600 s at 1 MHz would otherwise need 2^29-sample arrays. 2^20 leaves every rate up to
+#: 1.7 kHz with its 600 s drift window unchanged.
+MAX_WINDOW_SAMPLES = 2 ** 20
+
+#: Smallest false-alarm rate the thresholds are solved for [1/h] (once per 10^8 years; the
+#: Gaussian levels stay far inside the solver's bracket at any sample rate).
+FAR_MIN_PER_H = 1e-12
+
+#: Largest false-alarm rate as a share of the samples [-]: more than one alarm per 100
+#: samples is not a false-alarm rate a threshold can be set for (the tests fire at their
+#: lowest level already).
+FAR_MAX_PER_SAMPLE = 0.01
+
+#: Parity below this share of the readings' norm is zero to rounding (:func:`parity_is_zero`).
+PARITY_ZERO_RTOL = 1e-9
 
 _FAMILIES = ("step", "drift", "variance")
 
@@ -139,8 +166,17 @@ def parity_matrix(H: np.ndarray, R: np.ndarray | None = None) -> tuple[np.ndarra
     """
     H = np.asarray(H, dtype=float)
     n = H.shape[0]
-    W = np.eye(n) if R is None else linalg.solve_triangular(np.linalg.cholesky(R), np.eye(n),
-                                                            lower=True)
+    if R is None:
+        W = np.eye(n)
+    else:
+        try:
+            L = np.linalg.cholesky(R)
+        except np.linalg.LinAlgError:
+            raise InputError("the white-noise covariance of the model is not positive definite "
+                             "(an ARW too small to represent in double precision, or correlations "
+                             "of ±1): give every gyro an ARW it can have, e.g. n_deg_rt_h = 0.01, "
+                             "and correlations within (−1, 1)") from None
+        W = linalg.solve_triangular(L, np.eye(n), lower=True)
     V = linalg.null_space((W @ H).T).T                        # rows ⟂ columns of W H
     return V, V @ W
 
@@ -264,11 +300,42 @@ def _window_roughness(h: np.ndarray) -> tuple[float, float, float]:
 
 
 def _solve_level(rate_fn, target: float, lo: float = 0.5, hi: float = 60.0) -> float:
-    """The level x with rate_fn(x) = target (rate decreasing in x), on a log scale."""
+    """The level x with rate_fn(x) = target (rate decreasing in x), on a log scale.
+
+    Raises
+    ------
+    InputError
+        ``target`` below the rate at ``hi`` (a false-alarm rate too small to
+        set a threshold for; :func:`far_range_per_h` keeps callers away from it).
+    """
+    if not (math.isfinite(target) and target > 0):
+        raise InputError(f"far_per_h gives a false-alarm probability per sample of {target!r}: "
+                         "it must be finite and > 0")
     f = lambda x: math.log(max(rate_fn(x), 1e-300)) - math.log(target)   # noqa: E731
     if f(lo) < 0:
         return lo
+    if f(hi) > 0:
+        raise InputError(f"far_per_h gives a false-alarm probability per sample of {target:.3g}, "
+                         f"too small to set a threshold for (the level would be above {hi:g}); "
+                         f"use far_per_h >= {FAR_MIN_PER_H:g} [1/h]")
     return optimize.brentq(f, lo, hi, xtol=1e-10)
+
+
+def far_range_per_h(dt_s: float) -> tuple[float, float]:
+    """Range of false-alarm rates the thresholds can be set for at a sample period [1/h].
+
+    Parameters
+    ----------
+    dt_s : float
+        Sample period [s].
+
+    Returns
+    -------
+    (float, float)
+        :data:`FAR_MIN_PER_H` and :data:`FAR_MAX_PER_SAMPLE` of the samples
+        in an hour (3600/dt).
+    """
+    return FAR_MIN_PER_H, FAR_MAX_PER_SAMPLE * 3600.0 / float(dt_s)
 
 
 def design_parity(H: np.ndarray, noise: ArrayNoise, dt_s: float, gyros=None, *,
@@ -290,6 +357,7 @@ def design_parity(H: np.ndarray, noise: ArrayNoise, dt_s: float, gyros=None, *,
         Total false-alarm rate [1/h], a third per family.
     bias_memory_s, drift_window_s, variance_window_s : float
         Longest tracker time constant, drift window and variance block [s].
+        Every window is also at most :data:`MAX_WINDOW_SAMPLES` samples.
 
     Returns
     -------
@@ -314,11 +382,12 @@ def design_parity(H: np.ndarray, noise: ArrayNoise, dt_s: float, gyros=None, *,
     vn = np.linalg.norm(vd, axis=0)
     var_dir = vd / np.where(vn > 0, vn, 1.0)
     share = _white_share(P, R, var_dir, K, S)
+    drift_n = min(drift_window_s / dt_s, MAX_WINDOW_SAMPLES)     # windows in samples, bounded
+    var_n = min(variance_window_s / dt_s, MAX_WINDOW_SAMPLES)
     scales = {
-        "step": _pow2_scales(1, max(1.0, min(4.0 / float(np.min(K)), drift_window_s / dt_s))),
-        "drift": _pow2_scales(max(2.0, min(2.0 / float(np.max(K)), drift_window_s / dt_s)),
-                              max(2.0, drift_window_s / dt_s)),
-        "variance": _pow2_scales(VARIANCE_MIN_BLOCK, variance_window_s / dt_s),
+        "step": _pow2_scales(1, max(1.0, min(4.0 / float(np.min(K)), drift_n))),
+        "drift": _pow2_scales(max(2.0, min(2.0 / float(np.max(K)), drift_n)), max(2.0, drift_n)),
+        "variance": _pow2_scales(VARIANCE_MIN_BLOCK, var_n),
     }
     G, _ = gls_weights(Ha, R)
     design = ParityDesign(gyros=idx, V=V, P=P, q=q, K=K, S=S, coef=coef, groups=groups,
@@ -540,6 +609,11 @@ class FaultDetector(Estimator):
 
     def _fit(self, H, noise, dt_s):
         hp = self._hyper()
+        lo, hi = far_range_per_h(dt_s)
+        if not lo <= hp["far_per_h"] <= hi:
+            raise InputError(f"far_per_h must be between {lo:g} and {hi:g} [1/h] at a "
+                             f"{1.0 / dt_s:g} Hz sample rate (at most one false alarm per "
+                             f"{1.0 / FAR_MAX_PER_SAMPLE:g} samples), got {hp['far_per_h']!r}")
         if H.shape[0] < 4:
             raise InputError(f"fault detection needs at least 4 gyros (N − 3 parity checks), "
                              f"the layout has {H.shape[0]}")
@@ -1096,19 +1170,76 @@ def isolability(layout: Layout, noise=None, *, dt_s: float = 0.01) -> dict:
 
 # -- noise from the record itself ---------------------------------------------------
 
+def parity_is_zero(readings_rad_s, H) -> bool:
+    """Whether every sample's parity is zero to rounding: the outputs are exactly consistent.
+
+    Parameters
+    ----------
+    readings_rad_s : ndarray, shape (n, N)
+        Gyro outputs [rad/s].
+    H : ndarray, shape (N, 3)
+        Sensitive axes [-].
+
+    Returns
+    -------
+    bool
+        ‖V z_k‖ <= :data:`PARITY_ZERO_RTOL`·‖z_k‖ at every sample k (V the
+        orthonormal parity basis of H; the test does not depend on the noise
+        weighting, whose parity spans the same null space). True for
+        identical gyros on a layout whose axes share one elevation, constant
+        outputs of a body at rest, and simulated noise-free arrays.
+
+    Notes
+    -----
+    Why such a record has no fault rather than a refusal: a single-gyro
+    fault of any kind (step, drift, stuck, noise) of non-zero size on a gyro
+    the parity sees adds size·P[:, j] ≠ 0 to the parity. A parity that is
+    zero at every sample is therefore proof that no such fault is present;
+    the detector's statistics, which would read the missing noise as a
+    variance collapse of *every* parity direction at once (no single-gyro
+    fault looks like that), are not run on it.
+    """
+    z = np.asarray(readings_rad_s, dtype=float)
+    V, _ = parity_matrix(H)
+    if V.shape[0] == 0 or z.shape[0] == 0:
+        return False
+    p = np.linalg.norm(z @ V.T, axis=1)
+    return bool(np.all(p <= PARITY_ZERO_RTOL * np.linalg.norm(z, axis=1)))
+
+
 def _white_and_walk(e: np.ndarray) -> tuple[float, float]:
-    """(σ², q) per sample of one series, each raised by 2σ of its fit (:func:`estimate_noise`)."""
+    """(σ², q) per sample of one series, each raised by 2σ of its fit (:func:`estimate_noise`).
+
+    A series without variation at any octave (noise-free, constant) gives
+    (0, 0): there is nothing to fit, and NNLS is never called on it. At least
+    :data:`MIN_NOISE_SAMPLES` samples (two octaves) are needed. An octave whose
+    differences are mostly exact zeros (outputs quantised coarser than their
+    noise) takes their plain mean square: its MAD is 0 though the gyro moves.
+    """
     n = e.size
-    A, b, W = [], [], []
+    if n < MIN_NOISE_SAMPLES:
+        raise InputError(f"the noise estimate needs at least {MIN_NOISE_SAMPLES} samples, got {n}")
+    A, d_sizes, b = [], [], []
     for m in _pow2_scales(1, max(1, n // 16)):
         nb = n // m
         if nb < 8:
             break
         d = np.diff(e[:nb * m].reshape(nb, m).mean(axis=1))          # adjacent means of m
         v = (1.4826 * np.median(np.abs(d - np.median(d)))) ** 2        # robust variance
+        ad = np.abs(d)
+        if np.mean(ad <= 1e-9 * ad.max()) >= 0.5 and ad.max() > 0.0:
+            # quantised outputs: half the differences or more are 0 LSB (to rounding) and the
+            # MAD says 0 where the gyro does move; the plain variance does not
+            v = float(np.mean(d * d))
         A.append([2.0 / m, (2.0 * m * m + 1.0) / (3.0 * m)])          # 2σ²/m + q(2m² + 1)/(3m)
         b.append(v)
-        W.append(math.sqrt(d.size / 2.0) / max(v, 1e-300))            # 1/(v √(2/M))
+        d_sizes.append(d.size)
+    top = max(b)
+    if not (math.isfinite(top) and top > 0.0):                         # no variation to fit
+        return 0.0, 0.0
+    # 1/(v √(2/M)); an octave whose MAD is 0 (quantised outputs) is weighted as 1e-12 of the
+    # largest variance rather than 1/1e-300, which would overflow AᵀA
+    W = [math.sqrt(M / 2.0) / max(v, 1e-12 * top, 1e-300) for M, v in zip(d_sizes, b)]
     Aw = np.array(A) * np.array(W)[:, None]
     sol, _ = optimize.nnls(Aw, np.array(b) * np.array(W))
     cov = np.linalg.pinv(Aw.T @ Aw)                                    # rows have unit variance
@@ -1144,6 +1275,13 @@ def estimate_noise(readings_rad_s, layout: Layout, dt_s: float, ref_rad_s=None) 
     relative standard error √(2/M) (M differences); each is then raised by
     twice its standard error, so an estimated model errs toward fewer false
     alarms. Correlations are taken as 0.
+
+    Raises
+    ------
+    InputError
+        Fewer than :data:`MIN_NOISE_SAMPLES` samples, or a reference span in
+        which most gyros (or the parity) do not vary at all: there is no
+        noise to set thresholds from (give a model instead).
     """
     z = np.asarray(readings_rad_s, dtype=float)
     H = layout.H
@@ -1159,11 +1297,16 @@ def estimate_noise(readings_rad_s, layout: Layout, dt_s: float, ref_rad_s=None) 
                      "adjacent means): one ARW and RRW for every gyro, no correlation (no "
                      "reference rate to tell the gyros apart)")
     n_all = e.shape[0]
-    n = min(n_all, max(n_all // 4, int(round(REFERENCE_SPAN_S / dt_s))))
+    n = min(n_all, max(n_all // 4, int(round(REFERENCE_SPAN_S / dt_s)), MIN_NOISE_SAMPLES))
     e = e[:n]
     notes.append(f"noise taken from the first {n * dt_s:.4g} s of the record (a fault lasts to the "
                  "end of a record, so its start is the healthy reference)")
     s2, q = np.array([_white_and_walk(e[:, c]) for c in range(e.shape[1])]).T
+    if not (np.all(np.isfinite(s2)) and np.all(np.isfinite(q)) and float(np.median(s2)) > 0.0):
+        raise InputError(f"the first {n * dt_s:.4g} s of the record (the span the noise is "
+                         "estimated on) have no noise: the gyros' outputs there are exactly "
+                         "consistent (identical, constant or noise-free?), so no threshold can be "
+                         "set from them; give --model MODEL.toml with the gyros' ARW and RRW")
     floor = 1e-6 * float(np.median(s2))
     if np.any(s2 <= floor):
         bad = np.flatnonzero(s2 <= floor) + 1

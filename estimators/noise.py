@@ -52,6 +52,9 @@ class ArrayNoise:
         Correlation matrix of the RRW increments [-] (positive semi-definite).
     ignored_effects : tuple of str
         Effects of the source model that the estimators do not model.
+    zero_arw_ok : bool, default False
+        True: an ARW of 0 is accepted (R is then singular): only for the
+        estimators that use the layout alone (``ols``, ``naive``).
     """
 
     arw_rad_rt_s: np.ndarray
@@ -59,6 +62,7 @@ class ArrayNoise:
     corr_arw: np.ndarray
     corr_rrw: np.ndarray
     ignored_effects: tuple[str, ...] = ()
+    zero_arw_ok: bool = False
 
     def __post_init__(self):
         n = np.size(self.arw_rad_rt_s)
@@ -67,7 +71,7 @@ class ArrayNoise:
         object.__setattr__(self, "corr_arw", _frozen(self.corr_arw, (n, n)))
         object.__setattr__(self, "corr_rrw", _frozen(self.corr_rrw, (n, n)))
         object.__setattr__(self, "ignored_effects", tuple(self.ignored_effects))
-        if np.any(self.arw_rad_rt_s <= 0):
+        if np.any(self.arw_rad_rt_s < 0) or (np.any(self.arw_rad_rt_s == 0) and not self.zero_arw_ok):
             raise InputError("every gyro needs a positive angle random walk: the estimators "
                              "weight the gyros by their white noise")
         if np.any(self.rrw_rad_s_rt_s < 0):
@@ -139,7 +143,7 @@ def _corr(rho, n: int, common_mode: bool, what: str) -> np.ndarray:
         raise InputError(f"correlation {what}: {err.message}") from None
 
 
-def array_noise(noise_model, n_gyros: int) -> ArrayNoise:
+def array_noise(noise_model, n_gyros: int, require_arw: bool = True) -> ArrayNoise:
     """The ARW/RRW/correlation part of a noise model for an N-gyro array.
 
     Parameters
@@ -149,6 +153,10 @@ def array_noise(noise_model, n_gyros: int) -> ArrayNoise:
         all-gyros entry of the same effect for gyro k.
     n_gyros : int
         Number of gyros N.
+    require_arw : bool, default True
+        False: a gyro without ``arw`` (or with ``arw = 0``) gets a white-noise
+        level of 0 [rad/√s] instead of a refusal (estimators that only use the
+        layout, :attr:`~gyroarray.estimators.base.Estimator.needs_arw`).
 
     Returns
     -------
@@ -168,13 +176,15 @@ def array_noise(noise_model, n_gyros: int) -> ArrayNoise:
     noise_model.check(n_gyros)
     arw = _per_gyro(noise_model, "arw", "n_rad_rt_s", n_gyros)
     missing = np.flatnonzero(np.isnan(arw)) + 1
-    if missing.size:
+    if not require_arw:
+        arw = np.nan_to_num(arw, nan=0.0)
+    elif missing.size:
         raise InputError(
             f"the noise model has no angle random walk ('arw') for gyro(s) "
             f"{', '.join(map(str, missing))}: the estimators need the white-noise level of every "
             "gyro; add e.g. {effect = \"arw\", n_deg_rt_h = 0.1}")
     zero = np.flatnonzero(arw <= 0) + 1
-    if zero.size:
+    if zero.size and require_arw:
         raise InputError(f"arw is 0 on gyro(s) {', '.join(map(str, zero))}: the estimators need a "
                          "positive white-noise level on every gyro (R must be positive definite)")
     rrw = np.nan_to_num(_per_gyro(noise_model, "rrw", "k_rad_s_rt_s", n_gyros), nan=0.0)
@@ -190,4 +200,4 @@ def array_noise(noise_model, n_gyros: int) -> ArrayNoise:
         c_arw = _corr(p["rho_arw"], n_gyros, cm, "rho_arw")
         c_rrw = _corr(p["rho_rrw"], n_gyros, cm, "rho_rrw")
     ignored = tuple(sorted({e.effect for e in noise_model.entries} - set(_USED)))
-    return ArrayNoise(arw, rrw, c_arw, c_rrw, ignored)
+    return ArrayNoise(arw, rrw, c_arw, c_rrw, ignored, zero_arw_ok=not require_arw)

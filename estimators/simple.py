@@ -91,6 +91,7 @@ class OLS(_PerSample):
     """
 
     description = "ordinary least squares per sample (pseudo-inverse of H)"
+    needs_arw = False                    # M = pinv(H): no noise model needed
 
     def __init__(self, *, lowpass_hz=None):
         self.lowpass_hz = lowpass_hz
@@ -151,6 +152,7 @@ class Naive(_PerSample):
     """
 
     description = "mean of the back-projected readings per axis (no model)"
+    needs_arw = False
 
     def __init__(self):
         pass

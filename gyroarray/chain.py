@@ -328,9 +328,13 @@ def run_scenario(scenario, estimator_names=None, *, cache: bool = True,
             # one is skipped and said so (e.g. bias-state KFs on a model without RRW)
             if explicit:
                 raise InputError(err.message, file=scenario.source) from None
-            notes.append(f"skipped {err.message}")
+            notes.append(f"skipped {err.message}" if err.message.startswith(name)
+                         else f"skipped {name}: {err.message}")
             continue
         estimates[name] = est.estimate(res.readings_rad_s)
+    if not estimates:
+        raise InputError("no estimator applies to this scenario: " + "; ".join(
+            dict.fromkeys(n.removeprefix("skipped ") for n in notes)), file=scenario.source)
     result = score(estimates, res.truth.omega_body_rad_s, res.readings_rad_s, scenario.layout,
                    res.truth.time_s, dt, swing=swing_frequency(scenario.profile), scenario=scenario.name)
     result = replace(result, notes=tuple(notes))

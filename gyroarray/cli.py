@@ -16,7 +16,7 @@ import warnings
 from pathlib import Path
 from typing import Any, Callable
 
-from gyroarray.errors import InputError
+from gyroarray.errors import InputError, one_line
 
 EXIT_OK, EXIT_FAIL, EXIT_USAGE = 0, 1, 2
 
@@ -106,6 +106,44 @@ def _add_force(p):
 MAX_DESIGN_GYROS = 128
 #: Most taus ``allan --taus`` may ask for (an octave grid of 1e9 samples has 30).
 MAX_TAUS = 10_000
+
+
+#: Caps of the counts a user passes (issue 28: each is checked before any work, with the
+#: reason and the way out in the refusal). ``(cap, why)`` per option.
+COUNT_CAPS = {
+    "--runs": (1000, "the model band's 95 % limits settle within 1 % long before that"),
+    "--replicates": (1000, "a 95 % confidence interval from 1000 runs is already within 5 % of "
+                           "its width; run several seeds for more"),
+    "--check": (1000, "1000 paired runs resolve differences of a few per cent"),
+    "--workers": (256, "more processes than CPUs only wait for them"),
+    "--max-steps": (64, "each step adds one effect; no model needs more"),
+}
+
+
+def _count(name: str) -> Callable[[str], int]:
+    """A whole number from 1 to the cap of ``name`` in :data:`COUNT_CAPS`, refused at parse
+    time (before any file is read) with the reason and the way out."""
+    cap, why = COUNT_CAPS[name]
+
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{name} must be a whole number, got {text!r}") from None
+        if value < 1:
+            raise argparse.ArgumentTypeError(f"{name} must be >= 1, got {value}")
+        if value > cap:
+            raise argparse.ArgumentTypeError(f"{name} {value} is more than {cap}, the most "
+                                             f"gyroarray runs ({why}); give {name} {cap} or less")
+        return value
+    return parse
+
+
+def _check_count(name: str, value: int, bytes_per: float, what: str) -> None:
+    """Refuse a count whose memory (``value`` x ``bytes_per`` [bytes]) passes the budget,
+    before the work (:func:`gyroarray.limits.check_memory`)."""
+    from gyroarray.limits import check_memory
+    check_memory(value * float(bytes_per), f"{name} {value} ({what})", f"lower {name}")
 
 
 def _bounded_int(name: str, lo: int, hi: int) -> Callable[[str], int]:
@@ -493,6 +531,11 @@ def _parse_taus(text: str):
             raise InputError(f"--taus list must hold numbers of seconds, got {text[:60]!r}") from None
         if not all(math.isfinite(t) and t > 0 for t in taus):
             raise InputError("--taus list must hold finite taus > 0 s")
+        from gyroarray.analysis.allan import MAX_FIT_TAUS
+        if len(taus) > MAX_FIT_TAUS:
+            raise InputError(f"--taus lists {len(taus)} taus; the noise fit takes at most "
+                             f"{MAX_FIT_TAUS} (its cost grows with the cube of the count): list "
+                             "fewer, or give a count (N) to have them spread log-evenly")
         return taus
     try:
         count = int(text)
@@ -531,9 +574,16 @@ def cmd_allan(args) -> tuple[dict, str]:
                          f"gyros 1..{meas.n_gyros}", file=str(args.measurement))
     gyros = [args.gyro] if args.gyro is not None else list(range(1, meas.n_gyros + 1))
     signal, what = allan_signal(meas, raw=args.raw)
+    tau_note = None
+    if isinstance(taus, int):       # within what the record gives and the noise fit takes
+        from gyroarray.analysis.allan import fit_tau_count
+        try:
+            taus, tau_note = fit_tau_count(meas.n_samples + 1, meas.dt_s, taus, args.kind)
+        except InputError:          # too short for any tau: said per gyro below
+            pass
     analyses, skipped = _allan_each(meas, signal, gyros, taus, args)
-    notes = [*meas.notes, *_reference_noise_notes(meas, what != "gyro output", gyros),
-             *skipped.values()]
+    notes = [*meas.notes, *([tau_note] if tau_note else []),
+             *_reference_noise_notes(meas, what != "gyro output", gyros), *skipped.values()]
     out = {"gyros": {str(k): a.to_json_dict() for k, a in analyses.items()},
            "signal": what, "notes": notes,
            "not_analysed": {str(k): why for k, why in skipped.items()}}
@@ -642,6 +692,14 @@ def cmd_davar(args) -> tuple[dict, str]:
     signal, what = allan_signal(meas)
     adaptive = args.adaptive or args.window is None
     params = dv.AdaptiveWindow(l_max=args.l_max, l_min=args.l_min) if adaptive else None
+    # windows x taus of the result (arrays and their JSON text), before the work
+    longest = min(args.l_max if adaptive else args.window, meas.n_samples)
+    step = args.step if args.step is not None else (1 if adaptive else max(1, longest // 10))
+    taus = math.log2(max(longest, 2)) + 1
+    from gyroarray.limits import check_memory
+    windows = max(1, meas.n_samples // step)
+    check_memory(windows * (200 * taus + 200), f"davar of {windows} windows (--step {step}) x "
+                 f"{taus:.0f} taus", "give a larger --step", file=str(args.measurement))
     res = dv.davar(signal[:, args.gyro - 1], meas.dt_s, window=None if adaptive else args.window,
                    adaptive=adaptive, step=args.step, params=params)
     out = res.to_json_dict()
@@ -874,6 +932,9 @@ def cmd_report(args):
         inputs.append(args.design)
     _output(args.out, args, "--out", inputs=inputs, suffixes=(".html", ".htm"))
     _output(args.md, args, "--md", inputs=inputs, suffixes=(".md",))
+    if args.md is not None:      # its figures beside it, checked before the work too
+        from gyroarray.outputs import markdown_figures
+        markdown_figures(args.md, inputs=inputs, force=args.force)
     res = write_report(args.dirs, args.out, args.md, design=args.design,
                        paper_values=args.paper_values, top=args.top, force=args.force)
     lines = [f"report: {res['html']}" + (f" (Markdown twin {res['markdown']})" if res["markdown"] else "")
@@ -935,12 +996,28 @@ def _comparison(args):
             suffixes=(".toml",) if args.command == "fit" else (".html", ".htm"))
     _output(getattr(args, "md", None), args, "--md", inputs=inputs, suffixes=(".md",))
     _output(getattr(args, "model_out", None), args, "--model-out", inputs=inputs, suffixes=(".toml",))
+    if getattr(args, "md", None) is not None:      # its figures beside it, checked now too
+        from gyroarray.outputs import markdown_figures
+        markdown_figures(args.md, inputs=inputs, force=args.force)
     meas = read_measurement(args.measurement, repair=args.repair)
     model = None
     if args.model is not None:
         model = NoiseModel.from_toml(args.model, n_gyros=meas.n_gyros)
     meas, model, args.entry_notes = _live_gyros(meas, model, args)
+    _check_band_runs(args, meas)
     return ModelComparison(meas, model, n_runs=args.runs, seed=args.seed, ref_smooth_s=args.ref_smooth)
+
+
+def _check_band_runs(args, meas) -> None:
+    """Refuse ``--runs`` whose Monte-Carlo band would not fit the memory budget: each run keeps
+    the ADEV and the Welch PSD of every gyro (kept three times over: the runs, their array and
+    the quantiles), before any run."""
+    import math as _m
+    from gyroarray.analysis.localise import default_nperseg
+    n = max(int(meas.n_samples), 2)
+    per_run = 3 * 8 * meas.n_gyros * (_m.log2(n) + 1 + default_nperseg(n) // 2 + 1)
+    _check_count("--runs", args.runs, per_run,
+                 f"Monte-Carlo runs of {n} samples x {meas.n_gyros} gyros")
 
 
 def _live_gyros(meas, model, args):
@@ -1155,7 +1232,7 @@ def _add_compare_args(p, *, out: bool):
     p.add_argument("measurement", type=Path, metavar="MEAS.csv")
     p.add_argument("--model", type=Path, metavar="MODEL.toml",
                    help="noise model to calibrate (default: ARW + RRW on every gyro)")
-    p.add_argument("--runs", type=_positive_int("--runs"), default=40, metavar="K",
+    p.add_argument("--runs", type=_count("--runs"), default=40, metavar="K",
                    help="Monte-Carlo runs of the model band (40)")
     p.add_argument("--seed", type=int, default=0, help="seed of the model band (0)")
     p.add_argument("--repair", action="store_true", help="repair short gaps, missing values, exact duplicate rows and a jittering clock (each listed)")
@@ -1223,7 +1300,7 @@ def _add_design_parsers(sub) -> None:
                    help="--recommend: a 3-axis rate must survive K failed gyros (0, 1, 2; default 0)")
     p.add_argument("--estimators", metavar="A,B,...",
                    help="--recommend: estimators compared (default kf_array,kf_single,gls,ols,naive)")
-    p.add_argument("--check", type=_positive_int("--check"), metavar="K",
+    p.add_argument("--check", type=_count("--check"), metavar="K",
                    help="--recommend: simulate the top designs K times (paired) beside the prediction")
     p.add_argument("--seed", type=_nonneg_int("--seed"), metavar="S",
                    help="--recommend --check: root seed of the paired runs")
@@ -1293,7 +1370,7 @@ def _add_simulation_parsers(sub) -> None:
                    help="registry names (default: kf_array, kf_single, gls, ols, naive, bound)")
     p.add_argument("--no-cache", action="store_true", help="recompute the rate-table truth")
     _add_plugin(p)
-    p.add_argument("--replicates", type=_positive_int("--replicates"), metavar="K",
+    p.add_argument("--replicates", type=_count("--replicates"), metavar="K",
                    help="run K times with independent seeds: mean and 95 %% CI of every metric, "
                         "beside the analytic prediction")
     p.add_argument("--seed", type=_nonneg_int("--seed"), metavar="S",
@@ -1305,7 +1382,7 @@ def _add_simulation_parsers(sub) -> None:
     p = sub.add_parser("sweep", help="run a sweep of scenarios in parallel into a Parquet dataset (resumable)")
     p.add_argument("sweep", type=Path, metavar="SWEEP.toml")
     p.add_argument("--out", type=Path, required=True, metavar="DIR", help="output directory")
-    p.add_argument("--workers", type=_positive_int("--workers"), metavar="K",
+    p.add_argument("--workers", type=_count("--workers"), metavar="K",
                    help="local worker processes (default 1)")
     p.add_argument("--scheduler", metavar="tcp://HOST:PORT", help="a Dask distributed scheduler")
     p.add_argument("--json", action="store_true", help="print one JSON object (no progress bar)")
@@ -1351,7 +1428,7 @@ def _add_compare_parsers(sub) -> None:
 
     p = sub.add_parser("ladder", help="diagnose -> add the best effect -> fit, until consistent; report")
     _add_compare_args(p, out=True)
-    p.add_argument("--max-steps", type=_positive_int("--max-steps"), default=8, metavar="K",
+    p.add_argument("--max-steps", type=_count("--max-steps"), default=8, metavar="K",
                    help="effects added at most (8)")
     p.add_argument("--model-out", type=Path, metavar="NEW.toml", help="write the final fitted model")
     p.add_argument("--holdout", type=_finite_float("--holdout"), metavar="FRACTION",
@@ -1367,7 +1444,8 @@ def _add_fdi_and_check_parsers(sub) -> None:
     p.add_argument("--model", type=Path, metavar="MODEL.toml",
                    help="ARW/RRW/correlation of the gyros (default: estimated from the record)")
     p.add_argument("--far-per-h", type=_finite_float("--far-per-h"), default=0.01, metavar="RATE",
-                   help="false alarms per hour the thresholds are set for (0.01)")
+                   help="false alarms per hour the thresholds are set for (0.01; from 1e-12 to "
+                        "one per 100 samples)")
     p.add_argument("--plot", type=Path, metavar="OUT.png", help="statistics vs threshold over time")
     p.add_argument("--repair", action="store_true", help="repair short gaps and isolated NaNs")
     _add_force(p)
@@ -1418,12 +1496,17 @@ def _version() -> str:
 def main(argv: list[str] | None = None) -> int:
     """Run the CLI; returns the exit code (0 ok, 1 failure, 2 bad input)."""
     from gyroarray.limits import memory_budget
+    from gyroarray.outputs import private_matplotlib_dir
+    private_matplotlib_dir()            # matplotlib's font cache not in the user's home
     parser = build_parser()
     try:
         with warnings.catch_warnings():
             if not os.environ.get("GYROARRAY_DEBUG"):   # stderr carries one line at most
                 warnings.simplefilter("ignore")
             args = parser.parse_args(argv)
+            if sys.stdout is None:          # started with stdout closed (`>&-`): refuse before work
+                raise InputError("cannot write the output to standard output: it is closed; "
+                                 "redirect it to a file or to /dev/null")
             if getattr(args, "plugin", None):
                 from gyroarray.effects import plugin_effects
                 plugin_effects(args.plugin)
@@ -1438,7 +1521,7 @@ def main(argv: list[str] | None = None) -> int:
     except Exception as err:  # an internal bug, not bad input: keep stderr to one line
         if os.environ.get("GYROARRAY_DEBUG"):
             raise
-        print(f"gyroarray: internal error: {type(err).__name__}: {err} "
+        print(f"gyroarray: internal error: {type(err).__name__}: {one_line(err)} "
               "(set GYROARRAY_DEBUG=1 for the traceback)", file=sys.stderr)
         return EXIT_FAIL
     try:
@@ -1449,8 +1532,27 @@ def main(argv: list[str] | None = None) -> int:
             print(text)
         sys.stdout.flush()
     except BrokenPipeError:  # e.g. piped into `head`: not an error of ours
-        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        _stdout_to_devnull()
+    except OSError as err:   # a full disk (`> /dev/full`), a read-only descriptor: the user's setup
+        _stdout_to_devnull()
+        print(f"gyroarray: cannot write the output to standard output: "
+              f"{err.strerror or err}; free some space or redirect it elsewhere", file=sys.stderr)
+        return EXIT_USAGE
     return code[0] if code else EXIT_OK
+
+
+def _stdout_to_devnull() -> None:
+    """Point file descriptor 1 at /dev/null after a failed write to stdout, so that the
+    interpreter's own flush at exit finds a sink and prints no "Exception ignored" traceback."""
+    try:
+        fd = sys.stdout.fileno()
+    except (AttributeError, ValueError, OSError):       # not a real file (a test's StringIO)
+        return
+    null = os.open(os.devnull, os.O_WRONLY)
+    try:
+        os.dup2(null, fd)
+    finally:
+        os.close(null)
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -34,9 +34,9 @@ from pathlib import Path
 
 from gyroarray.errors import InputError
 
-__all__ = ["MAX_RATE_DEG_S", "MEMORY_FRACTION", "max_memory", "set_max_memory", "memory_budget",
+__all__ = ["MAX_RATE_DEG_S", "file_kind", "MEMORY_FRACTION", "max_memory", "set_max_memory", "memory_budget",
            "parse_size", "format_size", "check_memory", "open_regular", "read_regular",
-           "gunzip_bounded"]
+           "gunzip_bounded", "read_json", "MAX_JSON_DEPTH", "MAX_JSON_BYTES"]
 
 #: Largest angular rate a gyro (or a rate table) can physically see [deg/s];
 #: beyond it a value is a unit or logging error, not a measurement.
@@ -143,7 +143,8 @@ _KINDS = ((stat.S_ISDIR, "a folder"), (stat.S_ISFIFO, "a FIFO (named pipe)"),
           (stat.S_ISSOCK, "a socket"))
 
 
-def _kind(mode: int) -> str:
+def file_kind(mode: int) -> str:
+    """What a non-regular file is, in words (``a FIFO (named pipe)``), from its ``st_mode``."""
     return next((word for test, word in _KINDS if test(mode)), "not a regular file")
 
 
@@ -167,7 +168,7 @@ def open_regular(path, what: str = "file"):
     try:
         mode = os.fstat(fd).st_mode
         if not stat.S_ISREG(mode):
-            raise InputError(f"{what} expected, but this is {_kind(mode)}", file=name)
+            raise InputError(f"{what} expected, but this is {file_kind(mode)}", file=name)
         if hasattr(os, "set_blocking"):
             os.set_blocking(fd, True)
         return os.fdopen(fd, "rb")
@@ -195,6 +196,101 @@ def read_regular(path, what: str = "file", max_bytes: int | None = None) -> byte
     if len(data) > cap:
         raise InputError(f"{what} grew beyond {format_size(cap)} while being read", file=name)
     return data
+
+
+#: Deepest nesting of arrays/objects gyroarray reads in a JSON file [-] (its own files nest < 10).
+MAX_JSON_DEPTH = 64
+#: Largest JSON file gyroarray reads [bytes] (also at most a sixteenth of the memory budget:
+#: parsed JSON takes about ten times its text).
+MAX_JSON_BYTES = 256 * 2**20
+
+
+def _json_depth_over(obj, cap: int) -> str | None:
+    """The path (``scenarios[3].params``) where ``obj`` nests deeper than ``cap``, or None
+    (iterative: no recursion)."""
+    stack = [(obj, 1, "")]
+    while stack:
+        node, depth, path = stack.pop()
+        if not isinstance(node, (dict, list)):
+            continue
+        if depth > cap:
+            return path or "(top)"
+        items = node.items() if isinstance(node, dict) else enumerate(node)
+        for k, v in items:
+            if isinstance(v, (dict, list)):
+                stack.append((v, depth + 1, f"{path}[{k}]" if isinstance(k, int)
+                              else f"{path}.{k}".lstrip(".")))
+    return None
+
+
+def read_json(path, what: str = "JSON file", *, max_bytes: int | None = None,
+              max_depth: int = MAX_JSON_DEPTH, expect: type | None = dict):
+    """Parse a JSON file the user gave, bounded in size, depth and time; never blocks.
+
+    The file is read with :func:`read_regular` (a FIFO, device, socket or
+    folder is refused at once, ``/dev/zero`` included), at most ``max_bytes``
+    (default: :data:`MAX_JSON_BYTES`, or a sixteenth of the memory budget when
+    that is less). Non-finite numbers (``NaN``, ``Infinity``) are refused.
+
+    Parameters
+    ----------
+    path : path-like
+        The file.
+    what : str
+        What the file is, for the messages (e.g. ``"design result"``).
+    max_bytes : int, optional
+        Largest file read [bytes].
+    max_depth : int
+        Deepest nesting of arrays and objects [-].
+    expect : type or None
+        The type the top level must have (``dict``: a JSON object); None: any.
+
+    Returns
+    -------
+    object
+        The parsed document.
+
+    Raises
+    ------
+    InputError
+        Naming the file (and the line and column of a syntax error): not a
+        regular file, too large, not UTF-8, not JSON, nested deeper than
+        ``max_depth``, or not of the ``expect`` type at its top.
+    """
+    import json
+
+    name = str(path)
+    cap = min(MAX_JSON_BYTES, max(max_memory() // 16, 1 << 20)) if max_bytes is None else int(max_bytes)
+    data = read_regular(path, what, max_bytes=cap)
+    try:
+        text = data.decode("utf-8-sig")
+    except UnicodeDecodeError as err:
+        raise InputError(f"{what} is not UTF-8 text (byte {err.start}): not a JSON file",
+                         file=name) from None
+
+    def no_constant(word):
+        raise ValueError(f"{word} is not a finite number")
+
+    too_deep = (f"{what} nests arrays/objects more than {max_depth} deep (gyroarray reads JSON at "
+                f"most {max_depth} levels deep): not a file gyroarray wrote")
+    try:
+        obj = json.loads(text, parse_constant=no_constant)
+    except RecursionError:
+        raise InputError(too_deep, file=name) from None
+    except json.JSONDecodeError as err:
+        raise InputError(f"{what} is not valid JSON: {err.msg}", file=name, line=err.lineno,
+                         column=err.colno) from None
+    except ValueError as err:
+        raise InputError(f"{what} is not valid JSON: {err}", file=name) from None
+    if _json_depth_over(obj, max_depth) is not None:
+        raise InputError(too_deep, file=name)
+    if expect is not None and not isinstance(obj, expect):
+        kind = {dict: "an object", list: "an array", str: "a string", bool: "true/false",
+                type(None): "null"}.get(type(obj), "a number")
+        want = {dict: "object ({...})", list: "array ([...])"}.get(expect, expect.__name__)
+        raise InputError(f"{what} must be a JSON {want} at its top, but it is {kind}: not the "
+                         "file gyroarray wrote (was it edited or replaced?)", file=name)
+    return obj
 
 
 _GZIP_PIECE = 1 << 20

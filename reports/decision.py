@@ -29,6 +29,7 @@ import numpy as np
 from gyroarray import units
 from gyroarray.design import gdop_robustness, minmax_alpha, optimal_alpha
 from gyroarray.errors import InputError
+from gyroarray.limits import read_json
 from gyroarray.layout import Layout
 from gyroarray.predict import Swing, settle_start, swing_truth
 from gyroarray.recommend import DesignSpace, GyroNoise, _label as _recommend_label
@@ -42,12 +43,8 @@ AXES = ("x", "y", "z")
 def load_design(path) -> dict:
     """Read a ``design --recommend --out`` JSON file (checked for the keys the report needs)."""
     p = Path(path)
-    try:
-        data = json.loads(p.read_text(encoding="utf-8"))
-    except OSError as err:
-        raise InputError(f"cannot read the design result: {err.strerror}", file=str(p)) from None
-    except ValueError as err:
-        raise InputError(f"not JSON: {err}", file=str(p)) from None
+    # regular files only, bounded in size and depth (a FIFO or /dev/zero is refused at once)
+    data = read_json(p, "design result", expect=None)
     need = ("recommended", "designs", "equivalent", "assumptions")
     if not isinstance(data, dict) or any(k not in data for k in need):
         raise InputError("not a gyroarray design --recommend result (needs keys "

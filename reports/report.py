@@ -38,7 +38,6 @@ from __future__ import annotations
 
 import base64
 import html
-import json
 import math
 import time
 from dataclasses import dataclass, field
@@ -51,7 +50,7 @@ import pandas as pd
 from gyroarray import units
 from gyroarray import outputs
 from gyroarray.errors import InputError
-from gyroarray.limits import read_regular
+from gyroarray.limits import read_json
 from gyroarray.reports import decision as dec
 from gyroarray.reports.design_plots import _figure, _png, design_fig, plot_series
 from gyroarray.reports.hypotheses import check_entry, run_check
@@ -107,12 +106,10 @@ def load_sweep_dir(path) -> SweepData:
     man = path / MANIFEST
     if not path.is_dir():
         raise InputError("not a folder (give the --out folder of gyroarray sweep)", file=str(path))
-    if not man.is_file():
+    if not (man.exists() or man.is_symlink()):
         raise InputError(f"no {MANIFEST}: not a gyroarray sweep folder", file=str(path))
-    try:
-        manifest = json.loads(read_regular(man, "sweep manifest"))
-    except (UnicodeDecodeError, ValueError, RecursionError) as err:
-        raise InputError(f"unreadable sweep manifest: {str(err)[:200]}", file=str(man)) from None
+    # a regular file only (a FIFO is refused, never waited on), bounded in size and depth
+    manifest = read_json(man, "sweep manifest", expect=None)     # its shape is checked below
     scenarios = manifest.get("scenarios") if isinstance(manifest, dict) else None
     if not (isinstance(scenarios, list) and all(
             isinstance(s, dict) and isinstance(s.get("id"), str) for s in scenarios)):
@@ -544,14 +541,25 @@ class _Doc:
         if css:
             page = page.replace("</style>", css + "</style>", 1)
         outputs.check_output_dir(Path(out_html).parent, what="the report's folder")
-        outputs.write_text(out_html, page, force=force)
-        if out_md is None:
-            return None
-        md_path = Path(out_md)
-        figdir = outputs.check_output_dir(markdown_figure_dir(md_path), what="the Markdown figures' folder")
-        for name, png in self.figures:
-            outputs.write_bytes(figdir / f"{name}.png", png, force=force)
-        outputs.write_text(md_path, f"*{subtitle}*\n\n" + self.render_md(figdir.name), force=force)
+        files: list[tuple[Path, bytes]] = [(Path(out_html), page.encode("utf-8"))]
+        md_path = None if out_md is None else Path(out_md)
+        made = None
+        if md_path is not None:
+            figdir = markdown_figure_dir(md_path)
+            made = None if figdir.exists() else figdir
+            outputs.check_output_dir(figdir, what="the Markdown figures' folder")
+            files += [(figdir / f"{name}.png", png) for name, png in self.figures]
+            files.append((md_path, (f"*{subtitle}*\n\n" + self.render_md(figdir.name)).encode("utf-8")))
+        try:
+            # all or nothing: a refusal leaves neither the HTML nor some of the figures behind
+            outputs.write_many(files, force=force)
+        except BaseException:
+            if made is not None:
+                try:
+                    made.rmdir()            # the figures' folder this call made, if still empty
+                except OSError:
+                    pass
+            raise
         return md_path
 
 

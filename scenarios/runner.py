@@ -47,6 +47,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import re
 import signal
 import sys
 import threading
@@ -57,7 +58,9 @@ from pathlib import Path
 
 import multiprocessing as mp
 
+from gyroarray import outputs
 from gyroarray.errors import InputError
+from gyroarray.limits import open_regular, read_json, read_regular
 
 from gyroarray.scenarios.sweep import ScenarioSpec, Sweep, load_sweep
 
@@ -111,29 +114,33 @@ def _typed(df):
     return df
 
 
-def _write_rows(df, folder: Path, sid: str) -> Path:
-    """Write a scenario's rows atomically and record the file's checksum beside the folder."""
+def _write_rows(df, folder: Path, sid: str, inputs=()) -> Path:
+    """Write a scenario's rows atomically and record the file's checksum beside the folder.
+
+    Both go through :mod:`gyroarray.outputs`: the Parquet file is replaced
+    atomically (a symbolic link at its name is replaced, never written
+    through), the checksum line is appended with
+    :func:`~gyroarray.outputs.append_line` (no symbolic link, no input of the
+    command, no partial line on a full disk).
+    """
     import pyarrow as pa
     import pyarrow.parquet as pq
 
     final = folder / f"{sid}.parquet"
-    tmp = folder / f".{sid}.{os.getpid()}.tmp"
     table = pa.Table.from_pandas(df, preserve_index=False)
-    pq.write_table(table, tmp)
-    with open(tmp, "rb") as fh:
-        os.fsync(fh.fileno())
-    digest = _sha256(tmp)
-    os.replace(tmp, final)
-    with open(folder.parent / CHECKSUMS, "a", encoding="utf-8") as fh:
-        fh.write(f"{digest} {len(df)} {final.name}\n")
-        fh.flush()
-        os.fsync(fh.fileno())
+    sink = pa.BufferOutputStream()
+    pq.write_table(table, sink)
+    data = sink.getvalue().to_pybytes()
+    digest = hashlib.sha256(data).hexdigest()
+    outputs.write_bytes(final, data, force=True)      # a rerun replaces a corrupt file
+    outputs.append_line(folder.parent / CHECKSUMS, f"{digest} {len(df)} {final.name}",
+                        inputs=inputs, what="sweep checksum file (rows.sha256)")
     return final
 
 
 def _sha256(path: Path) -> str:
     h = hashlib.sha256()
-    with open(path, "rb") as fh:
+    with open_regular(path, "sweep result file") as fh:     # never blocks on a FIFO
         for block in iter(lambda: fh.read(1 << 20), b""):
             h.update(block)
     return h.hexdigest()
@@ -144,10 +151,12 @@ def _recorded_checksums(out: Path) -> dict:
     a torn last line (a crash while appending) is ignored."""
     path = out / CHECKSUMS
     records: dict[str, tuple[str, int]] = {}
-    try:
-        text = path.read_text(encoding="utf-8", errors="replace")
-    except OSError:
+    if not (path.exists() or path.is_symlink()):
         return records
+    # a regular file only (a FIFO is refused, never waited on), at most the size of a
+    # 100,000-scenario record with room to spare
+    text = read_regular(path, "sweep checksum file (rows.sha256)",
+                        max_bytes=64 * 2**20).decode("utf-8", errors="replace")
     for line in text.splitlines():
         parts = line.split()
         if len(parts) == 3 and len(parts[0]) == 64 and parts[1].isdigit():
@@ -172,6 +181,8 @@ def verify_rows_file(path: Path, record=None) -> str | None:
         rows = pq.ParquetFile(path).metadata.num_rows
     except OSError as err:
         return f"cannot be read ({err.strerror or err})"
+    except InputError as err:  # not a regular file (open_regular)
+        return err.message
     except Exception as err:   # pyarrow raises ArrowInvalid and others on a broken footer
         return f"not a complete Parquet file ({type(err).__name__})"
     return None if rows > 0 else "it holds no rows"
@@ -227,14 +238,50 @@ def _watch_parent(parent_pid: int) -> None:
     threading.Thread(target=watch, name="gyroarray-parent-watch", daemon=True).start()
 
 
+_RECORD_END = re.compile(r"[0-9a-f]{64} [0-9]+ [^ ]+\.parquet\r?$")
+_TORN = re.compile(r"[0-9a-f]{0,64}(?: [0-9]*(?: [^ ]*)?)?\r?")
+
+
+def _sweep_inputs(sweep: Sweep) -> list:
+    """The files a sweep reads: the sweep file, its base scenario files and motion profiles."""
+    files = {sweep.source} if sweep.source else set()
+    for s in sweep.scenarios:
+        if s.file:
+            files.add(s.file)
+        motion = s.data.get("motion")
+        ref = motion.get("profile") if isinstance(motion, dict) else None
+        if isinstance(ref, str) and (ref.endswith(".toml") or "/" in ref):
+            here = s.data.get("_base_dir") or (Path(s.file).parent if s.file else Path("."))
+            files.add(str(Path(here) / ref))
+    return sorted(files)
+
+
+def _check_out(out: Path, inputs) -> None:
+    """The output folder (created if needed, writable) and the files gyroarray keeps in it
+    (``sweep.json``, ``rows.sha256``): regular files of this user, never a symbolic link,
+    never an input of the command; ``rows.sha256`` must hold checksum lines only."""
+    outputs.check_output_dir(out, what="--out")
+    outputs.check_own_file(out / MANIFEST, inputs=inputs, what="sweep manifest (sweep.json)")
+    path = outputs.check_own_file(out / CHECKSUMS, inputs=inputs,
+                                  what="sweep checksum file (rows.sha256)")
+    if path.exists():
+        lines = read_regular(path, "sweep checksum file (rows.sha256)",
+                             max_bytes=64 * 2**20).decode("utf-8", errors="replace").split("\n")
+        for i, line in enumerate(lines):
+            # a record, or a record torn by a crash (alone, or glued to the next record by
+            # an older gyroarray): anything else is not ours
+            if not (_RECORD_END.search(line) or _TORN.fullmatch(line)):
+                raise InputError("not a gyroarray checksum file (lines of <sha256> <rows> "
+                                 "<id>.parquet); gyroarray appends to it: move it away, or use "
+                                 "a new --out folder", file=str(path), line=i + 1)
+
+
 def _check_manifest(out: Path, sweep: Sweep) -> None:
     path = out / MANIFEST
     mine = sweep.manifest()
-    if path.exists():
-        try:
-            theirs = json.loads(path.read_text())
-        except (OSError, ValueError) as err:
-            raise InputError(f"unreadable sweep manifest: {err}", file=str(path)) from None
+    if path.exists() or path.is_symlink():
+        # a regular file, a JSON object, bounded in size and depth (else one line naming it)
+        theirs = read_json(path, "sweep manifest")
         for key in ("sweep_sha256", "seed", "estimators", "scenarios"):
             if theirs.get(key) != json.loads(json.dumps(mine[key])):
                 raise InputError(
@@ -245,9 +292,7 @@ def _check_manifest(out: Path, sweep: Sweep) -> None:
     if (out / ROWS).is_dir() and any((out / ROWS).glob("*.parquet")):
         raise InputError("the folder has results but no sweep.json: not resuming into it",
                          file=str(out))
-    tmp = out / f".{MANIFEST}.tmp"
-    tmp.write_text(json.dumps(mine, indent=1))
-    os.replace(tmp, path)
+    outputs.write_text(path, json.dumps(mine, indent=1), force=True)
 
 
 @contextmanager
@@ -300,15 +345,139 @@ def _cost(spec: ScenarioSpec) -> float:
     return duration * sc.sample_rate_hz * sc.layout.n_gyros
 
 
+#: Longest wait for the Dask scheduler to answer, name lookup included [s].
+SCHEDULER_TIMEOUT_S = 10.0
+#: Address schemes of dask.distributed that reach another process (``inproc://`` lives inside
+#: one Python process; ``ucx://`` needs the separate distributed-ucxx package).
+SCHEDULER_SCHEMES = ("tcp", "tls", "ws", "wss")
+_HOST_RE = re.compile(r"[A-Za-z0-9_](?:[A-Za-z0-9_.-]{0,252}[A-Za-z0-9_])?|\[[0-9A-Fa-f:.]{2,45}\]")
+
+
+def parse_scheduler(address) -> tuple[str, str, int]:
+    """``(scheme, host, port)`` of a Dask scheduler address, refused up front when malformed.
+
+    Accepted: ``SCHEME://HOST:PORT`` with a scheme of :data:`SCHEDULER_SCHEMES`, or
+    ``HOST:PORT`` (tcp, as dask.distributed reads it); HOST a name, an IPv4 address or a
+    bracketed IPv6 address; PORT a whole number 1..65535.
+
+    Raises
+    ------
+    InputError
+        One line naming ``--scheduler``, what is wrong and the expected form.
+    """
+    text = str(address)
+    form = "give tcp://HOST:PORT, e.g. tcp://127.0.0.1:8786 (what `dask scheduler` prints)"
+    shown = text if len(text) <= 80 and text.isprintable() else repr(text[:80]) + "..."
+    scheme, sep, rest = text.partition("://")
+    if not sep:
+        scheme, rest = "tcp", text
+    scheme = scheme.lower()
+    if scheme == "inproc":
+        raise InputError(f"--scheduler {shown}: an inproc:// address lives only inside one Python "
+                         f"process; {form}")
+    if scheme not in SCHEDULER_SCHEMES:
+        raise InputError(f"--scheduler {shown}: the scheme {scheme}:// is not supported (use one of "
+                         f"{', '.join(s + '://' for s in SCHEDULER_SCHEMES)}); {form}")
+    host, colon, port = rest.rpartition(":")
+    if not colon or not _HOST_RE.fullmatch(host):
+        raise InputError(f"--scheduler {shown}: not a scheduler address (HOST:PORT expected); {form}")
+    if not (port.isascii() and port.isdigit() and 1 <= int(port) <= 65535):
+        raise InputError(f"--scheduler {shown}: the port must be a whole number from 1 to 65535, "
+                         f"got {port!r}; {form}")
+    return scheme, host.strip("[]"), int(port)
+
+
+def _probe_scheduler(scheduler: str, host: str, port: int, timeout: float) -> None:
+    """Refuse a scheduler whose host does not resolve or whose port does not accept a
+    connection, within ``timeout`` seconds in all (name lookup included: it runs on a thread)."""
+    import socket
+    outcome: list = []
+
+    def probe():
+        try:
+            socket.create_connection((host, port), timeout=timeout).close()
+            outcome.append(None)
+        except OSError as err:
+            outcome.append(err.strerror or str(err) or type(err).__name__)
+
+    t = threading.Thread(target=probe, name="gyroarray-scheduler-probe", daemon=True)
+    t.start()
+    t.join(timeout)
+    why = outcome[0] if outcome else "no answer"
+    if why is not None:
+        raise InputError(f"cannot reach the Dask scheduler at {scheduler}: {why} (waited at most "
+                         f"{timeout:g} s); check the address, or start one with `dask scheduler`")
+
+
+def _ask_identity(scheduler: str, timeout: float) -> None:
+    """Refuse a port that accepts connections but does not answer Dask's ``identity`` as a
+    scheduler within ``timeout`` seconds (``distributed.Client`` waits for ever on a silent one)."""
+    import asyncio
+    from distributed.comm import connect
+    from distributed.security import Security
+
+    async def ask():
+        comm = await connect(scheduler, timeout=timeout, **Security().get_connection_args("client"))
+        try:
+            await comm.write({"op": "identity", "reply": True})
+            return await comm.read()
+        finally:
+            comm.abort()
+
+    try:
+        answer = asyncio.run(asyncio.wait_for(ask(), timeout))
+    except (asyncio.TimeoutError, TimeoutError):
+        why = "no answer to the Dask handshake"
+    except OSError as err:
+        why = " ".join(str(err).split()) or type(err).__name__
+    except Exception as err:      # noqa: BLE001 - what the other end sent is not Dask's protocol
+        why = (f"it answered, but not as a Dask scheduler ({type(err).__name__}: "
+               f"{' '.join(str(err).split())[:160]})")
+    else:
+        if isinstance(answer, dict) and answer.get("type") == "Scheduler":
+            return
+        why = f"it answered, but not as a Dask scheduler (a {type(answer).__name__})"
+    raise InputError(f"cannot reach the Dask scheduler at {scheduler}: {why} (waited at most "
+                     f"{timeout:g} s); check the address and that a Dask scheduler of a compatible "
+                     "version runs there")
+
+
 def _dask_client(scheduler: str):
+    """A ``distributed.Client`` on ``scheduler``, or a one-line refusal within
+    :data:`SCHEDULER_TIMEOUT_S` (twice that at most: the probe, then the handshake)."""
+    _, host, port = parse_scheduler(scheduler)
     try:
         from distributed import Client
     except ImportError:
         raise InputError("a scheduler address needs dask[distributed] installed") from None
+    _probe_scheduler(scheduler, host, port, SCHEDULER_TIMEOUT_S)
+    _ask_identity(scheduler, SCHEDULER_TIMEOUT_S)
+
+    class _Client(Client):
+        """A Client whose failed start does not wait again (and print a traceback) when the
+        half-built object is collected at exit."""
+
+        def __init__(self, *args, **kwargs):
+            try:
+                super().__init__(*args, **kwargs)
+            except BaseException:
+                try:
+                    self.close(timeout=2)
+                except Exception:                         # noqa: BLE001 - it never started
+                    pass
+                self.status = "closed"                    # __del__ then closes nothing
+                raise
+
     try:
-        return Client(scheduler, timeout="20s", set_as_default=False)
+        return _Client(scheduler, timeout=f"{SCHEDULER_TIMEOUT_S:g}s", set_as_default=False)
     except (OSError, TimeoutError) as err:
-        raise InputError(f"cannot connect to the Dask scheduler {scheduler}: {err}") from None
+        why = " ".join(str(err).split()) or type(err).__name__
+    except Exception as err:      # noqa: BLE001 - the other end answered, but not as Dask
+        why = (f"it answered, but not as a Dask scheduler ({type(err).__name__}: "
+               f"{' '.join(str(err).split())[:160]})")
+    raise InputError(f"cannot reach the Dask scheduler at {scheduler}: {why} (waited at most "
+                     f"{SCHEDULER_TIMEOUT_S:g} s); check the address and that a Dask scheduler of "
+                     "a compatible version runs there")
 
 
 def _scenarios_to_run(sweep: Sweep, rows_dir: Path, records: dict, notes: list) -> list:
@@ -335,33 +504,68 @@ def _run_in_processes(todo: list, sweep: Sweep, workers: int, done) -> None:
                                          initargs=(os.getpid(),)) as pool:
         futures = {pool.submit(run_one, s, sweep.estimators, sweep.name): s for s in todo}
         pending = set(futures)
-        while pending:
-            finished, pending = wait(pending, return_when=FIRST_COMPLETED)
-            for fut in sorted(finished, key=lambda fu: futures[fu].id):
-                exc = fut.exception()
-                done(futures[fut], None if exc else fut.result(), exc)
+        try:
+            while pending:
+                finished, pending = wait(pending, return_when=FIRST_COMPLETED)
+                for fut in sorted(finished, key=lambda fu: futures[fu].id):
+                    exc = fut.exception()
+                    done(futures[fut], None if exc else fut.result(), exc)
+        except BaseException:
+            # a result that cannot be written (a full disk) or an interrupt: stop now, do not
+            # run the rest first (the workers write nothing themselves; a rerun resumes)
+            procs = dict(getattr(pool, "_processes", None) or {})   # before shutdown clears it
+            pool.shutdown(wait=False, cancel_futures=True)
+            for proc in procs.values():
+                try:
+                    proc.terminate()
+                except (OSError, AttributeError, ValueError):
+                    pass
+            raise
 
 
 def _run_on_dask(todo: list, sweep: Sweep, scheduler: str, done, notes: list) -> None:
     """Run ``todo`` on a dask.distributed cluster, reporting each result to ``done``."""
+    import logging
+    from concurrent.futures import CancelledError
     from distributed import as_completed
-    client = _dask_client(scheduler)
+    from distributed.comm.core import CommClosedError
+    lost = (CancelledError, CommClosedError, TimeoutError)
+
+    def gone(err) -> InputError:
+        return InputError(f"lost the connection to the Dask scheduler at {scheduler} "
+                          f"({type(err).__name__}: {' '.join(str(err).split())[:160]}); the scenarios "
+                          "finished so far are kept: run the same command again to resume")
+
+    log = logging.getLogger("distributed")
+    level = log.level
+    log.setLevel(logging.CRITICAL)        # its reconnection errors: stderr carries one line at most
+    client = None
     try:
-        envs = client.run(lambda: {k: os.environ.get(k) for k in THREAD_ENV})
+        client = _dask_client(scheduler)
+        try:
+            envs = client.run(lambda: {k: os.environ.get(k) for k in THREAD_ENV})
+            futures = {client.submit(run_one, s, sweep.estimators, sweep.name, key=f"sweep-{s.id}",
+                                     pure=False): s for s in todo}
+        except lost as err:
+            raise gone(err) from None
         off = sorted(w for w, e in envs.items() if e.get("OPENBLAS_NUM_THREADS") != "1")
         if off:
             notes.append(f"{len(off)} Dask worker(s) without OPENBLAS_NUM_THREADS=1: results "
                          "may differ in the last bits from a local run")
-        futures = {client.submit(run_one, s, sweep.estimators, sweep.name, key=f"sweep-{s.id}",
-                                 pure=False): s for s in todo}
         for dfut in as_completed(list(futures), loop=client.loop):
             spec = futures[dfut]
-            if dfut.status == "error":
-                done(spec, err=dfut.exception())
-            else:
-                done(spec, dfut.result())
+            try:
+                df, err = (None, dfut.exception()) if dfut.status == "error" else (dfut.result(), None)
+            except lost as exc:
+                raise gone(exc) from None
+            done(spec, df, err)
     finally:
-        client.close()
+        try:
+            if client is not None:
+                client.close(timeout=5)
+        except Exception:                      # noqa: BLE001 - a scheduler already gone
+            pass
+        log.setLevel(level)
 
 
 def run_sweep(sweep, out_dir, *, workers: int = 1, scheduler: str | None = None,
@@ -390,14 +594,19 @@ def run_sweep(sweep, out_dir, *, workers: int = 1, scheduler: str | None = None,
         combinations left out by ``skip_invalid``: {id, reason}).
     """
     t0 = time.perf_counter()
-    if not isinstance(sweep, Sweep):
-        sweep = load_sweep(sweep)
     if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
         raise InputError(f"workers must be an integer >= 1, got {workers!r}")
+    if scheduler is not None:
+        parse_scheduler(scheduler)                          # a malformed address: refused before work
     out = Path(out_dir)
-    if out.exists() and not out.is_dir():
-        raise InputError("the output must be a folder", file=str(out))
-    (out / ROWS).mkdir(parents=True, exist_ok=True)
+    # the folder and the files gyroarray keeps there, before the (possibly long) expansion
+    if out.exists() or out.is_symlink():
+        _check_out(out, [sweep.source if isinstance(sweep, Sweep) else sweep])
+    if not isinstance(sweep, Sweep):
+        sweep = load_sweep(sweep)
+    inputs = _sweep_inputs(sweep)
+    _check_out(out, inputs)
+    outputs.check_output_dir(out / ROWS, what="--out")
     _check_manifest(out, sweep)
     rows_dir = out / ROWS
     notes: list[str] = []
@@ -414,7 +623,7 @@ def run_sweep(sweep, out_dir, *, workers: int = 1, scheduler: str | None = None,
         if err is not None:
             failed.append({"id": spec.id, "error": f"{type(err).__name__}: {err}"})
         else:
-            _write_rows(df, rows_dir, spec.id)
+            _write_rows(df, rows_dir, spec.id, inputs)
             rows_written += len(df)
         bar.step()
 

@@ -278,12 +278,13 @@ def _build_scenario(data: dict, name: str, seed: int, file: str, doc: _Doc | Non
     if not isinstance(motion, dict) or set(motion) != {"profile"} or not isinstance(ref, str) or not ref:
         raise view.error("motion must be a table with one key, profile = \"<name or file>\"",
                          "motion")
-    profile = _cached_profile(resolve_profile(ref, Path(data["_base_dir"]), view))
     duration = data.get("duration_s")
+    if duration is not None and (not _is_num(duration) or duration <= 0):
+        raise view.error(f"duration_s must be a number > 0, got {_type(duration)} {duration!r}",
+                         "duration_s")
+    profile = _cached_profile(resolve_profile(ref, Path(data["_base_dir"]), view),
+                              None if duration is None else float(duration))
     if duration is not None:
-        if not _is_num(duration) or duration <= 0:
-            raise view.error(f"duration_s must be a number > 0, got {_type(duration)} {duration!r}",
-                             "duration_s")
         if duration > profile.duration_s + 1e-9:
             raise view.error(f"duration_s = {duration:g} s is longer than the motion profile "
                              f"{ref!r} ({profile.duration_s:g} s)", "duration_s")
@@ -307,18 +308,18 @@ def _build_scenario(data: dict, name: str, seed: int, file: str, doc: _Doc | Non
 _PROFILES: dict = {}
 
 
-def _cached_profile(path: Path):
-    """:func:`~gyroarray.sim.profiles.load_profile`, once per file version (a grid names a few
-    profiles thousands of times)."""
+def _cached_profile(path: Path, until_s: float | None = None):
+    """:func:`~gyroarray.sim.profiles.load_profile` (as far as ``until_s`` needs), once per file
+    version (a grid names a few profiles thousands of times)."""
     try:
         st = path.stat()
-        key = (str(path.resolve()), st.st_mtime_ns, st.st_size)
+        key = (str(path.resolve()), st.st_mtime_ns, st.st_size, until_s)
     except OSError:
-        return load_profile(path)      # refuses it, naming the file
+        return load_profile(path, until_s=until_s)      # refuses it, naming the file
     if key not in _PROFILES:
         if len(_PROFILES) > 64:
             _PROFILES.clear()
-        _PROFILES[key] = load_profile(path)
+        _PROFILES[key] = load_profile(path, until_s=until_s)
     return _PROFILES[key]
 
 
@@ -553,8 +554,10 @@ def _check_effect_sets(d: dict, doc: _Doc) -> dict:
     return effect_sets
 
 
-def _grid_combos(grid, doc: _Doc, effect_sets: dict) -> list[tuple[dict, dict]]:
-    """(given values, where each came from) of every point of the grid."""
+def _grid_combos(grid, doc: _Doc, effect_sets: dict
+                 ) -> tuple[list[tuple[dict, dict]], list[tuple[dict, dict]]]:
+    """(given values, where each came from) of every point of the grid; and the points to
+    check first (:func:`_grid_probes`)."""
     combos: list[tuple[dict, dict]] = []
     if not isinstance(grid, dict):
         raise doc.error(f"grid must be a table, got {_type(grid)}", "grid")
@@ -570,17 +573,40 @@ def _grid_combos(grid, doc: _Doc, effect_sets: dict) -> list[tuple[dict, dict]]:
         if not isinstance(vals, list) or not vals:
             raise doc.error(f"grid.{key} must be a non-empty array of values, got "
                             f"{_type(vals)} {vals!r}", f"grid.{key}")
+        if len(vals) > MAX_SCENARIOS:
+            raise doc.error(f"grid.{key} lists {len(vals)} values; a sweep has at most "
+                            f"{MAX_SCENARIOS} scenarios: split it into several sweeps", f"grid.{key}")
         norm = [_check_value(key, v, f"grid.{key}", doc, effect_sets) for v in vals]
         if len({json.dumps(v) for v in norm}) != len(norm):
             raise doc.error(f"grid.{key} lists a value twice: {vals!r}", f"grid.{key}")
         axes.append((key, norm))
     n = math.prod(len(v) for _, v in axes)
     if n > MAX_SCENARIOS:
-        raise doc.error(f"the grid has {n} scenarios (at most {MAX_SCENARIOS})", "grid")
+        raise doc.error(f"the grid has {n} scenarios (" + " x ".join(f"{len(v)} {k}" for k, v in axes)
+                        + f"), at most {MAX_SCENARIOS}: split it into several sweeps", "grid")
     for values in itertools.product(*[v for _, v in axes]):
         given = dict(zip([k for k, _ in axes], values))
         combos.append((given, {k: f"grid.{k}" for k in PARAM_KEYS}))
-    return combos
+    return combos, _grid_probes(axes)
+
+
+def _grid_probes(axes: list[tuple[str, list]]) -> list[tuple[dict, dict]]:
+    """The grid points to check first: each value of each axis with the other axes at their
+    first, then at their last values (at most twice the sum of the axis lengths points).
+
+    A value that is invalid on its own (a duration beyond the motion, a correlation outside its
+    bound for every N, ...) is then refused after a few builds instead of after the whole grid
+    (issue 28: a 99,900-point grid whose last point was invalid was refused after 487 s).
+    """
+    where = {k: f"grid.{k}" for k in PARAM_KEYS}
+    picked: dict[str, tuple[dict, dict]] = {}
+    for pos in (0, -1):
+        anchor = {k: v[pos] for k, v in axes}
+        for key, values in axes:
+            for v in values:
+                probe = dict(anchor, **{key: v})
+                picked.setdefault(json.dumps(probe, sort_keys=True), (probe, where))
+    return list(picked.values())
 
 
 def _point_combos(points, doc: _Doc, effect_sets: dict) -> list[tuple[dict, dict]]:
@@ -599,15 +625,71 @@ def _point_combos(points, doc: _Doc, effect_sets: dict) -> list[tuple[dict, dict
     return combos
 
 
+def _expanded_point(path: Path, doc: _Doc, b: _Base, ref: str | None, given: dict, where: dict,
+                    effect_sets: dict, seed: int, reps: list, paired: bool,
+                    specs: dict[str, ScenarioSpec]) -> None:
+    """Build and check one point of the sweep (each replicate) into ``specs``; refuse it naming
+    the sweep file and the keys that made it."""
+    params, data = _apply(b.data, b.params, given, effect_sets, path.parent, doc, where)
+    if ref is not None:
+        params["scenario"] = ref
+    for rep in reps:
+        p = dict(params)
+        if rep is not None:
+            p["replicate"] = rep
+        id_params = {k: p.get(k) for k in (*PARAM_KEYS, *_EXTRA_ID_KEYS)
+                     if k in PARAM_KEYS or p.get(k) is not None}
+        sid = scenario_id(id_params)
+        if sid in specs:
+            if specs[sid].params != p:      # a hash collision: never silently merge
+                raise doc.error(f"two scenarios share the id {sid}", "grid")
+            continue                         # the same scenario twice (grid ∪ points)
+        seed_key = f"paired:{ref or ''}:{rep or 0}" if paired else sid
+        spec = ScenarioSpec(id=sid, seed=scenario_seed(seed, seed_key), params=p, data=data,
+                            file=b.file)
+        try:
+            spec.build()
+        except InputError as err:
+            keys = [where[k] for k in given if k in ("rho_arw", "rho_rrw", "n_gyros",
+                                                     "duration_s", "motion", "effects",
+                                                     "alpha_deg", "scheme")]
+            raise InputError(f"scenario {sid} ({_canonical(id_params)}): {err.message}",
+                             file=str(path), line=err.line if err.file == str(path) else None,
+                             column=(err.column if err.file == str(path) and not keys
+                                     else ", ".join(sorted(set(keys))) or err.column)
+                             ) from None
+        specs[sid] = spec
+
+
 def _expand_scenarios(path: Path, doc: _Doc, bases: list[tuple[_Base, str | None]],
                       combos: list[tuple[dict, dict]], effect_sets: dict, seed: int,
-                      replicates: int | None, paired: bool, skip_invalid: bool
+                      replicates: int | None, paired: bool, skip_invalid: bool,
+                      probes: list[tuple[dict, dict]] = ()
                       ) -> tuple[dict[str, ScenarioSpec], dict[str, str]]:
-    """Every (base, combination, replicate) built and checked, by id; and the excluded ones."""
+    """Every (base, combination, replicate) built and checked, by id; and the excluded ones.
+
+    The total is capped (:data:`MAX_SCENARIOS`) before anything is built, and without
+    ``skip_invalid`` the ``probes`` (:func:`_grid_probes`, then each listed point) are checked
+    first, so that the first invalid value is refused at once.
+    """
     sweep_dir = path.parent
     specs: dict[str, ScenarioSpec] = {}
     excluded: dict[str, str] = {}
     reps = [None] if replicates is None else list(range(replicates))
+    total = len(bases) * len(combos) * len(reps)
+    if total > MAX_SCENARIOS:
+        parts = [f"{len(bases)} scenario files"] if len(bases) > 1 else []
+        parts += [f"{len(combos)} grid points and points"] + (
+            [f"{len(reps)} replicates"] if replicates is not None else [])
+        raise doc.error(f"the sweep has {total} scenarios ({' x '.join(parts)}), at most "
+                        f"{MAX_SCENARIOS}: split it into several sweeps or use fewer replicates",
+                        "grid" if "grid" in doc.data else ("replicates" if replicates else "points"))
+    if not skip_invalid:
+        # points that are invalid on their own value are refused at once, not after the grid
+        for b, ref in bases:
+            for given, where in probes:
+                _expanded_point(path, doc, b, ref, given, where, effect_sets, seed, reps[:1],
+                                paired, {})
     for b, ref in bases:
         for given, where in combos:
             try:
@@ -706,17 +788,24 @@ def load_sweep(path) -> Sweep:
 
     # grid and points
     combos: list[tuple[dict, dict]] = []           # (given values, where each came from)
+    probes: list[tuple[dict, dict]] = []           # checked first (see _expand_scenarios)
     grid = d.get("grid")
     if grid is not None:
-        combos += _grid_combos(grid, doc, effect_sets)
+        grid_combos, probes = _grid_combos(grid, doc, effect_sets)
+        combos += grid_combos
     points = d.get("points")
     if points is not None:
-        combos += _point_combos(points, doc, effect_sets)
+        if isinstance(points, list) and len(points) > MAX_SCENARIOS:
+            raise doc.error(f"points lists {len(points)} scenarios, at most {MAX_SCENARIOS}: "
+                            "split it into several sweeps", "points")
+        point_combos = _point_combos(points, doc, effect_sets)
+        combos += point_combos
+        probes += point_combos
     if grid is None and points is None:
         combos.append(({}, {k: "base" for k in PARAM_KEYS}))
 
     specs, excluded = _expand_scenarios(path, doc, bases, combos, effect_sets, seed, replicates,
-                                        paired, skip_invalid)
+                                        paired, skip_invalid, probes)
     if not specs:
         raise doc.error("the sweep has no valid scenario"
                         + (f" (first problem: {next(iter(excluded.values()))})" if excluded else ""),

@@ -37,6 +37,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import re
 from dataclasses import dataclass, field
 from types import MappingProxyType
 from typing import Any, Iterator, Mapping, Sequence
@@ -299,11 +300,31 @@ def _toml_value(value) -> str:
     raise TypeError(f"cannot write {type(value).__name__} to TOML")
 
 
-def _located(err: InputError, index: int | None, file: str | None) -> InputError:
-    """``err`` of one entry, located at ``effects[index]`` (and the file)."""
+def _located(err: InputError, index: int | None, file: str | None, line: int | None = None) -> InputError:
+    """``err`` of one entry, located at ``effects[index]`` (and the file and line)."""
     where = f"effects[{index}]"
     column = where if err.column is None else f"{where}.{err.column}"
-    return InputError(f"{where} {err.message}", file=file, column=column)
+    return InputError(f"{where} {err.message}", file=file, line=line, column=column)
+
+
+_EFFECT_KEY = re.compile(r"""(?:^|[{,\s])effect\s*=\s*["']""")
+_EFFECTS_HEADER = re.compile(r"\s*\[\[\s*effects\s*\]\]")
+
+
+def _entry_lines(text: str, n: int) -> tuple[int | None, ...]:
+    """The 1-based line of each of the ``n`` entries of the ``effects`` array in a model's TOML
+    text (its ``[[effects]]`` header, or the line of its ``effect = "..."`` key), for messages;
+    all None when the text does not show them one by one (then messages name no line)."""
+    headers, keys = [], []
+    for number, line in enumerate(text.split("\n"), 1):
+        code = line.split("#", 1)[0] if '"' not in line and "'" not in line else line
+        if _EFFECTS_HEADER.match(code):
+            headers.append(number)
+        keys += [number] * len(_EFFECT_KEY.findall(code))
+    for found in (headers, keys):
+        if len(found) == n:
+            return tuple(found)
+    return (None,) * n
 
 
 @dataclass(frozen=True)
@@ -318,11 +339,15 @@ class NoiseModel:
         Free text.
     source : str or None
         File it was read from (for messages; not compared).
+    lines : tuple of (int or None)
+        Line of each entry in that file (for messages; not compared; empty
+        when unknown).
     """
 
     entries: tuple[ModelEntry, ...] = ()
     description: str = ""
     source: str | None = field(default=None, compare=False)
+    lines: tuple = field(default=(), compare=False, repr=False)
 
     def __post_init__(self):
         entries = tuple(self.entries)
@@ -360,10 +385,11 @@ class NoiseModel:
             model (naming ``effects[i]`` and the key).
         """
         if isinstance(source, Mapping):
-            data, file = source, None
+            data, file, text = source, None, ""
         else:
             file = os.fspath(source)
-            data = load_toml(file, "noise model").data
+            doc = load_toml(file, "noise model")
+            data, text = doc.data, doc.text
         for key in data:
             if key not in _TOP_KEYS:
                 raise InputError(f"unknown top-level key {key!r}{did_you_mean(key, _TOP_KEYS)} "
@@ -375,6 +401,7 @@ class NoiseModel:
         if not isinstance(items, list):
             raise InputError(f"'effects' must be an array of tables, got {_type_name(items)}",
                              file=file, column="effects")
+        lines = _entry_lines(text, len(items))
         entries = []
         for i, item in enumerate(items):
             if not isinstance(item, Mapping):
@@ -391,8 +418,8 @@ class NoiseModel:
             try:
                 entries.append(ModelEntry(item["effect"], item.get("gyro"), params, item.get("sigma", {})))
             except InputError as err:
-                raise _located(err, i, file) from None
-        model = cls(tuple(entries), description=data.get("description", ""), source=file)
+                raise _located(err, i, file, lines[i]) from None
+        model = cls(tuple(entries), description=data.get("description", ""), source=file, lines=lines)
         if n_gyros is not None:
             model.check(n_gyros)
         return model
@@ -448,14 +475,23 @@ class NoiseModel:
         for i, e in enumerate(self.entries):
             if e.gyro is not None and e.gyro > n_gyros:
                 raise _located(InputError(f"{e.label}: gyro {e.gyro} does not exist: the array "
-                                          f"has {n_gyros} gyros", column="gyro"), i, self.source)
+                                          f"has {n_gyros} gyros", column="gyro"), i, self.source,
+                               self.entry_line(i))
             eff = REGISTRY[e.effect]
             if eff.check is not None:
                 try:
                     eff.check(e.params, e.gyro, int(n_gyros))
                 except InputError as err:
                     raise _located(InputError(f"{e.label}: {err.message}", column=err.column),
-                                   i, self.source) from None
+                                   i, self.source, self.entry_line(i)) from None
+
+    def entry_line(self, index: int) -> int | None:
+        """Line of entry ``index`` in the file the model was read from, or None."""
+        return self.lines[index] if 0 <= index < len(self.lines) else None
+
+    def located(self, index: int, err: InputError) -> InputError:
+        """``err`` about entry ``index``, located at ``effects[index]`` in the model's file and line."""
+        return _located(err, index, self.source, self.entry_line(index))
 
     # -- container protocol -----------------------------------------------
     def __len__(self) -> int:

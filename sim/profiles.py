@@ -128,6 +128,12 @@ AXIS_NORM_TOL = 1e-3
 GIMBAL_LOCK_MARGIN_RAD = deg_to_rad(10.0)
 #: Largest RK4 step when integrating ``rate_csv`` kinematics [s].
 CSV_MAX_STEP_S = 0.01
+#: Most RK4 steps one ``rate_csv`` segment may take (10 000 s at CSV_MAX_STEP_S, or that
+#: many rows): the integration is a Python loop of about 10 µs and 200 bytes a step.
+CSV_MAX_STEPS = 1_000_000
+#: Memory of one RK4 node of a ``rate_csv`` segment (nodes, angles, rates, interpolation)
+#: [bytes], for :func:`gyroarray.limits.check_memory`.
+_CSV_BYTES_PER_STEP = 200
 #: Two joint configurations closer than this are the same orientation [rad].
 SAME_ORIENTATION_RAD = 1e-12
 
@@ -946,6 +952,7 @@ class _Builder:
 
     def csv(self, i, seg: RateCSV):
         t_csv, w_csv = seg.time_s, seg.omega_rad_s
+        _check_csv_steps(i, seg)
         # RK4 nodes: the CSV rows, subdivided so that no step exceeds CSV_MAX_STEP_S
         nodes = [np.array([0.0])]
         for a, b in zip(t_csv[:-1], t_csv[1:]):
@@ -999,6 +1006,42 @@ class _Builder:
         self.q = qn[-1].copy()
 
 
+def _check_csv_steps(i: int, seg: RateCSV) -> None:
+    """Refuse a ``rate_csv`` segment whose integration would take more than
+    :data:`CSV_MAX_STEPS` RK4 steps (or more memory than the budget), before any is taken;
+    the message names the CSV file, the row where the cap is passed and the span."""
+    from gyroarray.limits import check_memory
+    t = seg.time_s
+    steps = np.maximum(1.0, np.ceil(np.diff(t) / CSV_MAX_STEP_S - 1e-9))
+    total = float(steps.sum())
+    if total > CSV_MAX_STEPS:
+        row = int(np.searchsorted(np.cumsum(steps), CSV_MAX_STEPS, side="left")) + 1
+        raise InputError(
+            f"segment {i + 1} (rate_csv): the rates span {seg.duration_s:.6g} s in {t.size} rows, "
+            f"{total:.3g} integration steps of at most {CSV_MAX_STEP_S:g} s; at most "
+            f"{CSV_MAX_STEPS:.3g} are integrated (passed at t = {float(t[row]):.6g} s): cut the "
+            "file to the span that is run (a scenario's duration_s reads only the rows it needs)",
+            file=seg.file, line=seg.line_of(row), column="time_s")
+    check_memory(total * _CSV_BYTES_PER_STEP,
+                 f"integrating the {seg.duration_s:.6g} s of rate_csv segment {i + 1} "
+                 f"({total:.3g} steps)", "cut the file to the span that is run",
+                 file=seg.file, line=seg.line_of(t.size - 1), column="time_s")
+
+
+def _csv_until(seg: RateCSV, until_s: float) -> RateCSV:
+    """The first ``until_s`` of a ``rate_csv`` segment: the rows before it and one row at it
+    (rates linear between rows, so the kept part is the same motion)."""
+    t, w = seg.time_s, seg.omega_rad_s
+    j = int(np.searchsorted(t, until_s, side="left"))      # t[j-1] < until_s <= t[j]
+    if j < 1:
+        j = 1
+    t_end = max(float(until_s), float(t[j - 1]) + CSV_MAX_STEP_S * 1e-6)
+    w_end = [np.interp(t_end, t, w[:, k]) for k in range(3)]
+    lines = None if seg.line_numbers is None else tuple(seg.line_numbers[:j]) + (seg.line_of(j),)
+    return RateCSV(time_s=np.append(t[:j], t_end), omega_rad_s=np.vstack([w[:j], w_end]),
+                   file=seg.file, line_numbers=lines, label=seg.label)
+
+
 # =============================================================================
 # Profile
 # =============================================================================
@@ -1034,6 +1077,12 @@ class Profile:
     fingerprint : str, optional
         Content hash (hex). :func:`load_profile` hashes the bytes of the TOML
         file and of every CSV it reads; otherwise the segment values are hashed.
+    until_s : float, optional
+        Only what the first ``until_s`` seconds need [s]: a ``rate_csv``
+        segment running past it is cut there (its later rows are never
+        integrated) and the segments after it are left out; the profile then
+        lasts ``until_s`` and its fingerprint says so. Other profiles are
+        unchanged.
 
     Raises
     ------
@@ -1046,6 +1095,7 @@ class Profile:
     description: str = ""
     source: str | None = None
     fingerprint: str = ""
+    until_s: float | None = None
     _pieces: tuple = field(default=(), init=False, repr=False)
 
     def __post_init__(self):
@@ -1062,6 +1112,19 @@ class Profile:
             object.__setattr__(self, "fingerprint", hashlib.sha256(text.encode()).hexdigest())
         b = _Builder(self.source)
         for i, s in enumerate(segs):
+            if (self.until_s is not None and isinstance(s, RateCSV)
+                    and b.t + s.duration_s > self.until_s + 1e-9):
+                # the rest is never run: not integrated
+                if b.t < self.until_s - 1e-9:
+                    s = _csv_until(s, self.until_s - b.t)
+                    b.segment(i, s)
+                    segs = segs[:i] + (s,)
+                else:
+                    segs = segs[:i]
+                object.__setattr__(self, "segments", segs)
+                object.__setattr__(self, "fingerprint", hashlib.sha256(
+                    f"{self.fingerprint}|until {float(self.until_s).hex()}".encode()).hexdigest())
+                break
             b.segment(i, s)
         object.__setattr__(self, "_pieces", tuple(b.pieces))
 
@@ -1381,13 +1444,16 @@ def read_rate_csv(path) -> RateCSV:
     return RateCSV(time_s=t, omega_rad_s=w, file=str(p), line_numbers=tuple(lines))
 
 
-def load_profile(path) -> Profile:
+def load_profile(path, until_s: float | None = None) -> Profile:
     """Read a motion profile from a TOML file (see the module docstring for the format).
 
     Parameters
     ----------
     path : str or Path
         The TOML file; ``rate_csv`` files are relative to its folder.
+    until_s : float, optional
+        Build only what the first ``until_s`` seconds need [s] (see
+        :class:`Profile`): a scenario's ``duration_s``.
 
     Returns
     -------
@@ -1439,7 +1505,7 @@ def load_profile(path) -> Profile:
         h.update(b"\0csv\0" + name.encode() + b"\0" + data)
     try:
         return Profile(segments=tuple(segments), description=desc, source=file,
-                       fingerprint=h.hexdigest())
+                       fingerprint=h.hexdigest(), until_s=until_s)
     except InputError as e:
         if e.line is None and e.file == file and isinstance(e.column, str):
             m = re.fullmatch(r"segment\[(\d+)\]\.(\w+)", e.column)

@@ -211,7 +211,7 @@ def load_scenario(path) -> Scenario:
         raise doc.error(f"acc_columns must be true or false, got {_toml_type(acc_columns)}",
                         "acc_columns")
     layout, _ = _parse_layout(doc)
-    profile = _parse_motion(doc, path)
+    profile = _parse_motion(doc, path, duration)
     if duration is not None and duration > profile.duration_s + 1e-9:
         raise doc.error(f"duration_s = {duration:g} s is longer than the motion profile "
                         f"({profile.duration_s:g} s)", "duration_s")
@@ -241,6 +241,7 @@ def validate_scenario(scenario: Scenario, doc, what: str = "simulate") -> None:
     _check_run_shape(scenario, doc)
     check_size(scenario, what, doc)
     _check_effects_fit_run(scenario, doc)
+    _check_profile_nyquist(scenario)
     _check_table_limits(scenario, doc)
 
 
@@ -324,6 +325,83 @@ def _check_effects_fit_run(scenario: Scenario, doc: _TomlDoc) -> None:
                              line=doc.line_of("effects"), column=f"{key}.delay_s")
 
 
+#: Content of a rate CSV above the scenario's Nyquist frequency is refused when its
+#: strongest line there exceeds this share of the strongest line below it [-] (the corners of
+#: linear interpolation between rows stay orders of magnitude under it).
+_ALIAS_SHARE = 0.01
+#: Points of the uniform grid the spectrum of a rate CSV is taken on (at most).
+_ALIAS_GRID = 2**20
+
+
+def _check_profile_nyquist(scenario: Scenario) -> None:
+    """Refuse motion the scenario's samples cannot represent: a ``sinusoid`` segment at or
+    above the Nyquist frequency, or a ``rate_csv`` whose rows (sampled faster than the
+    scenario) hold a line above it; each named with the profile's (or CSV's) file and key,
+    the frequency and the Nyquist limit (issue 28: a 1000 Hz swing in a 100 Hz run gave an
+    attenuation of 2.9e9). Only segments that start within the run are looked at."""
+    from gyroarray.sim.profiles import RateCSV, Sinusoid
+    prof = scenario.profile
+    rate = scenario.sample_rate_hz
+    nyquist = 0.5 * rate
+    end = run_duration_s(scenario)
+    way_out = (f"raise sample_rate_hz above {{f2:g}} Hz or slow the motion down (the gyros would "
+               f"alias it)")
+    for i, seg in enumerate(prof.segments):
+        if not any(p.segment == i for p in prof.pieces) or prof.segment_span(i)[0] >= end:
+            continue
+        if isinstance(seg, Sinusoid) and seg.frequency_hz >= nyquist:
+            raise InputError(f"segment {i + 1} (sinusoid): frequency_hz = {seg.frequency_hz:g} Hz is "
+                             f"not below the Nyquist frequency {nyquist:g} Hz of the scenario's "
+                             f"sample_rate_hz = {rate:g} Hz; "
+                             + way_out.format(f2=2 * seg.frequency_hz),
+                             file=prof.source, column=f"segment[{i + 1}].frequency_hz")
+        if isinstance(seg, RateCSV):
+            found = _csv_line_above(seg, rate)
+            if found is not None:
+                freq, axis, amp = found
+                raise InputError(f"segment {i + 1} (rate_csv): the commanded rates hold a line at "
+                                 f"{freq:.4g} Hz ({amp:.3g} deg/s), above the Nyquist frequency "
+                                 f"{nyquist:g} Hz of the scenario's sample_rate_hz = {rate:g} Hz "
+                                 f"(rows {np.min(np.diff(seg.time_s)):.3g} s apart); "
+                                 + way_out.format(f2=2 * freq) + ", or low-pass the rates",
+                                 file=seg.file, column=("wx_deg_s", "wy_deg_s", "wz_deg_s")[axis])
+
+
+def _csv_line_above(seg, rate_hz: float):
+    """``(frequency [Hz], axis, amplitude [deg/s])`` of the strongest line of a rate CSV above
+    ``rate_hz / 2`` when it exceeds :data:`_ALIAS_SHARE` of the strongest line below, else None.
+    Rows no closer than the scenario's samples cannot hold such a line (None at once)."""
+    t, w = seg.time_s, seg.omega_rad_s
+    gaps = np.diff(t)
+    if gaps.min() >= 1.0 / rate_hz:
+        return None
+    h = max(float(gaps.min()), float(t[-1]) / _ALIAS_GRID)
+    if h >= 1.0 / rate_hz:                   # the grid cannot resolve the Nyquist frequency
+        h = 0.5 / rate_hz
+        if t[-1] / h > 4 * _ALIAS_GRID:
+            return None
+    tg = np.arange(0.0, float(t[-1]), h)
+    if tg.size < 8:
+        return None
+    f = np.fft.rfftfreq(tg.size, h)
+    above = f > 0.5 * rate_hz
+    below = ~above
+    below[0] = False                          # the mean is no line
+    best = None
+    for k in range(3):
+        wg = np.interp(tg, t, w[:, k])
+        amp = 2.0 * np.abs(np.fft.rfft(wg - wg.mean())) / tg.size
+        if not above.any():
+            return None
+        j = int(np.argmax(np.where(above, amp, -1.0)))
+        ref = float(amp[below].max()) if below.any() else 0.0
+        if amp[j] > max(_ALIAS_SHARE * ref, 1e-12) and (best is None or amp[j] > best[2]):
+            best = (float(f[j]), k, float(amp[j]))
+    if best is None:
+        return None
+    return best[0], best[1], float(units.rad_s_to_deg_s(best[2]))
+
+
 def _check_table_limits(scenario: Scenario, doc: _TomlDoc) -> None:
     """Refuse a profile that commands the table beyond its rate or acceleration limits."""
     rate, accel = command_extremes(scenario.profile, run_duration_s(scenario))
@@ -368,13 +446,15 @@ def _command_extremes(profile: Profile, duration_s: float, per_piece: int = 200)
     return units.rad_to_deg(rate), units.rad_to_deg(accel)
 
 
-def _parse_motion(doc: _TomlDoc, path: Path) -> Profile:
+def _parse_motion(doc: _TomlDoc, path: Path, until_s: float | None = None) -> Profile:
+    """The motion profile, built only as far as ``until_s`` (the scenario's duration) needs:
+    a rate CSV's rows beyond it are never integrated (:class:`~gyroarray.sim.profiles.Profile`)."""
     t = _toml_table(doc, "motion", {"profile"})
     ref = t.get("profile") if t is not None else None
     if not isinstance(ref, str) or not ref:
         raise doc.error("motion.profile must name a profile: a shipped one (e.g. "
                         "'p003_static_1h') or a .toml file relative to the scenario", "motion.profile")
-    return load_profile(resolve_profile(ref, path.parent, doc))
+    return load_profile(resolve_profile(ref, path.parent, doc), until_s=until_s)
 
 
 def shipped_profiles() -> list[str]:

@@ -1,0 +1,183 @@
+"""Hostile surroundings of a run (issue 28, item 7 and the memory budget of item 2).
+
+* stdout closed before the start (``>&-``) or full (``> /dev/full``): one line on
+  stderr, exit 2, no traceback, not even the interpreter's "Exception ignored"
+  at its final flush (subprocesses: only a real file descriptor shows it);
+* a malformed ``--scheduler`` is refused before any work, an unreachable or
+  silent one within the stated connection timeout, always in one line;
+* ``--max-memory`` bounds the whole of ``diagnose``, not only the read: the
+  peak RSS of a subprocess stays under the budget (plus the interpreter's and
+  the libraries' fixed cost), or the command refuses up front.
+"""
+
+from __future__ import annotations
+
+import gzip
+import os
+import resource
+import socket
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from hostile import assert_contract, axes_sidecar, run_cli, write_measurement
+
+N = 3000
+RATE_HZ = 50.0
+
+
+@pytest.fixture(scope="module")
+def d(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("hostile_output")
+    rng = np.random.default_rng(28)
+    write_measurement(folder, "plain", np.arange(N) / RATE_HZ, rng.normal(0.0, 0.01, (N, 4)),
+                      sidecar=axes_sidecar(4, RATE_HZ))
+    return folder
+
+
+def _cli(argv, **kwargs) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "gyroarray.cli", *map(str, argv)],
+                          text=True, timeout=600, **kwargs)
+
+
+def _one_line(err: str, start: str) -> None:
+    assert "Traceback" not in err and "Exception ignored" not in err, err
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith(start), err
+
+
+# -- stdout ---------------------------------------------------------------------------------
+
+def test_stdout_closed_before_the_start(d):
+    """``gyroarray allan X >&-``: refused before the work, one line, exit 2."""
+    p = subprocess.run(["bash", "-c", 'exec "$@" >&-', "_", sys.executable, "-m", "gyroarray.cli",
+                        "allan", str(d / "plain.csv")], stderr=subprocess.PIPE, text=True, timeout=600)
+    assert p.returncode == 2, p.stderr
+    _one_line(p.stderr, "gyroarray: cannot write the output to standard output: it is closed")
+
+
+@pytest.mark.skipif(not Path("/dev/full").exists(), reason="no /dev/full here")
+@pytest.mark.parametrize("json_out", [False, True])
+def test_stdout_full(d, json_out):
+    """``> /dev/full``: ENOSPC on the write or the flush, one line naming it, exit 2."""
+    with open("/dev/full", "w") as full:
+        p = _cli(["allan", d / "plain.csv", *(["--json"] if json_out else [])], stdout=full,
+                 stderr=subprocess.PIPE)
+    assert p.returncode == 2, p.stderr
+    _one_line(p.stderr, "gyroarray: cannot write the output to standard output: No space left on device")
+
+
+def test_stdout_to_a_closed_pipe_stays_quiet(d):
+    """A reader that goes away (``| head -0``) is not an error: exit 0, nothing on stderr."""
+    p = subprocess.run(["bash", "-c", '"$@" | true; exit "${PIPESTATUS[0]}"', "_", sys.executable, "-m",
+                        "gyroarray.cli", "allan", str(d / "plain.csv")], stderr=subprocess.PIPE,
+                       text=True, timeout=600)
+    assert p.returncode == 0 and p.stderr == "", p.stderr
+
+
+# -- --scheduler ----------------------------------------------------------------------------
+
+TINY = """\
+name = "tiny"
+seed = 7
+[base]
+sample_rate_hz = 100.0
+duration_s = 5.0
+effects = [{ effect = "arw", n_deg_rt_h = 0.1 }]
+[base.layout]
+scheme = 1
+n_gyros = 4
+alpha_deg = 54.7356
+[base.motion]
+profile = "p003_sine_5dps_0p03hz"
+"""
+
+
+@pytest.fixture
+def sweep_file(tmp_path):
+    f = tmp_path / "tiny.toml"
+    f.write_text(TINY)
+    return f
+
+
+@pytest.mark.parametrize("address, why", [
+    ("not a url", "not a scheduler address"),
+    ("tcp://localhost:99999", "the port must be a whole number from 1 to 65535"),
+    ("tcp://localhost:0", "the port must be a whole number from 1 to 65535"),
+    ("tcp://localhost:80x", "the port must be a whole number from 1 to 65535"),
+    ("tcp://localhost", "not a scheduler address"),
+    ("ucx://localhost:8786", "the scheme ucx:// is not supported"),
+    ("http://localhost:8786", "the scheme http:// is not supported"),
+    ("inproc://10.0.0.1/1/2", "lives only inside one Python process"),
+    ("tcp://bad host:8786", "not a scheduler address"),
+    ("tcp://:8786", "not a scheduler address"),
+])
+def test_malformed_scheduler_refused_before_any_work(sweep_file, tmp_path, address, why):
+    out = tmp_path / "out"
+    t0 = time.monotonic()
+    o = run_cli(["sweep", sweep_file, "--out", out, "--scheduler", address], timeout=60)
+    assert_contract(o, "--scheduler")
+    assert o.code == 2 and why in o.err and "tcp://HOST:PORT" in o.err, o.err
+    assert time.monotonic() - t0 < 30
+    assert not out.exists()                          # refused before the output folder is made
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def test_unreachable_scheduler_refused_at_once(sweep_file, tmp_path):
+    """Nothing listens on the port: the connection is refused, said in one line, no 20-40 s wait."""
+    address = f"tcp://127.0.0.1:{_free_port()}"
+    t0 = time.monotonic()
+    o = run_cli(["sweep", sweep_file, "--out", tmp_path / "out", "--scheduler", address], timeout=120)
+    assert_contract(o)
+    assert o.code == 2 and f"cannot reach the Dask scheduler at {address}" in o.err, o.err
+    assert "refused" in o.err.lower() and "waited at most 10 s" in o.err
+    assert time.monotonic() - t0 < 60
+
+
+@pytest.mark.parametrize("answer", [b"", b"HTTP/1.1 400 Bad Request\r\n\r\n" + b"\xff" * 64])
+def test_scheduler_that_is_not_dask_refused_within_the_timeout(sweep_file, tmp_path, answer):
+    """A port that accepts but stays silent, or answers garbage: refused within the stated
+    10 s connection timeout (plus set-up), one line, no traceback at the client's cleanup."""
+    pytest.importorskip("distributed")
+    server = socket.socket()
+    server.bind(("127.0.0.1", 0))
+    server.listen(8)
+    conns = []
+
+    def serve():
+        while True:
+            try:
+                c, _ = server.accept()
+            except OSError:
+                return
+            conns.append(c)
+            if answer:
+                try:
+                    c.sendall(answer)
+                except OSError:
+                    pass
+
+    threading.Thread(target=serve, daemon=True).start()
+    address = f"tcp://127.0.0.1:{server.getsockname()[1]}"
+    try:
+        t0 = time.monotonic()
+        o = run_cli(["sweep", sweep_file, "--out", tmp_path / "out", "--scheduler", address], timeout=120)
+        elapsed = time.monotonic() - t0
+    finally:
+        server.close()
+        for c in conns:
+            c.close()
+    assert_contract(o)
+    assert o.code == 2 and f"cannot reach the Dask scheduler at {address}" in o.err, o.err
+    assert "(waited at most 10 s)" in o.err
+    assert elapsed < 90, elapsed
