@@ -47,10 +47,13 @@ test: $(STAMP)
 	OPENBLAS_NUM_THREADS=1 $(PY) -m pytest -q -n $(WORKERS) -m "not slow"
 	$(VENV)/bin/gyroarray check
 
-# long fuzzing of the CLI with generated hostile inputs (issue 17; make test runs 25 examples)
+# long fuzzing of the CLI with generated hostile inputs and arguments (issues 17, 28): FUZZ_EXAMPLES
+# generated examples in all (tests/test_fuzz.py shares them out); make test runs a small fixed sample
 FUZZ_EXAMPLES ?= 2000
 fuzz: $(STAMP)
-	GYROARRAY_FUZZ_EXAMPLES=$(FUZZ_EXAMPLES) $(PY) -m pytest -q -n $(WORKERS) tests/test_fuzz.py tests/test_hostile.py
+	GYROARRAY_FUZZ_EXAMPLES=$(FUZZ_EXAMPLES) $(PY) -m pytest -q -n $(WORKERS) tests/test_fuzz.py tests/test_fuzz_args.py \
+		tests/test_hostile.py tests/test_hostile_files.py tests/test_hostile_fdi.py tests/test_hostile_counts.py \
+		tests/test_hostile_models.py tests/test_hostile_output.py
 
 bench: $(STAMP)
 	OPENBLAS_NUM_THREADS=1 $(PY) benchmarks/run.py

@@ -16,6 +16,10 @@ from gyroarray.errors import InputError
 from gyroarray.effects.protocol import Param, RegressionEffect, Stage, explains_away, identity, with_cols
 from gyroarray.sensor import bandwidth_filter
 
+#: Lowest cut-off a model may give [Hz]: a time constant of about two days, beyond any gyro's
+#: own low-pass (below it the filter's pole rounds to 1 and the filter to an integrator).
+MIN_CUTOFF_HZ = 1e-6
+
 
 class Bandwidth(RegressionEffect):
     """The spec's causal low-pass on everything the sensing element produces
@@ -51,7 +55,7 @@ class Bandwidth(RegressionEffect):
     rivals = ("gauss_markov", "latency")
     channel = "spectrum_rolloff"
     scored = ("cutoff_hz", "order")
-    params = (Param("cutoff_hz", "Hz", "cutoff_hz", identity, lo=0.0, lo_open=True,
+    params = (Param("cutoff_hz", "Hz", "cutoff_hz", identity, lo=MIN_CUTOFF_HZ,
                     doc="−3 dB frequency of the gyro's internal low-pass (below Nyquist)"),
               Param("order", "-", "order", identity, lo=1.0, hi=2.0,
                     doc="1: H(s) = 1/(1 + s/ωc); 2: Butterworth"))
@@ -63,6 +67,13 @@ class Bandwidth(RegressionEffect):
         if params["order"] not in (1, 2):
             raise InputError(f"order must be 1 (first order) or 2 (Butterworth), got "
                              f"{params['order']!r}", column="order")
+
+    def check_record(self, params, dt_s, span_s):
+        nyquist = 0.5 / dt_s
+        if params["cutoff_hz"] >= nyquist:
+            raise InputError(f"cutoff_hz = {params['cutoff_hz']:g} Hz must be below the Nyquist frequency "
+                             f"{nyquist:g} Hz (half the sample rate; the samples cannot show a filter above it: "
+                             "lower cutoff_hz or remove the entry)", column="cutoff_hz")
 
     def placeholder(self):
         return {"cutoff_hz": 1.0, "order": 1}

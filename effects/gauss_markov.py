@@ -7,6 +7,10 @@ from gyroarray.physics import gauss_markov_noise
 from gyroarray.effects.protocol import NoiseTermEffect, Param, Stage, identity, with_term
 from gyroarray.units import deg_h_to_rad_s
 
+#: Longest correlation time a model may give [s] (about 30 years): over any record the process is
+#: then a random walk (the hump sits at 1.89·τc), and beyond it τc² overflows the Allan model.
+MAX_TAU_S = 1e9
+
 
 class GaussMarkov(NoiseTermEffect):
     """Exact AR(1) discretisation with a stationary start (:func:`gyroarray.physics.gauss_markov_noise`).
@@ -20,7 +24,8 @@ class GaussMarkov(NoiseTermEffect):
     stage = Stage.ADD
     rivals = ("bias_instability", "quantization")
     params = (Param("sigma_deg_h", "deg/h", "sigma_rad_s", deg_h_to_rad_s, lo=0.0, doc="stationary σ"),
-              Param("tau_s", "s", "tau_s", identity, lo=0.0, lo_open=True, doc="correlation time τc"))
+              Param("tau_s", "s", "tau_s", identity, lo=0.0, lo_open=True, hi=MAX_TAU_S,
+                    doc="correlation time τc"))
     doc = "first-order Gauss–Markov rate noise"
 
     def simulate(self, state, act, streams):

@@ -33,6 +33,11 @@ class Latency(RegressionEffect):
                              f"shorter than the record ({(ctx.n - 1) * ctx.dt_s:g} s)", column="delay_s")
         return with_cols(state, act.cols, fractional_delay(state.x[:, act.cols], d))
 
+    def check_record(self, params, dt_s, span_s):
+        if params["delay_s"] >= span_s - dt_s:
+            raise InputError(f"delay_s = {params['delay_s']:g} s is not shorter than the record "
+                             f"({span_s:g} s long)", column="delay_s")
+
     def regress(self, ctx, gyro, e, r, q):
         e, ref, inst = self.against_reference(ctx, gyro, e)
         return fit_latency(e, ref, ctx.H[gyro - 1], ctx.t, ctx.dt, r, q, gyro, use=ctx.use, instrument=inst)

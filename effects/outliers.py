@@ -14,6 +14,9 @@ from gyroarray.units import deg_s_to_rad_s, rad_s_to_deg_s
 
 #: Seconds per hour (the rate's unit).
 _S_PER_H = 3600.0
+#: Most spikes per hour a model may give [1/h]: one per sample at the highest sample rate a
+#: scenario may have (1 MHz); beyond it the Poisson count of a run overflows.
+MAX_RATE_PER_H = 1e6 * _S_PER_H
 
 
 class Outliers(Effect):
@@ -41,7 +44,7 @@ class Outliers(Effect):
     kind = Kind.TIME
     reads = "noise"
     rivals = ("burst", "gauss_markov", "bias_instability", "sinusoid", "fault_noise")
-    params = (Param("rate_per_h", "1/h", "rate_per_s", lambda x: x / _S_PER_H, lo=0.0,
+    params = (Param("rate_per_h", "1/h", "rate_per_s", lambda x: x / _S_PER_H, lo=0.0, hi=MAX_RATE_PER_H,
                     doc="spikes per hour (mean of a Poisson count)"),
               Param("size_deg_s", "deg/s", "size_rad_s", deg_s_to_rad_s, lo=0.0,
                     doc="rms spike size (spikes ~ N(0, size²))"))

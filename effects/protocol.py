@@ -517,6 +517,15 @@ class Effect:
         offending key. The bounds of single parameters are checked before.
         """
 
+    def check_record(self, params: Mapping[str, Any], dt_s: float, span_s: float) -> None:
+        """Rules a model entry's parameters [spec units] must meet on a record of sample step
+        ``dt_s`` [s] and span ``span_s`` [s] (a cut-off below its Nyquist frequency), checked
+        before any work on it (:func:`gyroarray.compare.check_record_needs`).
+
+        Raises :class:`~gyroarray.errors.InputError` with ``column`` set to the
+        offending key; the default has no such rule.
+        """
+
     def placeholder(self) -> dict:
         """Valid parameters [spec units] for an entry that a fit then overwrites."""
         out: dict[str, Any] = {}

@@ -37,6 +37,12 @@ class Sinusoid(RegressionEffect):
     # independent generator's 17.3 Hz line at 50 Hz: quantization z 211 ranked above the line's 179)
     rivals = ("gauss_markov", "bias_instability", "quantization")
 
+    def check_record(self, params, dt_s, span_s):
+        nyquist = 0.5 / dt_s
+        if params["freq_hz"] >= nyquist:
+            raise InputError(f"freq_hz = {params['freq_hz']:g} Hz must be below the Nyquist frequency "
+                             f"{nyquist:g} Hz (half the sample rate)", column="freq_hz")
+
     def simulate(self, state, act, streams):
         ctx = state.ctx
         nyquist = 0.5 / ctx.dt_s

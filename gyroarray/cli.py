@@ -60,6 +60,25 @@ def _finite_float(name: str) -> Callable[[str], float]:
     return parse
 
 
+def _float_in(name: str, lo: float = -math.inf, hi: float = math.inf, *, lo_open: bool = False,
+              unit: str = "") -> Callable[[str], float]:
+    """An argparse type: a finite number in [lo, hi] (``(lo`` when ``lo_open``), refused in one
+    line naming the argument and the range."""
+    finite = _finite_float(name)
+    if hi == math.inf:
+        span = (">" if lo_open else ">=") + f" {lo:g}"
+    else:
+        span = "in " + ("(" if lo_open else "[") + f"{lo:g}, {hi:g}]"
+    span += f" {unit}" if unit else ""
+
+    def parse(text: str) -> float:
+        value = finite(text)
+        if value < lo or (lo_open and value == lo) or value > hi:
+            raise argparse.ArgumentTypeError(f"{name} must be {span}, got {text}")
+        return value
+    return parse
+
+
 def _json_safe(obj):
     """Replace non-finite floats by None so the output is strict JSON."""
     if isinstance(obj, float):
@@ -164,7 +183,7 @@ def _add_layout_args(p: argparse.ArgumentParser, *, alpha: bool, required: bool)
     p.add_argument("--n", type=_bounded_int("--n", 3, MAX_DESIGN_GYROS), required=required, metavar="N",
                    help=f"number of gyros (3 to {MAX_DESIGN_GYROS})")
     if alpha:
-        p.add_argument("--alpha", type=_finite_float("--alpha"), required=True, metavar="DEG",
+        p.add_argument("--alpha", type=_float_in("--alpha", 0.0, 180.0, unit="deg"), required=True, metavar="DEG",
                        help="cone angle from +z [deg]")
     p.add_argument("--rho", type=_finite_float("--rho"), default=0.0, metavar="R",
                    help="common ARW correlation factor [-] (default 0)")
@@ -798,6 +817,12 @@ def cmd_run(args) -> tuple[dict, str]:
     from gyroarray.chain import run_scenario
     from gyroarray.sim.scenario import check_size, load_scenario
     names = [n.strip() for n in args.estimators.split(",") if n.strip()] if args.estimators else None
+    if names is not None:
+        from gyroarray.estimators import available
+        unknown = [n for n in names if n not in available()]
+        if unknown or not names:
+            raise InputError(f"--estimators: unknown estimator {(unknown or [args.estimators])[0]!r} "
+                             f"(available: {', '.join(available())})")
     scenario = load_scenario(args.scenario)
     check_size(scenario, "run")
     if args.replicates is not None or args.seed is not None:
@@ -1004,6 +1029,8 @@ def _comparison(args):
     if args.model is not None:
         model = NoiseModel.from_toml(args.model, n_gyros=meas.n_gyros)
     meas, model, args.entry_notes = _live_gyros(meas, model, args)
+    from gyroarray.compare import check_record_needs
+    check_record_needs(model, meas, fixed=bool(getattr(args, "validate", False)))
     _check_band_runs(args, meas)
     return ModelComparison(meas, model, n_runs=args.runs, seed=args.seed, ref_smooth_s=args.ref_smooth)
 
@@ -1234,9 +1261,9 @@ def _add_compare_args(p, *, out: bool):
                    help="noise model to calibrate (default: ARW + RRW on every gyro)")
     p.add_argument("--runs", type=_count("--runs"), default=40, metavar="K",
                    help="Monte-Carlo runs of the model band (40)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the model band (0)")
+    p.add_argument("--seed", type=_nonneg_int("--seed"), default=0, help="seed of the model band (0)")
     p.add_argument("--repair", action="store_true", help="repair short gaps, missing values, exact duplicate rows and a jittering clock (each listed)")
-    p.add_argument("--ref-smooth", type=_finite_float("--ref-smooth"), default=0.0, metavar="SECONDS",
+    p.add_argument("--ref-smooth", type=_float_in("--ref-smooth", 0.0, unit="s"), default=0.0, metavar="SECONDS",
                    help="smooth a noisy reference rate (a differentiated encoder) by a centred moving "
                         "average of this length before comparing; scale factor, nonlinearity, misalignment "
                         "and latency are then fitted against the recorded reference with the smoothed one "
@@ -1270,16 +1297,16 @@ def _add_design_parsers(sub) -> None:
                         "analytic predictor and recommend a design")
     p.add_argument("--model", type=Path, metavar="MODEL.toml",
                    help="--recommend: the gyro noise from a model (gyroarray fit --out)")
-    p.add_argument("--arw", type=_finite_float("--arw"), metavar="DEG_RT_H",
+    p.add_argument("--arw", type=_float_in("--arw", 0.0, 6e6, lo_open=True, unit="deg/√h"), metavar="DEG_RT_H",
                    help="--recommend: angle random walk [deg/rt(h)]")
-    p.add_argument("--rrw", type=_finite_float("--rrw"), metavar="DEG_H_RT_H",
+    p.add_argument("--rrw", type=_float_in("--rrw", 0.0, 3.6e8, unit="deg/h/√h"), metavar="DEG_H_RT_H",
                    help="--recommend: rate random walk [deg/h/rt(h)] (default 0)")
-    p.add_argument("--bi", type=_finite_float("--bi"), metavar="DEG_H",
+    p.add_argument("--bi", type=_float_in("--bi", 0.0, 3.6e8, unit="deg/h"), metavar="DEG_H",
                    help="--recommend: bias instability [deg/h] (default 0)")
     p.add_argument("--rho-range", metavar="LO,HI",
                    help="--recommend: the correlations the gyros may have; ranked per rho, "
                         "recommended: the best worst case (a negative LO: --rho-range=-0.1,0.5)")
-    p.add_argument("--rate-hz", type=_finite_float("--rate-hz"), metavar="HZ",
+    p.add_argument("--rate-hz", type=_float_in("--rate-hz", 1e-3, 1e6, unit="Hz"), metavar="HZ",
                    help="--recommend: sample rate (default 100)")
     p.add_argument("--horizon-s", type=_finite_float("--horizon-s"), metavar="T",
                    help="--recommend: run length the accuracy refers to (default 600)")
@@ -1493,6 +1520,24 @@ def _version() -> str:
     return __version__
 
 
+#: The argument naming a command's one input file, first found (a refusal that names neither a
+#: file nor an argument is about it).
+_INPUT_ARGS = ("measurement", "scenario", "sweep")
+
+
+def _located_input_error(err: InputError, args) -> InputError:
+    """``err`` with the command's input file (``MEAS.csv``, ``SCENARIO.toml``, ``SWEEP.toml``) as
+    its file when it names neither a file nor an argument (``--window``): a refusal deep in an
+    analysis then still says which file it is about."""
+    if err.file is not None or args is None or "--" in err.message or err.message.startswith("gyroarray "):
+        return err
+    for name in _INPUT_ARGS:
+        value = getattr(args, name, None)
+        if isinstance(value, (str, os.PathLike)):
+            return err.with_file(value)
+    return err
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run the CLI; returns the exit code (0 ok, 1 failure, 2 bad input)."""
     from gyroarray.limits import memory_budget
@@ -1505,15 +1550,16 @@ def main(argv: list[str] | None = None) -> int:
                 warnings.simplefilter("ignore")
             args = parser.parse_args(argv)
             if sys.stdout is None:          # started with stdout closed (`>&-`): refuse before work
-                raise InputError("cannot write the output to standard output: it is closed; "
-                                 "redirect it to a file or to /dev/null")
+                print("gyroarray: cannot write the output to standard output: it is closed; "
+                      "redirect it to a file or to /dev/null", file=sys.stderr)
+                return EXIT_USAGE
             if getattr(args, "plugin", None):
                 from gyroarray.effects import plugin_effects
                 plugin_effects(args.plugin)
             with memory_budget(getattr(args, "max_memory", None)):
                 result, text, *code = args.func(args)
     except InputError as err:
-        print(f"gyroarray: {err}", file=sys.stderr)
+        print(f"gyroarray: {_located_input_error(err, locals().get('args'))}", file=sys.stderr)
         return EXIT_USAGE
     except KeyboardInterrupt:
         print("gyroarray: interrupted", file=sys.stderr)

@@ -74,7 +74,8 @@ from gyroarray.effects.protocol import Effect, Explained, FitContext, Kind
 from gyroarray.sensor import gravity_specific_force, rigid_body_specific_force
 from gyroarray.units import RAD_PER_DEG, arw_deg_rt_h_to_rad_rt_s, rad_s_to_deg_h, rrw_deg_h_rt_h_to_rad_s_rt_s
 
-__all__ = ["ALPHA", "Test", "Analysis", "ModelComparison", "baseline_model", "critical_z", "parse_add",
+__all__ = ["ALPHA", "Test", "Analysis", "ModelComparison", "baseline_model", "check_record_needs",
+           "critical_z", "parse_add", "record_lacks",
            "split_measurement"]
 
 #: Family-wise false-alarm rate of the discrepancy.
@@ -143,6 +144,65 @@ def parse_add(text: str, n_gyros: int) -> tuple[str, int | None]:
     if not 1 <= gyro <= n_gyros:
         raise InputError(f"--add {text}: gyro {gyro} is not in 1..{n_gyros}")
     return name, gyro
+
+
+#: What each record need of :data:`~gyroarray.effects.protocol.RECORD_NEEDS` is, in the words of
+#: the measurement format (what to add to the record).
+_RECORD_DATA = {
+    "ref": "the reference rate (columns ref_x, ref_y, ref_z)",
+    "temp": "the temperature (column temp_c)",
+    "site": "the site (a [site] table with latitude_deg and heading_deg in the sidecar)",
+    "acc": "the specific force (columns acc_x, acc_y, acc_z) or the reference rate",
+    "positions": "the gyro positions (positions_m in the sidecar's [layout])",
+}
+
+
+def record_lacks(measurement: Measurement, need: str) -> str | None:
+    """What ``measurement`` lacks of the record data ``need`` (``Effect.model_needs``), or None."""
+    m = measurement
+    missing = {"ref": m.ref_rad_s is None, "temp": m.temp_c is None, "site": m.site is None,
+               "acc": m.acc_m_s2 is None and m.ref_rad_s is None,
+               "positions": getattr(m.layout, "positions_m", None) is None}.get(need, False)
+    return _RECORD_DATA[need] if missing else None
+
+
+def check_record_needs(model: NoiseModel | None, measurement: Measurement, *, fixed: bool = False) -> None:
+    """Refuse, before any work, a model that the record cannot carry.
+
+    Every entry's effect declares the record data it needs
+    (:attr:`~gyroarray.effects.protocol.Effect.model_needs`, or
+    ``predict_needs`` when the parameters are kept ``fixed``, a validation)
+    and the rules its parameters must meet on this record's sample step and
+    span (:meth:`~gyroarray.effects.protocol.Effect.check_record`: a cut-off
+    below Nyquist).
+
+    Raises
+    ------
+    InputError
+        Naming the model file, the entry's line and ``effects[i]``, the effect
+        and gyro, the missing data (or the key) and the way out.
+    """
+    if model is None:
+        return
+    record = measurement.source or "the measurement"
+    dt = float(measurement.dt_s)
+    span = float(relative_time_s(measurement)[-1]) + dt if len(measurement.time_s) else 0.0
+    for i, e in enumerate(model):
+        eff = get_effect(e.effect)
+        for need in sorted(eff.predict_needs if fixed else eff.model_needs):
+            what = record_lacks(measurement, need)
+            if what is None:
+                continue
+            way = "add it to the record or remove the entry from the model"
+            if need in eff.model_needs and need not in eff.predict_needs:
+                way += (" (with --validate its parameters stay fixed and the record without it is "
+                        "analysed as static)")
+            raise model.located(i, InputError(f"{e.label} needs {what}, which {record} lacks: {way}"))
+        try:
+            eff.check_record(e.params, dt, span)
+        except InputError as err:
+            raise model.located(i, InputError(f"{e.label} on {record}: {err.message}",
+                                              column=err.column)) from None
 
 
 @dataclass(frozen=True)
@@ -462,6 +522,37 @@ def _zeros_like_outputs(n: int, N: int) -> np.ndarray:
     return np.zeros((n, N))
 
 
+#: Peak memory of a comparison (diagnose, fit, validate, ladder) per sample and column of the
+#: record [bytes]: 18 float64 copies. Measured: ``diagnose`` of 1e7 samples x 4 gyros peaked at
+#: 5.21 GiB (RSS), 17.5 times the 0.30 GiB of the gyro columns (the Monte-Carlo band's run: the
+#: simulated noise, its random walk's cumsum, ADEV and Welch work arrays, on top of the record,
+#: its residual and the fits' copies).
+COMPARISON_BYTES_PER_CELL = 18 * 8
+#: What the interpreter and the libraries hold before any record is read [bytes].
+FIXED_BYTES = 400 * 2**20
+
+
+def comparison_memory(n: int, columns: int) -> int:
+    """Estimated peak memory [bytes] of comparing a record of ``n`` samples x ``columns``
+    columns (gyros + reference + temperature + specific force) with a model, whole command."""
+    return FIXED_BYTES + COMPARISON_BYTES_PER_CELL * int(n) * int(columns)
+
+
+def _check_comparison_memory(measurement: Measurement, n: int, n_gyros: int, name: str) -> None:
+    """Refuse, before any copy, a comparison whose peak would pass the memory budget."""
+    from gyroarray.limits import check_memory, format_size
+    cols = n_gyros + sum(k for x, k in ((measurement.ref_rad_s, 3), (measurement.temp_c, 1),
+                                           (measurement.acc_m_s2, 3)) if x is not None)
+    need = comparison_memory(n, cols)
+    if need <= max_memory():
+        return
+    fits = max((max_memory() - FIXED_BYTES) // (COMPARISON_BYTES_PER_CELL * cols), 0)
+    check_memory(need, f"comparing {n} samples x {cols} columns with the model",
+                 f"analyse at most {fits} samples (a shorter part of the record, or the record "
+                 f"decimated to a lower rate; about {format_size(COMPARISON_BYTES_PER_CELL * cols)} "
+                 "per sample)", file=name)
+
+
 class ModelComparison:
     """Compare a measurement with a noise model (the chain of the module docstring).
 
@@ -508,6 +599,7 @@ class ModelComparison:
         self.dt = float(measurement.dt_s)
         self.t = relative_time_s(measurement)   # epoch stamps: differences to the first are exact
         self.n = self.t.size
+        _check_comparison_memory(measurement, self.n, self.N, self.name)
         # the simulator's clock: uniform at dt from the first sample (the
         # measured clock may jitter by a fraction of a step)
         self.t_sim = self.t[0] + np.arange(self.n) * self.dt
@@ -515,6 +607,11 @@ class ModelComparison:
         self.ref = measurement.ref_rad_s
         self.ref_raw = self.ref_instrument = None
         self.setup_notes: list[str] = []
+        span = self.n * self.dt
+        if not (math.isfinite(ref_smooth_s) and 0.0 <= ref_smooth_s <= span):
+            raise InputError(f"--ref-smooth {ref_smooth_s:g} s must be from 0 to the record's "
+                             f"{span:.6g} s (a moving average longer than the record flattens all its "
+                             "motion)", file=self.name)
         if ref_smooth_s and self.ref is not None:
             self.ref_raw = self.ref
             k = max(int(round(ref_smooth_s / self.dt)), 1)

@@ -152,9 +152,9 @@ def check_output(path, *, inputs: Iterable = (), force: bool = False, what: str 
         raise InputError(f"{what}: an output file name is needed", file=str(p))
     try:
         os.lstat(p)
-    except FileNotFoundError:
+    except (FileNotFoundError, NotADirectoryError):    # a file in the way: _check_folder says so
         pass
-    except OSError as err:          # a name too long, a loop of links, a file used as a folder
+    except OSError as err:          # a name too long, a loop of links
         raise InputError(f"{what}: cannot use this path: {err.strerror or err}", file=str(p)) from None
     if p.is_dir():
         raise InputError(f"{what}: {p} is a folder; give a file name", file=str(p))
@@ -167,8 +167,8 @@ def check_output(path, *, inputs: Iterable = (), force: bool = False, what: str 
     if (p.exists() or p.is_symlink()) and not force:
         raise InputError(f"{what}: {p} exists; give another name, or --force to replace it",
                          file=str(p))
-    _refuse_special(p, what)
     _check_folder(p.parent if str(p.parent) else Path("."), what, p)
+    _refuse_special(p, what)
     return p
 
 

@@ -405,7 +405,7 @@ def _probe_scheduler(scheduler: str, host: str, port: int, timeout: float) -> No
     t.join(timeout)
     why = outcome[0] if outcome else "no answer"
     if why is not None:
-        raise InputError(f"cannot reach the Dask scheduler at {scheduler}: {why} (waited at most "
+        raise InputError(f"--scheduler: cannot reach the Dask scheduler at {scheduler}: {why} (waited at most "
                          f"{timeout:g} s); check the address, or start one with `dask scheduler`")
 
 
@@ -437,7 +437,7 @@ def _ask_identity(scheduler: str, timeout: float) -> None:
         if isinstance(answer, dict) and answer.get("type") == "Scheduler":
             return
         why = f"it answered, but not as a Dask scheduler (a {type(answer).__name__})"
-    raise InputError(f"cannot reach the Dask scheduler at {scheduler}: {why} (waited at most "
+    raise InputError(f"--scheduler: cannot reach the Dask scheduler at {scheduler}: {why} (waited at most "
                      f"{timeout:g} s); check the address and that a Dask scheduler of a compatible "
                      "version runs there")
 
@@ -475,7 +475,7 @@ def _dask_client(scheduler: str):
     except Exception as err:      # noqa: BLE001 - the other end answered, but not as Dask
         why = (f"it answered, but not as a Dask scheduler ({type(err).__name__}: "
                f"{' '.join(str(err).split())[:160]})")
-    raise InputError(f"cannot reach the Dask scheduler at {scheduler}: {why} (waited at most "
+    raise InputError(f"--scheduler: cannot reach the Dask scheduler at {scheduler}: {why} (waited at most "
                      f"{SCHEDULER_TIMEOUT_S:g} s); check the address and that a Dask scheduler of "
                      "a compatible version runs there")
 
@@ -532,7 +532,7 @@ def _run_on_dask(todo: list, sweep: Sweep, scheduler: str, done, notes: list) ->
     lost = (CancelledError, CommClosedError, TimeoutError)
 
     def gone(err) -> InputError:
-        return InputError(f"lost the connection to the Dask scheduler at {scheduler} "
+        return InputError(f"--scheduler: lost the connection to the Dask scheduler at {scheduler} "
                           f"({type(err).__name__}: {' '.join(str(err).split())[:160]}); the scenarios "
                           "finished so far are kept: run the same command again to resume")
 

@@ -63,6 +63,7 @@ from pathlib import Path
 import numpy as np
 
 from gyroarray import units
+from gyroarray.effects import get_effect
 from gyroarray.errors import InputError
 from gyroarray.layout import Layout
 from gyroarray.limits import MAX_RATE_DEG_S, check_memory
@@ -323,6 +324,11 @@ def _check_effects_fit_run(scenario: Scenario, doc: _TomlDoc) -> None:
             raise InputError(f"{key} (latency): delay_s = {e.params['delay_s']:g} s is not shorter "
                              f"than the run ({duration:g} s)", file=doc.name,
                              line=doc.line_of("effects"), column=f"{key}.delay_s")
+        try:        # every effect's own rules on this run's step and span (a cut-off below Nyquist)
+            get_effect(e.effect).check_record(e.params, 1.0 / scenario.sample_rate_hz, duration)
+        except InputError as err:
+            raise InputError(f"{key} ({e.effect}): {err.message}", file=doc.name, line=doc.line_of("effects"),
+                             column=f"{key}.{err.column}" if err.column else key) from None
 
 
 #: Content of a rate CSV above the scenario's Nyquist frequency is refused when its

@@ -29,7 +29,10 @@ from hypothesis import strategies as st
 from hostile import assert_contract, axes_sidecar, finite_numbers, run_cli, write_measurement
 
 LONG = int(os.environ.get("GYROARRAY_FUZZ_EXAMPLES", "0"))
-FUZZ = settings(max_examples=LONG or 25, deadline=None, derandomize=not LONG, database=None,
+# GYROARRAY_FUZZ_EXAMPLES is the total of a `make fuzz` run, shared out among the fuzz tests:
+# 17 % each to the allan and simulate tests here, 3 % to diagnose (each example is a whole
+# diagnosis), 7 % to each of the nine commands of tests/test_fuzz_args.py
+FUZZ = settings(max_examples=max(LONG * 17 // 100, 1) if LONG else 25, deadline=None, derandomize=not LONG, database=None,
                 suppress_health_check=list(HealthCheck))
 
 MAGNITUDES = [0.0, 5e-324, 1e-310, 1e-12, 1e-3, 1.0, 99999.0, 1e5 * (1 + 1e-15), 1e200, 1e308]
@@ -118,7 +121,7 @@ def test_allan_on_generated_measurements(data):
 
 
 @pytest.mark.skipif(not LONG, reason="diagnose fuzzing is long: make fuzz")
-@settings(max_examples=max(LONG // 10, 5), deadline=None, database=None,
+@settings(max_examples=max(LONG * 3 // 100, 5), deadline=None, database=None,
           suppress_health_check=list(HealthCheck))
 @given(data=st.data())
 def test_diagnose_on_generated_measurements(data):

@@ -139,7 +139,7 @@ def test_unreachable_scheduler_refused_at_once(sweep_file, tmp_path):
     t0 = time.monotonic()
     o = run_cli(["sweep", sweep_file, "--out", tmp_path / "out", "--scheduler", address], timeout=120)
     assert_contract(o)
-    assert o.code == 2 and f"cannot reach the Dask scheduler at {address}" in o.err, o.err
+    assert o.code == 2 and o.err.startswith(f"gyroarray: --scheduler: cannot reach the Dask scheduler at {address}: "), o.err
     assert "refused" in o.err.lower() and "waited at most 10 s" in o.err
     assert time.monotonic() - t0 < 60
 
@@ -178,6 +178,51 @@ def test_scheduler_that_is_not_dask_refused_within_the_timeout(sweep_file, tmp_p
         for c in conns:
             c.close()
     assert_contract(o)
-    assert o.code == 2 and f"cannot reach the Dask scheduler at {address}" in o.err, o.err
+    assert o.code == 2 and o.err.startswith(f"gyroarray: --scheduler: cannot reach the Dask scheduler at {address}: "), o.err
     assert "(waited at most 10 s)" in o.err
     assert elapsed < 90, elapsed
+
+
+# -- --max-memory covers the whole of diagnose -----------------------------------------------
+
+def _compact_record(folder: Path, name: str, n: int) -> Path:
+    """``n`` samples x 4 gyros at 1 kHz (white noise + a random walk, deg/s), short text cells."""
+    import pandas as pd
+    rng = np.random.default_rng(2028)
+    g = rng.standard_normal((n, 4)) * 3.0 + np.cumsum(rng.standard_normal((n, 4)), axis=0) * 1e-3
+    frame = pd.DataFrame({"time_s": np.arange(n), **{f"gyro{k + 1}": g[:, k] for k in range(4)}})
+    path = folder / f"{name}.csv"
+    frame.to_csv(path, index=False, float_format="%.3g")
+    (folder / f"{name}.toml").write_text('sample_rate_hz = 1000.0\n[units]\ntime = "ms"\n'
+                                         + axes_sidecar(4, 1000.0).split("\n", 1)[1])
+    return path
+
+
+_PEAK = """
+import resource, subprocess, sys
+p = subprocess.run(sys.argv[1:], capture_output=True, text=True)
+sys.stderr.write(p.stderr)
+print(p.returncode, resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss * 1024)
+"""
+
+
+def _peak_rss(argv) -> tuple[int, int, str]:
+    """Exit code, peak RSS [bytes] and stderr of ``gyroarray ARGV`` in a fresh process."""
+    p = subprocess.run([sys.executable, "-c", _PEAK, sys.executable, "-m", "gyroarray.cli",
+                        *map(str, argv)], capture_output=True, text=True, timeout=1500)
+    code, peak = map(int, p.stdout.split())
+    return code, peak, p.stderr
+
+
+@pytest.mark.parametrize("n, budget", [(2_000_000, 1 << 30), (200_000, 1 << 30)])
+def test_diagnose_stays_under_max_memory(tmp_path, n, budget):
+    """2e6 x 4 under 1 GiB: refused up front with the way out (unchecked it peaked at about
+    1.4 GiB, 17.5 x the record); 2e5 x 4 under 1 GiB: runs, and its peak RSS stays inside."""
+    f = _compact_record(tmp_path, "rec", n)
+    code, peak, err = _peak_rss(["diagnose", f, "--max-memory", str(budget), "--runs", "8"])
+    assert code in (0, 2), err
+    if code == 2:
+        _one_line(err, f"gyroarray: {f}: ")
+        assert "more than the limit of 1 GiB" in err and "analyse at most" in err, err
+    assert peak <= budget, (peak / 2**30, err)
+    assert code == (2 if n == 2_000_000 else 0), err

@@ -180,7 +180,7 @@ def test_errors_from_a_file_name_the_file(tmp_path):
     with pytest.raises(InputError) as exc:
         NoiseModel.from_toml(path)
     assert exc.value.file == str(path)
-    assert str(exc.value).startswith(f"{path}, column effects[0].n_deg_rt_h: effects[0] arw (all gyros)")
+    assert str(exc.value).startswith(f"{path}, line 2, column effects[0].n_deg_rt_h: effects[0] arw (all gyros)")
 
 
 def test_bad_toml_syntax_gives_line_and_column(tmp_path):
