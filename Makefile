@@ -6,7 +6,7 @@ STAMP  := $(VENV)/.installed
 # sweep worker processes (one per core)
 WORKERS ?= $(shell nproc 2>/dev/null || echo 2)
 
-.PHONY: demo paper test fuzz bench score typecheck venv clean
+.PHONY: demo paper test lint docs fuzz bench score typecheck venv clean
 
 venv: $(STAMP)
 
@@ -15,7 +15,7 @@ venv: $(STAMP)
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip setuptools wheel
-	$(PY) -m pip install --quiet -e '.[test]'
+	$(PY) -m pip install --quiet -e '.[test,docs]'
 	touch $(STAMP)
 
 # The design question of the demo: paper 003's simulated gyros (ARW 0.1 deg/rt(h), RRW
@@ -38,14 +38,25 @@ demo: $(STAMP)
 # Every paper experiment 20 times (the report's 95 % bands) and its named hypothesis checks,
 # added to the demo's report (several minutes on 2 cores).
 paper: demo
-	$(VENV)/bin/gyroarray sweep scenarios/sweeps/paper_reproduction.toml --out reports/demo/paper_reproduction --workers $(WORKERS)
+	$(VENV)/bin/gyroarray sweep src/gyroarray/data/scenarios/sweeps/paper_reproduction.toml --out reports/demo/paper_reproduction --workers $(WORKERS)
 	$(VENV)/bin/gyroarray report reports/demo/paper_reproduction --design reports/demo/design.json --out reports/demo/report.html --md reports/demo/report.md --force
 	@tail -n 3 reports/demo/design.txt
 
 # the long statistical cases (marked slow) run in make score
-test: $(STAMP)
+test: $(STAMP) lint
 	OPENBLAS_NUM_THREADS=1 $(PY) -m pytest -q -n $(WORKERS) -m "not slow"
 	$(VENV)/bin/gyroarray check
+
+# ruff, configured in pyproject.toml ([tool.ruff]); tests/test_layers.py holds the import layers
+lint: $(STAMP)
+	$(VENV)/bin/ruff check src tests benchmarks examples docs
+
+# the documentation site: docs/*.md (MyST) and the API reference from the numpydoc docstrings,
+# into build/docs/index.html (.ci/run builds it after make test; about a minute)
+docs: $(STAMP)
+	rm -rf docs/_api build/docs
+	PYTHONWARNINGS=ignore $(PY) -m sphinx -q -b html docs build/docs
+	@echo "docs: build/docs/index.html"
 
 # long fuzzing of the CLI with generated hostile inputs and arguments (issues 17, 28): FUZZ_EXAMPLES
 # generated examples in all (tests/test_fuzz.py shares them out); make test runs a small fixed sample
@@ -75,17 +86,9 @@ score: $(STAMP)
 	OPENBLAS_NUM_THREADS=1 $(PY) benchmarks/gm_tau_coverage.py --cases 40 --json bench_out/gm_tau_coverage.json
 	OPENBLAS_NUM_THREADS=1 $(PY) benchmarks/gm_null_tail.py --records 3000 --json bench_out/gm_null_tail.json
 
-# mypy on the package as installed: the folders mapped by pyproject.toml's package-dir are
-# linked into build/typecheck/gyroarray (mypy cannot read the mapping itself), ~20 s.
+# mypy on src/gyroarray as it stands (pyproject's [tool.mypy]), ~20 s.
 typecheck: $(STAMP)
-	rm -rf build/typecheck
-	$(PY) -c "import pathlib, sys; tl = __import__('tomllib' if sys.version_info >= (3, 11) else 'tomli'); \
-	m = tl.loads(pathlib.Path('pyproject.toml').read_text())['tool']['setuptools']['package-dir']; \
-	root = pathlib.Path('build/typecheck'); top = pathlib.Path(m['gyroarray']).resolve(); \
-	dst = root / 'gyroarray'; dst.mkdir(parents=True); \
-	[(dst / f.name).symlink_to(f) for f in top.iterdir() if f.name != '__pycache__']; \
-	[(root / p.replace('.', '/')).symlink_to(pathlib.Path(d).resolve()) for p, d in m.items() if p != 'gyroarray']"
 	$(PY) -m mypy
 
 clean:
-	rm -rf $(VENV) build *.egg-info .pytest_cache .hypothesis reports/demo
+	rm -rf $(VENV) build *.egg-info .pytest_cache .hypothesis reports/demo docs/_api

@@ -281,12 +281,16 @@ def _segments():
     segs, t = [], STATIC_START_S
     ez, ex, ey = np.array([0, 0, 1.0]), np.array([1.0, 0, 0]), np.array([0, 1.0, 0])
     for amp in (10.0, 30.0, 50.0, 80.0):
-        segs.append((t, 64.0, ez, "step", (amp, 1.0 + amp / 40.0))); t += 64.0
+        segs.append((t, 64.0, ez, "step", (amp, 1.0 + amp / 40.0)))
+        t += 64.0
     for axis in (ex, ey):
         for amp in (30.0, -30.0):
-            segs.append((t, 64.0, axis, "step", (amp, 1.5))); t += 64.0
-    segs.append((t, 100.0, ez, "swing", (25.0, 0.125, 2.0))); t += 104.0
-    segs.append((t, 64.0, ez, "swing", (6.0, 0.4, 2.0))); t += 68.0
+            segs.append((t, 64.0, axis, "step", (amp, 1.5)))
+            t += 64.0
+    segs.append((t, 100.0, ez, "swing", (25.0, 0.125, 2.0)))
+    t += 104.0
+    segs.append((t, 64.0, ez, "swing", (6.0, 0.4, 2.0)))
+    t += 68.0
     return segs, t + STATIC_END_S
 
 
@@ -394,7 +398,8 @@ def _draw_layout(rng) -> dict:
 def _tilted(axis: np.ndarray, tilt_deg: float, rng) -> np.ndarray:
     """Unit axis tilted by tilt_deg from ``axis`` towards a random perpendicular direction."""
     tmp = np.array([1.0, 0, 0]) if abs(axis[0]) < 0.9 else np.array([0, 1.0, 0])
-    u = np.cross(axis, tmp); u /= np.linalg.norm(u)
+    u = np.cross(axis, tmp)
+    u /= np.linalg.norm(u)
     v = np.cross(axis, u)
     psi = rng.uniform(0, 2 * np.pi)
     d = math.cos(psi) * u + math.sin(psi) * v
@@ -538,7 +543,8 @@ def make_case(effect: str, seed: int, with_fault: bool = True) -> dict:
         out[:, k] += random_walk(rng, n, rrw_step_rad_s(rrw[k], dt))
     z = rng.standard_normal((n, N))
     if effect == "correlation":
-        R = np.full((N, N), params["rho_arw"]); np.fill_diagonal(R, 1.0)
+        R = np.full((N, N), params["rho_arw"])
+        np.fill_diagonal(R, 1.0)
         z = z @ np.linalg.cholesky(R).T
     wn = z * np.array([arw_sigma_rad_s(a, dt) for a in arw])[None, :]
     if effect == "burst":
@@ -605,7 +611,8 @@ def effect_params(case: dict) -> dict:
 
 def write_case(case: dict, directory) -> Path:
     """Write ``<stem>.csv.gz`` + ``<stem>.toml`` (measurement-format.md); returns the CSV path."""
-    d = Path(directory); d.mkdir(parents=True, exist_ok=True)
+    d = Path(directory)
+    d.mkdir(parents=True, exist_ok=True)
     csv = d / f"{case['stem']}.csv.gz"
     N = case["gyro_deg_s"].shape[1]
     header = ",".join(["time_s"] + [f"gyro{k}" for k in range(1, N + 1)]

@@ -38,7 +38,7 @@ def main() -> dict:
     if not ADIS.is_file():
         print(f"skipped: {ADIS} not found (../shared beside the clone)")
         return {"skipped": True}
-    cli = [sys.executable, "-m", "gyroarray.cli", "allan", str(ADIS), "--json"]
+    cli = [sys.executable, "-m", "gyroarray.cli.main", "allan", str(ADIS), "--json"]
     _run(cli)  # warm the numba cache and the OS file cache
     t_cli, _ = best_of(lambda: _run(cli), 3)
     t_hand, _ = best_of(lambda: _run([sys.executable, "-c", _BY_HAND, str(ADIS)]), 3)

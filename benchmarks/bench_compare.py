@@ -1,4 +1,4 @@
-"""Speed of the model-vs-measurement loop (:mod:`gyroarray.compare`).
+"""Speed of the model-vs-measurement loop (:mod:`gyroarray.chain.compare`).
 
 Targets (issue 6): ``diagnose`` of a 46-min, 8-gyro, 100 Hz measurement
 with reference and temperature <= 20 s; ``ladder`` to consistency on one
@@ -18,10 +18,10 @@ import math
 import numpy as np
 from _timing import best_of
 
-from gyroarray.compare import ModelComparison
-from gyroarray.layout import Layout
+from gyroarray.chain.compare import ModelComparison
+from gyroarray.core.layout import Layout
 from gyroarray.sim.lab import lab_run
-from gyroarray.sim.model import ModelEntry, NoiseModel
+from gyroarray.effects.model import ModelEntry, NoiseModel
 
 BASE = (ModelEntry("arw", None, {"n_deg_rt_h": 0.15}), ModelEntry("rrw", None, {"k_deg_h_rt_h": 10.0}))
 LAYOUT = Layout.conical(2, 8, math.radians(60.7941))

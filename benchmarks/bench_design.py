@@ -1,6 +1,6 @@
 """Speed of the design search and of ``make demo``.
 
-* The predictor's full grid (``gyroarray.recommend.recommend``): 2 schemes ×
+* The predictor's full grid (``gyroarray.design.recommend.recommend``): 2 schemes ×
   N = 4, 5, 6, 8 × 100 cone angles (refined continuously) × 5 estimators with
   their bandwidth optimised against a 5 deg/s, 0.03 Hz swing (paper 003
   noise, 600 s horizon, one failure to survive). CPU time of one process on
@@ -33,8 +33,8 @@ DEMO_ARGS = ["--arw", "0.1", "--rrw", "600", "--rate-hz", "100", "--horizon-s", 
 
 
 def _grid_cpu(space_kw: dict) -> tuple[float, dict]:
-    from gyroarray.predict import Swing
-    from gyroarray.recommend import DesignSpace, GyroNoise, recommend
+    from gyroarray.design.predict import Swing
+    from gyroarray.design.recommend import DesignSpace, GyroNoise, recommend
     g = GyroNoise(arw_deg_rt_h=0.1, rrw_deg_h_rt_h=600.0)
     kw = dict(space_kw)
     if kw.pop("swing", False):

@@ -14,10 +14,10 @@ import math
 import numpy as np
 from _timing import best_of
 
-from gyroarray.layout import Layout
+from gyroarray.core.layout import Layout
 from gyroarray.sim.effects import simulate_readings
-from gyroarray.sim.model import NoiseModel
-from gyroarray.units import deg_s_to_rad_s, deg_to_rad
+from gyroarray.effects.model import NoiseModel
+from gyroarray.core.units import deg_s_to_rad_s, deg_to_rad
 
 N_GYROS = 8
 RATE_HZ = 100.0

@@ -50,13 +50,13 @@ from pathlib import Path
 import numpy as np
 from _timing import best_of
 
-from gyroarray import units
-from gyroarray.design import optimal_alpha
+from gyroarray.core import units
+from gyroarray.core.gdop import optimal_alpha
 from gyroarray.estimators import available, get_estimator
-from gyroarray.estimators.bound import _smooth_reference
-from gyroarray.layout import Layout
+from gyroarray.estimators.bound import smooth_reference
+from gyroarray.core.layout import Layout
 from gyroarray.sim.effects import simulate_readings
-from gyroarray.sim.model import ModelEntry, NoiseModel
+from gyroarray.effects.model import ModelEntry, NoiseModel
 from gyroarray.sim.scenario import load_scenario, simulate
 
 TARGET_RATIO = 200.0
@@ -106,7 +106,7 @@ def _bound(layout, w, z):
 
     def reference():
         x0, P0 = est._prior(zs[0])
-        return _smooth_reference(est._model, x0, P0, zs)[1][:, :3]
+        return smooth_reference(est._model, x0, P0, zs)[1][:, :3]
     ref_s, ref = best_of(reference, 1)
     agree = float(np.max(np.abs(ours - ref)) / np.max(np.abs(w[:N_BOUND])))
     full_s, _ = best_of(lambda: est.estimate(z), 1)
@@ -122,7 +122,7 @@ def _bound(layout, w, z):
 
 def _table5(seeds=(3006, 1, 2, 3, 4)):
     """Paper 003 §4.2 (Table 5, N = 6 row) through the real chain: 1σ per axis [deg/s]."""
-    sc = load_scenario(Path(__file__).resolve().parents[1] / "scenarios" / "paper003" / "swing_s1_n6.toml")
+    sc = load_scenario(Path(__file__).resolve().parents[1] / "src" / "gyroarray" / "data" / "scenarios" / "paper003" / "swing_s1_n6.toml")
     rows = []
     kf = get_estimator("kf_array")().fit(sc.layout, sc.model, 1 / sc.sample_rate_hz)
     for seed in seeds:

@@ -28,12 +28,12 @@ import math
 import numpy as np
 from _timing import best_of
 
-from gyroarray.analysis import fault_fit as ff
-from gyroarray.design import optimal_alpha
-from gyroarray.estimators.fdi import FaultDetector, _scan, _window_weights
-from gyroarray.layout import Layout
+from gyroarray.effects.fits import fault_fit as ff
+from gyroarray.core.gdop import optimal_alpha
+from gyroarray.estimators.fdi import FaultDetector, _scan, window_weights
+from gyroarray.core.layout import Layout
 from gyroarray.sim.effects import simulate_readings
-from gyroarray.sim.model import NoiseModel
+from gyroarray.effects.model import NoiseModel
 
 TARGET_S = 5.0
 N_GYROS, DT = 8, 0.01
@@ -61,7 +61,7 @@ def loop_scan(z: np.ndarray, design) -> tuple[dict, dict]:
     for fam in ("step", "drift"):
         for L in design.scales[fam]:
             if L <= n - 1:
-                h = np.stack([_window_weights(fam, design.a, design.K, design.S, design.coef[:, j], L)
+                h = np.stack([window_weights(fam, design.a, design.K, design.S, design.coef[:, j], L)
                               for j in reps], axis=2)            # (L, m, G)
                 weights[(fam, L)] = h / np.sqrt(np.sum(h * h, axis=(0, 1)))[None, None, :]
     eps = np.zeros((n, m))

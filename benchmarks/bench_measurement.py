@@ -18,7 +18,7 @@ from pathlib import Path
 import pandas as pd
 from _timing import best_of
 
-from gyroarray.measurement import read_measurement, write_measurement
+from gyroarray.core.measurement import read_measurement, write_measurement
 
 ADIS = (Path(__file__).resolve().parents[1].parent / "shared" / "measurements" / "real"
         / "adis16405_static.csv.gz")

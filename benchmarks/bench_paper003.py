@@ -19,10 +19,10 @@ import tempfile
 import time
 from pathlib import Path
 
-from gyroarray.scenarios.runner import load_results, run_sweep
-from gyroarray.scenarios.sweep import load_sweep
+from gyroarray.sweep.runner import load_results, run_sweep
+from gyroarray.sweep.sweep import load_sweep
 
-SWEEP = Path(__file__).resolve().parents[1] / "scenarios" / "sweeps" / "paper003_full.toml"
+SWEEP = Path(__file__).resolve().parents[1] / "src" / "gyroarray" / "data" / "scenarios" / "sweeps" / "paper003_full.toml"
 TARGET_S = 120.0
 
 

@@ -16,9 +16,9 @@ from pathlib import Path
 import numpy as np
 from _timing import best_of
 
-from gyroarray.compare import ModelComparison
-from gyroarray.measurement import read_measurement
-from gyroarray.sim.model import NoiseModel
+from gyroarray.chain.compare import ModelComparison
+from gyroarray.core.measurement import read_measurement
+from gyroarray.effects.model import NoiseModel
 
 ADIS = Path(__file__).resolve().parents[2] / "shared" / "measurements" / "real" / "adis16405_static.csv.gz"
 

@@ -1,4 +1,4 @@
-"""Parallel speed-up of the sweep runner (:func:`gyroarray.scenarios.runner.run_sweep`).
+"""Parallel speed-up of the sweep runner (:func:`gyroarray.sweep.runner.run_sweep`).
 
 The 48-scenario quick design sweep (``scenarios/sweeps/design_quick.toml``:
 both schemes, N = 4, 5, 6, 8 at the optimal α, ρ ∈ {−0.1, 0, 0.5}, static and
@@ -21,10 +21,10 @@ from pathlib import Path
 import numpy as np
 from _timing import best_of
 
-from gyroarray.scenarios.runner import THREAD_ENV, load_results, run_sweep
-from gyroarray.scenarios.sweep import load_sweep
+from gyroarray.sweep.runner import THREAD_ENV, load_results, run_sweep
+from gyroarray.sweep.sweep import load_sweep
 
-SWEEP = Path(__file__).resolve().parents[1] / "scenarios" / "sweeps" / "design_quick.toml"
+SWEEP = Path(__file__).resolve().parents[1] / "src" / "gyroarray" / "data" / "scenarios" / "sweeps" / "design_quick.toml"
 TARGET = 1.8
 REPEATS = 1          # each run is ~1-2 min; one is enough for a ratio
 

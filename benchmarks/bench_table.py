@@ -19,13 +19,13 @@ import mujoco
 from _timing import best_of
 import numpy as np
 
-from gyroarray.layout import Layout
+from gyroarray.core.layout import Layout
 from gyroarray.sim.profiles import Profile, Sinusoid, Static, load_profile
 from gyroarray.sim.table import RateTable
 from gyroarray.sim.truth import compute_truth, project
-from gyroarray.units import deg_s_to_rad_s, deg_to_rad, rad_s_to_deg_s, rad_to_deg
+from gyroarray.core.units import deg_s_to_rad_s, deg_to_rad, rad_s_to_deg_s, rad_to_deg
 
-PROFILES = Path(__file__).resolve().parents[1] / "scenarios" / "profiles"
+PROFILES = Path(__file__).resolve().parents[1] / "src" / "gyroarray" / "data" / "scenarios" / "profiles"
 
 
 def _python_loop_seconds(profile: Profile, fs: float, seconds: float) -> float:

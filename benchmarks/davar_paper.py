@@ -15,10 +15,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from gyroarray import units
-from gyroarray.analysis.davar import (AdaptiveWindow, DavarResult, _finite_float, change_nodes,
+from gyroarray.core import units
+from gyroarray.analysis.davar import (AdaptiveWindow, DavarResult, finite_float, change_nodes,
                                       davar)
-from gyroarray.errors import InputError
+from gyroarray.core.errors import InputError
 
 __all__ = ["PAPER_TABLE1", "PaperTable1", "paper_signal", "paper_table1", "format_paper_table1"]
 
@@ -81,7 +81,7 @@ def paper_signal(rng: np.random.Generator, *,
     """
     if not isinstance(rng, np.random.Generator):
         raise InputError("rng must be a numpy.random.Generator")
-    scale = np.full(_PAPER_N, _finite_float(sigma_rad_s, "sigma_rad_s"))
+    scale = np.full(_PAPER_N, finite_float(sigma_rad_s, "sigma_rad_s"))
     scale[_PAPER_CHANGE[0]:_PAPER_CHANGE[1]] *= math.sqrt(_PAPER_VARIANCE)
     return scale * rng.standard_normal(_PAPER_N)
 

@@ -22,7 +22,7 @@ import time
 
 import numpy as np
 
-from gyroarray.compare import ModelComparison
+from gyroarray.chain.compare import ModelComparison
 from gyroarray.sim.cases import EFFECTS, NOT_SCORED, single_effect_case
 
 

@@ -38,13 +38,13 @@ from pathlib import Path
 
 import numpy as np
 
-from gyroarray.design import optimal_alpha
+from gyroarray.core.gdop import optimal_alpha
 from gyroarray.estimators.fdi import FaultDetector, minimum_detectable
-from gyroarray.layout import Layout
+from gyroarray.core.layout import Layout
 from gyroarray.sim.effects import simulate_readings
-from gyroarray.sim.model import NoiseModel
+from gyroarray.effects.model import NoiseModel
 from gyroarray.sim.scenario import load_scenario, simulate
-from gyroarray.units import rad_s_to_deg_s
+from gyroarray.core.units import rad_s_to_deg_s
 
 ROOT = Path(__file__).resolve().parents[1]
 DT = 0.01
@@ -180,7 +180,7 @@ def _delay_theory(design, gyro, size) -> float:
 # -- C. the done-when on scenarios/faults ---------------------------------------------------
 
 def done_when_study(seeds: int) -> dict:
-    files = sorted((ROOT / "scenarios" / "faults").glob("*.toml"))
+    files = sorted((ROOT / "src" / "gyroarray" / "data" / "scenarios" / "faults").glob("*.toml"))
     tally = {}
     for f in files:
         sc = load_scenario(f)

@@ -8,7 +8,7 @@ This study simulates records that are nothing but ARW + RRW with plain numpy
 (white noise plus a cumulative sum), fits each with ``fit_gyro_noise`` and
 counts the scan's z beyond 2, 3 and 3.5, with the scan reading the Allan
 variances as they are and made Gaussian (``stochastic_fit._GAUSSIANISE``,
-:func:`gyroarray.analysis.stochastic_fit.avar_normal_score`). A normal z
+:func:`gyroarray.effects.fits.stochastic_fit.avar_normal_score`). A normal z
 exceeds them with 2.28 %, 0.135 % and 0.023 %. Two record lengths like the
 scored cases' stochastic records (50 Hz).
 """
@@ -22,8 +22,8 @@ import math
 import numpy as np
 from scipy import stats
 
-from gyroarray.analysis import stochastic_fit as sf
-from gyroarray.units import arw_deg_rt_h_to_rad_rt_s, rrw_deg_h_rt_h_to_rad_s_rt_s
+from gyroarray.effects.fits import stochastic_fit as sf
+from gyroarray.core.units import arw_deg_rt_h_to_rad_rt_s, rrw_deg_h_rt_h_to_rad_s_rt_s
 
 DT = 0.02
 #: (record length [s], N [deg/√h], K [deg/h/√h])

@@ -6,14 +6,10 @@ ROOT is a checkout (default: this one). Prints, for every pair of layers,
 how many module-level imports go from one to the other, the cycles among
 the layers, the count of ``gyroarray`` imports made inside functions, and
 the cycles among modules (module-level imports only: what Python resolves
-at import time). The layers are the order the project aims for::
+at import time). The layers are the folders of ``src/gyroarray`` (:data:`LAYERS`);
+``tests/test_layers.py`` fails on an import that points upward.
 
-    physics/units/constants/errors/sensor  <-  analysis  <-  effects  <-  sim
-        <-  chain / compare / design ...  <-  cli / reports
-
-(estimators and scenarios sit beside effects and sim: on analysis and on sim).
-
-Used for the closing note of issue 13 (before/after); not part of the tests.
+Used for the closing notes of issues 13 and 29 (before/after); not part of the tests.
 """
 
 from __future__ import annotations
@@ -23,15 +19,12 @@ import sys
 from collections import Counter, defaultdict
 from pathlib import Path
 
-#: Source folder of each subpackage (pyproject's package-dir).
-FOLDERS = {"gyroarray": "gyroarray", "gyroarray.analysis": "analysis", "gyroarray.sim": "sim",
-           "gyroarray.effects": "effects", "gyroarray.estimators": "estimators",
-           "gyroarray.scenarios": "scenarios", "gyroarray.reports": "reports"}
-
-#: The bottom of the house: modules of ``gyroarray`` itself that import nothing above them.
-BOTTOM = {"units", "constants", "errors", "physics", "tomlio", "formatting", "layout", "limits",
-          "design", "measurement", "outputs", "_numba", "plugins", "parallel",
-          "sensor"}    # the bandwidth filter and g-sensitivity: shared by sim, effects and analysis
+#: Source folder of the package (a plain src layout since issue 29).
+FOLDERS = {"gyroarray": "src/gyroarray"}
+#: The layers, lowest first: each a folder of src/gyroarray (tests/test_layers.py holds the code to
+#: the same order).
+LAYERS = ("core", "analysis", "effects", "sim", "estimators", "design", "chain", "sweep", "reports",
+          "cli")
 
 
 def modules(root: Path) -> dict:
@@ -49,16 +42,11 @@ def modules(root: Path) -> dict:
 
 
 def layer(name: str) -> str:
-    if name == "gyroarray":                     # the package root: its version string only
-        return "core-bottom"
+    """The layer folder of a module (``gyroarray.core.units`` -> ``core``)."""
     parts = name.split(".")
-    if len(parts) > 1 and f"gyroarray.{parts[1]}" in FOLDERS:
+    if len(parts) > 1 and parts[1] in LAYERS:
         return parts[1]
-    if len(parts) > 1 and parts[1] in BOTTOM:
-        return "core-bottom"
-    if len(parts) > 1 and parts[1] == "cli":
-        return "cli"
-    return "core-top"
+    return "root"                               # the package root: its version string only
 
 
 def _resolve(node, current: str, is_pkg: bool, mods) -> list:

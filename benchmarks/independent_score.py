@@ -4,7 +4,7 @@
 our own simulator, which only shows that simulator and fitter agree. Here
 the records come from a plain numpy/scipy generator written only from the
 specs; each is written to disk in the measurement format and read back with
-:func:`gyroarray.measurement.read_measurement`, as a user's file would be,
+:func:`gyroarray.core.measurement.read_measurement`, as a user's file would be,
 then scored exactly like ``diagnosis_score.score_case`` (shared
 :func:`score_measurement`): found = top candidate is the hidden effect (and
 gyro) and significant; falls = D halves after ``fit --add``; consistent
@@ -45,7 +45,7 @@ sys.path.insert(0, str(HERE))
 import _indep_gen as gen  # noqa: E402
 from diagnosis_score import NOT_SCORED, score_measurement, summarise  # noqa: E402
 
-from gyroarray.measurement import read_measurement  # noqa: E402
+from gyroarray.core.measurement import read_measurement  # noqa: E402
 
 
 def _details(row: dict) -> dict:

@@ -20,7 +20,7 @@ import json
 import numpy as np
 from scipy import stats
 
-from gyroarray.compare import ModelComparison
+from gyroarray.chain.compare import ModelComparison
 from gyroarray.sim.cases import EFFECTS, single_effect_case
 
 

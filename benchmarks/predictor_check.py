@@ -7,7 +7,7 @@ K replicates (default 30) are simulated with the sweep's own rate-table
 truth through ``sim.effects.simulate_readings`` and the real estimators, and
 the predictor's 1σ, RMS about the truth, mean error and angle error per axis
 are compared with √(mean over the runs of x²) and its 95 % interval
-(``gyroarray.chain.rms_ci``). Prints one line per scenario and a summary:
+(``gyroarray.chain.run.rms_ci``). Prints one line per scenario and a summary:
 the share of predictions inside their interval (≈ 95 % expected when the
 predictor is right; the comparisons within a scenario share their runs) and
 the largest |prediction / simulation − 1|.
@@ -32,10 +32,10 @@ KEYS = ("rms_deg_s", "std_deg_s", "mean_deg_s", "angle_deg")
 
 
 def check_scenario(spec, replicates: int, seed: int) -> dict:
-    from gyroarray import units
-    from gyroarray.chain import replicate_rng, rms_ci
+    from gyroarray.core import units
+    from gyroarray.analysis.replicates import replicate_rng, rms_ci
     from gyroarray.estimators import get_estimator
-    from gyroarray.predict import predict, settle_start
+    from gyroarray.design.predict import predict, settle_start
     from gyroarray.sim.effects import simulate_readings
     from gyroarray.sim.truth import compute_truth
     sc = spec.build()
@@ -75,8 +75,8 @@ def main(argv=None) -> int:
     ap.add_argument("--seed", type=int, default=20260414)
     ap.add_argument("--json", type=Path)
     args = ap.parse_args(argv)
-    from gyroarray.scenarios.sweep import load_sweep
-    sweep = load_sweep(ROOT / "scenarios" / "sweeps" / "design_quick.toml")
+    from gyroarray.sweep.sweep import load_sweep
+    sweep = load_sweep(ROOT / "src" / "gyroarray" / "data" / "scenarios" / "sweeps" / "design_quick.toml")
     t0 = time.perf_counter()
     rows = []
     for spec in sweep.scenarios:

@@ -4,7 +4,7 @@ Every case is a small measurement pair (``<case>.csv`` or ``<case>.csv.gz``
 plus ``<case>.toml``) that breaks exactly one rule of
 ``shared/spec/measurement-format.md`` (or of the reader's documented
 choices), with the fragment of the message and the location (file, line,
-column) that :func:`gyroarray.measurement.read_measurement` must report.
+column) that :func:`gyroarray.core.measurement.read_measurement` must report.
 
 The files are committed under ``tests/data/bad/``; regenerate them with::
 

@@ -23,7 +23,7 @@ def _registry_as_shipped():
 
 @pytest.fixture
 def cli(request):
-    """Run ``gyroarray ARGS...`` as a user would, in this process (``gyroarray.cli.main`` with
+    """Run ``gyroarray ARGS...`` as a user would, in this process (``gyroarray.cli.main.main`` with
     stdout/stderr captured: the interpreter's 2 s start-up and scipy's import are paid once per
     worker, not per call; tests/test_cli.py runs the installed entry point in a subprocess);
     ``check`` asserts exit 0 (stderr shown). Plugin tests keep a subprocess per call: a plugin
@@ -31,10 +31,10 @@ def cli(request):
     fresh = request.module.__name__.endswith("test_plugins")
 
     def run(*args, check: bool = True, timeout: float = 900.0) -> subprocess.CompletedProcess:
-        from gyroarray.cli import main
+        from gyroarray.cli.main import main
         argv = [str(a) for a in args]
         if fresh:
-            p = subprocess.run([sys.executable, "-m", "gyroarray.cli", *argv], capture_output=True,
+            p = subprocess.run([sys.executable, "-m", "gyroarray.cli.main", *argv], capture_output=True,
                                text=True, timeout=timeout)
             assert not check or p.returncode == 0, p.stderr
             return p
@@ -44,7 +44,7 @@ def cli(request):
                 code = main(argv)
             except SystemExit as stop:             # argparse's own refusals and --help
                 code = stop.code if isinstance(stop.code, int) else (0 if stop.code is None else 2)
-        p = subprocess.CompletedProcess([sys.executable, "-m", "gyroarray.cli", *argv], code or 0,
+        p = subprocess.CompletedProcess([sys.executable, "-m", "gyroarray.cli.main", *argv], code or 0,
                                         out.getvalue(), err.getvalue())
         if check:
             assert p.returncode == 0, p.stderr

@@ -122,8 +122,8 @@ class Outcome:
 
 
 def run_cli(argv, timeout: float = 120.0) -> Outcome:
-    """``gyroarray.cli.main(argv)`` in this process, stdout/stderr captured, under an alarm."""
-    from gyroarray.cli import main
+    """``gyroarray.cli.main.main(argv)`` in this process, stdout/stderr captured, under an alarm."""
+    from gyroarray.cli.main import main
     out, err = io.StringIO(), io.StringIO()
     start = time.process_time()
     with alarm(timeout), contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):

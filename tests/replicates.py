@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from gyroarray import units
-from gyroarray.chain import replicate_rng, rms_ci
-from gyroarray.predict import settle_start
+from gyroarray.core import units
+from gyroarray.analysis.replicates import replicate_rng, rms_ci
+from gyroarray.design.predict import settle_start
 from gyroarray.sim.effects import simulate_readings
 
 #: The predicted metrics each replicate measures, in this order.

@@ -19,7 +19,7 @@ from scipy.special import comb
 from gyroarray.analysis.allan import (ONE_SIGMA, allan_analysis,
                                       confidence_interval, edf, edf_greenhall,
                                       edf_simple, oadev, ohdev)
-from gyroarray.errors import InputError
+from gyroarray.core.errors import InputError
 
 STABLE32 = (Path(__file__).resolve().parents[2] / "shared" / "reference"
             / "stable32")

@@ -17,13 +17,13 @@ import pandas as pd
 import pytest
 from scipy import stats
 
-from gyroarray import units
+from gyroarray.core import units
 from gyroarray.analysis.allan import (AllanResult, allan_analysis,
                                       averaging_factors, deviation_from_angle,
                                       edf, oadev, plot_allan)
 from gyroarray.analysis.noise_fit import (TERM_CONSTANTS, TERM_EXPONENTS,
                                           fit_noise_terms, term_from_curve)
-from gyroarray.errors import InputError
+from gyroarray.core.errors import InputError
 
 SHARED = Path(__file__).resolve().parents[2] / "shared"
 AVAR = SHARED / "reference" / "avar_curves"
@@ -501,10 +501,10 @@ def test_fit_input_errors():
 def test_model_error_root_when_the_ends_do_not_bracket():
     # chi2 - dof is only piecewise monotonic in eps: the search must not call brentq on an
     # interval whose ends have the same sign (it raised on some 30 s records)
-    from gyroarray.analysis.noise_fit import _root_log_eps
-    assert _root_log_eps(lambda le: le + 3.0) == -8.0          # already consistent at the low end
-    assert _root_log_eps(lambda le: 1.0) == 2.0                 # never consistent: the high end
+    from gyroarray.analysis.noise_fit import root_log_eps
+    assert root_log_eps(lambda le: le + 3.0) == -8.0          # already consistent at the low end
+    assert root_log_eps(lambda le: 1.0) == 2.0                 # never consistent: the high end
     # positive at both ends, dipping below zero in between: the first grid point <= 0
-    assert _root_log_eps(lambda le: abs(le + 3.2) - 0.3) == -3.5
+    assert root_log_eps(lambda le: abs(le + 3.2) - 0.3) == -3.5
     # a proper bracket: Brent to xtol 1e-2
-    assert abs(_root_log_eps(lambda le: -(le + 1.234)) + 1.234) < 1e-2
+    assert abs(root_log_eps(lambda le: -(le + 1.234)) + 1.234) < 1e-2

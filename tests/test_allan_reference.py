@@ -34,12 +34,12 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from gyroarray import units
+from gyroarray.core import units
 from gyroarray.analysis import allan
 from gyroarray.analysis.allan import (AllanResult, averaging_factors,
                                       deviation, deviation_from_angle, oadev,
                                       ohdev)
-from gyroarray.errors import InputError
+from gyroarray.core.errors import InputError
 
 SHARED = Path(__file__).resolve().parents[2] / "shared"
 STABLE32 = SHARED / "reference" / "stable32"

@@ -26,14 +26,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from gyroarray import units
-from gyroarray.design import optimal_alpha
-from gyroarray.errors import InputError
+from gyroarray.core import units
+from gyroarray.core.gdop import optimal_alpha
+from gyroarray.core.errors import InputError
 from gyroarray.estimators import OfflineBound
-from gyroarray.estimators.bound import _smooth_reference
-from gyroarray.layout import Layout
+from gyroarray.estimators.bound import smooth_reference
+from gyroarray.core.layout import Layout
 from gyroarray.sim.effects import simulate_readings
-from gyroarray.sim.model import ModelEntry, NoiseModel
+from gyroarray.effects.model import ModelEntry, NoiseModel
 
 DT = 0.01
 TOL = 1e-9                                           # relative to the rate scale, see above
@@ -71,7 +71,7 @@ def _record(layout, model, n, seed):
 
 def _reference(est: OfflineBound, z):
     x0, P0 = est._prior(z[0])
-    return _smooth_reference(est._model, x0, P0, z)
+    return smooth_reference(est._model, x0, P0, z)
 
 
 CASES = [  # (N, model, hyperparameters, seed)

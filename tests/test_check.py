@@ -1,14 +1,14 @@
-"""gyroarray.check: thresholds files, grouping, pass/fail and strict validation."""
+"""gyroarray.chain.check: thresholds files, grouping, pass/fail and strict validation."""
 
 import shutil
 from pathlib import Path
 
 import pytest
 
-from gyroarray.check import format_check, load_thresholds, run_check
-from gyroarray.errors import InputError
+from gyroarray.chain.check import format_check, load_thresholds, run_check
+from gyroarray.core.errors import InputError
 
-ROOT = Path(__file__).resolve().parents[1] / "scenarios"
+ROOT = Path(__file__).resolve().parents[1] / "src" / "gyroarray" / "data" / "scenarios"
 
 
 @pytest.fixture()
@@ -46,7 +46,7 @@ max = 1.0
 
 
 def test_passing_file_runs_each_scenario_once(folder, monkeypatch):
-    import gyroarray.chain as chain
+    import gyroarray.chain.run as chain
     calls = []
     real = chain.run_scenario
     monkeypatch.setattr(chain, "run_scenario", lambda sc, names: calls.append(list(names)) or real(sc, names))

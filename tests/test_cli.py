@@ -11,7 +11,7 @@ import sys
 import numpy as np
 import pytest
 
-from gyroarray.cli import build_parser, main
+from gyroarray.cli.main import build_parser, main
 
 
 def run(capsys, *argv):
@@ -90,7 +90,7 @@ def test_bad_input_one_line_exit_2(capsys, argv, fragment):
 
 
 def test_entry_point_subprocess_no_traceback():
-    proc = subprocess.run([sys.executable, "-m", "gyroarray.cli", "gdop", "--scheme", "1", "--n", "4",
+    proc = subprocess.run([sys.executable, "-m", "gyroarray.cli.main", "gdop", "--scheme", "1", "--n", "4",
                            "--alpha", "60", "--rho", "-0.5", "--json"], capture_output=True, text=True)
     assert proc.returncode == 2
     assert proc.stdout == ""
@@ -121,11 +121,11 @@ def test_davar_run_simulate_bad_input(capsys, argv, fragment):
 def test_davar_on_a_simulated_burst(capsys, tmp_path):
     # ARW with variance x4 (sd x2) over 60-90 s of a 150 s run: the fixed-window ARW track
     # inside the burst is about twice the one before it (windows of 10 s, step 1 s)
-    from gyroarray.layout import Layout
-    from gyroarray.measurement import Measurement, write_measurement
+    from gyroarray.core.layout import Layout
+    from gyroarray.core.measurement import Measurement, write_measurement
     from gyroarray.sim.effects import simulate_readings
-    from gyroarray.sim.model import NoiseModel
-    from gyroarray.units import rad_s_to_deg_s
+    from gyroarray.effects.model import NoiseModel
+    from gyroarray.core.units import rad_s_to_deg_s
     n, dt = 15000, 0.01
     model = NoiseModel.from_toml({"effects": [
         {"effect": "arw", "n_deg_rt_h": 1.0},
@@ -152,7 +152,7 @@ def test_check_cli_exit_codes(capsys, tmp_path):
     # a threshold the model cannot meet -> exit 1 with passed false; a bad file -> exit 2
     import shutil
     from pathlib import Path
-    root = Path(__file__).resolve().parents[1] / "scenarios"
+    root = Path(__file__).resolve().parents[1] / "src" / "gyroarray" / "data" / "scenarios"
     shutil.copy(root / "paper003" / "static_s1_n6_rhob_0.toml", tmp_path / "s1n6.toml")
     bad_bound = tmp_path / "t.toml"
     # GLS on 6 gyros cannot reduce ARW by 10x (theory sqrt(6/3) = 1.41)

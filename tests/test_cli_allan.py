@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gyroarray.cli import main
+from gyroarray.cli.main import main
 
 SHARED = Path(__file__).resolve().parents[1].parent / "shared"
 ADIS = SHARED / "measurements" / "real" / "adis16405_static.csv.gz"

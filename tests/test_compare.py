@@ -1,4 +1,4 @@
-"""Model vs measurement (gyroarray.compare): no false alarms, one test per effect, bad input.
+"""Model vs measurement (gyroarray.chain.compare): no false alarms, one test per effect, bad input.
 
 Measurements come from the project's own simulator (:func:`gyroarray.sim.lab.lab_run`:
 600 s static, 300 s of rate steps and swings, 300 s static, 50 Hz, warming
@@ -7,7 +7,7 @@ temperature). Tolerances:
 * "consistent" means D <= 1, i.e. no test beyond the 1 % family-wise
   critical value: under the baseline each run has <= 1 % chance of a false
   alarm by construction (the z's are null-calibrated, see
-  gyroarray.analysis.stochastic_fit and .regress); the seeds are fixed, so
+  gyroarray.effects.fits.stochastic_fit and .regress); the seeds are fixed, so
   the tests are deterministic and were checked once.
 * a fitted parameter is within 10 % of the value set or within 2σ of its
   own uncertainty (the issue's rule); 2σ is a 95 % interval.
@@ -23,13 +23,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gyroarray.compare import ModelComparison, critical_z, parse_add
-from gyroarray.errors import InputError
-from gyroarray.layout import Layout
-from gyroarray.measurement import write_measurement
+from gyroarray.chain.compare import ModelComparison, critical_z, parse_add
+from gyroarray.core.errors import InputError
+from gyroarray.core.layout import Layout
+from gyroarray.core.measurement import write_measurement
 from gyroarray.sim.cases import EFFECTS, single_effect_case
 from gyroarray.sim.lab import lab_run
-from gyroarray.sim.model import ModelEntry, NoiseModel
+from gyroarray.effects.model import ModelEntry, NoiseModel
 from gyroarray.sim.scenario import load_scenario
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -47,7 +47,7 @@ def test_critical_z_is_sidak():
 
 def _paper_layouts():
     seen = {}
-    for f in sorted((ROOT / "scenarios").glob("paper00[23]/*.toml")):
+    for f in sorted((ROOT / "src" / "gyroarray" / "data" / "scenarios").glob("paper00[23]/*.toml")):
         sc = load_scenario(f)
         key = tuple(np.round(np.asarray(sc.layout.axes), 6).ravel())
         if key not in seen:
@@ -486,8 +486,8 @@ def test_a_ramp_in_the_model_tells_the_noise_fit_it_was_taken_out(monkeypatch):
     the other gyros' fits do not. Paired plain-numpy records (20 min, ARW 0.5 deg/√h, K 30
     deg/h/√h, 30 records with and without a 2000 deg/h² ramp on gyro 1) read K 6.1 ± 2.0 % low
     with the ramp in the model before, −0.2 ± 1.9 % after (closing note of this change)."""
-    import gyroarray.compare as compare_mod
-    from gyroarray.measurement import Measurement
+    import gyroarray.chain.compare as compare_mod
+    from gyroarray.core.measurement import Measurement
 
     seen = {}
     real = compare_mod.fit_gyro_noise

@@ -24,11 +24,11 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from gyroarray.compare import ModelComparison
-from gyroarray.layout import Layout
-from gyroarray.measurement import Measurement, write_measurement
+from gyroarray.chain.compare import ModelComparison
+from gyroarray.core.layout import Layout
+from gyroarray.core.measurement import Measurement, write_measurement
 from gyroarray.sim.effects import simulate_readings
-from gyroarray.sim.model import NoiseModel
+from gyroarray.effects.model import NoiseModel
 from swings import two_swings
 
 FS = 100.0
@@ -133,22 +133,22 @@ def test_clean_record_gives_no_findings_and_the_correlations_are_plain_ones(clea
 
 
 def test_report_shows_the_localisation_only_when_there_are_findings(samsung, clean):
-    from gyroarray.reports.compare_report import _section_unexplained
-    from gyroarray.reports.report import _Doc
+    from gyroarray.reports.compare_report import section_unexplained
+    from gyroarray.reports.report import Doc
     _, comp, a = samsung
-    doc = _Doc("t")
-    _section_unexplained(doc, a, comp)
+    doc = Doc("t")
+    section_unexplained(doc, a, comp)
     assert [n for n, _ in doc.figures] == ["localise_psd", "localise_channels"]
     assert all(png[:8] == b"\x89PNG\r\n\x1a\n" for _, png in doc.figures)
     text = "\n".join(doc.html)
     assert "Where it fails" in text and "not causal: no lag on motion" in text
-    doc = _Doc("t")
-    _section_unexplained(doc, clean[1], clean[0])
+    doc = Doc("t")
+    section_unexplained(doc, clean[1], clean[0])
     assert doc.figures == [] and "Nothing left unexplained" in "\n".join(doc.html)
 
 
 def test_cli_diagnose_json_carries_the_localisation(samsung, tmp_path, capsys):
-    from gyroarray.cli import main
+    from gyroarray.cli.main import main
     m, _, _ = samsung
     csv, _ = write_measurement(m, tmp_path / "samsung.csv")
     assert main(["diagnose", str(csv), "--runs", "10", "--json"]) == 0

@@ -16,16 +16,16 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from gyroarray.compare import ModelComparison
-from gyroarray.errors import InputError
-from gyroarray.layout import Layout
-from gyroarray.measurement import Measurement
+from gyroarray.chain.compare import ModelComparison
+from gyroarray.core.errors import InputError
+from gyroarray.core.layout import Layout
+from gyroarray.core.measurement import Measurement
 from gyroarray.reports.browser import find_chromium, render_check
-from gyroarray.reports.compare_report import (_binned, _fitted_bias, _model_asd_deg_h, _Regressors,
+from gyroarray.reports.compare_report import (_binned, fitted_bias, model_asd_deg_h, Regressors,
                                               write_compare_report)
 from gyroarray.sim.effects import simulate_readings
-from gyroarray.sim.model import ModelEntry, NoiseModel
-from gyroarray.units import arw_deg_rt_h_to_rad_rt_s, deg_s_to_rad_s, rad_s_to_deg_h, rad_s_to_deg_s
+from gyroarray.effects.model import ModelEntry, NoiseModel
+from gyroarray.core.units import arw_deg_rt_h_to_rad_rt_s, deg_s_to_rad_s, rad_s_to_deg_h, rad_s_to_deg_s
 
 N_GYROS = 4
 RATE_HZ = 100.0
@@ -147,7 +147,7 @@ def test_report_renders_in_chromium(written):
 
 def test_no_reference_report_has_no_rate_panels(noref):
     comp, a, root, res = noref
-    assert _Regressors(comp, a).keys == ["temp", "time"]
+    assert Regressors(comp, a).keys == ["temp", "time"]
     text = (root / "n.html").read_text()
     # one step: no ladder, no second ADEV figure; one regressor figure per gyro
     assert res["figure_names"] == (["adev_first"] + [f"regressors_g{g}" for g in range(1, 5)]
@@ -190,7 +190,7 @@ def test_fitted_bias_and_binning():
     static = (t < 100) | (t >= 200)
     E = np.column_stack([1e-5 * t, -2e-5 * t + 1e-4])
     E[~static] += 1.0                                     # what a dynamic part would add
-    b = _fitted_bias(E, t, static)
+    b = fitted_bias(E, t, static)
     inside = (t >= 15) & (t <= 284.99)          # first and last block centres: 14.995, 284.995 s
     assert np.allclose(b[inside, 0], 1e-5 * t[inside], rtol=0, atol=1e-12)
     assert np.allclose(b[inside, 1], -2e-5 * t[inside] + 1e-4, rtol=0, atol=1e-12)
@@ -212,6 +212,6 @@ def test_model_white_level_matches_welch():
     x = np.random.default_rng(1).normal(0, sigma, 2 ** 17)
     _, p = signal.welch(x, fs=1 / dt, nperseg=4096)
     level = rad_s_to_deg_h(math.sqrt(np.mean(p[1:-1])))
-    assert _model_asd_deg_h(np.array([1.0]), n_deg_rt_h, 0.0)[0] == pytest.approx(level, rel=0.01)
-    assert _model_asd_deg_h(np.array([1.0]), n_deg_rt_h, 0.0)[0] == pytest.approx(
+    assert model_asd_deg_h(np.array([1.0]), n_deg_rt_h, 0.0)[0] == pytest.approx(level, rel=0.01)
+    assert model_asd_deg_h(np.array([1.0]), n_deg_rt_h, 0.0)[0] == pytest.approx(
         math.sqrt(2) * 60 * n_deg_rt_h, rel=1e-12)

@@ -1,4 +1,4 @@
-"""Dynamic Allan deviation, fixed and adaptive windows (analysis/davar.py).
+"""Dynamic Allan deviation, fixed and adaptive windows (src/gyroarray/analysis/davar.py).
 
 Truth from outside:
 
@@ -35,11 +35,11 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from gyroarray import units
+from gyroarray.core import units
 from gyroarray.analysis.allan import (allan_analysis, confidence_interval,
                                       deviation, edf)
 from gyroarray.analysis.davar import AdaptiveWindow, change_nodes, davar, plot_davar
-from gyroarray.errors import InputError
+from gyroarray.core.errors import InputError
 
 # The paper's experiment (signal, Table 1) is a benchmark script, not part of the package.
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))

@@ -20,11 +20,11 @@ import math
 import numpy as np
 import pytest
 
-from gyroarray.design import (correlation_matrix, gdop, gdop_closed_form_optimum, gdop_vs_alpha,
+from gyroarray.core.gdop import (correlation_matrix, gdop, gdop_closed_form_optimum, gdop_vs_alpha,
                               optimal_alpha, paper003_cells)
-from gyroarray.errors import InputError
-from gyroarray.layout import Layout
-from gyroarray.units import deg_to_rad, rad_to_deg
+from gyroarray.core.errors import InputError
+from gyroarray.core.layout import Layout
+from gyroarray.core.units import deg_to_rad, rad_to_deg
 
 MAGIC_RAD = math.acos(1.0 / math.sqrt(3.0))  # 54.7356°
 

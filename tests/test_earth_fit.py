@@ -1,16 +1,15 @@
-"""The fit side of ``earth_rate`` (analysis/earth_fit.py), on simulator data."""
+"""The fit side of ``earth_rate`` (src/gyroarray/effects/fits/earth_fit.py), on simulator data."""
 
 import math
-from pathlib import Path
 
-import gyroarray.scenarios
 import numpy as np
 import pytest
-from gyroarray.analysis.earth_fit import attitude_from_rates, fit_earth_rate
+from gyroarray.effects.fits.earth_fit import attitude_from_rates, fit_earth_rate
 from gyroarray.sim.effects import simulate_readings
-from gyroarray.sim.model import NoiseModel
+from gyroarray.effects.model import NoiseModel
 from gyroarray.sim.truth import compute_truth
 from scipy.spatial.transform import Rotation
+from gyroarray.core.data import data_path
 
 FS = 100.0
 DT = 1.0 / FS
@@ -18,7 +17,7 @@ LAT = 34.25
 HEADING_DEG = 17.0          # non-zero: exercises the heading sign
 ARW = 0.05                  # deg/√h
 RRW = 0.5                   # deg/h/√h (small)
-SIX_POSITION = Path(gyroarray.scenarios.__file__).parent / "profiles" / "example_six_position.toml"
+SIX_POSITION = data_path("scenarios") / "profiles" / "example_six_position.toml"
 
 _H = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [1.0, 1.0, 1.0],
                [1.0, -1.0, 0.0]])

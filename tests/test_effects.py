@@ -15,15 +15,15 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from gyroarray.errors import InputError
-from gyroarray.layout import Layout
-from gyroarray.constants import EARTH_RATE_RAD_S
+from gyroarray.core.errors import InputError
+from gyroarray.core.layout import Layout
+from gyroarray.core.constants import EARTH_RATE_RAD_S
 from gyroarray.effects import REGISTRY
-from gyroarray.physics import fractional_delay, gauss_markov_avar, tilted_axes
+from gyroarray.core.physics import fractional_delay, gauss_markov_avar, tilted_axes
 from gyroarray.sim.effects import resolve, simulate_readings
-from gyroarray.sim.protocol import Stage
-from gyroarray.sim.model import ModelEntry, NoiseModel
-from gyroarray.units import (deg_h_to_rad_s, deg_s_to_rad_s, deg_to_rad, rad_s_to_deg_s,
+from gyroarray.effects.protocol import Stage
+from gyroarray.effects.model import ModelEntry, NoiseModel
+from gyroarray.core.units import (deg_h_to_rad_s, deg_s_to_rad_s, deg_to_rad, rad_s_to_deg_s,
                              ramp_deg_h2_to_rad_s2)
 
 DT = 0.01

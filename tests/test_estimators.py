@@ -14,17 +14,17 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from gyroarray import units
-from gyroarray.design import gdop, optimal_alpha
-from gyroarray.errors import InputError
+from gyroarray.core import units
+from gyroarray.core.gdop import gdop, optimal_alpha
+from gyroarray.core.errors import InputError
 from gyroarray.estimators import (GLS, OLS, ArrayKF, ArrayNoise, Naive, OfflineBound, SingleGyroKF,
                                   array_noise, bandwidth_hz, efficiency, paper002_relation,
                                   single_gyro_gain)
 from gyroarray.estimators._kalman import first_order_lowpass, kf_step, lowpass_pole
 from gyroarray.estimators.kf_single import single_gyro_filter
-from gyroarray.layout import Layout
+from gyroarray.core.layout import Layout
 from gyroarray.sim.effects import simulate_readings
-from gyroarray.sim.model import ModelEntry, NoiseModel
+from gyroarray.effects.model import ModelEntry, NoiseModel
 from gyroarray.sim.scenario import load_scenario, simulate
 
 ALPHA = 1e-3                                        # family-wise false-alarm rate of a test
@@ -340,7 +340,7 @@ def _stationary_terms(kf, axis):
 def test_kf_array_swing_arw_error_matches_prediction():
     """Paper 003 §4.2 through the real chain, ARW only in the readings."""
     root = Path(__file__).resolve().parents[1]
-    sc = load_scenario(root / "scenarios" / "paper003" / "swing_s1_n6.toml")
+    sc = load_scenario(root / "src" / "gyroarray" / "data" / "scenarios" / "paper003" / "swing_s1_n6.toml")
     arw_only = NoiseModel((ModelEntry("arw", None, {"n_deg_rt_h": 0.1}),))
     res = simulate(dataclasses.replace(sc, model=arw_only))
     w, z = res.truth.omega_body_rad_s, res.readings_rad_s

@@ -11,11 +11,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from gyroarray.errors import InputError
-from gyroarray.estimators import Estimator, NotFittedError, available, get_estimator, make
+from gyroarray.core.errors import InputError
+from gyroarray.estimators import Estimator, available, get_estimator, make
 from gyroarray.estimators import base as est_base
 from gyroarray.estimators.checks import CHECKS
-from gyroarray.testing import check_estimator, estimator_checks
+from gyroarray.chain.testing import check_estimator, estimator_checks
 
 NAMES = available()
 
@@ -27,7 +27,7 @@ def _class(name):
 @pytest.mark.parametrize("name", NAMES)
 @pytest.mark.parametrize("check_name", [n for n, _ in CHECKS])
 def test_contract(name, check_name):
-    """Every registered estimator passes every public check (gyroarray.testing)."""
+    """Every registered estimator passes every public check (gyroarray.chain.testing)."""
     cls = _class(name)
     dict(estimator_checks(cls))[check_name]()
 

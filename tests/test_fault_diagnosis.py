@@ -21,7 +21,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from gyroarray.compare import ModelComparison
+from gyroarray.chain.compare import ModelComparison
 from gyroarray.sim.cases import single_effect_case
 
 SEED = 100

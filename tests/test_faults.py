@@ -16,14 +16,14 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from gyroarray.analysis import fault_fit as ff
-from gyroarray.errors import InputError
-from gyroarray.layout import Layout
+from gyroarray.effects.fits import fault_fit as ff
+from gyroarray.core.errors import InputError
+from gyroarray.core.layout import Layout
 from gyroarray.effects import REGISTRY
 from gyroarray.sim.effects import simulate_readings
-from gyroarray.sim.protocol import Stage
-from gyroarray.sim.model import NoiseModel
-from gyroarray.units import deg_s_to_rad_s
+from gyroarray.effects.protocol import Stage
+from gyroarray.effects.model import NoiseModel
+from gyroarray.core.units import deg_s_to_rad_s
 
 SPEC = Path(__file__).resolve().parents[2] / "shared" / "spec" / "effects.md"
 DT = 0.01
@@ -356,8 +356,8 @@ def test_a_step_on_the_first_or_last_samples_is_not_called_a_fault():
     of the record: not identifiable as faults, and said so (the first three also read as a
     noise drop from 0.22 s). The same step 3000 samples before the end is a fault,
     and its onset is where the record (plain numpy, written here) puts it."""
-    from gyroarray.compare import ModelComparison
-    from gyroarray.measurement import Measurement
+    from gyroarray.chain.compare import ModelComparison
+    from gyroarray.core.measurement import Measurement
 
     n = 30000
     y = _static_triad(n, 11)

@@ -16,15 +16,15 @@ import numpy as np
 import pytest
 from scipy import linalg, special, stats
 
-from gyroarray.design import optimal_alpha
-from gyroarray.errors import InputError
+from gyroarray.core.gdop import optimal_alpha
+from gyroarray.core.errors import InputError
 from gyroarray.estimators import get_estimator
 from gyroarray.estimators.fdi import (FaultDetector, estimate_noise, fuse, isolability,
                                       minimum_detectable, parity_matrix)
 from gyroarray.estimators.noise import ArrayNoise
-from gyroarray.layout import Layout
+from gyroarray.core.layout import Layout
 from gyroarray.sim.effects import simulate_readings
-from gyroarray.sim.model import NoiseModel
+from gyroarray.effects.model import NoiseModel
 
 DT = 0.01
 PAPER = [{"effect": "arw", "n_deg_rt_h": 0.1}, {"effect": "rrw", "k_deg_h_rt_h": 600.0}]

@@ -7,13 +7,13 @@ import json
 import numpy as np
 import pytest
 
-from gyroarray.cli import main
-from gyroarray.design import optimal_alpha
-from gyroarray.layout import Layout
-from gyroarray.measurement import Measurement, write_measurement
+from gyroarray.cli.main import main
+from gyroarray.core.gdop import optimal_alpha
+from gyroarray.core.layout import Layout
+from gyroarray.core.measurement import Measurement, write_measurement
 from gyroarray.sim.effects import simulate_readings
-from gyroarray.sim.model import NoiseModel
-from gyroarray.units import rad_s_to_deg_s
+from gyroarray.effects.model import NoiseModel
+from gyroarray.core.units import rad_s_to_deg_s
 
 DT = 0.01
 PAPER = [{"effect": "arw", "n_deg_rt_h": 0.1}, {"effect": "rrw", "k_deg_h_rt_h": 600.0}]

@@ -15,10 +15,10 @@ import math
 import numpy as np
 import pytest
 
-from gyroarray.compare import ModelComparison
-from gyroarray.layout import Layout
+from gyroarray.chain.compare import ModelComparison
+from gyroarray.core.layout import Layout
 from gyroarray.sim.lab import lab_run
-from gyroarray.sim.model import ModelEntry, NoiseModel
+from gyroarray.effects.model import ModelEntry, NoiseModel
 
 Q_DEG = 0.002
 

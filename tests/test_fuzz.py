@@ -170,6 +170,6 @@ def test_simulate_generated_scenarios(data, tmp_path_factory):
     o = run_cli(["simulate", path, "--out", folder / "out", "--json"], timeout=120)
     assert_contract(o, "sc.toml")
     if o.code == 0:
-        from gyroarray.measurement import read_measurement
+        from gyroarray.core.measurement import read_measurement
         m = read_measurement(folder / "out" / "sc.csv.gz")
         assert np.all(np.isfinite(m.gyro_deg_s))

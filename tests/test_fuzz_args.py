@@ -1,6 +1,6 @@
 """Fuzzing every command-line argument of the CLI with extreme values (issue 28).
 
-The arguments are read from the parser itself (:func:`gyroarray.cli.build_parser`),
+The arguments are read from the parser itself (:func:`gyroarray.cli.main.build_parser`),
 so an option added later is fuzzed without touching this file. Each option
 of a command draws from a pool of hostile values: numbers at the float
 extremes (``1e-300``, ``1e300``, ``5e-324``), negative, zero, huge counts,
@@ -32,7 +32,6 @@ import hashlib
 import os
 import resource
 import stat
-import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -72,7 +71,7 @@ SKIP = {"--help", "--version", "--plugin", "--max-memory", "--scheduler", "--pap
 
 
 def _parser_actions(command: str):
-    from gyroarray.cli import build_parser
+    from gyroarray.cli.main import build_parser
     parser = build_parser()
     sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
     return sub.choices[command]._actions

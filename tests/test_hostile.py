@@ -1,7 +1,7 @@
 """The hostile corpus of issue 17 (items 1-8 of it that are not output paths or geometry).
 
 Each case is generated into a temporary folder and run through
-``gyroarray.cli.main`` in this process under an alarm (processes only where
+``gyroarray.cli.main.main`` in this process under an alarm (processes only where
 the case needs one: HOME, a read-only install). The contract of
 :func:`hostile.assert_contract` holds for every case: exit 0 with finite
 numbers, or exit 2 with one line naming the file; no internal error, no
@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from hostile import (SIDECAR_3, assert_contract, axes_sidecar, finite_numbers, gzip_bomb, run_cli,
+from hostile import (SIDECAR_3, assert_contract, finite_numbers, gzip_bomb, run_cli,
                      write_measurement, write_scenario)
 
 N = 2500                       # diagnose needs 2048 samples of a static part
@@ -331,10 +331,10 @@ _READ_ONLY = """
 import os, sys
 real = os.access
 os.access = lambda p, m, **k: False if m & os.W_OK else real(p, m, **k)   # an install and HOME we cannot write
-import gyroarray._numba                       # where numba is first loaded, and its cache chosen
+import gyroarray.core._numba                       # where numba is first loaded, and its cache chosen
 os.access = real
 assert os.environ["NUMBA_CACHE_DIR"].startswith(os.environ["TMPDIR"]), os.environ.get("NUMBA_CACHE_DIR")
-from gyroarray.cli import main
+from gyroarray.cli.main import main
 sys.exit(main(sys.argv[1:]))
 """
 
@@ -344,7 +344,7 @@ def test_runs_without_a_writable_home_or_install(d, tmp_path):
     env = {k: v for k, v in os.environ.items() if not k.startswith("NUMBA_")}
     env.update(HOME="/nonexistent", TMPDIR=str(tmp_path), GYROARRAY_CACHE="")
     for code in (None, _READ_ONLY):
-        argv = ([sys.executable, "-m", "gyroarray.cli"] if code is None else [sys.executable, "-c", code])
+        argv = ([sys.executable, "-m", "gyroarray.cli.main"] if code is None else [sys.executable, "-c", code])
         p = subprocess.run(argv + ["allan", str(d / "plain.csv"), "--json"], env=env,
                            capture_output=True, text=True, timeout=300)
         assert p.returncode == 0, p.stderr
@@ -361,8 +361,8 @@ MPU = Path(__file__).resolve().parents[2] / "shared" / "measurements" / "real" /
 def test_mpu_duplicates_and_jitter_repaired_only_with_the_flag():
     """The MPU-6050 log (device stamps: 27 exact duplicate rows, ~1 ms jitter) as it comes."""
     import pandas as pd
-    from gyroarray.errors import InputError
-    from gyroarray.measurement import read_measurement
+    from gyroarray.core.errors import InputError
+    from gyroarray.core.measurement import read_measurement
     with pytest.raises(InputError) as info:
         read_measurement(MPU)
     assert "--repair" in info.value.message and "repair=True" not in info.value.message.replace(
@@ -384,8 +384,8 @@ def test_mpu_duplicates_and_jitter_repaired_only_with_the_flag():
 
 
 def test_conflicting_duplicates_are_refused_even_with_repair(tmp_path):
-    from gyroarray.errors import InputError
-    from gyroarray.measurement import read_measurement
+    from gyroarray.core.errors import InputError
+    from gyroarray.core.measurement import read_measurement
     t = np.arange(100) * 0.02
     g = np.zeros((100, 3)) + np.arange(100)[:, None] * 1e-3
     t2, g2 = np.insert(t, 11, t[10]), np.insert(g, 11, g[10] + 1.0, axis=0)

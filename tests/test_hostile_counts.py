@@ -1,7 +1,7 @@
 """Issue 28, items 4 and 5: counts and sizes checked before the work, physically plausible
 profiles, and an RRW-only scenario that still scores an estimator.
 
-Each case is a reproduction from the issue, run through ``gyroarray.cli.main`` in this
+Each case is a reproduction from the issue, run through ``gyroarray.cli.main.main`` in this
 process (:func:`hostile.run_cli`). A refusal is proved to come before the work: the
 function that would do the work is replaced by one that fails the test if it is reached,
 or the number of scenarios built is counted.
@@ -62,22 +62,22 @@ def _never(what):
     (["ladder", "{d}/plain.csv", "--max-steps", "100000", "--out", "{d}/l.html"], "--max-steps"),
 ])
 def test_a_huge_count_is_refused_before_any_work(d, monkeypatch, argv, option):
-    import gyroarray.chain
-    import gyroarray.measurement
-    import gyroarray.recommend
+    import gyroarray.chain.run
+    import gyroarray.core.measurement
+    import gyroarray.design.recommend
     import gyroarray.sim.scenario
-    monkeypatch.setattr(gyroarray.measurement, "read_measurement", _never("reading the record"))
+    monkeypatch.setattr(gyroarray.core.measurement, "read_measurement", _never("reading the record"))
     monkeypatch.setattr(gyroarray.sim.scenario, "load_scenario", _never("reading the scenario"))
-    monkeypatch.setattr(gyroarray.chain, "run_replicates", _never("the replicates"))
-    monkeypatch.setattr(gyroarray.recommend, "recommend", _never("the design search"))
+    monkeypatch.setattr(gyroarray.chain.run, "run_replicates", _never("the replicates"))
+    monkeypatch.setattr(gyroarray.design.recommend, "recommend", _never("the design search"))
     o = run_cli([a.format(d=d) for a in argv], timeout=60)
     err = refused(o, option, "is more than", f"give {option}", "or less")
     assert "argument" in err or option in err
 
 
 def test_band_runs_beyond_the_memory_budget_are_refused_before_the_band(d, monkeypatch):
-    import gyroarray.compare
-    monkeypatch.setattr(gyroarray.compare, "ModelComparison", _never("the model comparison"))
+    import gyroarray.chain.compare
+    monkeypatch.setattr(gyroarray.chain.compare, "ModelComparison", _never("the model comparison"))
     o = run_cli(["diagnose", d / "plain.csv", "--runs", "1000", "--max-memory", "4M"], timeout=60)
     refused(o, "--runs 1000", "of memory", "lower --runs", "--max-memory")
 
@@ -104,8 +104,8 @@ def test_allan_taus_count_above_the_distinct_ones_says_so(tmp_path):
 
 
 def test_allan_taus_list_longer_than_the_fit_takes_is_refused(d, monkeypatch):
-    import gyroarray.measurement
-    monkeypatch.setattr(gyroarray.measurement, "read_measurement", _never("reading the record"))
+    import gyroarray.core.measurement
+    monkeypatch.setattr(gyroarray.core.measurement, "read_measurement", _never("reading the record"))
     taus = ",".join(f"{DT * k:g}" for k in range(1, 80))
     refused(run_cli(["allan", d / "plain.csv", "--taus", taus]), "--taus", "lists 79 taus",
             "at most 64")
@@ -131,7 +131,7 @@ profile = "p003_static_1h"
 
 
 def _count_builds(monkeypatch) -> list:
-    from gyroarray.scenarios import sweep
+    from gyroarray.sweep import sweep
     calls = []
     real = sweep._build_scenario
 
@@ -167,7 +167,7 @@ def test_too_many_sweep_scenarios_are_refused_before_any_is_built(tmp_path, monk
 
 
 def test_a_valid_grid_still_expands_every_point(tmp_path):
-    from gyroarray.scenarios.sweep import load_sweep
+    from gyroarray.sweep.sweep import load_sweep
     path = tmp_path / "g.toml"
     path.write_text(SWEEP.format(top="", grid="rho_arw = [0.0, 0.1, 0.2]\nduration_s = [10.0, 20.0]"))
     assert len(load_sweep(path)) == 6

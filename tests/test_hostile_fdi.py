@@ -62,8 +62,8 @@ def d(tmp_path_factory):
 
 
 def _child(argv, *, limit_bytes: int | None = None, timeout: float = 300.0):
-    """``gyroarray.cli.main(argv)`` in a child Python (optionally under RLIMIT_AS)."""
-    code = ("import sys; from gyroarray.cli import main; "
+    """``gyroarray.cli.main.main(argv)`` in a child Python (optionally under RLIMIT_AS)."""
+    code = ("import sys; from gyroarray.cli.main import main; "
             f"sys.exit(main({[str(a) for a in argv]!r}))")
 
     def limit():
@@ -120,17 +120,17 @@ def test_minimum_length_holds_with_a_model_too(d):
 def test_native_calls_on_empty_systems_are_guarded():
     p = _python("""
         import numpy as np
-        from gyroarray.analysis.noise_fit import _whitened_nnls
+        from gyroarray.analysis.noise_fit import whitened_nnls
         from gyroarray.analysis.psd_fit import _linear_ml
-        from gyroarray.errors import InputError
+        from gyroarray.core.errors import InputError
         from gyroarray.estimators.fdi import _white_and_walk
         ident = lambda v: v
-        a, x = _whitened_nnls(np.zeros((0, 3)), np.zeros(0), ident)
+        a, x = whitened_nnls(np.zeros((0, 3)), np.zeros(0), ident)
         assert a.shape == (3,) and not a.any(), a
-        a, x = _whitened_nnls(np.zeros((4, 0)), np.ones(4), ident)
+        a, x = whitened_nnls(np.zeros((4, 0)), np.ones(4), ident)
         assert a.shape == (0,), a
         g = np.c_[np.ones(4), np.zeros(4)]                      # one term never contributes
-        a, _ = _whitened_nnls(g, 2 * np.ones(4), ident)
+        a, _ = whitened_nnls(g, 2 * np.ones(4), ident)
         assert np.allclose(a, [2.0, 0.0]), a
         c, ll = _linear_ml(np.zeros(0), np.zeros((0, 2)), 10.0)
         assert c.shape == (2,) and ll == 0.0, (c, ll)
@@ -151,13 +151,13 @@ def test_native_calls_on_empty_systems_are_guarded():
 def test_nnls_guards_leave_valid_fits_unchanged():
     from scipy.optimize import nnls
 
-    from gyroarray.analysis.noise_fit import _whitened_nnls
+    from gyroarray.analysis.noise_fit import whitened_nnls
     rng = np.random.default_rng(3)
     g = rng.random((12, 3)) + 0.1
     y = g @ np.array([1.0, 0.0, 2.5]) + 0.01 * rng.standard_normal(12)
     scale = np.linalg.norm(g, axis=0)
     want = nnls(g / scale, y)[0] / scale
-    got, _ = _whitened_nnls(g, y, lambda v: v)
+    got, _ = whitened_nnls(g, y, lambda v: v)
     assert np.array_equal(got, want)
 
 
@@ -254,10 +254,10 @@ def test_model_with_an_unrepresentable_arw_names_the_model(d):
 
 
 def test_detector_refuses_an_impossible_rate_outside_the_cli():
-    from gyroarray.errors import InputError
+    from gyroarray.core.errors import InputError
     from gyroarray.estimators.fdi import FaultDetector
-    from gyroarray.layout import Layout
-    from gyroarray.sim.model import NoiseModel
+    from gyroarray.core.layout import Layout
+    from gyroarray.effects.model import NoiseModel
     lay = Layout.from_axes(_axes(5))
     m = NoiseModel.from_toml({"effects": [{"effect": "arw", "n_deg_rt_h": 0.1}]})
     for far in (1e-300, 1e300):

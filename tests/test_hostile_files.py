@@ -4,7 +4,7 @@
   folder, a FIFO, an input of the command, a file that is not a checksum
   list, a read-only ``--out``, a full disk: one-line refusal (exit 2), the
   user's file untouched, nothing corrupt kept;
-* JSON read through :func:`gyroarray.limits.read_json`: ``/dev/zero``, a FIFO,
+* JSON read through :func:`gyroarray.core.limits.read_json`: ``/dev/zero``, a FIFO,
   a JSON list, 100,000-deep nesting: one-line refusal naming the file, fast,
   never blocking;
 * output files get ``0o666`` less the umask (022 and 077);
@@ -27,9 +27,9 @@ from pathlib import Path
 
 import pytest
 
-from gyroarray import outputs
-from gyroarray.errors import InputError
-from gyroarray.limits import MAX_JSON_DEPTH, read_json
+from gyroarray.core import outputs
+from gyroarray.core.errors import InputError
+from gyroarray.core.limits import MAX_JSON_DEPTH, read_json
 from hostile import assert_contract, run_cli
 
 TINY = """\
@@ -114,13 +114,13 @@ def test_sweep_refuses_a_checksum_file_that_is_not_one(tiny, tmp_path):
 def test_a_checksum_file_torn_by_a_crash_is_still_ours(tmp_path):
     """Resuming after a crash: a torn record (alone, or glued to the next one by an older
     gyroarray) does not make the folder refused."""
-    from gyroarray.scenarios.runner import _check_out
+    from gyroarray.sweep.runner import check_out
     rec = "ab" * 32 + " 12 s1_n4-0123.parquet"
     (tmp_path / "rows.sha256").write_text(f"{rec}\n{rec[:40]}\n{rec[:70]}{rec}\n{rec[:20]}")
-    _check_out(tmp_path, [])
+    check_out(tmp_path, [])
     (tmp_path / "rows.sha256").write_text(f"{rec}\nname = 'tiny'\n")
     with pytest.raises(InputError, match="not a gyroarray checksum file"):
-        _check_out(tmp_path, [])
+        check_out(tmp_path, [])
 
 
 @pytest.mark.parametrize("kind", ["folder", "fifo"])
@@ -176,11 +176,11 @@ def test_rows_written_on_a_full_disk_leave_no_partial_line(tmp_path, monkeypatch
     """The result file and its checksum line: a write that fails keeps nothing corrupt."""
     import pandas as pd
 
-    from gyroarray.scenarios.runner import _write_rows, load_results
+    from gyroarray.sweep.runner import write_rows, load_results
     rows = tmp_path / "out" / "rows"
     rows.mkdir(parents=True)
     df = pd.DataFrame({"scenario_id": ["a"], "estimator": ["ols"], "axis": ["x"], "value": [1.0]})
-    _write_rows(df, rows, "a")
+    write_rows(df, rows, "a")
     before = (tmp_path / "out" / "rows.sha256").read_bytes()
     real = os.write
 
@@ -190,7 +190,7 @@ def test_rows_written_on_a_full_disk_leave_no_partial_line(tmp_path, monkeypatch
         raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
     monkeypatch.setattr(os, "write", half_then_full)
     with pytest.raises(InputError, match="No space left"):
-        _write_rows(df, rows, "b")
+        write_rows(df, rows, "b")
     monkeypatch.undo()
     assert not (rows / "b.parquet").exists() and _tmp_files(tmp_path) == []
     assert (tmp_path / "out" / "rows.sha256").read_bytes() == before
@@ -317,8 +317,8 @@ def test_report_md_figure_clash_is_refused_up_front(tmp_path):
 
 def test_report_write_leaves_no_html_when_a_figure_clashes(tmp_path):
     """A figure that appears after the checks: refused, and the HTML is not left behind."""
-    from gyroarray.reports.report import _Doc
-    doc = _Doc("t")
+    from gyroarray.reports.report import Doc
+    doc = Doc("t")
     doc.figure("gdop", b"\x89PNG fake", "caption")
     (tmp_path / "r_figures").mkdir()
     (tmp_path / "r_figures" / "gdop.png").write_bytes(b"theirs")
@@ -340,7 +340,7 @@ def test_plotting_writes_nothing_in_home(tmp_path):
     env = {k: v for k, v in os.environ.items()
            if not k.startswith(("MPL", "XDG_")) and k != "GYROARRAY_CACHE"}
     env.update(HOME=str(home), TMPDIR=str(tmp_path))
-    p = subprocess.run(["/bin/sh", "-c", f'umask 077; exec "{sys.executable}" -m gyroarray.cli '
+    p = subprocess.run(["/bin/sh", "-c", f'umask 077; exec "{sys.executable}" -m gyroarray.cli.main '
                         f'design --plot "{tmp_path / "p.png"}"'], env=env, capture_output=True,
                        text=True, timeout=300)
     assert p.returncode == 0, p.stderr
@@ -376,7 +376,7 @@ def test_a_name_too_long_is_refused(tmp_path):
     o = run_cli(["design", "--plot", tmp_path / ("y" * 300 + ".png")])
     assert_contract(o)
     assert o.code == 2 and "too long" in o.err, o.err
-    o = run_cli(["simulate", Path(__file__).parents[1] / "scenarios" / "examples" / "tetra_swing.toml",
+    o = run_cli(["simulate", Path(__file__).parents[1] / "src" / "gyroarray" / "data" / "scenarios" / "examples" / "tetra_swing.toml",
                  "--out", tmp_path / "x" / ("y" * 300)])
     assert_contract(o)
     assert o.code == 2 and "too long" in o.err, o.err

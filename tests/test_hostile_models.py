@@ -1,7 +1,7 @@
 """Issue 28, items 6 and 8: models the record cannot carry, extreme arguments and model values,
 refusals that name no file or run over several lines.
 
-Every case goes through ``gyroarray.cli.main`` (:func:`hostile.run_cli`) and must keep the
+Every case goes through ``gyroarray.cli.main.main`` (:func:`hostile.run_cli`) and must keep the
 contract of :func:`hostile.assert_contract`: exit 0 with finite numbers, or exit 2 with one
 stderr line naming the file or the argument; never an internal error. The refusals of a model
 come before any work, so these cases take milliseconds each (the few right answers seconds).
@@ -18,7 +18,7 @@ from hostile import SIDECAR_3, assert_contract, finite_numbers, run_cli, write_m
 
 from gyroarray.effects import REGISTRY
 from gyroarray.effects.protocol import RECORD_NEEDS
-from gyroarray.errors import InputError, one_line
+from gyroarray.core.errors import InputError, one_line
 
 N = 3000
 RATE = 50.0
@@ -243,7 +243,7 @@ def test_a_plugin_exception_with_newlines_is_one_line(d, tmp_path):
 
 
 def test_an_internal_error_with_newlines_is_one_line(d, monkeypatch):
-    import gyroarray.cli as cli
+    import gyroarray.cli.main as cli
 
     def boom(args):
         raise RuntimeError("line one\nline two")

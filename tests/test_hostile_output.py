@@ -12,9 +12,6 @@
 
 from __future__ import annotations
 
-import gzip
-import os
-import resource
 import socket
 import subprocess
 import sys
@@ -41,7 +38,7 @@ def d(tmp_path_factory):
 
 
 def _cli(argv, **kwargs) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "gyroarray.cli", *map(str, argv)],
+    return subprocess.run([sys.executable, "-m", "gyroarray.cli.main", *map(str, argv)],
                           text=True, timeout=600, **kwargs)
 
 
@@ -55,7 +52,7 @@ def _one_line(err: str, start: str) -> None:
 
 def test_stdout_closed_before_the_start(d):
     """``gyroarray allan X >&-``: refused before the work, one line, exit 2."""
-    p = subprocess.run(["bash", "-c", 'exec "$@" >&-', "_", sys.executable, "-m", "gyroarray.cli",
+    p = subprocess.run(["bash", "-c", 'exec "$@" >&-', "_", sys.executable, "-m", "gyroarray.cli.main",
                         "allan", str(d / "plain.csv")], stderr=subprocess.PIPE, text=True, timeout=600)
     assert p.returncode == 2, p.stderr
     _one_line(p.stderr, "gyroarray: cannot write the output to standard output: it is closed")
@@ -75,7 +72,7 @@ def test_stdout_full(d, json_out):
 def test_stdout_to_a_closed_pipe_stays_quiet(d):
     """A reader that goes away (``| head -0``) is not an error: exit 0, nothing on stderr."""
     p = subprocess.run(["bash", "-c", '"$@" | true; exit "${PIPESTATUS[0]}"', "_", sys.executable, "-m",
-                        "gyroarray.cli", "allan", str(d / "plain.csv")], stderr=subprocess.PIPE,
+                        "gyroarray.cli.main", "allan", str(d / "plain.csv")], stderr=subprocess.PIPE,
                        text=True, timeout=600)
     assert p.returncode == 0 and p.stderr == "", p.stderr
 
@@ -208,7 +205,7 @@ print(p.returncode, resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss * 102
 
 def _peak_rss(argv) -> tuple[int, int, str]:
     """Exit code, peak RSS [bytes] and stderr of ``gyroarray ARGV`` in a fresh process."""
-    p = subprocess.run([sys.executable, "-c", _PEAK, sys.executable, "-m", "gyroarray.cli",
+    p = subprocess.run([sys.executable, "-c", _PEAK, sys.executable, "-m", "gyroarray.cli.main",
                         *map(str, argv)], capture_output=True, text=True, timeout=1500)
     code, peak = map(int, p.stdout.split())
     return code, peak, p.stderr

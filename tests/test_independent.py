@@ -21,8 +21,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 
 import _indep_gen as gen  # noqa: E402
 
-from gyroarray.compare import ModelComparison  # noqa: E402
-from gyroarray.measurement import read_measurement  # noqa: E402
+from gyroarray.chain.compare import ModelComparison  # noqa: E402
+from gyroarray.core.measurement import read_measurement  # noqa: E402
 
 
 def _analysis(effect: str, seed: int, tmp_path):

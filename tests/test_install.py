@@ -22,8 +22,7 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 # What pyproject.toml builds the package from (its [tool.setuptools.package-dir]).
-SOURCES = ("pyproject.toml", "README.md", "gyroarray", "sim", "analysis", "effects", "estimators",
-           "scenarios", "reports")
+SOURCES = ("pyproject.toml", "README.md", "src")
 
 pytestmark = pytest.mark.skipif(
     importlib.util.find_spec("setuptools") is None or importlib.util.find_spec("wheel") is None,
@@ -63,9 +62,9 @@ def _run(installed, *args):
 
 def test_every_module_comes_from_the_install(installed):
     site, _ = installed
-    code = ("import sys, gyroarray.cli, gyroarray.reports.design_plots, gyroarray.analysis.davar, "
-            "gyroarray.estimators, gyroarray.sim.scenario, gyroarray.scenarios.runner, "
-            "gyroarray.effects, gyroarray.check; "
+    code = ("import sys, gyroarray.cli.main, gyroarray.reports.design_plots, gyroarray.analysis.davar, "
+            "gyroarray.estimators, gyroarray.sim.scenario, gyroarray.sweep.runner, "
+            "gyroarray.effects, gyroarray.chain.check; "
             "print('\\n'.join(sorted(getattr(m, '__file__', None) or '' for n, m in "
             "list(sys.modules.items()) if n == 'gyroarray' or n.startswith('gyroarray.'))))")
     files = _run(installed, "-c", code).split()
@@ -76,15 +75,15 @@ def test_every_module_comes_from_the_install(installed):
 
 def test_package_data_is_installed(installed):
     site, _ = installed
-    for rel in ("data/paper003_tables.toml", "scenarios/thresholds.toml",
-                "scenarios/paper_values.toml", "scenarios/examples/tetra_swing.toml"):
+    for rel in ("data/paper003_tables.toml", "data/scenarios/thresholds.toml",
+                "data/scenarios/paper_values.toml", "data/scenarios/examples/tetra_swing.toml"):
         assert (site / "gyroarray" / rel).is_file(), rel
 
 
 def test_gdop_matches_closed_form(installed):
     # Scheme 1 puts all N axes on one cone, equally spaced in azimuth (N >= 3), so
     # H'H = N diag(sin^2(a)/2, sin^2(a)/2, cos^2(a)) and GDOP^2 = 4/(N sin^2 a) + 1/(N cos^2 a).
-    out = json.loads(_run(installed, "-m", "gyroarray.cli", "gdop", "--scheme", "1", "--n", "4",
+    out = json.loads(_run(installed, "-m", "gyroarray.cli.main", "gdop", "--scheme", "1", "--n", "4",
                           "--alpha", "60", "--json"))
     a = math.radians(60.0)
     assert out["gdop"] == pytest.approx(math.sqrt(4 / (4 * math.sin(a) ** 2)
@@ -92,7 +91,7 @@ def test_gdop_matches_closed_form(installed):
 
 
 def test_paper_tables_read_the_packaged_data(installed):
-    out = json.loads(_run(installed, "-m", "gyroarray.cli", "design", "--paper-tables", "--json"))
+    out = json.loads(_run(installed, "-m", "gyroarray.cli.main", "design", "--paper-tables", "--json"))
     cells = {c["label"]: c for c in out["paper_tables"]}
     cell = cells["Scheme 1, N=8, alpha=60 deg, rho=0"]
     # the closed form above with N = 8, a = 60 deg: sqrt(7/6); the paper prints 1.0801

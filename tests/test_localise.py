@@ -23,13 +23,13 @@ import pytest
 from scipy import signal, stats
 
 from gyroarray.analysis.allan import averaging_factors, confidence_interval, edf
-from gyroarray.analysis.localise import (baseline_psd, chi2_z, critical_z, localise,
+from gyroarray.chain.localise import (baseline_psd, chi2_z, critical_z, localise,
                                          residual_psd)
-from gyroarray.layout import Layout
+from gyroarray.core.layout import Layout
 from gyroarray.sim.effects import simulate_readings
-from gyroarray.sim.model import NoiseModel
-from gyroarray.sim.sensor import bandwidth_sos
-from gyroarray.units import arw_deg_rt_h_to_rad_rt_s, deg_s_to_rad_s, rrw_deg_h_rt_h_to_rad_s_rt_s
+from gyroarray.effects.model import NoiseModel
+from gyroarray.core.sensor import bandwidth_sos
+from gyroarray.core.units import arw_deg_rt_h_to_rad_rt_s, deg_s_to_rad_s, rrw_deg_h_rt_h_to_rad_s_rt_s
 from swings import two_swings
 
 FS = 100.0
@@ -199,7 +199,7 @@ def test_baseline_psd_is_what_welch_sees_of_arw_and_rrw():
 
 
 def test_bad_inputs_are_refused():
-    from gyroarray.errors import InputError
+    from gyroarray.core.errors import InputError
     e = np.zeros((1000, 4))
     with pytest.raises(InputError, match="n >= 512"):
         localise(np.zeros((100, 4)), DT)
@@ -210,7 +210,7 @@ def test_bad_inputs_are_refused():
 
 
 def test_bandwidth_gain2_is_sosfreqz_of_the_library_filter():
-    from gyroarray.analysis.localise import bandwidth_gain2
+    from gyroarray.chain.localise import bandwidth_gain2
     f = np.linspace(0.01, 49.9, 997)
     for fc, order in ((0.5, 1), (8.0, 2), (30.0, 1), (45.0, 2)):
         _, h = signal.sosfreqz(bandwidth_sos(fc, order, DT), worN=f, fs=FS)
@@ -234,7 +234,7 @@ def test_a_stuck_output_is_a_finite_finding_named_stuck():
     import json
     import warnings
 
-    from gyroarray.analysis.localise import time_windows
+    from gyroarray.chain.localise import time_windows
 
     rng = np.random.default_rng(4)
     dt, n = 0.02, 60_000

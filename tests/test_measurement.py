@@ -15,10 +15,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gyroarray.errors import InputError
-from gyroarray.layout import Layout
-from gyroarray.measurement import Measurement, Site, read_measurement, write_measurement
-from gyroarray.units import deg_to_rad, rad_s_to_deg_s
+from gyroarray.core.errors import InputError
+from gyroarray.core.layout import Layout
+from gyroarray.core.measurement import Measurement, Site, read_measurement, write_measurement
+from gyroarray.core.units import deg_to_rad, rad_s_to_deg_s
 
 SHARED = Path(__file__).resolve().parents[1].parent / "shared"
 MEASUREMENTS = SHARED / "measurements"

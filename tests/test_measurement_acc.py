@@ -14,9 +14,9 @@ import math
 import numpy as np
 import pytest
 
-from gyroarray.errors import InputError
-from gyroarray.layout import Layout
-from gyroarray.measurement import Measurement, read_measurement, write_measurement
+from gyroarray.core.errors import InputError
+from gyroarray.core.layout import Layout
+from gyroarray.core.measurement import Measurement, read_measurement, write_measurement
 from gyroarray.sim.scenario import load_scenario, simulate, simulate_to_files
 
 CONE4 = Layout.conical(1, 4, math.acos(1 / math.sqrt(3)))

@@ -14,8 +14,8 @@ from pathlib import Path
 
 import pytest
 
-from gyroarray.errors import InputError
-from gyroarray.measurement import read_measurement
+from gyroarray.core.errors import InputError
+from gyroarray.core.measurement import read_measurement
 
 _HERE = Path(__file__).resolve().parent
 _spec = importlib.util.spec_from_file_location("bad_corpus", _HERE / "bad_corpus.py")

@@ -24,12 +24,12 @@ from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-from gyroarray.errors import InputError
-from gyroarray.layout import Layout
-from gyroarray.limits import MAX_RATE_DEG_S
-from gyroarray.measurement import (GAP_FACTOR, Measurement, Site, read_measurement,
+from gyroarray.core.errors import InputError
+from gyroarray.core.layout import Layout
+from gyroarray.core.limits import MAX_RATE_DEG_S
+from gyroarray.core.measurement import (GAP_FACTOR, Measurement, Site, read_measurement,
                                    write_measurement)
-from gyroarray.units import deg_to_rad
+from gyroarray.core.units import deg_to_rad
 
 CI = settings(max_examples=120, deadline=None, derandomize=True, database=None,
               suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])

@@ -1,4 +1,4 @@
-"""Scoring metrics (analysis/metrics.py) and the model chain's `gyroarray run`."""
+"""Scoring metrics (src/gyroarray/analysis/metrics.py) and the model chain's `gyroarray run`."""
 
 from __future__ import annotations
 
@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from gyroarray.analysis.metrics import attenuation_and_lag, noise_density, sine_fit
-from gyroarray.cli import main
-from gyroarray.errors import InputError
+from gyroarray.cli.main import main
+from gyroarray.core.errors import InputError
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -56,7 +56,7 @@ def test_noise_density_of_white_noise():
 @pytest.mark.slow
 def test_run_cli_on_the_paper003_swing(capsys, tmp_path, monkeypatch):
     monkeypatch.setenv("GYROARRAY_CACHE", str(tmp_path))
-    code = main(["run", str(ROOT / "scenarios" / "paper003" / "swing_s1_n6.toml"), "--json"])
+    code = main(["run", str(ROOT / "src" / "gyroarray" / "data" / "scenarios" / "paper003" / "swing_s1_n6.toml"), "--json"])
     out, err = capsys.readouterr()
     assert code == 0, err
     res = json.loads(out)
@@ -88,8 +88,8 @@ def test_run_cli_on_the_paper003_swing(capsys, tmp_path, monkeypatch):
 
 def test_score_ignores_a_swing_the_run_was_cut_before():
     # the swing segment starts at 500 s but the run ends at 60 s: no attenuation, no crash
-    from gyroarray.chain import score
-    from gyroarray.layout import Layout
+    from gyroarray.chain.run import score
+    from gyroarray.core.layout import Layout
     rng = np.random.default_rng(2)
     n, dt = 6000, 0.01
     t = np.arange(n) * dt

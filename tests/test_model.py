@@ -4,15 +4,15 @@ and the registry against ``shared/spec/effects.md`` (the contract)."""
 from __future__ import annotations
 
 import re
-from gyroarray.tomlio import tomllib
+from gyroarray.core.tomlio import tomllib
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from gyroarray.errors import InputError
+from gyroarray.core.errors import InputError
 from gyroarray.sim.effects import REGISTRY, effect_names, get_effect
-from gyroarray.sim.model import ModelEntry, NoiseModel
+from gyroarray.effects.model import ModelEntry, NoiseModel
 
 SPEC = Path(__file__).resolve().parents[2] / "shared" / "spec" / "effects.md"
 
@@ -299,7 +299,7 @@ def test_registry_lists_exactly_the_spec_effects_and_parameters():
 
 
 def test_registry_is_read_only_and_every_effect_has_both_sides():
-    from gyroarray.sim.protocol import Effect
+    from gyroarray.effects.protocol import Effect
     with pytest.raises(TypeError):
         REGISTRY["new"] = None
     for e in REGISTRY.values():

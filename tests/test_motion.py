@@ -18,12 +18,12 @@ import pytest
 from scipy.ndimage import maximum_filter1d
 
 from gyroarray.analysis.motion import still_mask
-from gyroarray.errors import InputError
-from gyroarray.layout import Layout
-from gyroarray.measurement import read_measurement
+from gyroarray.core.errors import InputError
+from gyroarray.core.layout import Layout
+from gyroarray.core.measurement import read_measurement
 from gyroarray.sim.lab import lab_run
-from gyroarray.sim.model import ModelEntry, NoiseModel
-from gyroarray.units import RAD_PER_DEG
+from gyroarray.effects.model import ModelEntry, NoiseModel
+from gyroarray.core.units import RAD_PER_DEG
 
 REAL = Path(__file__).resolve().parents[2] / "shared" / "measurements" / "real"
 needs_real = pytest.mark.skipif(not REAL.exists(), reason="shared/measurements/real not present")

@@ -19,12 +19,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gyroarray.analysis.outliers import clean_spikes, find_spikes
-from gyroarray.compare import ModelComparison
-from gyroarray.measurement import read_measurement
+from gyroarray.effects.fits.outliers import clean_spikes, find_spikes
+from gyroarray.chain.compare import ModelComparison
+from gyroarray.core.measurement import read_measurement
 from gyroarray.sim.effects import simulate_readings
-from gyroarray.sim.model import NoiseModel
-from gyroarray.layout import Layout
+from gyroarray.effects.model import NoiseModel
+from gyroarray.core.layout import Layout
 
 XSENS = Path(__file__).resolve().parents[2] / "shared" / "measurements" / "real" / "xsens_mtig_outliers.csv.gz"
 

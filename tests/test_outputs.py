@@ -2,7 +2,7 @@
 
 Each destructive case of the robustness issue is a test here, and each
 checks the user's file by its hash before and after. The CLI is run
-in-process (:func:`gyroarray.cli.main`): the refusals come before any
+in-process (:func:`gyroarray.cli.main.main`): the refusals come before any
 analysis, so these tests take milliseconds each.
 """
 
@@ -16,13 +16,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gyroarray import outputs
-from gyroarray.cli import main
-from gyroarray.errors import InputError
-from gyroarray.layout import Layout
-from gyroarray.measurement import Measurement, write_measurement
+from gyroarray.core import outputs
+from gyroarray.cli.main import main
+from gyroarray.core.errors import InputError
+from gyroarray.core.layout import Layout
+from gyroarray.core.measurement import Measurement, write_measurement
 
-EXAMPLE = Path(__file__).resolve().parents[1] / "scenarios" / "examples" / "tetra_swing.toml"
+EXAMPLE = Path(__file__).resolve().parents[1] / "src" / "gyroarray" / "data" / "scenarios" / "examples" / "tetra_swing.toml"
 
 
 def sha(path) -> str:

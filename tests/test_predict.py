@@ -19,16 +19,16 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from gyroarray import units
-from gyroarray.chain import rms_ci
-from gyroarray.errors import InputError
+from gyroarray.core import units
+from gyroarray.analysis.replicates import rms_ci
+from gyroarray.core.errors import InputError
 from gyroarray.estimators import get_estimator
 from gyroarray.estimators._kalman import state_model, steady_state
 from gyroarray.estimators.kf_array import rate_psd
-from gyroarray.layout import Layout
-from gyroarray.predict import (Swing, channel_filter, noise_sources, predict,
+from gyroarray.core.layout import Layout
+from gyroarray.design.predict import (Swing, channel_filter, noise_sources, predict,
                                swing_truth, window_sums)
-from gyroarray.sim.model import ModelEntry, NoiseModel
+from gyroarray.effects.model import ModelEntry, NoiseModel
 from replicates import predictions_outside
 
 DT = 0.01
@@ -191,7 +191,7 @@ def test_prediction_inside_the_simulated_replicates():
     Satterthwaite ν of the RMS and 1σ rests on the runs' own variance of x², which 30 skewed
     values (skewness ≈ 2 when random-walk drift dominates) underestimate too often.
     """
-    from gyroarray.design import optimal_alpha
+    from gyroarray.core.gdop import optimal_alpha
     reps, n = 100, 2000
     cases = []
     for scheme, nn, _, rho, motion in _QUICK:

@@ -16,14 +16,14 @@ import pytest
 from scipy.integrate import solve_ivp
 from scipy.spatial.transform import Rotation
 
-from gyroarray.errors import InputError
+from gyroarray.core.errors import InputError
 from gyroarray.sim.profiles import (ConstantRate, MultiPosition, Orientation, Profile, RateCSV,
                                     RateSteps, Sinusoid, Static, body_jacobian, body_rate,
                                     gimbal_for_up_axis, gimbal_quaternion, gimbal_rotation,
                                     joint_rates, load_profile, up_vector)
-from gyroarray.units import deg_s_to_rad_s, deg_to_rad
+from gyroarray.core.units import deg_s_to_rad_s, deg_to_rad
 
-PROFILES = Path(__file__).resolve().parents[1] / "scenarios" / "profiles"
+PROFILES = Path(__file__).resolve().parents[1] / "src" / "gyroarray" / "data" / "scenarios" / "profiles"
 RNG_SEED = 20240611
 
 

@@ -8,7 +8,7 @@ import math
 import numpy as np
 
 from gyroarray.analysis import psd_fit
-from gyroarray.units import arw_deg_rt_h_to_rad_rt_s, rrw_deg_h_rt_h_to_rad_s_rt_s
+from gyroarray.core.units import arw_deg_rt_h_to_rad_rt_s, rrw_deg_h_rt_h_to_rad_s_rt_s
 
 DT = 0.02
 
@@ -44,11 +44,11 @@ def test_filter_score_is_calibrated_without_a_filter():
 
 
 def test_dispersion_is_one_when_the_model_holds_the_spectrum():
-    """White noise through the spec's filter (scipy's sosfilt, gyroarray.sensor), 20 records of
+    """White noise through the spec's filter (scipy's sosfilt, gyroarray.core.sensor), 20 records of
     2e5 samples per setting: the robust dispersion of the fit's Pearson residuals averages 1
     (measured 1.00–1.02; its sd over records is about 0.12, so the mean's 3.3 standard errors
     are ±0.09), so the cut-off's σ is the profile's own on such records."""
-    from gyroarray.sensor import bandwidth_filter
+    from gyroarray.core.sensor import bandwidth_filter
     for fc, order, dt in ((20.0, 2, 0.01), (3.0, 1, 0.02)):
         d = [psd_fit.fit_psd(bandwidth_filter(np.random.default_rng([5, s]).standard_normal(200_000),
                                                dt, fc, order), dt).dispersion for s in range(20)]

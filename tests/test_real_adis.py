@@ -53,7 +53,7 @@ def test_adis_roll_off_agrees_with_a_plain_welch_ratio():
     from scipy import signal
 
     from gyroarray.analysis.psd_fit import fit_psd
-    from gyroarray.measurement import read_measurement
+    from gyroarray.core.measurement import read_measurement
 
     m = read_measurement(ADIS)
     for g in (0, 1):
@@ -77,7 +77,7 @@ def test_adis_cut_off_sigma_holds_up_on_the_other_half():
     σ scaled by √dispersion (quasi-likelihood) the halves are within 3σ of each other (2.6).
     The held-out half is the outside check."""
     from gyroarray.analysis.psd_fit import fit_psd
-    from gyroarray.measurement import read_measurement
+    from gyroarray.core.measurement import read_measurement
 
     x = read_measurement(ADIS).gyro_rad_s[:, 2]
     dt = 0.01
@@ -105,8 +105,8 @@ def test_adis_keeps_a_flicker_floor_once_the_filter_hump_is_fitted(adis_adev):
     where the model misses the short τ by χ² 1394 for 15 dof, read the floor as
     K = 186 deg/h/√h, and the calibrated model then lay 40 % below the ADEV at
     164–328 s on gyro 1.)"""
-    from gyroarray.compare import ModelComparison
-    from gyroarray.measurement import read_measurement
+    from gyroarray.chain.compare import ModelComparison
+    from gyroarray.core.measurement import read_measurement
 
     comp = ModelComparison(read_measurement(ADIS), n_runs=10)
     _, after = comp.fit([("gauss_markov", 1), ("gauss_markov", 2)])
@@ -138,7 +138,7 @@ def adis_adev():
     [(τ [s], ADEV [deg/h])]."""
     import allantools
 
-    from gyroarray.measurement import read_measurement
+    from gyroarray.core.measurement import read_measurement
     m = read_measurement(ADIS)
     out = []
     for g in (1, 2, 3):
@@ -151,8 +151,8 @@ def adis_adev():
 
 @pytest.fixture(scope="module")
 def adis_analysis():
-    from gyroarray.compare import ModelComparison
-    from gyroarray.measurement import read_measurement
+    from gyroarray.chain.compare import ModelComparison
+    from gyroarray.core.measurement import read_measurement
     m = read_measurement(ADIS)
     return m, ModelComparison(m, n_runs=3).analyse()
 

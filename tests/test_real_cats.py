@@ -14,9 +14,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gyroarray.compare import ModelComparison
-from gyroarray.measurement import read_measurement
-from gyroarray.units import rad_s_to_deg_h
+from gyroarray.chain.compare import ModelComparison
+from gyroarray.core.measurement import read_measurement
+from gyroarray.core.units import rad_s_to_deg_h
 
 CATS = Path(__file__).resolve().parents[2] / "shared" / "measurements" / "real" / "cats_thermal_p1.csv.gz"
 pytestmark = pytest.mark.skipif(not CATS.exists(), reason="needs ../shared/measurements/real")

@@ -34,8 +34,8 @@ def test_mimu_motion_is_cut_out_and_the_still_parts_diagnosed(cli):
 
 @pytest.mark.slow
 def test_mimu_axes_are_heterogeneous():
-    from gyroarray.compare import ModelComparison
-    from gyroarray.measurement import read_measurement
+    from gyroarray.chain.compare import ModelComparison
+    from gyroarray.core.measurement import read_measurement
 
     comp = ModelComparison(read_measurement(MIMU), n_runs=5)
     a = comp.analyse()

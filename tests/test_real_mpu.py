@@ -16,9 +16,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gyroarray.compare import ModelComparison
-from gyroarray.errors import InputError
-from gyroarray.measurement import read_measurement
+from gyroarray.chain.compare import ModelComparison
+from gyroarray.core.errors import InputError
+from gyroarray.core.measurement import read_measurement
 
 MPU = Path(__file__).resolve().parents[2] / "shared" / "measurements" / "real" / "mpu6050_yaw_medium_raw.csv.gz"
 pytestmark = pytest.mark.skipif(not MPU.exists(), reason="needs ../shared/measurements/real")
@@ -96,7 +96,7 @@ def test_a_gauss_markov_hump_with_no_positive_amplitude_is_not_significant(analy
     significant (its z is the refitted amplitude's Wald ratio, <= 0), and it says why. In the
     analysis itself the stochastic tests of this record no longer read that square wave (the
     tilts' fits are taken out first), and every significant hump there has σ > 0."""
-    from gyroarray.analysis.stochastic_fit import fit_gyro_noise
+    from gyroarray.effects.fits.stochastic_fit import fit_gyro_noise
     m, a = analysis
     for g in (1, 2):
         gm = next(f for f in fit_gyro_noise(a.residual_rad_s[:, g - 1], m.dt_s, g) if f.effect == "gauss_markov")

@@ -14,12 +14,11 @@ import math
 import numpy as np
 import pytest
 
-from gyroarray import units
-from gyroarray.cli import main
-from gyroarray.design import fault_tolerance, gdop_robustness, minmax_alpha, optimal_alpha
-from gyroarray.layout import Layout
-from gyroarray.predict import Swing
-from gyroarray.recommend import (DesignSpace, GyroNoise, _generic_design, _generic_or_fast,
+from gyroarray.cli.main import main
+from gyroarray.core.gdop import fault_tolerance, gdop_robustness, minmax_alpha, optimal_alpha
+from gyroarray.core.layout import Layout
+from gyroarray.design.predict import Swing
+from gyroarray.design.recommend import (DesignSpace, GyroNoise, generic_design, generic_or_fast,
                                  equivalent_groups, recommend)
 
 
@@ -93,7 +92,7 @@ def test_robustness_over_rho_matches_the_issue():
     # min-max: the worst GDOP over the range at the chosen angle is the smallest worst case
     mm = minmax_alpha(2, 8, [0.0, 0.5])
     grid = np.radians(np.arange(1.0, 179.0, 0.5))
-    from gyroarray.design import gdop_vs_alpha
+    from gyroarray.core.gdop import gdop_vs_alpha
     worst = np.maximum(gdop_vs_alpha(2, 8, grid, 0.0), gdop_vs_alpha(2, 8, grid, 0.5))
     assert mm.gdop <= worst.min() + 1e-9
 
@@ -106,8 +105,8 @@ def test_fast_path_equals_the_full_predictor():
     for scheme, n, alpha in ((1, 6, 0.9), (2, 5, 1.2)):
         for est, bw in (("kf_array", 3.0), ("kf_single", 7.0), ("gls", 2.0), ("ols", None),
                         ("naive", None)):
-            fast = _generic_or_fast(scheme, n, est, alpha, bw, 0.3, g, space)
-            full = _generic_design(scheme, n, est, alpha, bw, 0.3, space, g, 0)
+            fast = generic_or_fast(scheme, n, est, alpha, bw, 0.3, g, space)
+            full = generic_design(scheme, n, est, alpha, bw, 0.3, space, g, 0)
             for ax in "xyz":
                 for k, v in full["predicted"][ax].items():
                     if v is not None:
@@ -222,7 +221,7 @@ def test_run_refuses_an_unobservable_layout(tmp_path, capsys):
 
 
 def test_paired_sweep_gives_every_design_the_same_seed(tmp_path):
-    from gyroarray.scenarios.sweep import load_sweep
+    from gyroarray.sweep.sweep import load_sweep
     text = ('name = "p"\nseed = 3\npaired = true\nreplicates = 2\n'
             'base = "paper003/static_s1_n6_rhob_0"\n[grid]\nn_gyros = [4, 6]\nscheme = [1, 2]\n'
             'duration_s = [10.0]\n')

@@ -16,12 +16,12 @@ import numpy as np
 import pytest
 
 from gyroarray.analysis.reference_noise import RATIO, reference_own_noise
-from gyroarray.compare import ModelComparison
-from gyroarray.layout import Layout
-from gyroarray.measurement import read_measurement
+from gyroarray.chain.compare import ModelComparison
+from gyroarray.core.layout import Layout
+from gyroarray.core.measurement import read_measurement
 from gyroarray.sim.effects import simulate_readings
-from gyroarray.sim.model import NoiseModel
-from gyroarray.units import deg_s_to_rad_s, deg_to_rad
+from gyroarray.effects.model import NoiseModel
+from gyroarray.core.units import deg_s_to_rad_s, deg_to_rad
 
 SHARED = Path(__file__).resolve().parents[2] / "shared" / "measurements"
 PRACTICE = sorted((SHARED / "practice").glob("*.csv.gz"))

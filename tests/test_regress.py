@@ -1,4 +1,4 @@
-"""Regression fits of the deterministic effects (gyroarray.analysis.regress).
+"""Regression fits of the deterministic effects (gyroarray.effects.fits.regress).
 
 Data come from the project's simulator (``simulate_readings``) with synthetic
 truth rates (sinusoids about every axis) at 100 Hz for 10 min (60 000
@@ -31,18 +31,18 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from gyroarray.analysis.effect_fit import EffectFit
-from gyroarray.analysis.regress import (GLSFit, NotIdentifiableError, _RWWhitener, fit_latency,
+from gyroarray.effects.fits.effect_fit import EffectFit
+from gyroarray.effects.fits.regress import (GLSFit, NotIdentifiableError, RWWhitener, fit_latency,
                                         fit_misalignment, fit_rate_ramp, fit_saturation,
                                         fit_scale_and_nonlinearity, fit_scale_factor,
                                         fit_scale_nonlinearity, fit_sinusoid, fit_temperature_bias,
                                         gls_rw, misalignment_basis)
-from gyroarray.layout import Layout
-from gyroarray.physics import tilted_axes
+from gyroarray.core.layout import Layout
+from gyroarray.core.physics import tilted_axes
 from gyroarray.sim.effects import simulate_readings
-from gyroarray.units import per_deg_s_to_per_rad_s, per_rad_s_to_per_deg_s, ppm_to_ratio, ratio_to_ppm
-from gyroarray.sim.model import NoiseModel
-from gyroarray.units import (arw_deg_rt_h_to_rad_rt_s, deg_s_to_rad_s, deg_to_rad,
+from gyroarray.core.units import per_deg_s_to_per_rad_s, per_rad_s_to_per_deg_s, ppm_to_ratio, ratio_to_ppm
+from gyroarray.effects.model import NoiseModel
+from gyroarray.core.units import (arw_deg_rt_h_to_rad_rt_s, deg_s_to_rad_s, deg_to_rad,
                              rrw_deg_h_rt_h_to_rad_s_rt_s)
 
 DT = 0.01
@@ -240,7 +240,7 @@ def test_a_noisy_reference_is_instrumented_not_attenuated():
 def test_whitened_baseline_is_white_unit_noise():
     _, w, y, r, q = simulate([], seed=3, arw=0.3, rrw=600.0)
     e = y[:, 0] - w @ CONE6.H[0]
-    z = _RWWhitener(e.size, r, q).whiten(e)
+    z = RWWhitener(e.size, r, q).whiten(e)
     assert abs(z.mean()) < 5 / math.sqrt(z.size)
     assert z.var() == pytest.approx(1.0, abs=5 * math.sqrt(2 / z.size))
     lag1 = float(z[1:] @ z[:-1]) / z.size
@@ -416,7 +416,7 @@ def test_line_test_keeps_its_null_when_the_baseline_is_off(baseline, monkeypatch
     measured), so the check can fail."""
     from scipy import signal
 
-    import gyroarray.analysis.regress as reg
+    import gyroarray.effects.fits.regress as reg
     n, dt, sig, reps = 20_000, 0.01, 1e-3, 150
     t = np.arange(n) * dt
     rng = np.random.default_rng(17)

@@ -17,13 +17,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from scipy import stats
 
-from gyroarray.errors import InputError
+from gyroarray.core.errors import InputError
 from gyroarray.reports.browser import find_chromium, render_check
 from gyroarray.reports.report import (design_ranking, estimator_comparison, load_paper_values,
                                       load_sweep_dir, paper_vs_model, write_report)
-from gyroarray.scenarios.runner import run_sweep
+from gyroarray.sweep.runner import run_sweep
 
 SCENARIO = """\
 name = "tiny_static"
@@ -207,8 +206,8 @@ def test_cli_report_json_and_bad_input(sweeps, tmp_path, cli):
 
 
 def test_shipped_paper_values_name_shipped_scenarios():
-    from gyroarray.scenarios.sweep import load_sweep
-    root = Path(__file__).resolve().parents[1] / "scenarios"
+    from gyroarray.sweep.sweep import load_sweep
+    root = Path(__file__).resolve().parents[1] / "src" / "gyroarray" / "data" / "scenarios"
     exps = load_paper_values()
     listed = {s.params["scenario"]
               for s in load_sweep(root / "sweeps" / "paper_reproduction.toml").scenarios}

@@ -10,14 +10,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gyroarray.cli import main
-from gyroarray.errors import InputError
-from gyroarray.measurement import read_measurement
+from gyroarray.cli.main import main
+from gyroarray.core.errors import InputError
+from gyroarray.core.measurement import read_measurement
 from gyroarray.sim.scenario import load_scenario, simulate, simulate_to_files
-from gyroarray.units import arw_deg_rt_h_to_rad_rt_s, deg_s_to_rad_s
+from gyroarray.core.units import arw_deg_rt_h_to_rad_rt_s, deg_s_to_rad_s
 
 ROOT = Path(__file__).resolve().parents[1]
-EXAMPLE = ROOT / "scenarios" / "examples" / "tetra_swing.toml"
+EXAMPLE = ROOT / "src" / "gyroarray" / "data" / "scenarios" / "examples" / "tetra_swing.toml"
 
 BASE = """\
 name = "t"

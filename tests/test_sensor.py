@@ -15,15 +15,15 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from gyroarray.errors import InputError
-from gyroarray.layout import Layout
+from gyroarray.core.errors import InputError
+from gyroarray.core.layout import Layout
 from gyroarray.effects import REGISTRY
 from gyroarray.sim.effects import simulate_readings
-from gyroarray.sim.protocol import Stage
-from gyroarray.sim.model import NoiseModel
-from gyroarray.sim.sensor import (bandwidth_filter, bandwidth_sos, bandwidth_warped_frequency,
+from gyroarray.effects.protocol import Stage
+from gyroarray.effects.model import NoiseModel
+from gyroarray.core.sensor import (bandwidth_filter, bandwidth_sos, bandwidth_warped_frequency,
                                   g_sensitivity_bias)
-from gyroarray.units import deg_h_to_rad_s, deg_s_to_rad_s, deg_to_rad
+from gyroarray.core.units import deg_h_to_rad_s, deg_s_to_rad_s, deg_to_rad
 
 G0 = 9.80665
 FS = 100.0
@@ -149,7 +149,7 @@ def test_bandwidth_acts_after_sensing_and_noise_before_quantization_and_saturati
 
 def _quantizer_errors(seed, n_gyros, n, half):
     """The angle errors the quantizer draws: n + 1 uniforms on [−half, half) per gyro."""
-    from gyroarray.sim.protocol import Streams
+    from gyroarray.effects.protocol import Streams
     s = Streams.from_rng(np.random.default_rng(seed))
     return np.stack([s.stream("quantization", g).uniform(-half, half, n + 1)
                      for g in range(1, n_gyros + 1)], axis=1)

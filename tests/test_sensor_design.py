@@ -22,18 +22,19 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from gyroarray import units
-from gyroarray.chain import mean_ci, rms_ci, run_replicates, run_scenario
-from gyroarray.cli import main
-from gyroarray.constants import G0_M_S2
+from gyroarray.core import units
+from gyroarray.analysis.replicates import mean_ci, rms_ci
+from gyroarray.chain.run import run_replicates, run_scenario
+from gyroarray.cli.main import main
+from gyroarray.core.constants import G0_M_S2
 from gyroarray.estimators import get_estimator
-from gyroarray.layout import Layout
-from gyroarray.predict import (Swing, cascade, g_sensitivity_error, predict, sensor_bandwidth,
+from gyroarray.core.layout import Layout
+from gyroarray.design.predict import (Swing, cascade, g_sensitivity_error, predict, sensor_bandwidth,
                                swing_truth)
-from gyroarray.recommend import DesignSpace, GyroNoise, recommend
-from gyroarray.sim.model import ModelEntry, NoiseModel
+from gyroarray.design.recommend import DesignSpace, GyroNoise, recommend
+from gyroarray.effects.model import ModelEntry, NoiseModel
 from gyroarray.sim.scenario import load_scenario
-from gyroarray.sim.sensor import bandwidth_filter
+from gyroarray.core.sensor import bandwidth_filter
 from replicates import predictions_outside
 
 DT = 0.01
@@ -246,13 +247,13 @@ def test_recommend_says_when_the_sensor_limits_tracking():
 
 
 def test_fast_path_with_a_sensor_equals_the_full_predictor():
-    from gyroarray.recommend import _generic_design, _generic_or_fast
+    from gyroarray.design.recommend import generic_design, generic_or_fast
     g = GyroNoise(arw_deg_rt_h=0.15, rrw_deg_h_rt_h=40.0, bi_deg_h=5.0, rho_arw=0.2, rho_rrw=0.2)
     space = DesignSpace(rate_hz=100.0, horizon_s=20.0, swing=Swing(math.radians(5.0), 1.5),
                         bandwidth_hz=(0.5, 40.0), sensor_bandwidth=(8.0, 2))
     for est, bw in (("kf_array", 3.0), ("gls", 2.0), ("naive", None)):
-        fast = _generic_or_fast(1, 6, est, 0.9, bw, 0.2, g, space)
-        full = _generic_design(1, 6, est, 0.9, bw, 0.2, space, g, 0)
+        fast = generic_or_fast(1, 6, est, 0.9, bw, 0.2, g, space)
+        full = generic_design(1, 6, est, 0.9, bw, 0.2, space, g, 0)
         for ax in "xyz":
             for key, v in full["predicted"][ax].items():
                 if v is not None:

@@ -16,13 +16,13 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from gyroarray.errors import InputError
-from gyroarray.layout import Layout
+from gyroarray.core.errors import InputError
+from gyroarray.core.layout import Layout
 from gyroarray.sim.profiles import (ConstantRate, MultiPosition, Orientation, Profile, Sinusoid,
                                     Static, Tumble, up_vector)
 from gyroarray.sim.table import RateTable
 from gyroarray.sim.truth import compute_truth, specific_force
-from gyroarray.units import deg_s_to_rad_s, deg_to_rad
+from gyroarray.core.units import deg_s_to_rad_s, deg_to_rad
 
 G0 = 9.80665
 TABLE = RateTable()

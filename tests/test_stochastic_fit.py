@@ -1,4 +1,4 @@
-"""Fit side of the stochastic, array and time effects (analysis/stochastic_fit.py).
+"""Fit side of the stochastic, array and time effects (src/gyroarray/effects/fits/stochastic_fit.py).
 
 Data come from the project's simulator (``simulate_readings`` with a zero
 truth: a static record, so the output is the residual). Seeds are explicit
@@ -26,15 +26,15 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from gyroarray.analysis import stochastic_fit as sf
+from gyroarray.effects.fits import stochastic_fit as sf
 from gyroarray.analysis.avar_covariance import AvarCovariance
 from gyroarray.analysis.allan import edf
-from gyroarray.analysis.effect_fit import EffectFit, z_from_log_p
+from gyroarray.effects.fits.effect_fit import EffectFit, z_from_log_p
 from gyroarray.analysis.noise_fit import term_basis
-from gyroarray.errors import InputError
-from gyroarray.layout import Layout
+from gyroarray.core.errors import InputError
+from gyroarray.core.layout import Layout
 from gyroarray.sim.effects import REGISTRY, simulate_readings
-from gyroarray.sim.model import NoiseModel
+from gyroarray.effects.model import NoiseModel
 
 DT = 0.01
 N_46MIN = 276_000            # 46 min at 100 Hz
@@ -308,7 +308,7 @@ def test_white_column_through_the_sensors_filter():
     from functools import partial
 
     from gyroarray.analysis.psd_fit import filtered_white_avar_ratio, shortest_clean_tau
-    from gyroarray.sim.sensor import bandwidth_filter
+    from gyroarray.core.sensor import bandwidth_filter
     dt, n, n_true = 0.02, 60_000, 0.25
     min_tau = shortest_clean_tau(3.0, 1, dt)
     shape = partial(filtered_white_avar_ratio, 3.0, 1, dt)
@@ -330,7 +330,7 @@ def test_filtered_white_ratio_closed_form():
     directly in numpy (σ² of unit white noise is 1/m; the estimate's relative sd √(4m/(3n)),
     4 of them allowed), and → 1 at long τ (the filter passes DC: Σh = 1)."""
     from gyroarray.analysis.psd_fit import filtered_white_avar_ratio
-    from gyroarray.sim.sensor import bandwidth_filter
+    from gyroarray.core.sensor import bandwidth_filter
     dt = 0.02
     m = np.array([1, 4, 16, 64, 256])
     ratio = filtered_white_avar_ratio(3.0, 1, dt, m)

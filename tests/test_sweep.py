@@ -22,12 +22,12 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from gyroarray.errors import InputError
-from gyroarray.scenarios.runner import load_results, run_sweep
-from gyroarray.scenarios.sweep import PARAM_KEYS, load_sweep, scenario_id, scenario_seed
+from gyroarray.core.errors import InputError
+from gyroarray.sweep.runner import load_results, run_sweep
+from gyroarray.sweep.sweep import PARAM_KEYS, load_sweep, scenario_id, scenario_seed
 
 ROOT = Path(__file__).resolve().parents[1]
-EXAMPLE = ROOT / "scenarios" / "sweeps" / "design_quick.toml"
+EXAMPLE = ROOT / "src" / "gyroarray" / "data" / "scenarios" / "sweeps" / "design_quick.toml"
 
 # Tiny runs: 20 s at 100 Hz, three estimators, 3 scenarios (the runner tests).
 TINY = """\
@@ -95,7 +95,7 @@ def test_expansion_ids_and_params(tmp_path):
         assert sc.duration_s == 20.0
     point = next(s for s in sw.scenarios if s.params["scheme"] == 2)
     assert point.params["alpha_deg"] == "optimal" and point.params["motion"] == "p003_static_1h"
-    from gyroarray.design import optimal_alpha
+    from gyroarray.core.gdop import optimal_alpha
     assert point.params["alpha_deg_value"] == np.degrees(optimal_alpha(2, 5, 0.0).alpha_rad)
     # rho swept: one correlation entry with that rho, on top of the base effects
     r3 = next(s for s in sw.scenarios if s.params["rho_arw"] == 0.3)
@@ -294,7 +294,7 @@ def test_refuses_to_resume_a_different_sweep(reference, tmp_path):
 def test_sigkill_and_resume_gives_the_same_dataset(reference, tmp_path):
     sweep_file, _, df = reference
     out = tmp_path / "killed"
-    code = ("import sys; from gyroarray.scenarios.runner import run_sweep; "
+    code = ("import sys; from gyroarray.sweep.runner import run_sweep; "
             "run_sweep(sys.argv[1], sys.argv[2], workers=1, progress=False)")
     proc = subprocess.Popen([sys.executable, "-c", code, str(sweep_file), str(out)],
                             start_new_session=True, env=os.environ.copy())
@@ -325,7 +325,7 @@ def test_dask_cluster_equals_local(reference, tmp_path):
         from distributed import LocalCluster
     except ImportError as err:
         pytest.skip(f"dask.distributed not importable: {err}")
-    from gyroarray.scenarios.runner import THREAD_ENV       # OPENBLAS_NUM_THREADS=1 etc.
+    from gyroarray.sweep.runner import THREAD_ENV       # OPENBLAS_NUM_THREADS=1 etc.
     # numba's own count stays out of the nanny's pre-spawn environment, which it sets in this
     # process too: numba threads launched here with 1 would refuse the default later
     env = {k: v for k, v in THREAD_ENV.items() if k != "NUMBA_NUM_THREADS"}
@@ -374,7 +374,7 @@ def test_altered_result_without_a_record_is_checked_by_its_footer(reference, tmp
 
 
 def test_cli_report_refuses_a_corrupt_result_naming_it(reference, tmp_path, capsys):
-    from gyroarray.cli import main
+    from gyroarray.cli.main import main
     _, summary, _ = reference
     out = tmp_path / "corrupt"
     shutil.copytree(summary["out_dir"], out)
@@ -414,7 +414,7 @@ def _alive(pid: int) -> bool:
 @pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="needs Linux /proc")
 def test_workers_die_with_a_sigkilled_sweep(reference, tmp_path):
     sweep_file, _, _ = reference
-    code = ("import sys; from gyroarray.scenarios.runner import run_sweep; "
+    code = ("import sys; from gyroarray.sweep.runner import run_sweep; "
             "run_sweep(sys.argv[1], sys.argv[2], workers=2, progress=False)")
     proc = subprocess.Popen([sys.executable, "-c", code, str(sweep_file), str(tmp_path / "k")],
                             env=os.environ.copy())

@@ -18,14 +18,14 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 import gyroarray.sim.truth as truth_mod
-from gyroarray.layout import Layout
+from gyroarray.core.layout import Layout
 from gyroarray.sim.profiles import (ConstantRate, MultiPosition, Orientation, Profile, Sinusoid,
                                     Static, body_rate, gimbal_quaternion, load_profile)
 from gyroarray.sim.table import RateTable, TableParams, n_samples, steps_per_sample
 from gyroarray.sim.truth import compute_truth, project, truth_key
-from gyroarray.units import deg_s_to_rad_s, deg_to_rad
+from gyroarray.core.units import deg_s_to_rad_s, deg_to_rad
 
-PROFILES = Path(__file__).resolve().parents[1] / "scenarios" / "profiles"
+PROFILES = Path(__file__).resolve().parents[1] / "src" / "gyroarray" / "data" / "scenarios" / "profiles"
 TABLE = RateTable()
 MAGIC = math.acos(1 / math.sqrt(3))
 

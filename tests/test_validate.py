@@ -17,13 +17,13 @@ import warnings
 import numpy as np
 import pytest
 
-from gyroarray.cli import main
-from gyroarray.compare import ModelComparison, split_measurement
-from gyroarray.errors import InputError
-from gyroarray.layout import Layout
-from gyroarray.measurement import write_measurement
+from gyroarray.cli.main import main
+from gyroarray.chain.compare import ModelComparison, split_measurement
+from gyroarray.core.errors import InputError
+from gyroarray.core.layout import Layout
+from gyroarray.core.measurement import write_measurement
 from gyroarray.sim.lab import lab_run
-from gyroarray.sim.model import ModelEntry, NoiseModel
+from gyroarray.effects.model import ModelEntry, NoiseModel
 
 LAYOUT = Layout.conical(1, 5, math.radians(54.7356))
 

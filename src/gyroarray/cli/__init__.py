@@ -1,0 +1,1 @@
+"""The command line: ``gyroarray`` (:func:`gyroarray.cli.main.main`)."""

@@ -1,0 +1,5 @@
+"""``python -m gyroarray.cli``."""
+
+from gyroarray.cli.main import main
+
+raise SystemExit(main())

@@ -1,0 +1,1475 @@
+"""Measurement files: one recorded (or simulated) run of a gyro array.
+
+A measurement is a CSV of samples plus a TOML sidecar with the same stem
+(``shared/spec/measurement-format.md`` is the contract)::
+
+    run42.csv      (or run42.csv.gz)   time_s, gyro1..gyroN, [ref_x, ref_y, ref_z], [temp_c],
+                                       [acc_x, acc_y, acc_z]
+    run42.toml                         sample_rate_hz, description, [layout], [site], [units]
+
+:func:`read_measurement` turns such a pair into a :class:`Measurement`, the
+one in-memory type used everywhere; :func:`write_measurement` writes one back
+so that reading it again reproduces every value exactly.
+
+Reading rules (where the spec leaves a choice, the choice made here)
+--------------------------------------------------------------------
+* Paths: the CSV (``run42.csv`` or ``run42.csv.gz``), the sidecar
+  (``run42.toml``) or the bare stem (``run42``) are accepted; for the last
+  two exactly one of ``run42.csv`` / ``run42.csv.gz`` must exist.
+* Text: UTF-8 (a leading byte-order mark is skipped, with a note); lines end
+  in ``\\n`` or ``\\r\\n``, a bare ``\\r`` is refused. ``.gz`` files are
+  decompressed first and line numbers count lines of the decompressed text.
+* Lines whose first character is ``#`` are comments, anywhere in the file;
+  empty lines are skipped too (with a note). Every other line is the header
+  (the first one) or one sample. Line numbers in messages are 1-based and
+  count every line of the file, comments and header included.
+* Cells: standard CSV quoting is understood; spaces around a number are
+  tolerated; an empty cell or ``nan`` is a *missing value* (see repair);
+  ``inf``, numbers that overflow a double and anything else that is not a
+  decimal number are refused. Every row must have as many fields as the
+  header. Extra columns are ignored (with a note) but still counted.
+* Samples: at least :data:`MIN_SAMPLES`; ``time_s`` strictly increasing.
+  The nominal period is the median step of ``time_s``; a step longer than
+  :data:`GAP_FACTOR` periods is a gap of ``round(step / period) - 1``
+  missing samples.
+* Repair (``repair=True``): gaps of 1..:data:`MAX_REPAIR_SAMPLES` missing
+  samples get rows inserted at evenly spaced times, and runs of at most
+  :data:`MAX_REPAIR_SAMPLES` missing values in a data column (not touching
+  the first or last sample) are filled, both by linear interpolation in
+  time; each repair is reported in :attr:`Measurement.notes`. Without
+  ``repair`` both are refused; longer gaps or runs, missing values at the
+  start or end, and missing times are refused either way.
+* ``acc_x``, ``acc_y``, ``acc_z`` (specific force at the platform origin,
+  platform frame, m/s²) come as a set of three or not at all, like
+  ``ref_*``; their cells follow the same rules as every other column.
+* Sidecar: ``sample_rate_hz`` (> 0) and ``[layout]`` are required;
+  ``layout.axes`` wins over ``scheme``/``n_gyros``/``alpha_deg`` (with a
+  note). Optional ``layout.positions_m``: one [x, y, z] row per gyro,
+  finite, metres (within ``layout.MAX_POSITION_M`` of the origin). Optional ``[site]`` needs ``latitude_deg`` in [-90, 90] and
+  ``heading_deg``. Optional ``[units]`` declares non-default units (keys
+  ``time``, ``gyro``, ``ref``, ``temp``, ``acc``, see :data:`ACCEPTED_UNITS`);
+  values are converted to the canonical file units (s, deg/s, degC, m/s²)
+  with a note.
+  Unknown top-level keys are noted; unknown keys inside ``[layout]``,
+  ``[site]`` and ``[units]`` are refused, since every key there changes how
+  the samples are interpreted (a misspelt ``gyro`` unit must not pass).
+* Every problem is an :class:`~gyroarray.core.errors.InputError` naming the file,
+  the line and/or column (a CSV column name, a 1-based character column or a
+  TOML key) and what is wrong. Nothing is ever written by the reader.
+
+Speed: the well-formed case is parsed by pandas' C reader (exact
+round-trip float parsing) after the line structure (comments, blank lines,
+field counts) has been checked with numpy: about 0.5-1 s for 1e6 rows × 7
+columns, gzip included. When pandas refuses a cell, the rows are parsed
+again in chunks and only the refused chunk goes through the exact
+:mod:`csv` path that locates the problem. Files with quote characters in
+the data take the :mod:`csv` path throughout (about 10 s per 7e6 cells).
+At most ``_MAX_NOTES`` repairs of each kind are listed in ``notes``, then
+counted.
+"""
+
+from __future__ import annotations
+
+import csv
+import gzip
+import io
+import math
+import re
+import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+from types import MappingProxyType
+from typing import Callable, Mapping
+
+import numpy as np
+import pandas as pd
+import tomli_w
+
+from gyroarray import __version__
+from gyroarray.core import units
+from gyroarray.core.errors import InputError
+from gyroarray.core.layout import UNIT_NORM_TOL, Layout, check_positions
+from gyroarray.core.limits import (MAX_RATE_DEG_S, check_memory, format_size, gunzip_bounded, max_memory,
+                              read_regular)
+from gyroarray.core.outputs import measurement_files, same_path, write_bytes
+from gyroarray.core.tomlio import TomlDoc, load_toml, utf8_text
+
+__all__ = [
+    "Measurement",
+    "Site",
+    "read_measurement",
+    "constant_gyros",
+    "without_gyros",
+    "relative_time_s",
+    "MIN_SPREAD_DEG_S",
+    "write_measurement",
+    "MIN_SAMPLES",
+    "MAX_REPAIR_SAMPLES",
+    "GAP_FACTOR",
+    "MAX_CONE_GYROS",
+    "RATE_NOTE_TOL",
+    "ACCEPTED_UNITS",
+]
+
+#: Fewest samples a measurement may have (a time step needs two).
+MIN_SAMPLES = 2
+#: Longest gap [samples] or run of missing values [samples] that ``repair``
+#: fills; longer ones are refused even with ``repair=True``.
+MAX_REPAIR_SAMPLES = 5
+#: Largest ``n_gyros`` of a conical layout in a sidecar (a sanity bound).
+MAX_CONE_GYROS = 1024
+#: A time step longer than this many nominal periods [-] is a gap.
+GAP_FACTOR = 1.5
+#: Relative disagreement [-] between ``sample_rate_hz`` and the rate given by
+#: ``time_s`` above which a note is added (``time_s`` is the truth).
+RATE_NOTE_TOL = 0.01
+#: Milliseconds per second, for ``[units] time = "ms"``.
+MS_PER_S = 1000.0
+
+_TIME, _REF_NAMES, _TEMP = "time_s", ("ref_x", "ref_y", "ref_z"), "temp_c"
+_ACC_NAMES = ("acc_x", "acc_y", "acc_z")
+_GYRO_RE = re.compile(r"gyro(\d+)", re.ASCII)
+_NUMBER_RE = re.compile(r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?", re.ASCII)
+_NAN_WORDS = frozenset({"nan", "+nan", "-nan"})
+_INF_WORDS = frozenset({"inf", "+inf", "-inf", "infinity", "+infinity", "-infinity"})
+#: Cells pandas may turn into NaN on the fast path (the slow path knows more
+#: spellings; both agree on what is missing).
+_PANDAS_NA = ["", "nan", "NaN", "NAN"]
+_GZIP_MAGIC = b"\x1f\x8b"
+_BOM = b"\xef\xbb\xbf"
+_CSV_CHUNK_ROWS = 65536
+_LOCATE_CHUNK_ROWS = 16384
+_MAX_NOTES = 10          # per kind of repair; the rest are counted
+# pandas >= 3.1 parses floats exactly by default and deprecates the option.
+_EXACT_FLOATS = ({} if tuple(int(p) for p in pd.__version__.split(".")[:2]) >= (3, 1)
+                 else {"float_precision": "round_trip"})
+
+
+def _ms_to_s(x):
+    """Time [ms] -> [s]."""
+    return x / MS_PER_S
+
+
+def _deg_h_to_deg_s(x):
+    """Rate [deg/h] -> [deg/s]."""
+    return x / units.S_PER_H
+
+
+_RATE_UNITS = MappingProxyType(
+    {"deg/s": None, "rad/s": units.rad_s_to_deg_s, "deg/h": _deg_h_to_deg_s})
+#: Units a sidecar's ``[units]`` table may declare, per key, each with its
+#: converter to the canonical file unit (None: already canonical). Read-only.
+ACCEPTED_UNITS: Mapping[str, Mapping[str, Callable | None]] = MappingProxyType({
+    "time": MappingProxyType({"s": None, "ms": _ms_to_s}),
+    "gyro": _RATE_UNITS,
+    "ref": _RATE_UNITS,
+    "temp": MappingProxyType({"degC": None, "C": None, "°C": None}),
+    "acc": MappingProxyType({"m/s2": None, "m/s^2": None, "m/s²": None, "g": units.g_to_m_s2}),
+})
+_CANONICAL_UNIT = {"time": "s", "gyro": "deg/s", "ref": "deg/s", "temp": "degC", "acc": "m/s2"}
+
+
+# =========================================================================
+# The in-memory types
+# =========================================================================
+@dataclass(frozen=True)
+class Site:
+    """Where the rate table stands.
+
+    Parameters
+    ----------
+    latitude_rad : float
+        Geodetic latitude [rad], in [-π/2, π/2].
+    heading_rad : float
+        Heading of the platform x axis from true north at t = 0, turning
+        about up [rad].
+    """
+
+    latitude_rad: float
+    heading_rad: float
+
+    def __post_init__(self):
+        lat, heading = float(self.latitude_rad), float(self.heading_rad)
+        if not (math.isfinite(heading) and abs(lat) <= math.pi / 2):
+            raise ValueError(f"invalid site: latitude {lat!r} rad, heading {heading!r} rad")
+        object.__setattr__(self, "latitude_rad", lat)
+        object.__setattr__(self, "heading_rad", heading)
+
+
+@dataclass(frozen=True, eq=False)
+class Measurement:
+    """One run of a gyro array, in the units of the measurement file.
+
+    Parameters
+    ----------
+    time_s : ndarray, shape (n,)
+        Sample times [s], strictly increasing.
+    gyro_deg_s : ndarray, shape (n, N)
+        Output of each gyro along its sensitive axis [deg/s]; column k-1 is
+        gyro k, in the order of ``layout.axes``.
+    layout : Layout
+        Sensitive axes of the N gyros.
+    sample_rate_hz : float
+        Nominal sample rate [Hz] from the sidecar (``time_s`` is the truth).
+    ref_deg_s : ndarray, shape (n, 3), optional
+        Reference angular rate of the platform in the body frame, relative
+        to the Earth [deg/s]; None when the file has no ``ref_*`` columns.
+    temp_c : ndarray, shape (n,), optional
+        Temperature at the array [°C]; None when absent.
+    site : Site, optional
+        Where the table stands; None when the sidecar has no ``[site]``.
+    description : str
+        Free text from the sidecar.
+    source : str, optional
+        Path of the CSV as the user named it; None for data not read from a
+        file.
+    notes : tuple of str
+        What the reader noticed and reported (ignored columns and keys, unit
+        conversions, repairs, sample-rate disagreement).
+    acc_m_s2 : ndarray, shape (n, 3), optional
+        Specific force at the platform origin, platform frame [m/s²]
+        (``acc_x``, ``acc_y``, ``acc_z``; +g0 on z at rest, level, z up);
+        None when the file has no ``acc_*`` columns.
+
+    Notes
+    -----
+    All arrays are float64 copies, stored read-only, all finite. Shapes,
+    finiteness, strictly increasing time and unit layout axes are checked on
+    construction; a violation is a programming error (``ValueError``), since
+    user files are checked by :func:`read_measurement` first.
+    """
+
+    time_s: np.ndarray
+    gyro_deg_s: np.ndarray
+    layout: Layout
+    sample_rate_hz: float
+    ref_deg_s: np.ndarray | None = None
+    temp_c: np.ndarray | None = None
+    site: Site | None = None
+    description: str = ""
+    source: str | None = None
+    notes: tuple[str, ...] = field(default_factory=tuple)
+    acc_m_s2: np.ndarray | None = None
+
+    def __post_init__(self):
+        time = _frozen_array(self.time_s, "time_s", ndim=1)
+        n = time.shape[0]
+        if n < MIN_SAMPLES or not np.all(np.diff(time) > 0):
+            raise ValueError(f"time_s needs >= {MIN_SAMPLES} strictly increasing samples")
+        if not isinstance(self.layout, Layout):
+            raise ValueError(f"layout must be a Layout, got {type(self.layout).__name__}")
+        norms = np.linalg.norm(self.layout.axes, axis=1)
+        if np.any(np.abs(norms - 1.0) > UNIT_NORM_TOL):
+            raise ValueError("layout axes must be unit vectors")
+        object.__setattr__(self, "time_s", time)
+        object.__setattr__(self, "gyro_deg_s", _frozen_array(
+            self.gyro_deg_s, "gyro_deg_s", ndim=2, shape=(n, self.layout.n_gyros)))
+        if self.ref_deg_s is not None:
+            object.__setattr__(self, "ref_deg_s", _frozen_array(
+                self.ref_deg_s, "ref_deg_s", ndim=2, shape=(n, 3)))
+        if self.temp_c is not None:
+            object.__setattr__(self, "temp_c", _frozen_array(
+                self.temp_c, "temp_c", ndim=1, shape=(n,)))
+        if self.acc_m_s2 is not None:
+            object.__setattr__(self, "acc_m_s2", _frozen_array(
+                self.acc_m_s2, "acc_m_s2", ndim=2, shape=(n, 3)))
+        rate = float(self.sample_rate_hz)
+        if not (math.isfinite(rate) and rate > 0):
+            raise ValueError(f"sample_rate_hz must be finite and > 0, got {rate!r}")
+        object.__setattr__(self, "sample_rate_hz", rate)
+        if self.site is not None and not isinstance(self.site, Site):
+            raise ValueError(f"site must be a Site or None, got {type(self.site).__name__}")
+        if not isinstance(self.description, str):
+            raise ValueError("description must be a str")
+        object.__setattr__(self, "source", None if self.source is None else str(self.source))
+        object.__setattr__(self, "notes", tuple(str(s) for s in self.notes))
+
+    # -- SI views -----------------------------------------------------------
+    @property
+    def gyro_rad_s(self) -> np.ndarray:
+        """Gyro outputs [rad/s], shape (n, N) (a new array on each access)."""
+        return units.deg_s_to_rad_s(self.gyro_deg_s)
+
+    @property
+    def ref_rad_s(self) -> np.ndarray | None:
+        """Reference rate [rad/s], shape (n, 3), or None without reference."""
+        return None if self.ref_deg_s is None else units.deg_s_to_rad_s(self.ref_deg_s)
+
+    @property
+    def dt_s(self) -> float:
+        """Sample period [s]: the median step of ``time_s``.
+
+        When the median agrees with the sidecar's nominal period
+        1/``sample_rate_hz`` to 1e-6 relative, the nominal value is returned,
+        free of the rounding of the printed times (0.0100 − 0.0000 style
+        differences are not exactly 0.01 in binary); time_s stays the truth
+        whenever the two disagree.
+        """
+        median = float(np.median(np.diff(self.time_s)))
+        nominal = 1.0 / self.sample_rate_hz
+        return nominal if abs(median - nominal) <= 1e-6 * nominal else median
+
+    @property
+    def n_samples(self) -> int:
+        """Number of samples n."""
+        return int(self.time_s.shape[0])
+
+    @property
+    def n_gyros(self) -> int:
+        """Number of gyros N."""
+        return int(self.gyro_deg_s.shape[1])
+
+    @property
+    def has_reference(self) -> bool:
+        """True when the table's reference rate ``ref_deg_s`` is present."""
+        return self.ref_deg_s is not None
+
+    @property
+    def has_acc(self) -> bool:
+        """True when the specific force at the origin ``acc_m_s2`` is present."""
+        return self.acc_m_s2 is not None
+
+    def __repr__(self) -> str:
+        return (f"Measurement(n_samples={self.n_samples}, n_gyros={self.n_gyros}, "
+                f"sample_rate_hz={self.sample_rate_hz!r}, layout={self.layout!r}, "
+                f"has_reference={self.has_reference}, source={self.source!r})")
+
+
+def _frozen_array(x, name: str, *, ndim: int, shape: tuple | None = None) -> np.ndarray:
+    """A read-only finite float64 copy of ``x``, checked against ndim/shape."""
+    a = np.array(x, dtype=np.float64, copy=True, order="C")
+    if a.ndim != ndim or (shape is not None and a.shape != shape):
+        raise ValueError(f"{name} must have shape {shape or ('?',) * ndim}, got {a.shape}")
+    if not np.all(np.isfinite(a)):
+        raise ValueError(f"{name} contains a non-finite value")
+    a.setflags(write=False)
+    return a
+
+
+# =========================================================================
+# Reading
+# =========================================================================
+def read_measurement(path, *, repair: bool = False) -> Measurement:
+    """Read a measurement (CSV + TOML sidecar) and check it.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The CSV (``run42.csv`` / ``run42.csv.gz``), its sidecar
+        (``run42.toml``) or the stem (``run42``).
+    repair : bool
+        Fill short gaps and short runs of missing values by linear
+        interpolation in time, and report each repair in ``notes``
+        (default: refuse them).
+
+    Returns
+    -------
+    Measurement
+        Values in the file's canonical units (s, deg/s, degC).
+
+    Raises
+    ------
+    InputError
+        For anything wrong with the files, naming the file, the line and/or
+        column and the problem (see the module docstring for the rules).
+    """
+    csv_path, toml_path = _measurement_paths(path)
+    csv_name = str(csv_path)
+    side = _read_sidecar(toml_path)
+    data, notes = _read_csv_bytes(csv_path)
+    cols, table, line_notes = _parse_csv(data, csv_name)
+    _check_gyro_count(cols, side, csv_name, table.header_line)
+    values, repair_notes = _checked_values(table, cols, csv_name, repair,
+                                           _nominal_period(side, cols), side.units)
+    values, unit_notes = _to_canonical(values, cols, side.units, side.name, csv_name)
+    rate_note = _rate_note(values[:, 0], side)
+    all_notes = (*notes, *line_notes, *side.notes, *unit_notes, *repair_notes, *rate_note)
+    return _build(values, cols, side, csv_name, all_notes)
+
+
+#: A gyro whose output spans less than this [deg/s] is constant: no gyro
+#: resolves 3.6e-9 deg/h, so such a column is a dead, stuck or zeroed channel
+#: (also one of subnormal numbers).
+MIN_SPREAD_DEG_S = 1e-12
+
+
+def constant_gyros(m: Measurement) -> list[int]:
+    """The gyros (1-based) whose output is constant (dead or stuck).
+
+    A column is constant when its spread (max − min) is below
+    :data:`MIN_SPREAD_DEG_S`. Such a gyro carries no noise to analyse: the
+    analyses report it and go on with the others.
+    """
+    spread = np.ptp(m.gyro_deg_s, axis=0)
+    return [k + 1 for k in np.flatnonzero(spread < MIN_SPREAD_DEG_S).tolist()]
+
+
+def constant_note(gyros: list[int], m: Measurement) -> str:
+    """``gyro 2 is constant (dead or stuck?): ...`` for the notes and refusals."""
+    values = ", ".join(f"{float(m.gyro_deg_s[0, k - 1]):.6g} deg/s" for k in gyros)
+    which = (f"gyro {gyros[0]} is" if len(gyros) == 1 else
+             "gyros " + ", ".join(map(str, gyros)) + " are")
+    return f"{which} constant (dead or stuck?) at {values}"
+
+
+def without_gyros(m: Measurement, gyros: list[int], note: str = "") -> Measurement:
+    """The measurement without the given gyros (1-based), the note added.
+
+    The remaining gyros keep their order and are numbered 1..N' in the
+    result (the note should say how the numbers map).
+    """
+    keep = [k for k in range(m.n_gyros) if k + 1 not in set(gyros)]
+    if not keep:
+        raise InputError("no gyro left to analyse", file=m.source)
+    layout = Layout.from_axes(m.layout.axes[keep], source=m.source)
+    return Measurement(time_s=m.time_s, gyro_deg_s=m.gyro_deg_s[:, keep], layout=layout,
+                       sample_rate_hz=m.sample_rate_hz, ref_deg_s=m.ref_deg_s, temp_c=m.temp_c,
+                       site=m.site, description=m.description, source=m.source,
+                       notes=(*m.notes, *([note] if note else [])))
+
+
+def relative_time_s(m: Measurement) -> np.ndarray:
+    """``time_s − time_s[0]`` [s]: the clock every analysis works on.
+
+    Unix-epoch stamps (1.7e9 s) resolve only 2.4e-7 s in a double; a clock
+    built at the epoch (``t0 + k·dt``) is not uniform to the analyses'
+    tolerance, while the differences to the first stamp are exact.
+    """
+    return m.time_s - m.time_s[0]
+
+
+# -- paths ------------------------------------------------------------------
+def _measurement_paths(path) -> tuple[Path, Path]:
+    """(CSV path, sidecar path) for a CSV, sidecar or stem path."""
+    p = Path(path)
+    low = p.name.lower()
+    if low.endswith(".csv") or low.endswith(".csv.gz"):
+        if not p.is_file():
+            raise InputError("measurement file not found" if not p.exists()
+                             else "not a regular file", file=str(p))
+        return p, _sidecar_of(p)
+    stem = p.with_name(p.name[:-5]) if low.endswith(".toml") else p
+    found = [c for c in (stem.with_name(stem.name + ".csv"),
+                         stem.with_name(stem.name + ".csv.gz")) if c.is_file()]
+    if len(found) != 1:
+        what = "no measurement CSV" if not found else "two measurement CSVs"
+        raise InputError(f"{what} for this stem: looked for {stem.name}.csv and "
+                         f"{stem.name}.csv.gz (give the CSV path)", file=str(path))
+    return found[0], _sidecar_of(found[0])
+
+
+def _sidecar_of(csv_path: Path) -> Path:
+    """``<stem>.toml`` beside a ``<stem>.csv`` or ``<stem>.csv.gz``."""
+    name = csv_path.name
+    stem = name[:-7] if name.lower().endswith(".csv.gz") else name[:-4]
+    return csv_path.with_name(stem + ".toml")
+
+
+def _read_bytes(path: Path, what: str) -> bytes:
+    """A regular file's bytes (FIFOs, devices and folders refused), within the memory budget."""
+    return read_regular(path, what)
+
+
+# -- the sidecar ------------------------------------------------------------
+@dataclass(frozen=True)
+class _Sidecar:
+    name: str
+    sample_rate_hz: float
+    description: str
+    layout: Layout
+    site: Site | None
+    units: dict
+    notes: tuple[str, ...]
+
+
+_TomlDoc = TomlDoc   # the one TOML key locator (gyroarray.core.tomlio), for sidecars, scenarios and sweeps
+
+
+def _load_toml(path: Path, what: str = "sidecar") -> TomlDoc:
+    if what == "sidecar" and not path.exists() and not path.is_symlink():
+        raise InputError("missing sidecar: every measurement CSV needs a .toml with the "
+                         "same stem beside it (sample_rate_hz, [layout])", file=str(path))
+    return load_toml(path, what)
+
+
+def _read_sidecar(path: Path) -> _Sidecar:
+    doc = _load_toml(path)
+    d = doc.data
+    known = {"sample_rate_hz", "description", "layout", "site", "units"}
+    unknown = sorted(set(d) - known)
+    notes = [f"{doc.name}: ignored unknown key(s) {', '.join(unknown)}"] if unknown else []
+    if "sample_rate_hz" not in d:
+        raise doc.error("sample_rate_hz is missing (the nominal sample rate [Hz] is "
+                        "required)", "sample_rate_hz")
+    rate = toml_number(doc, d["sample_rate_hz"], "sample_rate_hz")
+    if rate <= 0:
+        raise doc.error(f"sample_rate_hz must be > 0, got {rate!r}", "sample_rate_hz")
+    description = d.get("description", "")
+    if not isinstance(description, str):
+        raise doc.error(f"description must be a string, got {toml_type(description)}",
+                        "description")
+    layout, layout_notes = parse_layout(doc)
+    return _Sidecar(name=doc.name, sample_rate_hz=rate, description=description,
+                    layout=layout, site=parse_site(doc), units=_parse_units(doc),
+                    notes=tuple(notes + layout_notes))
+
+
+def toml_type(v) -> str:
+    kinds = ((bool, "a boolean"), (int, "an integer"), (float, "a number"),
+             (str, "a string"), (list, "an array"), (dict, "a table"))
+    for t, word in kinds:
+        if isinstance(v, t):
+            return f"{word} ({_short(v)})"
+    return f"a {type(v).__name__} ({_short(v)})"
+
+
+def _short(v, limit: int = 40) -> str:
+    """repr of a value, cut to ``limit`` characters, on one line."""
+    r = repr(v)
+    return r if len(r) <= limit else r[:limit] + "..."
+
+
+def _is_number(v) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool)
+
+
+def _finite(v) -> float | None:
+    """float(v) for a TOML number (not bool) if finite, else None."""
+    if not _is_number(v):
+        return None
+    try:
+        x = float(v)
+    except OverflowError:            # TOML integers are unbounded
+        return None
+    return x if math.isfinite(x) else None
+
+
+def toml_number(doc: _TomlDoc, v, key: str) -> float:
+    """A finite TOML number (int or float, not bool)."""
+    if not _is_number(v):
+        raise doc.error(f"{key} must be a number, got {toml_type(v)}", key)
+    x = _finite(v)
+    if x is None:
+        raise doc.error(f"{key} must be finite, got {_short(v)}", key)
+    return x
+
+
+def toml_table(doc: _TomlDoc, key: str, allowed: set[str]) -> dict | None:
+    """The sub-table ``key`` (None if absent), refusing unknown keys in it."""
+    t = doc.data.get(key)
+    if t is None:
+        return None
+    if not isinstance(t, dict):
+        raise doc.error(f"{key} must be a table ([{key}]), got {toml_type(t)}", key)
+    unknown = sorted(set(t) - allowed)
+    if unknown:
+        raise doc.error(f"unknown key {key}.{unknown[0]} (known: {', '.join(sorted(allowed))})",
+                        f"{key}.{unknown[0]}")
+    return t
+
+
+_CONE_KEYS = ("scheme", "n_gyros", "alpha_deg")
+
+
+def parse_layout(doc: _TomlDoc) -> tuple[Layout, list[str]]:
+    t = toml_table(doc, "layout", {"axes", "positions_m", *_CONE_KEYS})
+    if t is None:
+        raise doc.error("[layout] is missing (give axes, or scheme, n_gyros and alpha_deg)",
+                        "layout")
+    if "axes" in t:
+        ignored = [k for k in _CONE_KEYS if k in t]
+        notes = ([f"{doc.name}: layout.axes given, so {', '.join(ignored)} ignored "
+                  "(explicit axes win)"] if ignored else [])
+        return _with_positions(doc, t, _axes_layout(doc, t["axes"])), notes
+    missing = [k for k in _CONE_KEYS if k not in t]
+    if missing:
+        raise doc.error("layout is incomplete: give axes, or all of scheme, n_gyros and "
+                        f"alpha_deg (missing: {', '.join(missing)})", "layout")
+    return _with_positions(doc, t, _cone_layout(doc, t)), []
+
+
+def _with_positions(doc: _TomlDoc, t: dict, layout: Layout) -> Layout:
+    """``layout`` with ``layout.positions_m`` when the table has it (checked)."""
+    if "positions_m" not in t:
+        return layout
+    rows = t["positions_m"]
+    key = "layout.positions_m"
+    if not (isinstance(rows, list) and all(
+            isinstance(r, list) and len(r) == 3 and all(_is_number(x) for x in r) for r in rows)):
+        raise doc.error("layout.positions_m must be an array of [x, y, z] rows of numbers "
+                        f"(metres, one per gyro), got {_short(rows)}", key)
+    values = [[_finite(x) for x in r] for r in rows]
+    if any(x is None for r in values for x in r):
+        raise doc.error(f"layout.positions_m must hold finite numbers, got {_short(rows)}", key)
+    try:
+        return layout.with_positions(check_positions(values, layout.n_gyros))
+    except InputError as e:
+        raise doc.error(e.message, key) from None
+
+
+def _axes_layout(doc: _TomlDoc, axes) -> Layout:
+    key = "layout.axes"
+    rows_ok = isinstance(axes, list) and len(axes) > 0 and all(
+        isinstance(r, list) and len(r) == 3 and all(_is_number(x) for x in r) for r in axes)
+    if not rows_ok:
+        raise doc.error("layout.axes must be an array of [x, y, z] rows of numbers, "
+                        f"got {_short(axes)}", key)
+    rows = [[_finite(x) for x in r] for r in axes]
+    if any(x is None for r in rows for x in r):
+        raise doc.error(f"layout.axes must hold finite numbers, got {_short(axes)}", key)
+    try:
+        return Layout.from_axes(rows, source=doc.name)
+    except InputError as e:
+        raise doc.error(e.message, key) from None
+
+
+def _cone_layout(doc: _TomlDoc, t: dict) -> Layout:
+    scheme, n = t["scheme"], t["n_gyros"]
+    if not (isinstance(scheme, int) and not isinstance(scheme, bool) and scheme in (1, 2)):
+        raise doc.error(f"layout.scheme must be 1 or 2, got {toml_type(scheme)}",
+                        "layout.scheme")
+    if not (isinstance(n, int) and not isinstance(n, bool) and 3 <= n <= MAX_CONE_GYROS):
+        raise doc.error(f"layout.n_gyros must be an integer from 3 to {MAX_CONE_GYROS}, "
+                        f"got {toml_type(n)}", "layout.n_gyros")
+    alpha = toml_number(doc, t["alpha_deg"], "layout.alpha_deg")
+    if not 0.0 <= alpha <= 180.0:
+        raise doc.error(f"layout.alpha_deg must be in [0, 180] deg, got {alpha!r}",
+                        "layout.alpha_deg")
+    return Layout.conical(scheme, n, units.deg_to_rad(alpha))
+
+
+def parse_site(doc: _TomlDoc) -> Site | None:
+    t = toml_table(doc, "site", {"latitude_deg", "heading_deg"})
+    if t is None:
+        return None
+    for key in ("latitude_deg", "heading_deg"):
+        if key not in t:
+            raise doc.error(f"site.{key} is missing ([site] needs latitude_deg and "
+                            "heading_deg)", "site")
+    lat = toml_number(doc, t["latitude_deg"], "site.latitude_deg")
+    heading = toml_number(doc, t["heading_deg"], "site.heading_deg")
+    if not -90.0 <= lat <= 90.0:
+        raise doc.error(f"site.latitude_deg must be in [-90, 90] deg, got {lat!r}",
+                        "site.latitude_deg")
+    return Site(units.deg_to_rad(lat), units.deg_to_rad(heading))
+
+
+def _parse_units(doc: _TomlDoc) -> dict:
+    t = toml_table(doc, "units", set(ACCEPTED_UNITS))
+    if t is None:
+        return {}
+    for key, unit in t.items():
+        accepted = ACCEPTED_UNITS[key]
+        if not isinstance(unit, str) or unit not in accepted:
+            raise doc.error(f"unknown unit {_short(unit)} for units.{key} (accepted: "
+                            f"{', '.join(repr(u) for u in accepted)})", f"units.{key}")
+    return dict(t)
+
+
+# -- the CSV: bytes and lines -----------------------------------------------
+def _read_csv_bytes(path: Path) -> tuple[bytes, list[str]]:
+    """The CSV's bytes (decompressed), checked to be UTF-8; and notes."""
+    name = str(path)
+    raw = _read_bytes(path, "measurement file")
+    if name.lower().endswith(".gz"):
+        raw = gunzip_bounded(raw, max_memory() // _READ_BYTES_FACTOR, name, cost=_read_cost,
+                             max_cost=max_memory())
+    elif raw.startswith(_GZIP_MAGIC):
+        raise InputError("file is gzip-compressed but its name does not end in .gz",
+                         file=name)
+    _check_read_memory(raw, name)
+    notes = []
+    if raw.startswith(_BOM):
+        raw = raw[len(_BOM):]
+        notes.append(f"{name}: skipped the UTF-8 byte-order mark")
+    if not raw.isascii():
+        utf8_text(raw, name)
+    if b"\r" in raw and raw.count(b"\r") != raw.count(b"\r\n"):
+        lone = re.search(rb"\r(?!\n)", raw)
+        assert lone is not None                                # more \r than \r\n
+        pos = lone.start()
+        raise InputError("carriage return (\\r) inside a line: lines must end in \\n or "
+                         "\\r\\n", file=name, line=raw.count(b"\n", 0, pos) + 1)
+    return raw, notes
+
+
+#: The decompressed text may take at most this share of the memory budget [-]
+#: (the reader holds the text, its line index and the parsed table at once).
+_READ_BYTES_FACTOR = 8
+#: Peak memory of the reader per byte of text, per line and per comma [bytes]
+#: (measured with tracemalloc: 323 MB for 1e6 rows x 5 columns = 106 MB of
+#: text, 250 MB for 5e6 blank lines; rounded up).
+_MEM_PER_BYTE, _MEM_PER_LINE, _MEM_PER_CELL = 2, 50, 16
+
+
+def _read_cost(data: bytes) -> int:
+    """Estimated peak memory [bytes] of parsing ``data`` (a piece of the CSV text)."""
+    return (_MEM_PER_BYTE * len(data) + _MEM_PER_LINE * data.count(b"\n")
+            + _MEM_PER_CELL * data.count(b","))
+
+
+def _check_read_memory(data: bytes, name: str) -> None:
+    """Refuse, before the text is indexed, a file whose reading would exceed the budget."""
+    lines = data.count(b"\n") + 1
+    need = _read_cost(data)
+    check_memory(need, f"reading {lines} lines ({format_size(len(data))} of text)",
+                 "split the record or keep only the columns needed", file=name)
+
+
+@dataclass(frozen=True)
+class _Lines:
+    """Physical lines of the CSV: byte bounds, and which ones hold data."""
+
+    data: bytes
+    starts: np.ndarray      # first byte of each line
+    ends: np.ndarray        # end of each line's content (before \r\n / \n)
+    stops: np.ndarray       # first byte after each line's terminator
+    header: int             # index of the header line
+    rows: np.ndarray        # indices of the data lines, in order
+
+    def text(self, i: int) -> str:
+        return self.data[self.starts[i]:self.ends[i]].decode("utf-8")
+
+
+def _scan_lines(data: bytes, name: str) -> tuple[_Lines, list[str]]:
+    """Find comment, blank, header and data lines (numpy, no Python loop)."""
+    if not data:
+        raise InputError("empty file", file=name)
+    buf = np.frombuffer(data, dtype=np.uint8)
+    nl = np.flatnonzero(buf == ord("\n"))
+    starts = np.concatenate(([0], nl + 1))
+    stops = np.concatenate((nl + 1, [len(data)]))
+    if starts[-1] == len(data):           # the text ends with a newline
+        starts, stops = starts[:-1], stops[:-1]
+    ends = stops - (buf[stops - 1] == ord("\n"))
+    ends = ends - ((ends > starts) & (buf[np.maximum(ends - 1, 0)] == ord("\r")))
+    blank = ends == starts
+    comment = ~blank & (buf[starts] == ord("#"))
+    kept = np.flatnonzero(~(blank | comment))
+    if kept.size == 0:
+        raise InputError("empty file: no header line (only comments or blank lines)",
+                         file=name)
+    lines = _Lines(data, starts, ends, stops, int(kept[0]), kept[1:])
+    n_blank = int(blank.sum())
+    notes = ([f"{name}: skipped {n_blank} blank line(s) (first at line "
+              f"{int(np.flatnonzero(blank)[0]) + 1})"] if n_blank else [])
+    return lines, notes
+
+
+# -- the CSV: header --------------------------------------------------------
+@dataclass(frozen=True)
+class _Columns:
+    """The header, and where the columns this module reads are."""
+
+    n_fields: int
+    positions: tuple[int, ...]   # file positions: time, gyro1..N, [ref x y z], [acc x y z], [temp]
+    names: tuple[str, ...]       # their names, same order
+    n_gyros: int
+    has_ref: bool
+    has_temp: bool
+    has_acc: bool = False
+
+
+def _parse_header(text: str, name: str, line: int) -> tuple[_Columns, list[str]]:
+    def error(message, column=None):
+        return InputError(message, file=name, line=line, column=column)
+
+    try:
+        fields = [f.strip() for f in next(csv.reader([text]))]
+    except (csv.Error, StopIteration) as e:
+        raise error(f"malformed header: {e}") from None
+    where: dict[str, int] = {}
+    for k, f in enumerate(fields, 1):
+        if not f:
+            raise error(f"header field {k} is empty (every column needs a name)", k)
+        if f in where:
+            raise error(f"duplicate column name {f!r} (columns {where[f]} and {k})", f)
+        where[f] = k
+    if _TIME not in where:
+        raise error(f"required column {_TIME} is missing (header: {_short(text, 60)})")
+    n_gyros = _gyro_count(fields, error)
+    refs = [r for r in _REF_NAMES if r in where]
+    if refs and len(refs) != 3:
+        raise error(f"ref_x, ref_y and ref_z must be given together; found only "
+                    f"{', '.join(refs)}", refs[0])
+    accs = [a for a in _ACC_NAMES if a in where]
+    if accs and len(accs) != 3:
+        missing = [a for a in _ACC_NAMES if a not in where]
+        raise error(f"acc_x, acc_y and acc_z must be given together; found only "
+                    f"{', '.join(accs)} ({', '.join(missing)} missing)", accs[0])
+    names = (_TIME, *(f"gyro{k}" for k in range(1, n_gyros + 1)), *refs, *accs,
+             *([_TEMP] if _TEMP in where else []))
+    extras = [f for f in fields if f not in names]
+    notes = ([f"{name}: ignored extra column(s) {', '.join(extras)}"] if extras else [])
+    cols = _Columns(n_fields=len(fields), positions=tuple(where[c] - 1 for c in names),
+                    names=names, n_gyros=n_gyros, has_ref=bool(refs),
+                    has_temp=_TEMP in where, has_acc=bool(accs))
+    return cols, notes
+
+
+def _gyro_count(fields: list[str], error) -> int:
+    """N, checking that the gyro columns are exactly gyro1..gyroN."""
+    found = [f for f in fields if _GYRO_RE.fullmatch(f)]
+    if not found:
+        raise error("no gyro columns (gyro1, gyro2, ... required)")
+    expected = [f"gyro{k}" for k in range(1, len(found) + 1)]
+    if set(found) != set(expected):
+        wrong = next(f for f in found if f not in expected)
+        missing = next(f for f in expected if f not in found)
+        raise error(f"gyro columns must be numbered gyro1..gyro{len(found)} "
+                    f"consecutively: found {', '.join(found)} ({wrong} is out of "
+                    f"sequence, {missing} is missing)", wrong)
+    return len(found)
+
+
+# -- the CSV: cells ---------------------------------------------------------
+@dataclass(frozen=True)
+class _Table:
+    """The used columns as floats (NaN for missing cells), with line numbers."""
+
+    values: np.ndarray            # (n, k) in the file's units
+    lines: np.ndarray             # (n,) 1-based file line of each row
+    header_line: int
+    token: Callable[[int, int], str]   # text of cell (row, j) for NaN/inf cells
+
+
+class _CellError(ValueError):
+    """A cell that is not a number (message without location)."""
+
+
+def _cell_value(token: str) -> float:
+    """The float in a cell; NaN if missing; _CellError if not a number."""
+    s = token.strip()
+    if _NUMBER_RE.fullmatch(s):
+        x = float(s)
+        if math.isinf(x):
+            raise _CellError(f"value {_short(token)} overflows to infinity")
+        return x
+    if not s or s.lower() in _NAN_WORDS:
+        return math.nan
+    if s.lower() in _INF_WORDS:
+        raise _CellError(f"infinite value {_short(token)}")
+    raise _CellError(f"non-numeric value {_short(token)}")
+
+
+def _missing_kind(token: str) -> str:
+    return "empty cell" if not token.strip() else f"NaN value {_short(token)}"
+
+
+def _parse_csv(data: bytes, name: str) -> tuple[_Columns, _Table, list[str]]:
+    lines, notes = _scan_lines(data, name)
+    header_line = lines.header + 1
+    cols, header_notes = _parse_header(lines.text(lines.header), name, header_line)
+    if lines.rows.size == 0:
+        raise InputError("no data rows after the header", file=name, line=header_line)
+    quoted = lines.data.find(b'"', int(lines.starts[lines.rows[0]])) != -1
+    table = _parse_slow(lines, cols, name) if quoted else _parse_fast(lines, cols, name)
+    return cols, table, notes + header_notes
+
+
+def _body_bytes(lines: _Lines, rows: np.ndarray) -> bytes:
+    """The given data lines as one byte string (lines between them left out)."""
+    breaks = np.flatnonzero(np.diff(rows) != 1)
+    firsts = np.concatenate(([rows[0]], rows[breaks + 1]))
+    lasts = np.concatenate((rows[breaks], [rows[-1]]))
+    # every piece but the last ends with its line's newline
+    return b"".join(lines.data[lines.starts[a]:lines.stops[b]] for a, b in zip(firsts, lasts))
+
+
+def _check_field_counts(lines: _Lines, cols: _Columns, name: str) -> None:
+    """Every data line has as many fields as the header (no quotes here)."""
+    buf = np.frombuffer(lines.data, dtype=np.uint8)
+    commas_before_stop = np.searchsorted(np.flatnonzero(buf == ord(",")), lines.stops)
+    per_line = np.diff(commas_before_stop, prepend=0)
+    rows = lines.rows
+    counts = per_line[rows] + 1
+    bad = np.flatnonzero(counts != cols.n_fields)
+    if bad.size:
+        i = int(bad[0])
+        raise _field_count_error(int(counts[i]), cols.n_fields, name, int(rows[i]) + 1)
+
+
+def _field_count_error(got: int, expected: int, name: str, line: int) -> InputError:
+    return InputError(f"wrong number of fields: {got}, the header has {expected}",
+                      file=name, line=line)
+
+
+def _pandas_values(body: bytes, cols: _Columns, n_rows: int) -> np.ndarray:
+    """The used columns of a quote-free body as float64 (pandas C parser).
+
+    Raises ValueError when pandas refuses a cell or finds another row count.
+    """
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        df = pd.read_csv(io.BytesIO(body), header=None, names=range(cols.n_fields),
+                         usecols=list(cols.positions), dtype=np.float64, engine="c",
+                         index_col=False, keep_default_na=False, na_values=_PANDAS_NA,
+                         skip_blank_lines=False, **_EXACT_FLOATS)
+    if len(df) != n_rows:
+        raise ValueError("row count differs")
+    return df.loc[:, list(cols.positions)].to_numpy(dtype=np.float64)
+
+
+def _parse_fast(lines: _Lines, cols: _Columns, name: str) -> _Table:
+    """pandas' C parser on a quote-free body, the slow path only where it fails.
+
+    When pandas refuses the body, it is parsed again in chunks of
+    ``_LOCATE_CHUNK_ROWS`` rows, and only the chunks pandas refuses go
+    through the exact slow path (which raises the located error, or accepts
+    spellings pandas does not know, such as ``-nan``).
+    """
+    _check_field_counts(lines, cols, name)
+    rows = lines.rows
+    try:
+        values = _pandas_values(_body_bytes(lines, rows), cols, rows.size)
+    except (ValueError, OverflowError):
+        step = _LOCATE_CHUNK_ROWS
+        values = np.concatenate([_chunk_values(lines, rows[a:a + step], cols, name)
+                                 for a in range(0, rows.size, step)])
+
+    def token(row: int, j: int) -> str:
+        return lines.text(int(rows[row])).split(",")[cols.positions[j]]
+
+    return _Table(values, rows + 1, lines.header + 1, token)
+
+
+def _chunk_values(lines: _Lines, rows: np.ndarray, cols: _Columns, name: str) -> np.ndarray:
+    try:
+        return _pandas_values(_body_bytes(lines, rows), cols, rows.size)
+    except (ValueError, OverflowError):
+        return _parse_slow(lines, cols, name, rows).values
+
+
+def _parse_slow(lines: _Lines, cols: _Columns, name: str, rows=None) -> _Table:
+    """Exact cell-by-cell parse with :mod:`csv`; raises at the first bad cell.
+
+    ``rows`` (indices of physical lines) defaults to every data line; about
+    5-10 µs per cell, so used only for quoted files and to locate errors.
+    """
+    rows = lines.rows if rows is None else rows
+    file_lines = rows + 1
+    reader = csv.reader(lines.text(int(i)) for i in rows)
+    values: list = []
+    rec_lines: list[int] = []
+    missing: dict[tuple[int, int], str] = {}
+    while True:
+        first = reader.line_num
+        try:
+            fields = next(reader)
+        except StopIteration:
+            break
+        except csv.Error as e:
+            raise InputError(f"malformed CSV row: {e}", file=name,
+                             line=int(file_lines[min(first, len(file_lines) - 1)])) from None
+        line = int(file_lines[first])
+        if len(fields) != cols.n_fields:
+            raise _field_count_error(len(fields), cols.n_fields, name, line)
+        values.append(_row_values(fields, cols, name, line, len(values), missing))
+        rec_lines.append(line)
+    array = np.array(values, dtype=np.float64).reshape(len(values), len(cols.positions))
+    return _Table(array, np.array(rec_lines, dtype=np.int64), lines.header + 1,
+                  lambda row, j: missing[(row, j)])
+
+
+def _row_values(fields, cols: _Columns, name: str, line: int, row: int,
+                missing: dict) -> list[float]:
+    out = []
+    for j, pos in enumerate(cols.positions):
+        try:
+            x = _cell_value(fields[pos])
+        except _CellError as e:
+            raise InputError(f"{e} in column {cols.names[j]}", file=name, line=line,
+                             column=cols.names[j]) from None
+        if x != x:
+            missing[(row, j)] = fields[pos]
+        out.append(x)
+    return out
+
+
+# -- checks and repairs -----------------------------------------------------
+def _check_gyro_count(cols: _Columns, side: _Sidecar, name: str, line: int) -> None:
+    if cols.n_gyros != side.layout.n_gyros:
+        raise InputError(
+            f"gyro count does not match the layout: {cols.n_gyros} gyro column(s) "
+            f"(gyro1..gyro{cols.n_gyros}) but the layout in {side.name} has "
+            f"{side.layout.n_gyros} axes", file=name, line=line)
+
+
+def _checked_values(table: _Table, cols: _Columns, name: str, repair: bool,
+                    nominal_s: float | None = None, declared: dict | None = None
+                    ) -> tuple[np.ndarray, list[str]]:
+    """Check cells, time and gaps; repair or refuse; values in file units.
+
+    With ``repair``, in this order: exact duplicate rows are dropped, short
+    gaps and runs of missing values are filled, and a jittering clock is
+    resampled onto the nominal grid (each step listed in the notes).
+    """
+    _check_infinite(table, cols, name)
+    _check_physical(table, cols, declared or {}, name)
+    if len(table.values) < MIN_SAMPLES:
+        raise InputError(f"too few samples: {len(table.values)}, at least {MIN_SAMPLES} needed",
+                         file=name, line=int(table.lines[-1]))
+    dup_notes: list[str] = []
+    if repair:
+        table, dup_notes = _drop_duplicate_rows(table, name)
+        if len(table.values) < MIN_SAMPLES:
+            raise InputError(f"too few samples after dropping exact duplicate rows: "
+                             f"{len(table.values)}, at least {MIN_SAMPLES} needed", file=name,
+                             line=int(table.lines[-1]))
+    _check_time(table, name)
+    _check_time_steps(table, name)
+    values, lines = table.values, table.lines
+    gaps, gap_notes = _find_gaps(values[:, 0], lines, name, repair)
+    runs, run_notes = _find_missing_runs(table, cols, name, repair)
+    if gaps or runs:
+        values = _fill_runs(values.copy(), runs)
+        values = _insert_gap_rows(values, gaps)
+        _check_repaired(values, cols, name)
+    values, jitter_notes = _jitter(values, nominal_s, name, repair)
+    return values, dup_notes + run_notes + gap_notes + jitter_notes
+
+
+def _nominal_period(side: "_Sidecar", cols: _Columns) -> float:
+    """The sidecar's nominal sample period in the time column's unit."""
+    period = 1.0 / side.sample_rate_hz
+    return period * MS_PER_S if side.units.get("time") == "ms" else period
+
+
+def _check_physical(table: _Table, cols: _Columns, declared: dict, name: str) -> None:
+    """Refuse a gyro or reference rate beyond :data:`MAX_RATE_DEG_S` (a unit or logging error)."""
+    groups = _column_groups(cols)
+    for key in ("gyro", "ref"):
+        if key not in groups:
+            continue
+        block = table.values[:, groups[key]]
+        convert = ACCEPTED_UNITS[key][declared.get(key, "deg/s")]
+        with np.errstate(invalid="ignore", over="ignore"):
+            mag = np.abs(block if convert is None else convert(block))
+            bad = mag > MAX_RATE_DEG_S
+        if bad.any():
+            row = int(np.flatnonzero(bad.any(axis=1))[0])
+            j = int(np.flatnonzero(bad[row])[0])
+            col = cols.names[groups[key].start + j]
+            raise InputError(f"{col} = {_fmt(table.values[row, groups[key].start + j])} is beyond "
+                             f"the {MAX_RATE_DEG_S:g} deg/s any gyro or rate table can see "
+                             "(a unit or logging error?)", file=name, line=int(table.lines[row]),
+                             column=col)
+
+
+#: Shortest time step accepted [s]: a clock faster than 1 GHz is not a gyro's.
+MIN_TIME_STEP_S = 1e-9
+#: Largest |step - nominal period| / nominal period accepted as the same clock
+#: without a note [-] (printing the times to a few digits stays far below it).
+JITTER_TOL = 1e-3
+
+
+def _check_time_steps(table: _Table, name: str) -> None:
+    """Refuse time steps below :data:`MIN_TIME_STEP_S` (subnormal or nanosecond steps)."""
+    t = table.values[:, 0]
+    step = np.diff(t)
+    tiny = np.flatnonzero(step < MIN_TIME_STEP_S)
+    if tiny.size:
+        i = int(tiny[0])
+        raise InputError(f"time step of {_fmt(step[i])} s between line {table.lines[i]} and line "
+                         f"{table.lines[i + 1]} is shorter than {MIN_TIME_STEP_S:g} s (a sample "
+                         "rate above 1 GHz): not a gyro's clock (a unit error?)", file=name,
+                         line=int(table.lines[i + 1]), column=_TIME)
+
+
+def _drop_duplicate_rows(table: _Table, name: str) -> tuple[_Table, list[str]]:
+    """Drop rows that repeat the previous row exactly (``repair``); refuse conflicting ones.
+
+    Two rows with the same time stamp and different values are refused,
+    naming both lines: nothing tells which of them is right.
+    """
+    v = table.values
+    same_t = v[1:, 0] == v[:-1, 0]
+    if not same_t.any():
+        return table, []
+    same_row = same_t & np.all((v[1:] == v[:-1]) | (np.isnan(v[1:]) & np.isnan(v[:-1])), axis=1)
+    conflict = np.flatnonzero(same_t & ~same_row)
+    if conflict.size:
+        i = int(conflict[0])
+        raise InputError(f"conflicting duplicate rows: line {table.lines[i]} and line "
+                         f"{table.lines[i + 1]} both have time_s = {_fmt(v[i, 0])} s but different "
+                         "values; --repair drops exact duplicates only (it cannot tell which row "
+                         "is right)", file=name, line=int(table.lines[i + 1]), column=_TIME)
+    keep = np.concatenate(([True], ~same_row))
+    kept = np.flatnonzero(keep)
+    dropped = table.lines[1:][same_row]
+    notes = [f"{name}: repaired: dropped line {int(line)}, an exact duplicate of the row before it"
+             for line in dropped]
+    token = table.token
+    return (_Table(v[kept], table.lines[kept], table.header_line,
+                   lambda row, j: token(int(kept[row]), j)),
+            _summarised(notes, "exact duplicate rows dropped"))
+
+
+def _jitter(values: np.ndarray, nominal_s: float | None, name: str,
+            repair: bool) -> tuple[np.ndarray, list[str]]:
+    """Resample a jittering clock onto the nominal grid (``repair``), or note the jitter.
+
+    The period is the median step, or the sidecar's nominal period when the
+    two agree to 1 %. With ``repair`` every column is linearly interpolated
+    in time onto ``t0 + k * period``, k = 0 .. round((t_end - t0) / period).
+    """
+    t = values[:, 0]
+    period = float(np.median(np.diff(t)))
+    if nominal_s is not None and abs(period / nominal_s - 1.0) <= RATE_NOTE_TOL:
+        period = nominal_s
+    dev = np.abs(np.diff(t) - period)
+    worst = float(dev.max()) if dev.size else 0.0
+    if worst <= JITTER_TOL * period:
+        return values, []
+    what = (f"the time steps jitter by up to {worst:.3g} s ({100 * worst / period:.3g} % of the "
+            f"{period:.6g} s step; rms {float(np.sqrt(np.mean(dev ** 2))):.3g} s)")
+    if not repair:
+        return values, [f"{name}: {what}; the analyses assume the uniform step (rerun with --repair "
+                        "to resample onto the nominal grid by linear interpolation)"]
+    rel = t - t[0]
+    with np.errstate(all="ignore"):
+        steps = float(rel[-1]) / period
+    if not (math.isfinite(steps) and steps <= 2 * len(t) + 10):
+        raise InputError(f"cannot resample onto a {period:.6g} s grid: the record spans "
+                         f"{_fmt(rel[-1])} s", file=name, column=_TIME)
+    k = int(round(steps))
+    grid = np.arange(k + 1) * period
+    grid = grid[grid <= rel[-1]]
+    out = np.empty((grid.size, values.shape[1]))
+    out[:, 0] = t[0] + grid
+    for j in range(1, values.shape[1]):
+        out[:, j] = np.interp(grid, rel, values[:, j])
+    if not np.all(np.diff(out[:, 0]) > 0):
+        raise InputError("cannot resample: the nominal grid is not representable at these time "
+                         "stamps (subtract the first stamp from time_s)", file=name, column=_TIME)
+    return out, [f"{name}: repaired: {what}; resampled {len(t)} samples onto {grid.size} at the "
+                 f"nominal {period:.6g} s step from the first stamp, by linear interpolation in time"]
+
+
+def _check_infinite(table: _Table, cols: _Columns, name: str) -> None:
+    inf = np.isinf(table.values)
+    if inf.any():
+        row = int(np.flatnonzero(inf.any(axis=1))[0])
+        j = int(np.flatnonzero(inf[row])[0])
+        token = table.token(row, j)
+        try:
+            _cell_value(token)
+            problem = f"infinite value {_short(token)}"   # pandas knows more spellings
+        except _CellError as e:
+            problem = str(e)
+        raise InputError(f"{problem} in column {cols.names[j]}", file=name,
+                         line=int(table.lines[row]), column=cols.names[j])
+
+
+def _check_time(table: _Table, name: str) -> None:
+    t, lines = table.values[:, 0], table.lines
+    nan = np.flatnonzero(np.isnan(t))
+    if nan.size:
+        i = int(nan[0])
+        raise InputError(f"{_missing_kind(table.token(i, 0))} in column {_TIME}: sample "
+                         "times cannot be missing or repaired", file=name,
+                         line=int(lines[i]), column=_TIME)
+    bad = np.flatnonzero(~(np.diff(t) > 0))
+    if bad.size:
+        i = int(bad[0])
+        hint = ("; if the rows repeat exactly, --repair drops the duplicates"
+                if t[i + 1] == t[i] else "")
+        raise InputError(f"time_s is not strictly increasing: {_fmt(t[i + 1])} s at line "
+                         f"{lines[i + 1]} follows {_fmt(t[i])} s at line {lines[i]}{hint}",
+                         file=name, line=int(lines[i + 1]), column=_TIME)
+
+
+def _fmt(x) -> str:
+    return repr(float(x))
+
+
+def _find_gaps(t: np.ndarray, lines: np.ndarray, name: str,
+               repair: bool) -> tuple[list[tuple[int, int]], list[str]]:
+    """Gaps as (row before the gap, missing samples); refuse unless repairable."""
+    step = np.diff(t)
+    period = float(np.median(step))
+    where = np.flatnonzero(step > GAP_FACTOR * period)
+    with np.errstate(over="ignore"):
+        missing = np.rint(np.minimum(step[where] / period, 1e15)).astype(np.int64) - 1
+    gaps, notes = [], []
+    for i, m in zip(where.tolist(), missing.tolist()):
+        span = (f"between line {lines[i]} (t = {_fmt(t[i])} s) and line {lines[i + 1]} "
+                f"(t = {_fmt(t[i + 1])} s)")
+        if m > MAX_REPAIR_SAMPLES or not repair:
+            fix = (f"gaps longer than {MAX_REPAIR_SAMPLES} samples cannot be repaired"
+                   if m > MAX_REPAIR_SAMPLES else
+                   "rerun with --repair (repair=True in Python) to fill it by linear interpolation")
+            raise InputError(f"gap of {m} missing sample(s) {span} (nominal period "
+                             f"{period:.6g} s); {fix}", file=name,
+                             line=int(lines[i + 1]), column=_TIME)
+        gaps.append((i, m))
+        notes.append(f"{name}: repaired a gap: inserted {m} sample(s) {span}, values "
+                     "linearly interpolated in time")
+    return gaps, _summarised(notes, "gaps repaired")
+
+
+def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
+    """[start, stop) index ranges where ``mask`` is True."""
+    edges = np.flatnonzero(np.diff(np.concatenate(([0], mask.astype(np.int8), [0]))))
+    return list(zip(edges[::2].tolist(), edges[1::2].tolist()))
+
+
+def _find_missing_runs(table: _Table, cols: _Columns, name: str,
+                       repair: bool) -> tuple[list[tuple[int, int, int]], list[str]]:
+    """Runs (start, stop, column) of missing data values; refuse unless repairable."""
+    nan = np.isnan(table.values[:, 1:])
+    if not nan.any():
+        return [], []
+    runs = sorted((a, b, j + 1) for j in np.flatnonzero(nan.any(axis=0)).tolist()
+                  for a, b in _runs(nan[:, j]))
+    n, lines, notes = len(table.values), table.lines, []
+    for a, b, j in runs:
+        col = cols.names[j]
+        where = (f"line {lines[a]}" if b - a == 1 else f"lines {lines[a]}-{lines[b - 1]}")
+        kind = _missing_kind(table.token(a, j))
+        what = f"{kind}, {where}"
+        if a == 0 or b == n:
+            problem = (f"missing value(s) at the {'start' if a == 0 else 'end'} of column "
+                       f"{col} ({what}) cannot be interpolated")
+        elif b - a > MAX_REPAIR_SAMPLES:
+            problem = (f"run of {b - a} missing values in column {col} ({what}) is longer "
+                       f"than {MAX_REPAIR_SAMPLES} samples and cannot be repaired")
+        elif not repair:
+            problem = (f"{kind} in column {col} ({b - a} missing value(s), {where}); rerun "
+                       "with --repair (repair=True in Python) to fill by linear interpolation")
+        else:
+            notes.append(f"{name}: repaired {b - a} missing value(s) in column {col} at "
+                         f"{where} by linear interpolation in time")
+            continue
+        raise InputError(problem, file=name, line=int(lines[a]), column=col)
+    return runs, _summarised(notes, "runs of missing values repaired")
+
+
+def _summarised(notes: list[str], what: str) -> list[str]:
+    """At most ``_MAX_NOTES`` notes of one kind, then a count of the rest."""
+    if len(notes) <= _MAX_NOTES:
+        return notes
+    return notes[:_MAX_NOTES] + [f"... and {len(notes) - _MAX_NOTES} more {what}"]
+
+
+def _fill_runs(values: np.ndarray, runs) -> np.ndarray:
+    t = values[:, 0]
+    for j in sorted({j for _, _, j in runs}):
+        bad = np.isnan(values[:, j])
+        values[bad, j] = np.interp(t[bad], t[~bad], values[~bad, j])
+    return values
+
+
+def _insert_gap_rows(values: np.ndarray, gaps) -> np.ndarray:
+    if not gaps:
+        return values
+    t = values[:, 0]
+    new_t = np.concatenate([t[i] + (t[i + 1] - t[i]) * np.arange(1, m + 1) / (m + 1)
+                            for i, m in gaps])
+    at = np.concatenate([np.full(m, i + 1) for i, m in gaps])
+    rows = np.column_stack([new_t] + [np.interp(new_t, t, values[:, j])
+                                      for j in range(1, values.shape[1])])
+    return np.insert(values, at, rows, axis=0)
+
+
+def _check_repaired(values: np.ndarray, cols: _Columns, name: str) -> None:
+    if not np.all(np.diff(values[:, 0]) > 0):
+        raise InputError("cannot repair: the inserted sample times are not representable "
+                         "between their neighbours", file=name, column=_TIME)
+    bad = np.flatnonzero(~np.isfinite(values).all(axis=0))
+    if bad.size:
+        raise InputError("cannot repair: interpolation overflows (values too large)",
+                         file=name, column=cols.names[int(bad[0])])
+
+
+def _column_groups(cols: _Columns) -> dict[str, slice]:
+    n = cols.n_gyros
+    groups = {"time": slice(0, 1), "gyro": slice(1, 1 + n)}
+    j = 1 + n
+    if cols.has_ref:
+        groups["ref"] = slice(j, j + 3)
+        j += 3
+    if cols.has_acc:
+        groups["acc"] = slice(j, j + 3)
+        j += 3
+    if cols.has_temp:
+        groups["temp"] = slice(j, j + 1)
+    return groups
+
+
+def _to_canonical(values: np.ndarray, cols: _Columns, declared: dict, toml_name: str,
+                  name: str) -> tuple[np.ndarray, list[str]]:
+    """Convert columns declared in ``[units]`` to s, deg/s and degC."""
+    groups = _column_groups(cols)
+    todo = [(key, unit) for key, unit in declared.items()
+            if key in groups and ACCEPTED_UNITS[key][unit] is not None]
+    if not todo:
+        return values, []
+    values, notes = values.copy(), []
+    for key, unit in todo:
+        convert = ACCEPTED_UNITS[key][unit]
+        assert convert is not None                             # todo keeps the converted units
+        with np.errstate(over="ignore", under="ignore"):
+            values[:, groups[key]] = convert(values[:, groups[key]])
+        notes.append(f"{toml_name}: converted {key} from {unit} to {_CANONICAL_UNIT[key]} "
+                     "([units] table)")
+        bad = ~np.isfinite(values[:, groups[key]])
+        if bad.any():
+            raise InputError(f"a {key} value overflows when converted from {unit}",
+                             file=name, column=cols.names[groups[key].start])
+    if not np.all(np.diff(values[:, 0]) > 0):
+        raise InputError("time_s is not strictly increasing after converting its unit",
+                         file=name, column=_TIME)
+    return values, notes
+
+
+def _build(values: np.ndarray, cols: _Columns, side: _Sidecar, name: str,
+           notes) -> Measurement:
+    g = _column_groups(cols)
+    return Measurement(
+        time_s=values[:, 0], gyro_deg_s=values[:, g["gyro"]], layout=side.layout,
+        sample_rate_hz=side.sample_rate_hz,
+        ref_deg_s=values[:, g["ref"]] if "ref" in g else None,
+        temp_c=values[:, g["temp"].start] if "temp" in g else None,
+        site=side.site, description=side.description, source=name, notes=notes,
+        acc_m_s2=values[:, g["acc"]] if "acc" in g else None)
+
+
+def _rate_note(time_s: np.ndarray, side: _Sidecar) -> list[str]:
+    """A note when sample_rate_hz and the median step of time_s disagree."""
+    with np.errstate(divide="ignore", over="ignore"):
+        rate = 1.0 / float(np.median(np.diff(time_s)))
+    if abs(rate / side.sample_rate_hz - 1.0) <= RATE_NOTE_TOL:
+        return []
+    return [f"{side.name}: sample_rate_hz = {_fmt(side.sample_rate_hz)} but the median "
+            f"step of time_s gives {rate:.6g} Hz; time_s is used"]
+
+
+# =========================================================================
+# Writing
+# =========================================================================
+def write_measurement(m: Measurement, path, *, force: bool = True) -> tuple[Path, Path]:
+    """Write a measurement as CSV (gzip if ``path`` ends in .gz) + TOML sidecar.
+
+    Parameters
+    ----------
+    m : Measurement
+        What to write. Values go out in the canonical file units (s, deg/s,
+        degC) with the shortest decimal that reads back as the same double,
+        so ``read_measurement(write_measurement(m, p)[0])`` reproduces every
+        array exactly. ``notes`` and ``source`` are not written.
+    path : str or os.PathLike
+        Output CSV, ending in ``.csv`` or ``.csv.gz``; the sidecar is
+        ``<stem>.toml`` beside it.
+    force : bool
+        Replace existing files (atomically, never through a symlink; see
+        :mod:`gyroarray.core.outputs`); False refuses an existing file.
+
+    Returns
+    -------
+    csv_path, toml_path : Path
+        The two files written.
+
+    Raises
+    ------
+    InputError
+        If ``path`` does not end in .csv/.csv.gz, if either output file is
+        the file ``m`` was read from (or its sidecar): nothing the user gave
+        is ever overwritten; or if a file cannot be written.
+
+    Notes
+    -----
+    A conical layout is written as ``scheme``/``n_gyros``/``alpha_deg`` when
+    that reproduces its axes exactly, otherwise as explicit ``axes``. Degrees
+    (``alpha_deg`` and the site) are chosen so that converting them back
+    gives the stored radians exactly whenever such a decimal exists.
+    """
+    csv_path = Path(path)
+    low = csv_path.name.lower()
+    if not (low.endswith(".csv") or low.endswith(".csv.gz")):
+        raise InputError("output must end in .csv or .csv.gz", file=str(path))
+    toml_path = _sidecar_of(csv_path)
+    _refuse_overwriting_source(m, (csv_path, toml_path))
+    text = _csv_text(m).encode("utf-8")
+    if low.endswith(".gz"):
+        text = gzip.compress(text, compresslevel=6, mtime=0)
+    sidecar = tomli_w.dumps(_sidecar_dict(m)).encode("utf-8")
+    for target, content in ((csv_path, text), (toml_path, sidecar)):
+        write_bytes(target, content, force=force)
+    return csv_path, toml_path
+
+
+def _refuse_overwriting_source(m: Measurement, targets) -> None:
+    if m.source is None:
+        return
+    for target in targets:
+        if any(same_path(target, p) for p in measurement_files(m.source)):
+            raise InputError("refusing to overwrite the measurement's own source file "
+                             f"({m.source} or its sidecar); choose another path",
+                             file=str(target))
+
+
+def _csv_text(m: Measurement) -> str:
+    names = [_TIME, *(f"gyro{k}" for k in range(1, m.n_gyros + 1))]
+    blocks = [m.time_s[:, None], m.gyro_deg_s]
+    if m.ref_deg_s is not None:
+        names += _REF_NAMES
+        blocks.append(m.ref_deg_s)
+    if m.temp_c is not None:
+        names.append(_TEMP)
+        blocks.append(m.temp_c[:, None])
+    if m.acc_m_s2 is not None:
+        names += _ACC_NAMES
+        blocks.append(m.acc_m_s2)
+    table = np.hstack(blocks)
+    row_format = ",".join(["%r"] * table.shape[1])   # %r of a float: shortest round trip
+    out = [f"# written by gyroarray {__version__}", ",".join(names)]
+    for start in range(0, len(table), _CSV_CHUNK_ROWS):
+        rows = table[start:start + _CSV_CHUNK_ROWS].tolist()
+        out.extend(map(row_format.__mod__, map(tuple, rows)))
+    return "\n".join(out) + "\n"
+
+
+def _exact_deg(rad: float) -> float:
+    """The shortest decimal degrees d near ``rad`` with ``deg_to_rad(d) == rad``.
+
+    ``rad_to_deg(deg_to_rad(15.1881))`` is 15.188099999999999 (about 7 % of
+    decimals come back one ulp off); both convert to the same radians, and
+    the sidecar should show what the user wrote. The few neighbours of
+    ``rad_to_deg(rad)`` are tried; without an exact one, that value is used.
+    """
+    d0 = float(units.rad_to_deg(rad))
+    candidates = [d0]
+    for direction in (math.inf, -math.inf):
+        d = d0
+        for _ in range(4):
+            d = math.nextafter(d, direction)
+            candidates.append(d)
+    exact = [d for d in candidates if units.deg_to_rad(d) == rad]
+    return min(exact, key=lambda d: len(repr(d))) if exact else d0
+
+
+def _layout_table(layout: Layout) -> dict:
+    """``scheme``/``n_gyros``/``alpha_deg`` if they rebuild the axes exactly, else axes."""
+    if (layout.scheme in (1, 2) and layout.alpha_rad is not None
+            and 3 <= layout.n_gyros <= MAX_CONE_GYROS):
+        alpha_deg = _exact_deg(layout.alpha_rad)
+        again = Layout.conical(layout.scheme, layout.n_gyros, units.deg_to_rad(alpha_deg))
+        if 0.0 <= alpha_deg <= 180.0 and np.array_equal(again.axes, layout.axes):
+            return {"scheme": int(layout.scheme), "n_gyros": layout.n_gyros,
+                    "alpha_deg": alpha_deg, **_positions_entry(layout)}
+    return {"axes": layout.axes.tolist(), **_positions_entry(layout)}
+
+
+def _positions_entry(layout: Layout) -> dict:
+    """``{"positions_m": rows}`` when the layout has positions, else empty."""
+    return {} if layout.positions_m is None else {"positions_m": layout.positions_m.tolist()}
+
+
+def _sidecar_dict(m: Measurement) -> dict:
+    doc = {"sample_rate_hz": m.sample_rate_hz, "description": m.description,
+           "layout": _layout_table(m.layout)}
+    if m.site is not None:
+        doc["site"] = {"latitude_deg": _exact_deg(m.site.latitude_rad),
+                       "heading_deg": _exact_deg(m.site.heading_rad)}
+    return doc

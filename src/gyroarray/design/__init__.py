@@ -1,0 +1,1 @@
+"""Array design: the analytic predictor and the recommendation."""

@@ -1,0 +1,1260 @@
+"""Which array to build: the design search behind ``gyroarray design --recommend``.
+
+For gyros that are alike (one datasheet, or the typical gyro of a fitted
+model), the search runs scheme × N × cone angle α × estimator × bandwidth
+through the analytic predictor (:mod:`gyroarray.design.predict`) and ranks the
+designs by the predicted RMS of the rate error about the truth over the
+horizon (root-sum-square over the body axes, random-walk drift included).
+
+The fast path. On a conical layout with identical, equicorrelated gyros the
+problem falls apart into one scalar channel per body axis:
+
+* a per-sample estimator (``gls``, ``ols``, ``naive``) with weights m_a gives
+  y_a = ω_a + m_aᵀ(b + v): white variance m_aᵀRm_a, random-walk variance
+  m_aᵀQ_bm_a, flicker Σ m_ai² B², whatever the layout; the low-pass acts on y_a;
+* ``kf_single`` is the same single-gyro filter on every gyro, so it commutes
+  with the OLS combination: the filter acts on the OLS channel;
+* ``kf_array`` decouples when HᵀR⁻¹H is diagonal and every whitened axis is
+  an eigenvector of the whitened bias covariance (every conical layout when
+  the ARW and RRW correlations are equal; Scheme 1 always): it is the
+  single-input KF on the GLS channel, designed for that channel's noise.
+
+A channel filter's unit responses (:func:`gyroarray.design.predict.channel_response`)
+are computed once per bandwidth, so every α and N is a weighted sum of them.
+The gyros' own low-pass (``DesignSpace.sensor_bandwidth``, the spec's
+``bandwidth`` on every gyro) commutes with every per-sample combination of
+alike gyros, so it is cascaded in front of each channel filter
+(:func:`gyroarray.design.predict.cascade`): the noise and the motion pass it, and the
+swing response splits into the estimator's and the sensor's factors
+(:func:`tracking_limit` says which one limits tracking). A g-sensitivity
+(``DesignSpace.g_sensitivity_deg_s_per_g``) is reported beside the noise:
+per gyro k · f, fused through the design's DC gain.
+
+The tests check the fast path against the full predictor. Where
+``kf_array`` does not decouple (Scheme 2 with unequal ARW and RRW
+correlation) it is predicted exactly by the full predictor at the cone angle
+and bandwidth found for ``kf_single``, and the assumptions say so.
+"""
+
+from __future__ import annotations
+
+import itertools
+import json
+import math
+import time
+from dataclasses import dataclass, field, replace
+from functools import lru_cache
+from typing import Any
+
+import numpy as np
+from scipy.optimize import minimize_scalar
+
+from gyroarray.core import units
+from gyroarray.core.constants import G0_M_S2
+from gyroarray.core.gdop import gdop_batch, correlation_matrix, fault_tolerance
+from gyroarray.core.errors import InputError
+from gyroarray.core.layout import Layout, conical_axes
+from gyroarray.design.predict import (AXES, MODELLED, SensorBandwidth, Swing, channel_filter, channel_response,
+                               g_sensitivity_error, predict, settle_start, swing_truth)
+
+__all__ = ["GyroNoise", "DesignSpace", "recommend", "ESTIMATORS", "DEFAULT_BANDWIDTH_HZ"]
+
+#: The estimators the search compares (the registry's linear ones).
+ESTIMATORS = ("kf_array", "kf_single", "gls", "ols", "naive")
+#: The bandwidth a filter is held at when no motion is given to trade it against [Hz].
+DEFAULT_BANDWIDTH_HZ = 10.0
+#: Cone angles per scheme on the search grid.
+ALPHA_POINTS = 100
+#: Bandwidths per decade on the search grid.
+BW_PER_DECADE = 8
+#: Designs whose objectives differ by less than this share are reported as equivalent.
+EQUIVALENT_SHARE = 0.01
+
+
+@dataclass(frozen=True)
+class GyroNoise:
+    """The noise of one gyro of the array (every gyro alike), datasheet units.
+
+    Attributes
+    ----------
+    arw_deg_rt_h : float
+        Angle random walk N [deg/√h] (> 0).
+    rrw_deg_h_rt_h : float
+        Rate random walk K [deg/h/√h].
+    bi_deg_h : float
+        Bias instability B [deg/h].
+    gm_sigma_deg_h, gm_tau_s : float
+        First-order Gauss–Markov σ [deg/h] and τc [s] (σ = 0: none).
+    rho_arw, rho_rrw : float
+        Common correlation of the gyros' ARW and of their RRW increments [-].
+    sources : dict
+        Where each value came from ("user", "default", "model FILE").
+    ignored : tuple of str
+        Effects of a source model that the predictor does not model.
+    """
+
+    arw_deg_rt_h: float
+    rrw_deg_h_rt_h: float = 0.0
+    bi_deg_h: float = 0.0
+    gm_sigma_deg_h: float = 0.0
+    gm_tau_s: float = 0.0
+    rho_arw: float = 0.0
+    rho_rrw: float = 0.0
+    sources: dict = field(default_factory=dict)
+    ignored: tuple[str, ...] = ()
+
+    def __post_init__(self):
+        if not (math.isfinite(self.arw_deg_rt_h) and self.arw_deg_rt_h > 0):
+            raise InputError(f"the gyros need an angle random walk > 0 [deg/√h], got {self.arw_deg_rt_h!r}")
+        for k in ("rrw_deg_h_rt_h", "bi_deg_h", "gm_sigma_deg_h", "gm_tau_s"):
+            v = getattr(self, k)
+            if not (math.isfinite(v) and v >= 0):
+                raise InputError(f"{k} must be finite and >= 0, got {v!r}")
+        for k in ("rho_arw", "rho_rrw"):
+            v = getattr(self, k)
+            if not (math.isfinite(v) and -1.0 < v < 1.0):
+                raise InputError(f"{k} must be in (-1, 1), got {v!r}")
+
+    @classmethod
+    def from_model(cls, model, source: str = "model") -> "GyroNoise":
+        """The typical gyro of a noise model: each effect's quadratic mean over its gyros.
+
+        A correlation matrix is reduced to the mean of its off-diagonal entries.
+        """
+        from gyroarray.estimators.noise import per_gyro  # lazy: loads numba
+        n = max([e.gyro or 1 for e in model.entries] + [1])
+
+        def qmean(effect, key):
+            v = per_gyro(model, effect, key, n)
+            v = v[np.isfinite(v)]
+            return float(np.sqrt(np.mean(v ** 2))) if v.size else 0.0
+        arw = units.arw_rad_rt_s_to_deg_rt_h(qmean("arw", "n_rad_rt_s"))
+        if arw <= 0:
+            raise InputError("the model has no angle random walk ('arw'): the estimators need "
+                             "the white-noise level of the gyros", file=source)
+        rho = {"rho_arw": 0.0, "rho_rrw": 0.0}
+        for e in model.entries:
+            if e.effect == "correlation":
+                for k in rho:
+                    r = np.asarray(e.si_params[k], dtype=float)
+                    rho[k] = float(r) if r.ndim == 0 else float(
+                        (r.sum() - np.trace(r)) / (r.size - r.shape[0]))
+        tau = per_gyro(model, "gauss_markov", "tau_s", n)
+        tau = tau[np.isfinite(tau)]
+        src = {k: source for k in ("arw", "rrw", "bi", "gauss_markov", "rho_arw", "rho_rrw")}
+        # the sensor's own effects come in through DesignSpace
+        modelled = tuple(m for m in MODELLED if m not in ("bandwidth", "g_sensitivity"))
+        return cls(arw_deg_rt_h=arw,
+                   rrw_deg_h_rt_h=units.rrw_rad_s_rt_s_to_deg_h_rt_h(qmean("rrw", "k_rad_s_rt_s")),
+                   bi_deg_h=units.rad_s_to_deg_h(qmean("bias_instability", "b_rad_s")),
+                   gm_sigma_deg_h=units.rad_s_to_deg_h(qmean("gauss_markov", "sigma_rad_s")),
+                   gm_tau_s=float(np.mean(tau)) if tau.size else 0.0, sources=src,
+                   ignored=tuple(sorted({e.effect for e in model.entries} - set(modelled))), **rho)
+
+    def with_rho(self, rho: float) -> "GyroNoise":
+        """The same gyros with a common correlation ρ of ARW and RRW (the condition varied)."""
+        return replace(self, rho_arw=float(rho), rho_rrw=float(rho))
+
+    def noise_model(self, n_gyros: int):
+        """This noise on every gyro of an N-gyro array, as a NoiseModel (for the simulator)."""
+        from gyroarray.effects.model import ModelEntry, NoiseModel  # lazy: loads numba
+        entries = [ModelEntry("arw", None, {"n_deg_rt_h": self.arw_deg_rt_h})]
+        if self.rrw_deg_h_rt_h > 0:
+            entries.append(ModelEntry("rrw", None, {"k_deg_h_rt_h": self.rrw_deg_h_rt_h}))
+        if self.bi_deg_h > 0:
+            entries.append(ModelEntry("bias_instability", None, {"b_deg_h": self.bi_deg_h}))
+        if self.gm_sigma_deg_h > 0 and self.gm_tau_s > 0:
+            entries.append(ModelEntry("gauss_markov", None, {"sigma_deg_h": self.gm_sigma_deg_h,
+                                                             "tau_s": self.gm_tau_s}))
+        if self.rho_arw or self.rho_rrw:
+            entries.append(ModelEntry("correlation", None, {"rho_arw": self.rho_arw,
+                                                            "rho_rrw": self.rho_rrw}))
+        model = NoiseModel(tuple(entries), description="typical gyro of the design search")
+        model.check(n_gyros)
+        return model
+
+    def to_json_dict(self) -> dict:
+        return {"arw_deg_rt_h": self.arw_deg_rt_h, "rrw_deg_h_rt_h": self.rrw_deg_h_rt_h,
+                "bi_deg_h": self.bi_deg_h, "gm_sigma_deg_h": self.gm_sigma_deg_h,
+                "gm_tau_s": self.gm_tau_s, "rho_arw": self.rho_arw, "rho_rrw": self.rho_rrw}
+
+
+@dataclass(frozen=True)
+class DesignSpace:
+    """What the search varies and under which conditions (every default recorded).
+
+    Attributes
+    ----------
+    rate_hz : float
+        Sample rate [Hz].
+    horizon_s : float
+        Run length T the accuracy refers to [s].
+    ns : tuple of int
+        Numbers of gyros N.
+    schemes : tuple of int
+    estimators : tuple of str
+    failures : int
+        Gyros that may fail while a 3-axis rate must remain.
+    bandwidth_hz : tuple of float
+        (lo, hi) range searched [Hz]; lo == hi: fixed.
+    swing : Swing or None
+        A swing about each body axis.
+    motion : ndarray (n, 3) or None
+        A commanded body rate instead of a swing [rad/s].
+    motion_name : str
+    settle_s : float
+        Start-up excluded from the window metrics [s].
+    alpha_points : int
+    sensor_bandwidth : (float, int) or None
+        The gyros' own low-pass, (cut-off [Hz], order 1 or 2), as the spec's
+        ``bandwidth`` effect on every gyro: cascaded before every estimator.
+    g_sensitivity_deg_s_per_g : (float, float, float) or None
+        Every gyro's g-sensitivity, platform frame [(deg/s)/g] (the spec's
+        ``g_sensitivity`` on every gyro); its rate error is reported beside
+        the noise terms, not ranked.
+    specific_force_m_s2 : ndarray (n, 3) or None
+        The specific force at the platform origin over the run (a motion
+        profile's truth) [m/s²]; None: the level table at rest, [0, 0, g0].
+    """
+
+    rate_hz: float = 100.0
+    horizon_s: float = 600.0
+    ns: tuple[int, ...] = (4, 5, 6, 8)
+    schemes: tuple[int, ...] = (1, 2)
+    estimators: tuple[str, ...] = ESTIMATORS
+    failures: int = 0
+    bandwidth_hz: tuple[float, float] = (DEFAULT_BANDWIDTH_HZ, DEFAULT_BANDWIDTH_HZ)
+    swing: Swing | None = None
+    motion: np.ndarray | None = None
+    motion_name: str = "at rest"
+    settle_s: float = 2.0
+    alpha_points: int = ALPHA_POINTS
+    sensor_bandwidth: tuple[float, int] | None = None
+    g_sensitivity_deg_s_per_g: tuple[float, float, float] | None = None
+    specific_force_m_s2: np.ndarray | None = None
+
+    def __post_init__(self):
+        if self.sensor_bandwidth is not None:
+            from gyroarray.core.sensor import bandwidth_sos  # lazy: loads scipy.signal
+            fc, order = self.sensor_bandwidth
+            bandwidth_sos(fc, order, self.dt_s)                     # order 1/2, 0 < fc < Nyquist
+
+    @property
+    def dt_s(self) -> float:
+        return 1.0 / self.rate_hz
+
+    def sensor(self, n_gyros: int = 1):
+        """The gyros' own filter as :class:`gyroarray.design.predict.SensorBandwidth` (None: none)."""
+        if self.sensor_bandwidth is None:
+            return None
+        fc, order = self.sensor_bandwidth
+        return SensorBandwidth(cutoff_hz=np.full(n_gyros, float(fc)),
+                               order=np.full(n_gyros, int(order)), dt_s=self.dt_s)
+
+    def sensor_entries(self) -> tuple:
+        """The sensor's ``bandwidth`` and ``g_sensitivity`` as model entries on every gyro."""
+        from gyroarray.effects.model import ModelEntry  # lazy: loads numba
+        out = []
+        if self.sensor_bandwidth is not None:
+            out.append(ModelEntry("bandwidth", None, {"cutoff_hz": float(self.sensor_bandwidth[0]),
+                                                      "order": int(self.sensor_bandwidth[1])}))
+        if self.g_sensitivity_deg_s_per_g is not None:
+            out.append(ModelEntry("g_sensitivity", None,
+                                  {"deg_s_per_g": tuple(float(v) for v in self.g_sensitivity_deg_s_per_g)}))
+        return tuple(out)
+
+    @property
+    def n_samples(self) -> int:
+        from gyroarray.sim.table import n_samples  # lazy: loads mujoco
+        return n_samples(self.horizon_s, self.rate_hz)
+
+
+# -- per-layout channel parameters ------------------------------------------------------
+
+def _weights(kind: str, H: np.ndarray, R: np.ndarray) -> np.ndarray:
+    """Per-sample weights M (G, 3, N) of a stack of layouts H (G, N, 3)."""
+    if kind == "gls":
+        rih = np.linalg.solve(R[None], H)                            # R⁻¹ H
+        return np.linalg.solve(np.einsum("gni,gnj->gij", H, rih), np.swapaxes(rih, 1, 2))
+    if kind == "ols":
+        return np.linalg.solve(np.einsum("gni,gnj->gij", H, H), np.swapaxes(H, 1, 2))
+    if kind == "naive":
+        return np.swapaxes(H, 1, 2) / np.sum(H * H, axis=1)[:, :, None]
+    raise ValueError(kind)
+
+
+@dataclass
+class _Channels:
+    """Per α and axis: the channel's noise levels for one estimator (SI, per sample)."""
+
+    white: np.ndarray          # (G, 3)
+    walk: np.ndarray
+    flicker: np.ndarray        # B² per axis
+    gm: np.ndarray
+    ratio: np.ndarray | None   # kf_array: q/r the filter is designed for (G, 3)
+    decoupled: bool
+    kf_single_ratio: float = 0.0   # kf_single: q/r of one gyro
+
+
+def _channels(est: str, H: np.ndarray, g: GyroNoise, dt: float) -> _Channels:
+    N = H.shape[1]
+    s2 = units.arw_deg_rt_h_to_rad_rt_s(g.arw_deg_rt_h) ** 2 / dt
+    q = units.rrw_deg_h_rt_h_to_rad_s_rt_s(g.rrw_deg_h_rt_h) ** 2 * dt
+    ca, cr = correlation_matrix(N, g.rho_arw), correlation_matrix(N, g.rho_rrw)
+    R, Qb = s2 * ca, q * cr
+    kind = {"kf_array": "gls", "kf_single": "ols"}.get(est, est)
+    M = _weights(kind, H, R)
+    white = np.einsum("gai,ij,gaj->ga", M, R, M)
+    walk = np.einsum("gai,ij,gaj->ga", M, Qb, M)
+    m2 = np.sum(M * M, axis=2)
+    b2 = m2 * units.deg_h_to_rad_s(g.bi_deg_h) ** 2
+    gm = m2 * units.deg_h_to_rad_s(g.gm_sigma_deg_h) ** 2
+    ratio, decoupled = None, True
+    if est == "kf_array":
+        ratio = walk / white
+        # decoupled: whitened axes orthogonal and eigenvectors of the whitened bias covariance
+        L = np.linalg.cholesky(R)
+        ht = np.linalg.solve(L[None], H)
+        qt = np.linalg.solve(L, np.linalg.solve(L, Qb).T)
+        gram = np.einsum("gni,gnj->gij", ht, ht)
+        off = np.abs(gram - np.einsum("gii->gi", gram)[:, :, None] * np.eye(3))
+        qh = np.einsum("nm,gmi->gni", qt, ht)
+        resid = qh - ht * (np.einsum("gni,gni->gi", ht, qh) / np.einsum("gni,gni->gi", ht, ht))[:, None, :]
+        scale = np.max(np.abs(gram), axis=(1, 2))
+        ok = np.isfinite(scale) & (scale > 0)
+        decoupled = bool(np.all(off[ok] <= 1e-9 * scale[ok, None, None])
+                         and np.all(np.abs(resid[ok]) <= 1e-9 * (np.max(np.abs(qt)) * np.sqrt(scale[ok]))[:, None, None]))
+    return _Channels(white, walk, b2, gm, ratio, decoupled)
+
+
+# -- the filters and their unit responses ----------------------------------------------------
+
+class _FilterBank:
+    """Channel filters and unit responses, built on demand and cached."""
+
+    def __init__(self, space: DesignSpace, gm_tau_s: float, bi: bool):
+        self.space = space
+        self.n = space.n_samples
+        self.k0 = settle_start(self.n, space.dt_s, space.settle_s)
+        self.gm_tau = gm_tau_s if gm_tau_s > 0 else None
+        self.bi = bi
+        self.motion: np.ndarray | None
+        if space.motion is not None:
+            self.motion = np.asarray(space.motion, dtype=float)[:self.n]
+        elif space.swing is not None:
+            self.motion = swing_truth(space.swing, self.n, space.dt_s)
+        else:
+            self.motion = None
+        self.swing_hz = None if space.swing is None else space.swing.frequency_hz
+        self._cache: dict = {}
+
+    def get(self, kind: str, bw: float | None, ratio: float | None = None):
+        key = (kind, None if bw is None else float(bw), None if ratio is None else float(f"{ratio:.12g}"))
+        if key not in self._cache:
+            sys = channel_filter(kind, self.space.dt_s, bw, ratio)
+            self._cache[key] = None if sys is None else channel_response(
+                sys, self.space.dt_s, self.n, self.k0, bi=self.bi, gm_tau_s=self.gm_tau,
+                motion=self.motion, swing_hz=self.swing_hz, sensor=self.space.sensor())
+        return self._cache[key]
+
+
+def _filter_kind(est: str) -> str:
+    return {"kf_array": "kf", "kf_single": "kf", "gls": "lowpass", "ols": "lowpass"}.get(est, "none")
+
+
+def _bandwidths(space: DesignSpace, est: str) -> list[float | None]:
+    """The bandwidths an estimator is tried at (None: its unfiltered form)."""
+    if est == "naive":
+        return [None]
+    lo, hi = space.bandwidth_hz
+    nyq = 0.5 * space.rate_hz
+    hi = min(hi, 0.45 * space.rate_hz)
+    lo = min(lo, hi)
+    grid = [lo] if lo == hi else list(np.geomspace(lo, hi, max(2, int(round(
+        BW_PER_DECADE * math.log10(hi / lo))) + 1)))
+    out: list[float | None] = [float(f) for f in grid if 0 < f < nyq]
+    if est in ("gls", "ols") and lo != hi:
+        out.append(None)                                             # no low-pass
+    return out
+
+
+@dataclass
+class _Moments:
+    """Per axis: the window moments of one design (SI) and its objective."""
+
+    ms: np.ndarray             # (..., 3)
+    sumw: np.ndarray
+    sumf: np.ndarray
+
+
+def _combine(ch: _Channels, sel, resp) -> _Moments:
+    """Moments per axis of the channels ``sel`` (index into α) through the responses
+    ``resp`` (one ChannelResponse per axis, or None: infeasible)."""
+    out = []
+    for part in range(3):
+        v = np.zeros(ch.white[sel].shape)
+        for a in range(3):
+            r = resp[a]
+            if r is None:
+                v[..., a] = np.inf
+                continue
+            v[..., a] = (ch.white[sel][..., a] * r.white[part] + ch.walk[sel][..., a] * r.walk[part]
+                         + ch.flicker[sel][..., a] * r.flicker[part]
+                         + ch.gm[sel][..., a] * r.gauss_markov[part])
+        out.append(v)
+    return _Moments(*out)
+
+
+def _add_motion(m: _Moments, resp) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Total ms, mean² over the window and sum² over the run per axis (noise + motion)."""
+    ms, sumw2, sumf2 = m.ms.copy(), m.sumw.copy(), m.sumf.copy()
+    for a in range(3):
+        r = resp[a]
+        if r is None or r.motion is None:
+            continue
+        mms, msw, msf = r.motion
+        ms[..., a] += mms[a]
+        sumw2[..., a] += msw[a] ** 2
+        sumf2[..., a] += msf[a] ** 2
+    return ms, sumw2, sumf2
+
+
+#: The swing-response keys of a design's prediction: total, then its two factors.
+_SPLIT_KEYS = ("amplitude_ratio", "phase_deg", "estimator_amplitude_ratio", "estimator_phase_deg",
+               "sensor_amplitude_ratio", "sensor_phase_deg")
+
+
+def _split(r) -> dict:
+    """The swing response of a channel (None at rest): total, estimator's and sensor's."""
+    return {k: getattr(r, k) for k in _SPLIT_KEYS}
+
+
+def _with_sensor(model, space: DesignSpace, *, g_sensitivity: bool = True):
+    """The noise model with the space's sensor bandwidth (and g-sensitivity) on every gyro.
+
+    The Monte-Carlo check and the full predictor leave the g-sensitivity out
+    (``g_sensitivity`` False), as the ranking does: it is reported on its own.
+    """
+    from gyroarray.effects.model import NoiseModel  # lazy: loads numba
+    extra = tuple(e for e in space.sensor_entries() if g_sensitivity or e.effect != "g_sensitivity")
+    return model if not extra else NoiseModel(tuple(model.entries) + extra,
+                                              description=model.description)
+
+
+def _r_matrix(n: int, g: GyroNoise, dt: float) -> np.ndarray:
+    """Covariance of one white sample of the N gyros [rad²/s²]."""
+    return units.arw_deg_rt_h_to_rad_rt_s(g.arw_deg_rt_h) ** 2 / dt * correlation_matrix(n, g.rho_arw)
+
+
+def _space_specific_force(space: DesignSpace) -> np.ndarray:
+    """The specific force at the platform origin over the scored window (n, 3) [m/s²]:
+    the motion profile's truth, else the level table at rest (a swing's few degrees of
+    tilt are left out), [0, 0, g0]."""
+    if space.specific_force_m_s2 is not None:
+        return np.asarray(space.specific_force_m_s2, dtype=float)[:space.n_samples]
+    return np.array([[0.0, 0.0, G0_M_S2]])
+
+
+def _g_sensitivity(space: DesignSpace, dc_gain: np.ndarray) -> dict:
+    """``g_sensitivity``: the RMS rate error of the space's g-sensitivity on its motion, per
+    gyro and fused through the design's DC gain T₀ (3, N) (:func:`gyroarray.design.predict.g_sensitivity_error`);
+    {} without one."""
+    if space.g_sensitivity_deg_s_per_g is None:
+        return {}
+    T0 = np.asarray(dc_gain, dtype=float)
+    N = T0.shape[1]
+    k = np.tile(units.deg_s_per_g_to_rad_s_per_m_s2(np.asarray(space.g_sensitivity_deg_s_per_g,
+                                                               dtype=float)), (N, 1))
+    f0 = _space_specific_force(space)
+    f = np.broadcast_to(f0[:, None, :], (f0.shape[0], N, 3))
+    k0 = settle_start(f0.shape[0], space.dt_s, space.settle_s) if f0.shape[0] > 1 else 0
+    r = g_sensitivity_error(k, f, T0, k0)
+    fused = r["fused_rms_deg_s"]
+    return {"g_sensitivity": {"per_gyro_rms_deg_s": float(np.mean(r["per_gyro_rms_deg_s"])),
+                              "fused_rms_deg_s": fused,
+                              "fused_rms_3axis_deg_s": float(math.sqrt(sum(v * v for v in fused.values())))}}
+
+
+# -- the search --------------------------------------------------------------------------
+
+def _alpha_grid(scheme: int, points: int) -> np.ndarray:
+    hi = 90.0 if scheme == 1 else 180.0
+    return np.deg2rad(np.linspace(hi / points, hi - (hi / points if scheme == 2 else 0.0), points))
+
+
+def _survives(H: np.ndarray, rho: float, k: int) -> np.ndarray:
+    """Worst-case GDOP (G,) over every choice of k failed gyros (inf: an axis is lost)."""
+    G, N, _ = H.shape
+    if k == 0:
+        return gdop_batch(H, np.linalg.cholesky(correlation_matrix(N, rho)))
+    if N - k < 3:
+        return np.full(G, math.inf)
+    worst = np.zeros(G)
+    chol = np.linalg.cholesky(correlation_matrix(N - k, rho))
+    for keep in itertools.combinations(range(N), N - k):
+        worst = np.maximum(worst, gdop_batch(H[:, list(keep)], chol))
+    return worst
+
+
+def _evaluate(est, resp_of, ch: _Channels, sel) -> tuple[np.ndarray, _Moments]:
+    """Objective (3-axis RMS² about the truth over the window) of channels ``sel``."""
+    m = _combine(ch, sel, resp_of)
+    ms, _, _ = _add_motion(m, resp_of)
+    return np.sum(ms, axis=-1), m
+
+
+@dataclass
+class _Best:
+    scheme: int
+    n: int
+    est: str
+    alpha_rad: float
+    bw: float | None
+    objective: float
+    resp: list
+    rho: float
+
+
+def _responses(bank: _FilterBank, est: str, bw, ch: _Channels, idx=None) -> list:
+    """One channel response per axis for the design (kf_array: per its design ratio)."""
+    kind = _filter_kind(est)
+    if bw is None:
+        kind = "none"
+    if kind == "kf":
+        if est == "kf_array":
+            assert ch.ratio is not None                              # _channels sets it for kf_array
+            ratios = ch.ratio[0 if idx is None else idx]
+        else:
+            ratios = np.full(3, ch.kf_single_ratio)
+        return [bank.get("kf", bw, float(r)) for r in ratios]
+    r = bank.get(kind, bw)
+    return [r, r, r]
+
+
+def _search_one(bank, space, g: GyroNoise, scheme: int, n: int, est: str, rho: float,
+                alive: np.ndarray, alphas: np.ndarray, H: np.ndarray, evaluate: bool = True):
+    """Best (α, bandwidth) of one scheme, N and estimator at one ρ (``evaluate`` False:
+    only the channels)."""
+    gr = g.with_rho(rho) if g.rho_arw == g.rho_rrw else g
+    ch = _channels(est, H, gr, space.dt_s)
+    ch.kf_single_ratio = _single_ratio(g, space)
+    if est == "kf_array" and ch.decoupled:
+        assert ch.ratio is not None                                  # _channels sets it for kf_array
+        r0 = ch.ratio[alive][0] if alive.any() else ch.ratio[0]
+        if np.any(np.abs(ch.ratio[alive] - r0) > 1e-9 * np.abs(r0) + 1e-300):
+            ch.decoupled = False
+    if not ch.decoupled or not evaluate:
+        return None, ch
+    best = None
+    for bw in _bandwidths(space, est):
+        resp = _responses(bank, est, bw, ch, idx=int(np.argmax(alive)) if alive.any() else 0)
+        J, _ = _evaluate(est, resp, ch, slice(None))
+        J = np.where(alive & np.isfinite(J), J, np.inf)
+        k = int(np.argmin(J))
+        if np.isfinite(J[k]):                       # ties (α and 180° − α at ρ = 0): the smaller α
+            k = int(np.flatnonzero(J <= J[k] * (1.0 + 1e-9))[0])
+        if np.isfinite(J[k]) and (best is None or J[k] < best.objective):
+            best = _Best(scheme, n, est, float(alphas[k]), bw, float(J[k]), resp, rho)
+    return best, ch
+
+
+def _refine_alpha(best: _Best, space: DesignSpace, g: GyroNoise, alphas: np.ndarray,
+                  failures: int) -> _Best:
+    """Continuous α around the best grid point (bounded Brent), same bandwidth."""
+    k = int(np.argmin(np.abs(alphas - best.alpha_rad)))
+    lo = alphas[k - 1] if k > 0 else alphas[k] * 0.5
+    hi = alphas[k + 1] if k + 1 < alphas.size else alphas[k]
+    gr = g.with_rho(best.rho) if g.rho_arw == g.rho_rrw else g
+
+    def f(alpha):
+        H = conical_axes(best.scheme, best.n, np.array([alpha]))
+        if failures and not np.isfinite(_survives(H, best.rho, failures)[0]):
+            return math.inf
+        ch = _channels(best.est, H, gr, space.dt_s)
+        ch.kf_single_ratio = _single_ratio(g, space)
+        J, _ = _evaluate(best.est, best.resp, ch, slice(None))
+        return float(J[0]) if np.isfinite(J[0]) else math.inf
+    if hi <= lo:
+        return best
+    res = minimize_scalar(f, bounds=(lo, hi), method="bounded", options={"xatol": 1e-7})
+    if res.fun < best.objective:
+        return replace(best, alpha_rad=float(res.x), objective=float(res.fun))
+    return best
+
+
+@lru_cache(maxsize=4096)
+def _fault_tolerance(scheme: int, n: int, alpha_rad: float, rho: float) -> dict:
+    """:func:`gyroarray.core.gdop.fault_tolerance` of a conical layout (cached; copy before changing)."""
+    return fault_tolerance(Layout.conical(scheme, n, alpha_rad), rho)
+
+
+def _design_dict(b: _Best, space: DesignSpace, g: GyroNoise, failures: int) -> dict:
+    """The predicted metrics of one design (fast path), in datasheet units."""
+    gr = g.with_rho(b.rho) if g.rho_arw == g.rho_rrw else g
+    H = conical_axes(b.scheme, b.n, np.array([b.alpha_rad]))
+    ch = _channels(b.est, H, gr, space.dt_s)
+    m = _combine(ch, slice(None), b.resp)
+    ms, sumw2, sumf2 = _add_motion(m, b.resp)
+    n, dt = space.n_samples, space.dt_s
+    nw = n - settle_start(n, dt, space.settle_s)
+    mean2 = sumw2[0] / nw ** 2
+    var = nw / (nw - 1.0) * (ms[0] - mean2)
+    to = units.rad_s_to_deg_s
+    pred = {}
+    for a, ax in enumerate(AXES):
+        r = b.resp[a]
+        pred[ax] = {"rms_deg_s": float(to(math.sqrt(ms[0, a]))),
+                    "std_deg_s": float(to(math.sqrt(max(var[a], 0.0)))),
+                    "mean_deg_s": float(to(math.sqrt(mean2[a]))),
+                    "angle_deg_at_horizon": float(units.rad_to_deg(dt * math.sqrt(sumf2[0, a]))),
+                    "arw_long_deg_rt_h": float(units.arw_rad_rt_s_to_deg_rt_h(
+                        abs(r.dc_gain) * math.sqrt(ch.white[0, a] * dt))),
+                    "rrw_long_deg_h_rt_h": float(units.rrw_rad_s_rt_s_to_deg_h_rt_h(
+                        abs(r.dc_gain) * math.sqrt(ch.walk[0, a] / dt))),
+                    "dc_gain": r.dc_gain, **_split(r)}
+    ft = _fault_tolerance(b.scheme, b.n, b.alpha_rad, b.rho if g.rho_arw == g.rho_rrw else g.rho_arw)
+    dcg = np.array([r.dc_gain for r in b.resp])
+    kind = {"kf_array": "gls", "kf_single": "ols"}.get(b.est, b.est)
+    gs = _g_sensitivity(space, dcg[:, None] * _weights(kind, H, _r_matrix(b.n, gr, space.dt_s))[0])
+    return {"scheme": b.scheme, "n": b.n, "alpha_deg": float(np.degrees(b.alpha_rad)),
+            "estimator": b.est, "bandwidth_hz": b.bw, "rho": b.rho,
+            "rms_3axis_deg_s": float(to(math.sqrt(b.objective))),
+            "predicted": pred, "gdop": ft["gdop"], **gs,
+            "worst_gdop_after_failures": ft["worst_gdop_after"][str(failures)] if failures else ft["gdop"],
+            "fault_tolerance": json.loads(json.dumps(ft))}
+
+
+def generic_design(scheme, n, est, alpha, bw, rho, space: DesignSpace, g: GyroNoise,
+                    failures: int) -> dict:
+    """A design predicted by the full predictor (used where the fast path does not apply)."""
+    from gyroarray.estimators import get_estimator  # lazy: loads numba
+    gr = g.with_rho(rho) if g.rho_arw == g.rho_rrw else g
+    layout = Layout.conical(scheme, n, alpha)
+    model = gr.noise_model(n)
+    kw = {"bandwidth_hz": bw} if est in ("kf_array", "kf_single") else (
+        {"lowpass_hz": bw} if est in ("gls", "ols") else {})
+    e = get_estimator(est)(**kw).fit(layout, model, space.dt_s)
+    motion = space.motion[:space.n_samples] if space.motion is not None else None
+    p = predict(e, _with_sensor(model, space, g_sensitivity=False), n_samples=space.n_samples,
+                settle_s=space.settle_s, truth_rad_s=motion, swing=space.swing)
+    rms2 = sum(units.deg_s_to_rad_s(v["rms_deg_s"]) ** 2 for v in p.axes.values())
+    pred = {ax: {"rms_deg_s": v["rms_deg_s"], "std_deg_s": v["std_deg_s"],
+                 "mean_deg_s": v["mean_deg_s"], "angle_deg_at_horizon": v["angle_deg"],
+                 "arw_long_deg_rt_h": v["arw_long_deg_rt_h"],
+                 "rrw_long_deg_h_rt_h": v["rrw_long_deg_h_rt_h"],
+                 "dc_gain": v["dc_gain"], **{k: v.get(k) for k in _SPLIT_KEYS}}
+            for ax, v in p.axes.items()}
+    ft = _fault_tolerance(scheme, n, alpha, gr.rho_arw)
+    return {"scheme": scheme, "n": n, "alpha_deg": float(np.degrees(alpha)), "estimator": est,
+            "bandwidth_hz": bw, "rho": rho, "rms_3axis_deg_s": float(units.rad_s_to_deg_s(math.sqrt(rms2))),
+            "predicted": pred, "gdop": ft["gdop"],
+            **_g_sensitivity(space, e.linear_system().dc_gain()),
+            "worst_gdop_after_failures": ft["worst_gdop_after"][str(failures)] if failures else ft["gdop"],
+            "fault_tolerance": json.loads(json.dumps(ft)),
+            "path": "full predictor (the array KF does not decouple here)"}
+
+
+def _rank_key(d: dict) -> float:
+    return d["rms_3axis_deg_s"] if math.isfinite(d["rms_3axis_deg_s"]) else math.inf
+
+
+def _bank(space: DesignSpace, g: GyroNoise) -> "_FilterBank":
+    """The filter bank of a search (one per space and noise shape; ρ does not enter it)."""
+    cache = space.__dict__.setdefault("_banks", {})
+    key = (g.gm_tau_s, g.bi_deg_h > 0)
+    if key not in cache:
+        cache[key] = _FilterBank(space, g.gm_tau_s, bi=g.bi_deg_h > 0)
+    return cache[key]
+
+
+def search(g: GyroNoise, space: DesignSpace, rho: float) -> tuple[list[dict], list[str]]:
+    """Every scheme × N × estimator at its best cone angle and bandwidth, at one ρ, ranked.
+
+    Returns the designs (best first) and notes (what was left out and why).
+    """
+    bank = _bank(space, g)
+    designs, notes = [], []
+    for scheme in space.schemes:
+        alphas = _alpha_grid(scheme, space.alpha_points)
+        for n in space.ns:
+            lo = -1.0 / (n - 1)
+            if not (g.rho_arw == g.rho_rrw and rho > lo) and not (g.rho_arw != g.rho_rrw
+                                                                  and min(g.rho_arw, g.rho_rrw) > lo):
+                notes.append(f"scheme {scheme}, N = {n}: rho = {rho:g} is not a correlation N = {n} "
+                             f"gyros can have (below -1/(N-1) = {lo:.4g}); left out")
+                continue
+            H = conical_axes(scheme, n, alphas)
+            alive = np.isfinite(_survives(H, rho if g.rho_arw == g.rho_rrw else g.rho_arw,
+                                          space.failures))
+            if not alive.any():
+                notes.append(f"scheme {scheme}, N = {n}: no cone angle keeps a 3-axis rate after "
+                             f"{space.failures} failed gyro(s); left out")
+                continue
+            found: dict[str, _Best | None] = {}
+            for est in space.estimators:
+                best, ch = _search_one(bank, space, g, scheme, n, est, rho, alive, alphas, H)
+                if best is None and est == "kf_array" and not ch.decoupled:
+                    found[est] = None                                # after kf_single
+                    continue
+                if best is None:
+                    notes.append(f"scheme {scheme}, N = {n}, {est}: no bandwidth in range is reachable")
+                    continue
+                best = _refine_alpha(best, space, g, alphas, space.failures)
+                found[est] = best
+                designs.append(_design_dict(best, space, g, space.failures))
+            if "kf_array" in found and found["kf_array"] is None:
+                ref = found.get("kf_single")
+                if ref is not None:
+                    designs.append(generic_design(scheme, n, "kf_array", ref.alpha_rad, ref.bw, rho,
+                                                   space, g, space.failures))
+                    notes.append(f"scheme {scheme}, N = {n}, kf_array: its z axis does not decouple "
+                                 "(unequal ARW and RRW correlation); predicted by the full predictor "
+                                 "at kf_single's cone angle and bandwidth")
+    designs = _ranked(designs, space.estimators)
+    designs = _refine_top_bandwidths(designs, g, space, rho)
+    return designs, notes
+
+
+#: Designs at the top of a ranking whose bandwidth is refined off the grid.
+REFINE_TOP = 8
+
+
+def _refine_top_bandwidths(designs: list[dict], g: GyroNoise, space: DesignSpace, rho: float) -> list[dict]:
+    """Bounded Brent in log(bandwidth) between the grid neighbours, for the top designs."""
+    lo, hi = space.bandwidth_hz
+    if lo == hi:
+        return designs
+    out = list(designs)
+    for i, d in enumerate(designs[:REFINE_TOP]):
+        bw = d["bandwidth_hz"]
+        if bw is None:
+            continue
+        grid = [f for f in _bandwidths(space, d["estimator"]) if f is not None]
+        k = int(np.argmin(np.abs(np.log(np.array(grid) / bw))))
+        a, b = grid[max(k - 1, 0)], grid[min(k + 1, len(grid) - 1)]
+        alpha = math.radians(d["alpha_deg"])
+
+        def f(logbw):
+            e = generic_or_fast(d["scheme"], d["n"], d["estimator"], alpha, float(np.exp(logbw)),
+                                 rho, g, space)
+            return e["rms_3axis_deg_s"] if math.isfinite(e["rms_3axis_deg_s"]) else math.inf
+        if b <= a:
+            continue
+        res = minimize_scalar(f, bounds=(math.log(a), math.log(b)), method="bounded",
+                              options={"xatol": 1e-3})
+        if res.fun < d["rms_3axis_deg_s"]:
+            new = generic_or_fast(d["scheme"], d["n"], d["estimator"], alpha,
+                                   float(round(math.exp(res.x), 3)), rho, g, space)
+            new["rank"] = d.get("rank")
+            out[i] = new
+    return _ranked(out, space.estimators)
+
+
+def _ranked(designs: list[dict], estimators) -> list[dict]:
+    """Best RMS first; designs equal to 1e-9 are ordered by fault tolerance (worst GDOP
+    after two failures), Scheme 1 first, a cone opening upwards, then the estimator order."""
+    designs = sorted(designs, key=_rank_key)
+    out, i = [], 0
+    order = {e: k for k, e in enumerate(estimators)}
+    while i < len(designs):
+        j = i + 1
+        while j < len(designs) and designs[j]["rms_3axis_deg_s"] <= designs[i]["rms_3axis_deg_s"] * (1 + 1e-9):
+            j += 1
+        out += sorted(designs[i:j], key=lambda d: (
+            round(d.get("fault_tolerance", {}).get("worst_gdop_after", {}).get("2", math.inf), 9),
+            d["scheme"], d["alpha_deg"] > 90.0, order.get(d["estimator"], 99)))
+        i = j
+    for k, d in enumerate(out):
+        d["rank"] = k + 1
+    return out
+
+
+def equivalent_groups(designs: list[dict], share: float = EQUIVALENT_SHARE) -> list[dict]:
+    """Groups of designs (best first) whose 3-axis RMS lies within ``share`` of the group's first.
+
+    Each group has ``members`` (ranks), ``spread`` (largest relative difference)
+    and ``reason``: why they are equal (identical by theory) or only close.
+    """
+    groups, i = [], 0
+    while i < len(designs):
+        j = i + 1
+        base = designs[i]["rms_3axis_deg_s"]
+        while j < len(designs) and designs[j]["rms_3axis_deg_s"] <= base * (1.0 + share):
+            j += 1
+        if j - i > 1:
+            members = designs[i:j]
+            spread = members[-1]["rms_3axis_deg_s"] / base - 1.0
+            groups.append({"members": [m["rank"] for m in members],
+                           "designs": [_label(m) for m in members], "spread": spread,
+                           "reason": _why_equal(members, spread)})
+        i = j
+    return groups
+
+
+def _label(d: dict) -> str:
+    bw = "no low-pass" if d["bandwidth_hz"] is None else f"{d['bandwidth_hz']:.3g} Hz"
+    if d["estimator"] == "naive":
+        bw = "no filter"
+    return f"scheme {d['scheme']}, N = {d['n']}, alpha = {d['alpha_deg']:.2f} deg, {d['estimator']} ({bw})"
+
+
+def _why_equal(members: list[dict], spread: float) -> str:
+    ests = {m["estimator"] for m in members}
+    schemes = {m["scheme"] for m in members}
+    ns = {m["n"] for m in members}
+    bits = []
+    identical = spread < 1e-9
+    if ests & {"kf_array", "kf_single"} == {"kf_array", "kf_single"}:
+        bits.append("kf_array and kf_single are the same filter here: with alike gyros and equal "
+                    "ARW/RRW correlation the array KF decouples per axis into the single-gyro KF "
+                    "on the least-squares channel")
+    if ests & {"kf_array", "kf_single"} and ests & {"gls", "ols"}:
+        bits.append("the Kalman filters are the low-passed least squares times their DC gain "
+                    "q_ω/(q_ω + q_b), which is close to 1 at this bandwidth")
+    if len(ests & {"gls", "ols", "naive"}) > 1:
+        bits.append("gls, ols and naive have the same weights: HᵀC⁻¹H is diagonal and the axes "
+                    "are eigenvectors of C on these cones")
+    if len(schemes) > 1 and len(ns) == 1:
+        bits.append("both schemes reach the isotropic optimum HᵀC⁻¹H ∝ I at their own cone angle, "
+                    "so their GDOP (and every prediction) is the same")
+    if not bits or not identical:
+        bits.append(f"the predictions differ by {100 * spread:.2g} % (< {100 * EQUIVALENT_SHARE:g} %), "
+                    "less than any run would resolve: choose by cost, mounting or fault tolerance")
+    return ("identical by theory: " if identical else "within 1 %: ") + "; ".join(bits)
+
+
+def recommend(g: GyroNoise, space: DesignSpace, *, rhos=None) -> dict:
+    """Rank the designs and recommend one (the ``--recommend`` JSON object).
+
+    Parameters
+    ----------
+    g : GyroNoise
+    space : DesignSpace
+    rhos : sequence of float, optional
+        A range of correlations the gyros may have (ρ is a condition, not a
+        choice): each is ranked on its own, and the recommended design is the
+        one whose worst predicted RMS over them is smallest. None: the ρ of ``g``.
+
+    Returns
+    -------
+    dict
+        ``recommended``, ``designs``, ``equivalent``, ``assumptions``, ``notes``,
+        ``runner_up``, ``what_changes_the_choice``, ``seconds`` and, with a ρ
+        range, ``per_rho`` (the ranking at each ρ) and ``robustness`` (each
+        ρ's winner evaluated over the range).
+    """
+    t0 = time.perf_counter()
+    single = rhos is None
+    rho_list = [g.rho_arw] if single else [float(r) for r in rhos]
+    per_rho, notes = {}, []
+    for r in rho_list:
+        ds, nt = search(g, space, r)
+        per_rho[r] = ds
+        notes += [f"rho = {r:g}: {x}" if not single else x for x in nt]
+    if single:
+        designs = per_rho[rho_list[0]]
+    else:
+        designs = _robust_ranking(per_rho, g, space)
+    if not designs:
+        raise InputError("no design meets the requirements (see the notes: failures, rho, bandwidth)")
+    rec = designs[0]
+    other = [d for d in designs[1:] if (d["scheme"], d["n"]) != (rec["scheme"], rec["n"])]
+    out: dict[str, Any] = {"recommended": _short(rec),
+                           "runner_up": _short(other[0]) if other else None,
+                           "designs": [_short(d) for d in designs],
+                           "equivalent": equivalent_groups(designs),
+                           "assumptions": assumptions(g, space, rho_list, single),
+                           "what_changes_the_choice": _what_changes(designs, g, space, rho_list),
+                           "notes": sorted(set(notes))}
+    lim = tracking_limit(rec, space, g)
+    if lim is not None:
+        out["tracking_limit"] = lim
+    gst = g_sensitivity_statement(rec, space)
+    if gst is not None:
+        out["g_sensitivity"] = {**rec["g_sensitivity"], "statement": gst}
+    if not single:
+        out["per_rho"] = {f"{r:g}": [_short(d) for d in per_rho[r][:10]] for r in rho_list}
+        out["robustness"] = _robustness(per_rho, g, space)
+    out["seconds"] = time.perf_counter() - t0
+    return out
+
+
+def tracking_limit(d: dict, space: DesignSpace, g: GyroNoise | None = None) -> dict | None:
+    """Whether the sensors' own bandwidth or the estimator limits tracking of the swing.
+
+    On the design's worst-tracked axis, the tracking error per unit swing
+    amplitude of the gyros' own filter, |1 − F| (amplitude loss and lag
+    together), is set against the estimator's, |1 − T|; the fused output
+    passes their product T·F. None without a sensor bandwidth.
+    """
+    if space.sensor_bandwidth is None:
+        return None
+    fc, order = space.sensor_bandwidth
+    what = f"the gyros' own {fc:g} Hz order-{int(order)} low-pass"
+    if space.swing is None:
+        return {"limited_by": None,
+                "statement": f"{what} is cascaded before the estimator in every prediction (noise and "
+                             "motion); give --swing AMP,FREQ to learn whether it or the estimator limits tracking"}
+    p = d["predicted"]
+    ax = min(AXES, key=lambda a: p[a]["amplitude_ratio"])
+    q = p[ax]
+    sa, ea = q["sensor_amplitude_ratio"], q["estimator_amplitude_ratio"]
+    est = d["estimator"] + ("" if d["bandwidth_hz"] is None else f" at {d['bandwidth_hz']:.3g} Hz")
+    f = space.swing.frequency_hz
+    def err(amp, lag_deg):                                           # |1 − A e^{−jφ}|
+        return abs(1.0 - amp * np.exp(-1j * np.radians(lag_deg)))
+    se, ee = err(sa, q["sensor_phase_deg"]), err(ea, q["estimator_phase_deg"])
+    nums = (f"{what} passes {sa:.4f} of the amplitude with a lag of {q['sensor_phase_deg'] + 0.0:.3g} deg "
+            f"(tracking error {100 * se:.3g} % of the swing), the {est} {ea:.4f} with "
+            f"{q['estimator_phase_deg'] + 0.0:.3g} deg ({100 * ee:.3g} %); the fused output "
+            f"{q['amplitude_ratio']:.4f} with {q['phase_deg'] + 0.0:.3g} deg")
+    if se > ee:
+        text = (f"the sensor bandwidth, not the {d['estimator']}, limits tracking at {f:g} Hz: {nums}. "
+                "A wider estimator bandwidth cannot win back the sensors' loss; gyros with a wider "
+                "internal filter can")
+        by = "sensor"
+    else:
+        text = f"the {d['estimator']}, not the sensor bandwidth, limits tracking at {f:g} Hz: {nums}"
+        by = "estimator"
+    if g is not None:
+        bare = generic_or_fast(d["scheme"], d["n"], d["estimator"], math.radians(d["alpha_deg"]),
+                                d["bandwidth_hz"], d.get("rho", g.rho_arw), g,
+                                replace(space, sensor_bandwidth=None))["rms_3axis_deg_s"]
+        text += (f". With an ideal sensor this design would predict {bare:.4g} deg/s 3-axis RMS "
+                 f"instead of {d['rms_3axis_deg_s']:.4g}")
+    return {"limited_by": by, "axis": ax, "swing_hz": f, "statement": text,
+            "rms_3axis_without_sensor_filter_deg_s": None if g is None else float(bare),
+            "sensor_tracking_error_share": float(se), "estimator_tracking_error_share": float(ee),
+            "sensor_amplitude_ratio": sa, "sensor_phase_deg": q["sensor_phase_deg"],
+            "estimator_amplitude_ratio": ea, "estimator_phase_deg": q["estimator_phase_deg"],
+            "amplitude_ratio": q["amplitude_ratio"], "phase_deg": q["phase_deg"]}
+
+
+def g_sensitivity_statement(d: dict, space: DesignSpace) -> str | None:
+    """The g-sensitivity's rate error of a design beside its noise RMS, in words."""
+    gs = d.get("g_sensitivity")
+    if gs is None or space.g_sensitivity_deg_s_per_g is None:
+        return None
+    k = ", ".join(f"{v:g}" for v in space.g_sensitivity_deg_s_per_g)
+    ratio = gs["fused_rms_3axis_deg_s"] / d["rms_3axis_deg_s"] if d["rms_3axis_deg_s"] > 0 else math.inf
+    xyz = " / ".join(f"{gs['fused_rms_deg_s'][a]:.3g}" for a in AXES)
+    where = "the motion profile" if space.specific_force_m_s2 is not None else "the level table (gravity on z)"
+    return (f"g-sensitivity ({k}) (deg/s)/g on every gyro, on {where}: {gs['per_gyro_rms_deg_s']:.4g} deg/s "
+            f"RMS per gyro, {gs['fused_rms_3axis_deg_s']:.4g} deg/s 3-axis on the fused output "
+            f"(x/y/z {xyz}), "
+            f"{ratio:.3g} x the design's predicted 3-axis RMS from noise and tracking "
+            f"({d['rms_3axis_deg_s']:.4g} deg/s)"
+            + ("; it dominates: calibrate it out or choose gyros with less" if ratio > 1 else "")
+            + ". Not part of the ranking: a deterministic bias that a calibration of k removes")
+
+
+def _short(d: dict) -> dict:
+    """The JSON fields of one design (the issue's keys first)."""
+    keys = ("rank", "scheme", "n", "alpha_deg", "estimator", "bandwidth_hz", "predicted",
+            "worst_gdop_after_failures", "rms_3axis_deg_s", "gdop", "fault_tolerance", "rho",
+            "worst_rms_3axis_deg_s", "rms_by_rho", "g_sensitivity", "path")
+    return {k: d[k] for k in keys if k in d}
+
+
+def _evaluate_design(d: dict, g: GyroNoise, space: DesignSpace, rho: float) -> dict:
+    """One fixed design (scheme, N, α, estimator, bandwidth) predicted at another ρ."""
+    return generic_or_fast(d["scheme"], d["n"], d["estimator"], math.radians(d["alpha_deg"]),
+                            d["bandwidth_hz"], rho, g, space)
+
+
+def generic_or_fast(scheme, n, est, alpha, bw, rho, g, space) -> dict:
+    gr = g.with_rho(rho) if g.rho_arw == g.rho_rrw else g
+    H = conical_axes(scheme, n, np.array([alpha]))
+    ch = _channels(est, H, gr, space.dt_s)
+    ch.kf_single_ratio = _single_ratio(g, space)
+    if not ch.decoupled:
+        return generic_design(scheme, n, est, alpha, bw, rho, space, g, space.failures)
+    bank = _bank(space, g)
+    resp = _responses(bank, est, bw, ch)
+    J, _ = _evaluate(est, resp, ch, slice(None))
+    b = _Best(scheme, n, est, alpha, bw, float(J[0]), resp, rho)
+    return _design_dict(b, space, g, space.failures)
+
+
+def _robust_ranking(per_rho: dict, g: GyroNoise, space: DesignSpace) -> list[dict]:
+    """Min-max over ρ for each scheme × N × estimator: the cone angle and bandwidth whose
+    worst 3-axis RMS over the ρ of the range is smallest (grid, then bounded Brent in α),
+    predicted at its worst ρ; ``rms_by_rho`` holds the 3-axis RMS at every ρ."""
+    bank = _bank(space, g)
+    rhos = list(per_rho)
+    out = []
+    for scheme in space.schemes:
+        alphas = _alpha_grid(scheme, space.alpha_points)
+        for n in space.ns:
+            ok = [r for r in rhos if r > -1.0 / (n - 1)]
+            if not ok:
+                continue
+            H = conical_axes(scheme, n, alphas)
+            alive = np.ones(alphas.size, bool)
+            for r in ok:
+                alive &= np.isfinite(_survives(H, r, space.failures))
+            if not alive.any():
+                continue
+            for est in space.estimators:
+                best = None
+                chs = {}
+                for r in ok:
+                    _, ch = _search_one(bank, space, g, scheme, n, est, r, alive, alphas, H,
+                                        evaluate=False)
+                    chs[r] = ch
+                if not all(ch.decoupled for ch in chs.values()):
+                    continue
+                for bw in _bandwidths(space, est):
+                    J = np.zeros(alphas.size)
+                    for r, ch in chs.items():
+                        resp = _responses(bank, est, bw, ch, idx=int(np.argmax(alive)))
+                        Jr, _ = _evaluate(est, resp, ch, slice(None))
+                        J = np.maximum(J, np.where(np.isfinite(Jr), Jr, np.inf))
+                    J = np.where(alive, J, np.inf)
+                    k = int(np.argmin(J))
+                    if np.isfinite(J[k]) and (best is None or J[k] < best[0]):
+                        best = (float(J[k]), float(alphas[k]), bw)
+                if best is None:
+                    continue
+                alpha, bw = _refine_minmax(scheme, n, est, best, alphas, ok, bank, space, g)
+                by_rho = {r: generic_or_fast(scheme, n, est, alpha, bw, r, g, space) for r in ok}
+                worst_r = max(by_rho, key=lambda r: by_rho[r]["rms_3axis_deg_s"])
+                d = dict(by_rho[worst_r])
+                d["worst_rms_3axis_deg_s"] = d["rms_3axis_deg_s"]
+                d["rms_by_rho"] = {f"{r:g}": by_rho[r]["rms_3axis_deg_s"] for r in ok}
+                out.append(d)
+    return _ranked(out, space.estimators)
+
+
+def _refine_minmax(scheme, n, est, best, alphas, rhos, bank, space, g):
+    """Bounded Brent in α on the worst-case objective, at the grid's best bandwidth."""
+    _, a0, bw = best
+    k = int(np.argmin(np.abs(alphas - a0)))
+    lo = alphas[k - 1] if k > 0 else alphas[k] * 0.5
+    hi = alphas[k + 1] if k + 1 < alphas.size else alphas[k]
+
+    def f(alpha):
+        H = conical_axes(scheme, n, np.array([alpha]))
+        worst = 0.0
+        for r in rhos:
+            if space.failures and not np.isfinite(_survives(H, r, space.failures)[0]):
+                return math.inf
+            gr = g.with_rho(r) if g.rho_arw == g.rho_rrw else g
+            ch = _channels(est, H, gr, space.dt_s)
+            ch.kf_single_ratio = _single_ratio(g, space)
+            J, _ = _evaluate(est, _responses(bank, est, bw, ch), ch, slice(None))
+            worst = max(worst, float(J[0]) if np.isfinite(J[0]) else math.inf)
+        return worst
+    if hi <= lo:
+        return a0, bw
+    res = minimize_scalar(f, bounds=(lo, hi), method="bounded", options={"xatol": 1e-7})
+    return (float(res.x), bw) if res.fun <= best[0] else (a0, bw)
+
+
+def _single_ratio(g: GyroNoise, space: DesignSpace) -> float:
+    """q_b / r of one gyro (the design ratio of kf_single's filter)."""
+    return (units.rrw_deg_h_rt_h_to_rad_s_rt_s(g.rrw_deg_h_rt_h) ** 2 * space.dt_s ** 2
+            / units.arw_deg_rt_h_to_rad_rt_s(g.arw_deg_rt_h) ** 2)
+
+
+def _robustness(per_rho: dict, g: GyroNoise, space: DesignSpace) -> list[dict]:
+    """The winner chosen at each assumed ρ̂, evaluated at every ρ of the range."""
+    rows = []
+    for rhat, ds in per_rho.items():
+        if not ds:
+            continue
+        d = ds[0]
+        vals: dict[str, Any] = {}
+        for r in per_rho:
+            best_r = per_rho[r][0]["rms_3axis_deg_s"] if per_rho[r] else math.nan
+            if r <= -1.0 / (d["n"] - 1):
+                vals[f"{r:g}"] = None
+                continue
+            e = _evaluate_design(d, g, space, r)
+            vals[f"{r:g}"] = {"rms_3axis_deg_s": e["rms_3axis_deg_s"],
+                              "vs_best_at_rho": e["rms_3axis_deg_s"] / best_r - 1.0}
+        rows.append({"chosen_for_rho": rhat, "design": _label(d), "at_rho": vals})
+    return rows
+
+
+def _what_changes(designs: list[dict], g: GyroNoise, space: DesignSpace, rhos) -> list[str]:
+    """Short sentences: what would change the recommendation."""
+    rec = designs[0]
+    out = []
+    fewer = [d for d in designs if d["n"] < rec["n"]]
+    if fewer:
+        f = fewer[0]
+        out.append(f"fewer gyros: the best N = {f['n']} design ({_label(f)}) predicts "
+                   f"{f['rms_3axis_deg_s']:.4g} deg/s 3-axis RMS, {100 * (f['rms_3axis_deg_s'] / rec['rms_3axis_deg_s'] - 1):.0f} % more")
+    ft = rec.get("fault_tolerance", {})
+    for k in ("1", "2"):
+        if k in ft.get("three_axes_after", {}) and not ft["three_axes_after"][k]:
+            alt = [d for d in designs if d.get("fault_tolerance", {}).get("three_axes_after", {}).get(k)]
+            if alt:
+                out.append(f"requiring a 3-axis rate after {k} failed gyro(s) (--failures {k}): "
+                           f"{_label(alt[0])}, {alt[0]['rms_3axis_deg_s']:.4g} deg/s")
+    if len(rhos) == 1:
+        out.append("a correlation between the gyros: rerun with --rho-range LO,HI; the ranking "
+                   "then holds per assumed ρ and the recommendation is the best worst case")
+    if space.swing is None and space.motion is None:
+        out.append("motion: at rest the bandwidth is a requirement (held at "
+                   f"{space.bandwidth_hz[0]:g} Hz); with --swing or --motion it is traded against lag")
+    return out
+
+
+def assumptions(g: GyroNoise, space: DesignSpace, rhos, single: bool) -> dict:
+    """Every input of the search and where it came from (user / default / model)."""
+    src = g.sources
+
+    def item(value, source, unit=""):
+        return {"value": value, "source": source, **({"unit": unit} if unit else {})}
+    s = space.__dict__.get("_sources", {})
+    return {
+        "arw": item(g.arw_deg_rt_h, src.get("arw", "user"), "deg/rt(h)"),
+        "rrw": item(g.rrw_deg_h_rt_h, src.get("rrw", "default"), "deg/h/rt(h)"),
+        "bias_instability": item(g.bi_deg_h, src.get("bi", "default"), "deg/h"),
+        "gauss_markov": item({"sigma_deg_h": g.gm_sigma_deg_h, "tau_s": g.gm_tau_s},
+                             src.get("gauss_markov", "default")),
+        "rho": item(rhos[0] if single else list(rhos), src.get("rho_arw", "default"),
+                    "common ARW and RRW correlation" if g.rho_arw == g.rho_rrw else
+                    f"rho_arw {g.rho_arw:g}, rho_rrw {g.rho_rrw:g}"),
+        "gyros": item("alike: every gyro has the noise above (a model's gyros reduced to their "
+                      "quadratic mean)", "assumption"),
+        "rate_hz": item(space.rate_hz, s.get("rate_hz", "default"), "Hz"),
+        "horizon_s": item(space.horizon_s, s.get("horizon_s", "default"), "s"),
+        "settle_s": item(space.settle_s, "default", "s (start-up left out of the window metrics)"),
+        "n": item(list(space.ns), s.get("ns", "default")),
+        "schemes": item(list(space.schemes), "default"),
+        "estimators": item(list(space.estimators), s.get("estimators", "default")),
+        "failures": item(space.failures, s.get("failures", "default")),
+        "motion": item(space.motion_name if space.swing is None else
+                       {"swing_amplitude_deg_s": units.rad_s_to_deg_s(space.swing.amplitude_rad_s),
+                        "swing_frequency_hz": space.swing.frequency_hz,
+                        "about": "each body axis in turn"}, s.get("motion", "default")),
+        "bandwidth_hz": item(list(space.bandwidth_hz), s.get("bandwidth_hz", "default"),
+                             "searched range (lo = hi: fixed)"),
+        "alpha_search": item(f"{space.alpha_points} cone angles per scheme (Scheme 1 in (0, 90], "
+                             "Scheme 2 in (0, 180) deg), refined continuously", "default"),
+        "objective": item("3-axis RMS of the rate error about the truth over the horizon "
+                          "(random-walk drift included), from the analytic predictor", "definition"),
+        "biases": item("start at zero (calibrated at switch-on), as the simulator draws them",
+                       "assumption"),
+        "ignored_effects": item([e for e in g.ignored if not (
+            (e == "bandwidth" and space.sensor_bandwidth is not None)
+            or (e == "g_sensitivity" and space.g_sensitivity_deg_s_per_g is not None))], "model"),
+        "sensor_bandwidth": item(None if space.sensor_bandwidth is None else
+                                 {"cutoff_hz": space.sensor_bandwidth[0], "order": space.sensor_bandwidth[1]},
+                                 s.get("sensor_bandwidth", "default"),
+                                 "every gyro's own low-pass, cascaded before the estimator (None: none)"),
+        "g_sensitivity": item(None if space.g_sensitivity_deg_s_per_g is None else
+                              list(space.g_sensitivity_deg_s_per_g), s.get("g_sensitivity", "default"),
+                              "(deg/s)/g, platform frame, every gyro alike; reported, not ranked"),
+    }
+
+
+# -- the Monte-Carlo check of the top designs ------------------------------------------
+
+def _pick_for_check(designs: list[dict], top: int) -> list[dict]:
+    """The first ``top`` designs of the ranking, one per distinct (layout, estimator family),
+    plus the best ``naive`` design as the no-model baseline."""
+    seen, out = set(), []
+    for d in designs:
+        # one of each set of designs the predictor says are the same (same layout, same RMS)
+        key = (d["scheme"], d["n"], round(d["alpha_deg"], 3), f"{d['rms_3axis_deg_s']:.9g}")
+        if key in seen:
+            continue
+        seen.add(key)
+        out.append(d)
+        if len(out) == top:
+            break
+    naive = next((d for d in designs if d["estimator"] == "naive"), None)
+    if naive is not None and naive not in out:
+        out.append(naive)
+    return out
+
+
+def monte_carlo_check(designs: list[dict], g: GyroNoise, space: DesignSpace, *,
+                      replicates: int = 20, seed: int = 20260412, top: int = 4) -> dict:
+    """Simulate the top designs with common random numbers and set the runs beside the prediction.
+
+    Every replicate r draws the gyro noise from the same seed for every design
+    (paired: gyro k's streams are the same in each layout), through the
+    simulator's own effects (:func:`gyroarray.sim.effects.simulate_readings`)
+    and the real estimators; the rate truth is the design's motion.
+
+    Returns
+    -------
+    dict
+        ``replicates``, ``seed``, ``designs``: per design its label, the
+        predicted and simulated (RMS over the runs, 95 % CI) per axis of
+        ``rms_deg_s``, ``std_deg_s``, ``mean_deg_s`` and ``angle_deg``, and
+        ``paired``: the recommended design against each other one, the mean
+        difference of the runs' 3-axis mean square with its 95 % CI
+        (``resolved``: the interval excludes 0).
+    """
+    from gyroarray.analysis.replicates import mean_ci, replicate_rng, rms_ci
+    from gyroarray.estimators import get_estimator  # lazy: loads numba
+    from gyroarray.sim.effects import simulate_readings  # lazy: loads numba
+    picked = _pick_for_check(designs, top)
+    n, dt = space.n_samples, space.dt_s
+    k0 = settle_start(n, dt, space.settle_s)
+    t = np.arange(n) * dt
+    if space.motion is not None:
+        truth = np.asarray(space.motion, dtype=float)[:n]
+    elif space.swing is not None:
+        truth = swing_truth(space.swing, n, dt)
+    else:
+        truth = np.zeros((n, 3))
+    setups = []
+    for d in picked:
+        rho = d.get("rho", g.rho_arw)
+        gr = g.with_rho(rho) if g.rho_arw == g.rho_rrw else g
+        layout = Layout.conical(d["scheme"], d["n"], math.radians(d["alpha_deg"]))
+        model = _with_sensor(gr.noise_model(d["n"]), space, g_sensitivity=False)
+        bw = d["bandwidth_hz"]
+        kw = {"bandwidth_hz": bw} if d["estimator"] in ("kf_array", "kf_single") else (
+            {"lowpass_hz": bw} if d["estimator"] in ("gls", "ols") else {})
+        est = get_estimator(d["estimator"])(**kw).fit(layout, model, dt)
+        setups.append((d, layout, model, est))
+    per: list[list[np.ndarray]] = [[] for _ in setups]                                        # runs × (4 metrics × 3 axes)
+    for r in range(int(replicates)):
+        for j, (d, layout, model, est) in enumerate(setups):
+            z = simulate_readings(model, truth, layout, dt, replicate_rng(seed, r), time_s=t)
+            e = est.estimate(z) - truth
+            w = e[k0:]
+            per[j].append(np.stack([np.sqrt(np.mean(w ** 2, axis=0)), np.std(w, axis=0, ddof=1),
+                                    np.mean(w, axis=0), dt * e.sum(axis=0)]))
+    keys = ("rms_deg_s", "std_deg_s", "mean_deg_s", "angle_deg")
+    conv = {"rms_deg_s": units.rad_s_to_deg_s, "std_deg_s": units.rad_s_to_deg_s,
+            "mean_deg_s": units.rad_s_to_deg_s, "angle_deg": units.rad_to_deg}
+    out_designs = []
+    for j, (d, *_rest) in enumerate(setups):
+        arr = np.array(per[j])                                        # (R, 4, 3)
+        axes: dict[str, Any] = {}
+        for a, ax in enumerate(AXES):
+            axes[ax] = {}
+            for m, key in enumerate(keys):
+                mc = rms_ci(conv[key](arr[:, m, a]), gaussian=key in ("mean_deg_s", "angle_deg"))
+                pk = "angle_deg_at_horizon" if key == "angle_deg" else key
+                p = d["predicted"][ax][pk]
+                axes[ax][key] = {"predicted": p, "monte_carlo": mc,
+                                 "agrees": bool(mc["ci_low"] <= p <= mc["ci_high"])
+                                 if mc["ci_low"] is not None else None}
+        tot = rms_ci(units.rad_s_to_deg_s(np.sqrt(np.sum(arr[:, 0, :] ** 2, axis=1))))
+        out_designs.append({"label": _label(d), "rank": d.get("rank"), "scheme": d["scheme"],
+                            "n": d["n"], "alpha_deg": d["alpha_deg"], "estimator": d["estimator"],
+                            "bandwidth_hz": d["bandwidth_hz"],
+                            "rms_3axis_deg_s": {"predicted": d["rms_3axis_deg_s"], "monte_carlo": tot},
+                            "axes": axes})
+    paired = []
+    ms0 = np.sum(np.array(per[0])[:, 0, :] ** 2, axis=1)
+    for j in range(1, len(setups)):
+        diff = units.rad_s_to_deg_s(1.0) ** 2 * (np.sum(np.array(per[j])[:, 0, :] ** 2, axis=1) - ms0)
+        s = mean_ci(diff)
+        paired.append({"against": out_designs[j]["label"], "mean_square_difference_deg2_s2": s,
+                       "resolved": None if s["ci_low"] is None else bool(s["ci_low"] > 0 or s["ci_high"] < 0)})
+    checked = [c for dd in out_designs for ax in dd["axes"].values() for c in ax.values()
+               if c["agrees"] is not None]
+    return {"replicates": int(replicates), "seed": int(seed), "designs": out_designs,
+            "paired": paired, "inside_95": sum(c["agrees"] for c in checked),
+            "compared": len(checked)}

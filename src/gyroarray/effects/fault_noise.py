@@ -1,0 +1,97 @@
+"""``fault_noise``: from ``start_s`` on, the gyro's white (ARW) part × ``ratio``."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+
+from gyroarray.effects import _draw
+from gyroarray.effects._fault import START, FaultEffect
+from gyroarray.effects import _fault_physics as faults
+from gyroarray.effects.protocol import Explained, Param, Stage, identity
+
+
+class FaultNoise(FaultEffect):
+    """The gyro's ARW draw (after the cross-gyro correlation, where ``burst``
+    scales it too) × ``ratio`` from ``start_s`` on.
+
+    Fit: the GLR of a change of the innovation variance over the onset
+    (:func:`gyroarray.effects.fits.fault_fit.fit_fault`). In a model it is
+    simulated in the Monte-Carlo band, and the stochastic record is brought
+    back to the gyro's level before the onset (:meth:`whiten`).
+    """
+
+    name = "fault_noise"
+    order = 24
+    fault_kind = "noise"
+    stage = Stage.SHAPE
+    stochastic = True
+    rivals = ("burst",)
+    params = (START, Param("ratio", "-", "ratio", identity, lo=0.0,
+                           doc="factor on the gyro's ARW (white) part"))
+    doc = "fault: the white (ARW) part × ratio from start_s on"
+
+    def placeholder(self):
+        return {"start_s": 1.0, "ratio": 1.0}
+
+    def simulate(self, state, act, streams):
+        ctx = state.ctx
+        old = state.white.arw_gain                           # a burst's (n,), if any
+        gain = np.ones((ctx.n, ctx.n_gyros))
+        if old is not None:
+            gain *= old[:, None] if old.ndim == 1 else old
+        gain[:, act.cols] *= faults.noise_gain(ctx.time_s, act.p["start_s"], act.p["ratio"])
+        return replace(state, white=replace(state.white, arw_gain=gain))
+
+    def whiten(self, ctx, entry, x, t):
+        after = t >= float(entry.params["start_s"])
+        if not after.any():
+            return x
+        g = int(entry.gyro) - 1
+        x = x.copy()
+        level = x[after, g].mean()
+        x[after, g] = level + (x[after, g] - level) / max(float(entry.params["ratio"]), 1e-6)
+        return x
+
+    @staticmethod
+    def _burst_reading(mine, burst, ctx) -> tuple[bool, bool, float]:
+        """(the burst's window reaches an end of the record, only ``mine``'s gyro changed, the
+        largest |z| of the others)."""
+        t0, t1 = float(ctx.t[0]), float(ctx.t[-1]) + ctx.dt
+        margin = max(float(burst.extra.get("block_s", 0.0)), 3.0 * float(burst.sigma.get("end_s", 0.0)),
+                     3.0 * float(burst.sigma.get("start_s", 0.0)))
+        s, e = float(burst.params["start_s"]), float(burst.params["end_s"])
+        to_end = s <= t0 + margin or e >= t1 - margin
+        pz = np.abs(np.asarray(burst.extra.get("per_gyro_z", []), float))
+        g = int(mine.gyro) - 1
+        others = np.delete(pz, g) if 0 <= g < pz.size else pz
+        worst = float(others.max()) if others.size else 0.0
+        return to_end, worst <= ctx.z_crit, worst
+
+    def prefer(self, mine, other, ctx):
+        """A change of the noise on this gyro alone that lasts to the end of the record is this
+        fault; the burst's window then reaches an end and the other gyros do not change."""
+        if other.effect != "burst":
+            return None
+        to_end, alone, worst = self._burst_reading(mine, other, ctx)
+        if to_end and alone:
+            return Explained(f"; but only gyro {mine.gyro} changed (the others |z| <= {worst:.1f}) and the "
+                             f"change lasts to the end of the record: a noise fault of gyro {mine.gyro}")
+        return None
+
+    def concede(self, mine, other, ctx):
+        if other.effect != "burst":
+            return None
+        to_end, alone, worst = self._burst_reading(mine, other, ctx)
+        if not to_end:
+            return Explained(f"; but the noise comes back at {other.params['end_s']:.1f} s: a burst, not a "
+                             "fault (a fault lasts to the end)")
+        if not alone:
+            return Explained(f"; but the other gyros changed too (|z| up to {worst:.1f}): a burst, not a "
+                             f"fault of gyro {mine.gyro}")
+        return None
+
+    def example(self, rng, n_gyros, max_rate_deg_s):
+        g = _draw.gyro(rng, n_gyros)
+        return g, {"start_s": _draw.u(rng, 200.0, 2000.0), "ratio": _draw.u(rng, 2.0, 5.0)}

@@ -1,0 +1,212 @@
+"""GDOP design figures (paper 003 Figs. 8–10) and the figure helpers the reports share."""
+
+from __future__ import annotations
+
+import io
+from pathlib import Path
+
+import numpy as np
+
+from gyroarray.core.gdop import correlation_matrix, gdop, gdop_vs_alpha, optimal_alpha
+from gyroarray.core.errors import InputError
+from gyroarray.core.layout import Layout
+from gyroarray.core.outputs import PLOT_SUFFIXES, check_output_dir, save_figure
+from gyroarray.core.units import deg_to_rad, rad_to_deg
+
+NS = (4, 5, 6, 8)
+
+
+def _rho_grid(n: int, count: int = 200) -> np.ndarray:
+    """ρ strictly inside (−1/(N−1), 1), where the correlation matrix is PD."""
+    lo = -1.0 / (n - 1)
+    eps = 1e-3
+    return np.linspace(lo + eps, 1.0 - eps, count)
+
+
+def _figure(w=9.0, h=5.0, ncols=1):
+    """A figure of ``ncols`` panels side by side on an Agg canvas (no pyplot state), and its axes."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+    fig = Figure(figsize=(w, h), layout="constrained")
+    FigureCanvasAgg(fig)
+    axs = fig.subplots(1, ncols, squeeze=False)[0]
+    return fig, axs
+
+
+def _png(fig, dpi=96) -> bytes:
+    """The figure as PNG bytes."""
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=dpi)
+    return buf.getvalue()
+
+
+def design_figure(path, *, force: bool = True) -> Path:
+    """Write the design figure to ``path`` (see :func:`design_fig`).
+
+    Parameters
+    ----------
+    path : path-like
+        Output image; the format follows the suffix (``.png``, ``.svg``, ``.pdf``).
+
+    Returns
+    -------
+    Path
+        The file written.
+    """
+    path = Path(path)
+    if path.suffix.lower() not in PLOT_SUFFIXES:
+        raise InputError(f"plot must end in .png, .svg or .pdf, got {path.name!r}", file=str(path))
+    check_output_dir(path.parent, what="the plot's folder")
+    return save_figure(design_fig(), path, force=force, dpi=110)
+
+
+def design_fig():
+    """The figure: GDOP vs α (both schemes, N = 4, 5, 6, 8, ρ = 0), GDOP vs α
+    for several ρ (Scheme 1, N = 6), GDOP vs ρ at the ρ = 0 optimal α and the
+    optimal α vs ρ (a matplotlib Figure on an Agg canvas; no pyplot state).
+    """
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    alphas_deg = np.linspace(5.0, 175.0, 341)
+    alphas = deg_to_rad(alphas_deg)
+    fig = Figure(figsize=(15, 8.5), layout="constrained")
+    FigureCanvasAgg(fig)
+    axs = fig.subplots(2, 3)
+    for col, scheme in enumerate((1, 2)):
+        ax = axs[0, col]
+        for n in NS:
+            g = gdop_vs_alpha(scheme, n, alphas, 0.0)
+            line, = ax.plot(alphas_deg, g, label=f"N = {n}")
+            opt = optimal_alpha(scheme, n, 0.0)
+            ax.plot(rad_to_deg(opt.alpha_rad), opt.gdop, "o", color=line.get_color())
+        ax.set(title=f"Scheme {scheme}: GDOP vs cone angle (ρ = 0)  [Fig. 8{'ab'[col]}]",
+               xlabel="cone angle α [deg]", ylabel="GDOP [-]", ylim=(0.8, 3.5))
+        ax.legend(loc="upper center")
+        ax.grid(alpha=0.3)
+
+    ax = axs[0, 2]
+    for rho in (-0.18, -0.1, 0.0, 0.2, 0.5):
+        g = gdop_vs_alpha(1, 6, alphas, rho)
+        ax.plot(alphas_deg, g, label=f"ρ = {rho:g}")
+    ax.set(title="Scheme 1, N = 6: GDOP vs α for several ρ  [Fig. 9]",
+           xlabel="cone angle α [deg]", ylabel="GDOP [-]", xlim=(5, 90), ylim=(0.8, 3.0))
+    ax.legend()
+    ax.grid(alpha=0.3)
+
+    for col, scheme in enumerate((1, 2)):
+        ax = axs[1, col]
+        for n in NS:
+            alpha = optimal_alpha(scheme, n, 0.0).alpha_rad
+            rhos = _rho_grid(n)
+            layout = Layout.conical(scheme, n, alpha)
+            ax.plot(rhos, [gdop(layout, correlation_matrix(n, r)) for r in rhos],
+                    label=f"N = {n}, α = {rad_to_deg(alpha):.2f}°")
+        ax.set(title=f"Scheme {scheme}: GDOP vs ρ at the ρ = 0 optimum  [Fig. 10{'ab'[col]}]",
+               xlabel="ARW correlation ρ [-]", ylabel="GDOP [-]")
+        ax.legend()
+        ax.grid(alpha=0.3)
+
+    ax = axs[1, 2]
+    jumps = []
+    for scheme, style in ((1, "-"), (2, "--")):
+        for k, n in enumerate(NS):
+            rhos = _rho_grid(n, 60)
+            a = np.array([rad_to_deg(optimal_alpha(scheme, n, r).alpha_rad) for r in rhos])
+            # the optimum changes branch (Scheme 2: the cone flips below the horizontal):
+            # break the line there instead of drawing a vertical stroke through angles no
+            # optimum takes
+            cut = np.flatnonzero(np.abs(np.diff(a)) > 10.0)
+            a_plot = a.copy()
+            r_plot = rhos.copy()
+            for c in cut[::-1]:
+                jumps.append((scheme, n, 0.5 * (rhos[c] + rhos[c + 1])))
+                a_plot = np.insert(a_plot, c + 1, np.nan)
+                r_plot = np.insert(r_plot, c + 1, np.nan)
+            ax.plot(r_plot, a_plot, style, color=f"C{k}", label=f"scheme {scheme}, N = {n}")
+    ax.set(title="Optimal cone angle vs ρ  [Table 2]" + ("  (breaks: the optimum jumps branch)"
+                                                         if jumps else ""),
+           xlabel="ARW correlation ρ [-]", ylabel="optimal α [deg]")
+    ax.legend(fontsize=7, ncol=2, title="solid: scheme 1, dashed: scheme 2", title_fontsize=7)
+    ax.grid(alpha=0.3)
+
+    fig.suptitle("gyroarray design analysis: GDOP = sqrt(trace((Hᵀ C⁻¹ H)⁻¹))")
+    return fig
+
+
+def plot_vs_n(ax, ns, ys, yerr=None, *, color, marker, label, offset: float = 0.0):
+    """Values per number of gyros N: markers (error bars when given), joined only between
+    consecutive N, so no line runs through an N that was not computed (e.g. N = 7)."""
+    ns = np.asarray(ns, dtype=float)
+    ys = np.asarray(ys, dtype=float)
+    x = ns + offset
+    if yerr is not None:
+        ax.errorbar(x, ys, yerr=yerr, fmt=marker, color=color, ms=5, capsize=3, label=label)
+    else:
+        ax.plot(x, ys, marker, color=color, ms=5, label=label)
+    for i in range(len(ns) - 1):
+        if ns[i + 1] - ns[i] == 1:
+            ax.plot(x[i:i + 2], ys[i:i + 2], "-", color=color, lw=1.0)
+    ticks = set(getattr(ax, "_gyroarray_n_ticks", set())) | {int(n) for n in ns}
+    ax._gyroarray_n_ticks = ticks
+    ax.set_xticks(sorted(ticks))
+
+
+def plot_series(ax, series: dict, *, rtol: float) -> list:
+    """Series {(scheme, estimator): (N, values, error bars or None)} vs N: one marker per
+    scheme, one colour per estimator; series equal to ``rtol`` are drawn once, their label
+    naming them all. Returns the estimators in colour order."""
+    merged: list[list] = []
+    for k, (n, y, _) in series.items():
+        for grp in merged:
+            n0, y0, _ = series[grp[0]]
+            if np.array_equal(n, n0) and np.allclose(y, y0, rtol=rtol, atol=0):
+                grp.append(k)
+                break
+        else:
+            merged.append([k])
+    ests = sorted({k[1] for k in series})
+    for grp in merged:
+        n, y, e = series[grp[0]]
+        scheme, est = grp[0]
+        label = " = ".join(f"scheme {sc}, {es}" for sc, es in grp)
+        plot_vs_n(ax, n, y, e, color=f"C{ests.index(est)}", marker="o" if scheme == 1 else "s",
+                  label=label + (f"  (equal to {rtol:g})" if len(grp) > 1 else ""),
+                  offset=0.04 * (ests.index(est) - len(ests) / 2) + (0.0 if scheme == 1 else 0.02))
+    return ests
+
+
+def accuracy_vs_n_fig(res: dict):
+    """Predicted 3-axis RMS vs N per scheme and estimator (identical series merged), with the
+    simulated check's 95 % interval as error bars at the checked designs."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+    fig = Figure(figsize=(8.5, 5.0), layout="constrained")
+    FigureCanvasAgg(fig)
+    ax = fig.subplots()
+    best: dict = {}
+    for d in res["designs"]:
+        key = (d["scheme"], d["estimator"])
+        cur = best.setdefault(key, {})
+        if d["n"] not in cur or d["rms_3axis_deg_s"] < cur[d["n"]]["rms_3axis_deg_s"]:
+            cur[d["n"]] = d
+    series = {}
+    for key, per_n in best.items():
+        ns = sorted(per_n)
+        series[key] = (np.array(ns), np.array([per_n[n]["rms_3axis_deg_s"] for n in ns]), None)
+    ests = plot_series(ax, series, rtol=1e-6)
+    chk = (res.get("check") or {}).get("designs", [])
+    for i, c in enumerate(chk):
+        mc = c["rms_3axis_deg_s"]["monte_carlo"]
+        if mc["ci_low"] is None:
+            continue
+        color = f"C{ests.index(c['estimator'])}" if c["estimator"] in ests else "k"
+        ax.errorbar([c["n"] + 0.12 + 0.06 * i], [mc["value"]],
+                    yerr=[[mc["value"] - mc["ci_low"]], [mc["ci_high"] - mc["value"]]],
+                    fmt="o" if c["scheme"] == 1 else "s", mfc="none", color=color, ms=6, capsize=3,
+                    label=f"simulated: scheme {c['scheme']}, α {c['alpha_deg']:.1f}°, {c['estimator']} (95 % CI)")
+    ax.set(xlabel="gyros N [-]", ylabel="3-axis RMS about the truth [deg/s]",
+           title="Predicted accuracy per N (best cone angle and bandwidth)")
+    ax.grid(alpha=0.3, which="both")
+    ax.legend(fontsize=7)
+    return fig

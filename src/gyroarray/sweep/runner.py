@@ -1,0 +1,647 @@
+"""Run a sweep in parallel into a resumable Parquet dataset.
+
+:func:`run_sweep` runs every scenario of a sweep (:mod:`gyroarray.sweep.sweep`)
+in worker processes — a local ``ProcessPoolExecutor`` (spawned workers), or a
+``dask.distributed`` cluster when ``scheduler`` is its address
+(``tcp://HOST:PORT``) — and writes, as each scenario finishes, its rows to
+``out_dir/rows/<id>.parquet``: one row per estimator × body axis (the
+chain's metric table) plus the scenario's parameters, id and seed. Each file
+is written to a hidden temporary file and moved into place with
+``os.replace``, so the dataset (``pandas.read_parquet(out_dir / "rows")`` or
+:func:`load_results`) is always the set of complete scenarios.
+
+A scenario that raises (in the chain) is reported in the summary's
+``failed`` list (id and error) and the others go on; it has no file, so a
+rerun tries it again.
+
+Resuming: rerunning into the same folder skips the ids whose file exists
+and is intact. ``out_dir/sweep.json`` (the manifest: the sweep file's
+SHA-256 and the expanded scenario list with ids and seeds) refuses a folder
+that holds a different sweep. Every finished file's SHA-256 and row count
+are appended to ``out_dir/rows.sha256`` as it is written; on resume each
+existing file is checked against that record (or, without a record, its
+Parquet footer and row count are read), and a truncated, emptied or altered
+file is run again (the summary's ``notes`` say which). :func:`load_results`
+refuses a corrupt file, naming it, instead of reading it.
+
+Workers die with the sweep: each worker process watches its parent (Linux
+``PR_SET_PDEATHSIG`` and, everywhere, a thread that polls the parent's pid
+twice a second) and exits when the parent is gone, also after a SIGKILL of
+the parent, which runs no clean-up of its own.
+
+Determinism: every scenario runs in a worker process (also with
+``workers=1``) whose environment has ``OPENBLAS_NUM_THREADS=1`` (and
+``OMP_NUM_THREADS``/``MKL_NUM_THREADS``/``NUMBA_NUM_THREADS=1``: one thread per
+worker, no oversubscription), so BLAS products do not depend on
+thread scheduling; a scenario's seed comes from the sweep seed and its id.
+The same sweep therefore gives the same bits whatever the number of workers
+or the order scenarios finish in. Dask workers get the variables from the
+cluster (``distributed.nanny.pre-spawn-environ``, which sets the BLAS/OpenMP
+ones to 1 by default; add ``NUMBA_NUM_THREADS=1`` against oversubscription);
+:func:`run_sweep` checks ``OPENBLAS_NUM_THREADS`` on every worker and says
+so in the summary's ``notes`` when it is not 1.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import re
+import signal
+import sys
+import threading
+import time
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from contextlib import contextmanager
+from pathlib import Path
+
+import multiprocessing as mp
+
+from gyroarray.core import outputs
+from gyroarray.core.errors import InputError
+from gyroarray.core.limits import open_regular, read_json, read_regular
+
+from gyroarray.sweep.sweep import ScenarioSpec, Sweep, load_sweep
+
+__all__ = ["run_sweep", "load_results", "run_one", "verify_rows_file", "THREAD_ENV"]
+
+#: Environment of every worker process (bitwise-reproducible BLAS).
+THREAD_ENV = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1",
+              "NUMBA_NUM_THREADS": "1"}
+MANIFEST = "sweep.json"
+ROWS = "rows"
+#: Checksums of the finished result files: ``<sha256> <rows> <id>.parquet`` per line.
+CHECKSUMS = "rows.sha256"
+_STR_COLS = ("estimator", "axis", "scenario_id", "motion", "effects", "sweep", "scenario")
+
+
+def run_one(spec: ScenarioSpec, estimators, sweep_name: str):
+    """Run one scenario (in a worker): its rows as a DataFrame with a fixed schema."""
+    import pandas as pd
+
+    from gyroarray.chain.run import run_scenario  # lazy: loads numba
+
+    result = run_scenario(spec.build(), list(estimators) if estimators else None)
+    table = result.table.copy()
+    out = pd.DataFrame({"sweep": [sweep_name] * len(table)})
+    for k, v in spec.row_params().items():
+        out[k] = [v] * len(table)
+    for col in table.columns:
+        if col in ("estimator", "axis"):
+            out[col] = table[col].astype(str).to_numpy()
+        else:
+            # metrics are numbers or None (not applicable): float64 with NaN
+            out[col] = pd.to_numeric(table[col].astype(object).where(table[col].notna(), None),
+                                     errors="raise").astype("float64").to_numpy()
+    return _typed(out)
+
+
+def _typed(df):
+    import pandas as pd
+    for col in df.columns:
+        if col in _STR_COLS:
+            df[col] = df[col].astype(object)
+        elif col in ("scheme",):
+            df[col] = pd.array(df[col], dtype="Int64")
+        elif col in ("n_gyros", "scenario_seed", "replicate"):
+            df[col] = df[col].astype("int64")
+        elif col == "alpha_optimal":
+            df[col] = df[col].astype(bool)
+        else:
+            df[col] = pd.to_numeric(df[col].astype(object).where(df[col].notna(), None)
+                                    ).astype("float64")
+    return df
+
+
+def write_rows(df, folder: Path, sid: str, inputs=()) -> Path:
+    """Write a scenario's rows atomically and record the file's checksum beside the folder.
+
+    Both go through :mod:`gyroarray.core.outputs`: the Parquet file is replaced
+    atomically (a symbolic link at its name is replaced, never written
+    through), the checksum line is appended with
+    :func:`~gyroarray.core.outputs.append_line` (no symbolic link, no input of the
+    command, no partial line on a full disk).
+    """
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    final = folder / f"{sid}.parquet"
+    table = pa.Table.from_pandas(df, preserve_index=False)
+    sink = pa.BufferOutputStream()
+    pq.write_table(table, sink)
+    data = sink.getvalue().to_pybytes()
+    digest = hashlib.sha256(data).hexdigest()
+    outputs.write_bytes(final, data, force=True)      # a rerun replaces a corrupt file
+    outputs.append_line(folder.parent / CHECKSUMS, f"{digest} {len(df)} {final.name}",
+                        inputs=inputs, what="sweep checksum file (rows.sha256)")
+    return final
+
+
+def _sha256(path: Path) -> str:
+    h = hashlib.sha256()
+    with open_regular(path, "sweep result file") as fh:     # never blocks on a FIFO
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def _recorded_checksums(out: Path) -> dict:
+    """File name -> (sha256, rows) from ``rows.sha256``; the last record of a name wins,
+    a torn last line (a crash while appending) is ignored."""
+    path = out / CHECKSUMS
+    records: dict[str, tuple[str, int]] = {}
+    if not (path.exists() or path.is_symlink()):
+        return records
+    # a regular file only (a FIFO is refused, never waited on), at most the size of a
+    # 100,000-scenario record with room to spare
+    text = read_regular(path, "sweep checksum file (rows.sha256)",
+                        max_bytes=64 * 2**20).decode("utf-8", errors="replace")
+    for line in text.splitlines():
+        parts = line.split()
+        if len(parts) == 3 and len(parts[0]) == 64 and parts[1].isdigit():
+            records[parts[2]] = (parts[0], int(parts[1]))
+    return records
+
+
+def verify_rows_file(path: Path, record=None) -> str | None:
+    """Why a result file cannot be trusted, or None when it is intact.
+
+    With a ``record`` (sha256, rows) from ``rows.sha256`` the file's bytes must
+    hash to it; without one, its Parquet footer must read and hold at least
+    one row.
+    """
+    import pyarrow.parquet as pq
+
+    try:
+        if path.stat().st_size == 0:
+            return "the file is empty"
+        if record is not None:
+            return None if _sha256(path) == record[0] else "its checksum differs from the one recorded"
+        rows = pq.ParquetFile(path).metadata.num_rows
+    except OSError as err:
+        return f"cannot be read ({err.strerror or err})"
+    except InputError as err:  # not a regular file (open_regular)
+        return err.message
+    except Exception as err:   # pyarrow raises ArrowInvalid and others on a broken footer
+        return f"not a complete Parquet file ({type(err).__name__})"
+    return None if rows > 0 else "it holds no rows"
+
+
+def load_results(out_dir):
+    """The dataset of a sweep folder (complete scenario files only), sorted by id, estimator, axis.
+
+    Raises
+    ------
+    InputError
+        A result file is corrupt (truncated, emptied, altered): named, with the way out.
+    """
+    import pandas as pd
+
+    out = Path(out_dir)
+    folder = out / ROWS
+    files = sorted(folder.glob("*.parquet")) if folder.is_dir() else []
+    if not files:
+        return pd.DataFrame()
+    records = _recorded_checksums(out)
+    for f in files:
+        why = verify_rows_file(f, records.get(f.name))
+        if why is not None:
+            raise InputError(f"corrupt sweep result: {why}; rerun the same `gyroarray sweep` command "
+                             "into this folder to redo that scenario", file=str(f))
+    df = pd.concat([pd.read_parquet(f) for f in files], ignore_index=True)
+    return df.sort_values(["scenario_id", "estimator", "axis"], kind="stable").reset_index(drop=True)
+
+
+def _watch_parent(parent_pid: int) -> None:
+    """Worker initializer: one numba thread; exit as soon as the sweep process is gone (module
+    docstring)."""
+    # numba's thread count is set here, in the worker, not in the parent's environment while the
+    # pool starts: a parent that launched numba's threads in that window would keep 1 and refuse
+    # the default later ("Cannot set NUMBA_NUM_THREADS ... once the threads have been launched")
+    os.environ["NUMBA_NUM_THREADS"] = "1"
+    if sys.platform.startswith("linux"):
+        try:
+            import ctypes
+            libc = ctypes.CDLL(None, use_errno=True)
+            libc.prctl(1, signal.SIGKILL, 0, 0, 0)      # PR_SET_PDEATHSIG
+        except (OSError, AttributeError):
+            pass
+    if os.getppid() != parent_pid:
+        os._exit(1)
+
+    def watch():
+        while True:
+            time.sleep(0.5)
+            if os.getppid() != parent_pid:
+                os._exit(1)
+    threading.Thread(target=watch, name="gyroarray-parent-watch", daemon=True).start()
+
+
+_RECORD_END = re.compile(r"[0-9a-f]{64} [0-9]+ [^ ]+\.parquet\r?$")
+_TORN = re.compile(r"[0-9a-f]{0,64}(?: [0-9]*(?: [^ ]*)?)?\r?")
+
+
+def _sweep_inputs(sweep: Sweep) -> list:
+    """The files a sweep reads: the sweep file, its base scenario files and motion profiles."""
+    files = {sweep.source} if sweep.source else set()
+    for s in sweep.scenarios:
+        if s.file:
+            files.add(s.file)
+        motion = s.data.get("motion")
+        ref = motion.get("profile") if isinstance(motion, dict) else None
+        if isinstance(ref, str) and (ref.endswith(".toml") or "/" in ref):
+            here = s.data.get("_base_dir") or (Path(s.file).parent if s.file else Path("."))
+            files.add(str(Path(here) / ref))
+    return sorted(files)
+
+
+def check_out(out: Path, inputs) -> None:
+    """The output folder (created if needed, writable) and the files gyroarray keeps in it
+    (``sweep.json``, ``rows.sha256``): regular files of this user, never a symbolic link,
+    never an input of the command; ``rows.sha256`` must hold checksum lines only."""
+    outputs.check_output_dir(out, what="--out")
+    outputs.check_own_file(out / MANIFEST, inputs=inputs, what="sweep manifest (sweep.json)")
+    path = outputs.check_own_file(out / CHECKSUMS, inputs=inputs,
+                                  what="sweep checksum file (rows.sha256)")
+    if path.exists():
+        lines = read_regular(path, "sweep checksum file (rows.sha256)",
+                             max_bytes=64 * 2**20).decode("utf-8", errors="replace").split("\n")
+        for i, line in enumerate(lines):
+            # a record, or a record torn by a crash (alone, or glued to the next record by
+            # an older gyroarray): anything else is not ours
+            if not (_RECORD_END.search(line) or _TORN.fullmatch(line)):
+                raise InputError("not a gyroarray checksum file (lines of <sha256> <rows> "
+                                 "<id>.parquet); gyroarray appends to it: move it away, or use "
+                                 "a new --out folder", file=str(path), line=i + 1)
+
+
+def _check_manifest(out: Path, sweep: Sweep) -> None:
+    path = out / MANIFEST
+    mine = sweep.manifest()
+    if path.exists() or path.is_symlink():
+        # a regular file, a JSON object, bounded in size and depth (else one line naming it)
+        theirs = read_json(path, "sweep manifest")
+        for key in ("sweep_sha256", "seed", "estimators", "scenarios"):
+            if theirs.get(key) != json.loads(json.dumps(mine[key])):
+                raise InputError(
+                    f"this folder holds a different sweep ({theirs.get('name')!r}, {key} differs); "
+                    "resume only with the same sweep file, or use a new folder", file=str(path),
+                    column=key)
+        return
+    if (out / ROWS).is_dir() and any((out / ROWS).glob("*.parquet")):
+        raise InputError("the folder has results but no sweep.json: not resuming into it",
+                         file=str(out))
+    outputs.write_text(path, json.dumps(mine, indent=1), force=True)
+
+
+@contextmanager
+def _env(values: dict):
+    old = {k: os.environ.get(k) for k in values}
+    os.environ.update(values)
+    try:
+        yield
+    finally:
+        for k, v in old.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
+
+
+class _Progress:
+    def __init__(self, total: int, done: int, enabled):
+        self.total, self.done, self.t0 = total, done, time.perf_counter()
+        self.start = done
+        self.on = sys.stderr.isatty() if enabled is None else bool(enabled)
+        self.show()
+
+    def show(self, final=False):
+        if not self.on:
+            return
+        if final:
+            sys.stderr.write("\n")
+            sys.stderr.flush()
+            return
+        el = time.perf_counter() - self.t0
+        ran = self.done - self.start
+        left = self.total - self.done
+        eta = f", eta {el / ran * left:.0f} s" if ran and left else ""
+        width = 30
+        fill = int(width * self.done / max(self.total, 1))
+        sys.stderr.write(f"\rsweep [{'#' * fill}{'.' * (width - fill)}] {self.done}/{self.total} "
+                         f"{el:.0f} s{eta}   " + ("\n" if final else ""))
+        sys.stderr.flush()
+
+    def step(self):
+        self.done += 1
+        self.show()
+
+
+def _cost(spec: ScenarioSpec) -> float:
+    """Rough work of a scenario: samples × gyros (for scheduling only)."""
+    sc = spec.build()
+    duration = sc.duration_s if sc.duration_s is not None else sc.profile.duration_s
+    return duration * sc.sample_rate_hz * sc.layout.n_gyros
+
+
+#: Longest wait for the Dask scheduler to answer, name lookup included [s].
+SCHEDULER_TIMEOUT_S = 10.0
+#: Address schemes of dask.distributed that reach another process (``inproc://`` lives inside
+#: one Python process; ``ucx://`` needs the separate distributed-ucxx package).
+SCHEDULER_SCHEMES = ("tcp", "tls", "ws", "wss")
+_HOST_RE = re.compile(r"[A-Za-z0-9_](?:[A-Za-z0-9_.-]{0,252}[A-Za-z0-9_])?|\[[0-9A-Fa-f:.]{2,45}\]")
+
+
+def parse_scheduler(address) -> tuple[str, str, int]:
+    """``(scheme, host, port)`` of a Dask scheduler address, refused up front when malformed.
+
+    Accepted: ``SCHEME://HOST:PORT`` with a scheme of :data:`SCHEDULER_SCHEMES`, or
+    ``HOST:PORT`` (tcp, as dask.distributed reads it); HOST a name, an IPv4 address or a
+    bracketed IPv6 address; PORT a whole number 1..65535.
+
+    Raises
+    ------
+    InputError
+        One line naming ``--scheduler``, what is wrong and the expected form.
+    """
+    text = str(address)
+    form = "give tcp://HOST:PORT, e.g. tcp://127.0.0.1:8786 (what `dask scheduler` prints)"
+    shown = text if len(text) <= 80 and text.isprintable() else repr(text[:80]) + "..."
+    scheme, sep, rest = text.partition("://")
+    if not sep:
+        scheme, rest = "tcp", text
+    scheme = scheme.lower()
+    if scheme == "inproc":
+        raise InputError(f"--scheduler {shown}: an inproc:// address lives only inside one Python "
+                         f"process; {form}")
+    if scheme not in SCHEDULER_SCHEMES:
+        raise InputError(f"--scheduler {shown}: the scheme {scheme}:// is not supported (use one of "
+                         f"{', '.join(s + '://' for s in SCHEDULER_SCHEMES)}); {form}")
+    host, colon, port = rest.rpartition(":")
+    if not colon or not _HOST_RE.fullmatch(host):
+        raise InputError(f"--scheduler {shown}: not a scheduler address (HOST:PORT expected); {form}")
+    if not (port.isascii() and port.isdigit() and 1 <= int(port) <= 65535):
+        raise InputError(f"--scheduler {shown}: the port must be a whole number from 1 to 65535, "
+                         f"got {port!r}; {form}")
+    return scheme, host.strip("[]"), int(port)
+
+
+def _probe_scheduler(scheduler: str, host: str, port: int, timeout: float) -> None:
+    """Refuse a scheduler whose host does not resolve or whose port does not accept a
+    connection, within ``timeout`` seconds in all (name lookup included: it runs on a thread)."""
+    import socket
+    outcome: list = []
+
+    def probe():
+        try:
+            socket.create_connection((host, port), timeout=timeout).close()
+            outcome.append(None)
+        except OSError as err:
+            outcome.append(err.strerror or str(err) or type(err).__name__)
+
+    t = threading.Thread(target=probe, name="gyroarray-scheduler-probe", daemon=True)
+    t.start()
+    t.join(timeout)
+    why = outcome[0] if outcome else "no answer"
+    if why is not None:
+        raise InputError(f"--scheduler: cannot reach the Dask scheduler at {scheduler}: {why} (waited at most "
+                         f"{timeout:g} s); check the address, or start one with `dask scheduler`")
+
+
+def _ask_identity(scheduler: str, timeout: float) -> None:
+    """Refuse a port that accepts connections but does not answer Dask's ``identity`` as a
+    scheduler within ``timeout`` seconds (``distributed.Client`` waits for ever on a silent one)."""
+    import asyncio
+    from distributed.comm import connect
+    from distributed.security import Security
+
+    async def ask():
+        comm = await connect(scheduler, timeout=timeout, **Security().get_connection_args("client"))
+        try:
+            await comm.write({"op": "identity", "reply": True})
+            return await comm.read()
+        finally:
+            comm.abort()
+
+    try:
+        answer = asyncio.run(asyncio.wait_for(ask(), timeout))
+    except (asyncio.TimeoutError, TimeoutError):
+        why = "no answer to the Dask handshake"
+    except OSError as err:
+        why = " ".join(str(err).split()) or type(err).__name__
+    except Exception as err:      # noqa: BLE001 - what the other end sent is not Dask's protocol
+        why = (f"it answered, but not as a Dask scheduler ({type(err).__name__}: "
+               f"{' '.join(str(err).split())[:160]})")
+    else:
+        if isinstance(answer, dict) and answer.get("type") == "Scheduler":
+            return
+        why = f"it answered, but not as a Dask scheduler (a {type(answer).__name__})"
+    raise InputError(f"--scheduler: cannot reach the Dask scheduler at {scheduler}: {why} (waited at most "
+                     f"{timeout:g} s); check the address and that a Dask scheduler of a compatible "
+                     "version runs there")
+
+
+def _dask_client(scheduler: str):
+    """A ``distributed.Client`` on ``scheduler``, or a one-line refusal within
+    :data:`SCHEDULER_TIMEOUT_S` (twice that at most: the probe, then the handshake)."""
+    _, host, port = parse_scheduler(scheduler)
+    try:
+        from distributed import Client
+    except ImportError:
+        raise InputError("a scheduler address needs dask[distributed] installed") from None
+    _probe_scheduler(scheduler, host, port, SCHEDULER_TIMEOUT_S)
+    _ask_identity(scheduler, SCHEDULER_TIMEOUT_S)
+
+    class _Client(Client):
+        """A Client whose failed start does not wait again (and print a traceback) when the
+        half-built object is collected at exit."""
+
+        def __init__(self, *args, **kwargs):
+            try:
+                super().__init__(*args, **kwargs)
+            except BaseException:
+                try:
+                    self.close(timeout=2)
+                except Exception:                         # noqa: BLE001 - it never started
+                    pass
+                self.status = "closed"                    # __del__ then closes nothing
+                raise
+
+    try:
+        return _Client(scheduler, timeout=f"{SCHEDULER_TIMEOUT_S:g}s", set_as_default=False)
+    except (OSError, TimeoutError) as err:
+        why = " ".join(str(err).split()) or type(err).__name__
+    except Exception as err:      # noqa: BLE001 - the other end answered, but not as Dask
+        why = (f"it answered, but not as a Dask scheduler ({type(err).__name__}: "
+               f"{' '.join(str(err).split())[:160]})")
+    raise InputError(f"--scheduler: cannot reach the Dask scheduler at {scheduler}: {why} (waited at most "
+                     f"{SCHEDULER_TIMEOUT_S:g} s); check the address and that a Dask scheduler of "
+                     "a compatible version runs there")
+
+
+def _scenarios_to_run(sweep: Sweep, rows_dir: Path, records: dict, notes: list) -> list:
+    """The scenarios without a rows file or whose file fails its check (noted), in sweep order."""
+    todo = []
+    for s in sweep.scenarios:
+        f = rows_dir / f"{s.id}.parquet"
+        if not f.exists():
+            todo.append(s)
+            continue
+        why = verify_rows_file(f, records.get(f.name))
+        if why is not None:
+            notes.append(f"{f}: {why}; run again")
+            todo.append(s)
+    return todo
+
+
+def _run_in_processes(todo: list, sweep: Sweep, workers: int, done) -> None:
+    """Run ``todo`` on a local spawn process pool, reporting each result to ``done``."""
+    ctx = mp.get_context("spawn")
+    blas = {k: v for k, v in THREAD_ENV.items() if k != "NUMBA_NUM_THREADS"}
+    with _env(blas), ProcessPoolExecutor(max_workers=min(workers, len(todo)),
+                                         mp_context=ctx, initializer=_watch_parent,
+                                         initargs=(os.getpid(),)) as pool:
+        futures = {pool.submit(run_one, s, sweep.estimators, sweep.name): s for s in todo}
+        pending = set(futures)
+        try:
+            while pending:
+                finished, pending = wait(pending, return_when=FIRST_COMPLETED)
+                for fut in sorted(finished, key=lambda fu: futures[fu].id):
+                    exc = fut.exception()
+                    done(futures[fut], None if exc else fut.result(), exc)
+        except BaseException:
+            # a result that cannot be written (a full disk) or an interrupt: stop now, do not
+            # run the rest first (the workers write nothing themselves; a rerun resumes)
+            procs = dict(getattr(pool, "_processes", None) or {})   # before shutdown clears it
+            pool.shutdown(wait=False, cancel_futures=True)
+            for proc in procs.values():
+                try:
+                    proc.terminate()
+                except (OSError, AttributeError, ValueError):
+                    pass
+            raise
+
+
+def _run_on_dask(todo: list, sweep: Sweep, scheduler: str, done, notes: list) -> None:
+    """Run ``todo`` on a dask.distributed cluster, reporting each result to ``done``."""
+    import logging
+    from concurrent.futures import CancelledError
+    from distributed import as_completed
+    from distributed.comm.core import CommClosedError
+    lost = (CancelledError, CommClosedError, TimeoutError)
+
+    def gone(err) -> InputError:
+        return InputError(f"--scheduler: lost the connection to the Dask scheduler at {scheduler} "
+                          f"({type(err).__name__}: {' '.join(str(err).split())[:160]}); the scenarios "
+                          "finished so far are kept: run the same command again to resume")
+
+    log = logging.getLogger("distributed")
+    level = log.level
+    log.setLevel(logging.CRITICAL)        # its reconnection errors: stderr carries one line at most
+    client = None
+    try:
+        client = _dask_client(scheduler)
+        try:
+            envs = client.run(lambda: {k: os.environ.get(k) for k in THREAD_ENV})
+            futures = {client.submit(run_one, s, sweep.estimators, sweep.name, key=f"sweep-{s.id}",
+                                     pure=False): s for s in todo}
+        except lost as err:
+            raise gone(err) from None
+        off = sorted(w for w, e in envs.items() if e.get("OPENBLAS_NUM_THREADS") != "1")
+        if off:
+            notes.append(f"{len(off)} Dask worker(s) without OPENBLAS_NUM_THREADS=1: results "
+                         "may differ in the last bits from a local run")
+        for dfut in as_completed(list(futures), loop=client.loop):
+            spec = futures[dfut]
+            try:
+                df, err = (None, dfut.exception()) if dfut.status == "error" else (dfut.result(), None)
+            except lost as exc:
+                raise gone(exc) from None
+            done(spec, df, err)
+    finally:
+        try:
+            if client is not None:
+                client.close(timeout=5)
+        except Exception:                      # noqa: BLE001 - a scheduler already gone
+            pass
+        log.setLevel(level)
+
+
+def run_sweep(sweep, out_dir, *, workers: int = 1, scheduler: str | None = None,
+              progress=None) -> dict:
+    """Run (or resume) a sweep into ``out_dir``; one Parquet file per finished scenario.
+
+    Parameters
+    ----------
+    sweep : Sweep or path
+        A loaded sweep or a sweep file.
+    out_dir : path
+        Output folder: ``sweep.json`` and ``rows/<id>.parquet``.
+    workers : int
+        Local worker processes (ignored with ``scheduler``).
+    scheduler : str, optional
+        A ``dask.distributed`` scheduler address (``tcp://HOST:PORT``): run there.
+    progress : bool or None
+        Progress bar on stderr; None: when stderr is a terminal.
+
+    Returns
+    -------
+    dict
+        ``sweep``, ``out_dir``, ``dataset``, ``scenarios``, ``ran``, ``skipped``,
+        ``failed`` (list of {id, error}), ``complete``, ``rows_written``,
+        ``seconds``, ``workers``, ``backend``, ``notes``, ``excluded`` (grid
+        combinations left out by ``skip_invalid``: {id, reason}).
+    """
+    t0 = time.perf_counter()
+    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
+        raise InputError(f"workers must be an integer >= 1, got {workers!r}")
+    if scheduler is not None:
+        parse_scheduler(scheduler)                          # a malformed address: refused before work
+    out = Path(out_dir)
+    # the folder and the files gyroarray keeps there, before the (possibly long) expansion
+    if out.exists() or out.is_symlink():
+        check_out(out, [sweep.source if isinstance(sweep, Sweep) else sweep])
+    if not isinstance(sweep, Sweep):
+        sweep = load_sweep(sweep)
+    inputs = _sweep_inputs(sweep)
+    check_out(out, inputs)
+    outputs.check_output_dir(out / ROWS, what="--out")
+    _check_manifest(out, sweep)
+    rows_dir = out / ROWS
+    notes: list[str] = []
+    records = _recorded_checksums(out)
+    todo = _scenarios_to_run(sweep, rows_dir, records, notes)
+    # longest first (a better finish on few workers); results do not depend on the order
+    todo.sort(key=lambda s: (-_cost(s), s.id))
+    skipped = len(sweep.scenarios) - len(todo)
+    bar = _Progress(len(sweep.scenarios), skipped, progress)
+    failed, rows_written = [], 0
+
+    def done(spec, df=None, err=None):
+        nonlocal rows_written
+        if err is not None:
+            failed.append({"id": spec.id, "error": f"{type(err).__name__}: {err}"})
+        else:
+            write_rows(df, rows_dir, spec.id, inputs)
+            rows_written += len(df)
+        bar.step()
+
+    if todo and scheduler is None:
+        backend = "processes"
+        _run_in_processes(todo, sweep, workers, done)
+    elif todo:
+        backend = "dask"
+        assert scheduler is not None                          # the process pool took the None case
+        _run_on_dask(todo, sweep, scheduler, done, notes)
+    else:
+        backend = "none (all done)"
+    bar.show(final=True)
+    complete = not failed and all((rows_dir / f"{s.id}.parquet").exists() for s in sweep.scenarios)
+    return {"sweep": sweep.name, "out_dir": str(out), "dataset": str(rows_dir),
+            "scenarios": len(sweep.scenarios), "ran": len(todo) - len(failed), "skipped": skipped,
+            "failed": failed, "complete": complete, "rows_written": rows_written,
+            "seconds": time.perf_counter() - t0,
+            "workers": None if scheduler else workers, "scheduler": scheduler,
+            "backend": backend, "notes": notes,
+            "excluded": [{"id": i, "reason": r} for i, r in sweep.excluded]}
