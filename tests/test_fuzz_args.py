@@ -39,6 +39,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from gyroarray.core.errors import one_line
 from hostile import assert_contract, finite_numbers, run_cli, write_measurement, write_scenario
 
 LONG = int(os.environ.get("GYROARRAY_FUZZ_EXAMPLES", "0"))
@@ -200,7 +201,7 @@ def _check(argv, inputs):
     if o.code == 2:
         line = o.err.strip()
         named = [a.split("=")[0] for a in argv if a.startswith("--")] + \
-                [Path(a).name for a in argv if "/" in a] + [argv[0], "--max-memory"]
+                [one_line(Path(a).name) for a in argv if "/" in a] + [argv[0], "--max-memory"]
         assert any(n and n in line for n in named) or "argument" in line or "usage" in line, \
             ("the refusal names no file or argument", argv, line)
     else:

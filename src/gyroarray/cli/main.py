@@ -110,8 +110,9 @@ def _measurement_inputs(args) -> list:
 
 def _add_plugin(p):
     p.add_argument("--plugin", action="append", type=Path, metavar="PATH.py",
-                   help="load the effects defined in this Python file (repeatable); the only way "
-                        "user code runs: scenario, model and measurement files are never executed")
+                   help="load the effects and estimators defined in this Python file (repeatable), "
+                        "once they pass the conformance checks; the only way user code runs: "
+                        "scenario, model and measurement files are never executed")
 
 
 def _add_force(p):
@@ -1554,8 +1555,8 @@ def main(argv: list[str] | None = None) -> int:
                       "redirect it to a file or to /dev/null", file=sys.stderr)
                 return EXIT_USAGE
             if getattr(args, "plugin", None):
-                from gyroarray.effects import plugin_effects
-                plugin_effects(args.plugin)
+                from gyroarray.chain.plugins import load_plugins  # deferred: loads numba, the registries
+                load_plugins(args.plugin)
             with memory_budget(getattr(args, "max_memory", None)):
                 result, text, *code = args.func(args)
     except InputError as err:

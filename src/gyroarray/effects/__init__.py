@@ -11,13 +11,13 @@ class found here, plus
   (:func:`load_plugin`): the only way user code runs. Scenario, model and
   measurement files are data and are never executed.
 
-Adding an effect is one new file: nothing else names it. The folder is its
-own top-level package (mapped to ``gyroarray.effects``) because an effect
-owns both its simulate side and its fit side (``analysis``): it sits above
-``analysis`` and below the simulator and the chains that use it
-(``gyroarray.sim``, ``gyroarray.chain.compare``). The protocol an effect implements
-is :mod:`gyroarray.effects.protocol` (also importable as
-``gyroarray.effects.protocol``); it needs nothing from this registry.
+Adding an effect is one new file: nothing else names it. The layer sits
+above ``gyroarray.analysis`` (statistics that know no effect) and below the
+simulator and the chains that use it (``gyroarray.sim``,
+``gyroarray.chain.compare``); the effects' fitting code is in
+``gyroarray.effects.fits``, the noise-model types in
+``gyroarray.effects.model``. The protocol an effect implements is
+:mod:`gyroarray.effects.protocol`; it needs nothing from this registry.
 """
 
 from __future__ import annotations
@@ -154,18 +154,17 @@ def _load_entry_points() -> None:
 _PLUGINS: dict[str, list[str]] = {}
 
 
-def load_plugin(path) -> list[str]:
-    """Run the Python file ``path`` (the user named it) and register the effects it defines.
+def run_plugin_file(path) -> tuple[ModuleType, bool]:
+    """Run the Python file ``path`` (the user named it) once; returns (its module, first run).
 
-    Returns the names of its effects. The file must be a regular ``.py`` file
-    that defines at least one :class:`~gyroarray.effects.protocol.Effect` subclass
-    with a ``name``. Loading the same file twice registers nothing new.
+    The file must be a regular ``.py`` file. The same file (after symlinks) is
+    run once per process: a second call returns the module of the first.
 
     Raises
     ------
     InputError
-        Not a regular .py file, an exception while running it (named, one
-        line), no effect in it, or an effect name already taken.
+        Not a regular .py file, or an exception while running it (named, one
+        line, with the line of the file it came from).
     """
     p = Path(path)
     where = str(p)
@@ -178,9 +177,9 @@ def load_plugin(path) -> list[str]:
     if not stat.S_ISREG(st.st_mode):
         raise InputError("a plugin must be a regular file", file=where)
     key = str(p.resolve())
-    if key in _PLUGINS:
-        return list(_PLUGINS[key])
     modname = "gyroarray_plugin_" + hashlib.sha256(key.encode()).hexdigest()[:12]
+    if modname in sys.modules:
+        return sys.modules[modname], False
     spec = importlib.util.spec_from_file_location(modname, p)
     if spec is None or spec.loader is None:
         raise InputError("cannot load the plugin as a Python module", file=where)
@@ -197,6 +196,42 @@ def load_plugin(path) -> list[str]:
             raise
         line = _plugin_line(err, p)
         raise InputError(f"the plugin raised {type(err).__name__}: {err}", file=where, line=line) from None
+    return module, True
+
+
+def effect_classes(module: ModuleType) -> list[type]:
+    """The Effect subclasses a module defines (not imports) with a name."""
+    return _effect_classes(module)
+
+
+def unregister(name: str) -> None:
+    """Take an effect a plugin registered out of the registry again (a failed conformance
+    check); built-ins and unknown names are left alone."""
+    if name in _EFFECTS and not _SOURCE.get(name, "").startswith("gyroarray.effects."):
+        del _EFFECTS[name]
+        _SOURCE.pop(name, None)
+
+
+def load_plugin(path) -> list[str]:
+    """Run the Python file ``path`` (the user named it) and register the effects it defines.
+
+    Returns the names of its effects. The file must be a regular ``.py`` file
+    that defines at least one :class:`~gyroarray.effects.protocol.Effect` subclass
+    with a ``name``. Loading the same file twice registers nothing new. The
+    CLI's ``--plugin`` goes through :func:`gyroarray.chain.plugins.load_plugin`,
+    which also takes estimators and runs the conformance checks first.
+
+    Raises
+    ------
+    InputError
+        Not a regular .py file, an exception while running it (named, one
+        line), no effect in it, or an effect name already taken.
+    """
+    where = str(path)
+    key = str(Path(path).resolve())
+    if key in _PLUGINS:
+        return list(_PLUGINS[key])
+    module, _ = run_plugin_file(path)
     classes = _effect_classes(module)
     if not classes:
         raise InputError("the plugin defines no effect (a subclass of gyroarray.effects.protocol.Effect "

@@ -23,7 +23,7 @@ Usage::
 """
 
 from gyroarray.estimators.base import (ENTRY_POINT_GROUP, Estimator, NotFittedError, available,
-                                       get_estimator, make, register)
+                                       get_estimator, make, register, unregister)
 from gyroarray.estimators.bound import OfflineBound, efficiency
 from gyroarray.estimators.fdi import FaultDetector
 from gyroarray.estimators.kf_array import ArrayKF
@@ -33,6 +33,6 @@ from gyroarray.estimators.noise import ArrayNoise, array_noise
 from gyroarray.estimators.simple import GLS, OLS, Naive
 
 __all__ = ["ENTRY_POINT_GROUP", "Estimator", "NotFittedError", "available", "get_estimator", "make",
-           "register", "OfflineBound", "efficiency", "FaultDetector", "ArrayKF", "SingleGyroKF", "bandwidth_hz",
+           "register", "unregister", "OfflineBound", "efficiency", "FaultDetector", "ArrayKF", "SingleGyroKF", "bandwidth_hz",
            "paper002_relation", "single_gyro_gain", "ArrayNoise", "array_noise", "GLS", "OLS",
            "Naive"]

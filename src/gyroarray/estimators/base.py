@@ -316,6 +316,14 @@ def register(name: str) -> Callable[[type], type]:
     return deco
 
 
+def unregister(name: str) -> None:
+    """Take an estimator a plugin file registered out of the registry again (a failed
+    conformance check); the built-ins are left alone."""
+    cls = _BUILTIN.get(name)
+    if cls is not None and not cls.__module__.startswith("gyroarray."):
+        del _BUILTIN[name]
+
+
 def _load_builtins() -> None:
     import importlib
     for mod in _BUILTIN_MODULES:
