@@ -40,7 +40,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from gyroarray.core.errors import one_line
-from hostile import assert_contract, finite_numbers, run_cli, write_measurement, write_scenario
+from hostile import (assert_contract, axes_sidecar, finite_numbers, run_cli, write_measurement,
+                     write_scenario)
 
 LONG = int(os.environ.get("GYROARRAY_FUZZ_EXAMPLES", "0"))
 #: examples per command: a bounded, derandomized sample in make test; in make fuzz 7 % of the
@@ -124,11 +125,12 @@ def inputs(tmp_path_factory):
     rng = np.random.default_rng(28)
     n = 3000
     t = np.arange(n) / 50.0
-    g = rng.normal(0.0, 0.05, (n, 3)) + np.cumsum(rng.normal(0.0, 1e-3, (n, 3)), axis=0)
-    meas = write_measurement(folder, "meas", t, g)
+    # six gyros on a cone: enough for fdi (N >= 4) and for every analysis
+    g = rng.normal(0.0, 0.05, (n, 6)) + np.cumsum(rng.normal(0.0, 1e-3, (n, 6)), axis=0)
+    meas = write_measurement(folder, "meas", t, g, sidecar=axes_sidecar(6))
     model = folder / "model.toml"
-    model.write_text('[[effect]]\neffect = "arw"\nn_deg_rt_h = 3.0\n'
-                     '[[effect]]\neffect = "rrw"\nk_deg_h_rt_h = 30.0\n')
+    model.write_text('effects = [ { effect = "arw", n_deg_rt_h = 3.0 }, '
+                     '{ effect = "rrw", k_deg_h_rt_h = 30.0 } ]\n')
     scen = write_scenario(folder, "scen", rate=20.0)
     (folder / "adir").mkdir()
     fifo = folder / "fifo"
@@ -157,15 +159,21 @@ def _is_output(action) -> bool:
 @st.composite
 def command_lines(draw, command: str, inputs: dict):
     argv = [command]
+    if command == "design" and draw(st.booleans()):
+        argv += ["--recommend", "--arw", "0.3", "--n", "4,6"]    # a question the drawn options vary
     pos = COMMANDS[command]
     if pos is not None:
         argv.append(str(inputs[pos]))
-    for action in _parser_actions(command):
-        if not action.option_strings or set(action.option_strings) & SKIP:
-            continue
+    actions = [a for a in _parser_actions(command)
+               if a.option_strings and not set(a.option_strings) & SKIP]
+    # one to three optional arguments an example (most of them then reach the work, instead of
+    # all dying at the first of many hostile values), plus the required ones
+    optional = [a for a in actions if not a.required]
+    chosen = set(draw(st.lists(st.sampled_from(range(len(optional))), min_size=1, max_size=3,
+                               unique=True))) if optional else set()
+    for action in actions:
         opt = action.option_strings[-1]
-        required = action.required
-        if not required and not draw(st.booleans()):
+        if not action.required and optional.index(action) not in chosen:
             continue
         if action.nargs == 0:                          # a flag
             argv.append(opt)
@@ -183,8 +191,6 @@ def command_lines(draw, command: str, inputs: dict):
         else:
             value = draw(st.sampled_from(NUMBERS))
         argv += [f"{opt}={value}"] if value.startswith("-") else [opt, value]
-    if command == "design" and draw(st.booleans()):
-        argv.append("--recommend")
     if "--force" not in argv and draw(st.booleans()):
         argv.append("--force")
     argv += ["--max-memory", BUDGET, "--json"]
