@@ -11,6 +11,7 @@ import argparse
 import json
 import math
 import os
+import re
 import sys
 import warnings
 from pathlib import Path
@@ -1526,16 +1527,27 @@ def _version() -> str:
 _INPUT_ARGS = ("measurement", "scenario", "sweep")
 
 
-def _located_input_error(err: InputError, args) -> InputError:
-    """``err`` with the command's input file (``MEAS.csv``, ``SCENARIO.toml``, ``SWEEP.toml``) as
-    its file when it names neither a file nor an argument (``--window``): a refusal deep in an
-    analysis then still says which file it is about."""
+def _located_input_error(err: InputError, args, argv=()) -> InputError:
+    """``err`` located for the user when it names neither a file nor an argument.
+
+    With the command's input file (``MEAS.csv``, ``SCENARIO.toml``, ``SWEEP.toml``) as its
+    file: a refusal deep in an analysis then still says which file it is about. A command
+    without one (``design``, ``gdop``) gets the option the user gave whose name the message
+    uses (``rho = 1 makes ...`` comes from ``--rho``; ``unknown shipped motion profile`` from
+    ``--motion``).
+    """
     if err.file is not None or args is None or "--" in err.message or err.message.startswith("gyroarray "):
         return err
     for name in _INPUT_ARGS:
         value = getattr(args, name, None)
         if isinstance(value, (str, os.PathLike)):
             return err.with_file(value)
+    words = set(re.findall(r"[a-z_]+", err.message.lower()))
+    for item in argv or ():
+        opt = str(item).split("=", 1)[0]
+        dest = opt[2:].replace("-", "_")
+        if opt.startswith("--") and any(w == dest or w.startswith(dest + "_") for w in words):
+            return InputError(f"{opt}: {err.message}", line=err.line, column=err.column)
     return err
 
 
@@ -1560,7 +1572,7 @@ def main(argv: list[str] | None = None) -> int:
             with memory_budget(getattr(args, "max_memory", None)):
                 result, text, *code = args.func(args)
     except InputError as err:
-        print(f"gyroarray: {_located_input_error(err, locals().get('args'))}", file=sys.stderr)
+        print(f"gyroarray: {_located_input_error(err, locals().get('args'), argv if argv is not None else sys.argv[1:])}", file=sys.stderr)
         return EXIT_USAGE
     except KeyboardInterrupt:
         print("gyroarray: interrupted", file=sys.stderr)

@@ -624,6 +624,19 @@ def _design_dict(b: _Best, space: DesignSpace, g: GyroNoise, failures: int) -> d
             "fault_tolerance": json.loads(json.dumps(ft))}
 
 
+def _estimator_kwargs(est: str, bw, g: GyroNoise) -> dict:
+    """The hyperparameters of estimator ``est`` as the predictor designs it: its bandwidth
+    [Hz], and for the array KF no bias states when the gyros have no rate random walk (the
+    fast path's walk/white ratio 0: the bias states would have no process noise and the gain
+    no steady state)."""
+    if est in ("kf_array", "kf_single"):
+        kw: dict = {"bandwidth_hz": bw}
+        if est == "kf_array" and not g.rrw_deg_h_rt_h > 0:
+            kw["bias_states"] = False
+        return kw
+    return {"lowpass_hz": bw} if est in ("gls", "ols") else {}
+
+
 def generic_design(scheme, n, est, alpha, bw, rho, space: DesignSpace, g: GyroNoise,
                     failures: int) -> dict:
     """A design predicted by the full predictor (used where the fast path does not apply)."""
@@ -631,9 +644,7 @@ def generic_design(scheme, n, est, alpha, bw, rho, space: DesignSpace, g: GyroNo
     gr = g.with_rho(rho) if g.rho_arw == g.rho_rrw else g
     layout = Layout.conical(scheme, n, alpha)
     model = gr.noise_model(n)
-    kw = {"bandwidth_hz": bw} if est in ("kf_array", "kf_single") else (
-        {"lowpass_hz": bw} if est in ("gls", "ols") else {})
-    e = get_estimator(est)(**kw).fit(layout, model, space.dt_s)
+    e = get_estimator(est)(**_estimator_kwargs(est, bw, g)).fit(layout, model, space.dt_s)
     motion = space.motion[:space.n_samples] if space.motion is not None else None
     p = predict(e, _with_sensor(model, space, g_sensitivity=False), n_samples=space.n_samples,
                 settle_s=space.settle_s, truth_rad_s=motion, swing=space.swing)
@@ -1212,9 +1223,7 @@ def monte_carlo_check(designs: list[dict], g: GyroNoise, space: DesignSpace, *,
         layout = Layout.conical(d["scheme"], d["n"], math.radians(d["alpha_deg"]))
         model = _with_sensor(gr.noise_model(d["n"]), space, g_sensitivity=False)
         bw = d["bandwidth_hz"]
-        kw = {"bandwidth_hz": bw} if d["estimator"] in ("kf_array", "kf_single") else (
-            {"lowpass_hz": bw} if d["estimator"] in ("gls", "ols") else {})
-        est = get_estimator(d["estimator"])(**kw).fit(layout, model, dt)
+        est = get_estimator(d["estimator"])(**_estimator_kwargs(d["estimator"], bw, g)).fit(layout, model, dt)
         setups.append((d, layout, model, est))
     per: list[list[np.ndarray]] = [[] for _ in setups]                                        # runs × (4 metrics × 3 axes)
     for r in range(int(replicates)):

@@ -207,9 +207,10 @@ class ArrayKF(Estimator):
             q = rate_psd(H, R, Qb, dt_s, self.bandwidth_hz, self.q_omega)
             filt = design(H, R, Qb, q, dt_s)
         except NoSteadyState as err:
-            raise InputError(f"kf_array: {err.message}; the bias states need rate random walk "
-                             "(rrw > 0) on the gyros — fit with bias_states=False for a model "
-                             "without it") from None
+            raise InputError(f"kf_array: {err.message}; its bias states need rate random walk "
+                             "(rrw > 0) on the gyros: add an rrw entry to the model, or use an "
+                             "estimator without bias states (gls, ols; in Python: "
+                             "ArrayKF(bias_states=False))") from None
         self._filter = filt
         self.q_omega_ = readonly(q)
         self.gain_ = readonly(filt.K)
