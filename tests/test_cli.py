@@ -95,7 +95,7 @@ def test_entry_point_subprocess_no_traceback():
     assert proc.returncode == 2
     assert proc.stdout == ""
     assert proc.stderr.strip().splitlines() == [
-        "gyroarray: rho = -0.5 is outside [-1/(N-1), 1] = [-0.333333, 1] for N = 4"]
+        "gyroarray: --rho: rho = -0.5 is outside [-1/(N-1), 1] = [-0.333333, 1] for N = 4"]
 
 
 def test_every_subcommand_is_listed():

@@ -1546,7 +1546,8 @@ def _located_input_error(err: InputError, args, argv=()) -> InputError:
     for item in argv or ():
         opt = str(item).split("=", 1)[0]
         dest = opt[2:].replace("-", "_")
-        if opt.startswith("--") and any(w == dest or w.startswith(dest + "_") for w in words):
+        if (opt.startswith("--") and len(dest) >= 3          # not --n: "for N = 4" is no reference
+                and any(w == dest or w.startswith(dest + "_") for w in words)):
             return InputError(f"{opt}: {err.message}", line=err.line, column=err.column)
     return err
 
