@@ -120,6 +120,7 @@ def test_the_former_protocol_path_gives_the_same_objects():
         subprocess.run([sys.executable, "-c", f"import {mod}; {mod}.Effect"], check=True)
 
 
+@pytest.mark.slow   # two 30-minute simulated sessions per statistical check (26 s): make score
 def test_the_example_passes_the_public_conformance_check():
     from gyroarray.effects import load_plugin, REGISTRY
     from gyroarray.chain.testing import check_effect

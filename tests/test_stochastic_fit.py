@@ -383,6 +383,7 @@ def test_walk_after_a_ramp_equals_the_explicit_covariance():
     assert got[-1] < 0.6                      # a third of the record: the ramp took about half
 
 
+@pytest.mark.slow   # a study of 200 paired records (19 s): make score
 def test_k_is_not_lowered_by_the_ramp_taken_out():
     """Plain-numpy records (20 min at 100 Hz, ARW 0.2 deg/√h, RRW K = 30 deg/h/√h), each read
     with and without a 2000 deg/h² ramp added: the ramp is found (z > 3) and taken out, and K of

@@ -99,8 +99,9 @@ def load_plugin(path) -> list[str]:
             names.append(name)
     except InputError:                   # take out what this file registered, nothing else
         for cls in effect_cls:
-            if type(effects.REGISTRY.get(cls.name)) is cls:
-                effects.unregister(cls.name)
+            name = getattr(cls, "name", "")
+            if type(effects.REGISTRY.get(name)) is cls:
+                effects.unregister(name)
         for cls in estimator_cls:
             name = getattr(cls, "name", "")
             if name in estimators.available() and estimators.get_estimator(name) is cls:

@@ -285,9 +285,11 @@ def read_json(path, what: str = "JSON file", *, max_bytes: int | None = None,
     if _json_depth_over(obj, max_depth) is not None:
         raise InputError(too_deep, file=name)
     if expect is not None and not isinstance(obj, expect):
-        kind = {dict: "an object", list: "an array", str: "a string", bool: "true/false",
-                type(None): "null"}.get(type(obj), "a number")
-        want = {dict: "object ({...})", list: "array ([...])"}.get(expect, expect.__name__)
+        kinds: dict[type, str] = {dict: "an object", list: "an array", str: "a string",
+                                  bool: "true/false", type(None): "null"}
+        kind = kinds.get(type(obj), "a number")
+        wants: dict[type, str] = {dict: "object ({...})", list: "array ([...])"}
+        want = wants.get(expect, expect.__name__)
         raise InputError(f"{what} must be a JSON {want} at its top, but it is {kind}: not the "
                          "file gyroarray wrote (was it edited or replaced?)", file=name)
     return obj

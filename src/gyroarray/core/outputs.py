@@ -531,9 +531,10 @@ def private_matplotlib_dir() -> str | None:
     if os.environ.get("MPLCONFIGDIR") or "matplotlib" in sys.modules:
         return None
     uid = os.geteuid() if hasattr(os, "geteuid") else 0
-    folder: str | None = os.path.join(tempfile.gettempdir(), f"gyroarray-mpl-{uid}")
+    made = os.path.join(tempfile.gettempdir(), f"gyroarray-mpl-{uid}")
+    folder: str | None = made
     try:
-        os.mkdir(folder, 0o700)
+        os.mkdir(made, 0o700)
     except FileExistsError:
         pass
     except OSError:

@@ -85,7 +85,7 @@ def _validate(cls: type[Effect], source: str) -> Effect:
     if not isinstance(cls.stage, Stage) or not isinstance(cls.kind, Kind):
         bad("stage must be a Stage and kind a Kind")
     for attr in ("model_needs", "predict_needs"):
-        got = getattr(cls, attr, frozenset())
+        got: object = getattr(cls, attr, frozenset())
         if not isinstance(got, (frozenset, set, tuple)) or not set(got) <= set(RECORD_NEEDS):
             bad(f"{attr} must be a frozenset of {', '.join(RECORD_NEEDS)}, got {got!r}")
     if cls.simulate is Effect.simulate:

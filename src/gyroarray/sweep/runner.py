@@ -546,8 +546,8 @@ def _run_on_dask(todo: list, sweep: Sweep, scheduler: str, done, notes: list) ->
             envs = client.run(lambda: {k: os.environ.get(k) for k in THREAD_ENV})
             futures = {client.submit(run_one, s, sweep.estimators, sweep.name, key=f"sweep-{s.id}",
                                      pure=False): s for s in todo}
-        except lost as err:
-            raise gone(err) from None
+        except lost as exc:
+            raise gone(exc) from None
         off = sorted(w for w, e in envs.items() if e.get("OPENBLAS_NUM_THREADS") != "1")
         if off:
             notes.append(f"{len(off)} Dask worker(s) without OPENBLAS_NUM_THREADS=1: results "

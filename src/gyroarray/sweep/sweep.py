@@ -664,7 +664,7 @@ def _expanded_point(path: Path, doc: _Doc, b: _Base, ref: str | None, given: dic
 def _expand_scenarios(path: Path, doc: _Doc, bases: list[tuple[_Base, str | None]],
                       combos: list[tuple[dict, dict]], effect_sets: dict, seed: int,
                       replicates: int | None, paired: bool, skip_invalid: bool,
-                      probes: list[tuple[dict, dict]] = ()
+                      probes: tuple | list[tuple[dict, dict]] = ()
                       ) -> tuple[dict[str, ScenarioSpec], dict[str, str]]:
     """Every (base, combination, replicate) built and checked, by id; and the excluded ones.
 
