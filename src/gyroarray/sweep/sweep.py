@@ -627,10 +627,19 @@ def _point_combos(points, doc: _Doc, effect_sets: dict) -> list[tuple[dict, dict
 
 def _expanded_point(path: Path, doc: _Doc, b: _Base, ref: str | None, given: dict, where: dict,
                     effect_sets: dict, seed: int, reps: list, paired: bool,
-                    specs: dict[str, ScenarioSpec]) -> None:
-    """Build and check one point of the sweep (each replicate) into ``specs``; refuse it naming
-    the sweep file and the keys that made it."""
-    params, data = _apply(b.data, b.params, given, effect_sets, path.parent, doc, where)
+                    specs: dict[str, ScenarioSpec], excluded: dict[str, str] | None = None) -> None:
+    """Build and check one point of the sweep (each replicate) into ``specs``.
+
+    An invalid point is refused naming the sweep file and the keys that made it; with
+    ``excluded`` (``skip_invalid``) it is recorded there, by id, instead.
+    """
+    try:
+        params, data = _apply(b.data, b.params, given, effect_sets, path.parent, doc, where)
+    except InputError as err:
+        if excluded is None:
+            raise
+        excluded[scenario_id({k: given.get(k) for k in PARAM_KEYS})] = err.message
+        return
     if ref is not None:
         params["scenario"] = ref
     for rep in reps:
@@ -650,6 +659,9 @@ def _expanded_point(path: Path, doc: _Doc, b: _Base, ref: str | None, given: dic
         try:
             spec.build()
         except InputError as err:
+            if excluded is not None:
+                excluded[sid] = err.message
+                continue
             keys = [where[k] for k in given if k in ("rho_arw", "rho_rrw", "n_gyros",
                                                      "duration_s", "motion", "effects",
                                                      "alpha_deg", "scheme")]
@@ -672,7 +684,6 @@ def _expand_scenarios(path: Path, doc: _Doc, bases: list[tuple[_Base, str | None
     ``skip_invalid`` the ``probes`` (:func:`_grid_probes`, then each listed point) are checked
     first, so that the first invalid value is refused at once.
     """
-    sweep_dir = path.parent
     specs: dict[str, ScenarioSpec] = {}
     excluded: dict[str, str] = {}
     reps = [None] if replicates is None else list(range(replicates))
@@ -692,44 +703,8 @@ def _expand_scenarios(path: Path, doc: _Doc, bases: list[tuple[_Base, str | None
                                 paired, {})
     for b, ref in bases:
         for given, where in combos:
-            try:
-                params, data = _apply(b.data, b.params, given, effect_sets, sweep_dir, doc, where)
-            except InputError as err:
-                if not skip_invalid:
-                    raise
-                excluded[scenario_id({k: given.get(k) for k in PARAM_KEYS})] = err.message
-                continue
-            if ref is not None:
-                params["scenario"] = ref
-            for rep in reps:
-                p = dict(params)
-                if rep is not None:
-                    p["replicate"] = rep
-                id_params = {k: p.get(k) for k in (*PARAM_KEYS, *_EXTRA_ID_KEYS)
-                             if k in PARAM_KEYS or p.get(k) is not None}
-                sid = scenario_id(id_params)
-                if sid in specs:
-                    if specs[sid].params != p:      # a hash collision: never silently merge
-                        raise doc.error(f"two scenarios share the id {sid}", "grid")
-                    continue                         # the same scenario twice (grid ∪ points)
-                seed_key = f"paired:{ref or ''}:{rep or 0}" if paired else sid
-                spec = ScenarioSpec(id=sid, seed=scenario_seed(seed, seed_key), params=p, data=data,
-                                    file=b.file)
-                try:
-                    spec.build()
-                except InputError as err:
-                    if skip_invalid:
-                        excluded[sid] = err.message
-                        continue
-                    keys = [where[k] for k in given if k in ("rho_arw", "rho_rrw", "n_gyros",
-                                                             "duration_s", "motion", "effects",
-                                                             "alpha_deg", "scheme")]
-                    raise InputError(f"scenario {sid} ({_canonical(id_params)}): {err.message}",
-                                     file=str(path), line=err.line if err.file == str(path) else None,
-                                     column=(err.column if err.file == str(path) and not keys
-                                             else ", ".join(sorted(set(keys))) or err.column)
-                                     ) from None
-                specs[sid] = spec
+            _expanded_point(path, doc, b, ref, given, where, effect_sets, seed, reps, paired, specs,
+                            excluded if skip_invalid else None)
     return specs, excluded
 
 
