@@ -66,7 +66,7 @@ from gyroarray.effects.fits.stochastic_fit import fit_gyro_noise
 from gyroarray.effects import REGISTRY, did_you_mean, effect_names, get_effect
 from gyroarray.core.errors import InputError
 from gyroarray.core.limits import max_memory
-from gyroarray.core.measurement import Measurement, _runs, relative_time_s
+from gyroarray.core.measurement import Measurement, relative_time_s, true_runs
 from gyroarray.core.parallel import available_cpus, map_runs
 from gyroarray.sim.effects import sim_context, simulate_on, simulate_readings
 from gyroarray.effects.model import ModelEntry, NoiseModel
@@ -640,10 +640,10 @@ class ModelComparison:
             self.static = np.all(np.abs(self.ref) <= STATIC_RAD_S, axis=1)
         else:
             self.static = np.ones(self.n, bool)
-        runs = [r for r in _runs(self.static) if r[1] - r[0] >= MIN_STATIC]
+        runs = [r for r in true_runs(self.static) if r[1] - r[0] >= MIN_STATIC]
         self.continuous = False
         if not runs and self.ref is not None and self.n >= MIN_STATIC:
-            longest = max((b - a for a, b in _runs(self.static)), default=0)
+            longest = max((b - a for a, b in true_runs(self.static)), default=0)
             self.continuous = True
             runs = [(0, self.n)]
             self.setup_notes.append(
@@ -651,7 +651,7 @@ class ModelComparison:
                 f"{longest * self.dt:.1f} s): the noise is calibrated on what the reference does not "
                 "explain over the whole record (white level from the residual's first differences)")
         if not runs:
-            longest = max((b - a for a, b in _runs(self.static)), default=0)
+            longest = max((b - a for a, b in true_runs(self.static)), default=0)
             raise InputError(f"no static part long enough to calibrate the noise: the longest stretch "
                              f"with the reference rate within 0.01 deg/s is {longest} samples "
                              f"({longest * self.dt:.1f} s), at least {MIN_STATIC} samples "
@@ -687,10 +687,10 @@ class ModelComparison:
         still = still_mask(self.y, self.H, self.dt)
         if still.all():
             return
-        runs = [(a, b) for a, b in _runs(still) if b - a >= MIN_STILL_PART]
+        runs = [(a, b) for a, b in true_runs(still) if b - a >= MIN_STILL_PART]
         total = sum(b - a for a, b in runs)
         if total < MIN_STATIC:
-            longest = max((b - a for a, b in _runs(still)), default=0)
+            longest = max((b - a for a, b in true_runs(still)), default=0)
             raise InputError(
                 f"no reference rate (ref_x, ref_y, ref_z) and the outputs show motion for "
                 f"{(~still).sum() * self.dt:.0f} s of {self.n * self.dt:.0f} s: the still parts add up to "

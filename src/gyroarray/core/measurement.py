@@ -482,9 +482,6 @@ class _Sidecar:
     notes: tuple[str, ...]
 
 
-_TomlDoc = TomlDoc   # the one TOML key locator (gyroarray.core.tomlio), for sidecars, scenarios and sweeps
-
-
 def _load_toml(path: Path, what: str = "sidecar") -> TomlDoc:
     if what == "sidecar" and not path.exists() and not path.is_symlink():
         raise InputError("missing sidecar: every measurement CSV needs a .toml with the "
@@ -544,7 +541,7 @@ def _finite(v) -> float | None:
     return x if math.isfinite(x) else None
 
 
-def toml_number(doc: _TomlDoc, v, key: str) -> float:
+def toml_number(doc: TomlDoc, v, key: str) -> float:
     """A finite TOML number (int or float, not bool)."""
     if not _is_number(v):
         raise doc.error(f"{key} must be a number, got {toml_type(v)}", key)
@@ -554,7 +551,7 @@ def toml_number(doc: _TomlDoc, v, key: str) -> float:
     return x
 
 
-def toml_table(doc: _TomlDoc, key: str, allowed: set[str]) -> dict | None:
+def toml_table(doc: TomlDoc, key: str, allowed: set[str]) -> dict | None:
     """The sub-table ``key`` (None if absent), refusing unknown keys in it."""
     t = doc.data.get(key)
     if t is None:
@@ -571,7 +568,7 @@ def toml_table(doc: _TomlDoc, key: str, allowed: set[str]) -> dict | None:
 _CONE_KEYS = ("scheme", "n_gyros", "alpha_deg")
 
 
-def parse_layout(doc: _TomlDoc) -> tuple[Layout, list[str]]:
+def parse_layout(doc: TomlDoc) -> tuple[Layout, list[str]]:
     t = toml_table(doc, "layout", {"axes", "positions_m", *_CONE_KEYS})
     if t is None:
         raise doc.error("[layout] is missing (give axes, or scheme, n_gyros and alpha_deg)",
@@ -588,7 +585,7 @@ def parse_layout(doc: _TomlDoc) -> tuple[Layout, list[str]]:
     return _with_positions(doc, t, _cone_layout(doc, t)), []
 
 
-def _with_positions(doc: _TomlDoc, t: dict, layout: Layout) -> Layout:
+def _with_positions(doc: TomlDoc, t: dict, layout: Layout) -> Layout:
     """``layout`` with ``layout.positions_m`` when the table has it (checked)."""
     if "positions_m" not in t:
         return layout
@@ -607,7 +604,7 @@ def _with_positions(doc: _TomlDoc, t: dict, layout: Layout) -> Layout:
         raise doc.error(e.message, key) from None
 
 
-def _axes_layout(doc: _TomlDoc, axes) -> Layout:
+def _axes_layout(doc: TomlDoc, axes) -> Layout:
     key = "layout.axes"
     rows_ok = isinstance(axes, list) and len(axes) > 0 and all(
         isinstance(r, list) and len(r) == 3 and all(_is_number(x) for x in r) for r in axes)
@@ -623,7 +620,7 @@ def _axes_layout(doc: _TomlDoc, axes) -> Layout:
         raise doc.error(e.message, key) from None
 
 
-def _cone_layout(doc: _TomlDoc, t: dict) -> Layout:
+def _cone_layout(doc: TomlDoc, t: dict) -> Layout:
     scheme, n = t["scheme"], t["n_gyros"]
     if not (isinstance(scheme, int) and not isinstance(scheme, bool) and scheme in (1, 2)):
         raise doc.error(f"layout.scheme must be 1 or 2, got {toml_type(scheme)}",
@@ -638,7 +635,7 @@ def _cone_layout(doc: _TomlDoc, t: dict) -> Layout:
     return Layout.conical(scheme, n, units.deg_to_rad(alpha))
 
 
-def parse_site(doc: _TomlDoc) -> Site | None:
+def parse_site(doc: TomlDoc) -> Site | None:
     t = toml_table(doc, "site", {"latitude_deg", "heading_deg"})
     if t is None:
         return None
@@ -654,7 +651,7 @@ def parse_site(doc: _TomlDoc) -> Site | None:
     return Site(units.deg_to_rad(lat), units.deg_to_rad(heading))
 
 
-def _parse_units(doc: _TomlDoc) -> dict:
+def _parse_units(doc: TomlDoc) -> dict:
     t = toml_table(doc, "units", set(ACCEPTED_UNITS))
     if t is None:
         return {}
@@ -1208,7 +1205,7 @@ def _find_gaps(t: np.ndarray, lines: np.ndarray, name: str,
     return gaps, _summarised(notes, "gaps repaired")
 
 
-def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
+def true_runs(mask: np.ndarray) -> list[tuple[int, int]]:
     """[start, stop) index ranges where ``mask`` is True."""
     edges = np.flatnonzero(np.diff(np.concatenate(([0], mask.astype(np.int8), [0]))))
     return list(zip(edges[::2].tolist(), edges[1::2].tolist()))
@@ -1221,7 +1218,7 @@ def _find_missing_runs(table: _Table, cols: _Columns, name: str,
     if not nan.any():
         return [], []
     runs = sorted((a, b, j + 1) for j in np.flatnonzero(nan.any(axis=0)).tolist()
-                  for a, b in _runs(nan[:, j]))
+                  for a, b in true_runs(nan[:, j]))
     n, lines, notes = len(table.values), table.lines, []
     for a, b, j in runs:
         col = cols.names[j]

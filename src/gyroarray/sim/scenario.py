@@ -66,8 +66,9 @@ from gyroarray.effects import get_effect
 from gyroarray.core.errors import InputError
 from gyroarray.core.layout import Layout
 from gyroarray.core.limits import MAX_RATE_DEG_S, check_memory
-from gyroarray.core.measurement import (Measurement, Site, _load_toml, parse_layout, parse_site,
-                                   toml_number, toml_table, toml_type, _TomlDoc,
+from gyroarray.core.tomlio import TomlDoc, load_toml
+from gyroarray.core.measurement import (Measurement, Site, parse_layout, parse_site,
+                                   toml_number, toml_table, toml_type,
                                    write_measurement)
 from gyroarray.core.outputs import check_output, check_output_dir
 from gyroarray.sim.effects import simulate_readings
@@ -173,7 +174,7 @@ def load_scenario(path) -> Scenario:
     path = Path(path)
     if not path.is_file():
         raise InputError("scenario file not found", file=str(path))
-    doc = _load_toml(path)
+    doc = load_toml(path, "scenario file")
     d = doc.data
     unknown = sorted(set(d) - _TOP_KEYS)
     if unknown:
@@ -259,7 +260,7 @@ MAX_SAMPLE_RATE_HZ = 1e6
 _DOUBLES_PER_SAMPLE = {"simulate": (80, 5), "run": (130, 5)}
 
 
-def _duration_key(scenario: Scenario, doc: _TomlDoc) -> str:
+def _duration_key(scenario: Scenario, doc: TomlDoc) -> str:
     return "duration_s" if "duration_s" in doc.data else "sample_rate_hz"
 
 
@@ -268,7 +269,7 @@ def run_duration_s(scenario: Scenario) -> float:
     return scenario.duration_s if scenario.duration_s is not None else scenario.profile.duration_s
 
 
-def _check_run_shape(scenario: Scenario, doc: _TomlDoc) -> None:
+def _check_run_shape(scenario: Scenario, doc: TomlDoc) -> None:
     rate, duration = scenario.sample_rate_hz, run_duration_s(scenario)
     if rate > MAX_SAMPLE_RATE_HZ:
         raise doc.error(f"sample_rate_hz = {rate:g} Hz is above the {MAX_SAMPLE_RATE_HZ:g} Hz a "
@@ -287,7 +288,7 @@ def memory_needed(scenario: Scenario, what: str = "simulate") -> float:
     return 8.0 * n * (a + b * scenario.layout.n_gyros)
 
 
-def check_size(scenario: Scenario, what: str = "simulate", doc: _TomlDoc | None = None) -> None:
+def check_size(scenario: Scenario, what: str = "simulate", doc: TomlDoc | None = None) -> None:
     """Refuse a scenario whose ``what`` (simulate or run) would exceed the memory budget.
 
     Raises
@@ -305,7 +306,7 @@ def check_size(scenario: Scenario, what: str = "simulate", doc: _TomlDoc | None 
                  column=key)
 
 
-def _check_effects_fit_run(scenario: Scenario, doc: _TomlDoc) -> None:
+def _check_effects_fit_run(scenario: Scenario, doc: TomlDoc) -> None:
     """Effects whose parameters must fit this run: a sinusoid below Nyquist, a latency shorter than it."""
     nyquist = 0.5 * scenario.sample_rate_hz
     duration = run_duration_s(scenario)
@@ -408,7 +409,7 @@ def _csv_line_above(seg, rate_hz: float):
     return best[0], best[1], float(units.rad_s_to_deg_s(best[2]))
 
 
-def _check_table_limits(scenario: Scenario, doc: _TomlDoc) -> None:
+def _check_table_limits(scenario: Scenario, doc: TomlDoc) -> None:
     """Refuse a profile that commands the table beyond its rate or acceleration limits."""
     rate, accel = command_extremes(scenario.profile, run_duration_s(scenario))
     limits = TableParams
@@ -452,7 +453,7 @@ def _command_extremes(profile: Profile, duration_s: float, per_piece: int = 200)
     return units.rad_to_deg(rate), units.rad_to_deg(accel)
 
 
-def _parse_motion(doc: _TomlDoc, path: Path, until_s: float | None = None) -> Profile:
+def _parse_motion(doc: TomlDoc, path: Path, until_s: float | None = None) -> Profile:
     """The motion profile, built only as far as ``until_s`` (the scenario's duration) needs:
     a rate CSV's rows beyond it are never integrated (:class:`~gyroarray.sim.profiles.Profile`)."""
     t = toml_table(doc, "motion", {"profile"})
@@ -469,7 +470,7 @@ def shipped_profiles() -> list[str]:
     return sorted(p.name[:-5] for p in folder.iterdir() if p.name.endswith(".toml"))
 
 
-def resolve_profile(ref: str, base: Path, doc: _TomlDoc | None = None) -> Path:
+def resolve_profile(ref: str, base: Path, doc: TomlDoc | None = None) -> Path:
     """The file of a profile reference: a path relative to ``base`` or a shipped name."""
     candidate = base / ref
     if ref.endswith(".toml") or "/" in ref or "\\" in ref:
@@ -487,7 +488,7 @@ def resolve_profile(ref: str, base: Path, doc: _TomlDoc | None = None) -> Path:
     raise doc.error(message, "motion.profile")
 
 
-def parse_temperature(doc: _TomlDoc) -> TemperatureProfile | None:
+def parse_temperature(doc: TomlDoc) -> TemperatureProfile | None:
     t = toml_table(doc, "temperature", {"points", "start_c", "end_c", "tau_s", "constant_c"})
     if t is None:
         return None

@@ -92,9 +92,9 @@ import numpy as np
 
 from gyroarray.core.gdop import optimal_alpha
 from gyroarray.core.errors import InputError
-from gyroarray.core.measurement import parse_layout, parse_site, _TomlDoc
+from gyroarray.core.measurement import parse_layout, parse_site
 from gyroarray.sim.profiles import load_profile
-from gyroarray.core.tomlio import load_toml
+from gyroarray.core.tomlio import TomlDoc, load_toml
 from gyroarray.core.data import data_path
 
 __all__ = ["Sweep", "ScenarioSpec", "load_sweep", "scenario_id", "scenario_seed", "PARAM_KEYS"]
@@ -122,7 +122,7 @@ def _is_num(v) -> TypeGuard[float]:
     return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
 
 
-_Doc = _TomlDoc  # one TOML key locator for sidecars, scenarios and sweeps
+_Doc = TomlDoc  # one TOML key locator for sidecars, scenarios and sweeps
 
 
 def _read_doc(path: Path, what: str) -> _Doc:
