@@ -91,6 +91,17 @@ def write_scenario(folder: Path, name: str, *, rate=20.0, extra: str = "", effec
     return path
 
 
+def tiny_sweep(*, rate_hz: float = 50.0, duration_s: float = 5.0, estimators=None) -> str:
+    """A sweep file of one short scenario (4-gyro tetrahedral array, ARW only, a shipped
+    swing): what the sweep-bookkeeping and scheduler refusals need, and nothing slow."""
+    names = ", ".join('"' + e + '"' for e in estimators or ())
+    est = "" if estimators is None else f"estimators = [{names}]\n"
+    return (f'name = "tiny"\nseed = 7\n{est}[base]\nsample_rate_hz = {rate_hz!r}\n'
+            f'duration_s = {duration_s!r}\neffects = [{{ effect = "arw", n_deg_rt_h = 0.1 }}]\n'
+            "[base.layout]\nscheme = 1\nn_gyros = 4\nalpha_deg = 54.7356\n"
+            '[base.motion]\nprofile = "p003_sine_5dps_0p03hz"\n')
+
+
 class Hang(Exception):
     """A call ran past its alarm."""
 

@@ -30,23 +30,9 @@ import pytest
 from gyroarray.core import outputs
 from gyroarray.core.errors import InputError
 from gyroarray.core.limits import MAX_JSON_DEPTH, read_json
-from hostile import assert_contract, run_cli
+from hostile import assert_contract, run_cli, tiny_sweep
 
-TINY = """\
-name = "tiny"
-seed = 7
-estimators = ["ols"]
-[base]
-sample_rate_hz = 50.0
-duration_s = 5.0
-effects = [{ effect = "arw", n_deg_rt_h = 0.1 }]
-[base.layout]
-scheme = 1
-n_gyros = 4
-alpha_deg = 54.7356
-[base.motion]
-profile = "p003_sine_5dps_0p03hz"
-"""
+TINY = tiny_sweep(estimators=["ols"])
 LINE = "0" * 64 + " 3 a.parquet\n"
 
 

@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from hostile import assert_contract, axes_sidecar, run_cli, write_measurement
+from hostile import assert_contract, axes_sidecar, run_cli, tiny_sweep, write_measurement
 
 N = 3000
 RATE_HZ = 50.0
@@ -79,20 +79,7 @@ def test_stdout_to_a_closed_pipe_stays_quiet(d):
 
 # -- --scheduler ----------------------------------------------------------------------------
 
-TINY = """\
-name = "tiny"
-seed = 7
-[base]
-sample_rate_hz = 100.0
-duration_s = 5.0
-effects = [{ effect = "arw", n_deg_rt_h = 0.1 }]
-[base.layout]
-scheme = 1
-n_gyros = 4
-alpha_deg = 54.7356
-[base.motion]
-profile = "p003_sine_5dps_0p03hz"
-"""
+TINY = tiny_sweep(rate_hz=100.0)
 
 
 @pytest.fixture

@@ -65,7 +65,7 @@ from gyroarray.effects.fits.regress import RWWhitener
 from gyroarray.effects.fits.stochastic_fit import fit_gyro_noise
 from gyroarray.effects import REGISTRY, did_you_mean, effect_names, get_effect
 from gyroarray.core.errors import InputError
-from gyroarray.core.limits import max_memory
+from gyroarray.core.limits import check_memory, format_size, max_memory
 from gyroarray.core.measurement import Measurement, relative_time_s, true_runs
 from gyroarray.core.parallel import available_cpus, map_runs
 from gyroarray.sim.effects import sim_context, simulate_on, simulate_readings
@@ -540,13 +540,12 @@ def comparison_memory(n: int, columns: int) -> int:
 
 def _check_comparison_memory(measurement: Measurement, n: int, n_gyros: int, name: str) -> None:
     """Refuse, before any copy, a comparison whose peak would pass the memory budget."""
-    from gyroarray.core.limits import check_memory, format_size
     cols = n_gyros + sum(k for x, k in ((measurement.ref_rad_s, 3), (measurement.temp_c, 1),
                                            (measurement.acc_m_s2, 3)) if x is not None)
-    need = comparison_memory(n, cols)
-    if need <= max_memory():
+    need, budget = comparison_memory(n, cols), max_memory()
+    if need <= budget:
         return
-    fits = max((max_memory() - FIXED_BYTES) // (COMPARISON_BYTES_PER_CELL * cols), 0)
+    fits = max((budget - FIXED_BYTES) // (COMPARISON_BYTES_PER_CELL * cols), 0)
     check_memory(need, f"comparing {n} samples x {cols} columns with the model",
                  f"analyse at most {fits} samples (a shorter part of the record, or the record "
                  f"decimated to a lower rate; about {format_size(COMPARISON_BYTES_PER_CELL * cols)} "

@@ -145,14 +145,10 @@ def _count(name: str) -> Callable[[str], int]:
     """A whole number from 1 to the cap of ``name`` in :data:`COUNT_CAPS`, refused at parse
     time (before any file is read) with the reason and the way out."""
     cap, why = COUNT_CAPS[name]
+    positive = _positive_int(name)
 
     def parse(text: str) -> int:
-        try:
-            value = int(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"{name} must be a whole number, got {text!r}") from None
-        if value < 1:
-            raise argparse.ArgumentTypeError(f"{name} must be >= 1, got {value}")
+        value = positive(text)
         if value > cap:
             raise argparse.ArgumentTypeError(f"{name} {value} is more than {cap}, the most "
                                              f"gyroarray runs ({why}); give {name} {cap} or less")

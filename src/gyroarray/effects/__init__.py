@@ -32,14 +32,14 @@ import stat
 import sys
 from pathlib import Path
 from types import MappingProxyType, ModuleType
-from typing import Iterable, Mapping, NoReturn
+from typing import Mapping, NoReturn
 
 from gyroarray.core.errors import InputError
 from gyroarray.core.plugins import EFFECTS_GROUP, installed
 from gyroarray.effects.protocol import RECORD_NEEDS, Effect, Kind, Param, Stage
 
 __all__ = ["REGISTRY", "ENTRY_POINT_GROUP", "effect_names", "get_effect", "did_you_mean", "register",
-           "load_plugin", "plugin_effects", "installed_plugins"]
+           "unregister", "run_plugin_file", "effect_classes", "load_plugin", "installed_plugins"]
 
 #: Entry-point group of installed packages that add effects.
 ENTRY_POINT_GROUP = EFFECTS_GROUP
@@ -115,7 +115,7 @@ def register(effect_cls: type, *, source: str = "<code>") -> Effect:
     return eff
 
 
-def _effect_classes(module: ModuleType) -> list[type]:
+def effect_classes(module: ModuleType) -> list[type]:
     """The Effect subclasses a module defines (not imports) with a name."""
     return [obj for obj in vars(module).values()
             if inspect.isclass(obj) and issubclass(obj, Effect) and obj.__module__ == module.__name__
@@ -127,7 +127,7 @@ def _load_builtins() -> None:
         if info.name.startswith("_"):
             continue
         module = importlib.import_module(f"{__name__}.{info.name}")
-        for cls in _effect_classes(module):
+        for cls in effect_classes(module):
             register(cls, source=f"gyroarray.effects.{info.name}")
 
 
@@ -146,7 +146,7 @@ def _load_entry_points() -> None:
         except Exception as err:             # an installed package's bug: one line, named
             raise InputError(f"cannot load the effect plugin {ep.value}: {type(err).__name__}: {err}",
                              file=source) from None
-        classes = _effect_classes(obj) if isinstance(obj, ModuleType) else [obj]
+        classes = effect_classes(obj) if isinstance(obj, ModuleType) else [obj]
         for cls in classes:
             register(cls, source=source)
 
@@ -199,11 +199,6 @@ def run_plugin_file(path) -> tuple[ModuleType, bool]:
     return module, True
 
 
-def effect_classes(module: ModuleType) -> list[type]:
-    """The Effect subclasses a module defines (not imports) with a name."""
-    return _effect_classes(module)
-
-
 def unregister(name: str) -> None:
     """Take an effect a plugin registered out of the registry again (a failed conformance
     check); built-ins and unknown names are left alone."""
@@ -232,7 +227,7 @@ def load_plugin(path) -> list[str]:
     if key in _PLUGINS:
         return list(_PLUGINS[key])
     module, _ = run_plugin_file(path)
-    classes = _effect_classes(module)
+    classes = effect_classes(module)
     if not classes:
         raise InputError("the plugin defines no effect (a subclass of gyroarray.effects.protocol.Effect "
                          "with a name)", file=where)
@@ -252,14 +247,6 @@ def _plugin_line(err: BaseException, path: Path) -> int | None:
         except OSError:
             continue
     return line
-
-
-def plugin_effects(paths: Iterable) -> list[str]:
-    """Load every ``--plugin`` file; the names of the effects they add, in order."""
-    out: list[str] = []
-    for path in paths or ():
-        out += load_plugin(path)
-    return out
 
 
 _load_builtins()

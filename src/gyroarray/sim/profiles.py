@@ -107,7 +107,7 @@ from typing import NoReturn
 import numpy as np
 
 from gyroarray.core.errors import InputError
-from gyroarray.core.limits import read_regular
+from gyroarray.core.limits import check_memory, read_regular
 from gyroarray.core.tomlio import load_toml
 from gyroarray.core.units import deg_s_to_rad_s, deg_to_rad, rad_to_deg
 
@@ -1010,7 +1010,6 @@ def _check_csv_steps(i: int, seg: RateCSV) -> None:
     """Refuse a ``rate_csv`` segment whose integration would take more than
     :data:`CSV_MAX_STEPS` RK4 steps (or more memory than the budget), before any is taken;
     the message names the CSV file, the row where the cap is passed and the span."""
-    from gyroarray.core.limits import check_memory
     t = seg.time_s
     steps = np.maximum(1.0, np.ceil(np.diff(t) / CSV_MAX_STEP_S - 1e-9))
     total = float(steps.sum())

@@ -73,7 +73,7 @@ from gyroarray.core.measurement import (Measurement, Site, parse_layout, parse_s
 from gyroarray.core.outputs import check_output, check_output_dir
 from gyroarray.sim.effects import simulate_readings
 from gyroarray.effects.model import NoiseModel
-from gyroarray.sim.profiles import Profile, load_profile
+from gyroarray.sim.profiles import Profile, RateCSV, Sinusoid, load_profile
 from gyroarray.sim.table import TableParams
 from gyroarray.sim.truth import Truth, compute_truth
 from gyroarray.core.data import data_path
@@ -346,7 +346,6 @@ def _check_profile_nyquist(scenario: Scenario) -> None:
     scenario) hold a line above it; each named with the profile's (or CSV's) file and key,
     the frequency and the Nyquist limit (issue 28: a 1000 Hz swing in a 100 Hz run gave an
     attenuation of 2.9e9). Only segments that start within the run are looked at."""
-    from gyroarray.sim.profiles import RateCSV, Sinusoid
     prof = scenario.profile
     rate = scenario.sample_rate_hz
     nyquist = 0.5 * rate
