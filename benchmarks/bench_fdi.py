@@ -28,7 +28,7 @@ import math
 import numpy as np
 from _timing import best_of
 
-from gyroarray.effects.fits import fault_fit as ff
+from gyroarray.effects.faults import scan as ff
 from gyroarray.core.gdop import optimal_alpha
 from gyroarray.estimators.fdi import FaultDetector, _scan, window_weights
 from gyroarray.core.layout import Layout

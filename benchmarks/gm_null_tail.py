@@ -7,8 +7,8 @@ cases (seeds 100–105) by a Gauss–Markov test on a long-τ hump (z 4.2, 3.9).
 This study simulates records that are nothing but ARW + RRW with plain numpy
 (white noise plus a cumulative sum), fits each with ``fit_gyro_noise`` and
 counts the scan's z beyond 2, 3 and 3.5, with the scan reading the Allan
-variances as they are and made Gaussian (``stochastic_fit._GAUSSIANISE``,
-:func:`gyroarray.effects.fits.stochastic_fit.avar_normal_score`). A normal z
+variances as they are and made Gaussian (``gauss_markov._GAUSSIANISE``,
+:func:`gyroarray.analysis.allan_gls.avar_normal_score`). A normal z
 exceeds them with 2.28 %, 0.135 % and 0.023 %. Two record lengths like the
 scored cases' stochastic records (50 Hz).
 """
@@ -22,7 +22,7 @@ import math
 import numpy as np
 from scipy import stats
 
-from gyroarray.effects.fits import stochastic_fit as sf
+from gyroarray.effects import gauss_markov as gm_fit, stochastic as sf
 from gyroarray.core.units import arw_deg_rt_h_to_rad_rt_s, rrw_deg_h_rt_h_to_rad_s_rt_s
 
 DT = 0.02
@@ -39,9 +39,9 @@ def study(seconds: float, n_deg: float, k_deg: float, records: int, seed: int) -
         rng = np.random.default_rng([seed, s])
         x = N / math.sqrt(DT) * rng.standard_normal(n) + np.cumsum(K * math.sqrt(DT) * rng.standard_normal(n))
         for key, flag in (("plain", False), ("gaussianised", True)):
-            sf._GAUSSIANISE = flag
+            gm_fit._GAUSSIANISE = flag
             z[key].append(next(f.z for f in sf.fit_gyro_noise(x, DT, 1) if f.effect == "gauss_markov"))
-    sf._GAUSSIANISE = True
+    gm_fit._GAUSSIANISE = True
     out = {"seconds": seconds, "n_deg_rt_h": n_deg, "k_deg_h_rt_h": k_deg, "records": records}
     for key, v in z.items():
         v = np.asarray(v)

@@ -8,7 +8,7 @@ Cases: :func:`gyroarray.sim.cases.single_effect_case` ``("gauss_markov", seed)``
 model (``--noise-of``, default seed 103) with other noise realisations (``noise_seed``): the
 parameter draw kept, the noise drawn again. Per case the chain fits as ``fit --add`` does,
 ``ModelComparison(m, n_runs=5).fit([("gauss_markov", gyro)])``, and, for comparison on the same
-record, :func:`~gyroarray.effects.fits.stochastic_fit.fit_gyro_noise` directly on the gyro's residual
+record, :func:`~gyroarray.effects.stochastic.fit_gyro_noise` directly on the gyro's residual
 (output − H·ref) over the whole record and over the longest static part. Pull = (fit − true)/σ
 (τc also in ln τc, σ_lnτ = σ_τ/τ). Printed: mean and sd of the pulls with their 90 % confidence
 intervals (t for the mean, χ² for the sd) and the fractions within 1σ and 2σ (0.683, 0.954 for
@@ -26,7 +26,7 @@ import time
 import numpy as np
 from scipy import stats
 
-from gyroarray.effects.fits.stochastic_fit import fit_gyro_noise
+from gyroarray.effects.stochastic import fit_gyro_noise
 from gyroarray.chain.compare import ModelComparison
 from gyroarray.sim.cases import single_effect_case
 

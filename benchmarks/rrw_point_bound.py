@@ -25,7 +25,7 @@ import math
 import allantools
 import numpy as np
 
-from gyroarray.effects.fits.stochastic_fit import fit_gyro_noise
+from gyroarray.effects.stochastic import fit_gyro_noise
 
 DT, N_SAMPLES, ARW = 0.01, 1_000_000, 2.5
 

@@ -20,7 +20,8 @@ from scipy import stats
 from gyroarray.core import units
 from gyroarray.analysis.allan import (AllanResult, allan_analysis,
                                       averaging_factors, deviation_from_angle,
-                                      edf, oadev, plot_allan)
+                                      edf, oadev)
+from gyroarray.reports.allan_plots import plot_allan
 from gyroarray.analysis.noise_fit import (TERM_CONSTANTS, TERM_EXPONENTS,
                                           fit_noise_terms, term_from_curve)
 from gyroarray.core.errors import InputError

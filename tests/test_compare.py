@@ -7,7 +7,7 @@ temperature). Tolerances:
 * "consistent" means D <= 1, i.e. no test beyond the 1 % family-wise
   critical value: under the baseline each run has <= 1 % chance of a false
   alarm by construction (the z's are null-calibrated, see
-  gyroarray.effects.fits.stochastic_fit and .regress); the seeds are fixed, so
+  gyroarray.effects.stochastic and .regress); the seeds are fixed, so
   the tests are deterministic and were checked once.
 * a fitted parameter is within 10 % of the value set or within 2σ of its
   own uncertainty (the issue's rule); 2σ is a 95 % interval.

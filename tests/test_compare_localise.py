@@ -133,17 +133,18 @@ def test_clean_record_gives_no_findings_and_the_correlations_are_plain_ones(clea
 
 
 def test_report_shows_the_localisation_only_when_there_are_findings(samsung, clean):
+    from gyroarray.chain.compare_figures import compare_figures
     from gyroarray.reports.compare_report import section_unexplained
     from gyroarray.reports.report import Doc
     _, comp, a = samsung
     doc = Doc("t")
-    section_unexplained(doc, a, comp)
+    section_unexplained(doc, a, comp, compare_figures(comp, [(None, a)]))
     assert [n for n, _ in doc.figures] == ["localise_psd", "localise_channels"]
     assert all(png[:8] == b"\x89PNG\r\n\x1a\n" for _, png in doc.figures)
     text = "\n".join(doc.html)
     assert "Where it fails" in text and "not causal: no lag on motion" in text
     doc = Doc("t")
-    section_unexplained(doc, clean[1], clean[0])
+    section_unexplained(doc, clean[1], clean[0], compare_figures(clean[0], [(None, clean[1])]))
     assert doc.figures == [] and "Nothing left unexplained" in "\n".join(doc.html)
 
 

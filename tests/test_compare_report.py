@@ -21,8 +21,8 @@ from gyroarray.core.errors import InputError
 from gyroarray.core.layout import Layout
 from gyroarray.core.measurement import Measurement
 from gyroarray.reports.browser import find_chromium, render_check
-from gyroarray.reports.compare_report import (_binned, fitted_bias, model_asd_deg_h, Regressors,
-                                              write_compare_report)
+from gyroarray.chain.compare_figures import binned, fitted_bias, model_asd_deg_h, Regressors
+from gyroarray.reports.compare_report import write_compare_report
 from gyroarray.sim.effects import simulate_readings
 from gyroarray.effects.model import ModelEntry, NoiseModel
 from gyroarray.core.units import arw_deg_rt_h_to_rad_rt_s, deg_s_to_rad_s, rad_s_to_deg_h, rad_s_to_deg_s
@@ -198,7 +198,7 @@ def test_fitted_bias_and_binning():
     rng = np.random.default_rng(0)
     x = rng.uniform(-1, 1, 200000)
     y = 2 * x + rng.normal(0, 0.5, x.size)
-    xc, m, se = _binned(x, y)
+    xc, m, se = binned(x, y)
     assert xc.size == 24
     assert np.allclose(m, 2 * xc, atol=5 * se.max())
     assert np.allclose(se, 0.5 / np.sqrt(x.size * 0.99 / 24), rtol=0.1)

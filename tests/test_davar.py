@@ -38,7 +38,8 @@ from scipy import stats
 from gyroarray.core import units
 from gyroarray.analysis.allan import (allan_analysis, confidence_interval,
                                       deviation, edf)
-from gyroarray.analysis.davar import AdaptiveWindow, change_nodes, davar, plot_davar
+from gyroarray.analysis.davar import AdaptiveWindow, change_nodes, davar
+from gyroarray.reports.davar_plots import plot_davar
 from gyroarray.core.errors import InputError
 
 # The paper's experiment (signal, Table 1) is a benchmark script, not part of the package.

@@ -1,10 +1,10 @@
-"""The fit side of ``earth_rate`` (src/gyroarray/effects/fits/earth_fit.py), on simulator data."""
+"""The fit side of ``earth_rate`` (src/gyroarray/effects/earth_rate.py), on simulator data."""
 
 import math
 
 import numpy as np
 import pytest
-from gyroarray.effects.fits.earth_fit import attitude_from_rates, fit_earth_rate
+from gyroarray.effects.earth_rate import attitude_from_rates, fit_earth_rate
 from gyroarray.sim.effects import simulate_readings
 from gyroarray.effects.model import NoiseModel
 from gyroarray.sim.truth import compute_truth

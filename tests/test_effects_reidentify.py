@@ -7,7 +7,7 @@ the correlation between taus, 1σ uncertainties), restricted to the terms the
 simulated model has: this checks the simulator (does the simulated process
 have the stated coefficient?), not the fit's ability to tell terms apart.
 Gauss–Markov σ and τc are fitted with the noise fit the diagnosis uses
-(:func:`gyroarray.effects.fits.stochastic_fit.fit_gyro_noise`, the term in the
+(:func:`gyroarray.effects.stochastic.fit_gyro_noise`, the term in the
 model: GLS on the Allan variance with the covariance between taus); the
 correlation of the white draws with the sample correlation matrix (Fisher z,
 Bonferroni).
@@ -51,7 +51,7 @@ from scipy import signal, stats
 
 from gyroarray.analysis.allan import allan_analysis, edf, oadev
 from gyroarray.core.layout import Layout
-from gyroarray.effects.fits.stochastic_fit import fit_gyro_noise
+from gyroarray.effects.stochastic import fit_gyro_noise
 from gyroarray.sim.effects import simulate_readings
 from gyroarray.effects.model import NoiseModel
 from gyroarray.core.units import (arw_deg_rt_h_to_rad_rt_s, deg_h_to_rad_s, deg_s_to_rad_s, deg_to_rad,

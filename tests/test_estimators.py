@@ -20,7 +20,7 @@ from gyroarray.core.errors import InputError
 from gyroarray.estimators import (GLS, OLS, ArrayKF, ArrayNoise, Naive, OfflineBound, SingleGyroKF,
                                   array_noise, bandwidth_hz, efficiency, paper002_relation,
                                   single_gyro_gain)
-from gyroarray.estimators._kalman import first_order_lowpass, kf_step, lowpass_pole
+from gyroarray.estimators.kalman import first_order_lowpass, kf_step, lowpass_pole
 from gyroarray.estimators.kf_single import single_gyro_filter
 from gyroarray.core.layout import Layout
 from gyroarray.sim.effects import simulate_readings

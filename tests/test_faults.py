@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from gyroarray.effects.fits import fault_fit as ff
+from gyroarray.effects.faults import scan as ff
 from gyroarray.core.errors import InputError
 from gyroarray.core.layout import Layout
 from gyroarray.effects import REGISTRY

@@ -26,6 +26,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from gyroarray.effects import REGISTRY
 from hostile import assert_contract, axes_sidecar, finite_numbers, run_cli, write_measurement
 
 LONG = int(os.environ.get("GYROARRAY_FUZZ_EXAMPLES", "0"))
@@ -136,12 +137,9 @@ def test_diagnose_on_generated_measurements(data):
 
 # -- scenarios and noise models ---------------------------------------------------------
 
-PARAMS = {                      # effect -> its numeric parameters (spec names)
-    "arw": ["n_deg_rt_h"], "rrw": ["k_deg_h_rt_h"], "bias_instability": ["b_deg_h"],
-    "quantization": ["q_deg"], "rate_ramp": ["r_deg_h2"], "constant_bias": ["bias_deg_h"],
-    "scale_factor": ["ppm"], "scale_nonlinearity": ["k2_per_deg_s"],
-    "gauss_markov": ["sigma_deg_h", "tau_s"], "sinusoid": ["amp_deg_s", "freq_hz"],
-    "latency": ["delay_s"], "saturation": ["range_deg_s"], "temperature_bias": ["deg_h_per_c", "t0_c"],
+PARAMS = {                      # effect -> its required numeric parameters (spec names), from the registry
+    e.name: [p.name for p in e.params if p.kind == "scalar" and p.required] for e in REGISTRY.values()
+    if any(p.kind == "scalar" and p.required for p in e.params)
 }
 VALUES = [0, 1e-300, 1e-6, 0.5, 3.0, 100.0, 1e6, 1e12, 1e300, -1.0, -1e300]
 

@@ -331,7 +331,7 @@ _READ_ONLY = """
 import os, sys
 real = os.access
 os.access = lambda p, m, **k: False if m & os.W_OK else real(p, m, **k)   # an install and HOME we cannot write
-import gyroarray.core._numba                       # where numba is first loaded, and its cache chosen
+import gyroarray.core.jit                       # where numba is first loaded, and its cache chosen
 os.access = real
 assert os.environ["NUMBA_CACHE_DIR"].startswith(os.environ["TMPDIR"]), os.environ.get("NUMBA_CACHE_DIR")
 from gyroarray.cli.main import main

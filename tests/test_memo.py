@@ -1,10 +1,10 @@
-"""analysis._memo.by_content: the same result for the same content, a new one otherwise."""
+"""analysis.memo.by_content: the same result for the same content, a new one otherwise."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from gyroarray.analysis._memo import by_content
+from gyroarray.analysis.memo import by_content
 
 
 def test_results_are_reused_only_for_the_same_content():

@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gyroarray.effects.fits.outliers import clean_spikes, find_spikes
+from gyroarray.effects.outliers import clean_spikes, find_spikes
 from gyroarray.chain.compare import ModelComparison
 from gyroarray.core.measurement import read_measurement
 from gyroarray.sim.effects import simulate_readings

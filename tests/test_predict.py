@@ -23,7 +23,7 @@ from gyroarray.core import units
 from gyroarray.analysis.replicates import rms_ci
 from gyroarray.core.errors import InputError
 from gyroarray.estimators import get_estimator
-from gyroarray.estimators._kalman import state_model, steady_state
+from gyroarray.estimators.kalman import state_model, steady_state
 from gyroarray.estimators.kf_array import rate_psd
 from gyroarray.core.layout import Layout
 from gyroarray.design.predict import (Swing, channel_filter, noise_sources, predict,

@@ -96,7 +96,7 @@ def test_a_gauss_markov_hump_with_no_positive_amplitude_is_not_significant(analy
     significant (its z is the refitted amplitude's Wald ratio, <= 0), and it says why. In the
     analysis itself the stochastic tests of this record no longer read that square wave (the
     tilts' fits are taken out first), and every significant hump there has σ > 0."""
-    from gyroarray.effects.fits.stochastic_fit import fit_gyro_noise
+    from gyroarray.effects.stochastic import fit_gyro_noise
     m, a = analysis
     for g in (1, 2):
         gm = next(f for f in fit_gyro_noise(a.residual_rad_s[:, g - 1], m.dt_s, g) if f.effect == "gauss_markov")

@@ -166,10 +166,12 @@ def test_rho_range_ranks_per_rho_and_reports_the_worst_case(capsys):
     assert set(res["per_rho"]) == {"-0.1", "0.05", "0.2", "0.35", "0.5", "0"}
     rec = res["recommended"]
     assert rec["worst_rms_3axis_deg_s"] == pytest.approx(rec["rms_3axis_deg_s"])
-    # the recommendation's worst case is no worse than any per-ρ winner's worst case
-    for row in res["robustness"]:
-        worst = max(v["rms_3axis_deg_s"] for v in row["at_rho"].values() if v)
-        assert rec["worst_rms_3axis_deg_s"] <= worst * (1 + 1e-9)
+    # the recommendation's worst case (weights fixed at its design ρ, issue 30: no longer the
+    # oracle per-ρ winners) is no worse than any design's, and no better than at any ρ shown
+    key = "rms_3axis_deg_s" if rec["objective"] == "rate" else "angle_deg"
+    for d in res["designs"]:
+        assert rec["worst_case"][key] <= d["worst_case"][key] * (1 + 0.0101)
+    assert rec["worst_rms_3axis_deg_s"] >= max(rec["rms_by_rho"].values()) * (1 - 1e-9)
 
 
 def test_model_file_gives_the_typical_gyro(tmp_path, capsys):

@@ -1,4 +1,4 @@
-"""Regression fits of the deterministic effects (gyroarray.effects.fits.regress).
+"""Regression fits of the deterministic effects (the ``fit_*`` functions of their modules in gyroarray.effects).
 
 Data come from the project's simulator (``simulate_readings``) with synthetic
 truth rates (sinusoids about every axis) at 100 Hz for 10 min (60 000
@@ -31,12 +31,16 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from gyroarray.effects.fits.effect_fit import EffectFit
-from gyroarray.effects.fits.regress import (GLSFit, NotIdentifiableError, RWWhitener, fit_latency,
-                                        fit_misalignment, fit_rate_ramp, fit_saturation,
-                                        fit_scale_and_nonlinearity, fit_scale_factor,
-                                        fit_scale_nonlinearity, fit_sinusoid, fit_temperature_bias,
-                                        gls_rw, misalignment_basis)
+from gyroarray.effects.fitting import EffectFit
+from gyroarray.analysis.gls import GLSFit, NotIdentifiableError, RWWhitener, gls_rw
+from gyroarray.effects.latency import fit_latency
+from gyroarray.effects.misalignment import fit_misalignment, misalignment_basis
+from gyroarray.effects.rate_ramp import fit_rate_ramp
+from gyroarray.effects.saturation import fit_saturation
+from gyroarray.effects.scale_factor import fit_scale_and_nonlinearity, fit_scale_factor
+from gyroarray.effects.scale_nonlinearity import fit_scale_nonlinearity
+from gyroarray.effects.sinusoid import fit_sinusoid
+from gyroarray.effects.temperature_bias import fit_temperature_bias
 from gyroarray.core.layout import Layout
 from gyroarray.core.physics import tilted_axes
 from gyroarray.sim.effects import simulate_readings
@@ -416,7 +420,7 @@ def test_line_test_keeps_its_null_when_the_baseline_is_off(baseline, monkeypatch
     measured), so the check can fail."""
     from scipy import signal
 
-    import gyroarray.effects.fits.regress as reg
+    import gyroarray.effects.sinusoid as reg
     n, dt, sig, reps = 20_000, 0.01, 1e-3, 150
     t = np.arange(n) * dt
     rng = np.random.default_rng(17)

@@ -20,8 +20,9 @@ import pytest
 
 from gyroarray.core.errors import InputError
 from gyroarray.reports.browser import find_chromium, render_check
-from gyroarray.reports.report import (design_ranking, estimator_comparison, load_paper_values,
-                                      load_sweep_dir, paper_vs_model, write_report)
+from gyroarray.reports.report import write_report
+from gyroarray.sweep.report_results import (design_ranking, estimator_comparison, load_paper_values,
+                                            load_sweep_dir, paper_vs_model)
 from gyroarray.sweep.runner import run_sweep
 
 SCENARIO = """\

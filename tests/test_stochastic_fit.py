@@ -1,4 +1,4 @@
-"""Fit side of the stochastic, array and time effects (src/gyroarray/effects/fits/stochastic_fit.py).
+"""Fit side of the stochastic, array and time effects (src/gyroarray/effects/stochastic.py, correlation.py, burst.py, gauss_markov.py).
 
 Data come from the project's simulator (``simulate_readings`` with a zero
 truth: a static record, so the output is the residual). Seeds are explicit
@@ -26,10 +26,12 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from gyroarray.effects.fits import stochastic_fit as sf
+from gyroarray.analysis import allan_gls
+from gyroarray.effects import burst as burst_fit, correlation as correlation_fit, gauss_markov as gm_fit
+from gyroarray.effects import stochastic as sf
 from gyroarray.analysis.avar_covariance import AvarCovariance
 from gyroarray.analysis.allan import edf
-from gyroarray.effects.fits.effect_fit import EffectFit, z_from_log_p
+from gyroarray.effects.fitting import EffectFit, z_from_log_p
 from gyroarray.analysis.noise_fit import term_basis
 from gyroarray.core.errors import InputError
 from gyroarray.core.layout import Layout
@@ -76,7 +78,7 @@ def test_estimate_covariance_agrees_with_greenhall_edf():
     type (white FM, flicker FM, white PM at every τ; RW FM from m = 8: at m = 1, 2
     the sampled random walk's Allan variance exceeds the continuous K²τ/3)."""
     n = N_20MIN
-    m = sf._factors(n)
+    m = allan_gls.factors(n)
     cov = AvarCovariance(m, n + 1 - 2 * m, 2, DT)
     taus = m * DT
     for key, alpha in (("n", 0), ("b", -1), ("q", 2), ("k", -2)):
@@ -148,7 +150,7 @@ def test_gauss_markov_is_found():
 def test_correlation_of_arw_and_rrw_is_found():
     y = simulate(baseline(0.2, 300.0) + [{"effect": "correlation", "rho_arw": 0.3, "rho_rrw": 0.5}], 6,
                  layout=CONE4)
-    fa, fr = sf.fit_correlation(y, DT)
+    fa, fr = correlation_fit.fit_correlation(y, DT)
     assert (fa.extra["family"], fr.extra["family"]) == ("rho_arw", "rho_rrw")
     assert fa.z > 5 and close(fa.params["rho_arw"], 0.3, fa.sigma["rho_arw"]), (fa.params, fa.sigma)
     assert fr.z > 5 and close(fr.params["rho_rrw"], 0.5, fr.sigma["rho_rrw"]), (fr.params, fr.sigma)
@@ -164,7 +166,7 @@ def test_burst_is_found_with_its_window_and_ratio():
     y = simulate(baseline(0.2, 30.0) + [{"effect": "burst", "start_s": 600.0, "end_s": 900.0,
                                          "variance_ratio": 3.0}], 7, layout=CONE4)
     t = np.arange(y.shape[0]) * DT
-    f = sf.fit_burst(y, t, DT)
+    f = burst_fit.fit_burst(y, t, DT)
     assert f.z > 5 and f.gyro is None
     for key, truth in (("start_s", 600.0), ("end_s", 900.0), ("variance_ratio", 3.0)):
         assert close(f.params[key], truth, f.sigma[key]), (key, f.params, f.sigma)
@@ -183,7 +185,7 @@ def test_burst_clock_is_the_records_clock():
         {"effect": "burst", "start_s": 1300.0, "end_s": 1400.0, "variance_ratio": 4.0}]}, n_gyros=4)
     t = 1000.0 + np.arange(N_20MIN) * DT
     y = simulate_readings(m, np.zeros((N_20MIN, 3)), CONE4, DT, np.random.default_rng(8), time_s=t)
-    f = sf.fit_burst(y, t, DT)
+    f = burst_fit.fit_burst(y, t, DT)
     assert f.z > 5
     assert abs(f.params["start_s"] - 1300.0) < 0.2 and abs(f.params["end_s"] - 1400.0) < 0.2
 
@@ -230,7 +232,7 @@ def test_gyro_terms_are_calibrated_without_them(null_runs):
 def test_correlation_is_calibrated_without_it(null_runs):
     za, zr = [], []
     for seed, arw, rrw, y in null_runs:
-        fa, fr = sf.fit_correlation(y, DT)
+        fa, fr = correlation_fit.fit_correlation(y, DT)
         za.append(fa.z)
         zr.append(fr.z)
         assert abs(fa.params["rho_arw"]) < 0.02
@@ -240,25 +242,25 @@ def test_correlation_is_calibrated_without_it(null_runs):
 
 def test_burst_is_calibrated_without_it(null_runs):
     t = np.arange(N_20MIN) * DT
-    z = [sf.fit_burst(y, t, DT).z for seed, arw, rrw, y in null_runs]
+    z = [burst_fit.fit_burst(y, t, DT).z for seed, arw, rrw, y in null_runs]
     assert_calibrated(z, "burst")
-    assert "no burst" in sf.fit_burst(null_runs[0][3], t, DT).evidence
+    assert "no burst" in burst_fit.fit_burst(null_runs[0][3], t, DT).evidence
 
 
 # -- scan calibration helpers -----------------------------------------------------
 
 def test_scan_maximum_of_one_statistic_is_its_normal_tail():
     """With one correlation time the scan is a single N(0, 1): z = w."""
-    maxima = sf._max_calibration(np.eye(3)[:, :1])
+    maxima = gm_fit._max_calibration(np.eye(3)[:, :1])
     for w in (-1.0, 0.0, 1.5, 2.5, 6.0, 40.0):
-        log_p, m_eff = sf._scan_log_p(w, maxima)
+        log_p, m_eff = gm_fit._scan_log_p(w, maxima)
         assert abs(m_eff - 1.0) < 0.15
         assert abs(z_from_log_p(log_p) - w) < (0.05 if w < 2.8 else 0.15)
 
 
 def test_burst_null_tail_formula_is_monotone_and_finite():
-    for blocks in sf._BURST_NULL:
-        lp = [sf._burst_log_p(x, blocks) for x in (1.0, 5.0, 10.0, 20.0, 100.0, 5000.0)]
+    for blocks in burst_fit._BURST_NULL:
+        lp = [burst_fit._burst_log_p(x, blocks) for x in (1.0, 5.0, 10.0, 20.0, 100.0, 5000.0)]
         assert all(a > b for a, b in itertools.pairwise(lp)) and lp[0] <= 0.0
         assert math.isfinite(z_from_log_p(lp[-1]))
 
@@ -280,11 +282,11 @@ def test_bad_inputs_are_refused():
     with pytest.raises(InputError, match="non-finite"):
         sf.fit_gyro_noise(bad, DT, 1)
     with pytest.raises(InputError, match="at least 2 gyros"):
-        sf.fit_correlation(y[:, :1], DT)
+        correlation_fit.fit_correlation(y[:, :1], DT)
     with pytest.raises(InputError, match="time_s"):
-        sf.fit_burst(y, np.arange(999) * DT, DT)
+        burst_fit.fit_burst(y, np.arange(999) * DT, DT)
     with pytest.raises(InputError, match="uniformly"):
-        sf.fit_burst(y, np.arange(1000) * DT * 1.5, DT)
+        burst_fit.fit_burst(y, np.arange(1000) * DT * 1.5, DT)
 
 
 def test_a_late_start_is_moved_back_to_leave_six_octaves():
@@ -352,7 +354,7 @@ def test_avar_normal_score_takes_the_chi2_skew_out():
     sd is 0.004 %), allowed 0.7–1.3× the normal's, where the raw estimates put 1.58 % there."""
     mu, nu = 2.5, 3.0
     y = mu * stats.chi2.rvs(nu, size=1_000_000, random_state=np.random.default_rng(9)) / nu
-    g = sf.avar_normal_score(y, mu, nu)
+    g = allan_gls.avar_normal_score(y, mu, nu)
     sd = mu * math.sqrt(2.0 / nu)
     assert abs(g.mean() - mu) < 0.01 * mu and abs(g.std() - sd) < 0.02 * sd
     assert 945 <= np.count_nonzero(g > mu + 3 * sd) <= 1755

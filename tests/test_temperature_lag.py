@@ -1,4 +1,4 @@
-"""The thermal-lag column of the temperature fit (src/gyroarray/effects/fits/regress.py: fit_temperature_bias).
+"""The thermal-lag column of the temperature fit (src/gyroarray/effects/temperature_bias.py: fit_temperature_bias).
 
 Outside truth: the simulated coefficient, and the binomial law of the 1σ coverage. Records
 like the CATS tag's: 1 Hz, 25 h, ARW 6 deg/√h, RRW 25 deg/h/√h, a fast 11 °C drop (300 s)
@@ -14,7 +14,8 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from gyroarray.effects.fits.regress import fit_temperature_bias, gls_rw
+from gyroarray.analysis.gls import gls_rw
+from gyroarray.effects.temperature_bias import fit_temperature_bias
 from gyroarray.core.units import arw_deg_rt_h_to_rad_rt_s, deg_h_to_rad_s, rad_s_to_deg_h, rrw_deg_h_rt_h_to_rad_s_rt_s
 
 DT, N_SAMPLES, K_TRUE = 1.0, 90_000, 90.0                  # s, -, deg/h/°C

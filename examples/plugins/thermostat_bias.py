@@ -21,7 +21,7 @@ three cycles per record and a tenth of the sample rate (an FFT of the
 record, the peak refined by a parabola through its neighbours); the
 switch-on time from a regression of the residual on the square wave at 8
 switch-on times across half a period, under the record's ARW +
-random-walk noise (:func:`gyroarray.effects.fits.regress.gls_rw`, starting bias
+random-walk noise (:func:`gyroarray.analysis.gls.gls_rw`, starting bias
 free). Its z is that regression's two-sided t, Šidák-corrected for the
 frequencies searched. The switch times are then located one by one (the
 step of largest mean difference within a quarter period of each predicted
@@ -40,8 +40,8 @@ import math
 import numpy as np
 from scipy import special
 
-from gyroarray.effects.fits.effect_fit import EffectFit, chi2_to_z
-from gyroarray.effects.fits.regress import NotIdentifiableError, gls_rw
+from gyroarray.effects.fitting import EffectFit, chi2_to_z
+from gyroarray.analysis.gls import NotIdentifiableError, gls_rw
 from gyroarray.effects.protocol import Param, RegressionEffect, Stage, explains_away, identity, with_term
 from gyroarray.core.errors import InputError
 from gyroarray.core.units import deg_h_to_rad_s, rad_s_to_deg_h

@@ -39,7 +39,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from gyroarray.core._numba import njit, prange
+from gyroarray.core.jit import njit, prange
 
 #: Samples per cache block (512 KiB of float64 per window).
 BLOCK = 65536

@@ -4,7 +4,7 @@ One model serves every fit that weighs an Allan-variance curve by its
 estimates' covariance: the datasheet fit of
 :func:`~gyroarray.analysis.noise_fit.fit_noise_terms` (any difference
 order, large-record correlation) and the per-effect GLS of
-:mod:`~gyroarray.effects.fits.stochastic_fit` (Allan variance, exact
+:mod:`~gyroarray.effects.stochastic` (Allan variance, exact
 finite-record covariance, Gauss–Markov and cross-spectra).
 
 For the phase differences z_j(i) = Σ_p b_p x(i + p m_j) (x the cumulative

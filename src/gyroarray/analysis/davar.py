@@ -11,7 +11,7 @@ record extended by mirroring at both ends so that edge windows have full
 length.
 
 SI inside: rate [rad/s], ``tau`` and time [s], ARW [rad/√s]; datasheet units
-only in :meth:`DavarResult.to_json_dict` and :func:`plot_davar` (through
+only in :meth:`DavarResult.to_json_dict` and the figure (through
 :mod:`gyroarray.core.units`).  The deviation of every window is
 :func:`gyroarray.analysis.allan.deviation` itself.
 
@@ -24,8 +24,8 @@ Public API
   (the "Beginning"/"End" nodes of the paper's Table 1).
 * The paper's simulated experiment beside its Table 1 is
   ``benchmarks/davar_paper.py``.
-* :func:`plot_davar`: heat map of ``sigma(t, tau)`` with the ARW and
-  window-length tracks.
+* The heat map of ``sigma(t, tau)`` with the ARW and window-length tracks
+  is :func:`gyroarray.reports.davar_plots.plot_davar`.
 """
 
 from __future__ import annotations
@@ -35,15 +35,13 @@ import functools
 import math
 import numbers
 from dataclasses import asdict, dataclass, field
-from pathlib import Path
 
 import numpy as np
 from scipy import special
 
-from gyroarray.core._numba import numba, njit
+from gyroarray.core.jit import numba, njit
 from gyroarray.core import units
 from gyroarray.core.errors import InputError
-from gyroarray.core.outputs import save_figure
 
 from gyroarray.analysis import _kernels
 from gyroarray.analysis.allan import (KINDS, ONE_SIGMA, AllanResult, as_series, check_kind,
@@ -59,7 +57,6 @@ __all__ = [
     "ChangeNodes",
     "davar",
     "change_nodes",
-    "plot_davar",
 ]
 
 #: How the ARW of each window is obtained (see :func:`davar`).
@@ -808,101 +805,3 @@ def change_nodes(result: DavarResult, change_s: float) -> ChangeNodes:
     while k > i_b and lengths[k] > lengths[k - 1]:  # back over the growth
         k -= 1
     return ChangeNodes(change, float(t[i_b]), float(t[k]), float(t[i_r]))
-
-
-# --------------------------------------------------------------------------
-# Plot
-
-
-def _cell_edges(centres: np.ndarray, result: DavarResult | None, *,
-                exp: bool = False) -> np.ndarray:
-    """Edges of the cells around sorted ``centres`` (midpoints, the outer
-    cells as wide as their neighbours; one centre: the window's span, or a
-    factor 2 around it when ``exp``); ``exp``: ``centres`` are logarithms
-    and the edges are returned exponentiated."""
-    if centres.size == 1:
-        if exp:
-            half = 0.5 * math.log(2.0)
-        else:
-            assert result is not None                  # the window's span
-            half = 0.5 * result.tau0_s * float(result.window_length[0])
-        edges = np.array([centres[0] - half, centres[0] + half])
-    else:
-        mid = 0.5 * (centres[1:] + centres[:-1])
-        edges = np.concatenate([[2.0 * centres[0] - mid[0]], mid,
-                                [2.0 * centres[-1] - mid[-1]]])
-    return np.exp(edges) if exp else edges
-
-
-def plot_davar(result: DavarResult, path, *, title: str | None = None,
-               force: bool = True) -> Path:
-    """Heat map of the dynamic deviation with the ARW and length tracks.
-
-    Parameters
-    ----------
-    result : DavarResult
-        From :func:`davar`.
-    path : str or os.PathLike
-        Output image; the format follows the suffix (png, pdf, svg).
-    title : str, optional
-        Figure title.
-    force : bool
-        Replace an existing file (atomically, :mod:`gyroarray.core.outputs`).
-
-    Returns
-    -------
-    pathlib.Path
-        The written file.
-
-    Notes
-    -----
-    Top: deviation [deg/h] over window centre [s] (x) and averaging time
-    [s] (y, log), logarithmic colour scale.  Middle: ARW [deg/√h] with its
-    confidence band.  Bottom: window length [samples].  Uses matplotlib's
-    Agg canvas directly (no pyplot, no global backend change).
-    """
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.colors import LogNorm
-    from matplotlib.figure import Figure
-
-    t = result.time_s
-    adev = units.rad_s_to_deg_h(result.adev_rad_s)
-    arw = units.arw_rad_rt_s_to_deg_rt_h
-    fig = Figure(figsize=(8.0, 8.0), layout="constrained")
-    FigureCanvasAgg(fig)
-    ax_map, ax_arw, ax_len = fig.subplots(
-        3, 1, sharex=True, gridspec_kw={"height_ratios": (3, 1.4, 1)})
-    positive = adev[adev > 0]
-    norm = (LogNorm(vmin=positive.min(), vmax=positive.max())
-            if positive.size else None)
-    mesh = ax_map.pcolormesh(_cell_edges(t, result), _cell_edges(
-        np.log(result.taus_s), None, exp=True), adev.T, norm=norm,
-        shading="flat", cmap="viridis")
-    ax_map.set_yscale("log")
-    ax_map.set_ylabel("averaging time τ [s]")
-    fig.colorbar(mesh, ax=ax_map,
-                 label=f"{'Allan' if result.kind == 'oadev' else 'Hadamard'}"
-                       " deviation [deg/h]")
-    ax_arw.fill_between(t, arw(result.arw_ci_low_rad_rt_s),
-                        arw(result.arw_ci_high_rad_rt_s), color="C0",
-                        alpha=0.25, linewidth=0,
-                        label=f"{result.confidence:.1%} confidence")
-    marker = "o" if t.size == 1 else None
-    ax_arw.plot(t, arw(result.arw_rad_rt_s), color="C0", linewidth=1.0,
-                marker=marker, label=f"ARW ({result.arw_method})")
-    ax_arw.set_ylabel("ARW [deg/√h]")
-    ax_arw.legend(fontsize="small", loc="upper right")
-    ax_len.plot(t, result.window_length, color="C1", linewidth=1.0,
-                marker=marker)
-    ax_len.set_ylabel("window [samples]")
-    ax_len.set_xlabel("window centre [s]")
-    for ax in (ax_map, ax_arw, ax_len):
-        ax.grid(True, alpha=0.3)
-    if title is None:
-        name = "A-DAVAR" if result.adaptive else "DAVAR"
-        title = (f"{name}: {result.n_windows} windows, {result.extension} "
-                 "extension" if t.size > 1 else
-                 f"{name}: one window of {int(result.window_length[0])} "
-                 "samples")
-    fig.suptitle(title)
-    return save_figure(fig, path, force=force, dpi=120)

@@ -43,7 +43,7 @@ from typing import Any
 import numpy as np
 from scipy import ndimage, optimize, signal, special, stats
 
-from gyroarray.analysis._memo import by_content
+from gyroarray.analysis.memo import by_content
 from gyroarray.analysis.spectrum import welch
 from gyroarray.core.sensor import bandwidth_response, bandwidth_sos, bandwidth_warped_frequency
 

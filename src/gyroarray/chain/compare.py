@@ -52,17 +52,17 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from scipy import optimize, special, stats
 
-from gyroarray.analysis._memo import by_content
+from gyroarray.analysis.memo import by_content
 from gyroarray.analysis.allan import averaging_factors, oadev
-from gyroarray.effects.fits.earth_fit import attitude_from_rates
-from gyroarray.effects.fits.effect_fit import EffectFit, chi2_to_z, z_from_log_p
-from gyroarray.chain.localise import Localisation, _plain, default_nperseg, residual_psd
+from gyroarray.effects.earth_rate import attitude_from_rates
+from gyroarray.effects.fitting import EffectFit, chi2_to_z, z_from_log_p
+from gyroarray.chain.localise import Localisation, plain_json, default_nperseg, residual_psd
 from gyroarray.chain.localise import localise as localise_residual
 from gyroarray.analysis.motion import still_mask
 from gyroarray.analysis.reference_noise import describe as describe_own_noise
 from gyroarray.analysis.reference_noise import reference_own_noise
-from gyroarray.effects.fits.regress import RWWhitener
-from gyroarray.effects.fits.stochastic_fit import fit_gyro_noise
+from gyroarray.analysis.gls import RWWhitener
+from gyroarray.effects.stochastic import fit_gyro_noise
 from gyroarray.effects import REGISTRY, did_you_mean, effect_names, get_effect
 from gyroarray.core.errors import InputError
 from gyroarray.core.limits import check_memory, format_size, max_memory
@@ -404,7 +404,7 @@ def _finding_dict(f, a: Analysis) -> dict:
     """One localisation finding as ``Analysis.localisation`` keeps it; a non-causal low-pass on
     gyros where ``bandwidth`` is a significant candidate or in the model says what that misses."""
     d = {"kind": f.kind, "gyros": list(f.gyros), "score": float(f.score), "sentence": f.summary,
-         "details": _plain(f.details)}
+         "details": plain_json(f.details)}
     lowpass = _lowpass_effects()
     if f.kind == "lowpass" and f.details.get("causal") is False and lowpass:
         with_bw = sorted({t.gyro for t in a.candidates if t.effect in lowpass and a.significant(t)}
@@ -840,7 +840,7 @@ class ModelComparison:
         determined). q, which decides how much slow drift the regressions
         forgive, is the larger of (a) its maximum-likelihood value on all
         static samples, the random walk running through the dynamic gaps
-        (exact likelihood of :class:`~gyroarray.effects.fits.regress.RWWhitener`),
+        (exact likelihood of :class:`~gyroarray.analysis.gls.RWWhitener`),
         and (b) the Allan fit's K + 2σ_K: a drift the Allan variance cannot
         tell from RRW (a flicker floor, a short record where K is 0 ± σ) must
         not make a slow regressor (temperature, ramp, Earth rate) significant.

@@ -224,17 +224,17 @@ class Localisation:
         """JSON-ready: the ranked findings (SI and Hz, as in ``details``), z_crit, gyro scores, notes."""
         return {"z_crit": self.z_crit, "gyro_scores": [float(x) for x in self.gyro_scores],
                 "findings": [{"kind": f.kind, "gyros": list(f.gyros), "score": float(f.score),
-                              "summary": f.summary, "details": _plain(f.details)}
+                              "summary": f.summary, "details": plain_json(f.details)}
                              for f in self.findings],
                 "notes": list(self.notes)}
 
 
-def _plain(x):
+def plain_json(x):
     """Mappings, sequences and numpy scalars as plain JSON values (NaN/inf as None)."""
     if isinstance(x, Mapping):
-        return {str(k): _plain(v) for k, v in x.items()}
+        return {str(k): plain_json(v) for k, v in x.items()}
     if isinstance(x, (list, tuple, np.ndarray)):
-        return [_plain(v) for v in x]
+        return [plain_json(v) for v in x]
     if isinstance(x, (bool, np.bool_)) or x is None or isinstance(x, str):
         return None if x is None else (x if isinstance(x, str) else bool(x))
     v = float(x)

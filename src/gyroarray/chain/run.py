@@ -60,9 +60,11 @@ from gyroarray.analysis.metrics import attenuation_and_lag, noise_density
 from gyroarray.analysis.replicates import mean_ci, replicate_rng, rms_ci
 from gyroarray.core.gdop import unobservable_reason
 from gyroarray.core.errors import InputError
+from gyroarray.effects import get_effect
 from gyroarray.estimators import available, get_estimator
 from gyroarray.design.predict import (g_sensitivity_coeffs, g_sensitivity_error, predict as _predict,
                                sensor_bandwidth, settle_start, swing_response)
+from gyroarray.sim.profiles import Sinusoid
 
 AXES = ("x", "y", "z")
 #: Filter start-up excluded from every metric [s].
@@ -129,7 +131,7 @@ def _ratio(a, b):
 def swing_frequency(profile) -> tuple[float, tuple[float, float]] | None:
     """(frequency [Hz], (start, end) [s]) of the first sinusoid segment, if any."""
     for i, seg in enumerate(profile.segments):
-        if getattr(seg, "kind", None) == "sinusoid":
+        if getattr(seg, "kind", None) == Sinusoid.kind:
             return float(seg.frequency_hz), tuple(profile.segment_span(i))
     return None
 
@@ -465,7 +467,7 @@ def run_replicates(scenario, estimator_names=None, *, replicates: int, seed: int
                               duration_s=scenario.duration_s, cache=cache)
         dt = 1.0 / scenario.sample_rate_hz
         f = None
-        if any(e.effect == "g_sensitivity" for e in scenario.model.entries):
+        if any("acc" in get_effect(e.effect).sim_needs for e in scenario.model.entries):
             from gyroarray.sim.truth import specific_force  # lazy: loads mujoco
             f = specific_force(truth, scenario.layout)
         for name in dict.fromkeys(runs[0].table.estimator):

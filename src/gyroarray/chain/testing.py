@@ -58,6 +58,9 @@ __all__ = ["effect_checks", "check_effect", "parametrize_effect_checks", "estima
 
 #: The table session of the checks [s] and its sample rate [Hz].
 STATIC_S, MOTION_S, TAIL_S, RATE_HZ = 600.0, 900.0, 300.0, 50.0
+#: The baseline of the checks' records, by ``Effect.baseline_term``: white 0.15 deg/√h,
+#: walk 5 deg/h/√h (the one parameter of each baseline effect, in its spec unit).
+BASELINE_LEVELS = {"white": 0.15, "walk": 5.0}
 
 
 def _registered(effect_cls):
@@ -85,8 +88,10 @@ def _example(eff, rng):
 def _record(extra_entries, seed: int):
     from gyroarray.sim.lab import lab_run  # lazy: loads numba, pandas
     from gyroarray.effects.model import ModelEntry, NoiseModel  # lazy: loads numba
+    from gyroarray.effects import REGISTRY  # lazy: loads numba
     rng = np.random.default_rng([20261123, seed])
-    base = (ModelEntry("arw", None, {"n_deg_rt_h": 0.15}), ModelEntry("rrw", None, {"k_deg_h_rt_h": 5.0}))
+    base = tuple(ModelEntry(e.name, None, {e.params[0].name: BASELINE_LEVELS[e.baseline_term]})
+                 for e in REGISTRY.values() if e.baseline and e.baseline_term in BASELINE_LEVELS)
     return lab_run(NoiseModel(base + tuple(extra_entries)), _layout(), rng, rate_hz=RATE_HZ,
                    static_s=STATIC_S, motion_s=MOTION_S, tail_s=TAIL_S, protocol="table")
 

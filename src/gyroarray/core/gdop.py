@@ -178,6 +178,43 @@ def gdop_batch(hs: np.ndarray, chol: np.ndarray) -> np.ndarray:
     return out
 
 
+def worst_gdop_over_rho(H, rho_lo: float, rho_hi: float, failures: int = 0) -> tuple[float, float]:
+    """Worst GDOP of one layout over ρ ∈ [lo, hi] and every set of ``failures`` failed gyros.
+
+    Parameters
+    ----------
+    H : array_like (N, 3)
+        Mounted unit axes [-] (signs included: under correlated noise a reversed
+        gyro changes the GDOP).
+    rho_lo, rho_hi : float
+        The range of the common correlation ρ [-] (each > −1/(N − failures − 1)).
+    failures : int
+        Gyros that fail (every choice is tried).
+
+    Returns
+    -------
+    (gdop, rho)
+        The largest GDOP (oracle whitening at each ρ; inf: an axis is lost) and
+        the ρ where it is, found continuously (both ends and a bounded Brent
+        search inside the range).
+    """
+    h = np.asarray(H, dtype=float)
+    n = h.shape[0]
+    keeps = [tuple(range(n))] if failures == 0 else list(itertools.combinations(range(n), n - failures))
+
+    def f(rho):
+        c = np.linalg.cholesky(correlation_matrix(n - failures, rho))
+        return float(max(gdop_batch(h[list(k)][None], c)[0] for k in keeps))
+    cands = [(f(rho_lo), rho_lo)]
+    if rho_hi > rho_lo:
+        cands.append((f(rho_hi), rho_hi))
+        res = minimize_scalar(lambda r: -f(r), bounds=(rho_lo, rho_hi), method="bounded",
+                              options={"xatol": 1e-9})
+        cands.append((-float(res.fun), float(res.x)))
+    v, r = max(cands, key=lambda c: c[0])
+    return float(v), float(r)
+
+
 def gdop_vs_alpha(scheme: int, n: int, alphas_rad, rho=0.0) -> np.ndarray:
     """GDOP of a conical layout over many cone angles (vectorised).
 

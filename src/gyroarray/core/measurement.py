@@ -92,7 +92,8 @@ from gyroarray.core.layout import UNIT_NORM_TOL, Layout, check_positions
 from gyroarray.core.limits import (MAX_RATE_DEG_S, check_memory, format_size, gunzip_bounded, max_memory,
                               read_regular)
 from gyroarray.core.outputs import measurement_files, same_path, write_bytes
-from gyroarray.core.tomlio import TomlDoc, load_toml, utf8_text
+from gyroarray.core.tomlio import (TomlDoc, finite_number, is_number, load_toml, short_repr, toml_number,
+                                   toml_table, toml_type, utf8_text)
 
 __all__ = [
     "Measurement",
@@ -511,60 +512,6 @@ def _read_sidecar(path: Path) -> _Sidecar:
                     notes=tuple(notes + layout_notes))
 
 
-def toml_type(v) -> str:
-    kinds = ((bool, "a boolean"), (int, "an integer"), (float, "a number"),
-             (str, "a string"), (list, "an array"), (dict, "a table"))
-    for t, word in kinds:
-        if isinstance(v, t):
-            return f"{word} ({_short(v)})"
-    return f"a {type(v).__name__} ({_short(v)})"
-
-
-def _short(v, limit: int = 40) -> str:
-    """repr of a value, cut to ``limit`` characters, on one line."""
-    r = repr(v)
-    return r if len(r) <= limit else r[:limit] + "..."
-
-
-def _is_number(v) -> bool:
-    return isinstance(v, (int, float)) and not isinstance(v, bool)
-
-
-def _finite(v) -> float | None:
-    """float(v) for a TOML number (not bool) if finite, else None."""
-    if not _is_number(v):
-        return None
-    try:
-        x = float(v)
-    except OverflowError:            # TOML integers are unbounded
-        return None
-    return x if math.isfinite(x) else None
-
-
-def toml_number(doc: TomlDoc, v, key: str) -> float:
-    """A finite TOML number (int or float, not bool)."""
-    if not _is_number(v):
-        raise doc.error(f"{key} must be a number, got {toml_type(v)}", key)
-    x = _finite(v)
-    if x is None:
-        raise doc.error(f"{key} must be finite, got {_short(v)}", key)
-    return x
-
-
-def toml_table(doc: TomlDoc, key: str, allowed: set[str]) -> dict | None:
-    """The sub-table ``key`` (None if absent), refusing unknown keys in it."""
-    t = doc.data.get(key)
-    if t is None:
-        return None
-    if not isinstance(t, dict):
-        raise doc.error(f"{key} must be a table ([{key}]), got {toml_type(t)}", key)
-    unknown = sorted(set(t) - allowed)
-    if unknown:
-        raise doc.error(f"unknown key {key}.{unknown[0]} (known: {', '.join(sorted(allowed))})",
-                        f"{key}.{unknown[0]}")
-    return t
-
-
 _CONE_KEYS = ("scheme", "n_gyros", "alpha_deg")
 
 
@@ -592,12 +539,12 @@ def _with_positions(doc: TomlDoc, t: dict, layout: Layout) -> Layout:
     rows = t["positions_m"]
     key = "layout.positions_m"
     if not (isinstance(rows, list) and all(
-            isinstance(r, list) and len(r) == 3 and all(_is_number(x) for x in r) for r in rows)):
+            isinstance(r, list) and len(r) == 3 and all(is_number(x) for x in r) for r in rows)):
         raise doc.error("layout.positions_m must be an array of [x, y, z] rows of numbers "
-                        f"(metres, one per gyro), got {_short(rows)}", key)
-    values = [[_finite(x) for x in r] for r in rows]
+                        f"(metres, one per gyro), got {short_repr(rows)}", key)
+    values = [[finite_number(x) for x in r] for r in rows]
     if any(x is None for r in values for x in r):
-        raise doc.error(f"layout.positions_m must hold finite numbers, got {_short(rows)}", key)
+        raise doc.error(f"layout.positions_m must hold finite numbers, got {short_repr(rows)}", key)
     try:
         return layout.with_positions(check_positions(values, layout.n_gyros))
     except InputError as e:
@@ -607,13 +554,13 @@ def _with_positions(doc: TomlDoc, t: dict, layout: Layout) -> Layout:
 def _axes_layout(doc: TomlDoc, axes) -> Layout:
     key = "layout.axes"
     rows_ok = isinstance(axes, list) and len(axes) > 0 and all(
-        isinstance(r, list) and len(r) == 3 and all(_is_number(x) for x in r) for r in axes)
+        isinstance(r, list) and len(r) == 3 and all(is_number(x) for x in r) for r in axes)
     if not rows_ok:
         raise doc.error("layout.axes must be an array of [x, y, z] rows of numbers, "
-                        f"got {_short(axes)}", key)
-    rows = [[_finite(x) for x in r] for r in axes]
+                        f"got {short_repr(axes)}", key)
+    rows = [[finite_number(x) for x in r] for r in axes]
     if any(x is None for r in rows for x in r):
-        raise doc.error(f"layout.axes must hold finite numbers, got {_short(axes)}", key)
+        raise doc.error(f"layout.axes must hold finite numbers, got {short_repr(axes)}", key)
     try:
         return Layout.from_axes(rows, source=doc.name)
     except InputError as e:
@@ -658,7 +605,7 @@ def _parse_units(doc: TomlDoc) -> dict:
     for key, unit in t.items():
         accepted = ACCEPTED_UNITS[key]
         if not isinstance(unit, str) or unit not in accepted:
-            raise doc.error(f"unknown unit {_short(unit)} for units.{key} (accepted: "
+            raise doc.error(f"unknown unit {short_repr(unit)} for units.{key} (accepted: "
                             f"{', '.join(repr(u) for u in accepted)})", f"units.{key}")
     return dict(t)
 
@@ -783,7 +730,7 @@ def _parse_header(text: str, name: str, line: int) -> tuple[_Columns, list[str]]
             raise error(f"duplicate column name {f!r} (columns {where[f]} and {k})", f)
         where[f] = k
     if _TIME not in where:
-        raise error(f"required column {_TIME} is missing (header: {_short(text, 60)})")
+        raise error(f"required column {_TIME} is missing (header: {short_repr(text, 60)})")
     n_gyros = _gyro_count(fields, error)
     refs = [r for r in _REF_NAMES if r in where]
     if refs and len(refs) != 3:
@@ -840,17 +787,17 @@ def _cell_value(token: str) -> float:
     if _NUMBER_RE.fullmatch(s):
         x = float(s)
         if math.isinf(x):
-            raise _CellError(f"value {_short(token)} overflows to infinity")
+            raise _CellError(f"value {short_repr(token)} overflows to infinity")
         return x
     if not s or s.lower() in _NAN_WORDS:
         return math.nan
     if s.lower() in _INF_WORDS:
-        raise _CellError(f"infinite value {_short(token)}")
-    raise _CellError(f"non-numeric value {_short(token)}")
+        raise _CellError(f"infinite value {short_repr(token)}")
+    raise _CellError(f"non-numeric value {short_repr(token)}")
 
 
 def _missing_kind(token: str) -> str:
-    return "empty cell" if not token.strip() else f"NaN value {_short(token)}"
+    return "empty cell" if not token.strip() else f"NaN value {short_repr(token)}"
 
 
 def _parse_csv(data: bytes, name: str) -> tuple[_Columns, _Table, list[str]]:
@@ -1151,7 +1098,7 @@ def _check_infinite(table: _Table, cols: _Columns, name: str) -> None:
         token = table.token(row, j)
         try:
             _cell_value(token)
-            problem = f"infinite value {_short(token)}"   # pandas knows more spellings
+            problem = f"infinite value {short_repr(token)}"   # pandas knows more spellings
         except _CellError as e:
             problem = str(e)
         raise InputError(f"{problem} in column {cols.names[j]}", file=name,

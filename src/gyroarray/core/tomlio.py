@@ -16,12 +16,17 @@ Each refusal is one :class:`~gyroarray.core.errors.InputError`. The parsed
 document comes back as a :class:`TomlDoc`, which also finds the line of a
 key for later messages (``doc.error(message, "layout.alpha_deg")``).
 
+The grammar every format shares is here too: :func:`toml_number` (a finite
+number), :func:`toml_table` (a sub-table with known keys) and the words of a
+refusal (:func:`toml_type`, :func:`short_repr`).
+
 Python 3.10 has no :mod:`tomllib`; the same parser is the ``tomli`` package
 there (a dependency for that version), imported here and nowhere else.
 """
 
 from __future__ import annotations
 
+import math
 import re
 import sys
 from pathlib import Path
@@ -35,7 +40,8 @@ else:  # pragma: no cover - Python 3.10: the same parser as a package
     import tomli as tomllib
 
 __all__ = ["MAX_TOML_BYTES", "MAX_DEPTH", "MAX_STRING_CHARS", "MAX_KEY_CHARS", "TomlDoc", "utf8_text",
-           "load_toml", "loads_toml", "TOMLDecodeError"]
+           "load_toml", "loads_toml", "TOMLDecodeError", "short_repr", "toml_type", "is_number",
+           "finite_number", "toml_number", "toml_table"]
 
 #: Largest TOML file read [bytes] (the biggest shipped one is a few KiB).
 MAX_TOML_BYTES = 16 * 2**20
@@ -207,3 +213,61 @@ def load_toml(path, what: str = "TOML file") -> TomlDoc:
     raw = read_regular(Path(path), what, max_bytes=MAX_TOML_BYTES)
     text = utf8_text(raw, name)
     return TomlDoc(name, text, loads_toml(text, name), raw)
+
+
+# -- the grammar the formats share: values and tables of a parsed document ---------------------
+
+def short_repr(v, limit: int = 40) -> str:
+    """repr of a value, cut to ``limit`` characters, on one line."""
+    r = repr(v)
+    return r if len(r) <= limit else r[:limit] + "..."
+
+
+def toml_type(v) -> str:
+    """What a TOML value is, in words, with the value: ``a string ('x')``."""
+    kinds = ((bool, "a boolean"), (int, "an integer"), (float, "a number"),
+             (str, "a string"), (list, "an array"), (dict, "a table"))
+    for t, word in kinds:
+        if isinstance(v, t):
+            return f"{word} ({short_repr(v)})"
+    return f"a {type(v).__name__} ({short_repr(v)})"
+
+
+def is_number(v) -> bool:
+    """Whether ``v`` is a TOML number (an integer or a float; a boolean is not)."""
+    return isinstance(v, (int, float)) and not isinstance(v, bool)
+
+
+def finite_number(v) -> float | None:
+    """float(v) for a TOML number (not bool) if finite, else None."""
+    if not is_number(v):
+        return None
+    try:
+        x = float(v)
+    except OverflowError:            # TOML integers are unbounded
+        return None
+    return x if math.isfinite(x) else None
+
+
+def toml_number(doc: TomlDoc, v, key: str) -> float:
+    """A finite TOML number (int or float, not bool); refused at the line of ``key``."""
+    if not is_number(v):
+        raise doc.error(f"{key} must be a number, got {toml_type(v)}", key)
+    x = finite_number(v)
+    if x is None:
+        raise doc.error(f"{key} must be finite, got {short_repr(v)}", key)
+    return x
+
+
+def toml_table(doc: TomlDoc, key: str, allowed: set[str]) -> dict | None:
+    """The sub-table ``key`` (None if absent), refusing unknown keys in it."""
+    t = doc.data.get(key)
+    if t is None:
+        return None
+    if not isinstance(t, dict):
+        raise doc.error(f"{key} must be a table ([{key}]), got {toml_type(t)}", key)
+    unknown = sorted(set(t) - allowed)
+    if unknown:
+        raise doc.error(f"unknown key {key}.{unknown[0]} (known: {', '.join(sorted(allowed))})",
+                        f"{key}.{unknown[0]}")
+    return t

@@ -54,19 +54,27 @@ not driven by K, so they never resonate with the random walks.
 
 The flicker (bias instability) is the simulator's circular process: a sum
 of independent sinusoids at the FFT frequencies j/(M dt) of variance
-2·B²/(π j) (j < M/2, M = next_fast_len(2n)); each passes the steady-state
+B²/(π j) (j <= M/2, M = next_fast_len(2n); the Nyquist line half that); each passes the steady-state
 response T(θ_j) (the filter's start-up transient is left out, a fraction
 ≈ 1/(n·BW·dt) of the window), and its window sum follows the Fejér kernel.
 
-A deterministic motion adds its own error e_det = estimate(F(H ω + b_g)) − ω
+A deterministic motion adds its own error e_det = estimate(F(H ω + b)) − ω
 exactly (the filter is linear; cross terms with the zero-mean noise vanish),
-with b_g the ``g_sensitivity`` bias k_i · f_i and F the gyros' own ``bandwidth``
-filters, which the noise passes too: the estimator is cascaded after them
-(:func:`cascade`), so the moments above stay exact. The g-sensitivity's own
-share is reported per gyro and through the estimator's DC gain
-(:func:`g_sensitivity_error`). Effects other than ARW, RRW, correlation, bias
-instability, Gauss–Markov noise, bandwidth and g-sensitivity are not
-modelled and listed in ``ignored``.
+with b the sum of the deterministic rate errors the model's effects declare
+for that motion (a scale factor s_i h_i·ω, a tilted axis (a_i − h_i)·ω, a
+g-sensitivity k_i · f_i, a temperature coefficient c_i ΔT, a plugin's own)
+and F the gyros' own filters (a declared sensor filter), which the noise
+passes too: the estimator is cascaded after them (:func:`cascade`), so the
+moments above stay exact. The g-sensitivity's own share is reported per
+gyro and through the estimator's DC gain (:func:`g_sensitivity_error`).
+
+Which effect contributes what is the effect's own declaration
+(:meth:`~gyroarray.effects.protocol.Effect.predictor_term`, the terms of
+:mod:`gyroarray.effects.terms`): this module names no effect. The effects
+of a model that declare no term, or whose term the stated motion cannot
+evaluate (a temperature coefficient without a temperature swing), are
+listed in ``ignored``; :mod:`gyroarray.design.budget` gives each term's
+own share.
 
 References
 ----------
@@ -84,16 +92,42 @@ import numpy as np
 import scipy.fft as sfft
 
 from gyroarray.core import units
-from gyroarray.core.constants import G0_M_S2
 from gyroarray.core.errors import InputError
+from gyroarray.effects.terms import (CorrelationTerm, DeterministicTerm, FlickerTerm, ForceTerm, GaussMarkovTerm,
+                                     Motion, SensorFilter, WalkTerm, WhiteTerm, root_sum_square)
 
 __all__ = ["NoiseSources", "noise_sources", "Prediction", "predict", "predict_system",
-           "window_sums", "error_moments", "Swing", "swing_truth", "settle_start"]
+           "window_sums", "error_moments", "Swing", "swing_truth", "settle_start", "deterministic_error",
+           "declared_terms"]
 
 AXES = ("x", "y", "z")
-#: Effects the predictor models exactly (the rest are listed as ignored).
-MODELLED = ("arw", "rrw", "correlation", "bias_instability", "gauss_markov", "bandwidth",
-            "g_sensitivity")
+#: The terms of the noise and sensor part of the predictor (the deterministic ones need a motion).
+NOISE_TERMS = (WhiteTerm, WalkTerm, CorrelationTerm, FlickerTerm, GaussMarkovTerm, SensorFilter)
+
+
+def declared_terms() -> dict:
+    """Each registered effect's declared term class, probed on its placeholder parameters on
+    three gyros (None: it declares none, or the probe fails)."""
+    from gyroarray.effects import REGISTRY  # lazy: the registry and its plugins, at call time
+    from gyroarray.effects.model import ModelEntry, NoiseModel
+    from gyroarray.estimators.noise import model_terms  # lazy: loads numba
+    out: dict = {}
+    for name, eff in REGISTRY.items():
+        try:
+            (_, term), = model_terms(NoiseModel((ModelEntry(name, None, eff.placeholder()),)), 3)
+        except Exception:                    # a plugin's probe that fails declares nothing usable
+            term = None
+        out[name] = None if term is None else type(term)
+    return out
+
+
+def __getattr__(name: str):
+    # MODELLED (kept for callers of the former hand list): the effects whose declared term is a
+    # noise term, a sensor filter or a g-sensitivity, computed from the declarations
+    if name == "MODELLED":
+        kinds = NOISE_TERMS + (ForceTerm,)
+        return tuple(n for n, t in declared_terms().items() if t is not None and issubclass(t, kinds))
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 # -- the noise ---------------------------------------------------------------------
@@ -119,7 +153,11 @@ class NoiseSources:
     sensor : SensorBandwidth or None
         The gyros' own low-pass (the ``bandwidth`` effect), None: none.
     g_sensitivity_rad_s_per_m_s2 : ndarray, shape (N, 3), or None
-        g-sensitivity of each gyro, platform frame [(rad/s)/(m/s²)].
+        g-sensitivity of each gyro, platform frame [(rad/s)/(m/s²)] (the declared
+        :class:`~gyroarray.effects.terms.ForceTerm` s, summed).
+    deterministic : tuple of (str, DeterministicTerm)
+        The declared deterministic rate errors, by effect name, that :func:`predict`
+        evaluates on the stated motion.
     """
 
     R: np.ndarray
@@ -131,6 +169,7 @@ class NoiseSources:
     ignored: tuple[str, ...] = ()
     sensor: "SensorBandwidth | None" = None
     g_sensitivity_rad_s_per_m_s2: np.ndarray | None = None
+    deterministic: tuple = ()
 
     @property
     def n_gyros(self) -> int:
@@ -143,21 +182,43 @@ def noise_sources(noise_model, n_gyros: int, dt_s: float) -> NoiseSources:
     Parameters
     ----------
     noise_model : NoiseModel
-        As simulated (``arw`` is required on every gyro, as for the estimators).
+        As simulated (white noise is required on every gyro, as for the estimators).
     n_gyros : int
     dt_s : float
         Sample period [s].
+
+    Notes
+    -----
+    Every effect's declared term (:func:`gyroarray.estimators.noise.model_terms`):
+    white and walk terms (with the correlation modifier) make R and Q_b as the
+    estimators see them (:func:`~gyroarray.estimators.noise.array_noise`);
+    flicker terms add their B² per gyro; a gyro has one Gauss–Markov process and
+    the gyros one sensor filter (a second one on the same gyro is listed as
+    ignored); the deterministic terms are kept for :func:`predict`.
     """
-    from gyroarray.estimators.noise import per_gyro, array_noise  # lazy: loads numba
+    from gyroarray.estimators.noise import array_noise, model_terms  # lazy: loads numba
     an = array_noise(noise_model, n_gyros)
-    sig = np.nan_to_num(per_gyro(noise_model, "gauss_markov", "sigma_rad_s", n_gyros))
-    tau = np.nan_to_num(per_gyro(noise_model, "gauss_markov", "tau_s", n_gyros), nan=1.0)
-    bi = np.nan_to_num(per_gyro(noise_model, "bias_instability", "b_rad_s", n_gyros))
-    ignored = tuple(sorted({e.effect for e in noise_model.entries} - set(MODELLED)))
+    terms = model_terms(noise_model, n_gyros)
+    ignored = {eff.name for eff, t in terms if t is None}
+    sig = np.zeros(n_gyros)
+    tau = np.ones(n_gyros)
+    for eff, t in terms:
+        if isinstance(t, GaussMarkovTerm):
+            has = ~np.isnan(t.sigma_rad_s)
+            if np.any(has & (sig > 0)):
+                ignored.add(eff.name)                # the predictor has one process per gyro
+                continue
+            sig = np.where(has, np.nan_to_num(t.sigma_rad_s), sig)
+            tau = np.where(has, np.nan_to_num(t.tau_s, nan=1.0), tau)
+    flick = [t.b_rad_s for _, t in terms if isinstance(t, FlickerTerm)]
+    bi = np.nan_to_num(root_sum_square(flick)) if flick else np.zeros(n_gyros)
+    sensors = [(eff, t) for eff, t in terms if isinstance(t, SensorFilter)]
+    ignored.update(eff.name for eff, _ in sensors[1:])
+    det = tuple((eff.name, t) for eff, t in terms if isinstance(t, DeterministicTerm))
     return NoiseSources(R=an.R(dt_s), Qb=an.Qb(dt_s), gm_sigma_rad_s=sig, gm_tau_s=tau,
-                        bi_rad_s=bi, dt_s=float(dt_s), ignored=ignored,
-                        sensor=sensor_bandwidth(noise_model, n_gyros, dt_s),
-                        g_sensitivity_rad_s_per_m_s2=g_sensitivity_coeffs(noise_model, n_gyros))
+                        bi_rad_s=bi, dt_s=float(dt_s), ignored=tuple(sorted(ignored)),
+                        sensor=_sensor(sensors[0][1] if sensors else None, dt_s),
+                        g_sensitivity_rad_s_per_m_s2=_force_coeffs(det, n_gyros), deterministic=det)
 
 
 # -- the sensor's own response: bandwidth and g-sensitivity --------------------------
@@ -221,21 +282,24 @@ class SensorBandwidth:
 
 
 def sensor_bandwidth(noise_model, n_gyros: int, dt_s: float) -> SensorBandwidth | None:
-    """The ``bandwidth`` entries of a noise model per gyro (None: the model has none).
+    """The sensor filter a noise model declares, per gyro (None: the model has none).
 
     Raises
     ------
     InputError
         An order other than 1 or 2, or a cut-off not inside (0, Nyquist).
     """
-    entries = [e for e in noise_model.entries if e.effect == "bandwidth"]
-    if not entries:
+    from gyroarray.estimators.noise import model_terms  # lazy: loads numba
+    sensors = [t for _, t in model_terms(noise_model, n_gyros) if isinstance(t, SensorFilter)]
+    return _sensor(sensors[0] if sensors else None, dt_s)
+
+
+def _sensor(term: SensorFilter | None, dt_s: float) -> SensorBandwidth | None:
+    """A declared :class:`~gyroarray.effects.terms.SensorFilter` as the predictor's filters."""
+    if term is None:
         return None
-    fc = np.full(n_gyros, np.nan)
-    order = np.zeros(n_gyros, dtype=int)
-    for e in sorted(entries, key=lambda e: e.gyro is not None):    # gyro = k overrides all
-        sel = slice(None) if e.gyro is None else e.gyro - 1
-        fc[sel], order[sel] = float(e.si_params["cutoff_hz"]), int(e.si_params["order"])
+    fc = np.asarray(term.cutoff_hz, dtype=float).copy()
+    order = np.nan_to_num(np.asarray(term.order, dtype=float)).astype(int)
     sb = SensorBandwidth(cutoff_hz=fc, order=order, dt_s=float(dt_s))
     for k in np.flatnonzero(sb.filtered):
         sb.sos(int(k))                                               # checks order and cut-off
@@ -339,16 +403,62 @@ def swing_response(sys, H: np.ndarray, sensor: SensorBandwidth | None, freq_hz: 
 
 
 def g_sensitivity_coeffs(noise_model, n_gyros: int) -> np.ndarray | None:
-    """The ``g_sensitivity`` of each gyro, shape (N, 3), platform frame [(rad/s)/(m/s²)]
-    (None: the model has none; an entry for gyro k overrides one for all)."""
-    entries = [e for e in noise_model.entries if e.effect == "g_sensitivity"]
-    if not entries:
+    """The g-sensitivity of each gyro (the declared force terms), shape (N, 3), platform frame
+    [(rad/s)/(m/s²)] (None: the model has none; an entry for gyro k overrides one for all)."""
+    from gyroarray.estimators.noise import model_terms  # lazy: loads numba
+    det = tuple((eff.name, t) for eff, t in model_terms(noise_model, n_gyros) if isinstance(t, ForceTerm))
+    return _force_coeffs(det, n_gyros)
+
+
+def _force_coeffs(det: tuple, n_gyros: int) -> np.ndarray | None:
+    """The sum of the :class:`~gyroarray.effects.terms.ForceTerm` coefficients (N, 3), or None."""
+    k = [np.nan_to_num(np.asarray(t.coeff_rad_s_per_m_s2, dtype=float)) for _, t in det
+         if isinstance(t, ForceTerm)]
+    if not k:
         return None
-    out = np.zeros((n_gyros, 3))
-    for e in sorted(entries, key=lambda e: e.gyro is not None):
-        sel = slice(None) if e.gyro is None else e.gyro - 1
-        out[sel] = np.asarray(e.si_params["coeff_rad_s_per_m_s2"], dtype=float)
-    return out
+    return k[0] if len(k) == 1 else np.sum(k, axis=0)
+
+
+def deterministic_error(noise: NoiseSources, motion: Motion, n: int, H: np.ndarray
+                        ) -> tuple[dict, list]:
+    """Each declared deterministic term's rate error on a motion.
+
+    Parameters
+    ----------
+    noise : NoiseSources
+    motion : Motion
+        The stated motion (:class:`~gyroarray.effects.terms.Motion`; unset fields: at
+        rest, level, no temperature swing).
+    n : int
+        Samples.
+    H : ndarray (N, 3)
+        Nominal axes.
+
+    Returns
+    -------
+    errors : dict
+        Effect name -> per-gyro rate error (n, N) [rad/s] (the errors of several terms of
+        one effect added).
+    left_out : list of str
+        Effects whose term the motion cannot evaluate (it lacks what they need).
+    """
+    m = motion.resolved(n, noise.dt_s, H)
+    errors: dict = {}
+    left_out = []
+    det = noise.deterministic
+    if noise.g_sensitivity_rad_s_per_m_s2 is not None and not any(isinstance(t, ForceTerm) for _, t in det):
+        det = det + ((ForceTerm.key, ForceTerm(noise.g_sensitivity_rad_s_per_m_s2)),)   # built by hand
+    for name, term in det:
+        e = term.rate_error(m)
+        if e is None:
+            left_out.append(name)
+            continue
+        e = np.asarray(e, dtype=float)
+        if e.shape != (n, H.shape[0]):
+            raise InputError(f"{name}: its predictor term gave a rate error of shape {e.shape}, not "
+                             f"({n}, {H.shape[0]})")
+        errors[name] = e if name not in errors else errors[name] + e
+    return errors, left_out
 
 
 def g_sensitivity_error(coeff_rad_s_per_m_s2: np.ndarray, specific_force_m_s2: np.ndarray,
@@ -593,7 +703,9 @@ def flicker_moments(sys, bi_rad_s: np.ndarray, n: int, k0: int, dt_s: float) -> 
         return Moments(zero, zero, zero, n - k0)
     M = sfft.next_fast_len(2 * n, real=True)
     j = np.arange(1, M // 2 + 1, dtype=float)
-    v = 2.0 / (np.pi * j)                                  # variance of each sinusoid per B²
+    # variance of each sinusoid per B²: the simulator's line j carries S(f_j)·Δf = 1/(π j)
+    # (S = B²/(π f) one-sided, Δf = 1/(M dt); core.physics.flicker_noise), not 2/(π j)
+    v = 1.0 / (np.pi * j)
     if M % 2 == 0:
         v[-1] *= 0.5                                       # the Nyquist bin is real
     theta = 2.0 * np.pi * j / M
@@ -683,13 +795,14 @@ class Prediction:
         return {"estimator": self.estimator, "n_samples": self.n_samples,
                 "horizon_s": self.n_samples * self.dt_s, "settle_s": self.settle_s,
                 "swing_hz": self.swing_hz, "axes": self.axes, "mean_square_by_source": self.components,
-                "sensor_bandwidth": self.sensor, "g_sensitivity": self.g_sensitivity,
+                "sensor_bandwidth": self.sensor, ForceTerm.key: self.g_sensitivity,
                 "ignored_effects": list(self.ignored)}
 
 
 def predict(estimator, noise_model, *, n_samples: int, settle_s: float = 2.0,
             truth_rad_s: np.ndarray | None = None, swing: Swing | None = None,
-            specific_force_m_s2: np.ndarray | None = None) -> Prediction:
+            specific_force_m_s2: np.ndarray | None = None,
+            temp_swing_k: np.ndarray | float | None = None) -> Prediction:
     """Predict the metrics of a fitted estimator on a run (module docstring).
 
     Parameters
@@ -698,9 +811,10 @@ def predict(estimator, noise_model, *, n_samples: int, settle_s: float = 2.0,
         Fitted (``fit(layout, model, dt_s)``); must have a :meth:`linear_system`.
     noise_model : NoiseModel or NoiseSources
         The noise the run will have (usually the one the estimator was fitted with).
-        Its ``bandwidth`` filters are cascaded before the estimator
+        Its declared sensor filters are cascaded before the estimator
         (:func:`cascade`: noise and motion pass them, as simulated); its
-        ``g_sensitivity`` adds the bias k_i · f_i to the readings.
+        deterministic terms add their rate errors for the motion to the
+        readings (:func:`deterministic_error`).
     n_samples : int
         Samples in the run (T / dt).
     settle_s : float
@@ -714,7 +828,11 @@ def predict(estimator, noise_model, *, n_samples: int, settle_s: float = 2.0,
     specific_force_m_s2 : ndarray (n, N, 3), optional
         The specific force at each gyro, platform frame [m/s²]
         (:func:`gyroarray.sim.truth.specific_force`); default: the level table at
-        rest, [0, 0, g0] at every gyro. Used by ``g_sensitivity`` only.
+        rest, [0, 0, g0] at every gyro. Read by the force terms (g-sensitivity).
+    temp_swing_k : ndarray (n,) or float, optional
+        The temperature's departure from the calibration temperature [K], read by
+        the temperature terms; None: not stated (those effects are listed in
+        ``ignored``).
     """
     sys = estimator.linear_system()
     dt = float(estimator.dt_s_)
@@ -731,16 +849,24 @@ def predict(estimator, noise_model, *, n_samples: int, settle_s: float = 2.0,
         omega = np.asarray(omega, dtype=float)
         if omega.shape != (n, 3):
             raise InputError(f"truth_rad_s must have shape ({n}, 3), got {omega.shape}")
+    if specific_force_m_s2 is not None and np.shape(specific_force_m_s2) != (n, H.shape[0], 3):
+        raise InputError(f"specific_force_m_s2 must have shape ({n}, {H.shape[0]}, 3), "
+                         f"got {np.shape(specific_force_m_s2)}")
+    motion = Motion(omega_rad_s=omega, specific_force_m_s2=specific_force_m_s2, temp_swing_k=temp_swing_k)
+    errors, left_out = deterministic_error(noise, motion, n, H)
     bias = gsens = None
+    if errors:
+        parts = list(errors.values())
+        bias = parts[0] if len(parts) == 1 else np.sum(parts, axis=0)
+        if omega is None and not np.any(bias) and noise.g_sensitivity_rad_s_per_m_s2 is None:
+            bias = None                                # at rest nothing moves (gravity always acts)
     if noise.g_sensitivity_rad_s_per_m_s2 is not None:
-        from gyroarray.core.sensor import g_sensitivity_bias  # lazy: loads scipy.signal
-        f = (np.broadcast_to([0.0, 0.0, G0_M_S2], (n, H.shape[0], 3)) if specific_force_m_s2 is None
-             else np.asarray(specific_force_m_s2, dtype=float))
-        if f.shape != (n, H.shape[0], 3):
-            raise InputError(f"specific_force_m_s2 must have shape ({n}, {H.shape[0]}, 3), got {f.shape}")
-        bias = g_sensitivity_bias(noise.g_sensitivity_rad_s_per_m_s2, f)
+        f = motion.resolved(n, dt, H).specific_force_m_s2
+        assert f is not None                                         # resolved: always set
         gsens = g_sensitivity_error(noise.g_sensitivity_rad_s_per_m_s2, f, sys.dc_gain(),
                                     settle_start(n, dt, settle_s))
+    if left_out:
+        noise = replace(noise, ignored=tuple(sorted(set(noise.ignored) | set(left_out))))
     det = None
     if omega is not None or bias is not None:
         w = np.zeros((n, 3)) if omega is None else omega
@@ -769,15 +895,15 @@ def predict_system(sys, noise: NoiseSources, H: np.ndarray, *, n: int, settle_s:
     if n - k0 < 2:
         raise InputError(f"the run is too short: {n - k0} samples after the {settle_s:g} s start-up")
     nw = n - k0
-    raw = {"white": error_moments(sys, noise, n, k0, white=True, walk=False, gm=False),
-           "walk": error_moments(sys, noise, n, k0, white=False, walk=True, gm=False),
-           "gauss_markov": error_moments(sys, noise, n, k0, white=False, walk=False, gm=True)
+    raw = {WhiteTerm.source: error_moments(sys, noise, n, k0, white=True, walk=False, gm=False),
+           WalkTerm.source: error_moments(sys, noise, n, k0, white=False, walk=True, gm=False),
+           GaussMarkovTerm.source: error_moments(sys, noise, n, k0, white=False, walk=False, gm=True)
            if np.any(noise.gm_sigma_rad_s > 0) else None,
-           "flicker": flicker_moments(sys, noise.bi_rad_s, n, k0, dt)}
+           FlickerTerm.source: flicker_moments(sys, noise.bi_rad_s, n, k0, dt)}
     parts: dict[str, Moments] = {k: v for k, v in raw.items() if v is not None}
-    total = parts["white"]
+    total = parts[WhiteTerm.source]
     for key, m in parts.items():
-        if key != "white":
+        if key != WhiteTerm.source:
             total = total + m
     ms = np.diag(total.ms_window).copy()
     mean_sq = np.diag(total.sum_window) / nw ** 2
@@ -786,8 +912,8 @@ def predict_system(sys, noise: NoiseSources, H: np.ndarray, *, n: int, settle_s:
     if det_error is not None:
         e = np.asarray(det_error, dtype=float)
         w = e[k0:]
-        comps["motion"] = np.mean(w ** 2, axis=0)
-        ms = ms + comps["motion"]
+        comps[DeterministicTerm.source] = np.mean(w ** 2, axis=0)
+        ms = ms + comps[DeterministicTerm.source]
         mean_sq = mean_sq + np.mean(w, axis=0) ** 2
         angle_sq = angle_sq + (dt * e.sum(axis=0)) ** 2
     var = nw / (nw - 1.0) * (ms - mean_sq)
@@ -857,13 +983,13 @@ def channel_filter(kind: str, dt_s: float, bandwidth_hz: float | None = None,
     -----
     The single-input KF at bandwidth f has the closed form used here (the
     tests check it against the Riccati solution): its stable mode is the
-    low-pass pole λ of f (:func:`gyroarray.estimators._kalman.lowpass_pole`),
+    low-pass pole λ of f (:func:`gyroarray.estimators.kalman.lowpass_pole`),
     the observable sum ω + b has the prior variance P = r(1 − λ)/λ, so the
     summed increment variance is Q = P²/(P + r) = r(1 − λ)²/λ, q_ω·dt = Q − q_b,
     and the gain splits as K = (1 − λ)[κ, 1 − κ] with κ = q_ω·dt/Q, the DC gain
     of the rate estimate.
     """
-    from gyroarray.estimators._kalman import lowpass_pole  # lazy: loads numba
+    from gyroarray.estimators.kalman import lowpass_pole  # lazy: loads numba
     from gyroarray.estimators.base import LinearSystem  # lazy: loads numba
     one = np.ones((1, 1))
     if kind == "none":

@@ -14,8 +14,9 @@ class found here, plus
 Adding an effect is one new file: nothing else names it. The layer sits
 above ``gyroarray.analysis`` (statistics that know no effect) and below the
 simulator and the chains that use it (``gyroarray.sim``,
-``gyroarray.chain.compare``); the effects' fitting code is in
-``gyroarray.effects.fits``, the noise-model types in
+``gyroarray.chain.compare``); each effect's fit is in its own
+module (shared helpers: ``gyroarray.effects.fitting``; the faults are the
+subpackage ``gyroarray.effects.faults``), the noise-model types in
 ``gyroarray.effects.model``. The protocol an effect implements is
 :mod:`gyroarray.effects.protocol`; it needs nothing from this registry.
 """
@@ -36,7 +37,7 @@ from typing import Mapping, NoReturn
 
 from gyroarray.core.errors import InputError
 from gyroarray.core.plugins import EFFECTS_GROUP, installed
-from gyroarray.effects.protocol import RECORD_NEEDS, Effect, Kind, Param, Stage
+from gyroarray.effects.protocol import RECORD_NEEDS, SIM_NEEDS, Effect, Kind, Param, Stage
 
 __all__ = ["REGISTRY", "ENTRY_POINT_GROUP", "effect_names", "get_effect", "did_you_mean", "register",
            "unregister", "run_plugin_file", "effect_classes", "load_plugin", "installed_plugins"]
@@ -88,6 +89,12 @@ def _validate(cls: type[Effect], source: str) -> Effect:
         got: object = getattr(cls, attr, frozenset())
         if not isinstance(got, (frozenset, set, tuple)) or not set(got) <= set(RECORD_NEEDS):
             bad(f"{attr} must be a frozenset of {', '.join(RECORD_NEEDS)}, got {got!r}")
+    got = getattr(cls, "sim_needs", frozenset())
+    if not isinstance(got, (frozenset, set, tuple)) or not set(got) <= set(SIM_NEEDS):
+        bad(f"sim_needs must be a frozenset of {', '.join(SIM_NEEDS)}, got {got!r}")
+    axes = getattr(cls, "sweep_axes", ())
+    if not isinstance(axes, tuple) or not set(axes) <= {p.name for p in cls.params}:
+        bad(f"sweep_axes must be a tuple of its parameter names, got {axes!r}")
     if cls.simulate is Effect.simulate:
         bad("it has no simulate(state, act, streams)")
     try:
@@ -123,12 +130,13 @@ def effect_classes(module: ModuleType) -> list[type]:
 
 
 def _load_builtins() -> None:
-    for info in pkgutil.iter_modules(__path__):
-        if info.name.startswith("_"):
+    # subpackages too (the faults live in ``faults/``); a private module or package is skipped
+    for info in pkgutil.walk_packages(__path__, prefix=f"{__name__}."):
+        if any(part.startswith("_") for part in info.name.split(".")):
             continue
-        module = importlib.import_module(f"{__name__}.{info.name}")
+        module = importlib.import_module(info.name)
         for cls in effect_classes(module):
-            register(cls, source=f"gyroarray.effects.{info.name}")
+            register(cls, source=info.name)
 
 
 def installed_plugins() -> list[tuple[str, str]]:

@@ -6,6 +6,7 @@ import math
 
 from gyroarray.effects import _draw
 from gyroarray.effects.protocol import NoiseTermEffect, Param, Stage, unit_draws, with_term
+from gyroarray.effects.terms import WhiteTerm, spread
 from gyroarray.core.units import arw_deg_rt_h_to_rad_rt_s
 
 
@@ -31,6 +32,10 @@ class AngleRandomWalk(NoiseTermEffect):
 
     def placeholder(self):
         return {"n_deg_rt_h": 0.1}
+
+    def predictor_term(self, act, n_gyros):
+        """White rate noise of density N [rad/√s] (per sample N²/dt)."""
+        return WhiteTerm(spread(act, "n_rad_rt_s", n_gyros))
 
     def simulate(self, state, act, streams):
         ctx = state.ctx

@@ -8,12 +8,13 @@ from functools import partial
 import numpy as np
 from scipy import optimize
 
-from gyroarray.effects.fits.effect_fit import EffectFit
+from gyroarray.effects.fitting import EffectFit
 from gyroarray.analysis.psd_fit import EFFECTIVE_TESTS, filter_z, filtered_white_avar_ratio, fit_psd
-from gyroarray.effects.fits.regress import RWWhitener
+from gyroarray.analysis.gls import RWWhitener
 from gyroarray.effects import _draw
 from gyroarray.core.errors import InputError
 from gyroarray.effects.protocol import Param, RegressionEffect, Stage, explains_away, identity, with_cols
+from gyroarray.effects.terms import SensorFilter, spread
 from gyroarray.core.sensor import bandwidth_filter
 
 #: Lowest cut-off a model may give [Hz]: a time constant of about two days, beyond any gyro's
@@ -93,6 +94,10 @@ class Bandwidth(RegressionEffect):
         (z up to 6.6), while a quantization after the filter was not seen at all."""
         fc, order = float(entry.params["cutoff_hz"]), int(entry.params["order"])
         return {"white_shape": partial(filtered_white_avar_ratio, fc, order, ctx.dt)}
+
+    def predictor_term(self, act, n_gyros):
+        """A modifier: every reading passes the gyro's own filter (cut-off [Hz], order)."""
+        return SensorFilter(spread(act, "cutoff_hz", n_gyros), spread(act, "order", n_gyros))
 
     def simulate(self, state, act, streams):
         try:

@@ -5,6 +5,7 @@ from __future__ import annotations
 from gyroarray.effects import _draw
 from gyroarray.core.physics import flicker_noise
 from gyroarray.effects.protocol import NoiseTermEffect, Param, Stage, with_term
+from gyroarray.effects.terms import FlickerTerm, spread
 from gyroarray.core.units import deg_h_to_rad_s
 
 
@@ -21,6 +22,10 @@ class BiasInstability(NoiseTermEffect):
     params = (Param("b_deg_h", "deg/h", "b_rad_s", deg_h_to_rad_s, lo=0.0,
                     doc="bias instability B: flicker noise, ADEV plateau 0.664·B"),)
     doc = "bias instability (1/f flicker rate noise)"
+
+    def predictor_term(self, act, n_gyros):
+        """Flicker noise of coefficient B [rad/s], independent between gyros."""
+        return FlickerTerm(spread(act, "b_rad_s", n_gyros))
 
     def simulate(self, state, act, streams):
         ctx = state.ctx

@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from gyroarray.effects.fits.effect_fit import EffectFit
+from gyroarray.effects.fitting import EffectFit
 from gyroarray.effects.protocol import Param, RegressionEffect, Stage, with_term
 from gyroarray.core.units import deg_h_to_rad_s, rad_s_to_deg_h
 

@@ -6,10 +6,11 @@ import math
 
 import numpy as np
 
-from gyroarray.effects.fits.effect_fit import EffectFit, chi2_to_z
-from gyroarray.effects.fits.regress import NotIdentifiableError, gls_rw
+from gyroarray.effects.fitting import EffectFit, chi2_to_z
+from gyroarray.analysis.gls import NotIdentifiableError, gls_rw
 from gyroarray.effects import _draw
 from gyroarray.effects.protocol import Param, RegressionEffect, Stage, explains_away, with_term
+from gyroarray.effects.terms import ForceTerm, spread
 from gyroarray.core.sensor import g_sensitivity_bias
 from gyroarray.core.units import deg_s_per_g_to_rad_s_per_m_s2, rad_s_per_m_s2_to_deg_s_per_g
 
@@ -28,7 +29,7 @@ class GSensitivity(RegressionEffect):
     :mod:`gyroarray.core.sensor`).
 
     Fit: the residual regressed on the three components of f_k under ARW +
-    a random-walk bias (:func:`gyroarray.effects.fits.regress.gls_rw`); f_0 from
+    a random-walk bias (:func:`gyroarray.analysis.gls.gls_rw`); f_0 from
     the record's ``acc_*`` columns, else gravity through the attitude
     integrated from ``ref_*`` (level, z up at t = 0), the lever-arm terms
     from ``positions_m``. Components that do not change over the record
@@ -42,12 +43,17 @@ class GSensitivity(RegressionEffect):
     order = 19
     stage = Stage.ADD
     needs = frozenset({"acc"})
+    sim_needs = frozenset({"acc"})        # the specific force at each gyro (gravity through the attitude)
     slow = True
     rivals = ("earth_rate", "misalignment")
     channel = "acc"
     params = (Param("deg_s_per_g", "(deg/s)/g", "coeff_rad_s_per_m_s2", _g_sens_si, kind="vector",
                     doc="bias = deg_s_per_g · f_k / g0, f_k the specific force at the gyro (platform frame)"),)
     doc = "bias proportional to the specific force at the gyro"
+
+    def predictor_term(self, act, n_gyros):
+        """A deterministic error k_i·f_i for the stated specific force at each gyro."""
+        return ForceTerm(spread(act, "coeff_rad_s_per_m_s2", n_gyros, (3,)))
 
     def simulate(self, state, act, streams):
         f = state.ctx.specific_force_m_s2[:, act.cols]                    # f_k, (n, m, 3)

@@ -28,6 +28,12 @@ definiteness, a scalar ρ's lower bound −1/(N−1)) is checked by
 call it). Each problem is one :class:`~gyroarray.core.errors.InputError` naming the
 file, the entry (``effects[i]``, 0-based as in the TOML array) and the key.
 
+An optional ``[array]`` table (:class:`ArrayNoise`) carries what is between
+the gyros of a recorded array: the correlation matrices of the white and slow
+parts, the per-gyro levels that scale them, and the lines several gyros
+share. Files without it read as before; a file with it round-trips exactly
+(``docs/model-format.md``).
+
 Models and entries are frozen; parameter mappings are read-only;
 :meth:`NoiseModel.with_effect` returns a new model.
 """
@@ -51,10 +57,10 @@ from gyroarray.effects.protocol import Effect, Param
 from gyroarray.core.limits import MAX_RATE_DEG_S
 from gyroarray.core.tomlio import load_toml
 
-__all__ = ["ModelEntry", "NoiseModel"]
+__all__ = ["ModelEntry", "NoiseModel", "ArrayNoise"]
 
 _NUMBER = (int, float, np.integer, np.floating)
-_TOP_KEYS = ("effects", "description")
+_TOP_KEYS = ("effects", "description", "array")
 
 
 def _is_number(v) -> bool:
@@ -327,6 +333,274 @@ def _entry_lines(text: str, n: int) -> tuple[int | None, ...]:
     return (None,) * n
 
 
+#: Keys of the ``[array]`` table (:class:`ArrayNoise`).
+ARRAY_KEYS = ("gyros", "white_n_deg_rt_h", "white_correlation", "walk_tau_s", "walk_adev_deg_h",
+              "walk_correlation", "shared", "notes", "sigma")
+_ARRAY_MATRICES = ("white_correlation", "walk_correlation")
+_ARRAY_VECTORS = ("white_n_deg_rt_h", "walk_adev_deg_h")
+_SHARED_KEYS = ("f_hz", "band_hz", "gyros", "coherence")
+#: Largest asymmetry, and departure of a diagonal from 1, of a correlation read from a file [-].
+ARRAY_MATRIX_TOL = 1e-9
+
+
+def _array_error(message: str, key: str, where) -> InputError:
+    """An error about ``array.key``, located by ``where`` = (file, TomlDoc or None)."""
+    file, doc = where
+    column = f"array.{key}" if key else "array"
+    line = doc.line_of(column) if doc is not None else None
+    return InputError(f"[array] {message}", file=file, line=line, column=column)
+
+
+def _gyro_list(value, key: str, where) -> tuple[int, ...]:
+    if not isinstance(value, (list, tuple)) or not value or not all(
+            isinstance(g, (int, np.integer)) and not isinstance(g, (bool, np.bool_)) and g >= 1 for g in value):
+        raise _array_error(f"{key} must be a non-empty array of gyro numbers (integers >= 1), got {value!r}",
+                           key, where)
+    if len(set(int(g) for g in value)) != len(value):
+        raise _array_error(f"{key} names a gyro twice: {list(value)!r}", key, where)
+    return tuple(int(g) for g in value)
+
+
+def _vector(value, key: str, n: int, where) -> tuple[float, ...]:
+    if not isinstance(value, (list, tuple)) or len(value) != n or not all(
+            _is_number(v) and math.isfinite(v) and v >= 0 for v in value):
+        raise _array_error(f"{key} must be {n} non-negative numbers (one per gyro of 'gyros'), got {value!r}",
+                           key, where)
+    return tuple(float(v) for v in value)
+
+
+def _matrix(value, key: str, n: int, where) -> tuple[tuple[float, ...], ...]:
+    """A correlation matrix n×n: numbers, |ρ| <= 1, unit diagonal, symmetric, positive definite."""
+    if not isinstance(value, (list, tuple)) or len(value) != n or any(
+            not isinstance(r, (list, tuple)) or len(r) != n for r in value):
+        raise _array_error(f"{key} must be a {n}x{n} matrix (one row and column per gyro of 'gyros'), "
+                           f"got {value!r}", key, where)
+    for i, row in enumerate(value):
+        for j, v in enumerate(row):
+            if not (_is_number(v) and math.isfinite(v)):
+                raise _array_error(f"{key}[{i}][{j}] must be a finite number, got {v!r}", key, where)
+            if abs(v) > 1.0:
+                raise _array_error(f"{key}[{i}][{j}] = {v!r} is not a correlation (|ρ| <= 1)", key, where)
+    a = np.array(value, dtype=float)
+    bad = np.flatnonzero(np.abs(np.diag(a) - 1.0) > ARRAY_MATRIX_TOL)
+    if bad.size:
+        i = int(bad[0])
+        raise _array_error(f"{key}[{i}][{i}] = {float(a[i, i])!r}: a correlation matrix has 1 on its diagonal",
+                           key, where)
+    asym = np.abs(a - a.T)
+    if asym.max() > ARRAY_MATRIX_TOL:
+        i, j = np.unravel_index(int(np.argmax(asym)), a.shape)
+        raise _array_error(f"{key} is not symmetric: [{i}][{j}] = {float(a[i, j])!r} but [{j}][{i}] = "
+                           f"{float(a[j, i])!r} (a correlation matrix equals its transpose)",
+                           key, where)
+    low = float(np.linalg.eigvalsh(a)[0])
+    if low <= 0.0:
+        raise _array_error(f"{key} is not positive definite (smallest eigenvalue {low:.3g}): regularise it "
+                           "(gyroarray's fit clips or shrinks it) or leave gyros out", key, where)
+    return tuple(tuple(float(v) for v in row) for row in value)
+
+
+@dataclass(frozen=True)
+class ArrayNoise:
+    """The ``[array]`` table of a noise model: the array's cross-covariance, as fitted.
+
+    Per-gyro terms stay in the effect entries (``gyro = k``); this table adds what is
+    between gyros: the correlation of the white part and of the slow part and the lines they
+    share. A covariance is ``Σ_ij = ρ_ij s_i s_j`` with the per-gyro scales s (white: ARW
+    ``white_n_deg_rt_h`` [deg/√h]; slow: Allan deviation ``walk_adev_deg_h`` [deg/h] at
+    ``walk_tau_s``). The simulator does not read it (its correlation is the ``correlation``
+    effect). Format: ``docs/model-format.md``.
+
+    Parameters
+    ----------
+    gyros : tuple of int
+        The 1-based gyros the rows and columns are, in order.
+    white_n_deg_rt_h : tuple of float, optional
+        White level (ARW) of each gyro [deg/√h].
+    white_correlation : tuple of tuple of float, optional
+        Correlation of the white part [-], symmetric, unit diagonal, positive definite.
+    walk_tau_s : float, optional
+        Averaging time at which the slow part was estimated [s] (needed with a walk term).
+    walk_adev_deg_h : tuple of float, optional
+        Allan deviation of each gyro's slow part at ``walk_tau_s`` (beyond white) [deg/h].
+    walk_correlation : tuple of tuple of float, optional
+        Correlation of the slow part [-] (0 for gyros where it was not seen).
+    shared : tuple of Mapping
+        Common-mode lines: ``{f_hz, band_hz = [lo, hi], gyros = [...], coherence}``.
+    notes : tuple of str
+        How the matrices were made (regularisation, what was left out).
+    sigma : Mapping
+        Optional 1σ of the matrices and vectors above, same shapes, same keys.
+    """
+
+    gyros: tuple = ()
+    white_n_deg_rt_h: tuple | None = None
+    white_correlation: tuple | None = None
+    walk_tau_s: float | None = None
+    walk_adev_deg_h: tuple | None = None
+    walk_correlation: tuple | None = None
+    shared: tuple = ()
+    notes: tuple = ()
+    sigma: Mapping[str, Any] = field(default_factory=dict)
+
+    @classmethod
+    def from_dict(cls, data, *, file: str | None = None, doc=None) -> "ArrayNoise":
+        """Read and check an ``[array]`` table (parsed TOML).
+
+        Raises
+        ------
+        InputError
+            Unknown key, wrong size, asymmetric or not positive definite matrix, |ρ| > 1, a
+            bad gyro list; naming the file, the line (when ``doc``, the file's
+            :class:`~gyroarray.core.tomlio.TomlDoc`, is given) and ``array.KEY``.
+        """
+        where = (file, doc)
+        if not isinstance(data, Mapping):
+            raise _array_error(f"must be a table, got {_type_name(data)}", "", where)
+        for key in data:
+            if key not in ARRAY_KEYS:
+                raise _array_error(f"unknown key {key!r}{did_you_mean(key, ARRAY_KEYS)} (the table has: "
+                                   f"{', '.join(ARRAY_KEYS)})", str(key), where)
+        if "gyros" not in data:
+            raise _array_error("needs 'gyros', the gyro numbers of its rows: gyros = [1, 2, ...]", "gyros", where)
+        gyros = _gyro_list(data["gyros"], "gyros", where)
+        n = len(gyros)
+        out: dict[str, Any] = {"gyros": gyros}
+        for key in _ARRAY_VECTORS:
+            if key in data:
+                out[key] = _vector(data[key], key, n, where)
+        for key in _ARRAY_MATRICES:
+            if key in data:
+                out[key] = _matrix(data[key], key, n, where)
+        if "walk_tau_s" in data:
+            tau = data["walk_tau_s"]
+            if not (_is_number(tau) and math.isfinite(tau) and tau > 0):
+                raise _array_error(f"walk_tau_s must be a number > 0 [s], got {tau!r}", "walk_tau_s", where)
+            out["walk_tau_s"] = float(tau)
+        elif "walk_adev_deg_h" in out or "walk_correlation" in out:
+            raise _array_error("a walk term needs walk_tau_s, the averaging time it was estimated at [s]",
+                               "walk_tau_s", where)
+        if "shared" in data:
+            out["shared"] = _shared(data["shared"], gyros, where)
+        if "notes" in data:
+            notes = data["notes"]
+            if not isinstance(notes, list) or not all(isinstance(s, str) for s in notes):
+                raise _array_error(f"notes must be an array of strings, got {notes!r}", "notes", where)
+            out["notes"] = tuple(notes)
+        if "sigma" in data:
+            out["sigma"] = _array_sigma(data["sigma"], out, n, where)
+        return cls(**out)
+
+    def __post_init__(self):
+        # checked here too, so that a table made in code writes a file that reads back
+        where = (None, None)
+        plain = {k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in
+                 (("gyros", self.gyros),) + tuple((k, getattr(self, k)) for k in _ARRAY_VECTORS + _ARRAY_MATRICES)}
+        object.__setattr__(self, "gyros", _gyro_list(plain["gyros"], "gyros", where))
+        n = len(self.gyros)
+        for key in _ARRAY_VECTORS:
+            if plain[key] is not None:
+                object.__setattr__(self, key, _vector(plain[key], key, n, where))
+        for key in _ARRAY_MATRICES:
+            if plain[key] is not None:
+                object.__setattr__(self, key, _matrix(plain[key], key, n, where))
+        object.__setattr__(self, "shared", tuple(MappingProxyType(dict(s)) for s in self.shared))
+        object.__setattr__(self, "notes", tuple(self.notes))
+        object.__setattr__(self, "sigma", MappingProxyType(dict(self.sigma)))
+
+    def __hash__(self):
+        return hash((self.gyros, self.white_correlation, self.walk_correlation))
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain dict, keys in file order, absent terms left out."""
+        out: dict[str, Any] = {"gyros": list(self.gyros)}
+        for key in ("white_n_deg_rt_h", "white_correlation", "walk_tau_s", "walk_adev_deg_h",
+                    "walk_correlation"):
+            value = getattr(self, key)
+            if value is not None:
+                out[key] = _plain(value)
+        if self.shared:
+            out["shared"] = [{k: _plain(v) for k, v in s.items()} for s in self.shared]
+        if self.notes:
+            out["notes"] = list(self.notes)
+        if self.sigma:
+            out["sigma"] = {k: _plain(v) for k, v in self.sigma.items()}
+        return out
+
+    def toml_lines(self) -> list[str]:
+        """The ``[array]`` table as TOML lines (one matrix row per line)."""
+        d = self.to_dict()
+        sigma = d.pop("sigma", None)
+        lines = ["", "[array]"]
+        for key, value in d.items():
+            if key in _ARRAY_MATRICES:
+                lines.append(f"{key} = [")
+                lines += [f"    {_toml_value(row)}," for row in value]
+                lines.append("]")
+            elif key in ("shared", "notes"):
+                lines.append(f"{key} = [")
+                lines += [f"    {_toml_value(item)}," for item in value]
+                lines.append("]")
+            else:
+                lines.append(f"{key} = {_toml_value(value)}")
+        if sigma:
+            lines += ["", "[array.sigma]"] + [f"{k} = {_toml_value(v)}" for k, v in sigma.items()]
+        return lines
+
+
+def _shared(value, gyros: tuple, where) -> tuple:
+    if not isinstance(value, list):
+        raise _array_error(f"shared must be an array of tables {{f_hz, band_hz, gyros, coherence}}, got "
+                           f"{_type_name(value)}", "shared", where)
+    out = []
+    for i, item in enumerate(value):
+        key = f"shared[{i}]"
+        if not isinstance(item, Mapping) or set(item) - set(_SHARED_KEYS) or "f_hz" not in item \
+                or "gyros" not in item:
+            raise _array_error(f"{key} must be a table with f_hz and gyros (optional band_hz, coherence), "
+                               f"got {item!r}", "shared", where)
+        f = item["f_hz"]
+        if not (_is_number(f) and math.isfinite(f) and f > 0):
+            raise _array_error(f"{key}.f_hz must be a frequency > 0 [Hz], got {f!r}", "shared", where)
+        g = _gyro_list(item["gyros"], f"{key}.gyros", where)
+        if set(g) - set(gyros):
+            raise _array_error(f"{key}.gyros {list(g)} names gyros not in 'gyros'", "shared", where)
+        entry: dict[str, Any] = {"f_hz": float(f)}
+        if "band_hz" in item:
+            b = item["band_hz"]
+            if not (isinstance(b, list) and len(b) == 2 and all(_is_number(v) and math.isfinite(v) for v in b)
+                    and 0 <= b[0] <= f <= b[1]):
+                raise _array_error(f"{key}.band_hz must be [lo, hi] [Hz] around f_hz, got {b!r}", "shared", where)
+            entry["band_hz"] = tuple(float(v) for v in b)
+        entry["gyros"] = g
+        if "coherence" in item:
+            c = item["coherence"]
+            if not (_is_number(c) and 0 <= c <= 1):
+                raise _array_error(f"{key}.coherence must be in [0, 1], got {c!r}", "shared", where)
+            entry["coherence"] = float(c)
+        out.append(MappingProxyType(entry))
+    return tuple(out)
+
+
+def _array_sigma(value, have: dict, n: int, where) -> dict:
+    if not isinstance(value, Mapping):
+        raise _array_error(f"sigma must be a table, got {_type_name(value)}", "sigma", where)
+    out = {}
+    for key, v in value.items():
+        if key not in have or key not in _ARRAY_MATRICES + _ARRAY_VECTORS:
+            raise _array_error(f"sigma.{key}: a 1σ needs its term ({', '.join(k for k in _ARRAY_MATRICES + _ARRAY_VECTORS if k in have) or 'none here'})",
+                               f"sigma.{key}", where)
+        rows = v if key in _ARRAY_MATRICES else [v]
+        if not isinstance(v, list) or len(rows) != (n if key in _ARRAY_MATRICES else 1) or any(
+                not isinstance(r, list) or len(r) != n or not all(_is_number(c) and math.isfinite(c) and c >= 0
+                                                                  for c in r) for r in rows):
+            raise _array_error(f"sigma.{key} must have the shape of {key} with non-negative numbers, got {v!r}",
+                               f"sigma.{key}", where)
+        out[key] = (tuple(tuple(float(c) for c in r) for r in rows) if key in _ARRAY_MATRICES
+                    else tuple(float(c) for c in v))
+    return out
+
+
 @dataclass(frozen=True)
 class NoiseModel:
     """A noise model: the effects of a gyro array, one entry each.
@@ -342,12 +616,16 @@ class NoiseModel:
     lines : tuple of (int or None)
         Line of each entry in that file (for messages; not compared; empty
         when unknown).
+    array : ArrayNoise, optional
+        The ``[array]`` table: correlations between gyros of the white and
+        slow parts, shared lines (None: the file has none).
     """
 
     entries: tuple[ModelEntry, ...] = ()
     description: str = ""
     source: str | None = field(default=None, compare=False)
     lines: tuple = field(default=(), compare=False, repr=False)
+    array: ArrayNoise | None = None
 
     def __post_init__(self):
         entries = tuple(self.entries)
@@ -363,6 +641,8 @@ class NoiseModel:
         if not isinstance(self.description, str):
             raise InputError(f"description must be a string, got {_type_name(self.description)}",
                              file=self.source, column="description")
+        if self.array is not None and not isinstance(self.array, ArrayNoise):
+            raise TypeError(f"array must be an ArrayNoise, got {type(self.array).__name__}")
         object.__setattr__(self, "entries", entries)
 
     # -- reading and writing --------------------------------------------
@@ -385,7 +665,7 @@ class NoiseModel:
             model (naming ``effects[i]`` and the key).
         """
         if isinstance(source, Mapping):
-            data, file, text = source, None, ""
+            data, file, text, doc = source, None, "", None
         else:
             file = os.fspath(source)
             doc = load_toml(file, "noise model")
@@ -419,7 +699,9 @@ class NoiseModel:
                 entries.append(ModelEntry(item["effect"], item.get("gyro"), params, item.get("sigma", {})))
             except InputError as err:
                 raise _located(err, i, file, lines[i]) from None
-        model = cls(tuple(entries), description=data.get("description", ""), source=file, lines=lines)
+        array = ArrayNoise.from_dict(data["array"], file=file, doc=doc) if "array" in data else None
+        model = cls(tuple(entries), description=data.get("description", ""), source=file, lines=lines,
+                    array=array)
         if n_gyros is not None:
             model.check(n_gyros)
         return model
@@ -441,6 +723,8 @@ class NoiseModel:
                 body = ", ".join(f"{k} = {_toml_value(v)}" for k, v in d.items())
                 lines.append(f"    {{{body}}},")
             lines.append("]")
+        if self.array is not None:
+            lines += self.array.toml_lines()
         return "\n".join(lines) + "\n"
 
     # -- new models from old ----------------------------------------------
@@ -448,14 +732,20 @@ class NoiseModel:
         """A new model with ``entry`` appended (this one is unchanged)."""
         if not isinstance(entry, ModelEntry):
             raise TypeError(f"entry must be a ModelEntry, got {type(entry).__name__}")
-        return NoiseModel(self.entries + (entry,), description=self.description, source=self.source)
+        return NoiseModel(self.entries + (entry,), description=self.description, source=self.source,
+                          array=self.array)
 
     def without_effect(self, effect: str, gyro: int | None = None) -> "NoiseModel":
         """A new model without the entry for (effect, gyro); KeyError if there is none."""
         kept = tuple(e for e in self.entries if (e.effect, e.gyro) != (effect, gyro))
         if len(kept) == len(self.entries):
             raise KeyError((effect, gyro))
-        return NoiseModel(kept, description=self.description, source=self.source)
+        return NoiseModel(kept, description=self.description, source=self.source, array=self.array)
+
+    def with_array(self, array: ArrayNoise | None) -> "NoiseModel":
+        """A new model with the ``[array]`` table ``array`` (None: without one)."""
+        return NoiseModel(self.entries, description=self.description, source=self.source, lines=self.lines,
+                          array=array)
 
     # -- checks needing N -------------------------------------------------
     def check(self, n_gyros: int) -> None:
@@ -463,7 +753,7 @@ class NoiseModel:
 
         ``gyro`` <= N, and each effect's own N-dependent rules (correlation
         matrix N×N, symmetric, unit diagonal, positive definite; scalar ρ in
-        (−1/(N−1), 1)).
+        (−1/(N−1), 1)), and the ``[array]`` table's gyros <= N.
 
         Raises
         ------
@@ -484,6 +774,9 @@ class NoiseModel:
                 except InputError as err:
                     raise _located(InputError(f"{e.label}: {err.message}", column=err.column),
                                    i, self.source, self.entry_line(i)) from None
+        if self.array is not None and max(self.array.gyros) > n_gyros:
+            raise InputError(f"[array] gyros {list(self.array.gyros)}: gyro {max(self.array.gyros)} does not "
+                             f"exist: the array has {n_gyros} gyros", file=self.source, column="array.gyros")
 
     def entry_line(self, index: int) -> int | None:
         """Line of entry ``index`` in the file the model was read from, or None."""

@@ -14,7 +14,7 @@ package's ``gyroarray.effects`` entry point, or a file given with
   of the chain's state;
 * its fit side: :meth:`Effect.fit` estimates its parameters on a residual
   (:class:`FitContext` carries the record and the calibrated noise) and
-  returns an :class:`~gyroarray.effects.fits.effect_fit.EffectFit` whose ``z`` is
+  returns an :class:`~gyroarray.effects.fitting.EffectFit` whose ``z`` is
   ≈ N(0, 1) when the effect is absent; :meth:`Effect.test` is the candidate
   test when the model does not have it;
 * how it enters the calibrated model: :meth:`Effect.predict` (what a
@@ -47,11 +47,12 @@ from gyroarray.core.errors import InputError
 from gyroarray.core.formatting import sig
 
 if TYPE_CHECKING:                                    # pragma: no cover - types only
-    from gyroarray.effects.fits.effect_fit import EffectFit
+    from gyroarray.effects.fitting import EffectFit
     from gyroarray.effects.model import ModelEntry, NoiseModel
+    from gyroarray.effects.terms import PredictorTerm
 
 __all__ = ["Stage", "Kind", "NEEDS", "RECORD_NEEDS", "Param", "Effect", "SimContext", "ChainState", "Active", "Mixer",
-           "WhiteShaping", "Streams", "FitContext", "RegressionEffect", "NoiseTermEffect", "same_noise_preference",
+           "SIM_NEEDS", "WhiteShaping", "Streams", "FitContext", "RegressionEffect", "NoiseTermEffect", "same_noise_preference",
            "explains_away", "no_longer_seen", "Explained", "terminal_cut", "with_term", "with_cols", "unit_draws", "identity"]
 
 #: What an effect may need from a record: the reference rates, a part where the
@@ -62,6 +63,11 @@ NEEDS = ("ref", "motion", "temp", "site", "acc", "static", "positions")
 #: The part of :data:`NEEDS` that is data a record holds or lacks (columns, sidecar
 #: tables), which a model entry may need (``Effect.model_needs``, ``Effect.predict_needs``).
 RECORD_NEEDS = ("ref", "temp", "site", "acc", "positions")
+
+#: What an effect's ``simulate`` may read from :class:`SimContext` beyond the rates
+#: (``Effect.sim_needs``): the temperature (``temp_c``), the site, the platform attitude,
+#: the specific force at the gyros (gravity through the attitude unless the truth gives it).
+SIM_NEEDS = ("temp", "site", "attitude", "acc")
 
 
 def identity(x):
@@ -463,6 +469,17 @@ class Effect:
     channel : str or None
         The record channel its residual follows (``rate``, ``other``,
         ``rate2``, ``accel``, ``temp``, ``time``, ``acc``), for the report.
+    sim_needs : frozenset of str
+        What its ``simulate`` reads from :class:`SimContext` beyond the rates
+        (:data:`SIM_NEEDS`): a run generator makes these inputs for a model
+        with such an entry (the lab builds the site and the attitude), and a
+        scenario without a ``[temperature]`` table refuses an entry needing
+        ``temp``.
+    sweep_axes : tuple of str
+        Parameters a sweep varies as axes of their own, among the sweep's
+        axes (``gyroarray.sweep.sweep.PARAM_KEYS``: ``rho_arw``, ``rho_rrw``):
+        a point's value replaces that parameter of the model's array-wide
+        entry of this effect, one is added when the model has none.
     scored : tuple of str or None
         Parameters a fit recovers (None: all), for scoring.
     doc : str
@@ -478,6 +495,8 @@ class Effect:
     needs: ClassVar[frozenset] = frozenset()
     model_needs: ClassVar[frozenset] = frozenset()
     predict_needs: ClassVar[frozenset] = frozenset()
+    sim_needs: ClassVar[frozenset] = frozenset()
+    sweep_axes: ClassVar[tuple[str, ...]] = ()
     rivals: ClassVar[tuple[str, ...]] = ()
     baseline: ClassVar[bool] = False
     baseline_term: ClassVar[str | None] = None
@@ -515,6 +534,15 @@ class Effect:
 
         Raises :class:`~gyroarray.core.errors.InputError` with ``column`` set to the
         offending key. The bounds of single parameters are checked before.
+        """
+
+    def check_run(self, params: Mapping[str, Any], sample_rate_hz: float, duration_s: float) -> None:
+        """Rules a scenario entry's parameters [spec units] must meet in a simulated run of
+        ``sample_rate_hz`` [Hz] lasting ``duration_s`` [s] (a frequency below Nyquist), checked
+        when the scenario is read, before :meth:`check_record`.
+
+        Raises :class:`~gyroarray.core.errors.InputError` with ``column`` set to the
+        offending key, its message in the scenario's words; the default has no such rule.
         """
 
     def check_record(self, params: Mapping[str, Any], dt_s: float, span_s: float) -> None:
@@ -613,8 +641,29 @@ class Effect:
     def noise_term(self, ctx: "FitContext", entry: "ModelEntry") -> dict:
         """For an effect in the model: what it changes in its gyro's Allan fit (a term of the
         baseline, ``terms``/``gm_tau_s``; the white column's shape, ``white_shape(m)``, see
-        :func:`~gyroarray.effects.fits.stochastic_fit.fit_gyro_noise`)."""
+        :func:`~gyroarray.effects.stochastic.fit_gyro_noise`)."""
         return {}
+
+    def predictor_term(self, act: Active, n_gyros: int) -> "PredictorTerm | None":
+        """What this effect contributes to the design predictor and the estimators' noise.
+
+        Parameters
+        ----------
+        act : Active
+            The model's entries of this effect resolved on an array of ``n_gyros``
+            gyros (SI parameters per gyro of ``act.cols``; the values themselves for an
+            array-wide effect); :func:`gyroarray.effects.terms.spread` puts one on every gyro.
+        n_gyros : int
+
+        Returns
+        -------
+        PredictorTerm or None
+            A term of :mod:`gyroarray.effects.terms` (white, walk, flicker or Gauss–Markov
+            noise, a correlation or sensor-filter modifier, or a deterministic rate error
+            for a stated motion); None (the default): the predictor leaves the effect out
+            and lists it in ``ignored``.
+        """
+        return None
 
     def exclude(self, ctx: "FitContext", entry: "ModelEntry") -> np.ndarray | None:
         """Samples (bool, n) the regressions should leave out with this entry in the model."""
@@ -876,7 +925,7 @@ class RegressionEffect(Effect):
 
     Subclasses write :meth:`regress`; the fit reads column ``gyro`` of the
     residual with that gyro's white and random-walk variances (an exact GLS
-    under ARW + a random-walk bias, :func:`gyroarray.effects.fits.regress.gls_rw`).
+    under ARW + a random-walk bias, :func:`gyroarray.analysis.gls.gls_rw`).
     """
 
     kind: ClassVar[Kind] = Kind.DETERMINISTIC

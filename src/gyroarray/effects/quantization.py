@@ -36,6 +36,12 @@ class Quantization(NoiseTermEffect):
                     doc="angle quantization Q of σ² = 3Q²/τ² (step √12·Q)"),)
     doc = "angle quantization of the output"
 
+    def predictor_term(self, act, n_gyros):
+        """None: its noise (e_k − e_{k−1})/dt is differenced white noise, whose spectrum
+        vanishes at DC and whose angle error stays bounded (±q): no white, walk, flicker or
+        Gauss–Markov term is that process, so the predictor lists it as ignored."""
+        return None
+
     def simulate(self, state, act, streams):
         ctx = state.ctx
         half = math.sqrt(3.0) * np.asarray(act.p["q_rad"], dtype=float)   # q/2 = √3·Q

@@ -8,6 +8,7 @@ import numpy as np
 
 from gyroarray.effects import _draw
 from gyroarray.effects.protocol import NoiseTermEffect, Param, Stage, unit_draws, with_term
+from gyroarray.effects.terms import WalkTerm, spread
 from gyroarray.core.units import rrw_deg_h_rt_h_to_rad_s_rt_s
 
 
@@ -29,6 +30,10 @@ class RateRandomWalk(NoiseTermEffect):
 
     def placeholder(self):
         return {"k_deg_h_rt_h": 10.0}
+
+    def predictor_term(self, act, n_gyros):
+        """A rate random walk of coefficient K [rad/s/√s] (increments K²·dt)."""
+        return WalkTerm(spread(act, "k_rad_s_rt_s", n_gyros))
 
     def simulate(self, state, act, streams):
         ctx = state.ctx

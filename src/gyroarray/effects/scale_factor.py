@@ -2,9 +2,15 @@
 
 from __future__ import annotations
 
-from gyroarray.effects.fits.regress import fit_scale_and_nonlinearity, fit_scale_factor
+import numpy as np
+
+from gyroarray.analysis.gls import gls_rw, GLSFit, NotIdentifiableError
+from gyroarray.core.units import per_rad_s_to_per_deg_s, rad_s_to_deg_s, ratio_to_ppm
+from gyroarray.effects.fitting import (as_vector, EffectFit, fit_extra, not_identifiable, num, pm,
+                                       projected_rate, Z_EVIDENT, z_two_sided)
 from gyroarray.effects import _draw
 from gyroarray.effects.protocol import Param, RegressionEffect, Stage, with_term
+from gyroarray.effects.terms import ScaleTerm, spread
 from gyroarray.core.units import ppm_to_ratio
 
 
@@ -21,6 +27,11 @@ class ScaleFactor(RegressionEffect):
     params = (Param("ppm", "ppm", "ratio", ppm_to_ratio, lo=-1e6, lo_open=True,
                     doc="scale-factor error: output = (1 + ppm·1e-6)·input"),)
     doc = "scale-factor error"
+
+    def predictor_term(self, act, n_gyros):
+        """A deterministic error s_i·(h_i·ω) for the stated body rate (the nominal axis; the
+        product with a misalignment is second order)."""
+        return ScaleTerm(spread(act, "ratio", n_gyros))
 
     def simulate(self, state, act, streams):
         return with_term(state, act.cols, act.p["ratio"] * state.u[:, act.cols])          # s·u
@@ -46,3 +57,152 @@ class ScaleFactor(RegressionEffect):
 
     def example(self, rng, n_gyros, max_rate_deg_s):
         return _draw.gyro(rng, n_gyros), {"ppm": _draw.u(rng, 1000.0, 8000.0, True) * rng.choice([-1, 1])}
+
+
+# -- fit ----------------------------------------------------------------------------------
+# -- scale factor and nonlinearity ---------------------------------------------
+
+def fit_scale_factor(e, omega_ref_rad_s, h, time_s, dt_s: float, r: float, q: float, gyro: int,
+                     *, use=None, instrument=None) -> EffectFit:
+    """Scale-factor error: residual proportional to the rate about the axis.
+
+    Parameters
+    ----------
+    e : array_like, shape (n,)
+        Residual y − h·ω_ref [rad/s].
+    omega_ref_rad_s : array_like, shape (n, 3)
+        Platform-frame reference rate [rad/s].
+    h : array_like, shape (3,)
+        Nominal unit sensitive axis [-].
+    time_s : array_like, shape (n,)
+        Sample times [s] (uniform; only its length is used here).
+    dt_s : float
+        Sample step [s] (not used here; the common signature).
+    r : float
+        ARW variance per sample, N²/dt [rad²/s²].
+    q : float
+        RRW increment variance per sample, K²·dt [rad²/s²].
+    gyro : int
+        1-based gyro number (for the result).
+    use : array_like of bool, shape (n,), optional
+        Samples to include (:func:`~gyroarray.analysis.gls.gls_rw`).
+    instrument : array_like, shape (n, 3), optional
+        The reference rate smoothed [rad/s]: a noisy reference (errors in
+        variables) is fitted by instrumental variables, the columns read from
+        ``omega_ref_rad_s`` instrumented by the same columns read from this.
+
+    Returns
+    -------
+    EffectFit
+        ``scale_factor``: ``ppm`` with sigma; z = two-sided significance.
+
+    Notes
+    -----
+    ::
+
+        e_t = s·u_t + b_t + w_t,   u_t = h·ω_ref,t,   ppm = s·1e6
+    """
+    e = np.asarray(e, dtype=float)
+    n = e.size
+    as_vector(time_s, n, "time_s")
+    _, u = projected_rate(omega_ref_rad_s, h, n)
+    ui = None if instrument is None else projected_rate(instrument, h, n)[1]
+    try:
+        fit = gls_rw(e, u, r, q, use=use, Z=ui)
+    except NotIdentifiableError as err:
+        return not_identifiable("scale_factor", gyro, {"ppm": 0.0}, "there is no rate about its axis", err)
+    return _scale_fit(fit, 0, gyro, joint_with_nonlinearity=False, instrumented=ui is not None)
+
+
+def _scale_fit(fit: GLSFit, i: int, gyro: int, **extra) -> EffectFit:
+    b, s = float(fit.beta[i]), float(fit.sigma[i])
+    ppm, ppm_s = ratio_to_ppm(b), ratio_to_ppm(s)
+    t = b / s
+    z = z_two_sided(t)
+    if z >= Z_EVIDENT:
+        ev = (f"gyro {gyro} residual {'rises' if b > 0 else 'falls'} {num(abs(b) * 100, 2)} % of the "
+              f"rate about its axis ({pm(ppm, ppm_s)} ppm); the model has no such slope")
+    else:
+        ev = (f"gyro {gyro} residual shows no significant slope with the rate about its axis "
+              f"({pm(ppm, ppm_s)} ppm, z = {z:.1f})")
+    return EffectFit("scale_factor", gyro, {"ppm": ppm}, {"ppm": ppm_s}, z, ev,
+                     fit_extra(fit, t=t, **extra))
+
+
+def fit_scale_and_nonlinearity(e, omega_ref_rad_s, h, time_s, dt_s: float, r: float, q: float,
+                               gyro: int, *, use=None, instrument=None) -> tuple[EffectFit, EffectFit]:
+    """Scale factor and quadratic nonlinearity fitted jointly.
+
+    Parameters
+    ----------
+    e : array_like, shape (n,)
+        Residual y − h·ω_ref [rad/s].
+    omega_ref_rad_s : array_like, shape (n, 3)
+        Platform-frame reference rate [rad/s].
+    h : array_like, shape (3,)
+        Nominal unit sensitive axis [-].
+    time_s : array_like, shape (n,)
+        Sample times [s].
+    dt_s : float
+        Sample step [s].
+    r, q : float
+        ARW variance per sample N²/dt and RRW increment variance K²·dt [rad²/s²].
+    gyro : int
+        1-based gyro number.
+    use : array_like of bool, shape (n,), optional
+        Samples to include (:func:`~gyroarray.analysis.gls.gls_rw`).
+    instrument : array_like, shape (n, 3), optional
+        The reference rate smoothed [rad/s]: a noisy reference (errors in
+        variables) is fitted by instrumental variables, the columns read from
+        ``omega_ref_rad_s`` instrumented by the same columns read from this.
+
+    Returns
+    -------
+    (EffectFit, EffectFit)
+        ``scale_factor`` (``ppm``) and ``scale_nonlinearity``
+        (``k2_per_deg_s``), each with its own sigma and z (the marginal
+        two-sided test of its coefficient in the joint fit); the
+        correlation of the two is in ``extra["corr"]`` of both.
+
+    Notes
+    -----
+    ::
+
+        e_t = s·u_t + k2_SI·u_t² + b_t + w_t,   u_t = h·ω_ref,t
+        k2 [1/(deg/s)] = k2_SI [1/(rad/s)] · π/180
+
+    (sim: y = (1 + s)·u + k2·u² in deg/s). Fitting u and u² together keeps a
+    linear error out of k2 when the rate is not symmetric about zero.
+    """
+    e = np.asarray(e, dtype=float)
+    n = e.size
+    as_vector(time_s, n, "time_s")
+    _, u = projected_rate(omega_ref_rad_s, h, n)
+    ui = None if instrument is None else projected_rate(instrument, h, n)[1]
+    try:
+        fit = gls_rw(e, np.column_stack([u, u * u]), r, q, use=use,
+                     Z=None if ui is None else np.column_stack([ui, ui * ui]))
+    except NotIdentifiableError as err:
+        why = "the rate about its axis does not vary enough to separate u from u²"
+        return (not_identifiable("scale_factor", gyro, {"ppm": 0.0}, why, err),
+                not_identifiable("scale_nonlinearity", gyro, {"k2_per_deg_s": 0.0}, why, err))
+    corr = float(fit.cov[0, 1] / (fit.sigma[0] * fit.sigma[1]))
+    sf = _scale_fit(fit, 0, gyro, joint_with_nonlinearity=True, corr=corr, instrumented=ui is not None)
+    b, s = float(fit.beta[1]), float(fit.sigma[1])
+    k2, k2_s = per_rad_s_to_per_deg_s(b), per_rad_s_to_per_deg_s(s)
+    t = b / s
+    z = z_two_sided(t)
+    if use is not None:
+        u = u[np.asarray(use, dtype=bool)]
+    umax = float(rad_s_to_deg_s(np.max(np.abs(u))))
+    if z >= Z_EVIDENT:
+        ev = (f"gyro {gyro} residual grows with the square of the rate about its axis "
+              f"(k2 = {pm(k2, k2_s)} per deg/s, {num(k2 * umax * umax, 2)} deg/s at "
+              f"{num(umax, 3)} deg/s); the model has no such curvature")
+    else:
+        ev = (f"gyro {gyro} residual shows no significant curvature with the rate about its axis "
+              f"(k2 = {pm(k2, k2_s)} per deg/s, z = {z:.1f})")
+    nl = EffectFit("scale_nonlinearity", gyro, {"k2_per_deg_s": k2}, {"k2_per_deg_s": k2_s}, z, ev,
+                   fit_extra(fit, t=t, corr=corr, ppm_joint=sf.params["ppm"], ppm_joint_z=float(sf.z),
+                          instrumented=ui is not None))
+    return sf, nl

@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import math
 
-from gyroarray.effects.fits.regress import fit_scale_nonlinearity
+from gyroarray.effects.fitting import EffectFit
+from gyroarray.effects.scale_factor import fit_scale_and_nonlinearity
 from gyroarray.effects import _draw
 from gyroarray.effects.protocol import Param, RegressionEffect, Stage, with_term
 from gyroarray.core.units import per_deg_s_to_per_rad_s
@@ -55,3 +56,46 @@ class ScaleNonlinearity(RegressionEffect):
 
     def example(self, rng, n_gyros, max_rate_deg_s):
         return _draw.gyro(rng, n_gyros), {"k2_per_deg_s": _draw.u(rng, 1e-5, 6e-5, True) * rng.choice([-1, 1])}
+
+
+# -- fit ----------------------------------------------------------------------------------
+def fit_scale_nonlinearity(e, omega_ref_rad_s, h, time_s, dt_s: float, r: float, q: float,
+                           gyro: int, *, use=None, instrument=None) -> EffectFit:
+    """Quadratic nonlinearity ``k2_per_deg_s``, fitted jointly with the scale factor.
+
+    Parameters
+    ----------
+    e : array_like, shape (n,)
+        Residual y − h·ω_ref [rad/s].
+    omega_ref_rad_s : array_like, shape (n, 3)
+        Platform-frame reference rate [rad/s].
+    h : array_like, shape (3,)
+        Nominal unit sensitive axis [-].
+    time_s : array_like, shape (n,)
+        Sample times [s].
+    dt_s : float
+        Sample step [s].
+    r, q : float
+        ARW variance per sample N²/dt and RRW increment variance K²·dt [rad²/s²].
+    gyro : int
+        1-based gyro number.
+    use : array_like of bool, shape (n,), optional
+        Samples to include.
+    instrument : array_like, shape (n, 3), optional
+        The reference rate smoothed [rad/s]: a noisy reference (errors in
+        variables) is fitted by instrumental variables, the columns read from
+        ``omega_ref_rad_s`` instrumented by the same columns read from this.
+
+    Returns
+    -------
+    EffectFit
+        The second result of :func:`~gyroarray.effects.scale_factor.fit_scale_and_nonlinearity`.
+
+    Notes
+    -----
+    ::
+
+        e_t = s·u_t + k2_SI·u_t² + b_t + w_t,   k2 = k2_SI · π/180
+    """
+    return fit_scale_and_nonlinearity(e, omega_ref_rad_s, h, time_s, dt_s, r, q, gyro, use=use,
+                                      instrument=instrument)[1]

@@ -6,13 +6,15 @@ import math
 from dataclasses import replace
 
 import numpy as np
+from scipy import signal
 
-from gyroarray.effects.fits.effect_fit import EffectFit
-from gyroarray.effects.fits.regress import (NotIdentifiableError, fit_temperature_bias, gls_rw, temperature_columns,
-                                       temperature_rates)
+from gyroarray.analysis.gls import gls_rw, GLSFit, NotIdentifiableError
+from gyroarray.effects.fitting import (as_vector, EffectFit, fit_extra, not_identifiable, pm, Z_EVIDENT,
+                                       z_two_sided)
 from gyroarray.effects import _draw
 from gyroarray.core.errors import InputError
 from gyroarray.effects.protocol import Param, RegressionEffect, Stage, identity, same_noise_preference, with_term
+from gyroarray.effects.terms import TemperatureTerm, spread
 from gyroarray.core.units import deg_h_to_rad_s, rad_s_to_deg_h
 
 #: Each half of a record must span this much temperature [°C], and this share of the whole
@@ -25,7 +27,7 @@ class TemperatureBias(RegressionEffect):
     """coeff·(temp_c − t0_c).
 
     Fit: the regression of the residual on the temperature under ARW + a
-    random-walk bias (:func:`gyroarray.effects.fits.regress.fit_temperature_bias`),
+    random-walk bias (:func:`gyroarray.effects.temperature_bias.fit_temperature_bias`),
     with a thermal-lag column (dT/dt of the smoothed reading) when the data ask
     for it; the levels' coefficient (an ordinary regression with an intercept,
     no random walk) is reported beside it. The CATS tag's gyro 2: 92 ± 8 with a
@@ -46,6 +48,7 @@ class TemperatureBias(RegressionEffect):
     stage = Stage.ADD
     needs = frozenset({"temp"})
     model_needs = predict_needs = frozenset({"temp"})     # bias = k·(temp_c − t0): nothing without it
+    sim_needs = frozenset({"temp"})
     slow = True
     rivals = ("rate_ramp",)
     channel = "temp"
@@ -56,6 +59,11 @@ class TemperatureBias(RegressionEffect):
 
     def placeholder(self):
         return {"deg_h_per_c": 0.0, "t0_c": 25.0}
+
+    def predictor_term(self, act, n_gyros):
+        """A deterministic error c_i·ΔT for a stated temperature swing ΔT [K] about the
+        temperature the bias was calibrated at (none stated: left out)."""
+        return TemperatureTerm(spread(act, "rad_s_per_c", n_gyros))
 
     def simulate(self, state, act, streams):
         temp = state.ctx.temp_c
@@ -134,3 +142,143 @@ class TemperatureBias(RegressionEffect):
     def example(self, rng, n_gyros, max_rate_deg_s):
         return _draw.gyro(rng, n_gyros), {"deg_h_per_c": _draw.u(rng, 10.0, 60.0, True) * rng.choice([-1, 1]),
                                           "t0_c": 25.0}
+
+
+# -- fit ----------------------------------------------------------------------------------
+# -- temperature and rate ramp -------------------------------------------------------
+
+#: Smoothing times of the temperature reading before its derivative is taken [s] (a zero-phase
+#: second-order low-pass at 1/T_s): a thermometer's read noise is white, and its derivative
+#: would otherwise be noise (the CATS tag's reading: 0.028 °C rms, lag-1 correlation of its
+#: differences −0.50).
+LAG_SMOOTHING_S = (30.0, 100.0, 300.0, 1000.0)
+
+#: χ² drop at which the thermal-lag column enters the temperature fit: χ²(1) at 1 % after the
+#: choice among the smoothings of :data:`LAG_SMOOTHING_S` (Bonferroni, 0.25 % each).
+LAG_CHI2 = 9.14
+
+
+def temperature_rates(temp_c, dt_s: float) -> dict[float, np.ndarray]:
+    """The thermal-lag columns a record allows: dT/dt of the temperature reading [°C/s],
+    smoothed (zero-phase second-order Butterworth low-pass at 1/T_s, then central
+    differences), for each T_s of :data:`LAG_SMOOTHING_S` within [8·dt, span/8]."""
+    temp = np.asarray(temp_c, dtype=float)
+    out = {}
+    for sm in LAG_SMOOTHING_S:
+        if not 8.0 * dt_s <= sm <= dt_s * temp.size / 8.0:
+            continue
+        b, a = signal.butter(2, min(2.0 * dt_s / sm, 0.99))     # cut-off over Nyquist
+        pad = min(temp.size - 1, int(3 * sm / dt_s))
+        out[sm] = np.gradient(signal.filtfilt(b, a, temp, padtype="odd", padlen=pad), dt_s)
+    return out
+
+
+def temperature_columns(temp: np.ndarray, rate: np.ndarray | None = None) -> np.ndarray:
+    """The temperature fit's regressors (n, 1 or 2): T − T_0, and the thermal-lag column."""
+    return (temp - temp[0])[:, None] if rate is None else np.column_stack([temp - temp[0], rate])
+
+
+def _lag_columns(e, temp, r: float, q: float, use, base: GLSFit,
+                 rates: dict) -> tuple[GLSFit, float | None]:
+    """The fit with the thermal-lag column beside T − T_0, when it lowers χ² by more than
+    :data:`LAG_CHI2` (the best smoothing of ``rates``), else ``base`` and None."""
+    best, best_s = base, None
+    for sm, rate in rates.items():
+        try:
+            fit = gls_rw(e, temperature_columns(temp, rate), r, q, use=use)
+        except NotIdentifiableError:     # dT/dt ∝ T − const (an exponential approach) or flat
+            continue
+        if fit.chi2 < best.chi2 - (LAG_CHI2 if best_s is None else 0.0):
+            best, best_s = fit, sm
+    return best, best_s
+
+
+def fit_temperature_bias(e, temp_c, time_s, dt_s: float, r: float, q: float, gyro: int,
+                         *, use=None, rates: dict | None = None) -> EffectFit:
+    """Temperature-dependent bias: residual following the temperature.
+
+    Parameters
+    ----------
+    e : array_like, shape (n,)
+        Residual [rad/s].
+    temp_c : array_like, shape (n,)
+        Temperature reading at the array [°C].
+    time_s : array_like, shape (n,)
+        Sample times [s].
+    dt_s : float
+        Sample step [s].
+    r, q : float
+        ARW variance per sample N²/dt and RRW increment variance K²·dt [rad²/s²].
+    gyro : int
+        1-based gyro number.
+    use : array_like of bool, shape (n,), optional
+        Samples to include (:func:`~gyroarray.analysis.gls.gls_rw`).
+    rates : dict, optional
+        The thermal-lag columns, :func:`temperature_rates` of ``temp_c`` (a caller
+        fitting several gyros on one temperature computes them once). Default:
+        computed here.
+
+    Returns
+    -------
+    EffectFit
+        ``temperature_bias``: ``deg_h_per_c`` with sigma, and
+        ``t0_c = temp_c[0]`` without sigma. ``extra``: ``thermal_lag_s`` and its
+        ``thermal_lag_sigma_s``, ``lag_smoothing_s`` (None without the lag column).
+
+    Notes
+    -----
+    ::
+
+        e_t = k·(T_t + τ·dT_t/dt − T_0) + b_t + w_t,   T_0 = temp_c[0]
+
+    The temperature of zero bias t0 is not identifiable: k·(T − t0) =
+    k·(T − T_0) + k·(T_0 − t0), and the constant joins the unknown starting
+    bias. So ``t0_c`` is reported as the first temperature (the model then
+    starts with the fitted starting bias, as the baseline does).
+
+    τ is a thermal lag between the thermometer and the gyro (first order: the
+    gyro's own temperature is T + τ·dT/dt). It is a nuisance: ``shared/spec``'s
+    ``temperature_bias`` has no lag, and the calibrated model predicts k·(T − t0).
+    Without it, a fast temperature change (the CATS tag: 16 → 9 °C in 10 min)
+    has a smaller response than the slow cycle, and the GLS, which reads the
+    coefficient from the changes, gives 60 deg/h/°C on its gyro 2 where the
+    levels give 96 and the sensor's two other periods 93 and 93; with the lag
+    column (τ ≈ 246 s) 92 ± 8 in `compare`. The column is dT/dt of the reading smoothed at
+    one of :data:`LAG_SMOOTHING_S` (the best, within [8·dt, span/8]), and it
+    enters only when it lowers the GLS χ² by more than :data:`LAG_CHI2` (a
+    pre-test at 1 %: without a lag the coefficient keeps the power of the
+    one-column fit). A first-order approach to a final temperature has dT/dt ∝
+    T − const: the lag is then not identifiable and the column stays out.
+    """
+    e = np.asarray(e, dtype=float)
+    n = e.size
+    as_vector(time_s, n, "time_s")
+    temp = as_vector(temp_c, n, "temp_c")
+    t0 = float(temp[0])
+    try:
+        fit = gls_rw(e, temp - t0, r, q, use=use)
+    except NotIdentifiableError as err:
+        return not_identifiable("temperature_bias", gyro, {"deg_h_per_c": 0.0, "t0_c": t0},
+                                 "the temperature does not change", err)
+    fit, sm = _lag_columns(e, temp, r, q, use, fit, temperature_rates(temp, dt_s) if rates is None else rates)
+    b, s = float(fit.beta[0]), float(fit.sigma[0])
+    k, ks = rad_s_to_deg_h(b), rad_s_to_deg_h(s)
+    t = b / s
+    z = z_two_sided(t)
+    lag = lag_s = None
+    lag_txt = ""
+    if sm is not None:                   # τ = c/k, its σ by the delta method from the fit's covariance
+        c, cov = float(fit.beta[1]), fit.cov
+        lag = c / b
+        lag_s = (abs(lag) * math.sqrt(max(cov[1, 1] / c ** 2 + cov[0, 0] / b ** 2 - 2.0 * cov[0, 1] / (b * c),
+                                          0.0))) if c != 0 else math.inf
+        lag_txt = (f", the gyro leading the temperature reading by {pm(lag, lag_s)} s (a thermal lag, "
+                   f"fitted as a dT/dt term on the reading smoothed over {sm:.0f} s)")
+    if z >= Z_EVIDENT:
+        ev = (f"gyro {gyro} residual follows the temperature: {pm(k, ks)} deg/h per °C "
+              f"relative to {t0:.2f} °C{lag_txt}; the model has no temperature term")
+    else:
+        ev = (f"gyro {gyro} residual shows no significant temperature dependence "
+              f"({pm(k, ks)} deg/h per °C, z = {z:.1f}{lag_txt})")
+    return EffectFit("temperature_bias", gyro, {"deg_h_per_c": k, "t0_c": t0}, {"deg_h_per_c": ks},
+                     z, ev, fit_extra(fit, t=t, thermal_lag_s=lag, thermal_lag_sigma_s=lag_s, lag_smoothing_s=sm))

@@ -10,6 +10,8 @@ kf_single  paper 002 single-gyro KF [rate, bias] per gyro, then OLS
 ols        ordinary least squares per sample (optional low-pass)
 gls        generalized least squares per sample (optional low-pass)
 naive      mean of the back-projected readings per axis, no model
+svo        variance-optimal static weights for one averaging time tau_s
+           (GLS on the gyros' Allan covariance at tau_s; issue 31, 3a)
 bound      time-varying KF + RTS smoother (offline), and the CRB
 fdi        parity-space fault detection and isolation; GLS without the
            isolated gyro (a detector whose estimate is the recovered rate)

@@ -2,7 +2,7 @@
 
 The time-varying Kalman filter and the Rauch–Tung–Striebel smoother on the
 array state x = [ω_b (p); b (N)] (D = p + N), for the model of
-:func:`~gyroarray.estimators._kalman.state_model` with bias states:
+:func:`~gyroarray.estimators.kalman.state_model` with bias states:
 
     x_k = x_{k-1} + w_k,  cov w = Q           (F = I: random walks)
     z_k = H1 x_k + v_k,   cov v = R,  H1 = [H  I_N]
@@ -10,7 +10,7 @@ array state x = [ω_b (p); b (N)] (D = p + N), for the model of
 Two kernels, one sequential pass each (fixed operation order, no threads:
 the same inputs give the same bits):
 
-* :func:`forward` — the textbook predict/update of ``_kalman.kf_step``
+* :func:`forward` — the textbook predict/update of ``kalman.kf_step``
   with its Joseph covariance update (expanded, see :func:`forward`), S⁻¹
   applied through a Cholesky factor instead of numpy's LU solve, and the
   Cholesky factor of each one-step prediction P_{k+1|k} = P_k + Q stored
@@ -37,7 +37,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from gyroarray.core._numba import njit
+from gyroarray.core.jit import njit
 
 
 @njit(cache=True, error_model="numpy")

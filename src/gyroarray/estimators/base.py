@@ -51,7 +51,7 @@ ENTRY_POINT_GROUP = ESTIMATORS_GROUP
 
 _BUILTIN: dict[str, type] = {}
 _LOADED_PLUGINS: dict[str, type] = {}
-_BUILTIN_MODULES = ("simple", "kf_array", "kf_single", "bound", "fdi")
+_BUILTIN_MODULES = ("simple", "kf_array", "kf_single", "bound", "fdi", "svo")
 
 
 class NotFittedError(InputError):

@@ -49,9 +49,10 @@ import numpy as np
 from gyroarray.core.errors import InputError
 
 from gyroarray.estimators import _bound_kernels
-from gyroarray.estimators._kalman import kf_step, state_model
+from gyroarray.estimators.kalman import kf_step, state_model
 from gyroarray.estimators.base import Estimator, readonly, register
 from gyroarray.estimators.kf_array import gls_weights, rate_psd
+from gyroarray.estimators.noise import baseline_effect
 
 __all__ = ["OfflineBound", "efficiency"]
 
@@ -156,7 +157,8 @@ class OfflineBound(Estimator):
         if k >= 0:
             raise InputError(f"bound: the predicted covariance is not positive definite at sample "
                              f"{k}: the RTS smoother gain P (P + Q)⁻¹ needs a rate random walk "
-                             "('rrw' > 0) on every gyro, with a positive definite RRW correlation")
+                             f"({baseline_effect('walk').name!r} > 0) on every gyro, with a positive "
+                             "definite RRW correlation")
         _bound_kernels.backward(xs, lfac, mdl.Q, xsm)
 
     def _estimate(self, z):

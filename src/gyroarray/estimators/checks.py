@@ -24,13 +24,23 @@ DT = 0.01
 LAYOUT = Layout.conical(2, 5, np.deg2rad(65.9))
 
 
+def _names() -> tuple[str, str, str]:
+    """The names of the white-noise, random-walk and correlation effects (their classes say)."""
+    # lazy: loads gyroarray.effects and its plugins
+    from gyroarray.effects.arw import AngleRandomWalk
+    from gyroarray.effects.correlation import Correlation
+    from gyroarray.effects.rrw import RateRandomWalk
+    return AngleRandomWalk.name, RateRandomWalk.name, Correlation.name
+
+
 def model():
     """A model with unequal ARW, RRW and correlated noise: what every estimator must accept."""
     from gyroarray.effects.model import ModelEntry, NoiseModel  # lazy: loads gyroarray.effects and its plugins
-    return NoiseModel((ModelEntry("arw", None, {"n_deg_rt_h": 0.1}),
-                       ModelEntry("arw", 3, {"n_deg_rt_h": 0.2}),
-                       ModelEntry("rrw", None, {"k_deg_h_rt_h": 600.0}),
-                       ModelEntry("correlation", None, {"rho_arw": 0.1, "rho_rrw": 0.05})))
+    white, walk, corr = _names()
+    return NoiseModel((ModelEntry(white, None, {"n_deg_rt_h": 0.1}),
+                       ModelEntry(white, 3, {"n_deg_rt_h": 0.2}),
+                       ModelEntry(walk, None, {"k_deg_h_rt_h": 600.0}),
+                       ModelEntry(corr, None, {"rho_arw": 0.1, "rho_rrw": 0.05})))
 
 
 def readings(n=300, seed=7):
@@ -147,9 +157,10 @@ def check_bad_fit_inputs_refused(cls):
     _raises(InputError, cls().fit, LAYOUT, m, 0.0, what="fit with dt = 0")
     _raises(InputError, cls().fit, LAYOUT, m, float("nan"), what="fit with dt = NaN")
     _raises(InputError, cls().fit, LAYOUT.H, m, DT, what="fit with an array instead of a Layout")
-    no_arw = NoiseModel((ModelEntry("rrw", None, {"k_deg_h_rt_h": 600.0}),))
+    white, walk, _ = _names()
+    no_arw = NoiseModel((ModelEntry(walk, None, {"k_deg_h_rt_h": 600.0}),))
     if getattr(cls, "needs_arw", True):
-        _raises(InputError, cls().fit, LAYOUT, no_arw, DT, match="arw", what="fit with a model without ARW")
+        _raises(InputError, cls().fit, LAYOUT, no_arw, DT, match=white, what="fit with a model without ARW")
     else:   # an estimator of the layout alone (ols, naive) runs on a model without white noise
         assert cls().fit(LAYOUT, no_arw, DT).estimate(readings(10)).shape == (10, 3), \
             "needs_arw = False, but a fit with a model without ARW does not estimate"

@@ -17,7 +17,7 @@ The chain (one stage each)
    walk P Q_b Pᵀ is diagonal (still V Vᵀ = I).
 2. **Bias tracking.** The unknown starting biases and their RRW move p:
    each of the m components gets the scalar Kalman bias tracker of
-   :mod:`gyroarray.effects.fits.fault_fit` (random walk q_i + unit white noise,
+   :mod:`gyroarray.effects.faults.scan` (random walk q_i + unit white noise,
    diffuse start, exact time-varying gain). Its normalised innovations ε are
    i.i.d. N(0, I) without a fault. The tracker's time constant is
    τ_i = dt/K_i, at most ``bias_memory_s``: the cost is that a drift slower
@@ -39,7 +39,7 @@ The chain (one stage each)
 4. **Thresholds** from the false-alarm rate per hour (``far_per_h``, a third
    to each family), analytically: a block test's tail is an exact χ²
    probability; a sliding window test is a stationary Gaussian sequence
-   whose excursion rate above u is :func:`~gyroarray.effects.fits.fault_fit.clump_rate`
+   whose excursion rate above u is :func:`~gyroarray.effects.faults.scan.clump_rate`
    (Siegmund–Yakir for the window edges, Rice for the interior, from the
    exact lag-one correlation of the weights). The family's rate is the sum
    over its directions and windows (a union bound, tight at these levels);
@@ -86,7 +86,7 @@ from typing import Any
 import numpy as np
 from scipy import linalg, optimize, special, stats
 
-from gyroarray.effects.fits import fault_fit as ff
+from gyroarray.effects.faults import scan as ff
 from gyroarray.core.errors import InputError
 from gyroarray.core.layout import Layout
 from gyroarray.core.units import rad_s_to_deg_s

@@ -12,7 +12,7 @@ import numpy as np
 
 from gyroarray.core.errors import InputError
 
-from gyroarray.estimators._kalman import (NoSteadyState, SteadyStateFilter, solve_log, state_model,
+from gyroarray.estimators.kalman import (NoSteadyState, SteadyStateFilter, solve_log, state_model,
                                           steady_state)
 from gyroarray.estimators.base import Estimator, LinearSystem, readonly, register
 
@@ -174,7 +174,7 @@ class ArrayKF(Estimator):
     Notes
     -----
     The model is paper 003's Eq. 4–5 discretised at dt (F = I, Q =
-    blkdiag(q_ω dt, Q_b), R); see :func:`gyroarray.estimators._kalman.steady_state`
+    blkdiag(q_ω dt, Q_b), R); see :func:`gyroarray.estimators.kalman.steady_state`
     for the gain on the observable subspace. The filter is
     x̂_k = x̂_{k-1} + K (z_k − H1 x̂_{k-1}) with the prior
     x̂_{-1} = [G z_0; 0] (G the GLS weights; the simulator's biases start

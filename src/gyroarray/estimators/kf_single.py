@@ -16,7 +16,7 @@ import numpy as np
 from gyroarray.core import units
 from gyroarray.core.errors import InputError
 
-from gyroarray.estimators._kalman import NoSteadyState, SteadyStateFilter, state_model, steady_state
+from gyroarray.estimators.kalman import NoSteadyState, SteadyStateFilter, state_model, steady_state
 from gyroarray.estimators.base import Estimator, LinearSystem, readonly, register
 from gyroarray.estimators.kf_array import filter_system, rate_psd
 

@@ -1,15 +1,20 @@
-"""The part of a noise model the estimators design with: ARW, RRW, correlation.
+"""The part of a noise model the estimators design with: white noise, random walk, correlation.
 
 A :class:`~gyroarray.effects.model.NoiseModel` lists effect entries in the
-spec's units; :func:`array_noise` reduces it to per-gyro white-noise and
-random-walk levels in SI and the two N×N correlation matrices, exactly as
-the simulator draws them (``src/gyroarray/sim/effects.py``): ARW is white with
-σ = N/√dt per sample, RRW increments have σ = K√dt, and the ``correlation``
-entry gives Σ_ij = C_ij σ_i σ_j for both.
+spec's units; each effect declares what it contributes
+(:meth:`~gyroarray.effects.protocol.Effect.predictor_term`, the terms of
+:mod:`gyroarray.effects.terms`), and :func:`model_terms` asks every entry
+for it: nothing here names an effect. :func:`array_noise` reduces the
+declared white-noise and random-walk terms to per-gyro levels in SI and the
+correlation modifier to the two N×N correlation matrices, exactly as the
+simulator draws them (``src/gyroarray/sim/effects.py``): white noise has
+σ = N/√dt per sample, random-walk increments σ = K√dt, and the correlation
+gives Σ_ij = C_ij σ_i σ_j for both (several white or walk terms on one gyro
+add their variances).
 
-Only ``arw``, ``rrw`` and ``correlation`` are used; the names of the other
-effects of the model are kept in :attr:`ArrayNoise.ignored_effects` so a
-report can say what the estimators did not model.
+The other effects of the model (no white, walk or correlation term) are kept
+in :attr:`ArrayNoise.ignored_effects` so a report can say what the
+estimators did not model.
 """
 
 from __future__ import annotations
@@ -18,12 +23,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from gyroarray.core.gdop import correlation_matrix
 from gyroarray.core.errors import InputError
 
-__all__ = ["ArrayNoise", "array_noise"]
-
-_USED = ("arw", "rrw", "correlation")
+__all__ = ["ArrayNoise", "array_noise", "model_terms", "per_gyro", "baseline_effect"]
 
 
 def _frozen(a, shape) -> np.ndarray:
@@ -121,6 +123,69 @@ class ArrayNoise:
         return self.corr_rrw * np.outer(s, s)
 
 
+def model_terms(noise_model, n_gyros: int) -> list:
+    """Each effect of a model with its declared predictor term, in the model's order.
+
+    The entries of one effect are resolved per gyro (an entry with ``gyro = k``
+    overrides the all-gyros entry for gyro k; the parameters of a gyro no entry
+    covers are NaN) and handed to its
+    :meth:`~gyroarray.effects.protocol.Effect.predictor_term`.
+
+    Parameters
+    ----------
+    noise_model : NoiseModel
+    n_gyros : int
+
+    Returns
+    -------
+    list of (Effect, PredictorTerm or None)
+        One pair per effect of the model; None: the effect declares no term.
+    """
+    from gyroarray.effects import get_effect  # lazy: loads gyroarray.effects and its plugins
+    from gyroarray.effects.protocol import Active  # lazy: with the registry above
+    groups: dict = {}
+    for entry in noise_model.entries:
+        groups.setdefault(entry.effect, []).append(entry)
+    out = []
+    for name, items in groups.items():
+        eff = get_effect(name)
+        if not eff.per_gyro:
+            act = Active(np.arange(n_gyros), items[0].si_params, name)
+        else:
+            per: dict = {}
+            for entry in sorted(items, key=lambda e: e.gyro is not None):   # all gyros, then overrides
+                if entry.gyro is None:
+                    per.update(dict.fromkeys(range(n_gyros), entry))
+                elif entry.gyro <= n_gyros:
+                    per[entry.gyro - 1] = entry
+            cols = np.array(sorted(per), dtype=np.int64)
+            p = {prm.si_name: _stack([per[c].si_params.get(prm.si_name) for c in cols], prm.kind)
+                 for prm in eff.params}
+            act = Active(cols, p, name)
+        out.append((eff, eff.predictor_term(act, n_gyros)))
+    return out
+
+
+def _stack(values: list, kind: str) -> np.ndarray:
+    """Per-gyro values as one array, NaN (a NaN row for a vector) where absent."""
+    if kind in ("axis", "vector"):
+        return np.array([np.full(3, np.nan) if v is None else v for v in values], dtype=float)
+    return np.array([np.nan if v is None else v for v in values], dtype=float)
+
+
+def baseline_effect(source: str):
+    """The registered effect that is the baseline's ``source`` term (``"white"``, ``"walk"``:
+    :attr:`~gyroarray.effects.protocol.Effect.baseline_term`), for messages that name the way out."""
+    from gyroarray.effects import REGISTRY  # lazy: loads gyroarray.effects and its plugins
+    return next(e for e in REGISTRY.values() if e.baseline and e.baseline_term == source)
+
+
+def _example(eff) -> str:
+    """``{effect = "NAME", key = value}``: an entry of ``eff`` the user may add."""
+    kv = ", ".join(f"{k} = {v:g}" for k, v in eff.placeholder().items())
+    return f'{{effect = "{eff.name}", {kv}}}'
+
+
 def per_gyro(model, effect: str, key: str, n_gyros: int) -> np.ndarray:
     """Per-gyro SI value of a per-gyro effect (NaN where absent); gyro=k overrides all."""
     out = np.full(n_gyros, np.nan)
@@ -133,18 +198,8 @@ def per_gyro(model, effect: str, key: str, n_gyros: int) -> np.ndarray:
     return out
 
 
-def _corr(rho, n: int, common_mode: bool, what: str) -> np.ndarray:
-    if np.ndim(rho) == 0 and common_mode:
-        r = float(rho)                       # e_k = √ρ c + √(1−ρ) z_k: same law, ρ = 1 allowed
-        return (1.0 - r) * np.eye(n) + r * np.ones((n, n))
-    try:
-        return correlation_matrix(n, rho)
-    except InputError as err:
-        raise InputError(f"correlation {what}: {err.message}") from None
-
-
 def array_noise(noise_model, n_gyros: int, require_arw: bool = True) -> ArrayNoise:
-    """The ARW/RRW/correlation part of a noise model for an N-gyro array.
+    """The white, random-walk and correlation part of a noise model for an N-gyro array.
 
     Parameters
     ----------
@@ -154,7 +209,7 @@ def array_noise(noise_model, n_gyros: int, require_arw: bool = True) -> ArrayNoi
     n_gyros : int
         Number of gyros N.
     require_arw : bool, default True
-        False: a gyro without ``arw`` (or with ``arw = 0``) gets a white-noise
+        False: a gyro without white noise (or with a level of 0) gets a white-noise
         level of 0 [rad/√s] instead of a refusal (estimators that only use the
         layout, :attr:`~gyroarray.estimators.base.Estimator.needs_arw`).
 
@@ -165,39 +220,41 @@ def array_noise(noise_model, n_gyros: int, require_arw: bool = True) -> ArrayNoi
     Raises
     ------
     InputError
-        The model fails :meth:`NoiseModel.check`, a gyro has no ``arw`` (the
-        estimators weight the gyros by their white noise), an ``arw`` of zero,
-        or an ARW correlation whose covariance is singular (``common_mode``
+        The model fails :meth:`NoiseModel.check`, a gyro has no white noise (the
+        estimators weight the gyros by their white noise), a white level of zero,
+        or a white correlation whose covariance is singular (a common mode
         with ρ = 1: every gyro sees the same white noise).
     """
     from gyroarray.effects.model import NoiseModel  # lazy: loads gyroarray.effects and its plugins
     if not isinstance(noise_model, NoiseModel):
         raise InputError(f"noise_model must be a NoiseModel, got {type(noise_model).__name__}")
+    # lazy: loads gyroarray.effects and its plugins
+    from gyroarray.effects.terms import CorrelationTerm, WalkTerm, WhiteTerm, root_sum_square
     noise_model.check(n_gyros)
-    arw = per_gyro(noise_model, "arw", "n_rad_rt_s", n_gyros)
+    terms = model_terms(noise_model, n_gyros)
+    white = [t.n_rad_rt_s for _, t in terms if isinstance(t, WhiteTerm)]
+    walk = [t.k_rad_s_rt_s for _, t in terms if isinstance(t, WalkTerm)]
+    corr = [t for _, t in terms if isinstance(t, CorrelationTerm)]
+    arw = root_sum_square(white) if white else np.full(n_gyros, np.nan)
     missing = np.flatnonzero(np.isnan(arw)) + 1
     if not require_arw:
         arw = np.nan_to_num(arw, nan=0.0)
     elif missing.size:
+        eff = baseline_effect(WhiteTerm.source)
         raise InputError(
-            f"the noise model has no angle random walk ('arw') for gyro(s) "
+            f"the noise model has no angle random walk ({eff.name!r}) for gyro(s) "
             f"{', '.join(map(str, missing))}: the estimators need the white-noise level of every "
-            "gyro; add e.g. {effect = \"arw\", n_deg_rt_h = 0.1}")
+            f"gyro; add e.g. {_example(eff)}")
     zero = np.flatnonzero(arw <= 0) + 1
     if zero.size and require_arw:
-        raise InputError(f"arw is 0 on gyro(s) {', '.join(map(str, zero))}: the estimators need a "
+        raise InputError(f"{baseline_effect(WhiteTerm.source).name} is 0 on gyro(s) "
+                         f"{', '.join(map(str, zero))}: the estimators need a "
                          "positive white-noise level on every gyro (R must be positive definite)")
-    rrw = np.nan_to_num(per_gyro(noise_model, "rrw", "k_rad_s_rt_s", n_gyros), nan=0.0)
-    corr = [e for e in noise_model.entries if e.effect == "correlation"]
+    rrw = np.nan_to_num(root_sum_square(walk) if walk else np.full(n_gyros, np.nan), nan=0.0)
     c_arw = c_rrw = np.eye(n_gyros)
     if corr:
-        p = corr[0].si_params
-        cm = bool(p["common_mode"])
-        if cm and np.ndim(p["rho_arw"]) == 0 and float(p["rho_arw"]) == 1.0:
-            raise InputError("correlation: rho_arw = 1 with common_mode makes every gyro see the "
-                             "same white noise: the measurement covariance R is singular and no "
-                             "estimator here is defined; use rho_arw < 1")
-        c_arw = _corr(p["rho_arw"], n_gyros, cm, "rho_arw")
-        c_rrw = _corr(p["rho_rrw"], n_gyros, cm, "rho_rrw")
-    ignored = tuple(sorted({e.effect for e in noise_model.entries} - set(_USED)))
+        c_arw = np.eye(n_gyros) if corr[0].white is None else corr[0].white
+        c_rrw = np.eye(n_gyros) if corr[0].walk is None else corr[0].walk
+    used = (WhiteTerm, WalkTerm, CorrelationTerm)
+    ignored = tuple(sorted(eff.name for eff, t in terms if not isinstance(t, used)))
     return ArrayNoise(arw, rrw, c_arw, c_rrw, ignored, zero_arw_ok=not require_arw)

@@ -6,7 +6,7 @@ can follow it with the comparison low-pass (``lowpass_hz``).
 
 The comparison low-pass is the first-order IIR y_k = a y_{k-1} + (1 − a) x_k
 per axis, with a set so its −3 dB point is at ``lowpass_hz`` (exactly, in
-discrete time: :func:`gyroarray.estimators._kalman.lowpass_pole`). It is the
+discrete time: :func:`gyroarray.estimators.kalman.lowpass_pole`). It is the
 KF's own rate channel: the KF without bias states is exactly GLS followed by
 x̂_k = A x̂_{k-1} + (I − A) ω̂_GLS,k (K = (I − A)·G), which is this filter per
 axis when HᵀR⁻¹H is isotropic. So ``gls`` at ``lowpass_hz = f`` and a KF
@@ -22,7 +22,7 @@ import numpy as np
 
 from gyroarray.core.errors import InputError
 
-from gyroarray.estimators._kalman import first_order_lowpass, lowpass_pole
+from gyroarray.estimators.kalman import first_order_lowpass, lowpass_pole
 from gyroarray.estimators.base import Estimator, LinearSystem, readonly, register
 from gyroarray.estimators.kf_array import gls_weights
 

@@ -53,38 +53,22 @@ from pathlib import Path
 import numpy as np
 
 from gyroarray.core import units
-from gyroarray.analysis.davar import davar
-from gyroarray.chain.localise import record_channels
 from gyroarray.chain.compare import Analysis
+from gyroarray.chain.compare_figures import (BIAS_BLOCK_S, REGRESSORS, ArwTrackFigure, ChannelPanel,
+                                             CompareFigures, LocalisePsd, PsdFigure, RegressorFigure,
+                                             XcorrFigure, channel_candidate, channel_effects,
+                                             channel_in_model, compare_figures)
 from gyroarray.effects import REGISTRY, get_effect
 from gyroarray.core.errors import InputError
-from gyroarray.reports.design_plots import _figure, _png
-from gyroarray.reports.report import Doc, _fmt
+from gyroarray.reports.design_plots import agg_figure, figure_png
+from gyroarray.reports.report import Doc, format_value
 
-__all__ = ["ARW_WINDOW_S", "BIAS_BLOCK_S", "REGRESSORS", "write_compare_report"]
+__all__ = ["write_compare_report", "section_unexplained"]
 
-#: Blocks [s] of the slowly varying "fitted bias" removed before the fast regressors are binned.
-BIAS_BLOCK_S = 30.0
-#: Window [s] of the sliding ARW (dynamic Allan deviation at τ₀).
-ARW_WINDOW_S = 60.0
-#: Bins of a residual-vs-regressor panel, and the fewest samples a bin needs to be drawn.
-N_BINS = 24
-MIN_BIN = 20
 #: Candidates listed per step.
 TOP = 15
 #: Resolution of the figures [dpi] (the HTML stays a few MB for 8 gyros).
 DPI = 88
-
-#: Regressor panels: record channel -> (axis label, what the record needs). The
-#: candidate drawn on a panel is the effect whose ``channel`` it is (``Effect.channel``).
-REGRESSORS = {
-    "rate": ("rate about its axis h·ω [deg/s]", "ref"),
-    "other": ("rate about the other axes [deg/s]", "ref"),
-    "rate2": ("rate² (h·ω)² [deg²/s²]", "ref"),
-    "accel": ("angular acceleration d(h·ω)/dt [deg/s²]", "ref"),
-    "temp": ("temperature [°C]", "temp"),
-    "time": ("time [s]", None),
-}
 
 _RED, _GREEN, _GREY = "#c0392b", "#1e8449", "0.45"
 
@@ -119,12 +103,12 @@ def _z(x) -> str:
 
 def _pm(v, s) -> str:
     if isinstance(v, (list, tuple, np.ndarray)):
-        return "(" + ", ".join(_fmt(float(x)) for x in np.ravel(v)) + ")"
+        return "(" + ", ".join(format_value(float(x)) for x in np.ravel(v)) + ")"
     if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, float, np.integer, np.floating)):
         return str(v)
     if s is None or not np.isfinite(s):
-        return _fmt(float(v))
-    return f"{_fmt(float(v))} ± {_fmt(float(s), 2)}"
+        return format_value(float(v))
+    return f"{format_value(float(v))} ± {format_value(float(s), 2)}"
 
 
 def _raw(doc: Doc, html_text: str, md_text: str):
@@ -216,31 +200,14 @@ def _candidate(analysis, effect: str, gyro):
     return next((t for t in analysis.candidates if t.effect == effect and t.gyro == gyro), None)
 
 
-def _channel_effects(channel: str) -> list[str]:
-    """The effects whose residual follows ``channel`` (``Effect.channel``), registry order."""
-    return [e.name for e in REGISTRY.values() if e.channel == channel]
-
-
-def _channel_candidate(analysis, channel: str, gyro):
-    """The best candidate (first in rank) of the effects of ``channel`` on ``gyro``."""
-    names = set(_channel_effects(channel))
-    return next((t for t in analysis.candidates if t.effect in names and t.gyro == gyro), None)
-
-
-def _channel_in_model(analysis, channel: str, gyro):
-    """The model entry of an effect of ``channel`` on ``gyro``, or None."""
-    names = set(_channel_effects(channel))
-    return next((e for e in analysis.model if e.effect in names and e.gyro == gyro), None)
-
-
 def _status(analysis, channel: str, gyro) -> tuple[str, str]:
     """(text, colour) of a channel's effect for a panel title: its candidate z, "in model" or "not tested"."""
-    e = _channel_in_model(analysis, channel, gyro)
+    e = channel_in_model(analysis, channel, gyro)
     if e is not None:
         return f"{e.effect}: in model", _GREEN
-    t = _channel_candidate(analysis, channel, gyro)
+    t = channel_candidate(analysis, channel, gyro)
     if t is None:
-        names = _channel_effects(channel)
+        names = channel_effects(channel)
         return f"{names[0] if names else channel}: not tested", _GREY
     effect = t.effect
     if np.isnan(t.z):
@@ -267,7 +234,7 @@ def _ladder_fig(steps) -> bytes:
     """Discrepancy after each step (log y) with the line D = 1."""
     d = np.array([a.discrepancy for _, a in steps], float)
     labels = ["start"] + [f"+ {e}" + ("" if g is None else f":{g}") for (e, g), _ in steps[1:]]
-    fig, axs = _figure(max(5.0, 1.3 * len(steps) + 2.0), 3.8)
+    fig, axs = agg_figure(max(5.0, 1.3 * len(steps) + 2.0), 3.8)
     ax = axs[0]
     x = np.arange(len(steps))
     dd = np.maximum(d, 1e-3)
@@ -286,7 +253,7 @@ def _ladder_fig(steps) -> bytes:
     ax.set_xticks(x, labels, fontsize=8, rotation=20 if len(steps) > 4 else 0)
     ax.set(ylabel="discrepancy D [-]", title="Discrepancy after each step (green: consistent)")
     ax.grid(alpha=0.3, axis="y")
-    return _png(fig, DPI)
+    return figure_png(fig, DPI)
 
 
 def _adev_fig(analysis, n_gyros: int, title: str) -> bytes:
@@ -323,186 +290,40 @@ def _adev_fig(analysis, n_gyros: int, title: str) -> bytes:
         ax.set_ylabel("ADEV [deg/h]", fontsize=8)
         ax.tick_params(labelsize=7)
     _header(fig, title, axs)
-    return _png(fig, DPI)
+    return figure_png(fig, DPI)
 
 
-def fitted_bias(E: np.ndarray, t: np.ndarray, static: np.ndarray) -> np.ndarray:
-    """Per-gyro mean of ``E`` over the static samples of each BIAS_BLOCK_S block, linear in time."""
-    blk = np.floor((t - t[0]) / BIAS_BLOCK_S).astype(np.int64)
-    nb = int(blk[-1]) + 1
-    w = static.astype(float)
-    cnt = np.bincount(blk, weights=w, minlength=nb)
-    tc = np.bincount(blk, weights=w * t, minlength=nb)
-    ok = cnt >= max(10, 0.05 * BIAS_BLOCK_S / max(t[1] - t[0], 1e-12))
-    if not ok.any():
-        ok = cnt > 0
-    out = np.empty_like(E)
-    for g in range(E.shape[1]):
-        s = np.bincount(blk, weights=w * E[:, g], minlength=nb)
-        out[:, g] = np.interp(t, tc[ok] / cnt[ok], s[ok] / cnt[ok])
-    return out
-
-
-def _binned(x: np.ndarray, y: np.ndarray, full_range: bool = False):
-    """Centres, means and standard errors of ``y`` in N_BINS uniform bins of ``x``."""
-    if full_range:
-        lo, hi = float(x.min()), float(x.max())
-    else:
-        lo, hi = (float(v) for v in np.percentile(x, [0.5, 99.5]))
-    if not hi > lo:
-        return np.array([]), np.array([]), np.array([])
-    edges = np.linspace(lo, hi, N_BINS + 1)
-    keep = (x >= lo) & (x <= hi)
-    i = np.clip(np.searchsorted(edges, x[keep], side="right") - 1, 0, N_BINS - 1)
-    yk = y[keep]
-    c = np.bincount(i, minlength=N_BINS).astype(float)
-    s = np.bincount(i, weights=yk, minlength=N_BINS)
-    s2 = np.bincount(i, weights=yk * yk, minlength=N_BINS)
-    ok = c >= MIN_BIN
-    m = s[ok] / c[ok]
-    var = np.maximum(s2[ok] / c[ok] - m * m, 0.0) * c[ok] / (c[ok] - 1.0)
-    return 0.5 * (edges[:-1] + edges[1:])[ok], m, np.sqrt(var / c[ok])
-
-
-class Regressors:
-    """The regressors of one comparison and the fitted bias of one analysis's residual."""
-
-    def __init__(self, comp, analysis):
-        self.comp = comp
-        self.t = np.asarray(comp.t, float)
-        self.E = np.asarray(analysis.residual_rad_s, float)
-        self.static = np.asarray(analysis.static, bool)
-        self.bias = fitted_bias(self.E, self.t, self.static)
-        self.has_ref = comp.ref is not None and comp.moving     # a table that never turns: no rates
-        self.has_temp = comp.temp is not None
-        self.keys = [k for k, (_, need) in REGRESSORS.items()
-                     if need is None or (need == "ref" and self.has_ref)
-                     or (need == "temp" and self.has_temp)]
-
-    def values(self, key: str, g: int, analysis) -> tuple[np.ndarray, str]:
-        """(regressor in display units, axis label) of gyro index ``g``."""
-        label = REGRESSORS[key][0]
-        if key == "time":
-            return self.t, label
-        if key == "temp":
-            return np.asarray(self.comp.temp, float), label
-        h = self.comp.H[g]
-        ref = np.asarray(self.comp.ref, float)
-        u = units.rad_s_to_deg_s(ref @ h)
-        if key == "rate":
-            return u, label
-        if key == "rate2":
-            return u * u, label
-        if key == "accel":
-            return np.gradient(u, self.comp.dt), label
-        # rate about the other axes, signed along the direction of the tilt the residual shows
-        perp = units.rad_s_to_deg_s(ref - np.outer(ref @ h, h))
-        d = self._tilt_direction(g, perp, analysis)
-        if d is None:
-            return np.linalg.norm(perp, axis=1), label.replace("[deg/s]", "(norm) [deg/s]")
-        return perp @ d, label.replace("[deg/s]", "(toward the tilt) [deg/s]")
-
-    def _tilt_direction(self, g: int, perp: np.ndarray, analysis):
-        t = _channel_candidate(analysis, "other", g + 1)
-        h = self.comp.H[g]
-        if t is not None and t.fit is not None and "axis" in t.fit.extra:
-            a = np.asarray(t.fit.extra["axis"], float)
-            v = a - (a @ h) * h
-            if np.linalg.norm(v) > 0:
-                return v / np.linalg.norm(v)
-        moving = ~self.static
-        if moving.sum() < 3 * MIN_BIN:
-            return None
-        y = self.E[moving, g] - self.bias[moving, g]
-        beta, *_ = np.linalg.lstsq(perp[moving], y, rcond=1e-8)
-        nb = float(np.linalg.norm(beta))
-        return beta / nb if nb > 0 else None
-
-
-def _fit_line(key: str, analysis, g: int, xb, yb, sb):
-    """(x, y [deg/h] or None, label) of the panel's candidate fit, or None.
-
-    The candidate is the effect whose ``channel`` the panel shows; its
-    ``Effect.channel_line`` gives the line. The line (y) only for a
-    significant candidate: the fit of an absent effect can be large and
-    uncertain, and a steep line across flat points would say the opposite of
-    its z; the label (value ± 1σ) always.
-    """
-    t = _channel_candidate(analysis, key, g + 1)
-    if t is None or t.fit is None or not np.isfinite(t.z) or xb.size < 2:
-        return None
-    x = np.linspace(xb.min(), xb.max(), 50)
-    w = 1.0 / np.maximum(sb, 1e-12) ** 2
-    xm, ym = float(np.average(xb, weights=w)), float(np.average(yb, weights=w))
-    line = get_effect(t.effect).channel_line(t.fit, x, xm, ym)
-    if line is None:
-        return None
-    return (x, line[0] if analysis.significant(t) else None, line[1])
-
-
-def _regressor_fig(reg: Regressors, analysis, g: int) -> bytes:
-    """Binned residual of gyro ``g`` (index) against every available regressor."""
-    to = units.rad_s_to_deg_h
-    keys = reg.keys
-    fig, axs = _grid(len(keys), 3, {1: 7.0, 2: 5.0}.get(len(keys), 4.2), 3.0)
-    e = reg.E[:, g]
-    e_fast = to(e - reg.bias[:, g])
-    offset = float(np.mean(e[reg.static])) if reg.static.any() else float(np.mean(e))
-    e_slow = to(e - offset)
-    thin = max(1, reg.t.size // 600)
-    for ax, key in zip(axs, keys):
-        x, label = reg.values(key, g, analysis)
-        y = e_slow if key in ("temp", "time") else e_fast
-        xb, yb, sb = _binned(x, y, full_range=key == "time")
+def _regressor_fig(rf: RegressorFigure, analysis) -> bytes:
+    """Binned residual of gyro ``rf.gyro`` against every available regressor."""
+    g = rf.gyro - 1
+    panels = rf.panels
+    fig, axs = _grid(len(panels), 3, {1: 7.0, 2: 5.0}.get(len(panels), 4.2), 3.0)
+    for ax, pan in zip(axs, panels):
+        key = pan.key
+        xb, yb, sb = pan.binned.x, pan.binned.mean, pan.binned.stderr
         if xb.size:
             ax.errorbar(xb, yb, yerr=2.0 * sb, fmt="o", ms=3, color="C0", ecolor="C0", elinewidth=1,
                         capsize=2, label="binned mean ± 2 standard errors")
         if key == "time":
-            ax.plot(reg.t[::thin], to(reg.bias[::thin, g] - offset), "-", color="C1", lw=1,
+            ax.plot(rf.time_s, rf.bias_deg_h, "-", color="C1", lw=1,
                     label=f"fitted bias (static samples, {BIAS_BLOCK_S:.0f} s blocks)")
-        line = _fit_line(key, analysis, g, xb, yb, sb) if xb.size else None
         text, color = _status(analysis, key, g + 1)
-        if line is not None:
+        if pan.line_label is not None:
             lc = color if color != "0.15" else _GREY
-            if line[1] is not None:
-                ax.plot(line[0], line[1], "--", color=lc, lw=1.2, label="significant candidate's fit")
-            ax.text(0.02, 0.97, line[2], transform=ax.transAxes, va="top", ha="left", fontsize=7,
-                    color=lc)
+            if pan.line_y_deg_h is not None:
+                ax.plot(pan.line_x, pan.line_y_deg_h, "--", color=lc, lw=1.2,
+                        label="significant candidate's fit")
+            ax.text(0.02, 0.97, pan.line_label, transform=ax.transAxes, va="top", ha="left",
+                    fontsize=7, color=lc)
         ax.axhline(0.0, color="0.6", lw=0.7)
-        ax.set_xlabel(label, fontsize=8)
+        ax.set_xlabel(pan.label, fontsize=8)
         ax.set_ylabel("residual [deg/h]", fontsize=8)
         ax.set_title(text, fontsize=9, color=color, y=1.0, pad=4)
         ax.tick_params(labelsize=7)
         ax.grid(alpha=0.3)
     _header(fig, f"Gyro {g + 1}: residual against the regressors"
-            + (" of the deterministic effects" if len(keys) > 2 else ""), axs)
-    return _png(fig, DPI)
-
-
-def _log_binned(f: np.ndarray, p: np.ndarray, per_decade: int = 20):
-    """Mean of a spectrum in log-spaced frequency bins (the level, for the eye)."""
-    edges = np.logspace(math.log10(f[0]), math.log10(f[-1]) + 1e-9, max(
-        2, int(per_decade * math.log10(f[-1] / f[0])) + 1))
-    i = np.clip(np.searchsorted(edges, f, side="right") - 1, 0, edges.size - 2)
-    c = np.bincount(i, minlength=edges.size - 1)
-    ok = c > 0
-    fc = np.bincount(i, weights=np.log(f), minlength=edges.size - 1)[ok] / c[ok]
-    out = np.stack([np.bincount(i, weights=p[:, g], minlength=edges.size - 1)[ok] / c[ok]
-                    for g in range(p.shape[1])], axis=1)
-    return np.exp(fc), out
-
-
-def model_asd_deg_h(f_hz: np.ndarray, n_deg_rt_h: float, k_deg_h_rt_h: float) -> np.ndarray:
-    """One-sided ASD [deg/h/√Hz] of ARW N [deg/√h] + RRW K [deg/h/√h] at ``f_hz``.
-
-    S(f) = 2 N² + K² / (2 π² f²) [rad²/s²/Hz] with N [rad/√s], K [rad/s/√s]
-    (white: two-sided N², one-sided twice that; random walk: two-sided
-    K² / (4 π² f²)).
-    """
-    n = units.arw_deg_rt_h_to_rad_rt_s(n_deg_rt_h)
-    k = units.rrw_deg_h_rt_h_to_rad_s_rt_s(k_deg_h_rt_h)
-    f = np.asarray(f_hz, float)
-    return units.rad_s_to_deg_h(np.sqrt(2.0 * n ** 2 + k ** 2 / (2.0 * math.pi ** 2 * f ** 2)))
+            + (" of the deterministic effects" if len(panels) > 2 else ""), axs)
+    return figure_png(fig, DPI)
 
 
 def _asd_axes(ax):
@@ -514,33 +335,27 @@ def _asd_axes(ax):
     ax.tick_params(labelsize=7)
 
 
-def _psd_fig(comp, analysis) -> bytes:
+def _psd_fig(p: PsdFigure, analysis) -> bytes:
     """Residual ASD per gyro over the record, with the sinusoid candidates and the model's level."""
-    from scipy.signal import welch
-    E = np.asarray(analysis.residual_rad_s, float)[analysis.record]
-    n, N = E.shape
-    nper = int(min(n, max(256, min(8192, n // 8))))
-    f, P = welch(E, fs=1.0 / comp.dt, nperseg=nper, axis=0, detrend="linear")
-    f, P = f[1:], P[1:]
-    fb, Pb = _log_binned(f, P)
-    to = units.rad_s_to_deg_h
+    f = p.freq_hz
+    N = p.asd_deg_h_rt_hz.shape[1]
     fig, axs = _grid(N, 4, 3.4, 2.9)
     for g, ax in enumerate(axs):
-        ax.loglog(f, to(np.sqrt(P[:, g])), color="0.72", lw=0.5, label="residual (Welch)")
-        ax.loglog(fb, to(np.sqrt(Pb[:, g])), color="k", lw=1.1, label="residual, log-binned")
-        n, k = analysis.baseline_noise(g + 1)
-        if n is not None:
-            white = float(model_asd_deg_h(np.array([f[-1]]), n, 0.0)[0])
+        ax.loglog(f, p.asd_deg_h_rt_hz[:, g], color="0.72", lw=0.5, label="residual (Welch)")
+        ax.loglog(p.freq_binned_hz, p.asd_binned_deg_h_rt_hz[:, g], color="k", lw=1.1,
+                  label="residual, log-binned")
+        white = p.white_deg_h_rt_hz[g]
+        if white is not None:
             ax.axhline(white, color="C0", ls="--", lw=1, label="model ARW level")
-            if k is not None:
-                model = model_asd_deg_h(f, n, k)
+            model = p.model_deg_h_rt_hz[g]
+            if model is not None:
                 ax.loglog(f, model, color="C0", lw=1, alpha=0.7, label="model ARW + RRW")
             lo, hi = ax.get_ylim()
             if white > 0:     # at least a decade around the white level: the noise looks calm
                 ax.set_ylim(min(lo, white / 2.5) if lo > 0 else white / 2.5, max(hi, white * 2.5))
         title, color = f"gyro {g + 1}", "0.15"
-        t = _channel_candidate(analysis, "spectrum", g + 1)
-        e = _channel_in_model(analysis, "spectrum", g + 1)
+        t = channel_candidate(analysis, "spectrum", g + 1)
+        e = channel_in_model(analysis, "spectrum", g + 1)
         fq = math.nan
         if e is not None and (e.effect, g + 1) in analysis.fits:
             fq = float(analysis.fits[(e.effect, g + 1)].params.get("freq_hz", math.nan))
@@ -556,30 +371,18 @@ def _psd_fig(comp, analysis) -> bytes:
         ax.set_title(title, fontsize=9, color=color, y=1.0, pad=4)
         _asd_axes(ax)
     _header(fig, "Residual amplitude spectral density", axs)
-    return _png(fig, DPI)
+    return figure_png(fig, DPI)
 
 
-def _corr(X: np.ndarray) -> np.ndarray:
-    d = np.diff(X, axis=0)
-    d = d - d.mean(axis=0)
-    s = np.sqrt(np.sum(d * d, axis=0))
-    s[s == 0] = 1.0
-    return (d.T @ d) / np.outer(s, s)
-
-
-def _xcorr_fig(comp, analysis) -> tuple[bytes, str]:
+def _xcorr_fig(x: XcorrFigure, comp, analysis) -> tuple[bytes, str]:
     """Correlation between the gyros' residuals: fast (sample differences) and slow (block means)."""
-    E = np.asarray(analysis.residual_rad_s, float)[analysis.record]
-    n, N = E.shape
-    fast = _corr(E)
-    blk = max(1, int(round(max(1.0, n * comp.dt / 200.0) / comp.dt)))
-    nb = n // blk
-    slow = _corr(E[:nb * blk].reshape(nb, blk, N).mean(axis=1)) if nb >= 8 else None
-    mats = [(fast, "first differences of the samples\n(the ARW part)")]
+    n, nb, slow = x.n_samples, x.n_blocks, x.slow
+    N = x.fast.shape[0]
+    mats = [(x.fast, "first differences of the samples\n(the ARW part)")]
     if slow is not None:
-        mats.append((slow, f"first differences of {blk * comp.dt:.3g} s means\n(the slow part, {nb} means)"))
+        mats.append((slow, f"first differences of {x.block_s:.3g} s means\n(the slow part, {nb} means)"))
     side = max(3.6, 0.5 * N + 0.6)
-    fig, axs = _figure(side * len(mats) + 0.8, side - 0.1, len(mats))
+    fig, axs = agg_figure(side * len(mats) + 0.8, side - 0.1, len(mats))
     off = ~np.eye(N, dtype=bool)
     vmax = max(0.05, max(float(np.max(np.abs(m[off]))) for m, _ in mats) * 1.1)
     im = None
@@ -605,23 +408,17 @@ def _xcorr_fig(comp, analysis) -> tuple[bytes, str]:
                                         if slow is not None else "")
     caption = (f"Correlation between the gyros' residuals over {_record_text(comp, analysis)}; "
                f"{text}. Independent gyros scatter by about {spread} (2σ).")
-    return _png(fig, DPI), caption
+    return figure_png(fig, DPI), caption
 
 
-def _arw_track_fig(comp, analysis) -> tuple[bytes, str]:
+def _arw_track_fig(a: ArwTrackFigure, comp, analysis) -> tuple[bytes, str]:
     """ARW in sliding windows (dynamic Allan deviation at τ₀) per gyro, with the burst candidate."""
-    E = np.asarray(analysis.residual_rad_s, float)
-    n, N = E.shape
-    dt = comp.dt
-    t0 = float(comp.t[0])
-    window = int(min(max(64, round(ARW_WINDOW_S / dt)), max(64, n // 8)))
-    step = max(1, window // 4)
-    to = units.arw_rad_rt_s_to_deg_rt_h
+    n, N = comp.n, a.arw_deg_rt_h.shape[1]
     fig, axs = _grid(N, 2, 6.0, 2.5)
     rec = analysis.record
     r0, r1 = rec.start or 0, rec.stop if rec.stop is not None else n
-    burst_t = _channel_candidate(analysis, "window", None)
-    burst_e = _channel_in_model(analysis, "window", None)
+    burst_t = channel_candidate(analysis, "window", None)
+    burst_e = channel_in_model(analysis, "window", None)
     shade = None
     if burst_e is not None:
         shade = (float(burst_e.params["start_s"]), float(burst_e.params["end_s"]), _GREEN,
@@ -631,12 +428,11 @@ def _arw_track_fig(comp, analysis) -> tuple[bytes, str]:
         shade = (float(p["start_s"]), float(p["end_s"]), _RED,
                  f"{burst_t.effect} candidate, z = {_z(burst_t.z)}")
     for g, ax in enumerate(axs):
-        res = davar(E[:, g], dt, window=window, step=step, taus=[dt], extension="mirror")
-        tc = t0 + res.time_s
-        arw = to(res.arw_rad_rt_s)
-        ax.fill_between(tc, to(res.arw_ci_low_rad_rt_s), to(res.arw_ci_high_rad_rt_s), color="k",
+        tc = a.time_s
+        arw = a.arw_deg_rt_h[:, g]
+        ax.fill_between(tc, a.ci_low_deg_rt_h[:, g], a.ci_high_deg_rt_h[:, g], color="k",
                         alpha=0.15, lw=0, label="1σ band")
-        ax.plot(tc, arw, color="k", lw=0.9, label=f"ARW in {window * dt:.0f} s windows")
+        ax.plot(tc, arw, color="k", lw=0.9, label=f"ARW in {a.window_s:.0f} s windows")
         level, _ = analysis.baseline_noise(g + 1)
         lo, hi = float(np.min(arw)), float(np.max(arw))
         if level is not None:
@@ -664,10 +460,10 @@ def _arw_track_fig(comp, analysis) -> tuple[bytes, str]:
     elif burst_e is not None:
         what = f"{burst_e.effect}: in the model (shaded)"
     else:
-        what = " / ".join(_channel_effects("window")) + ": not tested"
-    caption = (f"ARW of the residual in sliding {window * dt:.0f} s windows (dynamic Allan deviation "
-               f"at τ₀, step {step * dt:.3g} s) against the model's ARW; {what}.")
-    return _png(fig, DPI), caption
+        what = " / ".join(channel_effects("window")) + ": not tested"
+    caption = (f"ARW of the residual in sliding {a.window_s:.0f} s windows (dynamic Allan deviation "
+               f"at τ₀, step {a.step_s:.3g} s) against the model's ARW; {what}.")
+    return figure_png(fig, DPI), caption
 
 
 # -- sections ----------------------------------------------------------------------
@@ -713,9 +509,9 @@ def _section_headline(doc: Doc, comp, steps, alpha: float):
             ["discrepancy D", _d(final.discrepancy)],
             ["consistent", "yes" if ok else "no"]]
     _raw(doc, '<table class="facts"><tbody>' + "".join(
-        f"<tr><th>{html.escape(k)}</th><td>{html.escape(_fmt(v))}</td></tr>" for k, v in rows)
+        f"<tr><th>{html.escape(k)}</th><td>{html.escape(format_value(v))}</td></tr>" for k, v in rows)
         + "</tbody></table>",
-        "| item | value |\n|---|---|\n" + "\n".join(f"| {k} | {_fmt(v).replace('|', chr(92) + '|')} |"
+        "| item | value |\n|---|---|\n" + "\n".join(f"| {k} | {format_value(v).replace('|', chr(92) + '|')} |"
                                              for k, v in rows))
 
 
@@ -769,13 +565,6 @@ def _section_effects(doc: Doc, final, n_gyros: int):
               brow, flags)
 
 
-#: Channels of the localisation: display unit and the factor from SI.
-_CHANNEL_UNITS = {"time": ("s", 1.0), "rate": ("deg/s", 1.0 / units.RAD_PER_DEG),
-                  "rate²": ("deg²/s²", units.RAD_PER_DEG ** -2),
-                  "angular acceleration": ("deg/s²", 1.0 / units.RAD_PER_DEG),
-                  "temperature": ("°C", 1.0), "dT/dt": ("°C/s", 1.0)}
-
-
 def _finding_marks(ax, loc, gyro: int):
     """Draw one gyro's spectral findings on a PSD panel: cut-offs, lines, bands."""
     for f in loc.findings:
@@ -791,12 +580,10 @@ def _finding_marks(ax, loc, gyro: int):
                        label="band off the model")
 
 
-def _localise_psd_fig(comp, final) -> bytes:
+def _localise_psd_fig(comp, final, lp: LocalisePsd) -> bytes:
     """Residual PSD of every gyro (whole record) against the model's Monte-Carlo PSD band."""
     loc, a = final.localised, final.adev
-    f = loc.psd_freq_hz[1:]
-    P = loc.psd_residual[:, 1:].T
-    fb, Pb = _log_binned(f, P)
+    f, P, fb, Pb = lp.freq_hz, lp.psd, lp.freq_binned_hz, lp.psd_binned
     to = units.rad_s_to_deg_h
     fig, axs = _grid(comp.N, 4, 3.4, 2.9)
     for g, ax in enumerate(axs):
@@ -811,23 +598,18 @@ def _localise_psd_fig(comp, final) -> bytes:
                      fontsize=9, color=_RED if bad else "0.15", y=1.0, pad=4)
         _asd_axes(ax)
     _header(fig, "Residual spectrum against the model's band", axs)
-    return _png(fig, DPI)
+    return figure_png(fig, DPI)
 
 
-def _localise_channels_fig(comp, final) -> bytes:
+def _localise_channels_fig(comp, final, panels: list[ChannelPanel]) -> bytes:
     """Binned residual (mean removed) against every channel of the record, all gyros per panel."""
     loc = final.localised
-    rate = None if comp.ref is None else comp.ref @ comp.H.T
-    chans = record_channels(comp.n, comp.N, rate, None, comp.acc, comp.temp, comp.t, comp.dt, None)
-    E = final.residual_rad_s - final.residual_rad_s.mean(axis=0)
-    to = units.rad_s_to_deg_h
-    fig, axs = _grid(len(chans), 3, 3.6, 2.9)
-    for ax, (name, v) in zip(axs, chans.items()):
-        unit, k = _CHANNEL_UNITS.get(name, ("m/s²", 1.0))
-        for g in range(comp.N):
-            xc, m, se = _binned((v if v.ndim == 1 else v[:, g]) * k, E[:, g])
-            if xc.size:
-                ax.errorbar(xc, to(m), yerr=2.0 * to(se), fmt="o-", ms=2.5, lw=0.8, capsize=0,
+    fig, axs = _grid(len(panels), 3, 3.6, 2.9)
+    for ax, pan in zip(axs, panels):
+        name, unit = pan.name, pan.unit
+        for g, b in enumerate(pan.per_gyro):
+            if b.x.size:
+                ax.errorbar(b.x, b.mean, yerr=2.0 * b.stderr, fmt="o-", ms=2.5, lw=0.8, capsize=0,
                             color=f"C{g % 10}", label=f"gyro {g + 1}")
         c = next((c for c in loc.correlations if c.channel == name), None)
         bad = c is not None and abs(c.z) > loc.z_crit
@@ -838,10 +620,10 @@ def _localise_channels_fig(comp, final) -> bytes:
         ax.set_ylabel("residual [deg/h]", fontsize=8)
         ax.tick_params(labelsize=7)
     _header(fig, "Residual against each channel of the record", axs)
-    return _png(fig, DPI)
+    return figure_png(fig, DPI)
 
 
-def _section_localisation(doc: Doc, comp, final):
+def _section_localisation(doc: Doc, comp, final, figures: CompareFigures):
     """The ranked findings of the localisation and their figures."""
     loc = final.localised
     doc.h3("Where it fails")
@@ -852,17 +634,20 @@ def _section_localisation(doc: Doc, comp, final):
     doc.table(["score", "kind", "gyros", "finding"],
               [[f"{f['score']:.1f}", f["kind"], ", ".join(map(str, f["gyros"])), f["sentence"]]
                for f in final.localisation], [True] * len(final.localisation))
-    doc.figure("localise_psd", _localise_psd_fig(comp, final),
+    assert figures.localise_psd is not None                 # computed for a localised step
+    doc.figure("localise_psd", _localise_psd_fig(comp, final, figures.localise_psd),
                "Residual PSD (as ASD) of each gyro over the whole record against the model's "
                f"95 % band (the same {final.adev['mc'].shape[0]} Monte-Carlo runs as the ADEV band, "
                "per Welch frequency); red: the localised cut-offs, lines and bands.")
-    doc.figure("localise_channels", _localise_channels_fig(comp, final),
+    doc.figure("localise_channels", _localise_channels_fig(comp, final, figures.localise_channels),
                "Binned residual (mean removed, ± 2 standard errors) against every channel the "
                "record has; titles: the strongest correlation (block means, autocorrelation-"
                "corrected), red past the critical value.")
 
 
-def section_unexplained(doc: Doc, final, comp=None):
+def section_unexplained(doc: Doc, final, comp=None, figures: CompareFigures | None = None):
+    """Draw what the final step leaves unexplained; its localisation (with ``comp``) from
+    ``figures`` (:func:`gyroarray.chain.compare_figures.compare_figures`)."""
     doc.h2("What is still unexplained")
     left = [t for t in final.candidates if final.significant(t)]
     sentences = [] if final.localisation else final.unexplained()
@@ -881,8 +666,9 @@ def section_unexplained(doc: Doc, final, comp=None):
     if band and not sentences and not final.localisation:
         doc.p("ADEV outside the model's band (explained by a significant candidate above): "
               + "; ".join(t.evidence for t in band) + ".")
-    if final.localisation and final.localised is not None and comp is not None:
-        _section_localisation(doc, comp, final)
+    if (final.localisation and final.localised is not None and comp is not None
+            and figures is not None and figures.localise_psd is not None):
+        _section_localisation(doc, comp, final, figures)
 
 
 def _candidate_table(doc: Doc, a):
@@ -912,7 +698,7 @@ def _section_candidates(doc: Doc, steps):
         _candidate_table(doc, first)
 
 
-def _section_diagnostics(doc: Doc, comp, steps):
+def _section_diagnostics(doc: Doc, comp, steps, figures: CompareFigures):
     first, final = steps[0][1], steps[-1][1]
     N = comp.N
     doc.h2("Where the model fails" + (" (before fitting)" if len(steps) > 1 else ""))
@@ -926,34 +712,33 @@ def _section_diagnostics(doc: Doc, comp, steps):
                f"points leave the band.")
 
     doc.h3("Residual against the regressors")
-    reg = Regressors(comp, first)
-    have = ", ".join(REGRESSORS[k][0].split(" [")[0] for k in reg.keys)
+    have = ", ".join(REGRESSORS[k][0].split(" [")[0] for k in figures.regressor_keys)
     doc.p(f"Binned mean of the residual (± 2 standard errors) against {have}. Rate, other axes, "
           f"rate² and acceleration: the slowly varying bias (mean over the static samples of each "
           f"{BIAS_BLOCK_S:.0f} s block, linear in time) removed first; temperature and time: only "
           "the mean over the static samples removed (the fitted bias would take the slow signal "
           "with it; it is drawn on the time panel). Dashed: the candidate's fit. "
-          + ("" if reg.has_ref else "No reference rate: the rate panels are left out. "
+          + ("" if figures.has_ref else "No reference rate: the rate panels are left out. "
              if comp.ref is None else "The table never turns: the rate panels are left out. ")
-          + ("" if reg.has_temp else "No temperature: the temperature panel is left out."))
-    for g in range(N):
-        doc.figure(f"regressors_g{g + 1}", _regressor_fig(reg, first, g),
-                   f"Gyro {g + 1}: residual against the regressors")
+          + ("" if figures.has_temp else "No temperature: the temperature panel is left out."))
+    for rf in figures.regressors:
+        doc.figure(f"regressors_g{rf.gyro}", _regressor_fig(rf, first),
+                   f"Gyro {rf.gyro}: residual against the regressors")
 
     doc.h3("Residual spectrum")
-    doc.figure("psd", _psd_fig(comp, first),
+    doc.figure("psd", _psd_fig(figures.psd, first),
                f"Amplitude spectral density of the residual (Welch, over {_record_text(comp, first)}, "
                "where the stochastic tests read it) with the model's ARW level and ARW + RRW curve; "
                "dotted: the sinusoid candidate's frequency, its z in the panel title (red: "
                "significant).")
 
-    if N >= 2:
+    if figures.xcorr is not None:
         doc.h3("Correlation between gyros")
-        png, cap = _xcorr_fig(comp, first)
+        png, cap = _xcorr_fig(figures.xcorr, comp, first)
         doc.figure("xcorr", png, cap)
 
     doc.h3("Non-stationarity: ARW in sliding windows")
-    png, cap = _arw_track_fig(comp, first)
+    png, cap = _arw_track_fig(figures.arw_track, comp, first)
     doc.figure("arw_track", png, cap)
 
     if len(steps) > 1:
@@ -992,7 +777,7 @@ def _check_steps(comp, steps):
 # -- the report ----------------------------------------------------------------------
 
 def write_compare_report(comp, steps, out_html, out_md=None, *, title: str | None = None,
-                         force: bool = True) -> dict:
+                         force: bool = True, figures: CompareFigures | None = None) -> dict:
     """Write the model-vs-measurement report (see the module docstring).
 
     Parameters
@@ -1014,6 +799,10 @@ def write_compare_report(comp, steps, out_html, out_md=None, *, title: str | Non
     force : bool
         Replace existing output files (the CLI passes ``--force``; it has
         checked the paths before the analysis, :mod:`gyroarray.core.outputs`).
+    figures : CompareFigures, optional
+        The figures' data (:func:`gyroarray.chain.compare_figures.compare_figures`,
+        e.g. read back with ``CompareFigures.from_dict``); default: computed by the chain
+        from ``comp`` and ``steps``. Nothing else is computed here.
 
     Returns
     -------
@@ -1036,15 +825,17 @@ def write_compare_report(comp, steps, out_html, out_md=None, *, title: str | Non
         raise InputError("the Markdown twin must end in .md", file=str(out_md))
     _check_steps(comp, steps)
     steps = list(steps)
+    if figures is None:
+        figures = compare_figures(comp, steps)
     label = Path(comp.m.source).name if comp.m.source else "measurement not read from a file"
     doc = Doc(title or f"Model vs measurement: {label}")
     _section_headline(doc, comp, steps, comp.alpha)
     if len(steps) > 1:
         _section_ladder(doc, steps)
     _section_effects(doc, steps[-1][1], comp.N)
-    section_unexplained(doc, steps[-1][1], comp)
+    section_unexplained(doc, steps[-1][1], comp, figures)
     _section_candidates(doc, steps)
-    _section_diagnostics(doc, comp, steps)
+    _section_diagnostics(doc, comp, steps, figures)
     _section_notes(doc, comp, steps)
 
     stamp = time.strftime("%Y-%m-%d %H:%M", time.localtime())

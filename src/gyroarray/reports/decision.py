@@ -22,34 +22,18 @@ from __future__ import annotations
 
 import json
 import math
-from pathlib import Path
 
 import numpy as np
 
+from gyroarray.analysis.adev_curves import AdevFigure
 from gyroarray.core import units
-from gyroarray.core.gdop import gdop_robustness, minmax_alpha, optimal_alpha
-from gyroarray.core.errors import InputError
-from gyroarray.core.limits import read_json
-from gyroarray.core.layout import Layout
-from gyroarray.design.predict import Swing, settle_start, swing_truth
-from gyroarray.design.recommend import DesignSpace, GyroNoise, _label as _recommend_label
-from gyroarray.reports.design_plots import _figure, _png, accuracy_vs_n_fig
+from gyroarray.design.evidence import GdopRobustnessRow
+from gyroarray.design.recommend import design_label as _recommend_label
+from gyroarray.reports.design_plots import agg_figure, figure_png, accuracy_vs_n_fig
 
-__all__ = ["load_design", "write_sections", "decision_summary"]
+__all__ = ["write_sections", "decision_summary", "adev_section"]
 
 AXES = ("x", "y", "z")
-
-
-def load_design(path) -> dict:
-    """Read a ``design --recommend --out`` JSON file (checked for the keys the report needs)."""
-    p = Path(path)
-    # regular files only, bounded in size and depth (a FIFO or /dev/zero is refused at once)
-    data = read_json(p, "design result", expect=None)
-    need = ("recommended", "designs", "equivalent", "assumptions")
-    if not isinstance(data, dict) or any(k not in data for k in need):
-        raise InputError("not a gyroarray design --recommend result (needs keys "
-                         + ", ".join(need) + ")", file=str(p))
-    return data
 
 
 def _label(d: dict) -> str:
@@ -114,8 +98,13 @@ def decision_summary(res: dict) -> list[str]:
 
 # -- sections ---------------------------------------------------------------------
 
-def write_sections(doc, res: dict, top: int = 15) -> dict:
-    """Add the decision, assumptions and evidence sections to a report document."""
+def write_sections(doc, res: dict, top: int = 15,
+                   gdop_rows: list[GdopRobustnessRow] | None = None) -> dict:
+    """Add the decision, assumptions and evidence sections to a report document.
+
+    ``gdop_rows``: :func:`gyroarray.design.evidence.gdop_robustness_table` over the
+    result's ρ range (drawn with the ρ robustness; none: that table is left out).
+    """
     doc.h2("Decision")
     for s in decision_summary(res):
         doc.p(s, "decision")
@@ -158,12 +147,12 @@ def write_sections(doc, res: dict, top: int = 15) -> dict:
         doc.table(["ranks", "spread [%]", "why"],
                   [[", ".join(map(str, g["members"])), 100 * g["spread"], g["reason"]]
                    for g in res["equivalent"][:8]])
-    doc.figure("accuracy_vs_n", _png(accuracy_vs_n_fig(res)),
+    doc.figure("accuracy_vs_n", figure_png(accuracy_vs_n_fig(res)),
                "Predicted 3-axis RMS about the truth vs N (best cone angle and bandwidth per "
                "scheme and estimator); simulated check with its 95 % interval as error bars")
     _fault_tolerance(doc, res)
     if res.get("per_rho"):
-        _rho(doc, res)
+        _rho(doc, res, gdop_rows or [])
     return {"recommended": res["recommended"], "summary": decision_summary(res)}
 
 
@@ -242,7 +231,7 @@ def _fault_tolerance(doc, res: dict):
                "3 axes", "detectable", "isolable", "how an axis is lost (2 failures)"], rows)
 
 
-def _rho(doc, res: dict):
+def _rho(doc, res: dict, gdop_rows: list[GdopRobustnessRow]):
     doc.h3("The correlation ρ is a condition, not a choice")
     rho = res["assumptions"]["rho"]["value"]
     doc.p(f"The gyros' common correlation is not known exactly: the search was run at each ρ in "
@@ -260,102 +249,53 @@ def _rho(doc, res: dict):
     doc.p("Robustness: the design chosen for each assumed ρ̂, evaluated at every ρ of the range "
           "(in brackets: how much worse than that ρ's own best):")
     doc.table(["chosen for ρ̂", "design"] + [f"at ρ = {r}" for r in rhos], rows)
-    _gdop_robustness(doc, [float(r) for r in rhos])
+    _gdop_robustness(doc, gdop_rows)
 
 
-def _gdop_robustness(doc, rhos):
-    rows = []
-    for scheme in (1, 2):
-        for n in (4, 5, 6, 8):
-            ok = [r for r in rhos if r > -1.0 / (n - 1)]
-            if len(ok) < 2:
-                continue
-            hi = max(ok)
-            a_hi = optimal_alpha(scheme, n, hi).alpha_rad
-            rob = gdop_robustness(scheme, n, ok, alpha_rad=a_hi)
-            worst = max(rob, key=lambda r: r["excess"])
-            mm = minmax_alpha(scheme, n, ok)
-            rows.append([scheme, n, hi, math.degrees(a_hi), worst["rho"], worst["gdop"],
-                         worst["gdop_opt"], 100 * worst["excess"], math.degrees(mm.alpha_rad), mm.gdop])
+def _gdop_robustness(doc, gdop_rows: list[GdopRobustnessRow]):
+    rows = [[r.scheme, r.n, r.chosen_for_rho, r.alpha_deg, r.worst_rho, r.gdop, r.gdop_best,
+             r.excess_percent, r.minmax_alpha_deg, r.minmax_gdop] for r in gdop_rows]
     doc.p("GDOP alone: the cone angle optimal at the largest ρ, evaluated where it is worst, and "
           "the min-max cone angle over the range:")
     doc.table(["scheme", "N", "chosen for ρ", "its α [deg]", "worst at ρ", "its GDOP there",
                "best GDOP there", "excess [%]", "min-max α [deg]", "min-max worst GDOP"], rows)
 
 
-def adev_section(doc, res: dict, *, seed: int = 20260413):
-    """Allan deviation of the recommended design's fused error against its single gyros.
+def adev_section(doc, res: dict, a: AdevFigure):
+    """Draw the recommended design's fused ADEV against its single gyros (computed by
+    :func:`gyroarray.design.evidence.recommended_adev`).
 
-    One run of the design's horizon (at least 600 s), re-simulated; dashed: each single
-    gyro's ADEV × √(3/N) (what averaging N alike gyros gives per axis at long τ).
+    One run of the design's horizon (at least 600 s); dashed: gyro 1's ADEV × √(3/N)
+    (what averaging N alike gyros gives per axis at long τ).
     """
-    from gyroarray.analysis.allan import allan_analysis  # lazy: loads numba
-    from gyroarray.estimators import get_estimator  # lazy: loads numba
-    from gyroarray.sim.effects import simulate_readings  # lazy: loads numba
-    g, space = noise_and_space(res["assumptions"])
     d = res["recommended"]
-    gr = g.with_rho(d.get("rho", g.rho_arw)) if g.rho_arw == g.rho_rrw else g
-    n_g = d["n"]
-    layout = Layout.conical(d["scheme"], n_g, math.radians(d["alpha_deg"]))
-    model = gr.noise_model(n_g)
-    dt = space.dt_s
-    n = max(space.n_samples, int(round(600.0 / dt)))
-    truth = swing_truth(space.swing, n, dt) if space.swing is not None else np.zeros((n, 3))
-    t = np.arange(n) * dt
-    z = simulate_readings(model, truth, layout, dt, np.random.default_rng(seed), time_s=t)
-    bw = d["bandwidth_hz"]
-    kw = {"bandwidth_hz": bw} if d["estimator"] in ("kf_array", "kf_single") else (
-        {"lowpass_hz": bw} if d["estimator"] in ("gls", "ols") else {})
-    est = get_estimator(d["estimator"])(**kw).fit(layout, model, dt)
-    k0 = settle_start(n, dt, space.settle_s)
-    fused = (est.estimate(z) - truth)[k0:]
-    single = (z - truth @ layout.H.T)[k0:]
-    fig, axs = _figure(8.5, 5.2)
+    fig, axs = agg_figure(8.5, 5.2)
     ax = axs[0]
     to = units.rad_s_to_deg_h
-    for k in range(n_g):
-        an = allan_analysis(single[:, k], dt)
-        ax.loglog(an.taus_s, to(an.adev_rad_s), color="0.6", lw=0.7,
-                  label="single gyros (each)" if k == 0 else None)
-        if k == 0:
-            ax.loglog(an.taus_s, to(an.adev_rad_s) * math.sqrt(3.0 / n_g), "k--", lw=1.0,
-                      label=f"gyro 1 × √(3/N) = ×{math.sqrt(3.0 / n_g):.3f}")
-    for i, axis in enumerate(AXES):
-        an = allan_analysis(fused[:, i], dt)
-        ax.fill_between(an.taus_s, to(an.ci_low_rad_s), to(an.ci_high_rad_s), color=f"C{i}",
+    k = a.reference_factor
+    for i, c in enumerate(a.singles):
+        ax.loglog(c.taus_s, to(c.adev_rad_s), color="0.6", lw=0.7,
+                  label="single gyros (each)" if i == 0 else None)
+        if i == 0:
+            ax.loglog(c.taus_s, to(c.adev_rad_s) * k, "k--", lw=1.0,
+                      label=f"gyro 1 × √(3/N) = ×{k:.3f}")
+    for i, (c, axis) in enumerate(zip(a.fused, AXES)):
+        ax.fill_between(c.taus_s, to(c.ci_low_rad_s), to(c.ci_high_rad_s), color=f"C{i}",
                         alpha=0.2, lw=0)
-        ax.loglog(an.taus_s, to(an.adev_rad_s), color=f"C{i}", lw=1.6,
-                  label=f"fused {axis} ({d['estimator']})")
-    rho = d.get("rho", g.rho_arw)
-    ax.set(title=f"{_label(d)}, ρ = {rho:g}: one {n * dt:g} s record", xlabel="averaging time τ [s]",
+        ax.loglog(c.taus_s, to(c.adev_rad_s), color=f"C{i}", lw=1.6,
+                  label=f"fused {axis} ({a.estimator})")
+    rho = a.rho if a.rho is not None else math.nan
+    dt = a.dt_s
+    ax.set(title=f"{_label(d)}, ρ = {rho:g}: one {a.record_s:g} s record", xlabel="averaging time τ [s]",
            ylabel="Allan deviation [deg/h]")
     ax.grid(alpha=0.3, which="both")
     ax.legend(fontsize=8)
-    p = d["predicted"]
-    note = (f"Record length {n * dt:g} s at {1 / dt:g} Hz (seed {seed}), gyro correlation ρ = {rho:g} "
+    note = (f"Record length {a.record_s:g} s at {1 / dt:g} Hz (seed {a.seed}), gyro correlation ρ = {rho:g} "
             "(with ρ > 0 the common part does not average out: the fused curves stay above the "
             "dashed line); bands: 1σ confidence of "
             "each point. At τ above the filter's time constants the fused curves meet the dashed "
             "√(3/N) line when the DC gain is 1; predicted long-τ fused ARW x/y/z "
-            + " / ".join(f"{p[a].get('arw_long_deg_rt_h', float('nan')):.4g}" for a in AXES)
+            + " / ".join(f"{v:.4g}" for v in a.predicted_arw_long_deg_rt_h)
             + " deg/√h.")
     doc.h3("Allan deviation of the recommended design")
-    doc.figure("adev_recommended", _png(fig), note)
-
-
-def noise_and_space(a: dict):
-    """The GyroNoise and DesignSpace of a result's assumptions (for re-simulation)."""
-    gm = a["gauss_markov"]["value"]
-    rho = a["rho"]["value"]
-    r0 = 0.0 if isinstance(rho, list) else float(rho)
-    g = GyroNoise(arw_deg_rt_h=a["arw"]["value"], rrw_deg_h_rt_h=a["rrw"]["value"],
-                  bi_deg_h=a["bias_instability"]["value"], gm_sigma_deg_h=gm["sigma_deg_h"],
-                  gm_tau_s=gm["tau_s"], rho_arw=r0, rho_rrw=r0)
-    m = a["motion"]["value"]
-    swing = None
-    if isinstance(m, dict):
-        swing = Swing(units.deg_s_to_rad_s(m["swing_amplitude_deg_s"]), m["swing_frequency_hz"])
-    space = DesignSpace(rate_hz=a["rate_hz"]["value"], horizon_s=a["horizon_s"]["value"],
-                        ns=tuple(a["n"]["value"]), failures=a["failures"]["value"], swing=swing,
-                        settle_s=a["settle_s"]["value"])
-    return g, space
+    doc.figure("adev_recommended", figure_png(fig), note)

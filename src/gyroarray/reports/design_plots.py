@@ -23,7 +23,7 @@ def _rho_grid(n: int, count: int = 200) -> np.ndarray:
     return np.linspace(lo + eps, 1.0 - eps, count)
 
 
-def _figure(w=9.0, h=5.0, ncols=1):
+def agg_figure(w=9.0, h=5.0, ncols=1):
     """A figure of ``ncols`` panels side by side on an Agg canvas (no pyplot state), and its axes."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
@@ -33,7 +33,7 @@ def _figure(w=9.0, h=5.0, ncols=1):
     return fig, axs
 
 
-def _png(fig, dpi=96) -> bytes:
+def figure_png(fig, dpi=96) -> bytes:
     """The figure as PNG bytes."""
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=dpi)

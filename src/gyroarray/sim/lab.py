@@ -37,7 +37,8 @@ from typing import Any
 
 import numpy as np
 
-from gyroarray.effects.fits.earth_fit import attitude_from_rates
+from gyroarray.effects import get_effect
+from gyroarray.effects.earth_rate import attitude_from_rates
 from gyroarray.core.layout import Layout
 from gyroarray.core.measurement import Measurement, Site
 from gyroarray.sim.effects import simulate_readings
@@ -165,9 +166,10 @@ def lab_run(model: NoiseModel, layout: Layout, rng: np.random.Generator, *,
     temp = lab_temperature(t) if protocol == "steps" else lab_temperature(t, rise_c=12.0, wobble_c=0.5)
     site = None if latitude_deg is None else Site(latitude_deg * RAD_PER_DEG, heading_deg * RAD_PER_DEG)
     kw: dict[str, Any] = {"time_s": t, "temp_c": temp}
-    if any(e.effect == "earth_rate" for e in model):
+    needs = frozenset().union(*(get_effect(e.effect).sim_needs for e in model))
+    if "site" in needs:
         kw["site"] = site
-    if any(e.effect in ("earth_rate", "g_sensitivity") for e in model):
+    if needs & {"attitude", "acc"}:
         kw["attitude"] = attitude_from_rates(ref, dt)      # gravity moves with the attitude too
     y = simulate_readings(model, ref, layout, dt, rng, **kw)
     return Measurement(time_s=t, gyro_deg_s=y / RAD_PER_DEG, layout=layout, sample_rate_hz=float(rate_hz),

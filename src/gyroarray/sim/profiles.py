@@ -1180,15 +1180,15 @@ class Profile:
 
 _TOP_KEYS = ("description", "segment")
 _KEYS = {
-    "static": ("kind", "label", "duration_s", "up_axis", "gimbal_deg", "transition_s"),
-    "multi_position": ("kind", "label", "up_axes", "gimbal_deg", "hold_s", "transition_s"),
-    "constant_rate": ("kind", "label", "axis", "rate_deg_s", "duration_s", "ramp_s", "align_s"),
-    "rate_steps": ("kind", "label", "axis", "rates_deg_s", "hold_s", "ramp_s", "align_s"),
-    "sinusoid": ("kind", "label", "axis", "amplitude_deg_s", "frequency_hz", "duration_s",
-                 "phase_deg", "align_s"),
-    "tumble": ("kind", "label", "axis", "rate_deg_s", "duration_s", "ramp_s", "tilt_deg",
-               "align_s"),
-    "rate_csv": ("kind", "label", "file"),
+    Static.kind: ("kind", "label", "duration_s", "up_axis", "gimbal_deg", "transition_s"),
+    MultiPosition.kind: ("kind", "label", "up_axes", "gimbal_deg", "hold_s", "transition_s"),
+    ConstantRate.kind: ("kind", "label", "axis", "rate_deg_s", "duration_s", "ramp_s", "align_s"),
+    RateSteps.kind: ("kind", "label", "axis", "rates_deg_s", "hold_s", "ramp_s", "align_s"),
+    Sinusoid.kind: ("kind", "label", "axis", "amplitude_deg_s", "frequency_hz", "duration_s",
+                    "phase_deg", "align_s"),
+    Tumble.kind: ("kind", "label", "axis", "rate_deg_s", "duration_s", "ramp_s", "tilt_deg",
+                  "align_s"),
+    RateCSV.kind: ("kind", "label", "file"),
 }
 _CSV_COLUMNS = ("time_s", "wx_deg_s", "wy_deg_s", "wz_deg_s")
 
@@ -1308,24 +1308,24 @@ class _Reader:
 
 def _segment_from_table(r: _Reader, base_dir: Path, csv_bytes: list):
     k = r.kind
-    if k == "static":
+    if k == Static.kind:
         o = r.orientation("up_axis", "gimbal_deg", many=False)
         return Static(duration_s=r.number("duration_s", minimum=0, strict=True), orientation=o,
                       transition_s=r.number("transition_s", default=0.0, minimum=0),
                       label=r.label())
-    if k == "multi_position":
+    if k == MultiPosition.kind:
         o = r.orientation("up_axes", "gimbal_deg", many=True)
         if o is None:
             r.fail("up_axes", "missing key up_axes (or gimbal_deg)")
         return MultiPosition(orientations=o, hold_s=r.number("hold_s", minimum=0, strict=True),
                              transition_s=r.number("transition_s", minimum=0, strict=True),
                              label=r.label())
-    if k == "constant_rate":
+    if k == ConstantRate.kind:
         return ConstantRate(axis=r.axis("axis"), rate_rad_s=deg_s_to_rad_s(r.number("rate_deg_s")),
                             duration_s=r.number("duration_s", minimum=0, strict=True),
                             ramp_s=r.number("ramp_s", minimum=0),
                             align_s=r.number("align_s", default=0.0, minimum=0), label=r.label())
-    if k == "rate_steps":
+    if k == RateSteps.kind:
         rates = r.numbers("rates_deg_s")
         if isinstance(r.t.get("hold_s"), list):
             holds = r.numbers("hold_s", minimum=0, strict=True)
@@ -1336,7 +1336,7 @@ def _segment_from_table(r: _Reader, base_dir: Path, csv_bytes: list):
         return RateSteps(axis=r.axis("axis"), rates_rad_s=tuple(deg_s_to_rad_s(x) for x in rates),
                          hold_s=tuple(holds), ramp_s=r.number("ramp_s", minimum=0),
                          align_s=r.number("align_s", default=0.0, minimum=0), label=r.label())
-    if k == "sinusoid":
+    if k == Sinusoid.kind:
         return Sinusoid(axis=r.axis("axis"),
                         amplitude_rad_s=deg_s_to_rad_s(r.number("amplitude_deg_s", minimum=0,
                                                                 strict=True)),
@@ -1344,7 +1344,7 @@ def _segment_from_table(r: _Reader, base_dir: Path, csv_bytes: list):
                         duration_s=r.number("duration_s", minimum=0, strict=True),
                         phase_rad=deg_to_rad(r.number("phase_deg", default=0.0)),
                         align_s=r.number("align_s", default=0.0, minimum=0), label=r.label())
-    if k == "tumble":
+    if k == Tumble.kind:
         tilt = r.number("tilt_deg", default=0.0)
         if abs(tilt) > 90.0:
             r.fail("tilt_deg", f"tilt_deg must be within ±90 deg, got {tilt:g}")
@@ -1352,7 +1352,7 @@ def _segment_from_table(r: _Reader, base_dir: Path, csv_bytes: list):
                       duration_s=r.number("duration_s", minimum=0, strict=True),
                       ramp_s=r.number("ramp_s", minimum=0), tilt_rad=deg_to_rad(tilt),
                       align_s=r.number("align_s", default=0.0, minimum=0), label=r.label())
-    if k == "rate_csv":
+    if k == RateCSV.kind:
         name = r.t.get("file")
         if not isinstance(name, str) or not name:
             r.fail("file", f"file must be the path of a CSV file, got {name!r}")

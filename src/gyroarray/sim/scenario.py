@@ -66,9 +66,8 @@ from gyroarray.effects import get_effect
 from gyroarray.core.errors import InputError
 from gyroarray.core.layout import Layout
 from gyroarray.core.limits import MAX_RATE_DEG_S, check_memory
-from gyroarray.core.tomlio import TomlDoc, load_toml
+from gyroarray.core.tomlio import TomlDoc, load_toml, toml_number, toml_table, toml_type
 from gyroarray.core.measurement import (Measurement, Site, parse_layout, parse_site,
-                                   toml_number, toml_table, toml_type,
                                    write_measurement)
 from gyroarray.core.outputs import check_output, check_output_dir
 from gyroarray.sim.effects import simulate_readings
@@ -307,26 +306,20 @@ def check_size(scenario: Scenario, what: str = "simulate", doc: TomlDoc | None =
 
 
 def _check_effects_fit_run(scenario: Scenario, doc: TomlDoc) -> None:
-    """Effects whose parameters must fit this run: a sinusoid below Nyquist, a latency shorter than it."""
-    nyquist = 0.5 * scenario.sample_rate_hz
+    """Effects whose parameters must fit this run (``Effect.check_run``, then ``check_record``: a
+    sinusoid below Nyquist, a latency shorter than it) and whose simulation needs a temperature the
+    scenario lacks (``"temp"`` in ``Effect.sim_needs``)."""
     duration = run_duration_s(scenario)
     for i, e in enumerate(scenario.model.entries):
         key = f"effects[{i}]"
-        if e.effect == "sinusoid" and e.params["freq_hz"] >= nyquist:
-            raise InputError(f"{key} (sinusoid): freq_hz = {e.params['freq_hz']:g} Hz must be below the "
-                             f"Nyquist frequency {nyquist:g} Hz of sample_rate_hz = "
-                             f"{scenario.sample_rate_hz:g} Hz", file=doc.name,
-                             line=doc.line_of("effects"), column=f"{key}.freq_hz")
-        if e.effect == "temperature_bias" and scenario.temperature is None:
-            raise InputError(f"{key} (temperature_bias) needs a temperature: add a [temperature] "
+        eff = get_effect(e.effect)
+        if "temp" in eff.sim_needs and scenario.temperature is None:
+            raise InputError(f"{key} ({e.effect}) needs a temperature: add a [temperature] "
                              "table (points, start_c/end_c/tau_s or constant_c)", file=doc.name,
                              line=doc.line_of("effects"), column=key)
-        if e.effect == "latency" and e.params["delay_s"] >= duration:
-            raise InputError(f"{key} (latency): delay_s = {e.params['delay_s']:g} s is not shorter "
-                             f"than the run ({duration:g} s)", file=doc.name,
-                             line=doc.line_of("effects"), column=f"{key}.delay_s")
-        try:        # every effect's own rules on this run's step and span (a cut-off below Nyquist)
-            get_effect(e.effect).check_record(e.params, 1.0 / scenario.sample_rate_hz, duration)
+        try:        # every effect's own rules on this run's rate and span (a cut-off below Nyquist)
+            eff.check_run(e.params, scenario.sample_rate_hz, duration)
+            eff.check_record(e.params, 1.0 / scenario.sample_rate_hz, duration)
         except InputError as err:
             raise InputError(f"{key} ({e.effect}): {err.message}", file=doc.name, line=doc.line_of("effects"),
                              column=f"{key}.{err.column}" if err.column else key) from None

@@ -381,15 +381,33 @@ def _check_value(key: str, v, where: str, doc: _Doc, effect_sets: dict):
     raise AssertionError(key)
 
 
+def _axis_owners() -> dict[str, str]:
+    """Sweep axis -> the effect whose array-wide entry's parameter it sets (``Effect.sweep_axes``:
+    ``rho_arw`` and ``rho_rrw`` of the correlation), for the axes of :data:`PARAM_KEYS`; the first
+    effect in the registry's order that declares an axis owns it."""
+    from gyroarray.effects import REGISTRY  # lazy: loads numba, as resolve_profile does in _apply
+    owners: dict[str, str] = {}
+    for e in REGISTRY.values():
+        for k in e.sweep_axes:
+            if k in PARAM_KEYS:
+                owners.setdefault(k, e.name)
+    return owners
+
+
+def _array_entry(e, effect: str | None) -> bool:
+    """Whether ``e`` (an entry of a scenario's effects list) is ``effect``'s array-wide entry."""
+    return effect is not None and isinstance(e, dict) and e.get("effect") == effect and e.get("gyro") is None
+
+
 def _base_params(data: dict) -> dict:
     lay: dict = data["layout"] if isinstance(data.get("layout"), dict) else {}
     cone = "axes" not in lay
+    owner = _axis_owners()
     rho: dict[str, float | None] = {"rho_arw": None, "rho_rrw": None}
     for e in data.get("effects", []) or []:
-        if isinstance(e, dict) and e.get("effect") == "correlation" and e.get("gyro") is None:
-            for k in rho:
-                if _is_num(e.get(k, 0.0)):
-                    rho[k] = float(e.get(k, 0.0))
+        for k in rho:
+            if _array_entry(e, owner.get(k)) and _is_num(e.get(k, 0.0)):
+                rho[k] = float(e.get(k, 0.0))
     motion = data.get("motion", {}).get("profile") if isinstance(data.get("motion"), dict) else None
     return {"scheme": lay.get("scheme") if cone else None,
             "n_gyros": lay.get("n_gyros") if cone else (len(lay["axes"]) if isinstance(lay.get("axes"), list) else None),
@@ -436,16 +454,14 @@ def _apply(base: dict, base_params: dict, given: dict, effect_sets: dict, sweep_
     if p["scheme"] is not None:
         data["layout"] = {"scheme": p["scheme"], "n_gyros": p["n_gyros"],
                           "alpha_deg": p["alpha_deg_value"]}
-    # correlation
-    if "rho_arw" in given or "rho_rrw" in given:
-        effects = [e for e in data.get("effects", [])
-                   if not (isinstance(e, dict) and e.get("effect") == "correlation"
-                           and e.get("gyro") is None)]
-        old = [e for e in data.get("effects", []) if isinstance(e, dict)
-               and e.get("effect") == "correlation" and e.get("gyro") is None]
-        entry = dict(old[0]) if old else {"effect": "correlation"}
-        for k in ("rho_arw", "rho_rrw"):
-            if k in given:
+    # an effect's own axes (rho_arw, rho_rrw): its array-wide entry, replaced or added
+    owner = _axis_owners()
+    for name in dict.fromkeys(owner[k] for k in owner if k in given):
+        effects = [e for e in data.get("effects", []) if not _array_entry(e, name)]
+        old = [e for e in data.get("effects", []) if _array_entry(e, name)]
+        entry = dict(old[0]) if old else {"effect": name}
+        for k in owner:
+            if owner[k] == name and k in given:
                 entry[k] = given[k]
         data["effects"] = effects + [entry]
     # motion: resolved to a file now (grid refs relative to the sweep file)

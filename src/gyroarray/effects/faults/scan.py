@@ -69,7 +69,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import optimize, signal, special, stats
 
-from gyroarray.analysis._memo import by_content
+from gyroarray.analysis.memo import by_content
 from gyroarray.core.errors import InputError
 from gyroarray.core.units import rad_s_to_deg_s
 

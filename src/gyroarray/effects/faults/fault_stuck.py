@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 
 from gyroarray.effects import _draw
-from gyroarray.effects._fault import MEAN_RIVALS, START, FaultEffect
+from gyroarray.effects.faults.base import MEAN_RIVALS, START, FaultEffect
 from gyroarray.core.errors import InputError
-from gyroarray.effects import _fault_physics as faults
+from gyroarray.effects.faults import physics as faults
 from gyroarray.effects.protocol import no_longer_seen, with_cols
 
 
@@ -16,7 +16,7 @@ class FaultStuck(FaultEffect):
 
     Fit: the run of repeated outputs at the end of the record (exact onset);
     its z from the run's length against how often the gyro repeated a value
-    before (:func:`gyroarray.effects.fits.fault_fit.fit_fault`). In a model the
+    before (:func:`gyroarray.effects.faults.scan.fit_fault`). In a model the
     samples from the onset on carry no information on the noise: the
     regressions leave them out (:meth:`exclude`), the stochastic tests end
     at the onset, and its prediction (the reference's projection frozen at

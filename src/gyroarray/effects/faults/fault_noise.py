@@ -7,8 +7,8 @@ from dataclasses import replace
 import numpy as np
 
 from gyroarray.effects import _draw
-from gyroarray.effects._fault import START, FaultEffect
-from gyroarray.effects import _fault_physics as faults
+from gyroarray.effects.faults.base import START, FaultEffect
+from gyroarray.effects.faults import physics as faults
 from gyroarray.effects.protocol import Explained, Param, Stage, identity
 
 
@@ -17,7 +17,7 @@ class FaultNoise(FaultEffect):
     scales it too) × ``ratio`` from ``start_s`` on.
 
     Fit: the GLR of a change of the innovation variance over the onset
-    (:func:`gyroarray.effects.fits.fault_fit.fit_fault`). In a model it is
+    (:func:`gyroarray.effects.faults.scan.fit_fault`). In a model it is
     simulated in the Monte-Carlo band, and the stochastic record is brought
     back to the gyro's level before the onset (:meth:`whiten`).
     """

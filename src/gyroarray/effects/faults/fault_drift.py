@@ -3,8 +3,8 @@
 from __future__ import annotations
 
 from gyroarray.effects import _draw
-from gyroarray.effects._fault import MEAN_RIVALS, START, MeanFault
-from gyroarray.effects import _fault_physics as faults
+from gyroarray.effects.faults.base import MEAN_RIVALS, START, MeanFault
+from gyroarray.effects.faults import physics as faults
 from gyroarray.effects.protocol import Param, with_cols
 
 
@@ -13,7 +13,7 @@ class FaultDrift(MeanFault):
 
     Fit: the GLR of a ramp over the onset on the gyro's residual, its bias
     tracked as a random walk: a ramp older than the tracker's time constant
-    τ shows only as the offset rate·τ (:func:`gyroarray.effects.fits.fault_fit.fit_fault`).
+    τ shows only as the offset rate·τ (:func:`gyroarray.effects.faults.scan.fit_fault`).
     In a model it is a deterministic part (:meth:`predict`).
     """
 

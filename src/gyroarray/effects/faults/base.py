@@ -1,9 +1,9 @@
 """What the four fault effects share (``fault_step``, ``fault_drift``, ``fault_stuck``, ``fault_noise``).
 
 A fault starts at ``start_s`` on one gyro (``gyro`` required) and lasts to
-the end of the record. The physics is in :mod:`gyroarray.effects._fault_physics`, the fit
+the end of the record. The physics is in :mod:`gyroarray.effects.faults.physics`, the fit
 (onset and size with 1σ, z ≈ N(0, 1) when absent) in
-:func:`gyroarray.effects.fits.fault_fit.fit_fault`. The faults are not diagnosis
+:func:`gyroarray.effects.faults.scan.fit_fault`. The faults are not diagnosis
 candidates too: ``diagnose`` names a fault like any other missing effect,
 and ``fit --add fault_step:K`` fits one. Watching a running array for faults
 is the detector's job (``gyroarray fdi``, :mod:`gyroarray.estimators.fdi`).
@@ -25,9 +25,9 @@ from typing import ClassVar
 
 import numpy as np
 
-from gyroarray.analysis._memo import by_content
-from gyroarray.effects.fits.effect_fit import EffectFit
-from gyroarray.effects.fits.fault_fit import fit_fault
+from gyroarray.analysis.memo import by_content
+from gyroarray.effects.fitting import EffectFit
+from gyroarray.effects.faults.scan import fit_fault
 from gyroarray.core.errors import InputError
 from gyroarray.effects.protocol import Effect, Kind, Param, Stage, explains_away, identity
 

@@ -1,0 +1,753 @@
+"""Fusing a recorded array: any registered estimator applied to a measurement (issue 31, item 1).
+
+:func:`fuse` takes a :class:`~gyroarray.core.measurement.Measurement` of N gyros and
+returns the fused body rate (n, 3) of one estimator of :mod:`gyroarray.estimators`,
+with what it did and what fusion bought:
+
+1. **Gyros.** Constant gyros (dead or stuck: :func:`~gyroarray.core.measurement.constant_gyros`)
+   and the gyros the caller excludes (1-based, as everywhere) are left out; the estimator
+   is designed for the axes of the remaining ones. Fewer than 3 independent axes left is
+   refused.
+2. **Noise the estimator is designed with.** From a noise model (``arw``, ``rrw`` and the
+   ``correlation`` entry, per gyro, through :func:`~gyroarray.estimators.noise.array_noise`;
+   the rows and columns of the excluded gyros dropped), or, without one, fitted on the
+   record's still part: per gyro, ARW N and RRW K from the octave Allan variance,
+   σ²(τ) = N²/τ + K²τ/3, by weighted non-negative least squares (:func:`white_walk_fit`;
+   no correlation between gyros).
+3. **Where the noise is read** (the *analysed part*). With a reference rate: the whole
+   record, as output − layout·ref (what ``gyroarray allan`` analyses). Without one: the
+   still parts found in the outputs (:func:`~gyroarray.analysis.motion.still_mask`, parts
+   of at least :data:`MIN_PART` samples), each part's own mean taken out and the parts
+   joined (:func:`stitch`); τ beyond a part's length sees the joins.
+4. **What fusion bought**, per body axis a, on the analysed part:
+   the fused ADEV at the octave τ with its confidence interval
+   (:func:`~gyroarray.analysis.allan.allan_analysis`, 1σ band), the fused ARW (the same
+   white + walk fit as the single gyros), the best single gyro and the **gain**
+   ``G_a = min_k (ARW_k / |h_ka|) / ARW_fused,a``: gyro k alone reads axis a as
+   z_k / h_ka, so ARW_k/|h_ka| is the white noise it would give on that axis (for a gyro
+   along ±a simply its ARW). G_a > 1: fusion beats the best gyro of the array on that axis.
+   And the fused ARW the design noise predicts for the estimator (white part only, with the
+   model's correlation): sqrt(diag(G R_c Gᵀ)), G the estimator's gain to slow changes
+   (:meth:`~gyroarray.estimators.base.LinearSystem.dc_gain`), R_c the white noise's
+   two-sided PSD [rad²/s]; None for an estimator that is not a fixed linear filter.
+
+The fused record is a measurement of three "gyros" along the platform axes
+(:func:`fused_measurement`): ``gyro1``, ``gyro2``, ``gyro3`` are the fused rate about x, y,
+z [deg/s], with the input's reference, temperature and specific force, so ``allan``,
+``davar``, ``compare`` and ``fdi`` read it as any other measurement; its sidecar's
+``[fused]`` table says how it was made (:func:`fused_files`).
+
+Speed: the estimators run on the whole record at once (a static one is one matrix
+product, a Kalman filter its steady-state recursion); on the 24-gyro MIMU4444 record
+(37 439 samples) ``gyroarray fuse --estimator gls`` takes about 2.5 s of CPU, most of it
+the imports and reading the file (``fdi``, a detector run sample by sample, about 30 s).
+"""
+
+from __future__ import annotations
+
+import gzip
+import hashlib
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+import tomli_w
+
+from gyroarray import __version__
+from gyroarray.analysis.allan import allan_analysis, averaging_factors, edf_simple
+from gyroarray.analysis.motion import still_mask
+from gyroarray.core import units
+from gyroarray.core.errors import InputError
+from gyroarray.core.gdop import unobservable_reason
+from gyroarray.core.layout import Layout
+from gyroarray.core.measurement import Measurement, constant_gyros, true_runs
+from gyroarray.estimators import ArrayNoise, get_estimator, make
+from gyroarray.estimators.noise import array_noise
+from gyroarray.estimators.svo import allan_covariance
+
+__all__ = ["MIN_PART", "AXES", "WhiteWalk", "FuseResult", "fuse", "still_parts", "stitch",
+           "octave_avar", "white_walk_fit", "design_rrw", "nnls2", "fused_measurement", "fused_files", "sha256_of"]
+
+#: Shortest still part [samples] kept for the noise analysis (as ``compare``'s).
+MIN_PART = 256
+#: Names of the body axes.
+AXES = ("x", "y", "z")
+#: Fewest samples of analysed part for the Allan fits (6 octaves up to n/8).
+MIN_ANALYSED = 256
+#: Slowest octave τ of the white + walk fit, as a fraction of the analysed length [-].
+FIT_SPAN = 1.0 / 8.0
+#: Fewest octaves of the white + walk fit.
+MIN_FIT_OCTAVES = 3
+
+
+# =========================================================================
+# The analysed part and the white + walk fit
+# =========================================================================
+def still_parts(meas: Measurement, keep: list[int]) -> tuple[list[tuple[int, int]], str]:
+    """Where the noise is read: ``[start, stop)`` sample ranges and what they are.
+
+    Parameters
+    ----------
+    meas : Measurement
+        The record.
+    keep : list of int
+        0-based columns of the gyros used (the still test looks at these only).
+
+    Returns
+    -------
+    parts : list of (int, int)
+        The whole record with a reference rate; else the still parts of at least
+        :data:`MIN_PART` samples (empty when there is none).
+    what : str
+        One line for the output.
+    """
+    n = meas.n_samples
+    if meas.has_reference:
+        return [(0, n)], "the whole record, output minus layout·reference"
+    y = meas.gyro_rad_s[:, keep]
+    try:
+        still = still_mask(y, meas.layout.axes[keep], meas.dt_s)
+    except InputError:                        # fewer than 3 one-second windows: all of it
+        return [(0, n)], "the whole record (too short to look for motion)"
+    if still.all():
+        return [(0, n)], "the whole record (no reference rate; the outputs show no motion)"
+    parts = [(a, b) for a, b in true_runs(still) if b - a >= MIN_PART]
+    total = sum(b - a for a, b in parts) * meas.dt_s
+    return parts, (f"{len(parts)} still part(s), {total:.1f} s of {n * meas.dt_s:.1f} s (no "
+                   "reference rate: still parts found in the outputs, each part's mean taken out)")
+
+
+def stitch(x: np.ndarray, parts) -> np.ndarray:
+    """The parts ``x[a:b]`` of a (n, C) series, each minus its own mean, joined end to end."""
+    x = np.asarray(x, dtype=float)
+    return np.concatenate([x[a:b] - x[a:b].mean(axis=0) for a, b in parts])
+
+
+def octave_avar(x, dt_s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+    """Overlapping Allan variance of each column at the octave τ (numpy, all columns at once).
+
+    Parameters
+    ----------
+    x : array_like, shape (n, C)
+        Rate samples [rad/s].
+    dt_s : float
+        Sample step [s].
+
+    Returns
+    -------
+    taus_s : ndarray (M,)
+        Averaging times [s].
+    avar : ndarray (M, C)
+        Allan variance [rad²/s²].
+    m : ndarray (M,)
+        Averaging factors.
+    n_phase : int
+        n + 1 phase points.
+
+    Notes
+    -----
+    σ²(mτ0) = Σ_i (X_{i+2m} − 2X_{i+m} + X_i)² / (2 m² (n+1 − 2m)), X the cumulative sum
+    of the rate minus its mean (NIST SP 1065 eq. 11, angle in rate·samples).
+    """
+    x = np.asarray(x, dtype=float)
+    n = x.shape[0]
+    phase = np.zeros((n + 1, x.shape[1]))
+    np.cumsum(x - x.mean(axis=0), axis=0, out=phase[1:])
+    m = averaging_factors(n + 1, dt_s, "octave")
+    avar = np.empty((m.size, x.shape[1]))
+    for i, mm in enumerate(m.tolist()):
+        d = phase[2 * mm:] - 2.0 * phase[mm:n + 1 - mm] + phase[:n + 1 - 2 * mm]
+        avar[i] = np.einsum("ij,ij->j", d, d) / (2.0 * mm * mm * (n + 1 - 2 * mm))
+    return m * dt_s, avar, m, n + 1
+
+
+@dataclass(frozen=True)
+class WhiteWalk:
+    """White + random-walk fit of C rate series [SI].
+
+    Attributes
+    ----------
+    arw_rad_rt_s, arw_sigma : ndarray (C,)
+        Angle random walk N and its 1σ [rad/√s].
+    rrw_rad_s_rt_s, rrw_sigma : ndarray (C,)
+        Rate random walk K and its 1σ [rad/s/√s].
+    """
+
+    arw_rad_rt_s: np.ndarray
+    arw_sigma: np.ndarray
+    rrw_rad_s_rt_s: np.ndarray
+    rrw_sigma: np.ndarray
+
+
+def white_walk_fit(x, dt_s: float, min_tau_s: float = 1.0) -> WhiteWalk:
+    """ARW and RRW of each column from its octave Allan variance.
+
+    σ²(τ) = N²/τ + K²τ/3 fitted at the octave τ from ``min_tau_s`` up to :data:`FIT_SPAN`
+    of the record (the last :data:`MIN_FIT_OCTAVES` octaves below it when fewer are left) by
+    non-negative least squares, each point weighted by its standard error
+    σ²_model(τ)·sqrt(2/edf) (white-FM EDF, :func:`~gyroarray.analysis.allan.edf_simple`;
+    two passes: the weights from the measured, then from the fitted variance). 1σ of N and
+    K from the weighted normal equations. A record too short for two octaves gets N from
+    the spread of its first differences (σ_Δ/√2·√dt) and K = 0.
+
+    Parameters
+    ----------
+    x : array_like, shape (n, C)
+        Rate samples [rad/s].
+    dt_s : float
+        Sample step [s].
+    min_tau_s : float
+        Shortest τ of the fit [s]. The default 1 s is the IEEE Std 952 reading of ARW (the
+        τ^-1/2 line at τ = 1 s) extended to the white level over τ >= 1 s, which the angle
+        error over seconds and longer sees; the shorter τ, where a sensor's own filter,
+        vibration lines and quantization shape the variance of a real gyro (MIMU4444: lines
+        at 5-31 Hz), are left out. On white noise every τ range gives the same N.
+
+    Returns
+    -------
+    WhiteWalk
+    """
+    x = np.asarray(x, dtype=float)
+    n, c = x.shape
+    arw, arw_s = np.zeros(c), np.full(c, np.nan)
+    rrw, rrw_s = np.zeros(c), np.full(c, np.nan)
+    taus, avar, m, n_phase = octave_avar(x, dt_s) if n >= 8 else (None, None, None, 0)
+    use = None
+    if taus is not None:
+        use = np.flatnonzero(m <= max(FIT_SPAN * n, 2))
+        slow = use[taus[use] >= min_tau_s * (1.0 - 1e-9)]
+        use = slow if slow.size >= MIN_FIT_OCTAVES else use[-MIN_FIT_OCTAVES:]
+    if use is None or use.size < 2:
+        d = np.diff(x, axis=0) if n > 1 else np.zeros((1, c))
+        arw = np.std(d, axis=0) / math.sqrt(2.0) * math.sqrt(dt_s)
+        return WhiteWalk(arw, arw_s, rrw, rrw_s)
+    t, av = taus[use], avar[use]
+    edf = np.asarray(edf_simple(n_phase, m[use], 0), dtype=float)
+    a = np.column_stack([1.0 / t, t / 3.0])
+    for j in range(c):
+        target = av[:, j]
+        if not np.any(target > 0):
+            continue
+        model = target.copy()
+        coef = np.zeros(2)
+        for _ in range(2):
+            se = np.maximum(model, 1e-300) * np.sqrt(2.0 / edf)
+            coef = nnls2(a / se[:, None], target / se)
+            model = a @ coef
+        aw = a / (np.maximum(model, 1e-300) * np.sqrt(2.0 / edf))[:, None]
+        with np.errstate(all="ignore"):
+            cov = np.linalg.pinv(aw.T @ aw)
+        arw[j], rrw[j] = math.sqrt(max(coef[0], 0.0)), math.sqrt(max(coef[1], 0.0))
+        # σ of sqrt(c): σ_c / (2 sqrt c), or sqrt(σ_c) at c = 0
+        for v, s, col, out in ((arw[j], cov[0, 0], 0, arw_s), (rrw[j], cov[1, 1], 1, rrw_s)):
+            sc = math.sqrt(max(s, 0.0))
+            out[j] = sc / (2.0 * v) if v > 0 else math.sqrt(sc)
+    return WhiteWalk(arw, arw_s, rrw, rrw_s)
+
+
+def nnls2(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """argmin ||a c − b|| over c >= 0 for a (M, 2) design (closed form: the unconstrained
+    solution, else the better of the two one-column fits)."""
+    scale = np.linalg.norm(a, axis=0)
+    scale[scale == 0] = 1.0
+    u = a / scale
+    c, *_ = np.linalg.lstsq(u, b, rcond=None)
+    if np.all(c >= 0):
+        return c / scale
+    best, best_r = np.zeros(2), float(b @ b)
+    for j in range(2):
+        cj = max(float(u[:, j] @ b), 0.0)            # unit column: the one-column fit
+        r = float(np.sum((b - cj * u[:, j]) ** 2))
+        if r < best_r:
+            best, best_r = np.zeros(2), r
+            best[j] = cj
+    return best / scale
+
+
+# =========================================================================
+# Fusion
+# =========================================================================
+@dataclass(frozen=True, eq=False)
+class FuseResult:
+    """What :func:`fuse` did and found.
+
+    Attributes
+    ----------
+    measurement : Measurement
+        The input record.
+    estimator : str
+        Registry name of the estimator.
+    params : dict
+        Its hyperparameters.
+    fused_rad_s : ndarray (n, 3)
+        Fused body rate [rad/s].
+    used : list of int
+        The gyros fused (1-based, input numbering).
+    excluded : list of int
+        Left out because the caller asked (1-based).
+    constant : list of int
+        Left out because constant (1-based).
+    noise : ArrayNoise
+        The noise the estimator was designed with (the used gyros, in order).
+    model_source : str
+        Where that noise came from (a model file, or the fit on the record).
+    parts : list of (int, int)
+        Analysed part, ``[start, stop)`` sample ranges of the input.
+    analysed : str
+        One line on the analysed part.
+    single : WhiteWalk or None
+        White + walk fit of each used gyro on the analysed part (None: too little of it).
+    fused_fit : WhiteWalk or None
+        The same fit of the fused axes.
+    adev : list of AllanAnalysis or None
+        Fused ADEV with CIs per axis on the analysed part (None where it failed).
+    predicted_arw_rad_rt_s : ndarray (3,) or None
+        Fused ARW the design noise predicts (white part, module docstring).
+    notes : list of str
+        What the user should know.
+    """
+
+    measurement: Measurement
+    estimator: str
+    params: dict
+    fused_rad_s: np.ndarray
+    used: list
+    excluded: list
+    constant: list
+    noise: ArrayNoise
+    model_source: str
+    parts: list
+    analysed: str
+    single: WhiteWalk | None
+    fused_fit: WhiteWalk | None
+    adev: list | None
+    predicted_arw_rad_rt_s: np.ndarray | None
+    notes: list = field(default_factory=list)
+
+    def best_single(self) -> list[tuple[int | None, float]]:
+        """Per axis: (best single gyro, 1-based, or None; its ARW on that axis [rad/√s])."""
+        out: list[tuple[int | None, float]] = []
+        if self.single is None:
+            return [(None, math.nan)] * 3
+        h = np.asarray(self.measurement.layout.axes)[[k - 1 for k in self.used]]
+        for a in range(3):
+            proj = np.abs(h[:, a])
+            ok = (proj > 1e-9) & (self.single.arw_rad_rt_s > 0)
+            if not ok.any():
+                out.append((None, math.nan))
+                continue
+            eq = np.where(ok, self.single.arw_rad_rt_s / np.where(ok, proj, 1.0), np.inf)
+            j = int(np.argmin(eq))
+            out.append((self.used[j], float(eq[j])))
+        return out
+
+    def to_json_dict(self) -> dict:
+        """The result in datasheet units (deg/h, deg/√h, deg/h/√h) for ``--json``."""
+        arw = units.arw_rad_rt_s_to_deg_rt_h
+        rrw = units.rrw_rad_s_rt_s_to_deg_h_rt_h
+        m = self.measurement
+        axes: dict = {}
+        best = self.best_single()
+        for a, name in enumerate(AXES):
+            d: dict = {}
+            if self.adev is not None and self.adev[a] is not None:
+                j = self.adev[a].to_json_dict()
+                d.update({k: j[k] for k in ("kind", "confidence", "taus_s", "adev_deg_h",
+                                            "ci_low_deg_h", "ci_high_deg_h", "edf")})
+            if self.fused_fit is not None:
+                d["arw_deg_rt_h"] = float(arw(self.fused_fit.arw_rad_rt_s[a]))
+                d["arw_deg_rt_h_sigma"] = float(arw(self.fused_fit.arw_sigma[a]))
+                d["rrw_deg_h_rt_h"] = float(rrw(self.fused_fit.rrw_rad_s_rt_s[a]))
+            k, eq = best[a]
+            d["best_single_gyro"] = k
+            d["best_single_arw_deg_rt_h"] = None if k is None else float(arw(eq))
+            f = d.get("arw_deg_rt_h")
+            d["gain"] = (float(arw(eq)) / f) if (k is not None and f) else None
+            d["predicted_arw_deg_rt_h"] = (None if self.predicted_arw_rad_rt_s is None
+                                           else float(arw(self.predicted_arw_rad_rt_s[a])))
+            axes[name] = d
+        single = None
+        if self.single is not None:
+            single = {str(k): {"arw_deg_rt_h": float(arw(self.single.arw_rad_rt_s[i])),
+                               "arw_deg_rt_h_sigma": float(arw(self.single.arw_sigma[i])),
+                               "rrw_deg_h_rt_h": float(rrw(self.single.rrw_rad_s_rt_s[i]))}
+                      for i, k in enumerate(self.used)}
+        return {
+            "measurement": m.source, "n_samples": m.n_samples, "dt_s": m.dt_s,
+            "estimator": self.estimator, "estimator_params": self.params,
+            "model_source": self.model_source,
+            "gyros_used": list(self.used), "excluded_gyros": list(self.excluded),
+            "constant_gyros": list(self.constant),
+            "design_noise": {
+                "arw_deg_rt_h": [float(v) for v in arw(self.noise.arw_rad_rt_s)],
+                "rrw_deg_h_rt_h": [float(v) for v in rrw(self.noise.rrw_rad_s_rt_s)],
+                "correlated": bool(not np.array_equal(self.noise.corr_arw, np.eye(len(self.used))))},
+            "analysed": self.analysed,
+            "analysed_parts": [[int(a), int(b)] for a, b in self.parts],
+            "analysed_parts_s": [[float(m.time_s[a] - m.time_s[0]), float(m.time_s[b - 1] - m.time_s[0] + m.dt_s)]
+                                 for a, b in self.parts],
+            "axes": axes, "single_gyros": single,
+            "gain_definition": "gain = min over used gyros k of (ARW_k / |h_k,axis|) / fused ARW "
+                               "of the axis; ARWs from the same white + walk Allan fit on the "
+                               "analysed part",
+            "notes": list(self.notes),
+        }
+
+
+def _used_gyros(meas: Measurement, exclude) -> tuple[list[int], list[int], list[int], str | None]:
+    """(used, excluded, constant, note on the constant ones), all 1-based."""
+    n = meas.n_gyros
+    excluded = sorted({int(k) for k in exclude})
+    bad = [k for k in excluded if not 1 <= k <= n]
+    if bad:
+        raise InputError(f"--exclude {bad[0]} is out of range: the measurement has gyros 1..{n}",
+                         file=meas.source)
+    constant = [k for k in constant_gyros(meas) if k not in excluded]
+    used = [k for k in range(1, n + 1) if k not in excluded and k not in constant]
+    note = None
+    if constant:
+        which = "gyro " + str(constant[0]) if len(constant) == 1 else \
+            "gyros " + ", ".join(map(str, constant))
+        note = f"{which} left out: constant output (dead or stuck?)"
+    return used, excluded, constant, note
+
+
+def _check_geometry(meas: Measurement, used, excluded, constant) -> None:
+    left = []
+    if excluded:
+        left.append(f"--exclude {','.join(map(str, excluded))}")
+    if constant:
+        left.append(f"constant gyro(s) {','.join(map(str, constant))}")
+    why_left = f" after leaving out {' and '.join(left)}" if left else ""
+    if not used:
+        raise InputError(f"no gyro left to fuse{why_left}: give fewer --exclude", file=meas.source)
+    why = unobservable_reason(np.asarray(meas.layout.axes)[[k - 1 for k in used]])
+    if why is not None:
+        raise InputError(f"the {len(used)} gyro(s) left{why_left} do not span 3 independent "
+                         f"axes ({why}): fusion needs a 3-axis rate; exclude fewer gyros",
+                         file=meas.source)
+
+
+def _model_noise(model, meas: Measurement, used: list[int], needs_arw: bool, model_name: str) -> ArrayNoise:
+    """The model's ARW/RRW/correlation for the used gyros (rows and columns of the others dropped)."""
+    try:
+        full = array_noise(model, meas.n_gyros, require_arw=False)
+    except InputError as err:
+        raise err.with_file(model_name) from None
+    idx = [k - 1 for k in used]
+    arw = full.arw_rad_rt_s[idx]
+    if needs_arw and np.any(arw <= 0):
+        bad = [used[i] for i in np.flatnonzero(arw <= 0).tolist()]
+        raise InputError(f"the model gives no positive angle random walk ('arw') for gyro(s) "
+                         f"{', '.join(map(str, bad))}: this estimator weights the gyros by their "
+                         "white noise; add an arw entry for them, or --exclude them",
+                         file=model_name)
+    c_arw, c_rrw = full.corr_arw[np.ix_(idx, idx)], full.corr_rrw[np.ix_(idx, idx)]
+    table = getattr(model, "array", None)            # the model's [array] table, when it has one
+    if table is not None:
+        c_arw = _table_correlation(table, "white_correlation", used, c_arw)
+        c_rrw = _table_correlation(table, "walk_correlation", used, c_rrw)
+    try:
+        return ArrayNoise(arw, full.rrw_rad_s_rt_s[idx], c_arw, c_rrw, full.ignored_effects,
+                          zero_arw_ok=not needs_arw)
+    except InputError as err:
+        raise err.with_file(model_name) from None
+
+
+def _table_correlation(table, key: str, used: list[int], default: np.ndarray) -> np.ndarray:
+    """The correlation ``key`` of a model's ``[array]`` table for the used gyros: its rows and
+    columns of the used gyros it names, 0 between a named and an unnamed gyro, ``default``
+    between unnamed ones; ``default`` when the table has no such matrix."""
+    mat = getattr(table, key, None)
+    gyros = list(getattr(table, "gyros", ()) or ())
+    if mat is None or not gyros:
+        return default
+    mat = np.asarray(mat, dtype=float)
+    where = {g: i for i, g in enumerate(gyros)}
+    out = np.array(default, dtype=float, copy=True)
+    named = [j for j, k in enumerate(used) if k in where]
+    if not named:
+        return default
+    out[named, :] = 0.0
+    out[:, named] = 0.0
+    rows = [where[used[j]] for j in named]
+    out[np.ix_(named, named)] = mat[np.ix_(rows, rows)]
+    return out
+
+
+def design_rrw(ww: WhiteWalk) -> tuple[np.ndarray, list[int]]:
+    """The RRW an estimator is designed with: the fitted K where K² exceeds twice its 1σ,
+    else the 2σ upper bound sqrt(2σ_K²) (a Kalman filter with bias states needs K > 0, and a
+    drift the record cannot tell from none must not be ruled out). Returns (K [rad/s/√s],
+    indices where the bound was used)."""
+    k, sk = ww.rrw_rad_s_rt_s, np.nan_to_num(ww.rrw_sigma, nan=0.0)
+    sig_c = np.where(k > 0, 2.0 * k * sk, sk ** 2)              # 1σ of K²
+    low = k ** 2 < 2.0 * sig_c
+    out = np.where(low, np.sqrt(2.0 * sig_c), k)
+    return out, np.flatnonzero(low & (out > k)).tolist()
+
+
+def _plain_params(params: dict) -> dict:
+    """Hyperparameters as JSON can hold them (arrays as nested lists, other objects by repr)."""
+    out = {}
+    for k, v in params.items():
+        if isinstance(v, np.ndarray):
+            out[k] = v.tolist()
+        elif v is None or isinstance(v, (bool, int, float, str, list, tuple, dict)):
+            out[k] = v
+        else:
+            out[k] = repr(v)
+    return out
+
+
+def _predicted_arw(est, noise: ArrayNoise) -> np.ndarray | None:
+    """sqrt(diag(G R_c Gᵀ)) [rad/√s], G the estimator's gain to slow changes (module docstring)."""
+    try:
+        g = est.linear_system().dc_gain()
+    except (InputError, np.linalg.LinAlgError, ValueError):
+        return None
+    s = noise.arw_rad_rt_s
+    rc = noise.corr_arw * np.outer(s, s)
+    v = np.einsum("ai,ij,aj->a", g, rc, g)
+    return np.sqrt(np.maximum(v, 0.0))
+
+
+def fuse(meas: Measurement, estimator: str, *, model=None, model_name: str | None = None,
+         exclude=(), params: dict | None = None) -> FuseResult:
+    """Fuse a recorded array with a registered estimator (module docstring).
+
+    Parameters
+    ----------
+    meas : Measurement
+        The record (layout from its sidecar).
+    estimator : str
+        Registry name (:func:`gyroarray.estimators.available`).
+    model : NoiseModel, optional
+        Noise of the N gyros of the record (``arw``, ``rrw``, ``correlation`` are used);
+        None: fitted on the analysed part (white + walk per gyro, no correlation).
+    model_name : str, optional
+        The model's file, for the messages and the provenance.
+    exclude : iterable of int
+        Gyros to leave out (1-based).
+    params : dict, optional
+        Hyperparameters of the estimator.
+
+    Returns
+    -------
+    FuseResult
+
+    Raises
+    ------
+    InputError
+        Unknown estimator or hyperparameter, an excluded gyro out of range, fewer than 3
+        independent axes left, a model without ARW for a used gyro (estimators that weight
+        by it), or no model and no still part to fit the noise on; each names the file.
+    """
+    params = dict(params or {})
+    try:
+        cls = get_estimator(estimator)
+        est = make(estimator, **params)
+    except InputError as err:
+        raise InputError(f"--estimator: {err.message}") from None
+    used, excluded, constant, const_note = _used_gyros(meas, exclude)
+    _check_geometry(meas, used, excluded, constant)
+    notes = [] if const_note is None else [const_note]
+    idx = [k - 1 for k in used]
+    dt = meas.dt_s
+    y = meas.gyro_rad_s[:, idx]
+    h = np.asarray(meas.layout.axes)[idx]
+    parts, analysed = still_parts(meas, idx)
+    total = sum(b - a for a, b in parts)
+    enough = total >= MIN_ANALYSED
+    e_single = None
+    if enough:
+        resid = y - meas.ref_rad_s @ h.T if meas.has_reference else y
+        e_single = stitch(resid, parts)
+    if model is None:
+        if not enough:
+            raise InputError(f"no --model, and the record has {total * dt:.1f} s of still part to fit "
+                             f"the gyros' noise on (at least {MIN_ANALYSED} samples are needed): give "
+                             "--model M.toml (e.g. from gyroarray fit)", file=meas.source)
+        assert e_single is not None
+        ww = white_walk_fit(e_single, dt)
+        arw = ww.arw_rad_rt_s.copy()
+        weak = arw <= 0
+        if weak.any():                    # a walk alone: the white level from the differences
+            d = np.diff(e_single[:, weak], axis=0)
+            arw[weak] = np.maximum(np.std(d, axis=0) / math.sqrt(2.0) * math.sqrt(dt), 1e-30)
+        rrw, floored = design_rrw(ww)
+        noise = ArrayNoise(arw, rrw, np.eye(len(used)), np.eye(len(used)))
+        source = ("fitted on the record's analysed part: per gyro ARW + RRW from the octave Allan "
+                  "variance, no correlation between gyros")
+        notes.append("no --model: the estimator's noise was " + source)
+        if floored:
+            notes.append(f"the rate random walk of gyro(s) {', '.join(str(used[i]) for i in floored)} "
+                         "is not resolved from 0 on this record: the estimator is designed with its "
+                         "2-sigma upper bound (a drift the record cannot tell from none is not ruled out)")
+    else:
+        name = model_name or "the model"
+        noise = _model_noise(model, meas, used, cls.needs_arw, name)
+        source = f"model {name}"
+        if noise.ignored_effects:
+            notes.append(f"the estimator models ARW, RRW and correlation only; the model's "
+                         f"{', '.join(noise.ignored_effects)} are not used by it")
+    if model is None and "allan_covariance" in est.get_params() and est.get_params()["allan_covariance"] is None:
+        tau = est.get_params().get("tau_s")
+        if isinstance(tau, (int, float)) and math.isfinite(tau) and tau > 0:
+            assert e_single is not None
+            mm = max(int(round(tau / dt)), 1)
+            if 2 * mm <= e_single.shape[0]:
+                # the diagonal only: N² cross terms from T/τ blocks over-fit (MIMU4444, weights
+                # from its first 10 still parts, ADEV on the other 10 at τ = 8 s: x 10.9 deg/h
+                # with the full matrix, 7.6 with its diagonal, 12.7 with gls)
+                est.set_params(allan_covariance=np.diag(np.diag(allan_covariance(e_single, mm))))
+                notes.append(f"{estimator}: weights from each gyro's Allan variance measured on the "
+                             f"analysed part at tau = {mm * dt:g} s (no cross terms; in sample: the fused "
+                             "ADEV there is optimised on the same data; validate on another record, or "
+                             "give --model for weights from a model)")
+    try:
+        est.fit(Layout.from_axes(h, source=meas.source), noise, dt)
+    except InputError as err:
+        text = err.message if err.message.startswith(f"{estimator}:") else f"{estimator}: {err.message}"
+        # with a model, what the estimator cannot be designed with is the model's noise
+        raise InputError(text, file=meas.source if model is None else (model_name or meas.source)) from None
+    fused = np.asarray(est.estimate(y), dtype=float)
+    if excluded:
+        notes.append(f"gyro(s) {', '.join(map(str, excluded))} left out (--exclude)")
+    single = fused_fit = adev = None
+    if enough:
+        e_fused = fused - meas.ref_rad_s if meas.has_reference else fused
+        ef = stitch(e_fused, parts)
+        both = white_walk_fit(np.hstack([e_single, ef]), dt)
+        c = len(used)
+        single = WhiteWalk(*(v[:c] for v in (both.arw_rad_rt_s, both.arw_sigma, both.rrw_rad_s_rt_s,
+                                              both.rrw_sigma)))
+        fused_fit = WhiteWalk(*(v[c:] for v in (both.arw_rad_rt_s, both.arw_sigma, both.rrw_rad_s_rt_s,
+                                                 both.rrw_sigma)))
+        adev = []
+        for a in range(3):
+            try:
+                with np.errstate(all="ignore"):
+                    adev.append(allan_analysis(ef[:, a], dt))
+            except (InputError, np.linalg.LinAlgError, ValueError, FloatingPointError) as err:
+                adev.append(None)
+                notes.append(f"fused {AXES[a]}: no ADEV ({getattr(err, 'message', err)})")
+    else:
+        notes.append(f"the analysed part is {total} samples, fewer than {MIN_ANALYSED}: no ADEV, "
+                     "no ARW, no gain (the fused record is written all the same)")
+    return FuseResult(measurement=meas, estimator=estimator, params=_plain_params(est.get_params()),
+                      fused_rad_s=fused, used=used, excluded=excluded, constant=constant,
+                      noise=noise, model_source=source, parts=parts, analysed=analysed,
+                      single=single, fused_fit=fused_fit, adev=adev,
+                      predicted_arw_rad_rt_s=_predicted_arw(est, noise), notes=notes)
+
+
+# =========================================================================
+# The fused record
+# =========================================================================
+#: The fused record's layout: gyro1, gyro2, gyro3 along the platform x, y, z.
+FUSED_AXES = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))
+
+
+def fused_measurement(res: FuseResult) -> Measurement:
+    """The fused record as a 3-gyro measurement along the platform axes [deg/s].
+
+    ``gyro1..3`` are the fused rate about x, y, z; time, reference, temperature, specific
+    force and site are the input's.
+    """
+    m = res.measurement
+    return Measurement(time_s=m.time_s, gyro_deg_s=units.rad_s_to_deg_s(res.fused_rad_s),
+                       layout=Layout.from_axes(np.array(FUSED_AXES)), sample_rate_hz=m.sample_rate_hz,
+                       ref_deg_s=m.ref_deg_s, temp_c=m.temp_c, site=m.site,
+                       description=_description(res), acc_m_s2=m.acc_m_s2)
+
+
+def _description(res: FuseResult) -> str:
+    src = res.measurement.source or "a measurement"
+    return (f"fused body rate of {src} by gyroarray fuse (estimator {res.estimator}, "
+            f"{len(res.used)} gyros): gyro1, gyro2, gyro3 are the rate about the platform x, y, z axes")
+
+
+def sha256_of(path) -> str | None:
+    """SHA-256 of a file's bytes (hex), or None when it cannot be read."""
+    h = hashlib.sha256()
+    try:
+        with open(path, "rb") as fh:
+            for block in iter(lambda: fh.read(1 << 20), b""):
+                h.update(block)
+    except OSError:
+        return None
+    return h.hexdigest()
+
+
+def _toml_params(params: dict) -> dict:
+    """Hyperparameters TOML can hold (None means 'the default' and is left out)."""
+    return {k: v for k, v in params.items() if isinstance(v, (bool, int, float, str))}
+
+
+def _degrees(rad: float) -> float:
+    """The shortest decimal degrees that convert back to ``rad`` exactly (15.1881, not
+    15.188099999999999), else the plain conversion."""
+    d0 = float(units.rad_to_deg(rad))
+    near = [d0]
+    for direction in (math.inf, -math.inf):
+        d = d0
+        for _ in range(4):
+            d = math.nextafter(d, direction)
+            near.append(d)
+    exact = [d for d in near if units.deg_to_rad(d) == rad]
+    return min(exact, key=lambda d: len(repr(d))) if exact else d0
+
+
+def fused_files(res: FuseResult, gz: bool, *, input_sha256: str | None = None,
+                sidecar_sha256: str | None = None) -> tuple[bytes, bytes]:
+    """The fused record's CSV (gzip when ``gz``) and sidecar bytes, in the measurement format.
+
+    The CSV has ``time_s``, ``gyro1..3`` [deg/s] and the input's ``ref_*``, ``temp_c`` and
+    ``acc_*`` when present, each value the shortest decimal that reads back as the same
+    double. The sidecar has ``sample_rate_hz``, ``description``, ``[layout]`` (unit axes
+    x, y, z), the input's ``[site]`` and a ``[fused]`` table: estimator and its
+    hyperparameters, model source, gyros used, excluded and constant, the design noise per
+    used gyro, the input file and its SHA-256, and the gyroarray version.
+    """
+    fm = fused_measurement(res)
+    m = res.measurement
+    names = ["time_s", "gyro1", "gyro2", "gyro3"]
+    blocks = [fm.time_s[:, None], fm.gyro_deg_s]
+    if m.ref_deg_s is not None:
+        names += ["ref_x", "ref_y", "ref_z"]
+        blocks.append(m.ref_deg_s)
+    if m.temp_c is not None:
+        names.append("temp_c")
+        blocks.append(m.temp_c[:, None])
+    if m.acc_m_s2 is not None:
+        names += ["acc_x", "acc_y", "acc_z"]
+        blocks.append(m.acc_m_s2)
+    table = np.hstack(blocks)
+    row = ",".join(["%r"] * table.shape[1])          # %r of a float: the shortest round trip
+    lines = [f"# written by gyroarray {__version__} (gyroarray fuse, estimator {res.estimator}): "
+             "gyro1..3 = fused body rate about x, y, z [deg/s]", ",".join(names)]
+    lines.extend(map(row.__mod__, map(tuple, table.tolist())))
+    csv = ("\n".join(lines) + "\n").encode("utf-8")
+    if gz:
+        csv = gzip.compress(csv, compresslevel=6, mtime=0)
+    arw = units.arw_rad_rt_s_to_deg_rt_h(res.noise.arw_rad_rt_s)
+    rrw = units.rrw_rad_s_rt_s_to_deg_h_rt_h(res.noise.rrw_rad_s_rt_s)
+    fused = {"estimator": res.estimator, "estimator_params": _toml_params(res.params),
+             "model": res.model_source, "gyros_used": list(res.used),
+             "excluded_gyros": list(res.excluded), "constant_gyros": list(res.constant),
+             "design_arw_deg_rt_h": [float(v) for v in arw],
+             "design_rrw_deg_h_rt_h": [float(v) for v in rrw],
+             "input": str(m.source), "gyroarray_version": __version__,
+             "columns": "gyro1, gyro2, gyro3: fused body rate about the platform x, y, z axes [deg/s]"}
+    if input_sha256 is not None:
+        fused["input_sha256"] = input_sha256
+    if sidecar_sha256 is not None:
+        fused["input_sidecar_sha256"] = sidecar_sha256
+    doc: dict = {"sample_rate_hz": m.sample_rate_hz, "description": fm.description,
+                 "layout": {"axes": [list(r) for r in FUSED_AXES]}}
+    if m.site is not None:
+        doc["site"] = {"latitude_deg": _degrees(m.site.latitude_rad),
+                       "heading_deg": _degrees(m.site.heading_rad)}
+    doc["fused"] = fused
+    return csv, tomli_w.dumps(doc).encode("utf-8")

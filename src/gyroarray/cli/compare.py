@@ -1,0 +1,317 @@
+"""``gyroarray compare``, ``diagnose``, ``fit`` and ``ladder``: a measurement against a noise
+model (calibrate, model band, diagnostics, fit, the ladder of added effects), with their text.
+
+The chain (numpy, numba) and the compare report (matplotlib) are imported inside the commands,
+so that building the parser (``gyroarray --help``, every other command) does not load them.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+from gyroarray.cli.common import (add_force, add_plugin, check_count, count, finite_float, float_in,
+                                  measurement_inputs, nonneg_int, output)
+from gyroarray.core.errors import InputError
+
+__all__ = ["add_parser", "cmd_compare", "cmd_diagnose", "cmd_fit", "cmd_ladder"]
+
+def _comparison(args):
+    """Check the outputs, read the measurement (and model) of a compare-family
+    command; build the chain."""
+    # deferred: the chain (numpy, numba) loads only when the command runs (a fast --help)
+    from gyroarray.chain.compare import ModelComparison, check_record_needs
+    from gyroarray.core.measurement import read_measurement
+    from gyroarray.core.outputs import markdown_figures
+    from gyroarray.effects.model import NoiseModel
+    inputs = measurement_inputs(args)
+    output(getattr(args, "out", None), args, "--out", inputs=inputs,
+            suffixes=(".toml",) if args.command == "fit" else (".html", ".htm"))
+    output(getattr(args, "md", None), args, "--md", inputs=inputs, suffixes=(".md",))
+    output(getattr(args, "model_out", None), args, "--model-out", inputs=inputs, suffixes=(".toml",))
+    if getattr(args, "md", None) is not None:      # its figures beside it, checked now too
+        markdown_figures(args.md, inputs=inputs, force=args.force)
+    meas = read_measurement(args.measurement, repair=args.repair)
+    model = None
+    if args.model is not None:
+        model = NoiseModel.from_toml(args.model, n_gyros=meas.n_gyros)
+    meas, model, args.entry_notes = _live_gyros(meas, model, args)
+    check_record_needs(model, meas, fixed=bool(getattr(args, "validate", False)))
+    _check_band_runs(args, meas)
+    return ModelComparison(meas, model, n_runs=args.runs, seed=args.seed, ref_smooth_s=args.ref_smooth)
+
+
+def _check_band_runs(args, meas) -> None:
+    """Refuse ``--runs`` whose Monte-Carlo band would not fit the memory budget: each run keeps
+    the ADEV and the Welch PSD of every gyro (kept three times over: the runs, their array and
+    the quantiles), before any run."""
+    from gyroarray.chain.localise import default_nperseg  # deferred: the chain (numpy, numba)
+    n = max(int(meas.n_samples), 2)
+    per_run = 3 * 8 * meas.n_gyros * (math.log2(n) + 1 + default_nperseg(n) // 2 + 1)
+    check_count("--runs", args.runs, per_run,
+                 f"Monte-Carlo runs of {n} samples x {meas.n_gyros} gyros")
+
+
+def _live_gyros(meas, model, args):
+    """Leave constant (dead or stuck) gyros out of a comparison, saying so; refuse when none is left."""
+    from gyroarray.core.measurement import constant_gyros, constant_note, without_gyros  # deferred: numpy, pandas
+    dead = constant_gyros(meas)
+    if not dead:
+        return meas, model, []
+    note = constant_note(dead, meas)
+    live = [k for k in range(1, meas.n_gyros + 1) if k not in dead]
+    if not live:
+        raise InputError(f"nothing to analyse: {note}", file=str(args.measurement))
+    if model is not None and any(e.gyro is not None for e in model):
+        raise InputError(f"{note}, and the model names gyros by number: leave the constant "
+                         "gyro out of the record (and renumber the model) first",
+                         file=str(args.model))
+    mapping = ", ".join(f"{old} as {new}" for new, old in enumerate(live, 1) if old != new)
+    note += (": left out; the analysis below numbers the others "
+             + (mapping if mapping else "as before"))
+    return without_gyros(meas, dead, note), model, [note]
+
+
+def _model_lines(model) -> list[str]:
+    out = []
+    for e in model:
+        if e.effect in ("arw", "rrw"):
+            continue
+        params = ", ".join(f"{k} = {_short_num(v)}" for k, v in e.params.items())
+        out.append(f"  {e.label}: {params}")
+    return out
+
+
+def _short_num(v):
+    return f"{v:.6g}" if isinstance(v, float) else str(v)
+
+
+def _diagnosis_text(a, head: str) -> str:
+    lines = [head, f"discrepancy D = {a.discrepancy:.3g} ({'consistent' if a.consistent else 'NOT consistent'}"
+             f" with the model; D = max z / {a.z_crit:.2f}, the 1 % family-wise critical z of "
+             f"{len(a.tests)} tests)", "",
+             f"{'effect':<20} {'gyro':>4} {'score':>8}  sig  evidence"]
+    for t in a.candidates:
+        z = "nan" if not math.isfinite(t.z) else f"{t.z:8.2f}"
+        lines.append(f"{t.effect:<20} {'-' if t.gyro is None else t.gyro:>4} {z:>8}  "
+                     f"{'yes' if a.significant(t) else ' no'}  {t.evidence}")
+    bands = [t for t in a.tests if t.kind == "adev_band" and a.significant(t)]
+    if bands:
+        lines += ["", "ADEV outside the model band:"] + [f"  {t.evidence} (z = {t.z:.1f})" for t in bands]
+    where = a.where_it_fails()
+    if where:
+        lines += [""] + where
+    if a.notes:
+        lines += ["", "notes:"] + [f"  {n}" for n in a.notes]
+    return "\n".join(lines)
+
+
+def _write_report(comp, steps, args) -> dict:
+    from gyroarray.reports.compare_report import write_compare_report  # deferred: matplotlib
+    title = None
+    if getattr(args, "validate", False):
+        title = f"Validation: does the model ({comp.given_model.description or args.model}) predict {comp.name}?"
+    return write_compare_report(comp, steps, args.out, args.md, title=title, force=args.force)
+
+
+def _write_model(path: Path, model, args) -> str:
+    """The fitted model as TOML at ``path`` (checked by :func:`_comparison`); returns the path."""
+    # deferred: numba and the effect registry load only when the command runs (a fast --help)
+    from gyroarray.core.outputs import write_text
+    from gyroarray.effects.model import NoiseModel
+    model = NoiseModel(model.entries, description=f"fitted to {args.measurement} by gyroarray {args.command}")
+    return str(write_text(path, model.to_toml(), force=args.force))
+
+
+def _validation_text(comp, a, model_path) -> str:
+    """``the model fitted on X predicts Y: consistent / not, worst at …``."""
+    worst = max(a.tests, key=lambda t: t.z if math.isfinite(t.z) else -math.inf, default=None)
+    where = comp.given_model.description or str(model_path)
+    head = (f"the model ({where}) predicts {comp.name}: "
+            + ("consistent" if a.consistent else "NOT consistent") + f" (D = {a.discrepancy:.3g})")
+    if worst is not None and not a.consistent:
+        head += f", worst: {worst.evidence} (z = {worst.z:.1f})"
+    return head
+
+
+def cmd_compare(args):
+    comp = _comparison(args)
+    if args.validate:
+        if args.model is None:
+            raise InputError("gyroarray compare --validate needs --model (the model to test)")
+        a = comp.validate()
+        steps = [(None, a)]
+    else:
+        # with a model beyond the baseline: the baseline first, then its effects one
+        # by one, so the report shows the error falling
+        steps = comp.steps_to_model()
+        a = steps[-1][1]
+    a.notes[:0] = args.entry_notes
+    _write_report(comp, steps, args)
+    d = a.to_json_dict()
+    res = {"discrepancy": a.discrepancy, "consistent": a.consistent, "z_crit": a.z_crit,
+           "n_tests": len(a.tests), "report": str(args.out),
+           "steps": [{"added": None if add is None else {"effect": add[0], "gyro": add[1]},
+                      "discrepancy": s.discrepancy, "consistent": s.consistent} for add, s in steps],
+           "adev_band": d["adev_band"], "candidates": d["candidates"][:10],
+           "localisation": d["localisation"], "notes": a.notes}
+    if args.md is not None:
+        res["markdown"] = str(args.md)
+    if args.validate:
+        res["validated"] = True
+        res["verdict"] = _validation_text(comp, a, args.model)
+    fall = "" if len(steps) == 1 else f" (baseline alone: D = {steps[0][1].discrepancy:.3g})"
+    if args.validate:
+        fall = "\n" + res["verdict"]
+    text = (f"{comp.name}: discrepancy D = {a.discrepancy:.3g} "
+            f"({'consistent' if a.consistent else 'NOT consistent'} with the model){fall}\n"
+            + "\n".join(f"  {t.effect}{'' if t.gyro is None else ':' + str(t.gyro)}  z = {t.z:.1f}  {t.evidence}"
+                        for t in a.candidates[:5] if a.significant(t))
+            + "".join("\n" + x for x in a.where_it_fails())
+            + f"\nreport: {args.out}" + (f" and {args.md}" if args.md is not None else "")
+            + "".join(f"\nnote: {n}" for n in args.entry_notes))
+    return res, text
+
+
+def cmd_diagnose(args):
+    comp = _comparison(args)
+    if args.validate:
+        if args.model is None:
+            raise InputError("gyroarray diagnose --validate needs --model (the model to test)")
+        a = comp.validate()
+        a.notes[:0] = args.entry_notes
+        out = a.to_json_dict()
+        out["validated"] = True
+        out["verdict"] = _validation_text(comp, a, args.model)
+        return out, out["verdict"] + "\n" + _diagnosis_text(a, f"{comp.name}: {comp.N} gyros, {comp.n * comp.dt:.0f} s")
+    a = comp.diagnose()
+    a.notes[:0] = args.entry_notes
+    return a.to_json_dict(), _diagnosis_text(a, f"{comp.name}: {comp.N} gyros, {comp.n * comp.dt:.0f} s")
+
+
+def cmd_fit(args):
+    from gyroarray.chain.compare import parse_add  # deferred: the chain (numpy, numba)
+    comp = _comparison(args)
+    add = [parse_add(x, comp.N) for x in (args.add or [])]
+    before, after = comp.fit(add)
+    after.notes[:0] = args.entry_notes
+    res = {"discrepancy_before": before.discrepancy, "discrepancy_after": after.discrepancy,
+           "consistent": after.consistent, "effects": after.effects_json(),
+           "notes": list(args.entry_notes)}
+    if args.out is not None:
+        res["model"] = _write_model(args.out, after.model, args)
+    text = "\n".join([f"{comp.name}: discrepancy {before.discrepancy:.3g} -> {after.discrepancy:.3g} "
+                      f"({'consistent' if after.consistent else 'NOT consistent'})",
+                      "fitted model (beyond ARW + RRW):"] + (_model_lines(after.model) or ["  (baseline only)"])
+                     + ([f"written to {args.out}"] if args.out is not None else [])
+                     + [f"note: {n}" for n in args.entry_notes])
+    return res, text
+
+
+def cmd_ladder(args):
+    # deferred: the chain and the effect registry (numpy, numba) loads only when the command runs (a fast --help)
+    from gyroarray.chain.compare import ModelComparison, split_measurement
+    from gyroarray.effects.model import NoiseModel
+    comp = _comparison(args)
+    held = None
+    if args.holdout is not None:
+        first, rest = split_measurement(comp.m, args.holdout)
+        comp = ModelComparison(first, comp.given_model, n_runs=args.runs, seed=args.seed,
+                               ref_smooth_s=args.ref_smooth)
+        held = ModelComparison(rest, None, n_runs=args.runs, seed=args.seed, ref_smooth_s=args.ref_smooth)
+    steps = comp.ladder(max_steps=args.max_steps)
+    steps[-1][1].notes[:0] = args.entry_notes
+    _write_report(comp, steps, args)
+    final = steps[-1][1]
+    res = {"steps": [{"added": None if add is None else {"effect": add[0], "gyro": add[1]},
+                      "discrepancy": a.discrepancy, "consistent": a.consistent}
+                     for add, a in steps],
+           "discrepancy": final.discrepancy, "consistent": final.consistent,
+           "effects": final.effects_json(), "unexplained": final.unexplained(),
+           "localisation": list(final.localisation),
+           "candidates_left": [{"effect": t.effect, "gyro": t.gyro, "score": t.z, "evidence": t.evidence}
+                               for t in final.candidates if final.significant(t)],
+           "notes": list(final.notes), "report": str(args.out)}
+    if args.model_out is not None:
+        res["model"] = _write_model(args.model_out, final.model, args)
+    held_text = []
+    if held is not None:
+        model = NoiseModel(final.model.entries, description=f"the ladder on {comp.name}")
+        v = ModelComparison(held.m, model, n_runs=args.runs, seed=args.seed, ref_smooth_s=args.ref_smooth)
+        va = v.validate()
+        verdict = _validation_text(v, va, comp.name)
+        res["holdout"] = {"fraction": args.holdout, "discrepancy": va.discrepancy, "consistent": va.consistent,
+                          "verdict": verdict, "candidates": va.to_json_dict()["candidates"][:10]}
+        held_text = [f"held out ({args.holdout:g} of the record): {verdict}"]
+    lines = [f"{comp.name}: the ladder"]
+    for add, a in steps:
+        what = "calibrated model" if add is None else f"+ {add[0]}{'' if add[1] is None else ':' + str(add[1])}"
+        lines.append(f"  {what:<28} D = {a.discrepancy:8.3g}  {'consistent' if a.consistent else ''}")
+    lines += ["fitted model (beyond ARW + RRW):"] + (_model_lines(final.model) or ["  (baseline only)"])
+    left = [t.evidence for t in final.candidates if final.significant(t)]
+    if not final.localisation:
+        left = final.unexplained() + left
+    lines += ["still unexplained:"] + ([f"  {x}" for x in left] or
+                                       (["  nothing"] if not final.localisation else []))
+    if final.localisation:
+        lines += final.where_it_fails()
+    lines += [f"note: {x}" for x in final.notes if x.startswith("the ladder")]
+    lines += held_text
+    lines.append(f"report: {args.out}")
+    return res, "\n".join(lines)
+
+
+def _add_compare_args(p, *, out: bool):
+    p.add_argument("measurement", type=Path, metavar="MEAS.csv")
+    p.add_argument("--model", type=Path, metavar="MODEL.toml",
+                   help="noise model to calibrate (default: ARW + RRW on every gyro)")
+    p.add_argument("--runs", type=count("--runs"), default=40, metavar="K",
+                   help="Monte-Carlo runs of the model band (40)")
+    p.add_argument("--seed", type=nonneg_int("--seed"), default=0, help="seed of the model band (0)")
+    p.add_argument("--repair", action="store_true", help="repair short gaps, missing values, exact duplicate rows and a jittering clock (each listed)")
+    p.add_argument("--ref-smooth", type=float_in("--ref-smooth", 0.0, unit="s"), default=0.0, metavar="SECONDS",
+                   help="smooth a noisy reference rate (a differentiated encoder) by a centred moving "
+                        "average of this length before comparing; scale factor, nonlinearity, misalignment "
+                        "and latency are then fitted against the recorded reference with the smoothed one "
+                        "as instrument (0: as recorded)")
+    add_plugin(p)
+    if out:
+        add_force(p)
+        p.add_argument("--out", type=Path, required=True, metavar="REPORT.html")
+        p.add_argument("--md", type=Path, metavar="REPORT.md", help="also write a Markdown twin")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+
+
+def add_parser(sub) -> None:
+    """The ``compare``, ``diagnose``, ``fit`` and ``ladder`` subcommands (measurement vs model)."""
+    p = sub.add_parser("compare", help="measurement vs model: calibrate, model band, diagnostics report")
+    _add_compare_args(p, out=True)
+    p.add_argument("--validate", action="store_true",
+                   help="keep every parameter of --model fixed (only the starting biases are fitted): "
+                        "does the model fitted on another run predict this one?")
+    p.set_defaults(func=cmd_compare)
+
+    p = sub.add_parser("diagnose", help="which effect is the model missing: candidates ranked by significance")
+    _add_compare_args(p, out=False)
+    p.add_argument("--validate", action="store_true",
+                   help="keep every parameter of --model fixed: does it predict this record?")
+    p.set_defaults(func=cmd_diagnose)
+
+    p = sub.add_parser("fit", help="fit the model (plus --add EFFECT[:GYRO]) to a measurement")
+    _add_compare_args(p, out=False)
+    p.add_argument("--add", action="append", metavar="EFFECT[:GYRO]",
+                   help="effect to add before fitting (repeatable), e.g. scale_factor:2, burst")
+    p.add_argument("--out", type=Path, metavar="NEW.toml", help="write the fitted model (readable by --model)")
+    add_force(p)
+    p.set_defaults(func=cmd_fit)
+
+    p = sub.add_parser("ladder", help="diagnose -> add the best effect -> fit, until consistent; report")
+    _add_compare_args(p, out=True)
+    p.add_argument("--max-steps", type=count("--max-steps"), default=8, metavar="K",
+                   help="effects added at most (8)")
+    p.add_argument("--model-out", type=Path, metavar="NEW.toml", help="write the final fitted model")
+    p.add_argument("--holdout", type=finite_float("--holdout"), metavar="FRACTION",
+                   help="run the ladder on the first part of the record, then validate its model on the "
+                        "last FRACTION (e.g. 0.3)")
+    p.set_defaults(func=cmd_ladder)
+

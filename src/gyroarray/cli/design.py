@@ -1,0 +1,485 @@
+"""``gyroarray gdop`` and ``gyroarray design``: GDOP of a layout, the optimal cone angle, paper
+003's tables and plots, and ``design --recommend`` (which array to build), with their text.
+
+numpy and the design chain are imported inside the commands, so that building the parser
+(``gyroarray --help``, every other command) does not load them.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+from pathlib import Path
+
+from gyroarray.core.errors import InputError
+from gyroarray.core.units import deg_s_to_rad_s, deg_to_rad, rad_to_deg
+from gyroarray.cli.common import (add_force, bounded_int, check_plot, count, finite_float, float_in,
+                                  nonneg_int, output, write_json)
+
+__all__ = ["MAX_DESIGN_GYROS", "MAX_DESIGN_N", "add_parser", "cmd_gdop", "cmd_design",
+           "parse_sensor_bandwidth"]
+
+
+#: Most gyros a design question may ask about (the search costs O(N³) per angle).
+MAX_DESIGN_GYROS = 128
+
+
+#: Largest N the design search takes (every failure combination is enumerated).
+MAX_DESIGN_N = 24
+
+
+def _add_layout_args(p: argparse.ArgumentParser, *, alpha: bool, required: bool):
+    p.add_argument("--scheme", type=int, choices=(1, 2), required=required,
+                   help="conical scheme: 1 all gyros on the cone, 2 gyro 1 on +z")
+    p.add_argument("--n", type=bounded_int("--n", 3, MAX_DESIGN_GYROS), required=required, metavar="N",
+                   help=f"number of gyros (3 to {MAX_DESIGN_GYROS})")
+    if alpha:
+        p.add_argument("--alpha", type=float_in("--alpha", 0.0, 180.0, unit="deg"), required=True, metavar="DEG",
+                       help="cone angle from +z [deg]")
+    p.add_argument("--rho", type=finite_float("--rho"), default=0.0, metavar="R",
+                   help="common ARW correlation factor [-] (default 0)")
+
+
+def cmd_gdop(args) -> tuple[dict, str]:
+    # deferred: numpy and the design chain load only when the command runs (a fast --help)
+    from gyroarray.core.gdop import gdop, gdop_note
+    from gyroarray.core.layout import Layout
+    layout = Layout.conical(args.scheme, args.n, deg_to_rad(args.alpha))
+    g = gdop(layout, args.rho)
+    note = gdop_note(layout, args.rho)
+    text = f"GDOP = {g:.6f}  (scheme {args.scheme}, N = {args.n}, alpha = {args.alpha:g} deg, rho = {args.rho:g})"
+    out: dict[str, float | str] = {"gdop": g}
+    if note:
+        out["note"] = note
+        text += f"\nnote: {note}"
+    return out, text
+
+
+def cmd_design(args) -> tuple[dict, str]:
+    # deferred: numpy and the design chain load only when the command runs (a fast --help)
+    from gyroarray.core import gdop as design
+    from gyroarray.core.layout import Layout
+    if args.recommend:
+        return _design_recommend(args)
+    rec_only = [o for o, v in (("--model", args.model), ("--arw", args.arw), ("--rrw", args.rrw),
+                                ("--bi", args.bi), ("--rho-range", args.rho_range),
+                                ("--swing", args.swing), ("--motion", args.motion),
+                                ("--failures", args.failures), ("--estimators", args.estimators),
+                                ("--check", args.check), ("--out", args.out),
+                                ("--bandwidth-hz", args.bandwidth_hz), ("--rate-hz", args.rate_hz),
+                                ("--sensor-bandwidth", args.sensor_bandwidth),
+                                ("--g-sensitivity", args.g_sensitivity),
+                                ("--objective", args.objective), ("--design-rho", args.design_rho),
+                                ("--far-per-h", args.far_per_h), ("--p-md", args.p_md),
+                                ("--mdb-max", args.mdb_max),
+                                ("--horizon-s", args.horizon_s)) if v is not None]
+    if rec_only:
+        raise InputError(f"gyroarray design: {rec_only[0]} goes with --recommend")
+    out: dict = {}
+    lines: list[str] = []
+    check_plot(args)
+    rho = 0.0 if args.rho is None else args.rho
+    if args.scheme is not None or args.n is not None:
+        if args.scheme is None or args.n is None:
+            raise InputError("gyroarray design: --scheme and --n go together")
+        n = _single_n(args.n)
+        opt = design.optimal_alpha(args.scheme, n, rho)
+        out.update({"alpha_opt_deg": rad_to_deg(opt.alpha_rad), "gdop_min": opt.gdop})
+        lines.append(f"scheme {args.scheme}, N = {n}, rho = {rho:g}: "
+                     f"optimal alpha = {rad_to_deg(opt.alpha_rad):.4f} deg, GDOP min = {opt.gdop:.6f}")
+        note = design.gdop_note(Layout.conical(args.scheme, n, opt.alpha_rad), rho)
+        if note:
+            out["note"] = f"no cone angle gives a 3-axis rate: {note}"
+            lines.append(f"note: {out['note']}")
+    if args.paper_tables:
+        cells = design.paper003_cells()
+        out["paper_tables"] = [c.to_dict() for c in cells]
+        out["cells_not_reproduced"] = sum(not c.reproduces for c in cells)
+        lines.append(_format_paper_cells(cells))
+    if args.plot is not None:
+        from gyroarray.reports.design_plots import design_figure  # deferred: matplotlib, only for a plot
+        path = design_figure(args.plot, force=args.force)
+        out["plot"] = str(path)
+        lines.append(f"wrote {path}")
+    if not out:
+        table = design.optimum_table()
+        out["optima"] = table
+        lines.append(_format_optimum_table(table))
+    return out, "\n".join(lines)
+
+
+def _single_n(text: str) -> int:
+    try:
+        n = int(text)
+    except ValueError:
+        raise InputError(f"--n must be one whole number here (a list like 4,5,6,8 goes with "
+                         f"--recommend), got {text!r}") from None
+    if not 3 <= n <= MAX_DESIGN_GYROS:
+        raise InputError(f"--n must be from 3 to {MAX_DESIGN_GYROS}, got {n}")
+    return n
+
+
+def _number_list(text: str, name: str, *, integer: bool = False) -> list:
+    vals = []
+    for part in text.split(","):
+        part = part.strip()
+        try:
+            v = int(part) if integer else float(part)
+        except ValueError:
+            raise InputError(f"{name} must be a comma-separated list of "
+                             f"{'whole numbers' if integer else 'numbers'}, got {text!r}") from None
+        if not integer and not math.isfinite(v):
+            raise InputError(f"{name} must hold finite numbers, got {text!r}")
+        vals.append(v)
+    return vals
+
+
+def _design_noise(args):
+    """The GyroNoise of ``design --recommend`` (model file or datasheet, ρ) and the ρ range to
+    test (None: a single ρ)."""
+    # deferred: numpy and the design chain load only when the command runs (a fast --help)
+    import numpy as np
+    from gyroarray.design.recommend import GyroNoise
+    if args.model is not None and any(v is not None for v in (args.arw, args.rrw, args.bi)):
+        raise InputError("gyroarray design: give the noise as --model MODEL.toml or as a datasheet "
+                         "(--arw, --rrw, --bi), not both")
+    if args.model is not None:
+        from gyroarray.effects.model import NoiseModel  # deferred: numba (--model only)
+        g = GyroNoise.from_model(NoiseModel.from_toml(args.model), source=f"model {args.model}")
+    elif args.arw is not None:
+        g = GyroNoise(arw_deg_rt_h=args.arw, rrw_deg_h_rt_h=args.rrw or 0.0, bi_deg_h=args.bi or 0.0,
+                      sources={"arw": "user", "rrw": "user" if args.rrw is not None else "default",
+                               "bi": "user" if args.bi is not None else "default",
+                               "gauss_markov": "default", "rho_arw": "default", "rho_rrw": "default"})
+    else:
+        raise InputError("gyroarray design --recommend: give the gyro noise: --model MODEL.toml (from "
+                         "gyroarray fit --out) or --arw N_DEG_RT_H [--rrw K] [--bi B]")
+    if args.rho is not None and args.rho_range is not None:
+        raise InputError("gyroarray design: --rho and --rho-range exclude each other")
+    rhos = None
+    if args.rho is not None:
+        g = g.with_rho(args.rho)
+        g = GyroNoise(**{**g.__dict__, "sources": {**g.sources, "rho_arw": "user", "rho_rrw": "user"}})
+    if args.rho_range is not None:
+        lo, hi = (_number_list(args.rho_range, "--rho-range") + [None, None])[:2]
+        if hi is None or len(args.rho_range.split(",")) != 2 or not -1 < lo < hi < 1:
+            raise InputError(f"--rho-range must be LO,HI with -1 < LO < HI < 1, got {args.rho_range!r}")
+        rhos = sorted(set(np.round(np.linspace(lo, hi, 5), 12).tolist() + ([0.0] if lo < 0 < hi else [])))
+        g = GyroNoise(**{**g.with_rho(0.0).__dict__,
+                         "sources": {**g.sources, "rho_arw": "user", "rho_rrw": "user"}})
+    return g, rhos
+
+
+def _design_motion(args, rate: float, horizon: float):
+    """(swing, motion [rad/s] or None, its name, its specific force [m/s²] or None) of ``design``."""
+    # deferred: numpy and the design chain load only when the command runs (a fast --help)
+    from gyroarray.design.predict import Swing
+    force = None
+    swing, motion, motion_name = None, None, "at rest"
+    if args.swing is not None and args.motion is not None:
+        raise InputError("gyroarray design: --swing and --motion exclude each other")
+    if args.swing is not None:
+        vals = _number_list(args.swing, "--swing")
+        if len(vals) != 2 or not vals[0] > 0 or not 0 < vals[1] < 0.5 * rate:
+            raise InputError(f"--swing must be AMP_DPS,FREQ_HZ with AMP > 0 and 0 < FREQ < Nyquist, "
+                             f"got {args.swing!r}")
+        swing = Swing(deg_s_to_rad_s(vals[0]), vals[1])
+        motion_name = f"swing {vals[0]:g} deg/s at {vals[1]:g} Hz about each axis"
+    if args.motion is not None:
+        # deferred: numba and the simulator, only for --motion
+        from gyroarray.sim.profiles import load_profile
+        from gyroarray.sim.scenario import resolve_profile
+        from gyroarray.sim.truth import compute_truth
+        prof = load_profile(resolve_profile(args.motion, Path.cwd()))
+        dur = min(horizon, prof.duration_s)
+        if dur < horizon:
+            raise InputError(f"--motion {args.motion} lasts {prof.duration_s:g} s, shorter than "
+                             f"--horizon-s {horizon:g}")
+        mtruth = compute_truth(prof, rate, duration_s=horizon)
+        motion = mtruth.omega_body_rad_s
+        motion_name = f"profile {args.motion} (rate-table truth)"
+        force = mtruth.specific_force_m_s2
+    return swing, motion, motion_name, force
+
+
+def _design_bandwidth(args, rate: float, at_rest: bool, src: dict) -> list:
+    """[LO, HI] of the rate band [Hz]: the user's, else the default at rest or 0.1 Hz to 0.45 fs
+    in motion."""
+    from gyroarray.design.recommend import DEFAULT_BANDWIDTH_HZ  # deferred: numpy and the design chain
+    if args.bandwidth_hz is not None:
+        bw = _number_list(args.bandwidth_hz, "--bandwidth-hz")
+        if len(bw) == 1:
+            bw = [bw[0], bw[0]]
+        if len(bw) != 2 or not 0 < bw[0] <= bw[1] < 0.5 * rate:
+            raise InputError(f"--bandwidth-hz must be F or LO,HI with 0 < LO <= HI < Nyquist "
+                             f"({0.5 * rate:g} Hz), got {args.bandwidth_hz!r}")
+        src["bandwidth_hz"] = "user"
+    elif at_rest:
+        bw = [DEFAULT_BANDWIDTH_HZ, DEFAULT_BANDWIDTH_HZ]
+    else:
+        bw = [0.1, 0.45 * rate]
+    return bw
+
+
+def _design_space(args):
+    """The DesignSpace and GyroNoise of ``design --recommend`` (every default recorded)."""
+    from gyroarray.design.recommend import ESTIMATORS, DesignSpace  # deferred: numpy and the design chain
+    src = {}
+    g, rhos = _design_noise(args)
+    rate = 100.0 if args.rate_hz is None else args.rate_hz
+    if not rate > 0:
+        raise InputError(f"--rate-hz must be > 0, got {rate:g}")
+    horizon = 600.0 if args.horizon_s is None else args.horizon_s
+    if not horizon > 0:
+        raise InputError(f"--horizon-s must be > 0, got {horizon:g}")
+    if horizon * rate > 2e7:
+        raise InputError(f"--horizon-s {horizon:g} at {rate:g} Hz is {horizon * rate:.3g} samples "
+                         "(at most 2e7): shorten the horizon or lower the rate")
+    ns = tuple(_number_list(args.n, "--n", integer=True)) if args.n is not None else (4, 5, 6, 8)
+    bad = [n for n in ns if not 3 <= n <= MAX_DESIGN_N]
+    if bad:
+        raise InputError(f"--n {bad[0]} is outside 3..{MAX_DESIGN_N} (every failure combination is "
+                         "enumerated)")
+    failures = 0 if args.failures is None else args.failures
+    if failures < 0 or failures > 2:
+        raise InputError(f"--failures must be 0, 1 or 2, got {failures}")
+    ests = ESTIMATORS
+    if args.estimators is not None:
+        ests = tuple(e.strip() for e in args.estimators.split(",") if e.strip())
+        unknown = [e for e in ests if e not in ESTIMATORS]
+        if unknown or not ests:
+            raise InputError(f"--estimators: {unknown[0] if unknown else '(none)'} is not one the "
+                             f"design search predicts ({', '.join(ESTIMATORS)})")
+    swing, motion, motion_name, force = _design_motion(args, rate, horizon)
+    bw = _design_bandwidth(args, rate, swing is None and motion is None, src)
+    sensor_bw, src["sensor_bandwidth"] = _sensor_bandwidth_arg(args, rate)
+    gsens = None
+    if args.g_sensitivity is not None:
+        gsens = _number_list(args.g_sensitivity, "--g-sensitivity")
+        if len(gsens) == 1:
+            gsens = [0.0, 0.0, gsens[0]]
+        if len(gsens) != 3:
+            raise InputError(f"--g-sensitivity must be K or KX,KY,KZ [(deg/s)/g], got {args.g_sensitivity!r}")
+        src["g_sensitivity"] = "user"
+    for key, v in (("rate_hz", args.rate_hz), ("horizon_s", args.horizon_s), ("ns", args.n),
+                   ("estimators", args.estimators), ("failures", args.failures),
+                   ("motion", args.swing or args.motion)):
+        src[key] = "user" if v is not None else "default"
+    space = DesignSpace(rate_hz=rate, horizon_s=horizon, ns=ns, estimators=ests, failures=failures,
+                        bandwidth_hz=(float(bw[0]), float(bw[1])), swing=swing, motion=motion,
+                        motion_name=motion_name, sensor_bandwidth=sensor_bw,
+                        g_sensitivity_deg_s_per_g=None if gsens is None else tuple(gsens),
+                        specific_force_m_s2=force, objective=args.objective,
+                        design_rho=args.design_rho,
+                        far_per_h=0.01 if args.far_per_h is None else args.far_per_h,
+                        p_md=0.001 if args.p_md is None else args.p_md, mdb_max=args.mdb_max)
+    if args.mdb_max is not None and not failures:
+        raise InputError("--mdb-max needs --failures K (K >= 1): the detection limit is about "
+                         "isolating a failed gyro")
+    if args.design_rho is not None:
+        lo, hi = (min(rhos), max(rhos)) if rhos else (g.rho_arw, g.rho_arw)
+        if not lo <= args.design_rho <= hi:
+            raise InputError(f"--design-rho {args.design_rho:g} lies outside the correlation range "
+                             f"[{lo:g}, {hi:g}]: give a value inside --rho-range (or --rho)")
+    object.__setattr__(space, "_sources", src)
+    return g, space, rhos
+
+
+def parse_sensor_bandwidth(text: str, rate_hz: float) -> tuple[float, int]:
+    """``HZ[,ORDER]`` of ``--sensor-bandwidth``: the gyros' own −3 dB cut-off [Hz] and filter
+    order (1, default, or 2 = Butterworth), checked against the Nyquist frequency."""
+    vals = _number_list(text, "--sensor-bandwidth")
+    nyq = 0.5 * rate_hz
+    if len(vals) not in (1, 2):
+        raise InputError(f"--sensor-bandwidth must be HZ or HZ,ORDER, got {text!r}")
+    fc = vals[0]
+    order = vals[1] if len(vals) == 2 else 1
+    if not fc > 0:
+        raise InputError(f"--sensor-bandwidth: the cut-off must be > 0 Hz, got {fc:g}")
+    if order not in (1, 2):
+        raise InputError(f"--sensor-bandwidth: the order must be 1 or 2 (Butterworth), got {order:g}")
+    if not fc < nyq:
+        raise InputError(f"--sensor-bandwidth: the cut-off {fc:g} Hz must lie below the Nyquist "
+                         f"frequency {nyq:g} Hz of --rate-hz {rate_hz:g}")
+    return float(fc), int(order)
+
+
+def _sensor_bandwidth_arg(args, rate: float):
+    """The sensor bandwidth of ``design --recommend`` and its source: the flag, else the
+    model's ``bandwidth`` (its lowest cut-off, the worst gyro), else none."""
+    if args.sensor_bandwidth is not None:
+        return parse_sensor_bandwidth(args.sensor_bandwidth, rate), "user"
+    if args.model is not None:
+        from gyroarray.effects.model import NoiseModel  # deferred: numba and the effect registry
+        ents = [e for e in NoiseModel.from_toml(args.model).entries if e.effect == "bandwidth"]
+        if ents:
+            e = min(ents, key=lambda e: float(e.params["cutoff_hz"]))
+            fc, order = float(e.params["cutoff_hz"]), int(e.params["order"])
+            if not fc < 0.5 * rate:
+                raise InputError(f"the model's bandwidth cut-off {fc:g} Hz is not below the Nyquist "
+                                 f"frequency {0.5 * rate:g} Hz of --rate-hz {rate:g}", file=args.model)
+            return (fc, order), f"model {args.model} (lowest cut-off)"
+    return None, "default"
+
+
+def _design_recommend(args) -> tuple[dict, str]:
+    from gyroarray.design.recommend import monte_carlo_check, recommend  # deferred: numpy and the design chain
+    output(args.out, args, "--out", inputs=[args.model] if args.model is not None else [],
+            suffixes=(".json",))
+    g, space, rhos = _design_space(args)
+    res = recommend(g, space, rhos=rhos)
+    if args.check:
+        res["check"] = monte_carlo_check(res["designs"], g, space, replicates=args.check,
+                                         seed=20260412 if args.seed is None else args.seed)
+    if args.out is not None:
+        write_json(args.out, res, args)
+        res["written"] = str(args.out)
+    return res, _recommend_text(res)
+
+
+def _recommend_text(res: dict) -> str:
+    from gyroarray.design.recommend import design_label  # deferred: numpy and the design chain
+    r = res["recommended"]
+    lo, hi = r.get("rho_range", [None, None])
+    lines = [f"Designs, best worst case first ({r.get('objective', 'rate')} objective; worst over "
+             f"rho in [{lo:g}, {hi:g}] x every set of {res['assumptions']['failures']['value']} failed "
+             "gyro(s), weights fixed at the design rho):",
+             f"{'rank':>4} {'design':<62} {'worst RMS':>10} {'worst angle':>11} {'at rho':>7} "
+             f"{'failed':>6} {'design rho':>10} {'worst GDOP':>10}"]
+    for d in res["designs"][:15]:
+        w = d["worst_case"]
+        rd = "-" if d["design_rho"] is None else f"{d['design_rho']:.3g}"
+        lines.append(f"{d['rank']:>4} {design_label(d):<62} {w['rms_3axis_deg_s']:>10.4g} "
+                     f"{w['angle_deg']:>11.4g} {w['rho']:>7.3g} "
+                     f"{','.join(map(str, w['failed_gyros'])) or '-':>6} {rd:>10} "
+                     f"{d['worst_gdop_after_failures']:>10.4g}")
+    for grp in res["equivalent"][:6]:
+        lines.append(f"equivalent (ranks {', '.join(map(str, grp['members']))}): {grp['reason']}")
+    if "check" in res:
+        c = res["check"]
+        lines.append(f"Monte-Carlo check ({c['replicates']} paired runs): {c['inside_95']} of "
+                     f"{c['compared']} predictions inside the runs' 95 % CI")
+        for d in c["designs"]:
+            t = d["rms_3axis_deg_s"]
+            lines.append(f"  {d['label']}: predicted {t['predicted']:.4g}, simulated {t['monte_carlo']['value']:.4g} "
+                         f"[{t['monte_carlo']['ci_low']:.4g}, {t['monte_carlo']['ci_high']:.4g}] deg/s")
+    if "tracking_limit" in res:
+        lines.append("tracking: " + res["tracking_limit"]["statement"])
+    if "g_sensitivity" in res:
+        lines.append(res["g_sensitivity"]["statement"])
+    lines += [f"what would change the choice: {w}" for w in res["what_changes_the_choice"]]
+    lines += [f"note: {n}" for n in res["notes"]]
+    w, t, ru = r["worst_case"], r["typical"], res.get("runner_up")
+    failed = ("no failure" if not w["failed_gyros"] else
+              "gyro " + ", ".join(map(str, w["failed_gyros"])) + " failed")
+    rd = ("built without rho" if r["design_rho"] is None else f"weights built for rho = {r['design_rho']:.4g}")
+    mdb = f"; MDB {r['mdb_deg_s']:.3g} deg/s (gyro {r['mdb_worst_gyro']})" if r.get("mdb_deg_s") else ""
+    lines += ["", f"RECOMMENDED ({r['objective']} objective): {design_label(r)}; {r['mounting']}; {rd}",
+              f"  worst case rho = {w['rho']:.4g}, {failed}: {w['rms_3axis_deg_s']:.4g} deg/s 3-axis RMS, "
+              f"{w['angle_deg']:.4g} deg at the horizon; typical (design rho, intact): "
+              f"{t['rms_3axis_deg_s']:.4g} deg/s, {t['angle_deg']:.4g} deg{mdb}"
+              + (f"; {r['tie']}" if r.get("tie") else ""),
+              "  runner-up: " + (f"{design_label(ru)}, worst case {ru['worst_case']['rms_3axis_deg_s']:.4g} deg/s, "
+                                 f"{ru['worst_case']['angle_deg']:.4g} deg" if ru else "none")]
+    return "\n".join(lines)
+
+
+def _format_optimum_table(rows: list[dict]) -> str:
+    head = f"{'scheme':>6} {'N':>3} {'rho':>6} {'alpha_opt_deg':>14} {'gdop_min':>9} {'3/sqrt(N)':>9}"
+    body = [f"{r['scheme']:>6} {r['n']:>3} {r['rho']:>6g} {r['alpha_opt_deg']:>14.4f} "
+            f"{r['gdop_min']:>9.4f} {3 / math.sqrt(r['n']):>9.4f}" for r in rows]
+    return "Optimal cone angles (GDOP = sqrt(trace((H' C^-1 H)^-1)))\n" + "\n".join([head, *body])
+
+
+def _format_paper_cells(cells) -> str:
+    head = f"{'table':<10} {'cell':<40} {'quantity':<9} {'paper':>9} {'computed':>10}  reproduces"
+    body = []
+    for c in cells:
+        mark = "yes" if c.reproduces else f"NO  (computed {c.computed:.4f}, diff {c.computed - c.paper_value:+.4f})"
+        body.append(f"{c.table:<10} {c.label:<40} {c.quantity:<9} {c.paper:>9} {c.computed:>10.4f}  {mark}")
+    bad = sum(not c.reproduces for c in cells)
+    foot = (f"{bad} of {len(cells)} printed cells do not reproduce within one unit of their last "
+            "printed digit (the paper has errata; computed values are gyroarray's).")
+    return "Paper 003 Tables 1, 2 and the Section 3 optima beside gyroarray\n" + "\n".join([head, *body, foot])
+
+
+def add_parser(sub) -> None:
+    """The ``gdop`` and ``design`` subcommands (layouts, cone angle, recommendation)."""
+    p = sub.add_parser("gdop", help="GDOP of a conical layout")
+    _add_layout_args(p, alpha=True, required=True)
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(func=cmd_gdop)
+
+    p = sub.add_parser("design", help="optimal cone angle, paper 003 tables, GDOP plots; "
+                                      "--recommend: which array to build")
+    p.add_argument("--scheme", type=int, choices=(1, 2),
+                   help="conical scheme: 1 all gyros on the cone, 2 gyro 1 on +z")
+    p.add_argument("--n", metavar="N", help="number of gyros (>= 3); with --recommend a list "
+                                            "(default 4,5,6,8)")
+    p.add_argument("--rho", type=finite_float("--rho"), metavar="R",
+                   help="common correlation of the gyros' noise [-] (default 0; with --recommend "
+                        "it applies to ARW and RRW)")
+    p.add_argument("--recommend", action="store_true",
+                   help="search scheme x N x cone angle x estimator x bandwidth with the "
+                        "analytic predictor and recommend a design")
+    p.add_argument("--model", type=Path, metavar="MODEL.toml",
+                   help="--recommend: the gyro noise from a model (gyroarray fit --out)")
+    p.add_argument("--arw", type=float_in("--arw", 0.0, 6e6, lo_open=True, unit="deg/√h"), metavar="DEG_RT_H",
+                   help="--recommend: angle random walk [deg/rt(h)]")
+    p.add_argument("--rrw", type=float_in("--rrw", 0.0, 3.6e8, unit="deg/h/√h"), metavar="DEG_H_RT_H",
+                   help="--recommend: rate random walk [deg/h/rt(h)] (default 0)")
+    p.add_argument("--bi", type=float_in("--bi", 0.0, 3.6e8, unit="deg/h"), metavar="DEG_H",
+                   help="--recommend: bias instability [deg/h] (default 0)")
+    p.add_argument("--rho-range", metavar="LO,HI",
+                   help="--recommend: the correlations the gyros may have; ranked per rho, "
+                        "recommended: the best worst case (a negative LO: --rho-range=-0.1,0.5)")
+    p.add_argument("--rate-hz", type=float_in("--rate-hz", 1e-3, 1e6, unit="Hz"), metavar="HZ",
+                   help="--recommend: sample rate (default 100)")
+    p.add_argument("--horizon-s", type=finite_float("--horizon-s"), metavar="T",
+                   help="--recommend: run length the accuracy refers to (default 600)")
+    p.add_argument("--swing", metavar="AMP_DPS,FREQ_HZ",
+                   help="--recommend: a swing about each body axis (the bandwidth is traded against lag)")
+    p.add_argument("--motion", metavar="PROFILE",
+                   help="--recommend: a motion profile (shipped name or .toml file) instead of a swing")
+    p.add_argument("--bandwidth-hz", metavar="F|LO,HI",
+                   help="--recommend: filter bandwidth, fixed or searched (default: 10 at rest, "
+                        "0.1..0.45*rate with motion)")
+    p.add_argument("--sensor-bandwidth", metavar="HZ[,ORDER]",
+                   help="--recommend: the gyros' own low-pass (-3 dB cut-off, order 1 or 2 = "
+                        "Butterworth; default from --model, else none), cascaded before every estimator")
+    p.add_argument("--g-sensitivity", metavar="K|KX,KY,KZ",
+                   help="--recommend: every gyro's g-sensitivity [(deg/s)/g], platform frame (K alone: "
+                        "0,0,K, along gravity at rest); its rate error is reported beside the noise")
+    p.add_argument("--failures", type=int, metavar="K",
+                   help="--recommend: a 3-axis rate must survive K failed gyros (0, 1, 2; default 0)")
+    p.add_argument("--objective", choices=("rate", "angle"),
+                   help="--recommend: rank on the 3-axis RMS rate error (rate) or the angle error at the "
+                        "horizon (angle); default angle when --horizon-s is given, else rate")
+    p.add_argument("--design-rho", type=float_in("--design-rho", -1.0, 1.0, lo_open=True), metavar="R",
+                   help="--recommend: the ρ the estimator's weights are built for (default: chosen "
+                        "min-max over --rho-range)")
+    p.add_argument("--far-per-h", type=float_in("--far-per-h", 0.0, lo_open=True, unit="1/h"),
+                   metavar="RATE", help="--recommend --failures: false-alarm rate of the minimum "
+                                        "detectable bias (default 0.01 per hour)")
+    p.add_argument("--p-md", type=float_in("--p-md", 0.0, 0.5, lo_open=True), metavar="P",
+                   help="--recommend --failures: missed-detection probability of the minimum "
+                        "detectable bias (default 0.001)")
+    p.add_argument("--mdb-max", type=float_in("--mdb-max", 0.0, lo_open=True, unit="deg/s"),
+                   metavar="DEG_S", help="--recommend --failures: exclude designs whose minimum "
+                                         "detectable bias (worst gyro) is above DEG_S")
+    p.add_argument("--estimators", metavar="A,B,...",
+                   help="--recommend: estimators compared (default kf_array,kf_single,gls,ols,naive)")
+    p.add_argument("--check", type=count("--check"), metavar="K",
+                   help="--recommend: simulate the top designs K times (paired) beside the prediction")
+    p.add_argument("--seed", type=nonneg_int("--seed"), metavar="S",
+                   help="--recommend --check: root seed of the paired runs")
+    p.add_argument("--out", type=Path, metavar="FILE.json",
+                   help="--recommend: also write the whole result (for gyroarray report --design)")
+    p.add_argument("--paper-tables", action="store_true",
+                   help="paper 003 Tables 1-2 beside the computed values, cell by cell")
+    p.add_argument("--plot", type=Path, metavar="OUT.png",
+                   help="write GDOP vs alpha and vs rho (paper 003 Figs. 8-10)")
+    add_force(p)
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(func=cmd_design)
+

@@ -1,0 +1,171 @@
+"""``gyroarray fuse``: apply a registered estimator to a recorded array, write the fused body
+rate as a measurement, and say what fusion bought (:mod:`gyroarray.chain.fuse`).
+
+numpy and the chain are imported inside the command, so that building the parser does not
+load them.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+from gyroarray.core.errors import InputError
+from gyroarray.cli.common import add_force, add_plugin, measurement_inputs, output
+
+__all__ = ["add_parser", "cmd_fuse", "parse_exclude", "parse_params", "sidecar_path"]
+
+#: Suffixes of the fused record (the measurement format's CSV, plain or gzip).
+OUT_SUFFIXES = (".csv", ".csv.gz")
+
+
+def parse_exclude(text: str | None) -> list[int]:
+    """``"5,7"`` -> [5, 7] (1-based gyro numbers); one-line refusal of anything else."""
+    if text is None:
+        return []
+    out = []
+    for part in str(text).split(","):
+        p = part.strip()
+        if not p.isdigit() or int(p) < 1:
+            raise InputError(f"--exclude must be a comma-separated list of gyro numbers (1-based), "
+                             f"e.g. 5,7; got {str(text)[:60]!r}")
+        out.append(int(p))
+    return out
+
+
+def parse_params(items) -> dict:
+    """``["tau_s=2", "bias_states=false"]`` -> {"tau_s": 2.0, "bias_states": False}: numbers,
+    true/false and none are converted, anything else stays a string."""
+    out: dict = {}
+    for item in items or ():
+        key, sep, text = str(item).partition("=")
+        key = key.strip()
+        if not sep or not key.isidentifier():
+            raise InputError(f"--param must be KEY=VALUE with KEY a hyperparameter name, got {str(item)[:60]!r}")
+        low = text.strip().lower()
+        if low in ("true", "false"):
+            out[key] = low == "true"
+        elif low in ("none", "null"):
+            out[key] = None
+        else:
+            try:
+                value = float(text)
+            except ValueError:
+                out[key] = text.strip()
+                continue
+            if not math.isfinite(value):
+                raise InputError(f"--param {key}: the value must be finite, got {text!r}")
+            out[key] = value
+    return out
+
+
+def sidecar_path(csv_path: Path) -> Path:
+    """``F.csv.gz`` / ``F.csv`` -> ``F.toml`` beside it."""
+    name = csv_path.name
+    for suffix in (".csv.gz", ".csv"):
+        if name.lower().endswith(suffix):
+            return csv_path.with_name(name[: -len(suffix)] + ".toml")
+    return csv_path.with_name(name + ".toml")
+
+
+def _fmt(v, spec: str = ".4g") -> str:
+    return "-" if v is None or (isinstance(v, float) and not math.isfinite(v)) else format(v, spec)
+
+
+def _text(out: dict, args) -> str:
+    lines = [f"{args.measurement}: {out['n_samples']} samples at {1.0 / out['dt_s']:g} Hz; fused "
+             f"{len(out['gyros_used'])} gyros with {out['estimator']}",
+             f"estimator noise: {out['model_source']}",
+             f"analysed: {out['analysed']}"]
+    lines += [f"note: {n}" for n in out["notes"] if not n.startswith("no --model")]
+    lines.append(f"{'axis':<5}{'fused ARW':>16}{'predicted':>11}{'best gyro':>11}{'its ARW':>9}"
+                 f"{'gain':>7}   [deg/rt(h)]")
+    for name, d in out["axes"].items():
+        arw = d.get("arw_deg_rt_h")
+        s = d.get("arw_deg_rt_h_sigma")
+        fused = "-" if arw is None else (f"{arw:.4g} ± {s:.2g}" if s is not None and math.isfinite(s)
+                                         else f"{arw:.4g}")
+        lines.append(f"{name:<5}{fused:>16}{_fmt(d.get('predicted_arw_deg_rt_h')):>11}"
+                     f"{_fmt(d.get('best_single_gyro'), 'd'):>11}{_fmt(d.get('best_single_arw_deg_rt_h')):>9}"
+                     f"{_fmt(d.get('gain'), '.3g'):>7}")
+    x = out["axes"]["x"]
+    if "taus_s" in x:
+        conf = 100.0 * x["confidence"]
+        lines.append(f"fused ADEV [deg/h], {conf:.1f} % CI:")
+        lines.append(f"  {'tau_s':>9}" + "".join(f"{a:>30}" for a in out["axes"]))
+        for i, tau in enumerate(x["taus_s"]):
+            cells = []
+            for d in out["axes"].values():
+                if "taus_s" not in d or i >= len(d["taus_s"]):
+                    cells.append(f"{'-':>30}")
+                    continue
+                cells.append(f"{d['adev_deg_h'][i]:>12.5g} [{d['ci_low_deg_h'][i]:.4g}, "
+                             f"{d['ci_high_deg_h'][i]:.4g}]".rjust(30))
+            lines.append(f"  {tau:>9.4g}" + "".join(cells))
+    lines.append(out["gain_definition"])
+    if out.get("out"):
+        lines.append(f"wrote {out['out']} and {out['sidecar']}")
+    else:
+        lines.append("nothing written (no --out)")
+    return "\n".join(lines)
+
+
+def cmd_fuse(args) -> tuple[dict, str]:
+    from gyroarray.chain.fuse import fuse, fused_files, sha256_of
+    from gyroarray.core.measurement import read_measurement
+    from gyroarray.core.outputs import write_many
+    from gyroarray.effects.model import NoiseModel
+    exclude = parse_exclude(args.exclude)
+    params = parse_params(args.param)
+    inputs = measurement_inputs(args)
+    side = None
+    if args.out is not None:
+        output(args.out, args, "--out", inputs=inputs, suffixes=OUT_SUFFIXES)
+        side = sidecar_path(Path(args.out))
+        output(side, args, "--out (its sidecar)", inputs=inputs)
+    meas = read_measurement(args.measurement, repair=args.repair)
+    model = None
+    if args.model is not None:
+        model = NoiseModel.from_toml(args.model, n_gyros=meas.n_gyros)
+    res = fuse(meas, args.estimator, model=model,
+               model_name=None if args.model is None else str(args.model), exclude=exclude,
+               params=params)
+    out = res.to_json_dict()
+    out["notes"] = [*meas.notes, *out["notes"]]
+    if args.out is not None:
+        csv_path = Path(meas.source) if meas.source else Path(args.measurement)
+        csv_bytes, toml_bytes = fused_files(
+            res, str(args.out).lower().endswith(".gz"), input_sha256=sha256_of(csv_path),
+            sidecar_sha256=sha256_of(sidecar_path(csv_path)))
+        write_many([(args.out, csv_bytes), (side, toml_bytes)], force=args.force)
+        out["out"], out["sidecar"] = str(args.out), str(side)
+    return out, _text(out, args)
+
+
+def add_parser(sub) -> None:
+    """The ``fuse`` subcommand."""
+    p = sub.add_parser("fuse", help="fuse a recorded array with an estimator: the fused body rate as a "
+                                    "measurement, its ADEV and the gain over the best single gyro")
+    p.add_argument("measurement", type=Path, metavar="MEAS.csv")
+    p.add_argument("--estimator", required=True, metavar="NAME",
+                   help="registered estimator (gls, ols, kf_array, kf_single, naive, ...; "
+                        "installed plugins too)")
+    p.add_argument("--param", action="append", metavar="KEY=VALUE",
+                   help="a hyperparameter of the estimator (repeatable), e.g. tau_s=2 (svo), "
+                        "bandwidth_hz=5 (kf_array), lowpass_hz=10 (gls)")
+    p.add_argument("--model", type=Path, metavar="MODEL.toml",
+                   help="noise of the gyros (arw, rrw, correlation) the estimator is designed with "
+                        "(default: ARW + RRW per gyro fitted on the record's still part)")
+    p.add_argument("--exclude", metavar="K1,K2,...",
+                   help="gyros to leave out (1-based, comma separated); constant gyros are left "
+                        "out anyway")
+    p.add_argument("--out", type=Path, metavar="FUSED.csv.gz",
+                   help="write the fused body rate (gyro1..3 = x, y, z [deg/s]) and its sidecar "
+                        "FUSED.toml")
+    p.add_argument("--repair", action="store_true",
+                   help="repair short gaps, missing values, exact duplicate rows and a jittering clock "
+                        "(each listed)")
+    add_plugin(p)
+    add_force(p)
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(func=cmd_fuse)
