@@ -102,7 +102,8 @@ def test_every_subcommand_is_listed():
     parser = build_parser()
     sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
     assert set(sub.choices) == {"gdop", "design", "allan", "davar", "simulate", "run", "check", "sweep", "report",
-                                "compare", "diagnose", "fit", "ladder", "fdi", "fuse"}
+                                "compare", "diagnose", "fit", "ladder", "fdi", "fuse", "convert",
+                                "export", "plan", "parity"}
 
 
 @pytest.mark.parametrize("argv,fragment", [

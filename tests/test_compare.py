@@ -434,7 +434,7 @@ def test_cli_diagnose_fit_and_model_round_trip(sf_files, tmp_path, cli):
 
 @pytest.mark.parametrize("args, message", [
     (["--add", "scale_factr:2"], "did you mean"),
-    (["--add", "scale_factor"], "acts on one gyro"),
+    (["--add", "scale_factor:x"], "gyro must be a number"),   # scale_factor alone: every gyro (issue 32)
     (["--add", "scale_factor:9"], "not in 1..6"),
     (["--add", "burst:2"], "whole array"),
 ])

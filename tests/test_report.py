@@ -217,4 +217,4 @@ def test_shipped_paper_values_name_shipped_scenarios():
     assert not any(e.get("reason") for e in exps)
     assert all((root / f"{e['scenario']}.toml").is_file() for e in exps)
     names = [c["name"] for e in exps for c in e.get("check", [])]
-    assert len(names) == len(set(names)) >= 8
+    assert len(names) == len(set(names)) >= 7   # issue 30: 5 unsound checks withdrawn, 2 added

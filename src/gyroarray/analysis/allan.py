@@ -573,6 +573,31 @@ def _gh_basic_sum(j: int, big_m: float, s: float, f: float, alpha: int,
     return float(first + second + third)
 
 
+_GREENHALL_T1 = {   # Table 1 (modified variances, d = 2): (a0, a1) by alpha
+    2: (7.0 / 9.0, 0.5), 1: (0.997, 0.616), 0: (1.033, 0.607), -1: (1.048, 0.534),
+    -2: (1.302, 0.535)}
+
+
+def _edf_greenhall_modified(n: int, m: int, alpha: int, d: int) -> float:
+    """Greenhall's EDF for the overlapping modified variance (S = m, F = 1; case 1)."""
+    big_m = n - (d + 1) * m + 1           # M = 1 + floor(S (N - L)/m), L = m + d m
+    s = float(m)
+    j = min(big_m, (d + 1) * m)
+    r = big_m / s
+    jmax = _GREENHALL_JMAX
+    if j <= jmax:
+        inv = (_gh_basic_sum(j, big_m, s, 1.0, alpha, d)
+               / (float(_gh_sz(0.0, 1.0, alpha, d)) ** 2 * big_m))
+    elif r > d + 1:
+        a0, a1 = _GREENHALL_T1[alpha]
+        inv = (a0 - a1 / r) / r
+    else:
+        mp = jmax / r
+        inv = (_gh_basic_sum(jmax, jmax, mp, 1.0, alpha, d)
+               / (float(_gh_sz(0.0, 1.0, alpha, d)) ** 2 * jmax))
+    return 1.0 / inv
+
+
 def _edf_greenhall_one(n: int, m: int, alpha: int, d: int,
                        filtered: bool) -> float:
     """Greenhall's EDF for an overlapping, unmodified variance (S = m).
@@ -625,7 +650,7 @@ def _edf_greenhall_one(n: int, m: int, alpha: int, d: int,
 
 
 def edf_greenhall(n_phase, m, alpha, d: int, *,
-                  filter_factor: str = "m") -> np.ndarray:
+                  filter_factor: str = "m", modified: bool = False) -> np.ndarray:
     """EDF of an overlapping (unmodified) Allan or Hadamard variance.
 
     Parameters
@@ -648,6 +673,10 @@ def edf_greenhall(n_phase, m, alpha, d: int, *,
         interval (the phase is their cumulative sum); for white FM this is
         the exact EDF of the estimator (see Notes).  Both agree for
         :math:`m(d+1) > 100`.
+    modified : bool, default False
+        The overlapping *modified* variance (MVAR for ``d = 2``): Greenhall's case 1,
+        filter factor F = 1, :math:`M = N - (d+1)m + 1`, Table 1 asymptote (``d = 2`` only);
+        ``filter_factor`` is then unused.
 
     Returns
     -------
@@ -709,15 +738,18 @@ def edf_greenhall(n_phase, m, alpha, d: int, *,
     if not np.all(np.isin(aa, (2, 1, 0, -1, -2))):
         raise InputError("alpha must be one of +2, +1, 0, -1, -2")
     n = int(n_phase)
-    if np.any(mm < 1) or np.any(n - d * mm < 1):
+    if modified and d != 2:
+        raise InputError("the modified-variance EDF is implemented for d = 2 (MVAR) only")
+    if np.any(mm < 1) or np.any(n - (d + modified) * mm + modified < 1):
         raise InputError("edf needs m >= 1 and at least one summand "
-                         "(n_phase - d m >= 1)")
+                         "(n_phase - d m >= 1; modified: n_phase - 3 m + 1 >= 1)")
     out = np.empty(mm.shape)
     cache: dict = {}
     for idx in np.ndindex(mm.shape):
         key = (int(mm[idx]), int(aa[idx]))
         if key not in cache:
-            cache[key] = _edf_greenhall_one(n, key[0], key[1], d, filtered)
+            cache[key] = (_edf_greenhall_modified(n, key[0], key[1], d) if modified else
+                          _edf_greenhall_one(n, key[0], key[1], d, filtered))
         out[idx] = cache[key]
     return out
 
@@ -858,6 +890,9 @@ class AllanAnalysis:
         Two-sided confidence level of the bounds.
     fit : NoiseFit
         IEEE Std 952 noise terms.
+    info : dict, optional
+        JSON-ready extras merged into :meth:`to_json_dict` (e.g. the lag-1 noise
+        identification per tau, the EDF formula; :mod:`~gyroarray.analysis.deviations`).
     """
 
     kind: str
@@ -871,6 +906,7 @@ class AllanAnalysis:
     edf: np.ndarray = field(repr=False)
     confidence: float
     fit: NoiseFit
+    info: dict = field(default_factory=dict, repr=False, compare=False)
 
     def to_json_dict(self) -> dict:
         """JSON-ready dict in datasheet units (the CLI edge).
@@ -893,6 +929,7 @@ class AllanAnalysis:
             "ci_high_deg_h": deg_h(self.ci_high_rad_s),
             "edf": [float(v) for v in self.edf],
             "fit": self.fit.to_datasheet_dict(),
+            **self.info,
         }
 
 

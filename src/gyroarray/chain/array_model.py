@@ -34,7 +34,7 @@ from gyroarray.core.errors import InputError
 from gyroarray.core.measurement import Measurement, constant_gyros, true_runs
 from gyroarray.effects.model import ArrayNoise, NoiseModel
 
-__all__ = ["ArrayModel", "still_residual", "array_model", "with_array_model"]
+__all__ = ["ArrayModel", "still_residual", "array_model", "with_array_model", "comparison_still"]
 
 #: Fewest still samples the array model reads [-] (two 1 s blocks of differences at 100 Hz
 #: for 8 gyros are far too few; 512 gives the white part ~340 degrees of freedom).
@@ -261,3 +261,32 @@ def array_model(measurement: Measurement, *, tau_s: float | None = None, regular
 def with_array_model(model: NoiseModel, fitted: ArrayModel) -> NoiseModel:
     """``model`` with the ``[array]`` table of ``fitted`` (its entries unchanged)."""
     return model.with_array(fitted.table())
+
+
+def comparison_still(comp) -> np.ndarray | None:
+    """The still samples a :class:`~gyroarray.chain.compare.ModelComparison` read, as a mask of
+    its measurement (so :func:`array_model` need not look for them again).
+
+    Parameters
+    ----------
+    comp : ModelComparison
+
+    Returns
+    -------
+    ndarray of bool, shape (n,), or None
+        With a reference rate: its static samples; without one: the still parts it kept
+        (all samples when it kept the whole record); None when the parts cannot be mapped back.
+    """
+    m = comp.m
+    n = int(m.n_samples)
+    if comp.ref is not None:
+        static = np.asarray(comp.static, bool)
+        return static if static.shape == (n,) else None
+    if not comp.parts_s:
+        return np.ones(n, bool)
+    t = np.asarray(m.time_s, float) - float(m.time_s[0])
+    half = 0.5 * float(m.dt_s)
+    still = np.zeros(n, bool)
+    for a, b in comp.parts_s:
+        still |= (t >= a - half) & (t < b - half)
+    return still

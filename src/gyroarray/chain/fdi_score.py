@@ -22,12 +22,21 @@ from dataclasses import replace
 
 import numpy as np
 
+from gyroarray.analysis.motion import still_mask
+from gyroarray.chain.parity import calibrate_measurement
 from gyroarray.core.errors import InputError
 from gyroarray.core.limits import check_memory
+from gyroarray.core.measurement import true_runs
 from gyroarray.core.units import rad_s_to_deg_s
 
 __all__ = ["FDI_METRICS", "analyse_measurement", "format_fdi", "recovery_errors",
            "true_faults", "score_faults", "add_fdi_metrics", "summarise_scores"]
+
+#: Largest spread (times the white level) of the parity a moving array may leave after its fitted
+#: scale-factor and axis errors for the detector to watch it while it turns, widened by that spread
+#: (:meth:`~gyroarray.chain.parity.ParityCalibration.excess_scale`); beyond it only the still parts
+#: are tested.
+MAX_MOTION_EXCESS = 2.0
 
 #: Columns :func:`add_fdi_metrics` adds to the chain's table (``gyroarray check`` may bound them).
 FDI_METRICS = ("fdi_detected", "fdi_detection_delay_s", "fdi_onset_error_s", "fdi_correct_isolation",
@@ -84,7 +93,8 @@ def analyse_measurement(meas, model=None, *, far_per_h: float = 0.01, p_md: floa
     minimum detectable faults are null (no noise to size them from).
     """
     from gyroarray.estimators.fdi import (MIN_RECORD_SAMPLES, FaultDetector, estimate_noise,
-                                          far_range_per_h, minimum_detectable, parity_is_zero)
+                                          far_range_per_h, minimum_detectable, model_noise,
+                                          noise_spread, parity_is_zero)
     z = meas.gyro_rad_s
     dt = meas.dt_s
     far_lo, far_hi = far_range_per_h(dt)
@@ -112,14 +122,26 @@ def analyse_measurement(meas, model=None, *, far_per_h: float = 0.01, p_md: floa
                              variance_window_s=min(40.0, span_s))
     if parity_is_zero(z, meas.layout.H):
         return _no_parity_noise(meas, model, detector, far_per_h, p_md, notes)
+    still = _still(meas)
     if model is None:
         try:
-            noise, more = estimate_noise(z, meas.layout, dt, meas.ref_rad_s)
+            noise, more = estimate_noise(z, meas.layout, dt, meas.ref_rad_s, still=still)
         except InputError as err:
             raise InputError(err.message, file=meas.source) from None
         notes += more
+        if still is not None:
+            kappa, more = noise_spread(z, dt, still)
+            detector.variance_tolerance = kappa if np.any(kappa > 1.0) else None
+            notes += more
     else:
         noise = model
+        if getattr(model, "array", None) is not None:          # its [array] correlations too
+            try:
+                noise = model_noise(model, meas.n_gyros)
+            except InputError as err:
+                raise InputError(err.message, file=getattr(model, "source", None) or meas.source) from None
+            notes.append("the model's [array] table gives the white and walk correlations of the "
+                         "gyros it names")
         faults = sorted({e.effect for e in model.entries if e.effect.startswith("fault_")})
         if faults:
             notes.append(f"the model's {', '.join(faults)} entries are not used: the detector "
@@ -129,7 +151,38 @@ def analyse_measurement(meas, model=None, *, far_per_h: float = 0.01, p_md: floa
     if other:
         notes.append("the detector models ARW, RRW and their correlation only; also in the model: "
                      + ", ".join(other))
-    res = det.detect(z, meas.time_s, trace=True)
+    cal, scale, parts = None, None, None
+    if still is not None and not still.all():
+        R = det.noise_.R(dt)
+        cal = calibrate_measurement(meas, R=R, still=still)
+        if cal is not None and cal.significant:
+            # a motion-dependent parity is a calibration finding, not a fault: the fitted scale
+            # factor and axis errors are taken out of the readings the detector watches
+            z = cal.correct(z, meas.layout.H, R)
+            notes.append(f"calibration finding (not a fault): the parity follows the rate while the "
+                         f"array turns ({100 * cal.explained:.0f} % of the moving parity variance; "
+                         f"gyros off: {', '.join(map(str, cal.off)) or 'none'}); the fitted scale "
+                         "factor and axis errors are removed before detection (see 'calibration', "
+                         "or gyroarray parity MEAS)")
+            scale = cal.excess_scale(z, meas.layout.H, dt, R)
+            if float(scale.max()) > MAX_MOTION_EXCESS:
+                # what the motion leaves beyond them is not white noise of a known level (e.g.
+                # sampling instants that differ between the gyros): the moving parts are not
+                # tested, the still parts are, each on its own
+                parts = [(a, b) for a, b in true_runs(still)]
+                moving = float(np.sum(~still)) * dt
+                notes.append(f"the parity left after them still follows the motion (its spread up "
+                             f"to x{float(scale.max()):.3g} the white level at the fastest "
+                             f"changes): the {moving:.1f} s where the array turns are not tested "
+                             "for faults, the still parts are (each on its own)")
+                scale = None
+            elif float(scale.max()) > 1.0:
+                notes.append(f"the parity left after them grows with the motion: the tests are "
+                             f"widened by up to x{float(scale.max()):.3g} where the array turns")
+    if parts is not None:
+        res = det.detect_parts(z, parts, meas.time_s, trace=True)
+    else:
+        res = det.detect(z, meas.time_s, trace=True, innovation_scale=scale)
     md = minimum_detectable(meas.layout, det.noise_, far_per_h, p_md, dt_s=dt, design=det.design_)
     notes.append(f"minimum_detectable: found with probability {1 - p_md:g} at {far_per_h:g} false "
                  f"alarms/h; drift within {md['drift_window_s']:g} s; stuck_static_s for a gyro "
@@ -143,7 +196,19 @@ def analyse_measurement(meas, model=None, *, far_per_h: float = 0.01, p_md: floa
     notes += _recovery_notes(z, meas, det, res)
     out = {"alarms": [a.to_json_dict() for a in res.alarms], "far_per_h": float(far_per_h),
            "minimum_detectable": _md_json(md), "notes": notes}
+    if cal is not None:                                        # only for a record that turns
+        out["calibration"] = cal.to_json_dict()
     return out, res, det
+
+
+def _still(meas):
+    """Still samples of a record without a reference rate (None: a reference, or too short)."""
+    if meas.ref_rad_s is not None:
+        return None
+    try:
+        return still_mask(meas.gyro_rad_s, meas.layout.H, meas.dt_s)
+    except InputError:
+        return None
 
 
 def _memory_needed(n: int, n_gyros: int) -> float:

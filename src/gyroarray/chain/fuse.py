@@ -62,11 +62,12 @@ from gyroarray.core.gdop import unobservable_reason
 from gyroarray.core.layout import Layout
 from gyroarray.core.measurement import Measurement, constant_gyros, true_runs
 from gyroarray.estimators import ArrayNoise, get_estimator, make
-from gyroarray.estimators.noise import array_noise
+from gyroarray.estimators.noise import array_noise, table_correlation
 from gyroarray.estimators.svo import allan_covariance
 
 __all__ = ["MIN_PART", "AXES", "WhiteWalk", "FuseResult", "fuse", "still_parts", "stitch",
-           "octave_avar", "white_walk_fit", "design_rrw", "nnls2", "fused_measurement", "fused_files", "sha256_of"]
+           "octave_avar", "white_walk_fit", "design_rrw", "nnls2", "fused_measurement", "fused_files", "sha256_of",
+           "split_parts", "fused_terms", "band_basis", "predicted_band", "tau_verdict", "validate_fuse"]
 
 #: Shortest still part [samples] kept for the noise analysis (as ``compare``'s).
 MIN_PART = 256
@@ -305,6 +306,12 @@ class FuseResult:
         Fused ARW the design noise predicts (white part, module docstring).
     notes : list of str
         What the user should know.
+    gain : ndarray (3, N') or None
+        The estimator's gain to slow changes of the used gyros' readings
+        (:meth:`~gyroarray.estimators.base.LinearSystem.dc_gain`; a static estimator's
+        weights); None for an estimator that is not a fixed linear filter.
+    time_constant_s : float or None
+        Slowest time constant of the estimator's filter [s] (0 for a static estimator).
     """
 
     measurement: Measurement
@@ -323,6 +330,8 @@ class FuseResult:
     adev: list | None
     predicted_arw_rad_rt_s: np.ndarray | None
     notes: list = field(default_factory=list)
+    gain: np.ndarray | None = None
+    time_constant_s: float | None = None
 
     def best_single(self) -> list[tuple[int | None, float]]:
         """Per axis: (best single gyro, 1-based, or None; its ARW on that axis [rad/√s])."""
@@ -442,37 +451,13 @@ def _model_noise(model, meas: Measurement, used: list[int], needs_arw: bool, mod
                          f"{', '.join(map(str, bad))}: this estimator weights the gyros by their "
                          "white noise; add an arw entry for them, or --exclude them",
                          file=model_name)
+    # the [array] table's correlations are in these already (array_noise reads it)
     c_arw, c_rrw = full.corr_arw[np.ix_(idx, idx)], full.corr_rrw[np.ix_(idx, idx)]
-    table = getattr(model, "array", None)            # the model's [array] table, when it has one
-    if table is not None:
-        c_arw = _table_correlation(table, "white_correlation", used, c_arw)
-        c_rrw = _table_correlation(table, "walk_correlation", used, c_rrw)
     try:
         return ArrayNoise(arw, full.rrw_rad_s_rt_s[idx], c_arw, c_rrw, full.ignored_effects,
                           zero_arw_ok=not needs_arw)
     except InputError as err:
         raise err.with_file(model_name) from None
-
-
-def _table_correlation(table, key: str, used: list[int], default: np.ndarray) -> np.ndarray:
-    """The correlation ``key`` of a model's ``[array]`` table for the used gyros: its rows and
-    columns of the used gyros it names, 0 between a named and an unnamed gyro, ``default``
-    between unnamed ones; ``default`` when the table has no such matrix."""
-    mat = getattr(table, key, None)
-    gyros = list(getattr(table, "gyros", ()) or ())
-    if mat is None or not gyros:
-        return default
-    mat = np.asarray(mat, dtype=float)
-    where = {g: i for i, g in enumerate(gyros)}
-    out = np.array(default, dtype=float, copy=True)
-    named = [j for j, k in enumerate(used) if k in where]
-    if not named:
-        return default
-    out[named, :] = 0.0
-    out[:, named] = 0.0
-    rows = [where[used[j]] for j in named]
-    out[np.ix_(named, named)] = mat[np.ix_(rows, rows)]
-    return out
 
 
 def design_rrw(ww: WhiteWalk) -> tuple[np.ndarray, list[int]]:
@@ -500,6 +485,20 @@ def _plain_params(params: dict) -> dict:
     return out
 
 
+def _gain_of(est, dt_s: float) -> tuple[np.ndarray | None, float | None]:
+    """(gain to slow changes (3, N), slowest time constant [s]) of a fitted estimator, or
+    (None, None) when it is not a fixed linear filter."""
+    try:
+        sysm = est.linear_system()
+        g = sysm.dc_gain()
+    except (InputError, np.linalg.LinAlgError, ValueError, AttributeError, NotImplementedError):
+        return None, None
+    lam = np.abs(np.asarray(sysm.lam))
+    live = lam[(lam > 1e-12) & (np.abs(1.0 - lam) > 1e-12)]
+    tc = 0.0 if live.size == 0 else float(-dt_s / np.log(np.max(live)))
+    return np.asarray(g, dtype=float), tc
+
+
 def _predicted_arw(est, noise: ArrayNoise) -> np.ndarray | None:
     """sqrt(diag(G R_c Gᵀ)) [rad/√s], G the estimator's gain to slow changes (module docstring)."""
     try:
@@ -513,7 +512,8 @@ def _predicted_arw(est, noise: ArrayNoise) -> np.ndarray | None:
 
 
 def fuse(meas: Measurement, estimator: str, *, model=None, model_name: str | None = None,
-         exclude=(), params: dict | None = None) -> FuseResult:
+         exclude=(), params: dict | None = None, noise: ArrayNoise | None = None,
+         noise_source: str | None = None) -> FuseResult:
     """Fuse a recorded array with a registered estimator (module docstring).
 
     Parameters
@@ -531,6 +531,11 @@ def fuse(meas: Measurement, estimator: str, *, model=None, model_name: str | Non
         Gyros to leave out (1-based).
     params : dict, optional
         Hyperparameters of the estimator.
+    noise : ArrayNoise, optional
+        The noise of the gyros left after ``exclude`` and the constant ones, in order, to
+        design the estimator with (instead of ``model`` or the fit; :func:`validate_fuse`).
+    noise_source : str, optional
+        Where ``noise`` came from (one line).
 
     Returns
     -------
@@ -563,7 +568,11 @@ def fuse(meas: Measurement, estimator: str, *, model=None, model_name: str | Non
     if enough:
         resid = y - meas.ref_rad_s @ h.T if meas.has_reference else y
         e_single = stitch(resid, parts)
-    if model is None:
+    if noise is not None:
+        if noise.n_gyros != len(used):
+            raise ValueError(f"noise has {noise.n_gyros} gyros, {len(used)} are used")
+        source = noise_source or "given"
+    elif model is None:
         if not enough:
             raise InputError(f"no --model, and the record has {total * dt:.1f} s of still part to fit "
                              f"the gyros' noise on (at least {MIN_ANALYSED} samples are needed): give "
@@ -612,6 +621,7 @@ def fuse(meas: Measurement, estimator: str, *, model=None, model_name: str | Non
         # with a model, what the estimator cannot be designed with is the model's noise
         raise InputError(text, file=meas.source if model is None else (model_name or meas.source)) from None
     fused = np.asarray(est.estimate(y), dtype=float)
+    gain, tconst = _gain_of(est, dt)
     if excluded:
         notes.append(f"gyro(s) {', '.join(map(str, excluded))} left out (--exclude)")
     single = fused_fit = adev = None
@@ -639,7 +649,463 @@ def fuse(meas: Measurement, estimator: str, *, model=None, model_name: str | Non
                       fused_rad_s=fused, used=used, excluded=excluded, constant=constant,
                       noise=noise, model_source=source, parts=parts, analysed=analysed,
                       single=single, fused_fit=fused_fit, adev=adev,
-                      predicted_arw_rad_rt_s=_predicted_arw(est, noise), notes=notes)
+                      predicted_arw_rad_rt_s=_predicted_arw(est, noise), notes=notes,
+                      gain=gain, time_constant_s=tconst)
+
+
+# =========================================================================
+# Predict, then validate (issue 31, item 3)
+# =========================================================================
+#: Monte-Carlo runs of the prediction band.
+VALIDATE_RUNS = 200
+#: Two-sided level of the prediction band and of the measured CI [-].
+VALIDATE_LEVEL = 0.95
+#: Fraction of the τ inside the band at which a prediction is called consistent [-].
+CONSISTENT_FRACTION = 0.9
+#: τ below which a miss is read as "not white" (the white + walk fit starts here) [s].
+SHORT_TAU_S = 1.0
+#: Spread (median absolute deviation) of log(measured / predicted) over the missed τ below which
+#: they are "a consistent factor" [-].
+FACTOR_LOG_SPREAD = 0.15
+
+
+def split_parts(parts, holdout: float) -> tuple[list[tuple[int, int]], list[tuple[int, int]]]:
+    """Split ``[start, stop)`` parts in time order: the first ``1 − holdout`` of their samples
+    to fit on, the rest held out (a part at the boundary is cut in two).
+
+    Parameters
+    ----------
+    parts : list of (int, int)
+    holdout : float
+        Fraction held out, in (0, 1).
+
+    Returns
+    -------
+    fit, held : list of (int, int)
+    """
+    total = sum(b - a for a, b in parts)
+    cut = int(round((1.0 - holdout) * total))
+    fit, held, seen = [], [], 0
+    for a, b in parts:
+        n = b - a
+        if seen + n <= cut:
+            fit.append((a, b))
+        elif seen >= cut:
+            held.append((a, b))
+        else:
+            k = a + cut - seen
+            fit.append((a, k))
+            held.append((k, b))
+        seen += n
+    return [p for p in fit if p[1] > p[0]], [p for p in held if p[1] > p[0]]
+
+
+def fused_terms(w, level, level_sd, corr, corr_sd=None) -> tuple[np.ndarray, np.ndarray]:
+    """The variance of a noise term on each fused axis, wᵀ (C ∘ s sᵀ) w, and its 1σ.
+
+    Parameters
+    ----------
+    w : ndarray (3, N)
+        The estimator's gain (a static estimator's weights) [-].
+    level, level_sd : ndarray (N,)
+        Per-gyro level s of the term (ARW N [rad/√s] or RRW K [rad/s/√s]) and its 1σ.
+    corr : ndarray (N, N)
+        Correlation of the term between the gyros [-].
+    corr_sd : ndarray (N, N), optional
+        1σ of the correlation (0 when not given).
+
+    Returns
+    -------
+    q, q_sd : ndarray (3,)
+        wᵀ Σ w per axis [level²] and its 1σ from the delta method (the levels and the
+        correlations taken independent).
+    """
+    w = np.asarray(w, float)
+    s = np.asarray(level, float)
+    c = np.asarray(corr, float)
+    cov = c * np.outer(s, s)
+    q = np.einsum("ai,ij,aj->a", w, cov, w)
+    ds = 2.0 * w * ((c * s[None, :]) @ w.T).T                    # ∂q_a/∂s_k = 2 w_k Σ_j C_kj w_j s_j
+    var = (ds ** 2) @ (np.nan_to_num(np.asarray(level_sd, float)) ** 2)
+    if corr_sd is not None:
+        iu = np.triu_indices(s.size, 1)
+        dc = 2.0 * w[:, iu[0]] * w[:, iu[1]] * (s[iu[0]] * s[iu[1]])[None, :]
+        var = var + (dc ** 2) @ (np.nan_to_num(np.asarray(corr_sd, float))[iu] ** 2)
+    return np.maximum(q, 0.0), np.sqrt(var)
+
+
+def band_basis(dt_s: float, lengths, rng: np.random.Generator, runs: int = VALIDATE_RUNS):
+    """Unit white and unit walk realisations on parts of the given lengths, as octave Allan
+    variances: what :func:`predicted_band` scales (one simulation serves every axis).
+
+    Each run simulates unit white noise u (variance 1 per sample) and a unit random walk v
+    (increments of variance 1) on each part, takes each part's mean out and joins them as the
+    measured part is (:func:`stitch`); the Allan variance of √a·u + √b·v is then
+    a·A_uu + b·A_vv + 2√(ab)·A_uv.
+
+    Returns
+    -------
+    taus_s : ndarray (M,)
+    a_uu, a_vv, a_uv : ndarray (M, runs)
+    """
+    lengths = [int(n) for n in lengths if n > 0]
+    u_parts, v_parts = [], []
+    for m in lengths:
+        u = rng.standard_normal((m, runs))
+        v = np.cumsum(rng.standard_normal((m, runs)), axis=0)
+        u_parts.append(u - u.mean(axis=0))
+        v_parts.append(v - v.mean(axis=0))
+    u, v = np.concatenate(u_parts), np.concatenate(v_parts)
+    taus, a_uu, _, _ = octave_avar(u, dt_s)
+    _, a_vv, _, _ = octave_avar(v, dt_s)
+    _, a_ww, _, _ = octave_avar(u + v, dt_s)
+    return taus, a_uu, a_vv, 0.5 * (a_ww - a_uu - a_vv)
+
+
+def predicted_band(n2, n2_sd, k2, k2_sd, dt_s: float, basis, rng: np.random.Generator,
+                   level: float = VALIDATE_LEVEL):
+    """The fused ADEV a white + walk prediction gives on the held-out parts, with its band.
+
+    Each run of ``basis`` (:func:`band_basis`) draws the fused white variance n2 and walk
+    variance k2 from their 1σ (normal, kept >= 0) and scales the unit realisations: white
+    σ² = n2/dt per sample, walk increments of variance k2·dt.
+
+    Parameters
+    ----------
+    n2, n2_sd : float
+        Fused white variance N² [rad²/s] and its 1σ.
+    k2, k2_sd : float
+        Fused walk variance K² [rad²/s³] and its 1σ.
+    dt_s : float
+        Sample step [s].
+    basis : tuple
+        :func:`band_basis` on the held-out parts.
+    rng : numpy.random.Generator
+    level : float
+        Two-sided level of the band.
+
+    Returns
+    -------
+    taus_s, adev, low, high : ndarray (M,)
+        Octave τ [s], the predicted ADEV √E[σ²(τ)] and the band [rad/s].
+    """
+    taus, a_uu, a_vv, a_uv = basis
+    runs = a_uu.shape[1]
+    a = np.maximum(n2 + n2_sd * rng.standard_normal(runs), 0.0) / dt_s
+    b = np.maximum(k2 + k2_sd * rng.standard_normal(runs), 0.0) * dt_s
+    avar = a * a_uu + b * a_vv + 2.0 * np.sqrt(a * b) * a_uv
+    q = (1.0 - level) / 2.0
+    lo, hi = np.quantile(avar, [q, 1.0 - q], axis=1)
+    return taus, np.sqrt(np.maximum(avar.mean(axis=1), 0.0)), np.sqrt(np.maximum(lo, 0.0)), np.sqrt(hi)
+
+
+def tau_verdict(taus, measured, low, high, predicted, *, n2: float, k2: float, use=None,
+                independent: bool = False) -> dict:
+    """Inside or outside the prediction's band at each τ, and which term would explain a miss.
+
+    Parameters
+    ----------
+    taus, measured, low, high, predicted : ndarray (M,)
+        τ [s], the measured ADEV, the prediction's band and value [any one unit].
+    n2, k2 : float
+        The predicted fused white and walk variances (where the walk takes over:
+        τ_c = √(3 n2 / k2)).
+    use : ndarray of bool (M,), optional
+        The τ the prediction holds at (default all).
+    independent : bool
+        The prediction takes the gyros independent (no cross-covariance).
+
+    Returns
+    -------
+    dict
+        ``inside`` (list of bool or None), ``fraction_inside``, ``consistent``
+        (fraction >= :data:`CONSISTENT_FRACTION`), ``misses`` (ranges of τ outside, each with
+        its side and the term that would explain it) and ``verdict`` (one line).
+    """
+    taus = np.asarray(taus, float)
+    meas = np.asarray(measured, float)
+    use = np.ones(taus.size, bool) if use is None else np.asarray(use, bool)
+    inside = (meas >= np.asarray(low)) & (meas <= np.asarray(high))
+    above = meas > np.asarray(high)
+    k = int(use.sum())
+    frac = float(inside[use].mean()) if k else math.nan
+    tau_c = math.sqrt(3.0 * n2 / k2) if k2 > 0 else math.inf
+    ratio = meas / np.maximum(np.asarray(predicted, float), 1e-300)
+    out = {"inside": [bool(v) if u else None for v, u in zip(inside, use)], "fraction_inside": frac,
+           "n_tau": k, "consistent": bool(k and frac >= CONSISTENT_FRACTION),
+           "walk_from_tau_s": None if not math.isfinite(tau_c) else tau_c, "misses": []}
+    miss = use & ~inside
+    # a consistent factor: the misses one unbroken run of tau on one side, reaching tau >= SHORT_TAU_S
+    # (not short tau alone: that is the noise's shape there), with a nearly constant ratio
+    ev = np.flatnonzero(use)
+    mi = np.flatnonzero(miss)
+    run = mi.size >= 3 and np.array_equal(ev[(ev >= mi[0]) & (ev <= mi[-1])], mi)
+    same_side = mi.size > 0 and (np.all(above[mi]) or not np.any(above[mi]))
+    logr = np.log(ratio[mi]) if mi.size else np.zeros(0)
+    factor = float(np.exp(np.median(logr))) if logr.size else math.nan
+    spread = float(np.median(np.abs(logr - np.median(logr)))) if logr.size else math.inf   # robust: long tau scatter
+    if run and same_side and float(taus[mi[-1]]) >= SHORT_TAU_S and spread < FACTOR_LOG_SPREAD:
+        mslow = miss.copy()
+        miss = np.zeros_like(miss)
+        why = ("the cross-covariance between the gyros: a correlation the prediction leaves out "
+               f"(it {'raises' if factor > 1 else 'lowers'} the fused noise)") if independent else \
+              ("the correlation between the gyros or their white level: the fitted covariance is off by "
+               "about this factor squared")
+        out["misses"].append({"from_tau_s": float(taus[mslow].min()), "to_tau_s": float(taus[mslow].max()),
+                              "side": "above" if factor > 1 else "below", "factor": factor,
+                              "term": "correlation", "explanation": f"a consistent factor {factor:.3g} at every "
+                              f"tau from {taus[mi[0]]:.3g} to {taus[mi[-1]]:.3g} s: {why}"})
+    idx = np.flatnonzero(miss)
+    groups: list[list] = []
+    for i in idx.tolist():
+        region = "short" if taus[i] < SHORT_TAU_S else ("walk" if taus[i] >= tau_c else "white")
+        key = (region, bool(above[i]))
+        if groups and groups[-1][0] == key and groups[-1][-1] == i - 1:
+            groups[-1].append(i)
+        else:
+            groups.append([key, i])
+    for g in groups:
+        (region, up), ii = g[0], g[1:]
+        f = float(np.exp(np.mean(np.log(ratio[ii]))))
+        term, why = _miss_term(region, up, independent)
+        out["misses"].append({"from_tau_s": float(taus[ii[0]]), "to_tau_s": float(taus[ii[-1]]),
+                              "side": "above" if up else "below", "factor": f, "term": term,
+                              "explanation": why})
+    out["misses"].sort(key=lambda m: m["from_tau_s"])
+    head = (f"{'consistent' if out['consistent'] else 'NOT consistent'}: inside the band at "
+            f"{int(inside[use].sum())} of {k} tau ({100.0 * frac:.0f} %)") if k else "no tau to test"
+    tails = [f"{'above' if m['side'] == 'above' else 'below'} at tau {m['from_tau_s']:.3g}-{m['to_tau_s']:.3g} s "
+             f"(x{m['factor']:.3g}): {m['explanation']}" for m in out["misses"]]
+    out["verdict"] = head + ("; " + "; ".join(tails) if tails else "")
+    return out
+
+
+def _miss_term(region: str, up: bool, independent: bool) -> tuple[str, str]:
+    """(term, explanation) of a miss in one τ region (:func:`tau_verdict`)."""
+    if region == "short":
+        return ("lines/bumps", "excess at short tau: vibration lines, bumps or quantization, not white noise "
+                "(the white level is read at tau >= 1 s)") if up else \
+               ("filter", "less than white at short tau: the sensor's own low-pass filter or correlated "
+                "samples (the white level is read at tau >= 1 s)")
+    if region == "walk":
+        return ("walk/bias instability", "excess at long tau: a slow term beyond the fitted random walk "
+                "(bias instability, temperature, a larger RRW)") if up else \
+               ("walk", "below at long tau: the random walk is over-stated (or each part's mean taken out "
+                "hides it)")
+    corr = "a correlation between the gyros the prediction leaves out" if independent else \
+        "the fitted correlation between the gyros"
+    return ("white/correlation", f"{'excess' if up else 'deficit'} where white noise dominates: the white "
+            f"level, or {corr}")
+
+
+def _mapped(table, key: str, used: list[int], matrix, default: np.ndarray) -> np.ndarray:
+    """``matrix`` (rows and columns the table's gyros) for the used gyros (:func:`table_correlation`)."""
+    if matrix is None:
+        return default
+    view = type("_T", (), {"gyros": tuple(table.gyros), key: np.asarray(matrix, float)})
+    return table_correlation(view, key, used, default)
+
+
+def validate_fuse(meas: Measurement, estimator: str, *, holdout: float | None = 0.5, exclude=(),
+                  params: dict | None = None, model=None, model_name: str | None = None,
+                  seed: int = 0, runs: int = VALIDATE_RUNS) -> tuple[FuseResult, dict]:
+    """Fit the array model on part of a record, predict the fused ADEV, and check it on the rest.
+
+    1. The analysed part (:func:`still_parts`) is split in time (:func:`split_parts`): the
+       first ``1 − holdout`` to fit on, the rest held out.
+    2. On the fit part: per gyro, white N and walk K (:func:`white_walk_fit`, with their 1σ),
+       and the array model's white and slow correlations
+       (:func:`~gyroarray.chain.array_model.array_model`); with ``model``, its noise instead
+       and the whole analysed part held out.
+    3. The estimator is designed with that noise and fuses the record (:func:`fuse`).
+    4. Prediction per axis a, with w_a the estimator's gain to slow changes: the fused white
+       variance wᵀ(C_w ∘ N Nᵀ)w and walk variance wᵀ(C_k ∘ K Kᵀ)w, once with the fitted
+       correlations ("covariance") and once with the gyros taken independent
+       ("independent": C = I); σ²(τ) = n2/τ + k2 τ/3 on the held-out parts' lengths, with a
+       Monte-Carlo band (:func:`predicted_band`: the held-out record's own scatter and the
+       fit's 1σ).
+    5. The measured fused ADEV on the held-out part (with its CI) against each band, τ by τ
+       (:func:`tau_verdict`). An estimator that is not static is tested at τ >= 10 of its
+       time constants only.
+
+    Parameters
+    ----------
+    meas : Measurement
+    estimator : str
+    holdout : float or None
+        Fraction held out (0 < f < 1); None with ``model``.
+    exclude, params, model, model_name
+        As :func:`fuse`.
+    seed : int
+        Seed of the Monte-Carlo band.
+    runs : int
+        Its runs.
+
+    Returns
+    -------
+    result : FuseResult
+        The fusion with the fitted (or given) noise.
+    validation : dict
+        Everything, JSON-ready (deg/h, deg/√h).
+
+    Raises
+    ------
+    InputError
+        As :func:`fuse`; a holdout outside (0, 1); a fit or held-out part too short.
+    """
+    # deferred on purpose: chain.array_model loads chain.compare (the simulator, numba), which plain fuse does not need
+    from gyroarray.chain.array_model import array_model
+    name = meas.source
+    if model is None and (holdout is None or not (0.0 < holdout < 1.0)):
+        raise InputError(f"--holdout must be a fraction in (0, 1), got {holdout!r}", file=name)
+    used, _, _, _ = _used_gyros(meas, exclude)
+    _check_geometry(meas, used, sorted({int(k) for k in exclude}), [k for k in constant_gyros(meas)
+                                                                     if k not in set(exclude)])
+    idx = [k - 1 for k in used]
+    dt = float(meas.dt_s)
+    parts, _ = still_parts(meas, idx)
+    y = meas.gyro_rad_s[:, idx]
+    h = np.asarray(meas.layout.axes)[idx]
+    resid = y - meas.ref_rad_s @ h.T if meas.has_reference else y
+    notes: list[str] = []
+    fitted_json = None
+    if model is None:
+        fit_p, held_p = split_parts(parts, float(holdout))
+        n_fit, n_held = sum(b - a for a, b in fit_p), sum(b - a for a, b in held_p)
+        if min(n_fit, n_held) < MIN_ANALYSED:
+            raise InputError(f"--holdout {holdout:g} leaves {n_fit} samples to fit on and {n_held} to validate "
+                             f"on; each needs at least {MIN_ANALYSED}: record a longer still part or change "
+                             "--holdout", file=name)
+        ww = white_walk_fit(stitch(resid, fit_p), dt)
+        mask = np.zeros(meas.n_samples, bool)
+        for a, b in fit_p:
+            mask[a:b] = True
+        eye = np.eye(len(used))
+        c_w, c_k, c_w_sd, c_k_sd = eye, eye, None, None
+        try:
+            arr = array_model(meas, still=mask)
+        except InputError as err:
+            arr = None
+            notes.append(f"no array model on the fit part ({err.message}): the gyros taken independent")
+        if arr is not None:
+            tab = arr.table()
+            c_w = table_correlation(tab, "white_correlation", used, eye)
+            c_w_sd = _mapped(tab, "white_correlation", used, arr.white.corr_sigma, np.zeros_like(eye))
+            if arr.slow is not None:
+                c_k = table_correlation(tab, "walk_correlation", used, eye)
+                c_k_sd = _mapped(tab, "walk_correlation", used, arr.slow.corr_sigma, np.zeros_like(eye))
+            fitted_json = tab.to_dict()
+            notes += [f"array model: {n}" for n in arr.notes]
+        arw = ww.arw_rad_rt_s.copy()
+        weak = arw <= 0
+        if weak.any():
+            d = np.diff(stitch(resid, fit_p)[:, weak], axis=0)
+            arw[weak] = np.maximum(np.std(d, axis=0) / math.sqrt(2.0) * math.sqrt(dt), 1e-30)
+        rrw_design, _ = design_rrw(ww)
+        noise = ArrayNoise(arw, rrw_design, c_w, c_k)
+        total_fit = n_fit * dt
+        res = fuse(meas, estimator, exclude=exclude, params=params, noise=noise,
+                   noise_source=f"fitted on the first {1.0 - holdout:g} of the analysed part ({total_fit:.1f} s): "
+                                "per gyro ARW + RRW, the array model's white and slow correlations")
+        lev = (arw, np.nan_to_num(ww.arw_sigma), ww.rrw_rad_s_rt_s, np.nan_to_num(ww.rrw_sigma))
+    else:
+        if holdout is not None:
+            raise InputError("--holdout splits the record to fit a model on; with --model the whole "
+                             "record is validated: leave out --holdout or --model", file=name)
+        res = fuse(meas, estimator, model=model, model_name=model_name, exclude=exclude, params=params)
+        fit_p, held_p = [], list(parts)
+        if sum(b - a for a, b in held_p) < MIN_ANALYSED:
+            raise InputError(f"the analysed part has {sum(b - a for a, b in held_p)} samples; validating "
+                             f"needs at least {MIN_ANALYSED}", file=name)
+        noise = res.noise
+        zero = np.zeros(len(used))
+        lev = (noise.arw_rad_rt_s, zero, noise.rrw_rad_s_rt_s, zero)
+        c_w, c_k, c_w_sd, c_k_sd = noise.corr_arw, noise.corr_rrw, None, None
+    if res.gain is None:
+        raise InputError(f"{estimator} is not a fixed linear filter: its fused noise cannot be predicted "
+                         "from the model; validate gls, ols, svo, kf_array or kf_single", file=name)
+    w = res.gain
+    eye = np.eye(len(used))
+    # the 1σ of a fused level is at least what the same white + walk fit of the fused fit part
+    # gives: the per-gyro levels' errors are correlated as their noise is, which the delta
+    # method (errors taken independent) does not see
+    floor_n = floor_k = np.zeros(3)
+    if fit_p:
+        fw = white_walk_fit(stitch(resid, fit_p) @ w.T, dt)
+        sn, sk = np.nan_to_num(fw.arw_sigma), np.nan_to_num(fw.rrw_sigma)
+        floor_n = 2.0 * fw.arw_rad_rt_s * sn + sn ** 2
+        floor_k = np.where(fw.rrw_rad_s_rt_s > 0, 2.0 * fw.rrw_rad_s_rt_s * sk, sk ** 2)
+    preds = {}
+    for kind, cw, ck, cws, cks in (("independent", eye, eye, None, None), ("covariance", c_w, c_k, c_w_sd, c_k_sd)):
+        n2, n2_sd = fused_terms(w, lev[0], lev[1], cw, cws)
+        k2, k2_sd = fused_terms(w, lev[2], lev[3], ck, cks)
+        preds[kind] = (n2, np.maximum(n2_sd, floor_n), k2, np.maximum(k2_sd, floor_k))
+    e_fused = res.fused_rad_s - meas.ref_rad_s if meas.has_reference else res.fused_rad_s
+    ef = stitch(e_fused, held_p)
+    lengths = [b - a for a, b in held_p]
+    taus, avar_m, _, _ = octave_avar(ef, dt)
+    held_ww = white_walk_fit(ef, dt)
+    single_ww = white_walk_fit(stitch(resid, held_p), dt)
+    tc = res.time_constant_s or 0.0
+    use = taus >= 10.0 * tc * (1.0 - 1e-9) if tc > 0 else np.ones(taus.size, bool)
+    if tc > 0:
+        notes.append(f"{estimator} is a filter (slowest time constant {tc:.3g} s): the prediction from its "
+                     f"gain to slow changes is tested at tau >= {10 * tc:.3g} s only")
+    rng = np.random.default_rng(seed)
+    basis = band_basis(dt, lengths, rng, runs)
+    dh = units.rad_s_to_deg_h
+    arw_u = units.arw_rad_rt_s_to_deg_rt_h
+    axes: dict = {}
+    for a, ax in enumerate(AXES):
+        m_adev = np.sqrt(avar_m[:, a])
+        d: dict = {"taus_s": [float(t) for t in taus], "measured_adev_deg_h": [float(v) for v in dh(m_adev)]}
+        try:
+            with np.errstate(all="ignore"):
+                an = allan_analysis(ef[:, a], dt, confidence=VALIDATE_LEVEL)
+            lo = np.interp(taus, an.taus_s, an.ci_low_rad_s)
+            hi = np.interp(taus, an.taus_s, an.ci_high_rad_s)
+            d["measured_ci_low_deg_h"] = [float(v) for v in dh(lo)]
+            d["measured_ci_high_deg_h"] = [float(v) for v in dh(hi)]
+        except (InputError, np.linalg.LinAlgError, ValueError, FloatingPointError):
+            d["measured_ci_low_deg_h"] = d["measured_ci_high_deg_h"] = None
+        d["measured_arw_deg_rt_h"] = float(arw_u(held_ww.arw_rad_rt_s[a]))
+        d["measured_arw_deg_rt_h_sigma"] = float(arw_u(held_ww.arw_sigma[a]))
+        proj = np.abs(h[:, a])
+        ok = (proj > 1e-9) & (single_ww.arw_rad_rt_s > 0)
+        if ok.any():
+            eq = np.where(ok, single_ww.arw_rad_rt_s / np.where(ok, proj, 1.0), np.inf)
+            j = int(np.argmin(eq))
+            d["best_single_gyro"], d["best_single_arw_deg_rt_h"] = used[j], float(arw_u(eq[j]))
+        else:
+            d["best_single_gyro"] = d["best_single_arw_deg_rt_h"] = None
+        d["predicted"] = {}
+        for kind, (n2, n2_sd, k2, k2_sd) in preds.items():
+            pt, padev, plo, phi = predicted_band(float(n2[a]), float(n2_sd[a]), float(k2[a]), float(k2_sd[a]),
+                                                 dt, basis, rng)
+            assert pt.size == taus.size
+            v = tau_verdict(taus, m_adev, plo, phi, padev, n2=float(n2[a]), k2=float(k2[a]), use=use,
+                            independent=kind == "independent")
+            d["predicted"][kind] = {
+                "arw_deg_rt_h": float(arw_u(math.sqrt(n2[a]))),
+                "arw_deg_rt_h_sigma": float(arw_u(n2_sd[a] / (2.0 * math.sqrt(n2[a])))) if n2[a] > 0 else None,
+                "rrw_deg_h_rt_h": float(units.rrw_rad_s_rt_s_to_deg_h_rt_h(math.sqrt(k2[a]))),
+                "adev_deg_h": [float(x) for x in dh(padev)], "band_low_deg_h": [float(x) for x in dh(plo)],
+                "band_high_deg_h": [float(x) for x in dh(phi)], **v}
+        axes[ax] = d
+    t0 = float(meas.time_s[0])
+    span = [[float(meas.time_s[a] - t0), float(meas.time_s[b - 1] - t0 + dt)] for a, b in held_p]
+    val = {"estimator": estimator, "holdout": holdout, "level": VALIDATE_LEVEL, "runs": runs, "seed": seed,
+           "static": tc == 0, "gyros_used": list(used),
+           "fit_parts_s": [[float(meas.time_s[a] - t0), float(meas.time_s[b - 1] - t0 + dt)] for a, b in fit_p],
+           "held_parts_s": span, "fit_s": sum(b - a for a, b in fit_p) * dt,
+           "held_s": sum(lengths) * dt, "model": res.model_source,
+           "fitted_array": fitted_json, "axes": axes, "notes": notes,
+           "method": ("prediction: per axis, n2 = w'(C_w o N N')w and k2 = w'(C_k o K K')w with w the "
+                      "estimator's gain; white n2 + walk k2 simulated on the held-out parts "
+                      f"({runs} runs, each part's mean out, the fit's 1-sigma drawn): the band is its "
+                      f"{100 * VALIDATE_LEVEL:g} % range; 'independent' takes the gyros uncorrelated, "
+                      "'covariance' uses the fitted correlations; inside = the measured ADEV in the band")}
+    return res, val
 
 
 # =========================================================================

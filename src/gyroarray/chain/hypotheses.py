@@ -49,7 +49,8 @@ __all__ = ["METRICS", "MIN_RUNS", "CHECKS_FILE", "CheckRow", "HypothesisCheck", 
 
 #: Metrics a check may name: result columns of the chain (gyroarray.chain.run.score).
 METRICS = ("sigma_1_deg_s", "rms_deg_s", "mean_error_deg_s", "arw_deg_rt_h", "rrw_deg_h_rt_h",
-           "bi_deg_h", "attenuation", "phase_deg", "noise_density_deg_s_rt_hz")
+           "bi_deg_h", "attenuation", "phase_deg", "noise_density_deg_s_rt_hz",
+           "estimator_amplitude_ratio")
 #: Fewest runs for a 95 % percentile band.
 MIN_RUNS = 20
 #: The saved checks in a reproduction sweep's folder.

@@ -10,14 +10,16 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-from gyroarray.cli.common import add_force, check_plot, measurement_inputs, positive_int
+from gyroarray.cli.common import add_bag_options, bag_options, add_force, check_plot, measurement_inputs, positive_int
 from gyroarray.core.errors import InputError
 
-__all__ = ["MAX_TAUS", "add_parser", "allan_signal", "cmd_allan", "cmd_davar"]
+__all__ = ["MAX_TAUS", "MIN_STILL_PART", "add_parser", "allan_signal", "cmd_allan", "cmd_davar"]
 
 
 #: Most taus ``allan --taus`` may ask for (an octave grid of 1e9 samples has 30).
 MAX_TAUS = 10_000
+#: Shortest still part [samples] ``allan`` analyses (as ``fuse``'s ``MIN_PART``).
+MIN_STILL_PART = 256
 
 
 def _parse_taus(text: str):
@@ -67,28 +69,38 @@ def allan_signal(meas, *, raw: bool = False):
 def cmd_allan(args) -> tuple[dict, str]:
     # deferred: numpy and the analysis (numba) load only when the command runs (a fast --help)
     from gyroarray.analysis.allan import fit_tau_count
+    from gyroarray.analysis.deviations import RANGE_KIND, canonical_kind
     from gyroarray.core.measurement import read_measurement
     from gyroarray.reports.allan_plots import plot_allan
+    kind = canonical_kind(args.kind)                  # hdev: the overlapping Hadamard
     taus = _parse_taus(args.taus)
     check_plot(args, inputs=measurement_inputs(args))
-    meas = read_measurement(args.measurement, repair=args.repair)
+    meas = read_measurement(args.measurement, repair=args.repair, **bag_options(args))
     if args.gyro is not None and not 1 <= args.gyro <= meas.n_gyros:
         raise InputError(f"--gyro {args.gyro} is out of range: the measurement has "
                          f"gyros 1..{meas.n_gyros}", file=str(args.measurement))
     gyros = [args.gyro] if args.gyro is not None else list(range(1, meas.n_gyros + 1))
     signal, what = allan_signal(meas, raw=args.raw)
+    parts, part_notes, part_info = _analysed_parts(meas, gyros, args)
     tau_note = None
     if isinstance(taus, int):       # within what the record gives and the noise fit takes
         try:
-            taus, tau_note = fit_tau_count(meas.n_samples + 1, meas.dt_s, taus, args.kind)
+            taus, tau_note = fit_tau_count(max(b - a for a, b in parts) + 1, meas.dt_s, taus,
+                                           RANGE_KIND[kind])
         except InputError:          # too short for any tau: said per gyro below
             pass
-    analyses, skipped = _allan_each(meas, signal, gyros, taus, args)
-    notes = [*meas.notes, *([tau_note] if tau_note else []),
-             *_reference_noise_notes(meas, what != "gyro output", gyros), *skipped.values()]
+    signal, spike_notes, spike_info = _spikes(meas, signal, gyros, parts, taus, kind, args)
+    analyses, skipped = _allan_each(meas, signal, gyros, taus, args, kind=kind, parts=parts)
+    notes = [*meas.notes, *part_notes, *([tau_note] if tau_note else []),
+             *_reference_noise_notes(meas, what != "gyro output", gyros), *skipped.values(),
+             *spike_notes, *_white_notes(meas, signal, parts, analyses)]
     out = {"gyros": {str(k): a.to_json_dict() for k, a in analyses.items()},
            "signal": what, "notes": notes,
            "not_analysed": {str(k): why for k, why in skipped.items()}}
+    if part_info is not None:
+        out["analysed_parts"] = part_info
+    if spike_info:
+        out["spikes"] = spike_info
     lines = [f"{args.measurement}: {meas.n_samples} samples at {1 / meas.dt_s:g} Hz, "
              f"{meas.n_gyros} gyros; analysed: {what}", *[f"note: {n}" for n in notes]]
     for k, a in analyses.items():
@@ -119,16 +131,190 @@ def _reference_noise_notes(meas, minus_ref: bool, gyros: list[int]) -> list[str]
     return out
 
 
-def _allan_each(meas, signal, gyros: list[int], taus, args) -> tuple[dict, dict]:
+def _analysed_parts(meas, gyros: list[int], args) -> tuple[list, list[str], dict | None]:
+    """Where the noise is read: ``[start, stop)`` sample ranges, their notes and their JSON.
+
+    Without ``--all``: the still parts of a record with no reference rate, found by
+    :func:`gyroarray.analysis.motion.still_mask` (the detector ``fuse``'s ``still_parts`` and the
+    array model use; parts of at least :data:`MIN_STILL_PART` samples), refusing a record that
+    moves throughout; with ``--all``: the whole record. Either way a gap in the time stamps
+    (dropped samples) splits the parts: no difference spans it (the sums are pooled).
+    """
+    # deferred: numpy and the analysis load only when the command runs (a fast --help)
+    from gyroarray.analysis.deviations import contiguous_segments
+    from gyroarray.analysis.motion import still_mask
+    from gyroarray.core.measurement import true_runs
+    n, dt = meas.n_samples, meas.dt_s
+    segments, missing = contiguous_segments(meas.time_s, dt)
+    notes, info = [], None
+    parts = [(0, n)]
+    if not meas.has_reference:
+        keep = [k - 1 for k in gyros]
+        try:
+            still = still_mask(meas.gyro_rad_s[:, keep], meas.layout.axes[keep], dt)
+        except InputError:                      # fewer than 3 one-second windows: all of it
+            still = None
+        if still is not None and not still.all() and args.all:
+            notes.append(f"--all: the whole record analysed, {(n - int(still.sum())) * dt:.1f} s of it "
+                         "moving (found in the outputs): the motion counts as noise in every term")
+        elif still is not None and not still.all():
+            parts = [(a, b) for a, b in true_runs(still) if b - a >= MIN_STILL_PART]
+            desc = (f"{len(parts)} still part(s), {sum(b - a for a, b in parts) * dt:.1f} s of "
+                    f"{n * dt:.1f} s (no reference rate: still parts found in the outputs as diagnose "
+                    "and fuse find them, each part's mean taken out)")
+        if not parts:
+            raise InputError(f"the record moves throughout: no still part of at least {MIN_STILL_PART} "
+                             "samples in the outputs (no reference rate), and the Allan deviation of "
+                             "motion is not noise; record a still part, give the reference rate, or "
+                             "rerun with --all to analyse the whole record anyway",
+                             file=str(args.measurement))
+        if parts != [(0, n)]:
+            total = sum(b - a for a, b in parts) * dt
+            notes.append(f"analysed only the still parts: {desc}; longest "
+                         f"{max(b - a for a, b in parts) * dt:.1f} s; the Allan sums are pooled over "
+                         "the parts (no difference spans two parts); --all analyses the whole record, "
+                         "motion included")
+            t = meas.time_s - meas.time_s[0]
+            info = {"parts_s": [[float(t[a]), float(t[b - 1] + dt)] for a, b in parts],
+                    "still_s": float(total), "record_s": float(n * dt)}
+    if len(segments) > 1:
+        cut = [(max(a, c), min(b, e)) for a, b in parts for c, e in segments]
+        parts = [(a, b) for a, b in cut if b - a >= 4]
+        if not parts:
+            raise InputError(f"the {len(segments) - 1} gap(s) in the time stamps leave no contiguous "
+                             "part of at least 4 samples to analyse; record without dropping samples",
+                             file=str(args.measurement))
+        notes.append(f"{len(segments) - 1} gap(s) in the time stamps ({missing} sample(s) missing): "
+                     f"the deviation is computed over the {len(parts)} contiguous part(s) and their "
+                     "sums pooled, nothing interpolated")
+        info = {**(info or {}), "gaps": len(segments) - 1, "missing_samples": missing,
+                "segments": len(parts)}
+    return parts, notes, info
+
+
+def _spikes(meas, signal, gyros: list[int], parts, taus, kind: str, args):
+    """Spikes in the analysed parts (:func:`gyroarray.effects.outliers.find_spikes`), what they
+    do to the ARW, and with ``--robust`` the signal with them taken out.
+
+    Returns ``(signal, notes, JSON by gyro)``; the signal is a copy with each spike replaced by
+    the linear interpolation of its non-spike neighbours (``--robust``), else the input.
+    """
+    # deferred: numpy and the effects load only when the command runs (a fast --help)
+    import numpy as np
+    from gyroarray.core import units
+    from gyroarray.effects.outliers import find_spikes
+    notes, info, clean = [], {}, None
+    for k in gyros:
+        col = signal[:, k - 1]
+        idx = [a + find_spikes(col[a:b]).index for a, b in parts if b - a >= 16]
+        idx = np.concatenate(idx) if idx else np.array([], int)
+        if not idx.size or not np.ptp(col):
+            continue
+        fixed = np.array(col, dtype=float)
+        bad = np.zeros(col.size, bool)
+        bad[idx] = True
+        for a, b in parts:
+            good = np.flatnonzero(~bad[a:b])
+            if good.size >= 2 and bad[a:b].any():
+                t = np.arange(b - a)
+                fixed[a:b][bad[a:b]] = np.interp(t[bad[a:b]], good, col[a:b][good])
+        arw = []
+        for series in (col, fixed):
+            try:
+                with np.errstate(all="ignore"):
+                    arw.append(_arw_of(series, parts, meas.dt_s, taus, kind))
+            except (InputError, np.linalg.LinAlgError, ValueError, FloatingPointError):
+                arw.append(None)
+        change = (arw[0] / arw[1] - 1.0) if None not in arw and arw[1] > 0 else None
+        deg = [None if v is None else float(units.arw_rad_rt_s_to_deg_rt_h(v)) for v in arw]
+        info[str(k)] = {"count": int(idx.size), "arw_with_deg_rt_h": deg[0],
+                        "arw_without_deg_rt_h": deg[1], "taken_out": bool(args.robust)}
+        said = (f"ARW {deg[0]:.4g} deg/rt(h) with them, {deg[1]:.4g} without ({100 * change:+.0f} %)"
+                if change is not None else "their effect on the ARW could not be fitted")
+        heavy = change is not None and abs(change) > 0.05
+        if args.robust:
+            notes.append(f"gyro {k}: --robust took out {idx.size} spike(s) (find_spikes; each replaced by "
+                         f"the linear interpolation of its neighbours): {said}; the figures are without them")
+            if clean is None:
+                clean = np.array(signal, dtype=float)
+            clean[:, k - 1] = fixed
+        else:
+            notes.append(f"gyro {k}: {idx.size} isolated spike(s) in the analysed samples (find_spikes): "
+                         f"{said}" + ("; they make the short-tau terms (Q, ARW) describe the spikes, not "
+                                      "the noise: rerun with --robust to take them out" if heavy else
+                                      "; --robust takes them out"))
+    return (signal if clean is None else clean), notes, info
+
+
+def _arw_of(series, parts, dt: float, taus, kind: str) -> float:
+    """The fitted ARW [rad/√s] of one gyro's series over ``parts`` (0 when not fitted)."""
+    from gyroarray.analysis.allan import allan_analysis
+    from gyroarray.analysis.deviations import analyse_parts
+    if parts == [(0, series.size)] and kind in ("oadev", "ohdev"):
+        fit = allan_analysis(series, dt, taus, kind=kind).fit
+    else:
+        fit = analyse_parts([series[a:b] for a, b in parts], dt, taus, kind).fit
+    value = fit.coefficient("n")[0]
+    return float(value) if value is not None else 0.0
+
+
+def _white_notes(meas, signal, parts, analyses: dict) -> list[str]:
+    """A note per gyro whose per-sample white level and ADEV at tau >= 1 s disagree by > 20 %
+    (lines, bumps, filtering, holds or quantization: the spectrum is not white at short tau)."""
+    # deferred: numpy loads only when the command runs (a fast --help)
+    import numpy as np
+    from gyroarray.core import units
+    out, found = [], []
+    dt = meas.dt_s
+    for k, a in analyses.items():
+        if a.kind not in ("oadev", "totdev"):
+            continue
+        at = np.flatnonzero(a.taus_s >= 1.0)
+        if not at.size or dt >= 1.0:
+            continue
+        i = int(at[0])
+        diffs = [np.diff(signal[p:q, k - 1]) for p, q in parts if q - p >= 3]
+        d = np.concatenate(diffs) if diffs else np.array([])
+        if d.size < 10:
+            continue
+        per_sample = float(np.std(d) / np.sqrt(2.0) * np.sqrt(dt))              # rad/√s
+        at_tau = float(a.adev_rad_s[i] * np.sqrt(a.taus_s[i]))                     # rad/√s
+        if not (per_sample > 0 and at_tau > 0) or abs(per_sample / at_tau - 1.0) <= 0.20:
+            continue
+        ps, tt = (float(units.arw_rad_rt_s_to_deg_rt_h(v)) for v in (per_sample, at_tau))
+        found.append((k, 100 * (per_sample / at_tau - 1)))
+        out.append(f"gyro {k}: the spectrum is not white at short tau: the per-sample white level "
+                   f"({ps:.4g} deg/rt(h), from the sample-to-sample differences) and the ADEV at tau = "
+                   f"{a.taus_s[i]:g} s ({tt:.4g} deg/rt(h) x sqrt(tau)) differ by "
+                   f"{found[-1][1]:+.0f} %: " + _NOT_WHITE)
+    if len(found) > 3:                  # one line for many gyros
+        pct = [p for _, p in found]
+        out = [f"gyros {', '.join(str(k) for k, _ in found)}: the spectrum is not white at short tau: "
+               "the per-sample white level (from the sample-to-sample differences) and the ADEV at the "
+               f"first tau >= 1 s (x sqrt(tau)) differ by {min(pct):+.0f} to {max(pct):+.0f} %: " + _NOT_WHITE]
+    return out
+
+
+_NOT_WHITE = ("lines, bumps, a filter, held samples or quantization; the fitted ARW and Q then describe "
+              "that, not a white-noise density (read the ARW from the ADEV at tau >= 1 s)")
+
+
+def _allan_each(meas, signal, gyros: list[int], taus, args, *, kind: str | None = None,
+                parts=None) -> tuple[dict, dict]:
     """The Allan analysis of each gyro; a gyro that cannot be analysed is noted, not fatal.
 
+    ``parts``: ``[start, stop)`` ranges analysed (default the whole record); several, or a kind
+    beyond oadev/ohdev, go through :func:`gyroarray.analysis.deviations.analyse_parts`.
     Returns ``(analyses by gyro, reason by gyro not analysed)``; refuses
     (one line, every reason) when no gyro can be analysed.
     """
     # deferred: numpy and the analysis (numba) load only when the command runs (a fast --help)
     import numpy as np
     from gyroarray.analysis.allan import allan_analysis
+    from gyroarray.analysis.deviations import analyse_parts, with_noise_id
     from gyroarray.core.measurement import constant_gyros, constant_note
+    kind = kind or args.kind
+    parts = parts or [(0, meas.n_samples)]
     dead = set(constant_gyros(meas))
     analyses, skipped = {}, {}
     for k in gyros:
@@ -137,7 +323,11 @@ def _allan_each(meas, signal, gyros: list[int], taus, args) -> tuple[dict, dict]
             continue
         try:
             with np.errstate(all="ignore"):
-                analyses[k] = allan_analysis(signal[:, k - 1], meas.dt_s, taus, kind=args.kind)
+                col = signal[:, k - 1]
+                if parts == [(0, meas.n_samples)] and kind in ("oadev", "ohdev"):
+                    analyses[k] = with_noise_id(allan_analysis(col, meas.dt_s, taus, kind=kind), col)
+                else:
+                    analyses[k] = analyse_parts([col[a:b] for a, b in parts], meas.dt_s, taus, kind)
         except InputError as err:
             skipped[k] = f"gyro {k} not analysed: {err.message}"
         except (np.linalg.LinAlgError, ValueError, FloatingPointError) as err:
@@ -189,7 +379,7 @@ def cmd_davar(args) -> tuple[dict, str]:
         raise InputError("gyroarray davar: --window L and --adaptive exclude each other "
                          "(the adaptive window runs between --l-min and --l-max)")
     check_plot(args, inputs=measurement_inputs(args))
-    meas = read_measurement(args.measurement, repair=args.repair)
+    meas = read_measurement(args.measurement, repair=args.repair, **bag_options(args))
     if not 1 <= args.gyro <= meas.n_gyros:
         raise InputError(f"--gyro {args.gyro} is out of range: the measurement has gyros "
                          f"1..{meas.n_gyros}", file=str(args.measurement))
@@ -224,11 +414,17 @@ def add_parser(sub) -> None:
     """The ``allan`` and ``davar`` subcommands (Allan and dynamic Allan deviation)."""
     p = sub.add_parser("allan", help="Allan deviation with confidence intervals and noise fit")
     p.add_argument("measurement", type=Path, metavar="MEAS.csv")
+    add_bag_options(p)
     p.add_argument("--gyro", type=int, metavar="K", help="only gyro K (1-based)")
     p.add_argument("--taus", default="octave", metavar="octave|N|T1,T2,...",
                    help="octave taus (default), N log-spaced taus, or a list of taus [s]")
-    p.add_argument("--kind", choices=("oadev", "ohdev"), default="oadev",
-                   help="overlapping Allan (default) or Hadamard deviation")
+    p.add_argument("--kind", choices=("oadev", "mdev", "hdev", "ohdev", "totdev"), default="oadev",
+                   help="overlapping Allan (default), modified Allan, overlapping Hadamard (hdev or "
+                        "ohdev) or total deviation")
+    p.add_argument("--all", action="store_true",
+                   help="analyse the whole record, motion included (default: only its still parts)")
+    p.add_argument("--robust", action="store_true",
+                   help="take isolated spikes out first (each replaced by its neighbours' interpolation; counted)")
     p.add_argument("--repair", action="store_true",
                    help="repair short gaps, missing values, exact duplicate rows and a jittering clock (each listed)")
     p.add_argument("--raw", action="store_true",
@@ -240,6 +436,7 @@ def add_parser(sub) -> None:
 
     p = sub.add_parser("davar", help="dynamic Allan deviation (fixed or adaptive window, paper 000)")
     p.add_argument("measurement", type=Path, nargs="?", metavar="MEAS.csv")
+    add_bag_options(p)
     p.add_argument("--gyro", type=int, metavar="K", help="gyro K (1-based)")
     p.add_argument("--adaptive", action="store_true",
                    help="adaptive window A-DAVAR (the default when --window is not given)")

@@ -18,7 +18,8 @@ from pathlib import Path
 
 __all__ = ["EXIT_OK", "EXIT_FAIL", "EXIT_USAGE", "COUNT_CAPS", "finite_float", "float_in", "count",
            "check_count", "bounded_int", "positive_int", "nonneg_int", "json_safe", "output",
-           "check_plot", "measurement_inputs", "write_json", "add_plugin", "add_force"]
+           "check_plot", "measurement_inputs", "write_json", "add_plugin", "add_force",
+           "add_bag_options", "bag_options"]
 
 EXIT_OK, EXIT_FAIL, EXIT_USAGE = 0, 1, 2
 
@@ -160,7 +161,27 @@ def measurement_inputs(args) -> list:
     files = measurement_files(args.measurement) if getattr(args, "measurement", None) else []
     if getattr(args, "model", None) is not None:
         files.append(args.model)
+    if getattr(args, "extrinsics", None) is not None:
+        files.append(args.extrinsics)
     return files
+
+
+def add_bag_options(p):
+    """``--topic T[,T2,...]`` and ``--extrinsics FILE.yaml``: how a ROS bag measurement is read
+    (:mod:`gyroarray.core.bags`); pass them on with :func:`bag_options`."""
+    p.add_argument("--topic", metavar="T[,T2,...]",
+                   help="a ROS bag's sensor_msgs/msg/Imu topic (default: its only one); several, "
+                        "comma separated, make an array of 3 gyros per IMU")
+    p.add_argument("--extrinsics", type=Path, metavar="FILE.yaml",
+                   help="a ROS bag's IMU extrinsics, Kalibr imu-chain YAML (imu0: T_i_b: 4x4, "
+                        "body to IMU); default: each IMU's axes taken as the body frame's")
+
+
+def bag_options(args) -> dict:
+    """The keyword arguments of ``read_measurement`` for the ``--topic`` and ``--extrinsics`` the
+    user gave (none when neither: a CSV is read exactly as before)."""
+    return {name: getattr(args, name) for name in ("topic", "extrinsics")
+            if getattr(args, name, None) is not None}
 
 
 def write_json(path: Path, obj: dict, args) -> None:

@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-from gyroarray.cli.common import (add_force, add_plugin, check_count, count, finite_float, float_in,
+from gyroarray.cli.common import (add_bag_options, bag_options, add_force, add_plugin, check_count, count, finite_float, float_in,
                                   measurement_inputs, nonneg_int, output)
 from gyroarray.core.errors import InputError
 
@@ -31,7 +31,10 @@ def _comparison(args):
     output(getattr(args, "model_out", None), args, "--model-out", inputs=inputs, suffixes=(".toml",))
     if getattr(args, "md", None) is not None:      # its figures beside it, checked now too
         markdown_figures(args.md, inputs=inputs, force=args.force)
-    meas = read_measurement(args.measurement, repair=args.repair)
+    meas = read_measurement(args.measurement, repair=args.repair, **bag_options(args))
+    # what reading the file said, every --repair included (the text `allan` prints): in the notes
+    # of every compare-family command (the report lists them as "reading the file")
+    args.read_notes = list(meas.notes)
     model = None
     if args.model is not None:
         model = NoiseModel.from_toml(args.model, n_gyros=meas.n_gyros)
@@ -95,6 +98,9 @@ def _diagnosis_text(a, head: str) -> str:
         z = "nan" if not math.isfinite(t.z) else f"{t.z:8.2f}"
         lines.append(f"{t.effect:<20} {'-' if t.gyro is None else t.gyro:>4} {z:>8}  "
                      f"{'yes' if a.significant(t) else ' no'}  {t.evidence}")
+    shared = a.shared_lines()
+    if shared:
+        lines += [""] + shared
     bands = [t for t in a.tests if t.kind == "adev_band" and a.significant(t)]
     if bands:
         lines += ["", "ADEV outside the model band:"] + [f"  {t.evidence} (z = {t.z:.1f})" for t in bands]
@@ -119,8 +125,23 @@ def _write_model(path: Path, model, args) -> str:
     # deferred: numba and the effect registry load only when the command runs (a fast --help)
     from gyroarray.core.outputs import write_text
     from gyroarray.effects.model import NoiseModel
-    model = NoiseModel(model.entries, description=f"fitted to {args.measurement} by gyroarray {args.command}")
+    model = NoiseModel(model.entries, description=f"fitted to {args.measurement} by gyroarray {args.command}",
+                       array=model.array)
     return str(write_text(path, model.to_toml(), force=args.force))
+
+
+def _array_fit(comp, notes: list):
+    """The array model of a comparison's record (None with one gyro, or with a note when the
+    record cannot give one): the ``[array]`` table that ``fit`` and ``ladder`` write."""
+    # deferred: the chain (numpy, numba) loads only when the command runs (a fast --help)
+    from gyroarray.chain.array_model import array_model, comparison_still
+    if comp.N < 2:
+        return None
+    try:
+        return array_model(comp.m, still=comparison_still(comp))
+    except InputError as err:
+        notes.append(f"no array model ([array] table): {err.message}")
+        return None
 
 
 def _validation_text(comp, a, model_path) -> str:
@@ -154,7 +175,7 @@ def cmd_compare(args):
            "steps": [{"added": None if add is None else {"effect": add[0], "gyro": add[1]},
                       "discrepancy": s.discrepancy, "consistent": s.consistent} for add, s in steps],
            "adev_band": d["adev_band"], "candidates": d["candidates"][:10],
-           "localisation": d["localisation"], "notes": a.notes}
+           "localisation": d["localisation"], "notes": [*args.read_notes, *a.notes]}
     if args.md is not None:
         res["markdown"] = str(args.md)
     if args.validate:
@@ -169,7 +190,7 @@ def cmd_compare(args):
                         for t in a.candidates[:5] if a.significant(t))
             + "".join("\n" + x for x in a.where_it_fails())
             + f"\nreport: {args.out}" + (f" and {args.md}" if args.md is not None else "")
-            + "".join(f"\nnote: {n}" for n in args.entry_notes))
+            + "".join(f"\nnote: {n}" for n in [*args.read_notes, *args.entry_notes]))
     return res, text
 
 
@@ -179,38 +200,49 @@ def cmd_diagnose(args):
         if args.model is None:
             raise InputError("gyroarray diagnose --validate needs --model (the model to test)")
         a = comp.validate()
-        a.notes[:0] = args.entry_notes
+        a.notes[:0] = [*args.read_notes, *args.entry_notes]
         out = a.to_json_dict()
         out["validated"] = True
         out["verdict"] = _validation_text(comp, a, args.model)
         return out, out["verdict"] + "\n" + _diagnosis_text(a, f"{comp.name}: {comp.N} gyros, {comp.n * comp.dt:.0f} s")
     a = comp.diagnose()
-    a.notes[:0] = args.entry_notes
+    a.notes[:0] = [*args.read_notes, *args.entry_notes]
     return a.to_json_dict(), _diagnosis_text(a, f"{comp.name}: {comp.N} gyros, {comp.n * comp.dt:.0f} s")
 
 
 def cmd_fit(args):
-    from gyroarray.chain.compare import parse_add  # deferred: the chain (numpy, numba)
+    from gyroarray.chain.compare import parse_add_all  # deferred: the chain (numpy, numba)
     comp = _comparison(args)
-    add = [parse_add(x, comp.N) for x in (args.add or [])]
+    add, add_notes = [], []
+    for x in args.add or []:                 # EFFECT, EFFECT:all of a per-gyro effect: every gyro
+        more, note = parse_add_all(x, comp.N)
+        add += [a for a in more if a not in add]
+        add_notes += [note] if note else []
+    from gyroarray.chain.array_model import with_array_model  # deferred: the chain (numpy, numba)
     before, after = comp.fit(add)
     after.notes[:0] = args.entry_notes
+    notes = [*args.read_notes, *args.entry_notes, *add_notes]
+    arr = _array_fit(comp, notes)
     res = {"discrepancy_before": before.discrepancy, "discrepancy_after": after.discrepancy,
            "consistent": after.consistent, "effects": after.effects_json(),
-           "notes": list(args.entry_notes)}
+           "notes": notes}
+    if comp.N >= 2:
+        res["array_model"] = None if arr is None else arr.to_json_dict()
     if args.out is not None:
-        res["model"] = _write_model(args.out, after.model, args)
+        model = after.model if arr is None else with_array_model(after.model, arr)
+        res["model"] = _write_model(args.out, model, args)
     text = "\n".join([f"{comp.name}: discrepancy {before.discrepancy:.3g} -> {after.discrepancy:.3g} "
                       f"({'consistent' if after.consistent else 'NOT consistent'})",
                       "fitted model (beyond ARW + RRW):"] + (_model_lines(after.model) or ["  (baseline only)"])
+                     + ([] if arr is None else arr.text_lines())
                      + ([f"written to {args.out}"] if args.out is not None else [])
-                     + [f"note: {n}" for n in args.entry_notes])
+                     + [f"note: {n}" for n in notes])
     return res, text
 
 
 def cmd_ladder(args):
     # deferred: the chain and the effect registry (numpy, numba) loads only when the command runs (a fast --help)
-    from gyroarray.chain.compare import ModelComparison, split_measurement
+    from gyroarray.chain.compare import LADDER_RULE, ModelComparison, split_measurement
     from gyroarray.effects.model import NoiseModel
     comp = _comparison(args)
     held = None
@@ -231,9 +263,17 @@ def cmd_ladder(args):
            "localisation": list(final.localisation),
            "candidates_left": [{"effect": t.effect, "gyro": t.gyro, "score": t.z, "evidence": t.evidence}
                                for t in final.candidates if final.significant(t)],
-           "notes": list(final.notes), "report": str(args.out)}
+           "notes": [*args.read_notes, *final.notes], "rule": LADDER_RULE, "report": str(args.out)}
+    arr_lines: list[str] = []
     if args.model_out is not None:
-        res["model"] = _write_model(args.model_out, final.model, args)
+        # deferred: the chain (numpy, numba)
+        from gyroarray.chain.array_model import with_array_model
+        arr = _array_fit(comp, res["notes"])
+        if comp.N >= 2:
+            res["array_model"] = None if arr is None else arr.to_json_dict()
+        arr_lines = [] if arr is None else arr.text_lines()
+        model = final.model if arr is None else with_array_model(final.model, arr)
+        res["model"] = _write_model(args.model_out, model, args)
     held_text = []
     if held is not None:
         model = NoiseModel(final.model.entries, description=f"the ladder on {comp.name}")
@@ -247,6 +287,7 @@ def cmd_ladder(args):
     for add, a in steps:
         what = "calibrated model" if add is None else f"+ {add[0]}{'' if add[1] is None else ':' + str(add[1])}"
         lines.append(f"  {what:<28} D = {a.discrepancy:8.3g}  {'consistent' if a.consistent else ''}")
+    lines.append(f"  ({LADDER_RULE})")
     lines += ["fitted model (beyond ARW + RRW):"] + (_model_lines(final.model) or ["  (baseline only)"])
     left = [t.evidence for t in final.candidates if final.significant(t)]
     if not final.localisation:
@@ -255,7 +296,10 @@ def cmd_ladder(args):
                                        (["  nothing"] if not final.localisation else []))
     if final.localisation:
         lines += final.where_it_fails()
+    lines += arr_lines
+    lines += [f"note: {x}" for x in args.read_notes]
     lines += [f"note: {x}" for x in final.notes if x.startswith("the ladder")]
+    lines += [f"note: {x}" for x in res["notes"] if x.startswith("no array model")]
     lines += held_text
     lines.append(f"report: {args.out}")
     return res, "\n".join(lines)
@@ -263,6 +307,7 @@ def cmd_ladder(args):
 
 def _add_compare_args(p, *, out: bool):
     p.add_argument("measurement", type=Path, metavar="MEAS.csv")
+    add_bag_options(p)
     p.add_argument("--model", type=Path, metavar="MODEL.toml",
                    help="noise model to calibrate (default: ARW + RRW on every gyro)")
     p.add_argument("--runs", type=count("--runs"), default=40, metavar="K",
@@ -300,7 +345,8 @@ def add_parser(sub) -> None:
     p = sub.add_parser("fit", help="fit the model (plus --add EFFECT[:GYRO]) to a measurement")
     _add_compare_args(p, out=False)
     p.add_argument("--add", action="append", metavar="EFFECT[:GYRO]",
-                   help="effect to add before fitting (repeatable), e.g. scale_factor:2, burst")
+                   help="effect to add before fitting (repeatable), e.g. scale_factor:2, burst; an effect "
+                        "that acts on one gyro at a time, without a gyro (or EFFECT:all), is added to every gyro")
     p.add_argument("--out", type=Path, metavar="NEW.toml", help="write the fitted model (readable by --model)")
     add_force(p)
     p.set_defaults(func=cmd_fit)

@@ -13,8 +13,8 @@ from pathlib import Path
 
 from gyroarray.core.errors import InputError
 from gyroarray.core.units import deg_s_to_rad_s, deg_to_rad, rad_to_deg
-from gyroarray.cli.common import (add_force, bounded_int, check_plot, count, finite_float, float_in,
-                                  nonneg_int, output, write_json)
+from gyroarray.cli.common import (add_force, add_plugin, bounded_int, check_plot, count, finite_float,
+                                  float_in, nonneg_int, output, write_json)
 
 __all__ = ["MAX_DESIGN_GYROS", "MAX_DESIGN_N", "add_parser", "cmd_gdop", "cmd_design",
            "parse_sensor_bandwidth"]
@@ -59,6 +59,11 @@ def cmd_design(args) -> tuple[dict, str]:
     # deferred: numpy and the design chain load only when the command runs (a fast --help)
     from gyroarray.core import gdop as design
     from gyroarray.core.layout import Layout
+    if args.layout_from is not None:
+        if args.recommend:
+            raise InputError("gyroarray design: --layout-from predicts the array as built; it does not "
+                             "go with --recommend (a search over layouts)")
+        return _design_as_built(args)
     if args.recommend:
         return _design_recommend(args)
     rec_only = [o for o, v in (("--model", args.model), ("--arw", args.arw), ("--rrw", args.rrw),
@@ -72,7 +77,8 @@ def cmd_design(args) -> tuple[dict, str]:
                                 ("--objective", args.objective), ("--design-rho", args.design_rho),
                                 ("--far-per-h", args.far_per_h), ("--p-md", args.p_md),
                                 ("--mdb-max", args.mdb_max),
-                                ("--horizon-s", args.horizon_s)) if v is not None]
+                                ("--horizon-s", args.horizon_s),
+                                ("--alike", args.alike or None)) if v is not None]
     if rec_only:
         raise InputError(f"gyroarray design: {rec_only[0]} goes with --recommend")
     out: dict = {}
@@ -145,7 +151,10 @@ def _design_noise(args):
                          "(--arw, --rrw, --bi), not both")
     if args.model is not None:
         from gyroarray.effects.model import NoiseModel  # deferred: numba (--model only)
-        g = GyroNoise.from_model(NoiseModel.from_toml(args.model), source=f"model {args.model}")
+        g = GyroNoise.from_model(NoiseModel.from_toml(args.model), source=f"model {args.model}",
+                                 alike=bool(args.alike))
+    elif args.alike:
+        raise InputError("gyroarray design: --alike goes with --model (a datasheet's gyros are alike)")
     elif args.arw is not None:
         g = GyroNoise(arw_deg_rt_h=args.arw, rrw_deg_h_rt_h=args.rrw or 0.0, bi_deg_h=args.bi or 0.0,
                       sources={"arw": "user", "rrw": "user" if args.rrw is not None else "default",
@@ -236,6 +245,13 @@ def _design_space(args):
         raise InputError(f"--horizon-s {horizon:g} at {rate:g} Hz is {horizon * rate:.3g} samples "
                          "(at most 2e7): shorten the horizon or lower the rate")
     ns = tuple(_number_list(args.n, "--n", integer=True)) if args.n is not None else (4, 5, 6, 8)
+    if g.n_gyros is not None:             # a per-gyro model: its gyro count fixes N
+        if args.n is not None and set(ns) != {g.n_gyros}:
+            raise InputError(f"--n {args.n}: the model {args.model} has {g.n_gyros} gyros, each with its "
+                             f"own parameters, so N = {g.n_gyros}; give --n {g.n_gyros}, or --alike to "
+                             "reduce them to one typical gyro and search other N", file=args.model)
+        ns = (g.n_gyros,)
+        src["ns"] = f"model {args.model} (its {g.n_gyros} gyros)"
     bad = [n for n in ns if not 3 <= n <= MAX_DESIGN_N]
     if bad:
         raise InputError(f"--n {bad[0]} is outside 3..{MAX_DESIGN_N} (every failure combination is "
@@ -264,7 +280,7 @@ def _design_space(args):
     for key, v in (("rate_hz", args.rate_hz), ("horizon_s", args.horizon_s), ("ns", args.n),
                    ("estimators", args.estimators), ("failures", args.failures),
                    ("motion", args.swing or args.motion)):
-        src[key] = "user" if v is not None else "default"
+        src.setdefault(key, "user" if v is not None else "default")
     space = DesignSpace(rate_hz=rate, horizon_s=horizon, ns=ns, estimators=ests, failures=failures,
                         bandwidth_hz=(float(bw[0]), float(bw[1])), swing=swing, motion=motion,
                         motion_name=motion_name, sensor_bandwidth=sensor_bw,
@@ -335,6 +351,49 @@ def _design_recommend(args) -> tuple[dict, str]:
         write_json(args.out, res, args)
         res["written"] = str(args.out)
     return res, _recommend_text(res)
+
+
+def _design_as_built(args) -> tuple[dict, str]:
+    """``design --model ARRAY.toml --layout-from MEAS``: each estimator's fused ADEV, RMS and
+    angle error on the measured array's axes with the model's per-gyro noise and covariance."""
+    # deferred: numpy, numba and the design chain load only when the command runs (a fast --help)
+    import numpy as np
+    from gyroarray.core.measurement import read_measurement
+    from gyroarray.design.recommend import predict_as_built
+    from gyroarray.effects.model import NoiseModel
+    if args.model is None:
+        raise InputError("gyroarray design --layout-from: give the array's noise model, --model ARRAY.toml "
+                         "(gyroarray fit --out on the record)")
+    extra = [o for o, v in (("--n", args.n), ("--scheme", args.scheme), ("--alike", args.alike or None),
+                            ("--arw", args.arw), ("--rrw", args.rrw), ("--bi", args.bi),
+                            ("--rho", args.rho), ("--rho-range", args.rho_range)) if v is not None]
+    if extra:
+        raise InputError(f"gyroarray design --layout-from: {extra[0]} does not apply (the layout is the "
+                         "measurement's and the noise the model's)")
+    output(args.out, args, "--out", inputs=[args.model, args.layout_from], suffixes=(".json",))
+    meas = read_measurement(args.layout_from)
+    model = NoiseModel.from_toml(args.model)
+    ests = None if args.estimators is None else tuple(e.strip() for e in args.estimators.split(",") if e.strip())
+    n = meas.n_samples if args.horizon_s is None else max(2, int(round(args.horizon_s / meas.dt_s)))
+    res = predict_as_built(model, np.asarray(meas.layout.axes, dtype=float), meas.dt_s, n_samples=n,
+                           estimators=ests, source=str(args.model))
+    res["measurement"] = str(args.layout_from)
+    res["model"] = str(args.model)
+    if args.out is not None:
+        write_json(args.out, res, args)
+        res["written"] = str(args.out)
+    lines = [f"Predicted on {args.layout_from} as built ({res['n_gyros']} gyros, "
+             f"{'per-gyro noise' if res['per_gyro'] else 'alike gyros'}, {res['correlation']}), "
+             f"over {res['horizon_s']:g} s:",
+             f"{'estimator':<10} {'axis':<4} {'ARW deg/rt(h)':>13} {'RMS deg/s':>10} {'angle deg':>10}  "
+             "ADEV deg/s at tau = " + ", ".join(f"{t:g}" for t in res["taus_s"][::3]) + " s"]
+    for name, axes in res["estimators"].items():
+        for ax, v in axes.items():
+            lines.append(f"{name:<10} {ax:<4} {v['arw_deg_rt_h']:>13.4g} {v['rms_deg_s']:>10.4g} "
+                         f"{v['angle_deg']:>10.4g}  " + ", ".join(f"{p['adev_deg_s']:.3g}"
+                                                                   for p in v["adev_deg_s"][::3]))
+    lines += [f"note: {t}" for t in res["notes"]]
+    return res, "\n".join(lines)
 
 
 def _recommend_text(res: dict) -> str:
@@ -423,7 +482,15 @@ def add_parser(sub) -> None:
                    help="search scheme x N x cone angle x estimator x bandwidth with the "
                         "analytic predictor and recommend a design")
     p.add_argument("--model", type=Path, metavar="MODEL.toml",
-                   help="--recommend: the gyro noise from a model (gyroarray fit --out)")
+                   help="--recommend: the gyro noise from a model (gyroarray fit --out); a model that "
+                        "names its gyros keeps each gyro's own parameters and fixes N")
+    p.add_argument("--alike", action="store_true",
+                   help="--model: reduce the model's gyros to one typical gyro (quadratic means) and "
+                        "search every N")
+    p.add_argument("--layout-from", type=Path, metavar="MEAS",
+                   help="with --model: predict each estimator's fused ADEV, RMS and angle error on the "
+                        "array as built (the measurement sidecar's axes, the model's per-gyro noise "
+                        "and [array] covariance)")
     p.add_argument("--arw", type=float_in("--arw", 0.0, 6e6, lo_open=True, unit="deg/√h"), metavar="DEG_RT_H",
                    help="--recommend: angle random walk [deg/rt(h)]")
     p.add_argument("--rrw", type=float_in("--rrw", 0.0, 3.6e8, unit="deg/h/√h"), metavar="DEG_H_RT_H",
@@ -479,6 +546,7 @@ def add_parser(sub) -> None:
                    help="paper 003 Tables 1-2 beside the computed values, cell by cell")
     p.add_argument("--plot", type=Path, metavar="OUT.png",
                    help="write GDOP vs alpha and vs rho (paper 003 Figs. 8-10)")
+    add_plugin(p)
     add_force(p)
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=cmd_design)

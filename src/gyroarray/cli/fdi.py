@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from gyroarray.cli.common import EXIT_FAIL, EXIT_OK, add_force, check_plot, finite_float, measurement_inputs
+from gyroarray.cli.common import add_bag_options, bag_options, EXIT_FAIL, EXIT_OK, add_force, check_plot, finite_float, measurement_inputs
 
 __all__ = ["add_parser", "cmd_fdi", "cmd_check"]
 
@@ -21,7 +21,7 @@ def cmd_fdi(args):
     from gyroarray.effects.model import NoiseModel
     from gyroarray.reports.fdi_plots import plot_fdi
     check_plot(args, inputs=measurement_inputs(args))
-    meas = read_measurement(args.measurement, repair=args.repair)
+    meas = read_measurement(args.measurement, repair=args.repair, **bag_options(args))
     model = None if args.model is None else NoiseModel.from_toml(args.model, n_gyros=meas.n_gyros)
     out, res, _ = analyse_measurement(meas, model, far_per_h=args.far_per_h)
     text = format_fdi(out, str(args.measurement))
@@ -42,6 +42,7 @@ def add_parser(sub) -> None:
     """The ``fdi`` (fault detection) and ``check`` (regression thresholds) subcommands."""
     p = sub.add_parser("fdi", help="fault detection and isolation on a measurement (parity space)")
     p.add_argument("measurement", type=Path, metavar="MEAS.csv")
+    add_bag_options(p)
     p.add_argument("--model", type=Path, metavar="MODEL.toml",
                    help="ARW/RRW/correlation of the gyros (default: estimated from the record)")
     p.add_argument("--far-per-h", type=finite_float("--far-per-h"), default=0.01, metavar="RATE",

@@ -11,7 +11,7 @@ import math
 from pathlib import Path
 
 from gyroarray.core.errors import InputError
-from gyroarray.cli.common import add_force, add_plugin, measurement_inputs, output
+from gyroarray.cli.common import add_bag_options, bag_options, add_force, add_plugin, finite_float, measurement_inputs, output
 
 __all__ = ["add_parser", "cmd_fuse", "parse_exclude", "parse_params", "sidecar_path"]
 
@@ -110,8 +110,38 @@ def _text(out: dict, args) -> str:
     return "\n".join(lines)
 
 
+def _validation_text(val: dict) -> list[str]:
+    """Lines of ``--validate``: per axis the ARWs, the verdicts and the ADEV against both bands."""
+    head = (f"validation: fitted on {val['fit_s']:.1f} s, held out {val['held_s']:.1f} s"
+            if val["holdout"] is not None else f"validation of the model on {val['held_s']:.1f} s")
+    lines = [f"{head} ({100 * val['level']:g} % prediction band, {val['runs']} runs)",
+             f"{'axis':<5}{'best gyro':>10}{'its ARW':>9}{'fused ARW':>16}{'pred indep':>12}{'pred cov':>10}"
+             "   [deg/rt(h)]"]
+    for name, d in val["axes"].items():
+        p = d["predicted"]
+        fused = f"{d['measured_arw_deg_rt_h']:.4g} ± {d['measured_arw_deg_rt_h_sigma']:.2g}"
+        lines.append(f"{name:<5}{_fmt(d['best_single_gyro'], 'd'):>10}{_fmt(d['best_single_arw_deg_rt_h']):>9}"
+                     f"{fused:>16}{_fmt(p['independent']['arw_deg_rt_h']):>12}"
+                     f"{_fmt(p['covariance']['arw_deg_rt_h']):>10}")
+    for name, d in val["axes"].items():
+        for kind in ("independent", "covariance"):
+            lines.append(f"{name} {kind}: {d['predicted'][kind]['verdict']}")
+    lines.append("fused ADEV [deg/h] held out, against the bands (* = outside):")
+    for name, d in val["axes"].items():
+        lines.append(f"  {name}: {'tau_s':>8}{'measured':>11}{'independent':>22}{'covariance':>22}")
+        pi, pc = d["predicted"]["independent"], d["predicted"]["covariance"]
+        for i, tau in enumerate(d["taus_s"]):
+            cells = []
+            for p in (pi, pc):
+                flag = " " if p["inside"][i] is None else ("" if p["inside"][i] else "*")
+                cells.append(f"{flag}[{p['band_low_deg_h'][i]:.4g}, {p['band_high_deg_h'][i]:.4g}]".rjust(22))
+            lines.append(f"     {tau:>8.4g}{d['measured_adev_deg_h'][i]:>11.5g}" + "".join(cells))
+    lines += [f"note: {n}" for n in val["notes"]]
+    return lines
+
+
 def cmd_fuse(args) -> tuple[dict, str]:
-    from gyroarray.chain.fuse import fuse, fused_files, sha256_of
+    from gyroarray.chain.fuse import fuse, fused_files, sha256_of, validate_fuse
     from gyroarray.core.measurement import read_measurement
     from gyroarray.core.outputs import write_many
     from gyroarray.effects.model import NoiseModel
@@ -123,14 +153,24 @@ def cmd_fuse(args) -> tuple[dict, str]:
         output(args.out, args, "--out", inputs=inputs, suffixes=OUT_SUFFIXES)
         side = sidecar_path(Path(args.out))
         output(side, args, "--out (its sidecar)", inputs=inputs)
-    meas = read_measurement(args.measurement, repair=args.repair)
+    meas = read_measurement(args.measurement, repair=args.repair, **bag_options(args))
     model = None
     if args.model is not None:
         model = NoiseModel.from_toml(args.model, n_gyros=meas.n_gyros)
-    res = fuse(meas, args.estimator, model=model,
-               model_name=None if args.model is None else str(args.model), exclude=exclude,
-               params=params)
+    val = None
+    if args.holdout is not None and not args.validate:
+        raise InputError("--holdout is the part held out by --validate: add --validate")
+    if args.validate:
+        holdout = args.holdout if args.holdout is not None or model is not None else 0.5
+        res, val = validate_fuse(meas, args.estimator, holdout=holdout, exclude=exclude, params=params,
+                                 model=model, model_name=None if args.model is None else str(args.model))
+    else:
+        res = fuse(meas, args.estimator, model=model,
+                   model_name=None if args.model is None else str(args.model), exclude=exclude,
+                   params=params)
     out = res.to_json_dict()
+    if val is not None:
+        out["validation"] = val
     out["notes"] = [*meas.notes, *out["notes"]]
     if args.out is not None:
         csv_path = Path(meas.source) if meas.source else Path(args.measurement)
@@ -139,7 +179,10 @@ def cmd_fuse(args) -> tuple[dict, str]:
             sidecar_sha256=sha256_of(sidecar_path(csv_path)))
         write_many([(args.out, csv_bytes), (side, toml_bytes)], force=args.force)
         out["out"], out["sidecar"] = str(args.out), str(side)
-    return out, _text(out, args)
+    text = _text(out, args)
+    if val is not None:
+        text += "\n" + "\n".join(_validation_text(val))
+    return out, text
 
 
 def add_parser(sub) -> None:
@@ -147,6 +190,7 @@ def add_parser(sub) -> None:
     p = sub.add_parser("fuse", help="fuse a recorded array with an estimator: the fused body rate as a "
                                     "measurement, its ADEV and the gain over the best single gyro")
     p.add_argument("measurement", type=Path, metavar="MEAS.csv")
+    add_bag_options(p)
     p.add_argument("--estimator", required=True, metavar="NAME",
                    help="registered estimator (gls, ols, kf_array, kf_single, naive, ...; "
                         "installed plugins too)")
@@ -165,6 +209,13 @@ def add_parser(sub) -> None:
     p.add_argument("--repair", action="store_true",
                    help="repair short gaps, missing values, exact duplicate rows and a jittering clock "
                         "(each listed)")
+    p.add_argument("--validate", action="store_true",
+                   help="fit the array model (per gyro ARW + RRW, the white and slow correlations) on the "
+                        "first part of the still data, predict the fused ADEV per axis with its band (gyros "
+                        "independent, and with the fitted covariance), and test it tau by tau on the rest "
+                        "(with --model: the model's prediction on the whole record)")
+    p.add_argument("--holdout", type=finite_float("--holdout"), metavar="FRACTION",
+                   help="with --validate: the last FRACTION of the still data held out (0.5)")
     add_plugin(p)
     add_force(p)
     p.add_argument("--json", action="store_true", help="print one JSON object")

@@ -22,7 +22,9 @@ import sys
 import warnings
 
 from gyroarray import __version__
-from gyroarray.cli import allan, compare, design, fdi, fuse, simulate
+from gyroarray.cli import allan, compare, convert, design, fdi, fuse, simulate
+from gyroarray.cli import export as export_cmd, plan as plan_cmd
+from gyroarray.cli import parity as parity_cmd
 from gyroarray.cli.common import EXIT_FAIL, EXIT_OK, EXIT_USAGE, json_safe
 from gyroarray.core.errors import InputError, one_line
 
@@ -68,6 +70,10 @@ def build_parser() -> argparse.ArgumentParser:
     compare.add_parser(sub)
     fdi.add_parser(sub)
     fuse.add_parser(sub)
+    convert.add_parser(sub)
+    export_cmd.add_parser(sub)
+    plan_cmd.add_parser(sub)
+    parity_cmd.add_parser(sub)
     for p in sub.choices.values():
         p.add_argument("--max-memory", type=_size, metavar="SIZE",
                        help="memory gyroarray may plan to use, e.g. 8G (default: half the "

@@ -350,18 +350,25 @@ def _frozen_array(x, name: str, *, ndim: int, shape: tuple | None = None) -> np.
 # =========================================================================
 # Reading
 # =========================================================================
-def read_measurement(path, *, repair: bool = False) -> Measurement:
-    """Read a measurement (CSV + TOML sidecar) and check it.
+def read_measurement(path, *, repair: bool = False, topic: str | None = None,
+                     extrinsics=None) -> Measurement:
+    """Read a measurement (CSV + TOML sidecar, or a ROS bag) and check it.
 
     Parameters
     ----------
     path : str or os.PathLike
         The CSV (``run42.csv`` / ``run42.csv.gz``), its sidecar
-        (``run42.toml``) or the stem (``run42``).
+        (``run42.toml``) or the stem (``run42``); or a ROS bag of
+        ``sensor_msgs/msg/Imu`` (``.bag``, ``.db3``, ``.mcap`` or a ROS2 bag
+        folder), read by :func:`gyroarray.core.bags.read_bag`.
     repair : bool
         Fill short gaps and short runs of missing values by linear
         interpolation in time, and report each repair in ``notes``
         (default: refuse them).
+    topic : str, optional
+        A bag's IMU topic(s), comma separated (bags only).
+    extrinsics : str or os.PathLike, optional
+        Kalibr imu-chain YAML of a bag's IMUs (bags only).
 
     Returns
     -------
@@ -374,6 +381,14 @@ def read_measurement(path, *, repair: bool = False) -> Measurement:
         For anything wrong with the files, naming the file, the line and/or
         column and the problem (see the module docstring for the rules).
     """
+    # deferred: core.bags imports this module (Measurement), so it cannot be imported at the top
+    from gyroarray.core.bags import is_bag, read_bag
+    if is_bag(path):
+        return read_bag(path, topic=topic, extrinsics=extrinsics, repair=repair)
+    for option, value in (("--topic", topic), ("--extrinsics", extrinsics)):
+        if value is not None:
+            raise InputError(f"{option} is for ROS bags (.bag, .db3, .mcap or a ROS2 bag folder); "
+                             "this is a measurement CSV: leave it out", file=str(path))
     csv_path, toml_path = _measurement_paths(path)
     csv_name = str(csv_path)
     side = _read_sidecar(toml_path)
@@ -493,7 +508,7 @@ def _load_toml(path: Path, what: str = "sidecar") -> TomlDoc:
 def _read_sidecar(path: Path) -> _Sidecar:
     doc = _load_toml(path)
     d = doc.data
-    known = {"sample_rate_hz", "description", "layout", "site", "units"}
+    known = {"sample_rate_hz", "description", "layout", "site", "units", "fused"}   # fused: gyroarray fuse's provenance
     unknown = sorted(set(d) - known)
     notes = [f"{doc.name}: ignored unknown key(s) {', '.join(unknown)}"] if unknown else []
     if "sample_rate_hz" not in d:

@@ -11,6 +11,13 @@
 * :func:`gdop_robustness_table`: per scheme and N, the cone angle optimal at the
   largest ρ evaluated where it is worst, and the min-max cone angle (rows of
   :class:`GdopRobustnessRow`).
+* :func:`mirror_comparison`: a design against its mounting mirror, worst case over
+  ρ × failures of the fixed-weight least squares' white-noise GDOP (the reason a
+  cone at α > 90° or a reversed gyro wins under correlated noise).
+* :func:`what_would_change`: what would change the choice, from the ranked designs,
+  for a result that does not say it.
+* :func:`fused_single_ratio`: the plotted record's fused/single Allan deviation
+  ratio at long τ, against √(3/N).
 """
 
 from __future__ import annotations
@@ -27,12 +34,14 @@ from gyroarray.core.gdop import gdop_robustness, minmax_alpha, optimal_alpha
 from gyroarray.core.layout import Layout
 from gyroarray.core.result_cache import ResultCache, input_key
 from gyroarray.design.predict import Swing, settle_start, swing_truth
-from gyroarray.design.recommend import DesignSpace, GyroNoise, estimator_kwargs
+from gyroarray.design.recommend import DesignSpace, GyroNoise, design_label, estimator_kwargs
+from gyroarray.design.robust import fixed_weights, kept_sets, mirror_pattern, mounted_axes, worst_over_interval
 from gyroarray.estimators import get_estimator
 from gyroarray.sim.effects import simulate_readings
 
 __all__ = ["ADEV_SEED", "GdopRobustnessRow", "noise_and_space", "recommended_adev",
-           "cached_recommended_adev", "adev_file", "gdop_robustness_table"]
+           "cached_recommended_adev", "adev_file", "gdop_robustness_table", "mirror_comparison",
+           "what_would_change", "fused_single_ratio", "record_rho"]
 
 #: Seed of the recommended design's simulated record.
 ADEV_SEED = 20260413
@@ -73,14 +82,20 @@ def recommended_adev(res: dict, *, seed: int = ADEV_SEED, title: str = "") -> Ad
     -------
     AdevFigure
         One record of the design's horizon (at least 600 s), after the settling
-        time; ``rho`` the design's correlation, ``predicted_arw_long_deg_rt_h``
-        the predictor's long-τ fused ARW per axis.
+        time, of the array as mounted (``axes``, reversed gyros included), with the
+        motion of the result when it has one; ``rho`` the record's correlation
+        (:func:`record_rho`: the design ρ the estimator is built for),
+        ``predicted_arw_long_deg_rt_h`` the predictor's long-τ fused ARW per axis.
     """
     g, space = noise_and_space(res["assumptions"])
     d = res["recommended"]
-    gr = g.with_rho(d.get("rho", g.rho_arw)) if g.rho_arw == g.rho_rrw else g
+    rho = record_rho(d, g.rho_arw)
+    gr = g.with_rho(rho) if g.rho_arw == g.rho_rrw else g
     n_g = d["n"]
-    layout = Layout.conical(d["scheme"], n_g, math.radians(d["alpha_deg"]))
+    if d.get("axes") is not None:             # the array as mounted (reversed gyros included)
+        layout = Layout(np.asarray(d["axes"], dtype=float))
+    else:
+        layout = Layout.conical(d["scheme"], n_g, math.radians(d["alpha_deg"]))
     model = gr.noise_model(n_g)
     dt = space.dt_s
     n = max(space.n_samples, int(round(600.0 / dt)))
@@ -94,9 +109,157 @@ def recommended_adev(res: dict, *, seed: int = ADEV_SEED, title: str = "") -> Ad
     single = (z - truth @ layout.H.T)[k0:]
     p = d["predicted"]
     return single_vs_fused(single, fused, dt, title=title, estimator=d["estimator"], seed=seed,
-                           rho=float(d.get("rho", g.rho_arw)), record_s=n * dt,
+                           rho=float(rho), record_s=n * dt,
                            predicted_arw_long_deg_rt_h=[p[a].get("arw_long_deg_rt_h", math.nan)
                                                         for a in AXES])
+
+
+def record_rho(d: dict, default: float = 0.0) -> float:
+    """The correlation the recommended design's ADEV record is simulated at [-].
+
+    The design ρ its estimator is built for (``design_rho``, the typical case); a
+    result without one: its ``rho``, else ``default``.
+    """
+    for v in (d.get("design_rho"), (d.get("typical") or {}).get("rho"), d.get("rho")):
+        if v is not None:
+            return float(v)
+    return float(default)
+
+
+def fused_single_ratio(a: AdevFigure, min_tau_s: float = 1.0) -> dict:
+    """The plotted record's fused / single Allan deviation at long τ.
+
+    Parameters
+    ----------
+    a : AdevFigure
+    min_tau_s : float
+        Only τ at or above this are compared [s] (above the filter's time constants).
+
+    Returns
+    -------
+    dict
+        ``per_axis`` (x, y, z: median over τ ≥ ``min_tau_s`` of fused ADEV / the mean
+        single-gyro ADEV [-]), ``reference`` (√(3/N) [-]), ``min_tau_s``; per_axis
+        empty when no τ qualifies.
+    """
+    singles = a.singles
+    out = {"per_axis": {}, "reference": float(a.reference_factor), "min_tau_s": float(min_tau_s)}
+    if not singles:
+        return out
+    taus = singles[0].taus_s
+    single = np.mean([c.adev_rad_s for c in singles if c.taus_s.shape == taus.shape], axis=0)
+    for c, axis in zip(a.fused, AXES):
+        m = (c.taus_s >= min_tau_s)
+        if c.taus_s.shape != taus.shape or not m.any():
+            continue
+        r = c.adev_rad_s[m] / single[m]
+        r = r[np.isfinite(r)]
+        if r.size:
+            out["per_axis"][axis] = float(np.median(r))
+    return out
+
+
+def _white_worst(axes: np.ndarray, design_rho: float, lo: float, hi: float, failures: int) -> dict:
+    """Worst white-noise GDOP of the GLS with weights fixed for ``design_rho``, over ρ × failures."""
+    n = axes.shape[0]
+    worst = {"gdop": -math.inf, "rho": None, "failed_gyros": []}
+    for keep in kept_sets(n, failures):
+        k = list(keep)
+        H = axes[k]
+        m = len(k)
+        lo_ok = max(lo, -1.0 / (m - 1) + 1e-6) if m > 1 else lo
+        c_d = (1.0 - design_rho) * np.eye(m) + design_rho * np.ones((m, m))
+        M = fixed_weights("gls", H[None], c_d)[0]
+
+        def g(r, M=M, m=m):
+            C = (1.0 - r) * np.eye(m) + r * np.ones((m, m))
+            return float(np.sqrt(max(np.trace(M @ C @ M.T), 0.0)))
+        v, at = worst_over_interval(g, lo_ok, max(hi, lo_ok))
+        if v > worst["gdop"]:
+            worst = {"gdop": v, "rho": at, "failed_gyros": [j + 1 for j in range(n) if j not in keep]}
+    return worst
+
+
+def mirror_comparison(d: dict, rho_range, failures: int) -> dict | None:
+    """A design against its mounting mirror under correlated noise.
+
+    Both are scored the same way: least squares with weights fixed for the design's
+    ``design_rho`` (recomputed on the gyros left after a failure), the white-noise
+    GDOP √trace(M C(ρ) Mᵀ) [-] at its worst over ρ in ``rho_range`` and every set of
+    ``failures`` failed gyros. The mirror is
+    :func:`gyroarray.design.robust.mirror_pattern` of the design.
+
+    Parameters
+    ----------
+    d : dict
+        A design of a ``design --recommend`` result (``scheme``, ``n``, ``alpha_deg``,
+        ``mounting_signs``, ``design_rho``).
+    rho_range : (float, float)
+        The correlations the gyros may have [-].
+    failures : int
+        Failed gyros to survive.
+
+    Returns
+    -------
+    dict or None
+        ``design`` and ``mirror`` ({gdop, rho, failed_gyros}), ``mirror_alpha_deg``,
+        ``mirror_reversed`` (1-based gyros reversed in the mirror), ``ratio``
+        (mirror / design); None when the design has no mounting signs.
+    """
+    signs = d.get("mounting_signs")
+    if signs is None:
+        return None
+    lo, hi = (float(rho_range[0]), float(rho_range[-1])) if rho_range is not None else (0.0, 0.0)
+    rd = d.get("design_rho")
+    rd = 0.5 * (lo + hi) if rd is None else float(rd)
+    s = np.asarray(signs, dtype=float)
+    own = mounted_axes(d["scheme"], d["n"], np.array([math.radians(d["alpha_deg"])]), s)[0]
+    m_alpha, m_signs = mirror_pattern(d["scheme"], d["alpha_deg"], s)
+    mir = mounted_axes(d["scheme"], d["n"], np.array([math.radians(m_alpha)]), m_signs)[0]
+    a = _white_worst(own, rd, lo, hi, failures)
+    b = _white_worst(mir, rd, lo, hi, failures)
+    return {"design": a, "mirror": b, "mirror_alpha_deg": float(m_alpha),
+            "mirror_reversed": [k + 1 for k in range(len(m_signs)) if m_signs[k] < 0],
+            "ratio": b["gdop"] / a["gdop"] if a["gdop"] > 0 else math.nan, "design_rho": rd}
+
+
+def _objective_value(d: dict, objective: str) -> float | None:
+    wc = d.get("worst_case") or {}
+    v = wc.get("angle_deg" if objective == "angle" else "rms_3axis_deg_s")
+    return None if v is None else float(v)
+
+
+def what_would_change(res: dict) -> list[str]:
+    """What would change the choice, from the ranked designs (for a result that does not say it).
+
+    Returns
+    -------
+    list of str
+        The runner-up's margin on the objective's worst case, and the best design
+        with fewer gyros and its cost in accuracy; empty when the designs carry no
+        worst case.
+    """
+    rec = res.get("recommended") or {}
+    obj = res.get("objective") or rec.get("objective") or "rate"
+    unit = "deg at the horizon" if obj == "angle" else "deg/s 3-axis RMS"
+    v0 = _objective_value(rec, obj)
+    if v0 is None:
+        return []
+    out = []
+    ru = res.get("runner_up")
+    v1 = _objective_value(ru, obj) if ru else None
+    if v1 is not None and v0 > 0:
+        out.append(f"the runner-up ({design_label(ru)}) is {100 * (v1 / v0 - 1):.3g} % worse in the worst "
+                   f"case ({v1:.4g} against {v0:.4g} {unit}): a larger error in the inputs than that "
+                   "(noise, ρ range) can reverse the order")
+    fewer = [d for d in res.get("designs", []) if d.get("n", 0) < rec.get("n", 0)
+             and _objective_value(d, obj) is not None]
+    if fewer:
+        b = min(fewer, key=lambda d: _objective_value(d, obj))
+        vb = _objective_value(b, obj)
+        out.append(f"fewer gyros: the best N = {b['n']} design ({design_label(b)}) has a worst case of "
+                   f"{vb:.4g} {unit}, {100 * (vb / v0 - 1):.3g} % more")
+    return out
 
 
 def adev_file(design_path) -> Path:

@@ -36,7 +36,12 @@ continuously) × every set of k failed gyros, with the estimator built once for
 a design ρ (weights fixed; after a failure recomputed for the same design ρ on
 the gyros left); the mounting sense of each gyro is searched
 (:mod:`gyroarray.design.robust`), the objective is the rate or the angle error,
-and designs tying within 1 % are ranked by their typical case.
+and designs tying within 1 % are ranked by their typical case. The fast channel
+model screens; the first :data:`EXACT_TOP` designs, the recommendation, the
+runner-up and the mounting mirror are then re-scored exactly
+(:func:`rescore_exact`: the registry's estimator built for the design ρ on the
+gyros left, :func:`gyroarray.design.predict.predict` at both ends of the ρ
+range, the error of a fixed estimator being linear in ρ) and re-ranked.
 
 The tests check the fast path against the full predictor. Where
 ``kf_array`` does not decouple (Scheme 2 with unequal ARW and RRW
@@ -57,13 +62,15 @@ from typing import Any
 import numpy as np
 from scipy.optimize import minimize_scalar
 
+from gyroarray.analysis.replicates import rms_ci
 from gyroarray.core import units
 from gyroarray.core.constants import G0_M_S2
 from gyroarray.core.gdop import gdop_batch, correlation_matrix, fault_tolerance, worst_gdop_over_rho
 from gyroarray.core.errors import InputError
 from gyroarray.core.layout import Layout, conical_axes
-from gyroarray.design.predict import (AXES, MODELLED, SensorBandwidth, Swing, channel_filter, channel_response,
-                               g_sensitivity_error, predict, settle_start, swing_truth)
+from gyroarray.design.predict import (AXES, MODELLED, SensorBandwidth, Swing, cascade, channel_filter,
+                                      channel_response, g_sensitivity_error, noise_sources, predict,
+                                      predict_system, settle_start, swing_truth)
 from gyroarray.design.robust import (fixed_weights, kept_sets, mirror_pattern, mounted_axes,
                                      mounting_patterns, mounting_words, worst_over_interval)
 
@@ -112,6 +119,15 @@ class GyroNoise:
     rho_rrw: float = 0.0
     sources: dict = field(default_factory=dict)
     ignored: tuple[str, ...] = ()
+    per_gyro: dict | None = field(default=None, compare=False)
+    corr_arw: np.ndarray | None = field(default=None, compare=False, repr=False)
+    corr_rrw: np.ndarray | None = field(default=None, compare=False, repr=False)
+    model: Any = field(default=None, compare=False, repr=False)
+
+    @property
+    def n_gyros(self) -> int | None:
+        """The gyro count a per-gyro model fixes (None: alike gyros, any N)."""
+        return None if self.per_gyro is None else int(len(self.per_gyro["arw"]))
 
     def __post_init__(self):
         if not (math.isfinite(self.arw_deg_rt_h) and self.arw_deg_rt_h > 0):
@@ -126,11 +142,22 @@ class GyroNoise:
                 raise InputError(f"{k} must be in (-1, 1), got {v!r}")
 
     @classmethod
-    def from_model(cls, model, source: str = "model") -> "GyroNoise":
-        """The typical gyro of a noise model: each effect's quadratic mean over its gyros.
+    def from_model(cls, model, source: str = "model", *, alike: bool = True) -> "GyroNoise":
+        """The gyros of a noise model.
 
-        A correlation matrix is reduced to the mean of its off-diagonal entries.
+        ``alike`` (the default, ``design --alike``): the typical gyro, each effect's quadratic
+        mean over its gyros, a correlation matrix reduced to the mean of its off-diagonal
+        entries. Otherwise, when the model names gyros (per-gyro entries, as ``fit --out``
+        writes, or an ``[array]`` table), every gyro keeps its own parameters
+        (:func:`per_gyro_noise`); the scalar fields still hold the quadratic means.
         """
+        typical = cls._typical(model, source)
+        if alike:
+            return typical
+        return per_gyro_noise(model, typical, source)
+
+    @classmethod
+    def _typical(cls, model, source: str) -> "GyroNoise":
         from gyroarray.estimators.noise import per_gyro  # lazy: loads numba
         n = max([e.gyro or 1 for e in model.entries] + [1])
 
@@ -162,12 +189,18 @@ class GyroNoise:
                    ignored=tuple(sorted({e.effect for e in model.entries} - set(modelled))), **rho)
 
     def with_rho(self, rho: float) -> "GyroNoise":
-        """The same gyros with a common correlation ρ of ARW and RRW (the condition varied)."""
-        return replace(self, rho_arw=float(rho), rho_rrw=float(rho))
+        """The same gyros with a common correlation ρ of ARW and RRW (the condition varied;
+        a model's correlation matrices give way to it, the per-gyro levels stay)."""
+        return replace(self, rho_arw=float(rho), rho_rrw=float(rho), corr_arw=None, corr_rrw=None)
 
-    def noise_model(self, n_gyros: int):
-        """This noise on every gyro of an N-gyro array, as a NoiseModel (for the simulator)."""
+    def noise_model(self, n_gyros: int, keep=None):
+        """This noise on every gyro of an N-gyro array, as a NoiseModel (for the simulator).
+
+        Per-gyro noise: gyro k of the model on gyro k of the array; ``keep`` (0-based indices
+        of the model's gyros, len ``n_gyros``): the gyros left after a failure, renumbered."""
         from gyroarray.effects.model import ModelEntry, NoiseModel  # lazy: loads numba
+        if self.per_gyro is not None:
+            return self._per_gyro_model(n_gyros, keep)
         entries = [ModelEntry("arw", None, {"n_deg_rt_h": self.arw_deg_rt_h})]
         if self.rrw_deg_h_rt_h > 0:
             entries.append(ModelEntry("rrw", None, {"k_deg_h_rt_h": self.rrw_deg_h_rt_h}))
@@ -183,10 +216,150 @@ class GyroNoise:
         model.check(n_gyros)
         return model
 
+    def _per_gyro_model(self, n_gyros: int, keep):
+        from gyroarray.effects.model import ModelEntry, NoiseModel  # lazy: loads numba
+        idx = list(range(n_gyros)) if keep is None else [int(k) for k in keep]
+        if len(idx) != n_gyros or max(idx) >= self.n_gyros:
+            raise ValueError(f"keep {idx} does not give {n_gyros} of the model's {self.n_gyros} gyros")
+        p = self.per_gyro
+        entries = []
+        for j, i in enumerate(idx):
+            entries.append(ModelEntry("arw", j + 1, {"n_deg_rt_h": float(p["arw"][i])}))
+            if p["rrw"][i] > 0:
+                entries.append(ModelEntry("rrw", j + 1, {"k_deg_h_rt_h": float(p["rrw"][i])}))
+            if p["bi"][i] > 0:
+                entries.append(ModelEntry("bias_instability", j + 1, {"b_deg_h": float(p["bi"][i])}))
+            if p["gm_sigma"][i] > 0 and p["gm_tau"][i] > 0:
+                entries.append(ModelEntry("gauss_markov", j + 1, {"sigma_deg_h": float(p["gm_sigma"][i]),
+                                                                  "tau_s": float(p["gm_tau"][i])}))
+        corr = {}
+        for key, mat, rho in (("rho_arw", self.corr_arw, self.rho_arw), ("rho_rrw", self.corr_rrw, self.rho_rrw)):
+            if mat is not None:
+                sub = np.asarray(mat, dtype=float)[np.ix_(idx, idx)]
+                if np.any(sub != np.eye(len(idx))):
+                    corr[key] = [[float(v) for v in row] for row in sub]
+            elif rho:
+                corr[key] = float(rho)
+        if corr:
+            entries.append(ModelEntry("correlation", None, corr))
+        model = NoiseModel(tuple(entries), description="the model's gyros, each its own noise")
+        model.check(n_gyros)
+        return model
+
     def to_json_dict(self) -> dict:
-        return {"arw_deg_rt_h": self.arw_deg_rt_h, "rrw_deg_h_rt_h": self.rrw_deg_h_rt_h,
-                "bi_deg_h": self.bi_deg_h, "gm_sigma_deg_h": self.gm_sigma_deg_h,
-                "gm_tau_s": self.gm_tau_s, "rho_arw": self.rho_arw, "rho_rrw": self.rho_rrw}
+        out = {"arw_deg_rt_h": self.arw_deg_rt_h, "rrw_deg_h_rt_h": self.rrw_deg_h_rt_h,
+               "bi_deg_h": self.bi_deg_h, "gm_sigma_deg_h": self.gm_sigma_deg_h,
+               "gm_tau_s": self.gm_tau_s, "rho_arw": self.rho_arw, "rho_rrw": self.rho_rrw}
+        if self.per_gyro is not None:
+            out["per_gyro"] = {k: [float(x) for x in v] for k, v in self.per_gyro.items()}
+        return out
+
+
+#: The per-gyro levels of :class:`GyroNoise` (datasheet units): ARW [deg/√h], RRW [deg/h/√h],
+#: bias instability [deg/h], Gauss–Markov σ [deg/h] and τc [s].
+PER_GYRO_KEYS = ("arw", "rrw", "bi", "gm_sigma", "gm_tau")
+
+
+def model_gyro_count(model) -> int:
+    """The gyro count a model names: its highest per-gyro entry or ``[array]`` gyro (0: none)."""
+    n = max([e.gyro or 0 for e in model.entries] + [0])
+    table = getattr(model, "array", None)
+    if table is not None and getattr(table, "gyros", None):
+        n = max(n, max(table.gyros))
+    return int(n)
+
+
+def _table_matrix(table, key: str, n: int, default: np.ndarray | None) -> np.ndarray | None:
+    """An ``[array]`` correlation for gyros 1..n: its rows and columns of the gyros it names,
+    0 between a named and an unnamed gyro, ``default`` (or the identity) between unnamed ones."""
+    mat = getattr(table, key, None) if table is not None else None
+    if mat is None:
+        return default
+    gyros = [int(g) - 1 for g in table.gyros]
+    out = np.eye(n) if default is None else np.array(default, dtype=float, copy=True)
+    out[gyros, :] = 0.0
+    out[:, gyros] = 0.0
+    out[np.ix_(gyros, gyros)] = np.asarray(mat, dtype=float)
+    return out
+
+
+def per_gyro_noise(model, typical: GyroNoise, source: str = "model") -> GyroNoise:
+    """The gyros of a model each with its own parameters (the model's gyro count fixes N).
+
+    The levels come from the terms the model's effects declare
+    (:func:`gyroarray.estimators.noise.model_terms`): white, walk, flicker and Gauss–Markov
+    per gyro; the correlation matrices from its correlation term, overridden by the
+    ``[array]`` table's ``white_correlation`` / ``walk_correlation`` for the gyros it names.
+    A model that names fewer than 3 gyros (no array) gives ``typical`` back (alike gyros).
+    """
+    from gyroarray.effects.terms import (CorrelationTerm, FlickerTerm, GaussMarkovTerm,  # lazy: numba
+                                         WalkTerm, WhiteTerm, root_sum_square)
+    from gyroarray.estimators.noise import model_terms  # lazy: loads numba
+    n = model_gyro_count(model)
+    if n < 3:                     # names no array (0) or fewer gyros than a 3-axis rate needs
+        return typical
+    try:
+        model.check(n)
+        terms = model_terms(model, n)
+    except InputError as err:
+        raise err.with_file(source) from None
+    of = {}
+    for kind in (WhiteTerm, WalkTerm, FlickerTerm):
+        attr = {WhiteTerm: "n_rad_rt_s", WalkTerm: "k_rad_s_rt_s", FlickerTerm: "b_rad_s"}[kind]
+        vals = [np.asarray(getattr(t, attr), dtype=float) for _, t in terms if isinstance(t, kind)]
+        of[kind] = np.nan_to_num(root_sum_square(vals), nan=0.0) if vals else np.zeros(n)
+    arw = units.arw_rad_rt_s_to_deg_rt_h(of[WhiteTerm])
+    if np.any(~(arw > 0)):
+        bad = [k + 1 for k in np.flatnonzero(~(arw > 0))]
+        raise InputError(f"the model gives no angle random walk for gyro(s) {', '.join(map(str, bad))}: "
+                         "the estimators need every gyro's white-noise level (or use --alike)", file=source)
+    gm_s, gm_t = np.zeros(n), np.zeros(n)
+    for _, t in terms:
+        if isinstance(t, GaussMarkovTerm):
+            s_, t_ = np.nan_to_num(np.asarray(t.sigma_rad_s, float)), np.nan_to_num(np.asarray(t.tau_s, float))
+            gm_s, gm_t = np.where(s_ > 0, s_, gm_s), np.where(s_ > 0, t_, gm_t)
+    corr = next((t for _, t in terms if isinstance(t, CorrelationTerm)), None)
+    c_w = None if corr is None or corr.white is None else np.asarray(corr.white, dtype=float)
+    c_q = None if corr is None or corr.walk is None else np.asarray(corr.walk, dtype=float)
+    table = getattr(model, "array", None)
+    c_w = _table_matrix(table, "white_correlation", n, c_w)
+    c_q = _table_matrix(table, "walk_correlation", n, c_q)
+    per = {"arw": arw, "rrw": units.rrw_rad_s_rt_s_to_deg_h_rt_h(of[WalkTerm]),
+           "bi": units.rad_s_to_deg_h(of[FlickerTerm]), "gm_sigma": units.rad_s_to_deg_h(gm_s),
+           "gm_tau": gm_t}
+    per = {k: np.asarray(v, dtype=float) for k, v in per.items()}
+
+    def off_mean(c, fallback):
+        return fallback if c is None else float((c.sum() - np.trace(c)) / (c.size - n))
+    return replace(typical, per_gyro=per, corr_arw=c_w, corr_rrw=c_q, model=model,
+                   rho_arw=off_mean(c_w, typical.rho_arw), rho_rrw=off_mean(c_q, typical.rho_rrw),
+                   sources={**typical.sources, "per_gyro": source})
+
+
+def _levels(g: GyroNoise, n: int, keep, dt: float):
+    """Per gyro (the kept ones): white variance per sample [rad²/s²], walk increment variance
+    per sample [rad²/s²], flicker B² [rad²/s²], Gauss–Markov σ² [rad²/s²]."""
+    p = g.per_gyro
+    idx = list(range(n)) if keep is None else list(keep)
+    return (units.arw_deg_rt_h_to_rad_rt_s(p["arw"][idx]) ** 2 / dt,
+            units.rrw_deg_h_rt_h_to_rad_s_rt_s(p["rrw"][idx]) ** 2 * dt,
+            units.deg_h_to_rad_s(p["bi"][idx]) ** 2, units.deg_h_to_rad_s(p["gm_sigma"][idx]) ** 2)
+
+
+def _corr_of(g: GyroNoise, n: int, keep, which: str) -> np.ndarray:
+    """The correlation of the kept gyros: the model's matrix when it has one, else equicorrelated."""
+    mat = g.corr_arw if which == "arw" else g.corr_rrw
+    if mat is None:
+        return _corr(n, g.rho_arw if which == "arw" else g.rho_rrw)
+    idx = list(range(n)) if keep is None else list(keep)
+    return np.asarray(mat, dtype=float)[np.ix_(idx, idx)]
+
+
+def _cov(g: GyroNoise, n: int, keep, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    """Per-sample white covariance R and walk increment covariance Q of the kept gyros [rad²/s²]."""
+    s2, q, _, _ = _levels(g, n, keep, dt)
+    s, qs = np.sqrt(s2), np.sqrt(q)
+    return np.outer(s, s) * _corr_of(g, n, keep, "arw"), np.outer(qs, qs) * _corr_of(g, n, keep, "rrw")
 
 
 @dataclass(frozen=True)
@@ -471,6 +644,8 @@ def _with_sensor(model, space: DesignSpace, *, g_sensitivity: bool = True):
 
 def _r_matrix(n: int, g: GyroNoise, dt: float) -> np.ndarray:
     """Covariance of one white sample of the N gyros [rad²/s²]."""
+    if g.per_gyro is not None:
+        return _cov(g, n, None, dt)[0]
     return units.arw_deg_rt_h_to_rad_rt_s(g.arw_deg_rt_h) ** 2 / dt * correlation_matrix(n, g.rho_arw)
 
 
@@ -814,25 +989,88 @@ def _ranked(designs: list[dict], estimators) -> list[dict]:
     return out
 
 
-def equivalent_groups(designs: list[dict], share: float = EQUIVALENT_SHARE) -> list[dict]:
-    """Groups of designs (best first) whose 3-axis RMS lies within ``share`` of the group's first.
+def _objective_value(d: dict) -> float:
+    """What a design is ranked on: its worst case (decision) in the objective's unit, else the
+    3-axis RMS of the single-ρ search."""
+    wc = d.get("worst_case")
+    if wc is not None:
+        v = wc["rms_3axis_deg_s" if d.get("objective", "rate") == "rate" else "angle_deg"]
+    else:
+        v = d["rms_3axis_deg_s"]
+    return v if math.isfinite(v) else math.inf
 
-    Each group has ``members`` (ranks), ``spread`` (largest relative difference)
-    and ``reason``: why they are equal (identical by theory) or only close.
+
+def _pct(share: float) -> str:
+    """A share in percent with the digits that tell 0.9987 % from 1 %."""
+    return f"{100.0 * share:.4g} %"
+
+
+def _mirror_of(a: dict, b: dict) -> bool:
+    """b is a's mounting mirror (same scheme and N, the cone at 180° − α or the other senses)."""
+    if (a["scheme"], a["n"], a["estimator"]) != (b["scheme"], b["n"], b["estimator"]):
+        return False
+    sa, sb = a.get("mounting_signs"), b.get("mounting_signs")
+    alpha_mirror = abs(a["alpha_deg"] + b["alpha_deg"] - 180.0) < 1e-3
+    return alpha_mirror or (sa is not None and sb is not None and sa != sb
+                            and abs(a["alpha_deg"] - b["alpha_deg"]) < 1e-3)
+
+
+def equivalent_groups(designs: list[dict], share: float = EQUIVALENT_SHARE) -> list[dict]:
+    """Designs that theory makes equal, and smaller arrays that reach the same worst case.
+
+    Two kinds of group (best first), each with ``members`` (ranks), ``designs`` (labels),
+    ``spread`` (largest relative difference of the objective), ``kind`` and ``reason``:
+
+    * ``identical`` — same N, predictions equal to 1e-9: the same estimator in another form
+      (kf_array = kf_single on a decoupled cone, gls = ols = naive where HᵀC⁻¹H is diagonal),
+      the two schemes at their isotropic optimum, or the mounting mirror (identical at ρ = 0).
+      Designs of different N, or merely close, are never merged;
+    * ``fewer_gyros`` — a design with fewer gyros whose worst case lies within ``share`` of a
+      larger array's: "k gyros saved at the same worst case", with the difference in percent.
     """
-    groups, i = [], 0
-    while i < len(designs):
-        j = i + 1
-        base = designs[i]["rms_3axis_deg_s"]
-        while j < len(designs) and designs[j]["rms_3axis_deg_s"] <= base * (1.0 + share):
-            j += 1
-        if j - i > 1:
-            members = designs[i:j]
-            spread = members[-1]["rms_3axis_deg_s"] / base - 1.0
+    groups = []
+    used: set = set()
+    for i, d in enumerate(designs):
+        if i in used:
+            continue
+        base = _objective_value(d)
+        members = [d]
+        for j in range(i + 1, len(designs)):
+            e = designs[j]
+            if j in used or e["n"] != d["n"]:
+                continue
+            v = _objective_value(e)
+            if math.isfinite(base) and abs(v - base) <= 1e-9 * max(abs(base), 1e-300):
+                members.append(e)
+                used.add(j)
+        if len(members) > 1:
+            spread = max(_objective_value(m) for m in members) / base - 1.0 if base > 0 else 0.0
             groups.append({"members": [m["rank"] for m in members],
                            "designs": [design_label(m) for m in members], "spread": spread,
-                           "reason": _why_equal(members, spread)})
-        i = j
+                           "kind": "identical", "reason": _why_equal(members, spread)})
+    # a smaller array at the same worst case (within the tie share): the gyros it saves
+    best_by_n: dict = {}
+    for d in designs:
+        if math.isfinite(_objective_value(d)):
+            best_by_n.setdefault(d["n"], d)
+    ns = sorted(best_by_n)
+    for big in reversed(ns):
+        d = best_by_n[big]
+        for small in ns:
+            if small >= big:
+                break
+            e = best_by_n[small]
+            vd, ve = _objective_value(d), _objective_value(e)
+            if ve <= vd * (1.0 + share):
+                diff = ve / vd - 1.0
+                groups.append({"members": [e["rank"], d["rank"]],
+                               "designs": [design_label(e), design_label(d)], "spread": diff,
+                               "kind": "fewer_gyros",
+                               "reason": (f"{big - small} gyro(s) saved at the same worst case: N = {small} "
+                                          f"reaches {ve:.6g} against {vd:.6g} for N = {big} "
+                                          f"({'+' if diff >= 0 else ''}{_pct(diff)}, within the "
+                                          f"{_pct(share)} tie share)")})
+                break
     return groups
 
 
@@ -849,28 +1087,29 @@ def design_label(d: dict) -> str:
 
 
 def _why_equal(members: list[dict], spread: float) -> str:
+    """Why designs of one N have the same prediction (only reasons that apply are given)."""
     ests = {m["estimator"] for m in members}
     schemes = {m["scheme"] for m in members}
-    ns = {m["n"] for m in members}
     bits = []
-    identical = spread < 1e-9
     if ests & {"kf_array", "kf_single"} == {"kf_array", "kf_single"}:
         bits.append("kf_array and kf_single are the same filter here: with alike gyros and equal "
                     "ARW/RRW correlation the array KF decouples per axis into the single-gyro KF "
                     "on the least-squares channel")
-    if ests & {"kf_array", "kf_single"} and ests & {"gls", "ols"}:
-        bits.append("the Kalman filters are the low-passed least squares times their DC gain "
-                    "q_ω/(q_ω + q_b), which is close to 1 at this bandwidth")
     if len(ests & {"gls", "ols", "naive"}) > 1:
         bits.append("gls, ols and naive have the same weights: HᵀC⁻¹H is diagonal and the axes "
                     "are eigenvectors of C on these cones")
-    if len(schemes) > 1 and len(ns) == 1:
+    if len(schemes) > 1:
         bits.append("both schemes reach the isotropic optimum HᵀC⁻¹H ∝ I at their own cone angle, "
                     "so their GDOP (and every prediction) is the same")
-    if not bits or not identical:
-        bits.append(f"the predictions differ by {100 * spread:.2g} % (< {100 * EQUIVALENT_SHARE:g} %), "
-                    "less than any run would resolve: choose by cost, mounting or fault tolerance")
-    return ("identical by theory: " if identical else "within 1 %: ") + "; ".join(bits)
+    if any(_mirror_of(a, b) for a in members for b in members if a is not b):
+        rhos = {tuple(m.get("rho_range") or [m.get("rho", 0.0)] * 2) for m in members}
+        bits.append("mounting mirror: the same lines with the other sense, identical when the gyros' "
+                    "noise is uncorrelated" + (" (ρ = 0 here)" if rhos <= {(0.0, 0.0)} else ""))
+    if not bits:
+        bits.append("the same N with predictions equal to 1e-9 (a symmetry of the array: a rotation "
+                    "of the body frame or a global sign)")
+    return (f"identical by theory (spread {_pct(spread)}): " if spread > 0 else "identical by theory: ") \
+        + "; ".join(bits)
 
 
 def recommend(g: GyroNoise, space: DesignSpace, *, rhos=None) -> dict:
@@ -1013,7 +1252,7 @@ def _short(d: dict) -> dict:
             "worst_rms_3axis_deg_s", "rms_by_rho", "g_sensitivity", "path", "axes", "mounting",
             "mounting_signs", "design_rho", "design_rho_note", "objective", "rho_range", "worst_case",
             "typical", "oracle_worst_case", "error_budget", "mdb_deg_s", "mdb_per_gyro_deg_s",
-            "mdb_worst_gyro", "far_per_h", "p_md", "tie", "excluded")
+            "mdb_worst_gyro", "far_per_h", "p_md", "tie", "excluded", "predicted_at", "scored")
     return {k: d[k] for k in keys if k in d}
 
 
@@ -1043,6 +1282,29 @@ def _single_ratio(g: GyroNoise, space: DesignSpace) -> float:
             / units.arw_deg_rt_h_to_rad_rt_s(g.arw_deg_rt_h) ** 2)
 
 
+def worst_words(d: dict) -> str:
+    """A design's worst case in words, by its objective: value, unit, true ρ and failed gyros
+    (e.g. "27.92 deg angle error at the horizon (ρ = -0.1, gyro 3 failed)")."""
+    wc = d.get("worst_case")
+    if not wc:
+        return f"{d['rms_3axis_deg_s']:.4g} deg/s 3-axis RMS (ρ = {d.get('rho', math.nan):.4g}, no failure)"
+    failed = ("no failure" if not wc["failed_gyros"] else
+              ("gyro " if len(wc["failed_gyros"]) == 1 else "gyros ")
+              + ", ".join(map(str, wc["failed_gyros"])) + " failed")
+    v = (f"{wc['angle_deg']:.4g} deg angle error at the horizon" if d.get("objective") == "angle"
+         else f"{wc['rms_3axis_deg_s']:.4g} deg/s 3-axis RMS")
+    return f"{v} (ρ = {wc['rho']:.4g}, {failed})"
+
+
+def _more(d: dict, ref: dict) -> str:
+    """``d``'s worst case against ``ref``'s, by the objective, as "12 % more" / "3 % less"."""
+    key = "angle_deg" if d.get("objective") == "angle" and "worst_case" in d else "rms_3axis_deg_s"
+    a = d["worst_case"][key] if "worst_case" in d else d[key]
+    b = ref["worst_case"][key] if "worst_case" in ref else ref[key]
+    share = 100.0 * (a / b - 1.0)
+    return f"{abs(share):.0f} % {'more' if share >= 0 else 'less'}"
+
+
 def _what_changes(designs: list[dict], g: GyroNoise, space: DesignSpace, rhos) -> list[str]:
     """Short sentences: what would change the recommendation."""
     rec = designs[0]
@@ -1050,21 +1312,77 @@ def _what_changes(designs: list[dict], g: GyroNoise, space: DesignSpace, rhos) -
     fewer = [d for d in designs if d["n"] < rec["n"]]
     if fewer:
         f = fewer[0]
-        out.append(f"fewer gyros: the best N = {f['n']} design ({design_label(f)}) predicts "
-                   f"{f['rms_3axis_deg_s']:.4g} deg/s 3-axis RMS, {100 * (f['rms_3axis_deg_s'] / rec['rms_3axis_deg_s'] - 1):.0f} % more")
+        out.append(f"fewer gyros: the best N = {f['n']} design ({design_label(f)}) has a worst case of "
+                   f"{worst_words(f)}, {_more(f, rec)} than the recommendation's {worst_words(rec)}")
     ft = rec.get("fault_tolerance", {})
     for k in ("1", "2"):
         if k in ft.get("three_axes_after", {}) and not ft["three_axes_after"][k]:
             alt = [d for d in designs if d.get("fault_tolerance", {}).get("three_axes_after", {}).get(k)]
             if alt:
                 out.append(f"requiring a 3-axis rate after {k} failed gyro(s) (--failures {k}): "
-                           f"{design_label(alt[0])}, {alt[0]['rms_3axis_deg_s']:.4g} deg/s")
+                           f"{design_label(alt[0])}, worst case {worst_words(alt[0])}")
     if len(rhos) == 1:
         out.append("a correlation between the gyros: rerun with --rho-range LO,HI; the ranking "
                    "then holds per assumed ρ and the recommendation is the best worst case")
     if space.swing is None and space.motion is None:
         out.append("motion: at rest the bandwidth is a requirement (held at "
                    f"{space.bandwidth_hz[0]:g} Hz); with --swing or --motion it is traded against lag")
+    return out
+
+
+#: The error sources of a real gyro that a noise model may leave out, and why each matters.
+_USUAL_EFFECTS = (
+    ("scale_factor", "a rate error proportional to the body rate (ppm of the motion)"),
+    ("scale_nonlinearity", "a rate error growing with the square of the body rate"),
+    ("misalignment", "each gyro's axis tilted from its mounted direction: cross-axis rate error"),
+    ("temperature_bias", "a bias that follows the temperature swing"),
+    ("quantization", "the output resolution (white angle noise)"),
+    ("constant_bias", "the turn-on bias: taken as calibrated at switch-on (biases start at zero)"),
+)
+
+
+def ignored_effects(g: GyroNoise, space: DesignSpace, budget_ignored=()) -> list[str]:
+    """What the prediction leaves out, each as "name: why" (never empty while anything is).
+
+    Parameters
+    ----------
+    g : GyroNoise
+        Its ``ignored`` (effects of a source model the predictor does not model) and its
+        model's effects (a usual error source absent from it is left out as zero).
+    space : DesignSpace
+        The g-sensitivity and the gyros' own low-pass, when stated.
+    budget_ignored : sequence of str
+        Effects the error budget could not evaluate on the stated motion
+        (:attr:`gyroarray.design.budget.ErrorBudget.ignored`).
+
+    Returns
+    -------
+    list of str
+    """
+    present = set() if g.model is None else {e.effect for e in g.model.entries}
+    out = []
+    for name in g.ignored:
+        if (name == "bandwidth" and space.sensor_bandwidth is not None) or (
+                name == "g_sensitivity" and space.g_sensitivity_deg_s_per_g is not None):
+            continue
+        out.append(f"{name}: in the model, not in the ranking's predictor (the error budget shows it "
+                   "where the effect declares a term)")
+    for name in budget_ignored:
+        if not any(o.startswith(name + ":") for o in out):
+            out.append(f"{name}: in the model, but the stated motion cannot excite or evaluate it "
+                       "(e.g. a temperature coefficient without a temperature swing)")
+    src = "the datasheet inputs" if g.model is None else "the model"
+    for name, what in _USUAL_EFFECTS:
+        if name not in present:
+            out.append(f"{name}: not in {src}, taken as zero ({what})")
+    if space.g_sensitivity_deg_s_per_g is None and "g_sensitivity" not in present:
+        out.append(f"g_sensitivity: not in {src} (--g-sensitivity), taken as zero (a rate error "
+                   "proportional to the specific force)")
+    elif space.g_sensitivity_deg_s_per_g is not None:
+        out.append("g_sensitivity: stated; in the error budget and reported beside the ranking, "
+                   "not ranked")
+    if space.sensor_bandwidth is None and "bandwidth" not in present:
+        out.append(f"bandwidth: not in {src} (--sensor-bandwidth), the gyros' own low-pass taken as flat")
     return out
 
 
@@ -1084,8 +1402,16 @@ def assumptions(g: GyroNoise, space: DesignSpace, rhos, single: bool) -> dict:
         "rho": item(rhos[0] if single else list(rhos), src.get("rho_arw", "default"),
                     "common ARW and RRW correlation" if g.rho_arw == g.rho_rrw else
                     f"rho_arw {g.rho_arw:g}, rho_rrw {g.rho_rrw:g}"),
-        "gyros": item("alike: every gyro has the noise above (a model's gyros reduced to their "
-                      "quadratic mean)", "assumption"),
+        "gyros": (item("alike: every gyro has the noise above (a model's gyros reduced to their "
+                       "quadratic mean)", "assumption") if g.per_gyro is None else
+                  item({"per_gyro": {k: [float(x) for x in v] for k, v in g.per_gyro.items()},
+                        "statement": f"each of the model's {g.n_gyros} gyros keeps its own parameters "
+                                     f"(gyro k of the model at position k of the layout); the search is "
+                                     f"over the layouts with N = {g.n_gyros}; the values above are "
+                                     "quadratic means, shown for reference (--alike uses them instead)",
+                        "correlation": ("the model's matrices" if g.corr_arw is not None
+                                        or g.corr_rrw is not None else "common ρ")},
+                       src.get("per_gyro", "model"))),
         "rate_hz": item(space.rate_hz, s.get("rate_hz", "default"), "Hz"),
         "horizon_s": item(space.horizon_s, s.get("horizon_s", "default"), "s"),
         "settle_s": item(space.settle_s, "default", "s (start-up left out of the window metrics)"),
@@ -1105,9 +1431,7 @@ def assumptions(g: GyroNoise, space: DesignSpace, rhos, single: bool) -> dict:
                           "(random-walk drift included), from the analytic predictor", "definition"),
         "biases": item("start at zero (calibrated at switch-on), as the simulator draws them",
                        "assumption"),
-        "ignored_effects": item([e for e in g.ignored if not (
-            (e == "bandwidth" and space.sensor_bandwidth is not None)
-            or (e == "g_sensitivity" and space.g_sensitivity_deg_s_per_g is not None))], "model"),
+        "ignored_effects": item(ignored_effects(g, space), "model"),
         "sensor_bandwidth": item(None if space.sensor_bandwidth is None else
                                  {"cutoff_hz": space.sensor_bandwidth[0], "order": space.sensor_bandwidth[1]},
                                  s.get("sensor_bandwidth", "default"),
@@ -1239,6 +1563,9 @@ DESIGN_RHO_POINTS = 3
 #: Designs at the top of the decision whose detection (MDB) and error budget are computed
 #: (all of them with an MDB limit).
 DETAIL_TOP = 12
+#: Designs at the top of the screening re-scored exactly (the estimator as built, the full
+#: predictor), besides the recommendation, the runner-up and the mounting mirror.
+EXACT_TOP = 8
 
 
 def resolve_objective(space: DesignSpace) -> str:
@@ -1254,10 +1581,14 @@ def _noise_at(g: GyroNoise, rho: float | None) -> GyroNoise:
 
 
 def fixed_channels(est: str, H: np.ndarray, g_design: GyroNoise, g_true: GyroNoise,
-                   dt: float) -> _Channels:
+                   dt: float, keep=None) -> _Channels:
     """Per α and axis the channel noise of an estimator built for ``g_design`` and run on
-    ``g_true`` (weights fixed at design; variances MᵀC_true M) [SI, per sample]."""
+    ``g_true`` (weights fixed at design; variances MᵀC_true M) [SI, per sample].
+
+    Per-gyro noise: ``keep`` names the model's gyros in H's columns (0-based; None: all)."""
     N = H.shape[1]
+    if g_true.per_gyro is not None:
+        return _fixed_channels_per_gyro(est, H, g_design, g_true, dt, keep)
     s2 = units.arw_deg_rt_h_to_rad_rt_s(g_true.arw_deg_rt_h) ** 2 / dt
     q = units.rrw_deg_h_rt_h_to_rad_s_rt_s(g_true.rrw_deg_h_rt_h) ** 2 * dt
     Rd = s2 * _corr(N, g_design.rho_arw)
@@ -1275,6 +1606,27 @@ def fixed_channels(est: str, H: np.ndarray, g_design: GyroNoise, g_true: GyroNoi
                    m2 * units.deg_h_to_rad_s(g_true.gm_sigma_deg_h) ** 2, ratio, True,
                    bias=np.max(np.abs(np.einsum("gan,gnb->gab", M, H) - np.eye(3)), axis=(1, 2)))
     ch.kf_single_ratio = q / s2                                     # q_b / r of one gyro
+    return ch
+
+
+def _fixed_channels_per_gyro(est: str, H: np.ndarray, g_design: GyroNoise, g_true: GyroNoise,
+                             dt: float, keep) -> _Channels:
+    """:func:`fixed_channels` with every gyro its own level (and the model's correlation)."""
+    N = H.shape[1]
+    Rd, Qd = _cov(g_design, N, keep, dt)
+    Rt, Qt = _cov(g_true, N, keep, dt)
+    _, _, b2, gm2 = _levels(g_true, N, keep, dt)
+    kind = {"kf_array": "gls", "kf_single": "ols"}.get(est, est)
+    M = fixed_weights(kind, H, Rd)
+    white = np.einsum("gai,ij,gaj->ga", M, Rt, M)
+    walk = np.einsum("gai,ij,gaj->ga", M, Qt, M)
+    ratio = None
+    if est == "kf_array":
+        ratio = np.einsum("gai,ij,gaj->ga", M, Qd, M) / np.einsum("gai,ij,gaj->ga", M, Rd, M)
+    ch = _Channels(white, walk, np.einsum("gai,i->ga", M * M, b2), np.einsum("gai,i->ga", M * M, gm2),
+                   ratio, True, bias=np.max(np.abs(np.einsum("gan,gnb->gab", M, H) - np.eye(3)), axis=(1, 2)))
+    s2, q, _, _ = _levels(g_true, N, keep, dt)
+    ch.kf_single_ratio = float(np.mean(q) / np.mean(s2))             # the typical gyro's q_b / r
     return ch
 
 
@@ -1321,7 +1673,8 @@ class _Decider:
 
     def __init__(self, g: GyroNoise, space: DesignSpace, lo: float, hi: float, objective: str):
         self.g, self.space, self.lo, self.hi, self.objective = g, space, lo, hi, objective
-        self.ranged = hi > lo or g.rho_arw == g.rho_rrw
+        # a model's own correlation matrices stay unless a range (or --rho) replaces them
+        self.ranged = hi > lo or (g.rho_arw == g.rho_rrw and g.corr_arw is None and g.corr_rrw is None)
         self.bank = _bank(space, g)
         self.dt = space.dt_s
         self._conds: dict = {}
@@ -1337,7 +1690,7 @@ class _Decider:
 
     def channels(self, est, H, keep, rho_d, rho_t):
         gd = self.cond(self.lo if rho_d is None else rho_d)
-        return fixed_channels(est, H[:, list(keep)], gd, self.cond(rho_t), self.dt)
+        return fixed_channels(est, H[:, list(keep)], gd, self.cond(rho_t), self.dt, keep=list(keep))
 
     def resp(self, est, bw, ch):
         return _responses(self.bank, est, bw, ch, idx=0)
@@ -1350,6 +1703,17 @@ class _Decider:
         keeps = kept_sets(n, self.space.failures)
         design = self.channels(est, H, keeps[0], rho_d, rho_d if rho_d is not None else self.lo)
         gd = self.cond(self.lo if rho_d is None else rho_d)
+        if self.g.per_gyro is not None:          # each kept set has its own gyros' noise
+            chs, combos = [], []
+            for keep in keeps:
+                for rt in self.ends():
+                    chs.append(fixed_channels(est, H[:, list(keep)], gd, self.cond(rt), self.dt,
+                                              keep=list(keep)))
+                    combos.append((keep, rt))
+            stacked = _Channels(*(np.stack([getattr(c, f) for c in chs])
+                                  for f in ("white", "walk", "flicker", "gm")),
+                                None, True, design.kf_single_ratio, bias=np.stack([c.bias for c in chs]))
+            return (design, stacked, combos) if with_combos else (design, stacked)
         parts, combos = [], []
         for rt in self.ends():
             ch = fixed_channels(est, H, gd, self.cond(rt), self.dt)
@@ -1522,6 +1886,113 @@ def _worst_case(dec: _Decider, c: _Cand, H: np.ndarray, *, oracle: bool = False)
     return _case(dec, c, H, keep, r, rd(r))
 
 
+def screening_is_exact(est: str, g: GyroNoise) -> bool:
+    """Whether the screening's channel model is the estimator itself (then re-scoring changes
+    nothing): per-sample weights with their low-pass always; ``kf_single`` on alike gyros (the
+    same filter on every gyro commutes with the least-squares combination); never ``kf_array``
+    (after a failure or with reversed gyros its bias states couple the axes)."""
+    if est == "kf_array":
+        return False
+    return not (est == "kf_single" and g.per_gyro is not None)
+
+
+def _prediction_case(p, keep, n: int, rho_t: float) -> dict:
+    """A :func:`_case`-shaped dict from a full :class:`~gyroarray.design.predict.Prediction`."""
+    ax = p.axes
+    return {"rho": float(rho_t), "failed_gyros": [k + 1 for k in range(n) if k not in keep],
+            "rms_3axis_deg_s": float(math.sqrt(sum(ax[a]["rms_deg_s"] ** 2 for a in AXES))),
+            "angle_deg": float(math.sqrt(sum(ax[a]["angle_deg"] ** 2 for a in AXES))),
+            "per_axis": {a: {k: float(ax[a][k]) for k in ("rms_deg_s", "std_deg_s", "mean_deg_s", "angle_deg")}
+                         for a in AXES}}
+
+
+def exact_predictions(dec: _Decider, c: _Cand, H: np.ndarray, extra_rhos=()) -> dict:
+    """Every (kept set, true ρ at an end of the range) of a design predicted exactly.
+
+    The estimator is built as the Monte-Carlo check builds it: the registry's estimator with
+    :func:`estimator_kwargs`, fitted once per kept set for the design ρ on the gyros left
+    (weights and filter recomputed on the remaining geometry); its linear system is then
+    predicted (:func:`gyroarray.design.predict.predict`) with the noise of the true ρ on
+    those gyros. With the estimator fixed, every error variance is linear in the true noise
+    covariance, hence in ρ: the worst ρ of each kept set is an end of the range.
+
+    Parameters
+    ----------
+    dec : _Decider
+    c : _Cand
+    H : ndarray (1, N, 3)
+        The mounted axes [-].
+    extra_rhos : sequence of float
+        Further true ρ for the intact array (the typical case).
+
+    Returns
+    -------
+    dict
+        (kept set, ρ) -> Prediction.
+    """
+    from gyroarray.estimators import get_estimator  # lazy: loads numba
+    space = dec.space
+    motion = None if space.motion is None else np.asarray(space.motion, dtype=float)[:space.n_samples]
+    gd = dec.cond(dec.lo if c.rho_d is None else c.rho_d)
+    out = {}
+    for keep in kept_sets(c.n, space.failures):
+        Hk = H[0, list(keep)]
+        est = get_estimator(c.est)(**_estimator_kwargs(c.est, c.bw, dec.g)).fit(
+            Layout(Hk), _with_sensor(gd.noise_model(len(keep), keep), space, g_sensitivity=False), dec.dt)
+        rts = list(dec.ends()) + (list(extra_rhos) if len(keep) == c.n else [])
+        for rt in rts:
+            if (keep, float(rt)) in out:
+                continue
+            model = _with_sensor(dec.cond(rt).noise_model(len(keep), keep), space, g_sensitivity=False)
+            out[(keep, float(rt))] = predict(est, model, n_samples=space.n_samples, settle_s=space.settle_s,
+                                             truth_rad_s=motion, swing=None if motion is not None else space.swing)
+    return out
+
+
+def rescore_exact(d: dict, dec: _Decider) -> None:
+    """Replace a screened design's scores by the exact ones (:func:`exact_predictions`).
+
+    ``worst_case`` (worst over the kept sets × the range's ends, by the objective),
+    ``typical``, ``predicted`` / ``rms_3axis_deg_s`` / ``rho`` (the intact array at its worst
+    end of the range), ``worst_rms_3axis_deg_s`` and ``rms_by_rho`` (linear in ρ between the
+    ends, exact for a fixed estimator) are recomputed; ``scored`` says how. Designs whose
+    screening is already exact (:func:`screening_is_exact`) are only marked.
+    """
+    c = d["_cand"]
+    if screening_is_exact(c.est, dec.g):
+        d["scored"] = "exact (the screening's channel model is this estimator)"
+        return
+    H = mounted_axes(c.scheme, c.n, np.array([c.alpha_rad]), c.signs)
+    rho_typ = _nominal_rho(dec, c)
+    preds = exact_predictions(dec, c, H, extra_rhos=(rho_typ,))
+    key = "rms_3axis_deg_s" if dec.objective == "rate" else "angle_deg"
+    cases = {k: _prediction_case(p, k[0], c.n, k[1]) for k, p in preds.items()}
+    ends = [k for k in cases if k[1] in dec.ends()]
+    wk = max(ends, key=lambda k: cases[k][key])
+    full = tuple(range(c.n))
+    ik = max((k for k in ends if k[0] == full), key=lambda k: cases[k][key])
+    p = preds[ik]
+    pred = {}
+    for a in AXES:
+        v = p.axes[a]
+        pred[a] = {"rms_deg_s": v["rms_deg_s"], "std_deg_s": v["std_deg_s"], "mean_deg_s": v["mean_deg_s"],
+                   "angle_deg_at_horizon": v["angle_deg"], "arw_long_deg_rt_h": v["arw_long_deg_rt_h"],
+                   "rrw_long_deg_h_rt_h": v["rrw_long_deg_h_rt_h"], "dc_gain": v["dc_gain"],
+                   **{k: v.get(k) for k in _SPLIT_KEYS}}
+    d.update({"rho": ik[1], "rms_3axis_deg_s": cases[ik]["rms_3axis_deg_s"], "predicted": pred,
+              "predicted_at": _predicted_at(ik[1], dec),
+              "worst_case": cases[wk], "worst_rms_3axis_deg_s": cases[wk]["rms_3axis_deg_s"],
+              "typical": {**cases[(full, float(rho_typ))], "failed_gyros": []}})
+    if "rms_by_rho" in d and dec.hi > dec.lo:
+        ms_lo = cases[(full, float(dec.lo))]["rms_3axis_deg_s"] ** 2
+        ms_hi = cases[(full, float(dec.hi))]["rms_3axis_deg_s"] ** 2
+        d["rms_by_rho"] = {r: math.sqrt(ms_lo + (float(r) - dec.lo) / (dec.hi - dec.lo) * (ms_hi - ms_lo))
+                           for r in d["rms_by_rho"]}
+    d["scored"] = ("exact: the estimator as built for the design ρ on the gyros left after each failure, "
+                   "predicted by the full predictor at both ends of the ρ range (a fixed estimator's "
+                   "error variance is linear in ρ)")
+
+
 def _nominal_rho(dec: _Decider, c: _Cand) -> float:
     """The typical condition: the design ρ, else (ρ-free estimators) ρ = 0 if in range, else the
     range's middle."""
@@ -1566,14 +2037,15 @@ def _error_budget(d: dict, dec: _Decider, c: _Cand, H: np.ndarray) -> dict:
         Hk = H[0, list(keep)]
         gd = dec.cond(c.rho_d if c.rho_d is not None else wc["rho"])
         est = get_estimator(c.est)(**_estimator_kwargs(c.est, c.bw, dec.g)).fit(
-            Layout(Hk), gd.noise_model(len(keep)), dec.dt)
+            Layout(Hk), gd.noise_model(len(keep), keep), dec.dt)
         motion = dec.space.swing if dec.space.swing is not None else (
             None if dec.space.motion is None else np.asarray(dec.space.motion)[:dec.space.n_samples])
         b = budget_mod.error_budget(est.linear_system(), Hk,
-                                    _with_sensor(dec.cond(wc["rho"]).noise_model(len(keep)), dec.space),
+                                    _with_sensor(_budget_model(dec.cond(wc["rho"]), keep), dec.space),
                                     n_samples=dec.space.n_samples, dt_s=dec.dt,
                                     settle_s=dec.space.settle_s, motion=motion)
-        return {"at": {"rho": wc["rho"], "failed_gyros": wc["failed_gyros"]}, **b.to_dict()}
+        return {"at": {"rho": wc["rho"], "failed_gyros": wc["failed_gyros"]}, **b.to_dict(),
+                "ignored_effects": ignored_effects(dec.g, dec.space, b.ignored)}
     m, _, _, _, ch, resp = _case(dec, c, H, keep, wc["rho"], c.rho_d)["_moments"]
     terms = {}
     for name, level, field_ in (("white", ch.white, "white"), ("rate_random_walk", ch.walk, "walk"),
@@ -1590,13 +2062,48 @@ def _error_budget(d: dict, dec: _Decider, c: _Cand, H: np.ndarray) -> dict:
         terms["motion_tracking"] = {"rms_deg_s": float(units.rad_s_to_deg_s(math.sqrt(ms))),
                                     "angle_deg": float(units.rad_to_deg(dec.dt * math.sqrt(sf)))}
     return {"at": {"rho": wc["rho"], "failed_gyros": wc["failed_gyros"]}, "terms": terms,
-            "ignored": ["scale_factor", "misalignment", "temperature"]
-            + ([] if dec.space.g_sensitivity_deg_s_per_g is not None else ["g_sensitivity"]),
+            "ignored_effects": ignored_effects(dec.g, dec.space),
             "source": "fast-path noise terms (gyroarray.design.budget not available)"}
+
+
+def _budget_model(g: GyroNoise, keep):
+    """The model the error budget reads for the kept gyros: the user's own model (every effect,
+    a plugin's included, its per-gyro entries renumbered to the kept gyros) with the
+    condition's correlation in place of the model's; the typical gyro's model for alike gyros."""
+    keep = list(keep)
+    if g.model is None or g.per_gyro is None:
+        return g.noise_model(len(keep), keep)
+    from gyroarray.effects.model import ModelEntry, NoiseModel  # lazy: loads numba
+    from gyroarray.effects.terms import CorrelationTerm  # lazy: with the registry
+    from gyroarray.estimators.noise import model_terms  # lazy: loads numba
+    corr = {eff.name for eff, t in model_terms(g.model, g.n_gyros) if isinstance(t, CorrelationTerm)}
+    own = g.noise_model(len(keep), keep)
+    own_corr = [e for e in own.entries if e.gyro is None]               # the condition's correlation
+    pos = {k + 1: j + 1 for j, k in enumerate(keep)}
+    entries = []
+    for e in g.model.entries:
+        if e.effect in corr:
+            continue
+        if e.gyro is None:
+            entries.append(e)
+        elif e.gyro in pos:
+            entries.append(ModelEntry(e.effect, pos[e.gyro], dict(e.params), dict(e.sigma)))
+    model = NoiseModel(tuple(entries) + tuple(own_corr), description=g.model.description)
+    model.check(len(keep))
+    return model
 
 
 def _strip(case: dict) -> dict:
     return {k: v for k, v in case.items() if not k.startswith("_")}
+
+
+def _predicted_at(rho: float, dec: _Decider) -> dict:
+    """Where a design's ``predicted``, ``rms_3axis_deg_s`` and ``rho`` are: the intact array at
+    the true ρ where its objective is worst over the range (weights for the design ρ)."""
+    return {"rho": float(rho), "failed_gyros": [],
+            "what": (f"the intact array at the true ρ = {rho:.4g} where its {dec.objective} objective is "
+                     f"worst over ρ in [{dec.lo:g}, {dec.hi:g}] (the estimator built for the design ρ); "
+                     "the worst case over failures is `worst_case`")}
 
 
 def _decision_dict(dec: _Decider, c: _Cand, rhos_shown) -> dict:
@@ -1643,7 +2150,9 @@ def _decision_dict(dec: _Decider, c: _Cand, rhos_shown) -> dict:
     d: dict[str, Any] = {
         "scheme": c.scheme, "n": c.n, "alpha_deg": float(np.degrees(c.alpha_rad)),
         "estimator": c.est, "bandwidth_hz": c.bw, "rho": r_int,
-        "rms_3axis_deg_s": intact["rms_3axis_deg_s"], "predicted": pred, "gdop": gd_rho,
+        "rms_3axis_deg_s": intact["rms_3axis_deg_s"], "predicted": pred,
+        "predicted_at": _predicted_at(r_int, dec),
+        "gdop": gd_rho,
         **gs, "worst_gdop_after_failures": wg, "fault_tolerance": json.loads(json.dumps(ft)),
         "axes": [[float(v) for v in row] for row in Hm],
         "mounting_signs": [int(s) for s in c.signs],
@@ -1653,7 +2162,10 @@ def _decision_dict(dec: _Decider, c: _Cand, rhos_shown) -> dict:
         "worst_case": _strip(wc), "typical": {**_strip(typ), "failed_gyros": []},
         "worst_rms_3axis_deg_s": wc["rms_3axis_deg_s"],
     }
-    if c.rho_d is None:
+    if c.rho_d is None and not dec.ranged and c.est in RHO_WEIGHTED:
+        d["design_rho_note"] = (f"{c.est} is built for the model's own correlation matrices (no ρ range "
+                                "given)")
+    elif c.rho_d is None:
         d["design_rho_note"] = (f"{c.est} is built without ρ (its weights do not use the correlation); "
                                 f"typical case at ρ = {rho_typ:g}")
     if c.est in RHO_WEIGHTED and dec.hi > dec.lo:
@@ -1756,6 +2268,25 @@ def decide(g: GyroNoise, space: DesignSpace, rho_lo: float, rho_hi: float, *,
     cands.sort(key=lambda t: t[0].J)
     refined = [_refine(dec, c, a, bandwidth=i < REFINE_TOP) for i, (c, a) in enumerate(cands)]
     designs = _rank_decision([_decision_dict(dec, c, rhos_shown) for c in refined], objective, None)
+    # the screening is approximate for the array KF: the top designs, then the recommendation
+    # and the runner-up until both are exact, are re-scored with the estimator as built
+    for d in designs[:EXACT_TOP]:
+        rescore_exact(d, dec)
+    while True:
+        designs = _rank_decision(designs, objective, None)
+        rec = designs[0]
+        other = [d for d in designs[1:] if (d["scheme"], d["n"]) != (rec["scheme"], rec["n"])]
+        todo = [d for d in [rec] + other[:1] if "scored" not in d]
+        if not todo:
+            break
+        for d in todo:
+            rescore_exact(d, dec)
+    for d in designs:
+        if "scored" not in d:
+            d["scored"] = ("exact (the screening's channel model is this estimator)"
+                           if screening_is_exact(d["estimator"], g) else
+                           f"screening only (below the first {EXACT_TOP}): the single-input filter on "
+                           "the fixed-weight least-squares channel")
     top = designs if space.mdb_max is not None else designs[:DETAIL_TOP]
     for d in top:
         _add_details(d, dec)
@@ -1766,11 +2297,21 @@ def decide(g: GyroNoise, space: DesignSpace, rho_lo: float, rho_hi: float, *,
         if space.failures:
             d["mdb_deg_s"] = None
         d["error_budget"] = None
+    if g.per_gyro is not None:
+        notes.append(f"the model's {g.n_gyros} gyros keep their own noise (gyro k at position k); the "
+                     f"search is over the layouts with N = {g.n_gyros} (--alike: one typical gyro, any N)")
+        if {"kf_array", "kf_single"} & set(space.estimators):
+            notes.append("kf_array and kf_single on gyros with unequal noise are screened as the single-input "
+                         "filter on the fixed-weight least-squares channel, designed for the typical "
+                         f"gyro's q_b/r (each gyro's own filter differs); the first {EXACT_TOP} designs, the "
+                         "recommendation and the runner-up are re-scored exactly")
     if "kf_array" in space.estimators and (space.failures or any(
             np.any(np.asarray(d["mounting_signs"]) < 0) for d in designs if d["estimator"] == "kf_array")):
-        notes.append("kf_array after a failed gyro or with reversed gyros is scored as the single-input "
+        notes.append("kf_array after a failed gyro or with reversed gyros is screened as the single-input "
                      "KF on the fixed-weight GLS channel (exact on an intact symmetric cone, where the "
-                     "array KF decouples)")
+                     f"array KF decouples); the first {EXACT_TOP} designs, the recommendation and the "
+                     "runner-up are then re-scored exactly (the filter as built on the gyros left, full "
+                     "predictor) and re-ranked: each design's `scored` says which")
     return (_rank_decision(designs, objective, space.mdb_max) if space.mdb_max is not None
             else designs), notes
 
@@ -1799,15 +2340,36 @@ def _decision_statement(designs: list[dict], space: DesignSpace, lo: float, hi: 
 
 def _mirror_design(rec: dict, g: GyroNoise, space: DesignSpace) -> dict:
     """The recommendation with its mounting mirrored (:func:`gyroarray.design.robust.mirror_pattern`),
-    same estimator, bandwidth and design ρ, scored the same way."""
+    same estimator, bandwidth and design ρ, scored the same way (exactly: :func:`rescore_exact`)."""
     lo, hi = rec["rho_range"]
     dec = _Decider(g, space, lo, hi, rec["objective"])
     alpha, signs = mirror_pattern(rec["scheme"], rec["alpha_deg"], np.asarray(rec["mounting_signs"], float))
     c = _Cand(rec["scheme"], rec["n"], rec["estimator"], signs, math.radians(alpha), rec["bandwidth_hz"],
               rec["design_rho"], math.nan)
     d = _decision_dict(dec, c, None)
+    rescore_exact(d, dec)
     d.pop("_cand", None)
     return d
+
+
+def honest_rms_ci(values, *, gaussian: bool = False) -> dict:
+    """:func:`gyroarray.analysis.replicates.rms_ci` that never claims more than the runs show.
+
+    Each run's mean square is a positive quadratic form of Gaussian noise, so it carries at
+    least one degree of freedom: ν >= n runs. The Satterthwaite ν estimated from the spread
+    of a few runs can be far larger than the truth when the error is dominated by a random
+    walk (a handful of slow modes per run; four runs that happen to agree give a narrow
+    interval around a low draw). The interval returned is the wider of the Satterthwaite one
+    and the ν = n bound (exact for a zero-mean Gaussian; ``gaussian``: that one alone).
+    """
+    a = rms_ci(values, gaussian=True)
+    if gaussian or a["ci_low"] is None:
+        return a
+    b = rms_ci(values)
+    if b["ci_low"] is None:
+        return a
+    return {**a, "ci_low": min(a["ci_low"], b["ci_low"]), "ci_high": max(a["ci_high"], b["ci_high"]),
+            "interval": "the wider of Satterthwaite and nu = n runs (at least one degree of freedom per run)"}
 
 
 def check_decision(designs: list[dict], g: GyroNoise, space: DesignSpace, *, replicates: int = 20,
@@ -1829,7 +2391,7 @@ def check_decision(designs: list[dict], g: GyroNoise, space: DesignSpace, *, rep
         95 % intervals, ``rms_3axis_deg_s``, ``inside_95`` of ``compared``), ``paired`` (the
         recommendation against each other one), ``inside_95``, ``compared``.
     """
-    from gyroarray.analysis.replicates import mean_ci, replicate_rng, rms_ci
+    from gyroarray.analysis.replicates import mean_ci, replicate_rng
     from gyroarray.estimators import get_estimator  # lazy: loads numba
     from gyroarray.sim.effects import simulate_readings  # lazy: loads numba
     rec = designs[0]
@@ -1845,7 +2407,8 @@ def check_decision(designs: list[dict], g: GyroNoise, space: DesignSpace, *, rep
         truth = swing_truth(space.swing, n, dt)
     else:
         truth = np.zeros((n, 3))
-    ranged = g.rho_arw == g.rho_rrw or rec["rho_range"][1] > rec["rho_range"][0]
+    ranged = ((g.rho_arw == g.rho_rrw and g.corr_arw is None and g.corr_rrw is None)
+              or rec["rho_range"][1] > rec["rho_range"][0])
     setups = []
     for role, d in picked:
         wc = d["worst_case"]
@@ -1855,8 +2418,8 @@ def check_decision(designs: list[dict], g: GyroNoise, space: DesignSpace, *, rep
         g_design = g.with_rho(rd) if ranged else g
         g_true = g.with_rho(wc["rho"]) if ranged else g
         est = get_estimator(d["estimator"])(**_estimator_kwargs(d["estimator"], d["bandwidth_hz"], g)).fit(
-            layout, _with_sensor(g_design.noise_model(len(keep)), space, g_sensitivity=False), dt)
-        model = _with_sensor(g_true.noise_model(len(keep)), space, g_sensitivity=False)
+            layout, _with_sensor(g_design.noise_model(len(keep), keep), space, g_sensitivity=False), dt)
+        model = _with_sensor(g_true.noise_model(len(keep), keep), space, g_sensitivity=False)
         setups.append((role, d, layout, model, est))
     per: list[list[np.ndarray]] = [[] for _ in setups]
     for r in range(int(replicates)):
@@ -1875,14 +2438,14 @@ def check_decision(designs: list[dict], g: GyroNoise, space: DesignSpace, *, rep
             axes_out[ax] = {}
             for m, key, conv in ((0, "rms_deg_s", units.rad_s_to_deg_s), (2, "std_deg_s", units.rad_s_to_deg_s),
                                  (3, "mean_deg_s", units.rad_s_to_deg_s), (1, "angle_deg", units.rad_to_deg)):
-                mc = rms_ci(conv(arr[:, m, a]), gaussian=key in ("mean_deg_s", "angle_deg"))
+                mc = honest_rms_ci(conv(arr[:, m, a]), gaussian=key in ("mean_deg_s", "angle_deg"))
                 p = wc["per_axis"][ax][key]
                 ok = None if mc["ci_low"] is None else bool(mc["ci_low"] <= p <= mc["ci_high"])
                 axes_out[ax][key] = {"predicted": p, "monte_carlo": mc, "agrees": ok}
                 if ok is not None:
                     compared += 1
                     inside += ok
-        tot = rms_ci(units.rad_s_to_deg_s(np.sqrt(np.sum(arr[:, 0, :] ** 2, axis=1))))
+        tot = honest_rms_ci(units.rad_s_to_deg_s(np.sqrt(np.sum(arr[:, 0, :] ** 2, axis=1))))
         out_designs.append({"role": role, "label": design_label(d), "mounting": d["mounting"],
                             "scheme": d["scheme"], "n": d["n"], "alpha_deg": d["alpha_deg"],
                             "estimator": d["estimator"], "bandwidth_hz": d["bandwidth_hz"],
@@ -1905,3 +2468,153 @@ def check_decision(designs: list[dict], g: GyroNoise, space: DesignSpace, *, rep
             "compared": sum(d["compared"] for d in out_designs),
             "what": "each design at its own worst case (true rho, failed gyros), estimator built for "
                     "its design rho on the remaining gyros"}
+
+
+# -- the array as built: each estimator's fused accuracy on a recorded array's axes -------------
+
+#: The estimators predicted on an array as built (those registered; ``svo`` when it is).
+AS_BUILT_ESTIMATORS = ("gls", "ols", "kf_array", "svo", "naive")
+#: Longest impulse response kept for a filter's Allan variance [samples].
+MAX_IMPULSE = 1 << 16
+
+
+def impulse_response(sys, tol: float = 1e-12, max_len: int = MAX_IMPULSE) -> np.ndarray:
+    """h_j = C Aʲ K (L, 3, N) of a :class:`~gyroarray.estimators.base.LinearSystem`, cut where
+    the slowest mode has decayed below ``tol`` (at most ``max_len`` samples)."""
+    lam = np.asarray(sys.lam)
+    amax = float(np.max(np.abs(lam))) if lam.size else 0.0
+    L = 1 if amax <= 0 else int(min(max_len, max(1, math.ceil(math.log(tol) / math.log(min(amax, 1 - 1e-15))))))
+    cs = sys.C @ sys.S                                                # (3, D)
+    bk = sys.S_inv @ sys.K                                            # (D, N)
+    powers = lam[None, :] ** np.arange(L)[:, None]                   # (L, D)
+    h = np.einsum("ad,ld,dn->lan", cs, powers, bk)
+    return np.real(h)
+
+
+def allan_variance_linear(h: np.ndarray, R: np.ndarray, Q: np.ndarray, m: int) -> np.ndarray:
+    """Allan variance (3,) [rad²/s²] at τ = m·dt of the output of impulse response h (L, 3, N)
+    driven by white noise of per-sample covariance R and a random walk of per-sample increment
+    covariance Q (stationary: the start-up left out).
+
+    With g the Allan filter (−1/m on m samples, then +1/m on m samples), c = g ∗ h:
+    σ² = ½ Σ_j c_jᵀ R c_j (white) + ½ Σ_j d_jᵀ Q d_j (walk), d_j = Σ_{i<=j} c_i."""
+    L = h.shape[0]
+    g = np.concatenate([np.full(m, -1.0 / m), np.full(m, 1.0 / m)])
+    P = 1 << int(math.ceil(math.log2(2 * m + L)))
+    c = np.fft.irfft(np.fft.rfft(g, P)[:, None, None] * np.fft.rfft(h, P, axis=0), P, axis=0)[:2 * m + L - 1]
+    d = np.cumsum(c, axis=0)
+    white = 0.5 * np.einsum("jan,nk,jak->a", c, R, c)
+    walk = 0.5 * np.einsum("jan,nk,jak->a", d, Q, d)
+    return white + walk
+
+
+def _gm_avar(sigma2: np.ndarray, tau_c: np.ndarray, tau: float) -> np.ndarray:
+    """Allan variance of first-order Gauss–Markov noise of variance σ² and correlation time τc
+    at τ: σ²(τc/τ)²(2τ/τc − 3 + 4e^{−τ/τc} − e^{−2τ/τc}) [unit of σ²] (0 where τc = 0)."""
+    out = np.zeros_like(np.asarray(sigma2, dtype=float))
+    ok = (tau_c > 0) & (sigma2 > 0)
+    x = tau / tau_c[ok]
+    out[ok] = sigma2[ok] * (2.0 * x - 3.0 + 4.0 * np.exp(-x) - np.exp(-2.0 * x)) / x ** 2
+    return out
+
+
+def as_built_taus(dt_s: float, duration_s: float) -> list[float]:
+    """Octave averaging times from dt to a ninth of the record (at most 2¹⁵ samples) [s]."""
+    out, m = [], 1
+    while m * dt_s <= duration_s / 9.0 and m <= 1 << 15:
+        out.append(m * dt_s)
+        m *= 2
+    return out or [dt_s]
+
+
+def predict_as_built(model, axes: np.ndarray, dt_s: float, *, n_samples: int,
+                     estimators=None, taus=None, settle_s: float = 2.0, source: str = "model") -> dict:
+    """Each estimator's fused accuracy on an array as built (``design --layout-from``).
+
+    Parameters
+    ----------
+    model : NoiseModel
+        The array's model: per-gyro parameters (every effect, a plugin's included) and, where it
+        has one, the ``[array]`` table's white and walk correlation (:func:`per_gyro_noise`).
+    axes : ndarray (N, 3)
+        The mounted unit axes of the measurement [-].
+    dt_s : float
+        Sample period [s].
+    n_samples : int
+        Run length for the RMS and the angle error (the record's length).
+    estimators : sequence of str, optional
+        Default :data:`AS_BUILT_ESTIMATORS` that are registered.
+    taus : sequence of float, optional
+        Averaging times [s] (default :func:`as_built_taus`).
+
+    Returns
+    -------
+    dict
+        ``estimators``: per estimator per axis ``adev_deg_s`` (list of {tau_s, adev_deg_s}),
+        ``arw_deg_rt_h`` (the long-τ white level through the DC gain), ``rms_deg_s`` and
+        ``angle_deg`` (the full predictor over the run); ``taus_s``, ``n_gyros``, ``noise``
+        (the per-gyro levels used), ``ignored_effects``, ``notes``.
+
+    Notes
+    -----
+    The Allan deviation is exact for the white and walk parts through the estimator's impulse
+    response (:func:`allan_variance_linear`, covariances R and Q of the whole array); flicker
+    and Gauss–Markov terms pass the DC gain T₀ (independent between gyros): flicker at its
+    floor (2 ln 2/π)·Σ T₀² B², Gauss–Markov by its closed form.
+    """
+    from gyroarray.estimators import available, get_estimator  # lazy: loads numba
+    H = np.asarray(axes, dtype=float)
+    N = H.shape[0]
+    nm = model_gyro_count(model)
+    if nm > N:
+        raise InputError(f"the model names gyro {nm}, but the measurement has {N} gyros", file=source)
+    typical = GyroNoise._typical(model, source)
+    g = per_gyro_noise(model, typical, source) if nm else typical
+    if nm and nm < N:
+        raise InputError(f"the model names {nm} gyros, the measurement has {N}: give every gyro its "
+                         "parameters (gyroarray fit --out on this record)", file=source)
+    full = _budget_model(g, range(N))
+    noise = noise_sources(full, N, dt_s)
+    names = [e for e in (estimators or AS_BUILT_ESTIMATORS) if e in set(available())]
+    taus = list(taus) if taus is not None else as_built_taus(dt_s, n_samples * dt_s)
+    notes = []
+    out: dict[str, Any] = {}
+    flicker_floor = 2.0 * math.log(2.0) / math.pi
+    rrw_on = bool(np.any(np.diag(noise.Qb) > 0))
+    for name in names:
+        kw: dict = {}
+        if name == "kf_array" and not rrw_on:
+            kw["bias_states"] = False
+        try:
+            est = get_estimator(name)(**kw).fit(Layout(H), full, dt_s)
+        except InputError as err:
+            notes.append(f"{name}: not predicted ({err})")
+            continue
+        sys = est.linear_system()
+        csys = cascade(sys, noise.sensor)
+        h = impulse_response(csys)
+        if h.shape[0] >= MAX_IMPULSE:
+            notes.append(f"{name}: its impulse response was cut at {MAX_IMPULSE} samples (a slow mode)")
+        t0 = h.sum(axis=0)                                            # (3, N) DC gain
+        p = predict_system(sys, noise, H, n=int(n_samples), settle_s=settle_s, name=name)
+        per_axis = {}
+        adev = []
+        for tau in taus:
+            m = max(1, int(round(tau / dt_s)))
+            av = allan_variance_linear(h, noise.R, noise.Qb, m)
+            av = av + flicker_floor * (t0 ** 2) @ (noise.bi_rad_s ** 2)
+            av = av + (t0 ** 2) @ _gm_avar(noise.gm_sigma_rad_s ** 2, np.asarray(noise.gm_tau_s, float), m * dt_s)
+            adev.append((m * dt_s, np.sqrt(np.maximum(av, 0.0))))
+        arw = units.arw_rad_rt_s_to_deg_rt_h(np.sqrt(np.maximum(np.einsum("ai,ij,aj->a", t0, noise.R, t0) * dt_s, 0)))
+        for a, ax in enumerate(AXES):
+            per_axis[ax] = {"adev_deg_s": [{"tau_s": float(t), "adev_deg_s": float(units.rad_s_to_deg_s(v[a]))}
+                                           for t, v in adev],
+                            "arw_deg_rt_h": float(arw[a]),
+                            "rms_deg_s": p.axes[ax]["rms_deg_s"], "angle_deg": p.axes[ax]["angle_deg"]}
+        out[name] = per_axis
+    return {"estimators": out, "taus_s": [float(t) for t in taus], "n_gyros": N,
+            "horizon_s": float(n_samples * dt_s), "dt_s": float(dt_s),
+            "noise": g.to_json_dict(), "per_gyro": g.per_gyro is not None,
+            "correlation": ("the model's [array] / correlation matrices" if g.corr_arw is not None
+                            or g.corr_rrw is not None else f"rho = {g.rho_arw:g}"),
+            "ignored_effects": list(noise.ignored), "notes": notes}

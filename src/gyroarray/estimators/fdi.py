@@ -89,6 +89,7 @@ from scipy import linalg, optimize, special, stats
 from gyroarray.effects.faults import scan as ff
 from gyroarray.core.errors import InputError
 from gyroarray.core.layout import Layout
+from gyroarray.core.measurement import true_runs
 from gyroarray.core.units import rad_s_to_deg_s
 
 from gyroarray.estimators.base import Estimator, readonly, check_readings, register
@@ -97,7 +98,8 @@ from gyroarray.estimators.noise import ArrayNoise, array_noise
 
 __all__ = ["FaultDetector", "ParityDesign", "Alarm", "FdiResult", "parity_matrix",
            "design_parity", "minimum_detectable", "minimum_detectable_step", "isolability",
-           "estimate_noise", "far_range_per_h", "parity_is_zero", "KIND_UNITS",
+           "estimate_noise", "noise_spread", "band_ratio", "model_noise", "far_range_per_h", "parity_is_zero",
+           "KIND_UNITS",
            "MIN_RECORD_SAMPLES", "MAX_WINDOW_SAMPLES"]
 
 #: Unit of ``Alarm.size`` per kind (JSON ``size_unit``).
@@ -122,6 +124,18 @@ MIN_RECORD_SAMPLES = VARIANCE_MIN_BLOCK + 1
 
 #: Fewest samples the noise estimate fits on (two octaves, m = 1 and 2, of >= 8 means each).
 MIN_NOISE_SAMPLES = 16
+
+#: Length of the chunks of the still parts the per-gyro levels and their spread are read on [s].
+NOISE_CHUNK_S = 10.0
+
+#: Fewest samples of such a chunk.
+MIN_CHUNK_SAMPLES = 64
+
+#: A gyro's level changes between chunks count as real when Cochran's Q has a p-value below this.
+SPREAD_P = 1e-3
+
+#: κ = exp(SPREAD_Z·τ), τ the between-chunk standard deviation of a gyro's ln variance [-].
+SPREAD_Z = 3.0
 
 #: Longest test window [samples], whatever the windows in seconds and the sample rate: the
 #: thresholds are calibrated on signature weights of that length (memory ∝ window × N), so
@@ -214,6 +228,10 @@ class ParityDesign:
         Per family: list of (group, L, weights …) the scan evaluates.
     gls : ndarray, shape (3, n_a)
         GLS weights of the active gyros.
+    var_band : ndarray, shape (2, n_a) or None
+        Lowest and highest variance ratio along each gyro's ``var_dir`` that
+        is still no fault (the gyros' own level changes, :func:`noise_spread`);
+        None: exactly 1 (the noise levels are known).
     """
 
     gyros: tuple
@@ -231,6 +249,7 @@ class ParityDesign:
     far_per_h: dict
     gls: np.ndarray
     energies: dict = field(default_factory=dict)
+    var_band: np.ndarray | None = None
 
     @property
     def m(self) -> int:
@@ -248,7 +267,10 @@ class ParityDesign:
         return (self.gyros == other.gyros and self.groups == other.groups
                 and self.scales == other.scales and self.thresholds == other.thresholds
                 and self.far_per_h == other.far_per_h
-                and all(np.array_equal(getattr(self, k), getattr(other, k)) for k in arrays))
+                and all(np.array_equal(getattr(self, k), getattr(other, k)) for k in arrays)
+                and ((self.var_band is None and other.var_band is None)
+                     or (self.var_band is not None and other.var_band is not None
+                         and np.array_equal(self.var_band, other.var_band))))
 
     __hash__ = None  # type: ignore[assignment]
 
@@ -340,7 +362,8 @@ def far_range_per_h(dt_s: float) -> tuple[float, float]:
 
 def design_parity(H: np.ndarray, noise: ArrayNoise, dt_s: float, gyros=None, *,
                   far_per_h: float = 0.01, bias_memory_s: float = ff.DEFAULT_BIAS_MEMORY_S,
-                  drift_window_s: float = 600.0, variance_window_s: float = 40.0) -> ParityDesign:
+                  drift_window_s: float = 600.0, variance_window_s: float = 40.0,
+                  variance_tolerance=None) -> ParityDesign:
     """Parity, trackers, windows and thresholds for a set of active gyros.
 
     Parameters
@@ -358,6 +381,11 @@ def design_parity(H: np.ndarray, noise: ArrayNoise, dt_s: float, gyros=None, *,
     bias_memory_s, drift_window_s, variance_window_s : float
         Longest tracker time constant, drift window and variance block [s].
         Every window is also at most :data:`MAX_WINDOW_SAMPLES` samples.
+    variance_tolerance : array_like, shape (N,), optional
+        Per gyro (whole array), the factor κ ≥ 1 by which its white variance
+        may change without a fault (:func:`noise_spread`); the variance test
+        of a direction then fires only beyond the band its gyros' κ allow
+        (``ParityDesign.var_band``). Default: 1 (levels known exactly).
 
     Returns
     -------
@@ -382,6 +410,14 @@ def design_parity(H: np.ndarray, noise: ArrayNoise, dt_s: float, gyros=None, *,
     vn = np.linalg.norm(vd, axis=0)
     var_dir = vd / np.where(vn > 0, vn, 1.0)
     share = _white_share(P, R, var_dir, K, S)
+    band = None
+    if variance_tolerance is not None:
+        kap = np.broadcast_to(np.asarray(variance_tolerance, dtype=float), (H.shape[0],))[list(idx)]
+        if np.any(kap > 1.0):
+            share_all = _white_shares(P, R, var_dir, K, S)
+            hi = 1.0 + share_all @ (kap - 1.0)
+            lo = np.maximum(1.0 - share_all @ (1.0 - 1.0 / kap), 1e-6)
+            band = np.vstack([lo, hi])
     drift_n = min(drift_window_s / dt_s, MAX_WINDOW_SAMPLES)     # windows in samples, bounded
     var_n = min(variance_window_s / dt_s, MAX_WINDOW_SAMPLES)
     scales = {
@@ -392,7 +428,7 @@ def design_parity(H: np.ndarray, noise: ArrayNoise, dt_s: float, gyros=None, *,
     G, _ = gls_weights(Ha, R)
     design = ParityDesign(gyros=idx, V=V, P=P, q=q, K=K, S=S, coef=coef, groups=groups,
                           var_dir=var_dir, white_share=share, scales=scales, thresholds={},
-                          far_per_h={}, gls=G)
+                          far_per_h={}, gls=G, var_band=band)
     _calibrate(design, far_per_h, dt_s)
     return design
 
@@ -412,6 +448,43 @@ def _white_share(P, R, d, K, S) -> np.ndarray:
         v = d[:, j] * P[:, j]
         out[j] = sig2[j] * float(np.sum(np.outer(v, v) * kern))
     return out
+
+
+def _white_shares(P, R, d, K, S) -> np.ndarray:
+    """Share of Var(dⱼᵀε) that gyro k's own white noise makes (as if uncorrelated): (n_a, n_a).
+
+    Gyro k's white noise enters p as σₖ² cₖcₖᵀ; the tracker passes white
+    noise to the innovation with weights [1, −K, −Ka, −Ka², ...], so the
+    covariance it adds to ε is cₖcₖᵀ ∘ (1 + KᵢKₗ/(1 − aᵢaₗ))/√(SᵢSₗ) σₖ²;
+    row j is that seen along dⱼ (the diagonal: a gyro's own share).
+    """
+    a = 1.0 - K
+    kern = (1.0 + np.outer(K, K) / (1.0 - np.outer(a, a))) / np.sqrt(np.outer(S, S))
+    sig2 = np.diag(R)
+    v = d.T[:, None, :] * P.T[None, :, :]                     # (j, k, m): dⱼ ∘ cₖ
+    return sig2[None, :] * np.einsum("jki,il,jkl->jk", v, kern, v)
+
+
+def band_ratio(lam: np.ndarray, band: np.ndarray | None) -> np.ndarray:
+    """A variance ratio relative to the no-fault band: 1 inside, λ/hi above, λ/lo below.
+
+    Parameters
+    ----------
+    lam : ndarray, shape (..., G)
+        Block variance ratios along G directions [-].
+    band : ndarray, shape (2, G) or None
+        Lowest and highest ratio that is no fault (None: the point 1).
+
+    Returns
+    -------
+    ndarray
+        The ratio the χ² GLR is evaluated at (composite null: the nearest
+        point of the band).
+    """
+    if band is None:
+        return lam
+    lo, hi = band
+    return np.where(lam > hi, lam / hi, np.where(lam < lo, lam / lo, 1.0))
 
 
 def _calibrate(design: ParityDesign, far_per_h: float, dt_s: float) -> None:
@@ -557,6 +630,9 @@ class FaultDetector(Estimator):
         Longest drift window [s] (default 600).
     variance_window_s : float
         Longest variance block [s] (default 40).
+    variance_tolerance : array_like, shape (N,), optional
+        Per gyro, the factor κ ≥ 1 its white variance may change by without a
+        fault (:func:`noise_spread`; default None: the levels are known).
 
     Attributes
     ----------
@@ -582,8 +658,9 @@ class FaultDetector(Estimator):
 
     def __init__(self, *, far_per_h=0.01, isolation_odds=99.0, isolation_s=120.0,
                  bias_memory_s=ff.DEFAULT_BIAS_MEMORY_S, drift_window_s=600.0,
-                 variance_window_s=40.0):
+                 variance_window_s=40.0, variance_tolerance=None):
         self.far_per_h = far_per_h
+        self.variance_tolerance = variance_tolerance
         self.isolation_odds = isolation_odds
         self.isolation_s = isolation_s
         self.bias_memory_s = bias_memory_s
@@ -629,6 +706,19 @@ class FaultDetector(Estimator):
         self.weights_ = readonly(G)
         self.covariance_ = readonly(cov)
 
+    def _tolerance(self, n: int):
+        kap = getattr(self, "variance_tolerance", None)
+        if kap is None:
+            return None
+        try:
+            kap = np.broadcast_to(np.asarray(kap, dtype=float), (n,))
+        except ValueError:
+            raise InputError(f"variance_tolerance must be one number or one per gyro ({n}), got "
+                             f"{getattr(self, 'variance_tolerance')!r}") from None
+        if not np.all(np.isfinite(kap) & (kap >= 1.0)):
+            raise InputError("variance_tolerance must be finite and >= 1 (a factor on the variance)")
+        return kap
+
     def _design(self, H, noise, dt_s, gyros, hp=None) -> ParityDesign:
         hp = hp or self._hyper()
         key = tuple(gyros)
@@ -637,7 +727,8 @@ class FaultDetector(Estimator):
             cache[key] = design_parity(H, noise, dt_s, gyros, far_per_h=hp["far_per_h"],
                                        bias_memory_s=hp["bias_memory_s"],
                                        drift_window_s=hp["drift_window_s"],
-                                       variance_window_s=hp["variance_window_s"])
+                                       variance_window_s=hp["variance_window_s"],
+                                       variance_tolerance=self._tolerance(H.shape[0]))
         return cache[key]
 
     # -- estimate (fault-tolerant GLS) ------------------------------------------
@@ -666,7 +757,8 @@ class FaultDetector(Estimator):
         return out
 
     # -- detect ------------------------------------------------------------------
-    def detect(self, readings_rad_s, time_s=None, *, trace: bool = False) -> FdiResult:
+    def detect(self, readings_rad_s, time_s=None, *, trace: bool = False,
+               innovation_scale=None, exclude=()) -> FdiResult:
         """Find, isolate and exclude faulty gyros in a record.
 
         Parameters
@@ -677,6 +769,16 @@ class FaultDetector(Estimator):
             Sample times [s] (default k·dt).
         trace : bool
             Keep the statistics of the first scan for a plot.
+        innovation_scale : array_like, shape (n,), optional
+            Known excess spread (>= 1) of the parity at each sample, e.g. the
+            part of a moving array's parity that follows the motion beyond its
+            fitted scale-factor and axis errors
+            (:meth:`gyroarray.chain.parity.ParityCalibration.excess_scale`): the
+            innovations are divided by it, so the tests keep their false-alarm
+            rate where the array disagrees with itself for a known reason, at
+            the cost of sensitivity there. Default: 1.
+        exclude : sequence of int
+            0-based gyros left out from the start (already excluded).
 
         Returns
         -------
@@ -689,14 +791,22 @@ class FaultDetector(Estimator):
         if t.shape != (n,):
             raise InputError(f"time_s has shape {t.shape}, the readings {n} samples")
         hp = self._hyper()
-        active = list(range(self.n_gyros_))
+        scale = None
+        if innovation_scale is not None:
+            scale = np.asarray(innovation_scale, dtype=float)
+            if scale.shape != (n,) or not np.all(np.isfinite(scale) & (scale >= 1.0)):
+                raise InputError(f"innovation_scale must be {n} finite numbers >= 1, got shape "
+                                 f"{scale.shape}")
+        active = [g for g in range(self.n_gyros_) if g not in {int(e) for e in exclude}]
         k0, tr = 0, {}
         alarms: list[Alarm] = []
         excl: list[tuple[int, int]] = []
         notes: list[str] = []
-        while n - k0 >= 3:
+        while n - k0 >= 3 and len(active) >= 4:
             design = self._design(self.H_, self.noise_, self.dt_s_, tuple(active), hp)
             eps = ff.rw_innovations(z[k0:, active] @ design.P.T, design.q)
+            if scale is not None:
+                eps = eps / scale[k0:, None]
             hit = _scan(eps, design, trace=trace and not alarms)
             if trace and not alarms:
                 tr = {"ratio": hit.pop("trace"), "start": k0}
@@ -715,6 +825,52 @@ class FaultDetector(Estimator):
                 notes.append(f"{len(active)} gyros left after excluding gyro {gyro + 1}: no "
                              "parity to watch any more")
                 break
+        return FdiResult(alarms=tuple(alarms), exclusions=tuple(excl), time_s=t, trace=tr,
+                         notes=tuple(notes))
+
+
+    def detect_parts(self, readings_rad_s, parts, time_s=None, *, trace: bool = False) -> FdiResult:
+        """:meth:`detect` on stretches of a record only (e.g. its still parts), in order.
+
+        A gyro excluded in one stretch stays excluded in the next; each stretch
+        starts its bias trackers afresh. Samples outside the stretches are not
+        tested (their trace is 0).
+
+        Parameters
+        ----------
+        readings_rad_s : array_like, shape (n, N)
+        parts : sequence of (int, int)
+            [start, stop) sample ranges, increasing, each of at least
+            :data:`MIN_RECORD_SAMPLES` samples (shorter ones are skipped).
+        time_s : array_like, shape (n,), optional
+        trace : bool
+
+        Returns
+        -------
+        FdiResult
+            Alarms and exclusions (sample indices of the whole record) of all stretches.
+        """
+        self._check_fitted()
+        z = check_readings(readings_rad_s, self.n_gyros_)
+        n = z.shape[0]
+        t = np.arange(n) * self.dt_s_ if time_s is None else np.asarray(time_s, dtype=float)
+        alarms, excl, notes = [], [], []
+        ratio = {f: np.zeros(n) for f in _FAMILIES} if trace else None
+        out_of = set()
+        for a, b in parts:
+            if b - a < MIN_RECORD_SAMPLES or self.n_gyros_ - len(out_of) < 4:
+                continue
+            r = self.detect(z[a:b], t[a:b], trace=trace, exclude=sorted(out_of))
+            alarms += list(r.alarms)
+            excl += [(k + a, g) for k, g in r.exclusions]
+            out_of.update(g for _, g in r.exclusions)
+            notes += list(r.notes)
+            if trace and r.trace:
+                s0 = a + int(r.trace["start"])
+                for f in _FAMILIES:
+                    v = r.trace["ratio"][f]
+                    ratio[f][s0:s0 + v.size] = v
+        tr = {"ratio": ratio, "start": 0} if trace else {}
         return FdiResult(alarms=tuple(alarms), exclusions=tuple(excl), time_s=t, trace=tr,
                          notes=tuple(notes))
 
@@ -776,7 +932,8 @@ def _scan(eps: np.ndarray, design: ParityDesign, *, trace: bool = False) -> dict
             break
         blocks = (x[1:1 + nb * L] ** 2).reshape(nb, L, -1).sum(axis=1)   # skip ε₀
         lam = np.maximum(blocks / L, 1e-300)
-        G = 0.5 * L * (lam - 1.0 - np.log(lam))
+        lam_b = band_ratio(lam, None if design.var_band is None else design.var_band[:, reps])
+        G = 0.5 * L * (lam_b - 1.0 - np.log(lam_b))
         if trace:                                              # known at each block's end
             r = np.repeat(G.max(axis=1) / g, L)[:max(n - L, 0)]
             np.maximum(ratio["variance"][L:L + r.size], r, out=ratio["variance"][L:L + r.size])
@@ -829,6 +986,7 @@ def alarm_events(eps: np.ndarray, design: ParityDesign) -> dict:
         if nb < 1:
             break
         lam = np.maximum((x[1:1 + nb * L] ** 2).reshape(nb, L, -1).sum(axis=1) / L, 1e-300)
+        lam = band_ratio(lam, None if design.var_band is None else design.var_band[:, reps])
         over = (0.5 * L * (lam - 1.0 - np.log(lam)) > g).any(axis=1)
         spans += [(a, b, "variance") for a, b in _clumps((np.flatnonzero(over) + 1) * L, L)]
     per = {f: sum(1 for s in spans if s[2] == f) for f in _FAMILIES}
@@ -1111,6 +1269,8 @@ def minimum_detectable(layout: Layout, noise, far_per_h: float = 0.01, p_md: flo
 def _variance_detectable(d: ParityDesign, p: int, p_md: float, dt_s: float) -> tuple[float, float]:
     g = d.thresholds["variance"]
     w = d.white_share[p]
+    lo_band, hi_band = (1.0, 1.0) if d.var_band is None else (float(d.var_band[0, p]),
+                                                              float(d.var_band[1, p]))
     L = d.scales["variance"][-1]
     lo, hi = ff._glr_roots(g, L)
 
@@ -1118,9 +1278,10 @@ def _variance_detectable(d: ParityDesign, p: int, p_md: float, dt_s: float) -> t
         return stats.chi2.sf(L * hi / lam, L) + stats.chi2.cdf(L * lo / lam, L)
     lam = optimize.brentq(lambda x: power(x) - (1.0 - p_md), 1.0 + 1e-9, 1e6) \
         if power(1e6) > 1.0 - p_md else math.inf
+    lam = lam * hi_band                                       # beyond the no-fault band
     ratio = math.sqrt(1.0 + (lam - 1.0) / w) if math.isfinite(lam) else math.inf
     stuck = math.inf
-    lam0 = max(1.0 - w, 1e-12)                                # ratio 0 at rest
+    lam0 = min(max(1.0 - w, 1e-12) / lo_band, 1.0)            # ratio 0 at rest
     for Lb in d.scales["variance"]:
         lo_b, hi_b = ff._glr_roots(g, Lb)
         pw = stats.chi2.sf(Lb * hi_b / lam0, Lb) + stats.chi2.cdf(Lb * lo_b / lam0, Lb)
@@ -1247,7 +1408,94 @@ def _white_and_walk(e: np.ndarray) -> tuple[float, float]:
             sol[1] + 2.0 * math.sqrt(max(cov[1, 1], 0.0)))
 
 
-def estimate_noise(readings_rad_s, layout: Layout, dt_s: float, ref_rad_s=None) -> tuple[ArrayNoise, list]:
+def _reference_chunks(still: np.ndarray, dt_s: float, *, everything: bool = False) -> list:
+    """The chunks [a, b) the per-gyro levels are read on: the first still runs up to a quarter of
+    the still samples (at least :data:`REFERENCE_SPAN_S`; all of them with ``everything``), each
+    cut into pieces of about :data:`NOISE_CHUNK_S` (at least :data:`MIN_CHUNK_SAMPLES`)."""
+    still = np.asarray(still, dtype=bool)
+    runs = [(a, b) for a, b in true_runs(still) if b - a >= MIN_CHUNK_SAMPLES]
+    total = sum(b - a for a, b in runs)
+    want = total if everything else max(total // 4, int(round(REFERENCE_SPAN_S / dt_s)))
+    chunk = max(MIN_CHUNK_SAMPLES, int(round(NOISE_CHUNK_S / dt_s)))
+    out, got = [], 0
+    for a, b in runs:
+        if got >= want:
+            break
+        b = min(b, a + (want - got)) if want - got >= MIN_CHUNK_SAMPLES else b
+        k = max(1, (b - a) // chunk)
+        edges = np.linspace(a, b, k + 1).round().astype(int)
+        out += [(int(x), int(y)) for x, y in zip(edges[:-1], edges[1:])]
+        got += b - a
+    return out
+
+
+def _chunk_variances(z: np.ndarray, chunks: list) -> tuple[np.ndarray, np.ndarray]:
+    """Per chunk and gyro the sample variance about the chunk's mean (C, N), and each chunk's size."""
+    v = np.array([np.var(z[a:b], axis=0, ddof=1) for a, b in chunks])
+    return v, np.array([b - a for a, b in chunks], dtype=float)
+
+
+def noise_spread(readings_rad_s, dt_s: float, still) -> tuple[np.ndarray, list]:
+    """How much each gyro's white level changes along a record without a fault: κ per gyro.
+
+    Parameters
+    ----------
+    readings_rad_s : ndarray, shape (n, N)
+        Gyro outputs [rad/s].
+    dt_s : float
+        Sample step [s].
+    still : ndarray of bool, shape (n,)
+        Still samples (:func:`~gyroarray.analysis.motion.still_mask`).
+
+    Returns
+    -------
+    kappa : ndarray, shape (N,)
+        Factor κ ≥ 1 on the variance that is no fault (``variance_tolerance``
+        of :class:`FaultDetector`).
+    notes : list of str
+
+    Notes
+    -----
+    Every still part, cut into chunks of about :data:`NOISE_CHUNK_S`, gives
+    per chunk a sample variance v_c (n_c samples): all of them, since a
+    level that changes with the orientation shows only over several
+    orientations (the robust spread below is not moved by a minority of
+    chunks, e.g. those a noise fault covers). Without a level change ln v_c
+    scatters with variance 2/(n_c − 1) only; Cochran's Q = Σ (ln v_c −
+    mean)²/(2/(n_c − 1)) is then χ² with C − 1 dof. Where its p-value is
+    below :data:`SPREAD_P` the between-chunk scatter τ² (robust variance of
+    ln v_c minus the sampling part) is real: real MEMS gyros' noise changes
+    with the orientation and the vibration lines they pick up (the MIMU4444
+    record: a factor 0.4–1.5 between orientations on two of its gyros), and
+    κ = exp(:data:`SPREAD_Z`·τ). Elsewhere κ = 1 (a simulated white record
+    keeps the exact χ² test).
+    """
+    z = np.asarray(readings_rad_s, dtype=float)
+    N = z.shape[1]
+    chunks = _reference_chunks(still, dt_s, everything=True)
+    kap = np.ones(N)
+    if len(chunks) < 3:
+        return kap, []
+    v, nc = _chunk_variances(z, chunks)
+    if not np.all(v > 0):
+        return kap, []
+    lv = np.log(v)
+    samp = 2.0 / (nc - 1.0)
+    Q = np.sum((lv - lv.mean(axis=0)) ** 2 / samp[:, None], axis=0)
+    pv = stats.chi2.sf(Q, len(chunks) - 1)
+    tau2 = (1.4826 * np.median(np.abs(lv - np.median(lv, axis=0)), axis=0)) ** 2 - float(np.mean(samp))
+    real = (pv < SPREAD_P) & (tau2 > 0)
+    kap[real] = np.exp(SPREAD_Z * np.sqrt(tau2[real]))
+    notes = []
+    if real.any():
+        notes.append("white level changes between still parts beyond chance (no fault: the "
+                     "variance test allows it): " + ", ".join(
+                         f"gyro {j + 1} x{kap[j]:.2f}" for j in np.flatnonzero(real)))
+    return kap, notes
+
+
+def estimate_noise(readings_rad_s, layout: Layout, dt_s: float, ref_rad_s=None, *,
+                   still=None) -> tuple[ArrayNoise, list]:
     """ARW and RRW of each gyro estimated robustly from the record (no model given).
 
     Parameters
@@ -1256,8 +1504,13 @@ def estimate_noise(readings_rad_s, layout: Layout, dt_s: float, ref_rad_s=None) 
     layout : Layout
     dt_s : float
     ref_rad_s : ndarray, shape (n, 3), optional
-        Reference rate: per-gyro residuals z − H·ref; without it the parity
-        of unweighted V (identical, uncorrelated gyros assumed).
+        Reference rate: per-gyro residuals z − H·ref.
+    still : ndarray of bool, shape (n,), optional
+        Without a reference: the still samples
+        (:func:`~gyroarray.analysis.motion.still_mask`). Each gyro's own
+        levels are then read on them (below); without it (or with too few
+        still samples) the parity of unweighted V is used (identical,
+        uncorrelated gyros assumed).
 
     Returns
     -------
@@ -1276,6 +1529,17 @@ def estimate_noise(readings_rad_s, layout: Layout, dt_s: float, ref_rad_s=None) 
     twice its standard error, so an estimated model errs toward fewer false
     alarms. Correlations are taken as 0.
 
+    With ``still`` and no reference, each gyro's output on a still platform
+    is its own noise (plus a constant rate): the first still runs up to a
+    quarter of the still samples (at least ``REFERENCE_SPAN_S``) are cut into
+    chunks of about :data:`NOISE_CHUNK_S`; a gyro's white variance per sample
+    is the median over the chunks of its variance about the chunk's mean
+    (robust to a chunk a fault or a knock touches; quantization noise
+    included, as it is in the outputs), raised by twice the median's
+    standard error; its RRW is fitted as above on the still runs (each
+    minus its mean). Gyros differ (a real board: ARW 0.7–4 deg/√h), so their
+    parity is weighted by their own levels (heterogeneous R).
+
     Raises
     ------
     InputError
@@ -1286,6 +1550,10 @@ def estimate_noise(readings_rad_s, layout: Layout, dt_s: float, ref_rad_s=None) 
     z = np.asarray(readings_rad_s, dtype=float)
     H = layout.H
     notes = []
+    if ref_rad_s is None and still is not None:
+        chunks = _reference_chunks(still, dt_s)
+        if sum(b - a for a, b in chunks) >= MIN_NOISE_SAMPLES * 4 and chunks:
+            return _still_noise(z, H, dt_s, chunks)
     if ref_rad_s is not None:
         e = z - np.asarray(ref_rad_s, dtype=float) @ H.T
         notes.append("noise estimated from the record (gyro output − H·ref, robust MAD of "
@@ -1320,3 +1588,90 @@ def estimate_noise(readings_rad_s, layout: Layout, dt_s: float, ref_rad_s=None) 
     rrw = np.sqrt(q / dt_s)                                    # K = √(q/dt)
     eye = np.eye(H.shape[0])
     return ArrayNoise(arw, rrw, eye, eye), notes
+
+
+def _still_noise(z: np.ndarray, H: np.ndarray, dt_s: float, chunks: list) -> tuple[ArrayNoise, list]:
+    """Each gyro's white and walk levels from still chunks (:func:`estimate_noise` with ``still``)."""
+    v, nc = _chunk_variances(z, chunks)
+    C = len(chunks)
+    with np.errstate(divide="ignore"):
+        lv = np.log(np.maximum(v, 1e-300))
+    level = np.exp(np.median(lv, axis=0))
+    if C >= 3:
+        se = 1.2533 * 1.4826 * np.median(np.abs(lv - np.median(lv, axis=0)), axis=0) / math.sqrt(C)
+    else:
+        se = np.zeros(z.shape[1])
+    se = np.maximum(se, math.sqrt(2.0 / max(float(nc.sum()) - 1.0, 1.0)))
+    s2 = level * np.exp(2.0 * se)
+    span = sum(b - a for a, b in chunks) * dt_s
+    top = max(float(np.max(np.abs(z[a:b]))) for a, b in chunks)
+    if not (np.all(np.isfinite(s2)) and float(np.median(level)) > (PARITY_ZERO_RTOL * top) ** 2):
+        raise InputError(f"the still parts the noise is estimated on ({span:.4g} s) have no noise: "
+                         "the gyros' outputs there are constant (to rounding), so no threshold can be set from "
+                         "them; give --model MODEL.toml with the gyros' ARW and RRW")
+    notes = [f"noise estimated from the record's still parts (the first {span:.4g} s of them, "
+             f"{C} chunk(s)): each gyro's own white level (median chunk variance) and RRW, no "
+             "correlation; heterogeneous gyros are weighted by their own levels"]
+    floor = 1e-6 * float(np.median(s2))
+    if np.any(s2 <= floor):
+        bad = np.flatnonzero(s2 <= floor) + 1
+        notes.append(f"gyro(s) {', '.join(map(str, bad))} barely move in the reference span: their "
+                     "white noise is floored at 1e-6 of the median")
+        s2 = np.maximum(s2, floor)
+    runs = []
+    for a, b in chunks:                                        # chunks of one run joined again
+        if runs and runs[-1][1] == a:
+            runs[-1] = (runs[-1][0], b)
+        else:
+            runs.append((a, b))
+    x = np.concatenate([z[a:b] - z[a:b].mean(axis=0) for a, b in runs])
+    q = np.array([_white_and_walk(x[:, j])[1] if x.shape[0] >= MIN_NOISE_SAMPLES else 0.0
+                  for j in range(z.shape[1])])
+    eye = np.eye(H.shape[0])
+    ratio = np.sqrt(s2 / np.median(s2))
+    if ratio.max() / ratio.min() > 1.5:
+        notes.append("white level per gyro over the median: " + ", ".join(
+            f"{j + 1}: {r:.2f}" for j, r in enumerate(ratio)))
+    return ArrayNoise(np.sqrt(s2 * dt_s), np.sqrt(q / dt_s), eye, eye), notes
+
+
+def model_noise(model, n_gyros: int) -> ArrayNoise:
+    """A noise model's white and walk levels with its ``[array]`` table's correlations.
+
+    Parameters
+    ----------
+    model : NoiseModel
+        Per-gyro ``arw``/``rrw`` entries (and ``correlation``); an optional
+        ``[array]`` table (:class:`gyroarray.effects.model.ArrayNoise`) whose
+        ``white_correlation`` and ``walk_correlation`` replace the rows and
+        columns of the gyros it names (0 between a named and an unnamed gyro).
+    n_gyros : int
+
+    Returns
+    -------
+    ArrayNoise
+        What the detector designs with: a heterogeneous, correlated R.
+
+    Raises
+    ------
+    InputError
+        The combined correlation is not positive definite.
+    """
+    base = array_noise(model, n_gyros)
+    table = getattr(model, "array", None)
+    if table is None or not tuple(getattr(table, "gyros", ()) or ()):
+        return base
+    named = [g - 1 for g in table.gyros if 1 <= g <= n_gyros]
+    rows = [i for i, g in enumerate(table.gyros) if 1 <= g <= n_gyros]
+    corr = {}
+    for key, default in (("white_correlation", base.corr_arw), ("walk_correlation", base.corr_rrw)):
+        mat = getattr(table, key, None)
+        out = np.array(default, dtype=float, copy=True)
+        if mat is not None and named:
+            m = np.asarray(mat, dtype=float)
+            out[named, :] = 0.0
+            out[:, named] = 0.0
+            out[np.ix_(named, named)] = m[np.ix_(rows, rows)]
+        corr[key] = out
+    return ArrayNoise(base.arw_rad_rt_s, base.rrw_rad_s_rt_s, corr["white_correlation"],
+                      corr["walk_correlation"], base.ignored_effects)

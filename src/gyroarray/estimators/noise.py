@@ -10,7 +10,11 @@ correlation modifier to the two N×N correlation matrices, exactly as the
 simulator draws them (``src/gyroarray/sim/effects.py``): white noise has
 σ = N/√dt per sample, random-walk increments σ = K√dt, and the correlation
 gives Σ_ij = C_ij σ_i σ_j for both (several white or walk terms on one gyro
-add their variances).
+add their variances). A model with an ``[array]`` table (a fitted array's
+cross-covariance, :class:`~gyroarray.effects.model.ArrayNoise`) gives C from
+its ``white_correlation`` and ``walk_correlation`` for the gyros it names
+(:func:`table_correlation`) instead of the one-ρ ``correlation`` entry; the
+per-gyro levels stay the effect entries'.
 
 The other effects of the model (no white, walk or correlation term) are kept
 in :attr:`ArrayNoise.ignored_effects` so a report can say what the
@@ -25,7 +29,7 @@ import numpy as np
 
 from gyroarray.core.errors import InputError
 
-__all__ = ["ArrayNoise", "array_noise", "model_terms", "per_gyro", "baseline_effect"]
+__all__ = ["ArrayNoise", "array_noise", "model_terms", "per_gyro", "baseline_effect", "table_correlation"]
 
 
 def _frozen(a, shape) -> np.ndarray:
@@ -224,6 +228,11 @@ def array_noise(noise_model, n_gyros: int, require_arw: bool = True) -> ArrayNoi
         estimators weight the gyros by their white noise), a white level of zero,
         or a white correlation whose covariance is singular (a common mode
         with ρ = 1: every gyro sees the same white noise).
+
+    Notes
+    -----
+    With an ``[array]`` table, its correlation matrices replace the ``correlation``
+    entry's between the gyros the table names (:func:`table_correlation`).
     """
     from gyroarray.effects.model import NoiseModel  # lazy: loads gyroarray.effects and its plugins
     if not isinstance(noise_model, NoiseModel):
@@ -255,6 +264,50 @@ def array_noise(noise_model, n_gyros: int, require_arw: bool = True) -> ArrayNoi
     if corr:
         c_arw = np.eye(n_gyros) if corr[0].white is None else corr[0].white
         c_rrw = np.eye(n_gyros) if corr[0].walk is None else corr[0].walk
+    table = getattr(noise_model, "array", None)          # the [array] table of a fitted array
+    if table is not None:
+        every = list(range(1, n_gyros + 1))
+        c_arw = table_correlation(table, "white_correlation", every, c_arw)
+        c_rrw = table_correlation(table, "walk_correlation", every, c_rrw)
     used = (WhiteTerm, WalkTerm, CorrelationTerm)
     ignored = tuple(sorted(eff.name for eff, t in terms if not isinstance(t, used)))
     return ArrayNoise(arw, rrw, c_arw, c_rrw, ignored, zero_arw_ok=not require_arw)
+
+
+def table_correlation(table, key: str, gyros, default: np.ndarray) -> np.ndarray:
+    """A correlation matrix of a model's ``[array]`` table for the gyros ``gyros``.
+
+    Parameters
+    ----------
+    table : ArrayNoise (the ``[array]`` table, :class:`gyroarray.effects.model.ArrayNoise`)
+        The table.
+    key : {"white_correlation", "walk_correlation"}
+        Which matrix.
+    gyros : sequence of int
+        1-based gyros of the rows and columns wanted, in order.
+    default : ndarray, shape (len(gyros), len(gyros))
+        The correlation without the table [-].
+
+    Returns
+    -------
+    ndarray, shape (len(gyros), len(gyros))
+        The table's entries between the gyros it names, 0 between a named and an unnamed
+        gyro, ``default`` between unnamed ones; ``default`` when the table has no such
+        matrix or names none of ``gyros`` [-].
+    """
+    mat = getattr(table, key, None)
+    names = list(getattr(table, "gyros", ()) or ())
+    if mat is None or not names:
+        return default
+    mat = np.asarray(mat, dtype=float)
+    where = {g: i for i, g in enumerate(names)}
+    gyros = list(gyros)
+    named = [j for j, k in enumerate(gyros) if k in where]
+    if not named:
+        return default
+    out = np.array(default, dtype=float, copy=True)
+    out[named, :] = 0.0
+    out[:, named] = 0.0
+    rows = [where[gyros[j]] for j in named]
+    out[np.ix_(named, named)] = mat[np.ix_(rows, rows)]
+    return out

@@ -22,16 +22,19 @@ from __future__ import annotations
 
 import json
 import math
+import re
 
 import numpy as np
 
 from gyroarray.analysis.adev_curves import AdevFigure
 from gyroarray.core import units
-from gyroarray.design.evidence import GdopRobustnessRow
+from gyroarray.design.evidence import (GdopRobustnessRow, fused_single_ratio, mirror_comparison,
+                                       record_rho, what_would_change)
 from gyroarray.design.recommend import design_label as _recommend_label
-from gyroarray.reports.design_plots import agg_figure, figure_png, accuracy_vs_n_fig
+from gyroarray.reports.design_plots import agg_figure, array_fig, figure_png, accuracy_vs_n_fig
 
-__all__ = ["write_sections", "decision_summary", "adev_section"]
+__all__ = ["write_sections", "decision_summary", "decision_block", "adev_section",
+           "equivalence_rows", "pct"]
 
 AXES = ("x", "y", "z")
 
@@ -58,6 +61,271 @@ def _check_of(res: dict, d: dict) -> dict | None:
     return None
 
 
+OBJECTIVES = {"rate": "the 3-axis RMS of the rate error about the truth over the horizon",
+              "angle": "the 3-axis angle error at the horizon"}
+
+
+def pct(x: float) -> str:
+    """A relative difference in per cent with enough digits that it never rounds onto a bound
+    (0.9987 % reads 0.9987 %, not 1 %)."""
+    v = 100.0 * float(x)
+    if abs(v) < 1e-7:
+        return "0 %"
+    return f"{v:.4g} %" if abs(v) < 10 else f"{v:.3g} %"
+
+
+def _failed(gyros) -> str:
+    g = list(gyros or [])
+    if not g:
+        return "no gyro failed"
+    return ("gyro " if len(g) == 1 else "gyros ") + ", ".join(map(str, g)) + " failed"
+
+
+def _rho_range(res: dict, d: dict) -> tuple[float, float] | None:
+    rr = d.get("rho_range")
+    if rr is None:
+        v = res["assumptions"].get("rho", {}).get("value")
+        rr = v if isinstance(v, list) else ([v, v] if v is not None else None)
+    return None if rr is None else (float(min(rr)), float(max(rr)))
+
+
+def _case_text(c: dict, horizon: float) -> str:
+    return (f"at ρ = {c['rho']:.4g} with {_failed(c.get('failed_gyros'))}: "
+            f"{c['rms_3axis_deg_s']:.4g} deg/s 3-axis RMS about the truth, "
+            f"{c['angle_deg']:.4g} deg angle error at the horizon ({horizon:g} s)")
+
+
+def _mirror_sentence(res: dict, r: dict) -> str | None:
+    """Why the recommendation is mounted as it is (α > 90° or reversed gyros), with numbers."""
+    signs = r.get("mounting_signs") or []
+    reversed_ = [k + 1 for k, v in enumerate(signs) if v < 0]
+    if not (r["alpha_deg"] > 90.0 or reversed_):
+        return None
+    rr = _rho_range(res, r) or (0.0, 0.0)
+    if r["alpha_deg"] > 90.0 and r["scheme"] == 2 and not reversed_:
+        what = (f"α = {r['alpha_deg']:.2f}° > 90° is the {180.0 - r['alpha_deg']:.2f}° cone with its "
+                "axial gyro mounted reversed (on −z)")
+    elif r["alpha_deg"] > 90.0:
+        what = (f"α = {r['alpha_deg']:.2f}° > 90° with gyro(s) {', '.join(map(str, reversed_))} reversed "
+                "is a mounting sense of the cone")
+    else:
+        what = f"gyro(s) {', '.join(map(str, reversed_))} mounted reversed"
+    why = ("with correlated noise, reversing gyros relative to the others moves the common-mode "
+           "noise into the parity space, where the estimator cancels it (at ρ = 0 both mountings "
+           "are identical)")
+    mirror = next((c for c in (res.get("check") or {}).get("designs", [])
+                   if c.get("role") == "mounting mirror"), None)
+    wc = r.get("worst_case")
+    if mirror is not None and wc:
+        m = mirror["rms_3axis_deg_s"]["predicted"]
+        return (f"Why this mounting: {what}; {why}: worst case {wc['rms_3axis_deg_s']:.4g} deg/s "
+                f"3-axis RMS (ρ = {wc['rho']:.4g}, {_failed(wc['failed_gyros'])}) against "
+                f"{m:.4g} deg/s for its mounting mirror (ρ = {mirror['at']['rho']:.4g}, "
+                f"{_failed(mirror['at']['failed_gyros'])}), {m / wc['rms_3axis_deg_s']:.3g}× "
+                "(the predictor; the simulation check below tests both).")
+    fails = res["assumptions"].get("failures", {}).get("value", 0) or 0
+    mc = mirror_comparison(r, rr, int(fails))
+    if mc is None:
+        return f"Why this mounting: {what}; {why}."
+    a, b = mc["design"], mc["mirror"]
+    mir = (f"α = {mc['mirror_alpha_deg']:.2f}°" + (", gyro(s) " + ", ".join(map(str, mc["mirror_reversed"]))
+                                                   + " reversed" if mc["mirror_reversed"] else ", every gyro +"))
+    return (f"Why this mounting: {what}; {why}: worst white-noise GDOP of the least squares with "
+            f"weights fixed for ρ = {mc['design_rho']:.4g}, over ρ in [{rr[0]:g}, {rr[1]:g}] and "
+            f"{fails} failed gyro(s), {a['gdop']:.4g} (ρ = {a['rho']:.4g}, {_failed(a['failed_gyros'])}) "
+            f"against {b['gdop']:.4g} for its mirror ({mir}; ρ = {b['rho']:.4g}, "
+            f"{_failed(b['failed_gyros'])}), {mc['ratio']:.3g}×.")
+
+
+def decision_block(doc, res: dict):
+    """The decision block: the array as mounted, the design ρ, the objective, the worst
+    case and its accuracy, the runner-up's worst case, what would change the choice, the
+    error budget and, when the array has α > 90° or reversed gyros, why.
+
+    Designs without a ``worst_case`` (results of older versions) get the summary only.
+    """
+    r = res["recommended"]
+    a = res["assumptions"]
+    horizon = a["horizon_s"]["value"]
+    wc = r.get("worst_case")
+    if wc is None:
+        for s in decision_summary(res):
+            doc.p(s, "decision")
+        return
+    doc.p(f"Build: {_label(r)}.", "decision")
+    if r.get("mounting"):
+        doc.p(f"Mounting: {r['mounting']}.", "decision")
+    rr = _rho_range(res, r)
+    obj = res.get("objective") or r.get("objective") or "rate"
+    src = a.get("design_rho", {}).get("source") if isinstance(a.get("design_rho"), dict) else None
+    if r.get("design_rho") is None:
+        doc.p(f"Estimator: {r['estimator']}; its weights do not depend on ρ.", "decision")
+    else:
+        how = ("given by the user" if src == "user" else
+               "chosen min-max over the ρ range" if rr and rr[1] > rr[0] else "the stated ρ")
+        doc.p(f"Estimator: {r['estimator']}, its weights built once for the design ρ = "
+              f"{r['design_rho']:.4g} ({how}) and kept at every true ρ; after an isolated failure "
+              "it drops that gyro and recomputes its weights for the same design ρ.", "decision")
+    rng = f" over ρ in [{rr[0]:g}, {rr[1]:g}]" if rr else ""
+    fails = a.get("failures", {}).get("value", 0) or 0
+    doc.p(f"Objective: {obj} ({OBJECTIVES.get(obj, obj)}), ranked by its worst case{rng} × every set "
+          f"of {fails} failed gyro(s).", "decision")
+    s = f"Worst case: {_case_text(wc, horizon)}."
+    if r.get("typical"):
+        s += f" Typical (design ρ, every gyro): {_case_text(r['typical'], horizon)}."
+    if r.get("oracle_worst_case"):
+        o = r["oracle_worst_case"]
+        s += (f" Oracle (weights that know the true ρ, not buildable; for comparison only): worst "
+              f"{o['rms_3axis_deg_s']:.4g} deg/s, {o['angle_deg']:.4g} deg.")
+    doc.p(s, "decision")
+    if r.get("mdb_deg_s") is not None:
+        doc.p(f"Minimum detectable bias {r['mdb_deg_s']:.3g} deg/s (worst gyro: "
+              f"{r.get('mdb_worst_gyro', '?')}; false alarms {r.get('far_per_h', '?')} per hour, "
+              f"missed detection {r.get('p_md', '?')}).", "decision")
+    if res.get("tie") or r.get("tie"):
+        doc.p("Tie: " + (res.get("tie") or r.get("tie")) + ".", "note")
+    ru = res.get("runner_up")
+    if ru and ru.get("worst_case"):
+        doc.p(f"Runner-up: {_label(ru)}" + (f" ({ru['mounting']})" if ru.get("mounting") else "")
+              + f"; its worst case {_case_text(ru['worst_case'], horizon)}.", "decision")
+    why = _mirror_sentence(res, r)
+    if why:
+        doc.p(why, "decision")
+    chk = next((c for c in (res.get("check") or {}).get("designs", []) if c.get("role") == "recommended"),
+               None)
+    if chk:
+        t = chk["rms_3axis_deg_s"]["monte_carlo"]
+        doc.p(f"{res['check']['replicates']} paired simulated runs at the worst case give a 3-axis "
+              f"RMS of {_ci_text(t)} deg/s against the predicted {chk['rms_3axis_deg_s']['predicted']:.4g}.",
+              "decision")
+    doc.p("What would change the choice:")
+    doc.ul(res.get("what_changes_the_choice") or what_would_change(res) or ["nothing computed"])
+    _budget(doc, r, horizon)
+    if r.get("axes"):
+        doc.figure("array_mounted", figure_png(array_fig(r["axes"], _label(r), r.get("mounting_signs"))),
+                   f"The recommended array as mounted: {r.get('mounting', _label(r))} "
+                   "(arrows: each gyro's sensitive axis, signs included; red: reversed)")
+
+
+def _budget(doc, r: dict, horizon: float):
+    b = r.get("error_budget")
+    if not b or not b.get("terms"):
+        return
+    at = b.get("at", {})
+    big_r, big_a = b.get("largest_rms_term"), b.get("largest_angle_term")
+    rows = []
+    for name, t in b["terms"].items():
+        mark = " / ".join(w for w, k in (("largest RMS", big_r), ("largest angle", big_a)) if k == name)
+        rows.append([name, t.get("rms_deg_s"), t.get("angle_deg"), mark])
+    if b.get("tracking"):
+        rows.append(["tracking (lag on the motion)", b["tracking"].get("rms_deg_s"),
+                     b["tracking"].get("angle_deg"), ""])
+    if b.get("total"):
+        rows.append(["total", b["total"].get("rms_deg_s"), b["total"].get("angle_deg"), ""])
+    doc.p(f"Error budget of the recommendation at ρ = {at.get('rho', math.nan):.4g}, "
+          f"{_failed(at.get('failed_gyros'))} (its worst case); angle at the horizon "
+          f"{b.get('horizon_s', horizon):g} s:")
+    doc.table(["term", "RMS [deg/s]", "angle @T [deg]", "largest"], rows)
+    ign = b.get("ignored_effects")
+    if ign is not None:
+        doc.p("Left out of the predictor: " + (", ".join(map(str, ign)) if ign else
+                                               "nothing listed") + ".", "note")
+
+
+#: Each reason recommend() may give for an equivalence group, and when it applies.
+_REASONS = (
+    ("kf_array and kf_single are the same filter", "kf_pair"),
+    ("the Kalman filters are the low-passed least squares", "kf_ls"),
+    ("gls, ols and naive have the same weights", "ls_pair"),
+    ("both schemes reach the isotropic optimum", "schemes"),
+)
+
+
+def _geometry(d: dict) -> tuple:
+    return (d["scheme"], d["n"], round(d["alpha_deg"], 6), tuple(d.get("mounting_signs") or ()))
+
+
+def _applies(kind: str, members: list[dict]) -> bool:
+    by_geo: dict = {}
+    for m in members:
+        by_geo.setdefault(_geometry(m), set()).add(m["estimator"])
+    if kind == "kf_pair":
+        return any({"kf_array", "kf_single"} <= e for e in by_geo.values())
+    if kind == "kf_ls":
+        return any(e & {"kf_array", "kf_single"} and e & {"gls", "ols"} for e in by_geo.values())
+    if kind == "ls_pair":
+        return any(len(e & {"gls", "ols", "naive"}) > 1 for e in by_geo.values())
+    if kind == "schemes":
+        ns = {m["n"] for m in members}
+        gd = [m.get("gdop") for m in members]
+        return (len({m["scheme"] for m in members}) > 1 and len(ns) == 1 and None not in gd
+                and max(gd) - min(gd) <= 1e-6 * max(gd))
+    return False
+
+
+def _objective(d: dict, obj: str) -> float | None:
+    wc = d.get("worst_case")
+    if wc:
+        return wc.get("angle_deg" if obj == "angle" else "rms_3axis_deg_s")
+    return d.get("rms_3axis_deg_s")
+
+
+def equivalence_rows(res: dict) -> list[dict]:
+    """The equivalence groups of a result as the report prints them.
+
+    Per group: ``members`` (ranks), ``spread`` (largest / smallest worst-case objective − 1,
+    recomputed from the members), ``reason`` (only the reasons of the result that apply to
+    these members, and the spread with enough digits), ``dropped`` (reasons given that do
+    not apply).
+    """
+    by_rank = {d.get("rank"): d for d in res.get("designs", [])}
+    obj = res.get("objective") or res["recommended"].get("objective") or "rate"
+    out = []
+    for g in res.get("equivalent", []):
+        members = [by_rank[k] for k in g["members"] if k in by_rank]
+        vals = [v for v in (_objective(m, obj) for m in members) if v is not None]
+        spread = (max(vals) / min(vals) - 1.0) if vals and min(vals) > 0 else abs(g.get("spread", 0.0))
+        text = re.sub(r"^(identical by theory( \(spread [^)]*\))?|within 1 %): ", "", g.get("reason", ""))
+        bits, dropped = [], []
+        for bit in (b.strip() for b in text.split("; ") if b.strip()):
+            kind = next((k for key, k in _REASONS if bit.startswith(key)), None)
+            if bit.startswith("the predictions differ by"):
+                continue                      # restated below with enough digits
+            if kind is None or _applies(kind, members):
+                bits.append(bit)
+            else:
+                dropped.append(bit)
+        unit = "deg at the horizon" if obj == "angle" else "deg/s"
+        if not vals:
+            bits.append("no worst case given")
+        elif spread < 1e-9:
+            bits.append(f"their worst cases are equal to rounding ({min(vals):.6g} {unit})")
+        else:
+            bits.append(f"their worst cases differ by {pct(spread)} ({min(vals):.6g} to {max(vals):.6g} {unit})")
+        out.append({"members": list(g["members"]), "spread": spread, "kind": g.get("kind"),
+                    "reason": "; ".join(bits), "dropped": dropped})
+    return out
+
+
+def _worst_case_summary(res: dict) -> list[str]:
+    r = res["recommended"]
+    horizon = res["assumptions"]["horizon_s"]["value"]
+    obj = res.get("objective") or r.get("objective") or "rate"
+    rd = r.get("design_rho")
+    lines = [f"Build: {_label(r)}" + (f"; {r['mounting']}" if r.get("mounting") else "") + "."]
+    lines.append(f"Ranked on the {obj} objective by the worst case"
+                 + (f"; estimator weights built for the design ρ = {rd:.4g}" if rd is not None else "")
+                 + f"; worst case {_case_text(r['worst_case'], horizon)}.")
+    ru = res.get("runner_up")
+    if ru and ru.get("worst_case"):
+        lines.append(f"Runner-up: {_label(ru)}; worst case {_case_text(ru['worst_case'], horizon)}.")
+    if res.get("tracking_limit"):
+        lines.append("Tracking: " + res["tracking_limit"]["statement"] + ".")
+    if res.get("g_sensitivity"):
+        lines.append(res["g_sensitivity"]["statement"] + ".")
+    return lines
+
+
 def decision_summary(res: dict) -> list[str]:
     """The decision in a few sentences (also printed by ``make demo``)."""
     r = res["recommended"]
@@ -65,6 +333,8 @@ def decision_summary(res: dict) -> list[str]:
     a = res["assumptions"]
     horizon = a["horizon_s"]["value"]
     chk = _check_of(res, r)
+    if r.get("worst_case") is not None:
+        return _worst_case_summary(res)
     lines = [f"Build: {_label(r)}."]
     rms = " / ".join(f"{p[x]['rms_deg_s']:.3g}" for x in AXES)
     ang = " / ".join(f"{p[x]['angle_deg_at_horizon']:.3g}" for x in AXES)
@@ -106,20 +376,26 @@ def write_sections(doc, res: dict, top: int = 15,
     result's ρ range (drawn with the ρ robustness; none: that table is left out).
     """
     doc.h2("Decision")
-    for s in decision_summary(res):
-        doc.p(s, "decision")
-    eq = [g for g in res["equivalent"] if res["recommended"].get("rank") in g["members"]]
+    decision_block(doc, res)
+    eqs = equivalence_rows(res)
+    eq = [g for g in eqs if res["recommended"].get("rank") in g["members"]]
     if eq:
-        doc.p("Equal to the recommendation within 1 % (ranks "
-              + ", ".join(map(str, eq[0]["members"])) + "): " + eq[0]["reason"] + ".", "note")
-    doc.p("What would change the choice:")
-    doc.ul(res.get("what_changes_the_choice", []))
+        doc.p("Close to the recommendation (ranks " + ", ".join(map(str, eq[0]["members"])) + "): "
+              + eq[0]["reason"] + ".", "note")
+    if res["recommended"].get("worst_case") is None:
+        doc.p("What would change the choice:")
+        doc.ul(res.get("what_changes_the_choice", []))
     _assumptions(doc, res["assumptions"])
     doc.h2("Evidence: the prediction and the simulation")
     _check(doc, res)
     doc.h3("Every design, best first (analytic predictor)")
-    doc.p("3-axis RMS about the truth = √(Σ over x, y, z of the mean square over the horizon): "
-          "the ranking objective. Per axis (mean over x, y, z shown): RMS about the truth and "
+    worst = any(d.get("worst_case") for d in res["designs"][:top])
+    doc.p("3-axis RMS about the truth = √(Σ over x, y, z of the mean square over the horizon). "
+          + ("The worst-case columns are each design's worst over the ρ range × failures, at the ρ "
+             "and with the failed gyros they name (the ranking objective); the other columns are "
+             "the intact design at the ρ of the column 'at ρ'. " if worst else
+             "Every column is at the ρ of the column 'at ρ'. ")
+          + "Per axis (mean over x, y, z shown): RMS about the truth and "
           "the run's own 1σ (mean removed) are separate columns, as is the RMS of the run's mean "
           "error (random-walk drift, paper 002 Eq. 19). Fused ARW/RRW are the long-τ values of "
           "the fused rate (the readings' terms through the estimator's low-frequency gain), not "
@@ -132,21 +408,31 @@ def write_sections(doc, res: dict, top: int = 15,
             v = [p[a].get(key) for a in AXES if p[a].get(key) is not None]
             return float(np.mean(v)) if v else None
         ft = d.get("fault_tolerance", {})
-        rows.append([d["rank"], d["scheme"], d["n"], d["alpha_deg"], d["estimator"],
-                     "none" if d["bandwidth_hz"] is None else d["bandwidth_hz"],
-                     d["rms_3axis_deg_s"], mean("rms_deg_s"), mean("std_deg_s"), mean("mean_deg_s"),
-                     mean("angle_deg_at_horizon"), mean("arw_long_deg_rt_h"),
-                     mean("rrw_long_deg_h_rt_h"), mean("dc_gain"), d.get("gdop"),
-                     ft.get("worst_gdop_after", {}).get("1"), ft.get("worst_gdop_after", {}).get("2")])
-    doc.table(["rank", "scheme", "N", "α [deg]", "estimator", "bandwidth [Hz]",
-               "3-axis RMS [deg/s]", "RMS/axis [deg/s]", "1σ/axis [deg/s]", "mean error RMS [deg/s]",
-               "angle @T [deg]", "fused ARW long-τ [deg/√h]", "fused RRW long-τ [deg/h/√h]",
-               "DC gain [-]", "GDOP", "worst GDOP 1 fail", "worst GDOP 2 fail"], rows)
-    if res["equivalent"]:
-        doc.p("Designs within 1 % of each other (grouped, with the reason):")
-        doc.table(["ranks", "spread [%]", "why"],
-                  [[", ".join(map(str, g["members"])), 100 * g["spread"], g["reason"]]
-                   for g in res["equivalent"][:8]])
+        wc = d.get("worst_case") or {}
+        row = [d["rank"], d["scheme"], d["n"], d["alpha_deg"], _reversed(d), d["estimator"],
+               "none" if d["bandwidth_hz"] is None else d["bandwidth_hz"]]
+        if worst:
+            row += [wc.get("rho"), _failed(wc.get("failed_gyros")) if wc else None,
+                    wc.get("rms_3axis_deg_s"), wc.get("angle_deg")]
+        row += [d.get("rho"), d["rms_3axis_deg_s"], mean("rms_deg_s"), mean("std_deg_s"),
+                mean("mean_deg_s"), mean("angle_deg_at_horizon"), mean("arw_long_deg_rt_h"),
+                mean("rrw_long_deg_h_rt_h"), mean("dc_gain"), d.get("gdop"),
+                ft.get("worst_gdop_after", {}).get("1"), ft.get("worst_gdop_after", {}).get("2")]
+        rows.append(row)
+    doc.table(["rank", "scheme", "N", "α [deg]", "reversed", "estimator", "bandwidth [Hz]"]
+              + (["worst at ρ", "worst: failed", "worst 3-axis RMS [deg/s]", "worst angle @T [deg]"]
+                 if worst else [])
+              + ["at ρ", "3-axis RMS [deg/s]", "RMS/axis [deg/s]", "1σ/axis [deg/s]",
+                 "mean error RMS [deg/s]", "angle @T [deg]", "fused ARW long-τ [deg/√h]",
+                 "fused RRW long-τ [deg/h/√h]", "DC gain [-]", "GDOP (worst over ρ)",
+                 "worst GDOP 1 fail", "worst GDOP 2 fail"], rows)
+    if eqs:
+        doc.p("Designs the search groups (equal by theory, or fewer gyros at the same worst case), "
+              "with only the reasons that apply to the members and how far apart their worst cases "
+              "are (each over the ρ range × failures):")
+        doc.table(["ranks", "worst-case spread [%]", "why"],
+                  [[", ".join(map(str, g["members"])), pct(g["spread"])[:-2], g["reason"]]
+                   for g in eqs[:8]])
     doc.figure("accuracy_vs_n", figure_png(accuracy_vs_n_fig(res)),
                "Predicted 3-axis RMS about the truth vs N (best cone angle and bandwidth per "
                "scheme and estimator); simulated check with its 95 % interval as error bars")
@@ -154,6 +440,11 @@ def write_sections(doc, res: dict, top: int = 15,
     if res.get("per_rho"):
         _rho(doc, res, gdop_rows or [])
     return {"recommended": res["recommended"], "summary": decision_summary(res)}
+
+
+def _reversed(d: dict) -> str:
+    rev = [k + 1 for k, v in enumerate(d.get("mounting_signs") or []) if v < 0]
+    return ", ".join(map(str, rev)) if rev else "none"
 
 
 def _assumptions(doc, a: dict):
@@ -185,8 +476,12 @@ def _check(doc, res: dict):
           f"{c['inside_95']} of {c['compared']} predictions lie inside their interval.")
     rows, flags = [], []
     for d in c["designs"]:
+        at = d.get("at")
+        where = (f"ρ = {at['rho']:.4g}, {_failed(at.get('failed_gyros'))}" if at else
+                 f"ρ = {d.get('rho', math.nan):.4g}")
         for ax in AXES:
-            cells = [d["label"] if ax == "x" else "", ax]
+            cells = [(f"{d.get('role', '')}: " if d.get("role") else "") + d["label"] if ax == "x" else "",
+                     where if ax == "x" else "", ax]
             bad = False
             for key in ("rms_deg_s", "std_deg_s", "mean_deg_s", "angle_deg"):
                 e = d["axes"][ax][key]
@@ -194,7 +489,7 @@ def _check(doc, res: dict):
                 bad |= e["agrees"] is False
             rows.append(cells)
             flags.append(bad)
-    doc.table(["design", "axis", "RMS pred.", "RMS sim. [95 %]", "1σ pred.", "1σ sim.",
+    doc.table(["design", "at (true ρ, failures)", "axis", "RMS pred.", "RMS sim. [95 %]", "1σ pred.", "1σ sim.",
                "mean-error pred.", "mean-error sim.", "angle@T pred. [deg]", "angle@T sim."],
               rows, flags=flags)
     if c.get("paired"):
@@ -210,33 +505,39 @@ def _check(doc, res: dict):
 
 def _fault_tolerance(doc, res: dict):
     doc.h3("Fault tolerance (geometry)")
-    doc.p("Worst-case GDOP over every choice of failed gyros, at each design's cone angle; "
+    doc.p("Worst-case GDOP over every choice of failed gyros, at each design's cone angle and "
+          "mounting, at the ρ of the column 'at ρ' (the design's typical ρ); "
           "'3 axes' says whether every choice keeps a 3-axis rate. Detectable: a single fault "
           "shows in the parity residual (every gyro has a parity signature, N ≥ 4); isolable: no "
           "two gyros share a parity direction. The detection machinery itself is separate.", "note")
     seen, rows = set(), []
     for d in res["designs"]:
-        key = (d["scheme"], d["n"], round(d["alpha_deg"], 2))
+        key = (d["scheme"], d["n"], round(d["alpha_deg"], 2), _reversed(d))
         if key in seen:
             continue
         seen.add(key)
         ft = d.get("fault_tolerance", {})
-        rows.append([d["scheme"], d["n"], d["alpha_deg"], ft.get("gdop"),
+        at = (d.get("typical") or {}).get("rho", d.get("design_rho", d.get("rho")))
+        rows.append([d["scheme"], d["n"], d["alpha_deg"], _reversed(d), at, ft.get("gdop"),
                      ft.get("worst_gdop_after", {}).get("1"), ft.get("three_axes_after", {}).get("1"),
                      ft.get("worst_gdop_after", {}).get("2"), ft.get("three_axes_after", {}).get("2"),
                      ft.get("detectable"), ft.get("isolable"),
                      ft.get("lost_axis_example", {}).get("2") or ""])
     rows.sort(key=lambda r: (r[1], r[0]))
-    doc.table(["scheme", "N", "α [deg]", "GDOP", "worst after 1", "3 axes", "worst after 2",
+    doc.table(["scheme", "N", "α [deg]", "reversed", "at ρ", "GDOP", "worst after 1", "3 axes", "worst after 2",
                "3 axes", "detectable", "isolable", "how an axis is lost (2 failures)"], rows)
 
 
 def _rho(doc, res: dict, gdop_rows: list[GdopRobustnessRow]):
     doc.h3("The correlation ρ is a condition, not a choice")
     rho = res["assumptions"]["rho"]["value"]
+    continuous = res["recommended"].get("worst_case") is not None
     doc.p(f"The gyros' common correlation is not known exactly: the search was run at each ρ in "
-          f"{rho} and the recommendation is the design whose worst predicted 3-axis RMS over "
-          "that range is smallest (min-max).")
+          f"{rho} and the recommendation is the design whose worst "
+          + ("objective over the whole interval (continuously, not only these grid points) × "
+             "failures is smallest (min-max); the tables below are at the grid points named in "
+             "their columns." if continuous else
+             "predicted 3-axis RMS over that range is smallest (min-max)."))
     doc.table(["assumed ρ", "best design at that ρ", "3-axis RMS [deg/s]"],
               [[r, _label(ds[0]), ds[0]["rms_3axis_deg_s"]] for r, ds in res["per_rho"].items() if ds])
     rows = []
@@ -284,17 +585,33 @@ def adev_section(doc, res: dict, a: AdevFigure):
                         alpha=0.2, lw=0)
         ax.loglog(c.taus_s, to(c.adev_rad_s), color=f"C{i}", lw=1.6,
                   label=f"fused {axis} ({a.estimator})")
-    rho = a.rho if a.rho is not None else math.nan
+    rho = a.rho if a.rho is not None else record_rho(d)
     dt = a.dt_s
-    ax.set(title=f"{_label(d)}, ρ = {rho:g}: one {a.record_s:g} s record", xlabel="averaging time τ [s]",
+    ax.set(title=f"{_label(d)}, ρ = {rho:.3g}: one {a.record_s:g} s record", xlabel="averaging time τ [s]",
            ylabel="Allan deviation [deg/h]")
     ax.grid(alpha=0.3, which="both")
     ax.legend(fontsize=8)
-    note = (f"Record length {a.record_s:g} s at {1 / dt:g} Hz (seed {a.seed}), gyro correlation ρ = {rho:g} "
-            "(with ρ > 0 the common part does not average out: the fused curves stay above the "
-            "dashed line); bands: 1σ confidence of "
-            "each point. At τ above the filter's time constants the fused curves meet the dashed "
-            "√(3/N) line when the DC gain is 1; predicted long-τ fused ARW x/y/z "
+    m = res["assumptions"].get("motion", {}).get("value")
+    moving = isinstance(m, dict)               # the record simulates a swing only (evidence.recommended_adev)
+    ratio = fused_single_ratio(a)
+    per = ratio["per_axis"]
+    measured = (f"; measured fused/single ratio at τ ≥ {ratio['min_tau_s']:g} s (median over τ) x/y/z "
+                + " / ".join(f"{per[x]:.3g}" for x in AXES if x in per)
+                + f" against √(3/N) = {ratio['reference']:.3g}") if per else ""
+    if moving:
+        gap = ("The record has the motion of the result on (the swing), so the fused error also holds "
+               "the filter's lag on the swing, which does not average over the gyros: where a fused "
+               "curve stays above the dashed √(3/N) line, that lag (not a correlation) is the gap" + measured
+               + " (without motion, at ρ = 0 and unity DC gain, it falls to √(3/N) at long τ).")
+    else:
+        gap = ("The record is static (no motion): at τ above the filter's time constants the fused "
+               "curves meet the dashed √(3/N) line when the DC gain is 1 and ρ = 0"
+               + (", and stay above it with ρ > 0 (the common part does not average out)" if rho > 0 else "")
+               + measured + ".")
+    note = (f"One simulated record of the recommended array as mounted, {a.record_s:g} s at {1 / dt:g} Hz "
+            f"(seed {a.seed}), gyro correlation of the record ρ = {rho:.4g} (the design ρ its "
+            f"estimator is built for), estimator {a.estimator}; bands: 1σ confidence of each point. "
+            + gap + " Predicted long-τ fused ARW x/y/z "
             + " / ".join(f"{v:.4g}" for v in a.predicted_arw_long_deg_rt_h)
             + " deg/√h.")
     doc.h3("Allan deviation of the recommended design")

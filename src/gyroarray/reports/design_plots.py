@@ -80,7 +80,7 @@ def design_fig():
             line, = ax.plot(alphas_deg, g, label=f"N = {n}")
             opt = optimal_alpha(scheme, n, 0.0)
             ax.plot(rad_to_deg(opt.alpha_rad), opt.gdop, "o", color=line.get_color())
-        ax.set(title=f"Scheme {scheme}: GDOP vs cone angle (ρ = 0)  [Fig. 8{'ab'[col]}]",
+        ax.set(title=f"Scheme {scheme}: GDOP vs α, ρ = 0 [Fig. 8{'ab'[col]}]",
                xlabel="cone angle α [deg]", ylabel="GDOP [-]", ylim=(0.8, 3.5))
         ax.legend(loc="upper center")
         ax.grid(alpha=0.3)
@@ -89,7 +89,7 @@ def design_fig():
     for rho in (-0.18, -0.1, 0.0, 0.2, 0.5):
         g = gdop_vs_alpha(1, 6, alphas, rho)
         ax.plot(alphas_deg, g, label=f"ρ = {rho:g}")
-    ax.set(title="Scheme 1, N = 6: GDOP vs α for several ρ  [Fig. 9]",
+    ax.set(title="Scheme 1, N = 6: GDOP vs α per ρ [Fig. 9]",
            xlabel="cone angle α [deg]", ylabel="GDOP [-]", xlim=(5, 90), ylim=(0.8, 3.0))
     ax.legend()
     ax.grid(alpha=0.3)
@@ -102,7 +102,7 @@ def design_fig():
             layout = Layout.conical(scheme, n, alpha)
             ax.plot(rhos, [gdop(layout, correlation_matrix(n, r)) for r in rhos],
                     label=f"N = {n}, α = {rad_to_deg(alpha):.2f}°")
-        ax.set(title=f"Scheme {scheme}: GDOP vs ρ at the ρ = 0 optimum  [Fig. 10{'ab'[col]}]",
+        ax.set(title=f"Scheme {scheme}: GDOP vs ρ, α of ρ = 0 [Fig. 10{'ab'[col]}]",
                xlabel="ARW correlation ρ [-]", ylabel="GDOP [-]")
         ax.legend()
         ax.grid(alpha=0.3)
@@ -124,13 +124,65 @@ def design_fig():
                 a_plot = np.insert(a_plot, c + 1, np.nan)
                 r_plot = np.insert(r_plot, c + 1, np.nan)
             ax.plot(r_plot, a_plot, style, color=f"C{k}", label=f"scheme {scheme}, N = {n}")
-    ax.set(title="Optimal cone angle vs ρ  [Table 2]" + ("  (breaks: the optimum jumps branch)"
-                                                         if jumps else ""),
+    ax.set(title="Optimal α vs ρ [Table 2]" + (" (gaps: branch jumps)" if jumps else ""),
            xlabel="ARW correlation ρ [-]", ylabel="optimal α [deg]")
     ax.legend(fontsize=7, ncol=2, title="solid: scheme 1, dashed: scheme 2", title_fontsize=7)
     ax.grid(alpha=0.3)
 
     fig.suptitle("gyroarray design analysis: GDOP = sqrt(trace((Hᵀ C⁻¹ H)⁻¹))")
+    for ax in axs.flat:
+        ax.title.set_fontsize(10)
+    return fig
+
+
+def title_overlaps(fig) -> list[tuple[str, str]]:
+    """Pairs of panel titles (and the suptitle) whose drawn boxes intersect (empty: none overlap).
+
+    Draws the figure on its canvas first, so the boxes are those of the laid-out figure.
+    """
+    fig.canvas.draw()
+    r = fig.canvas.get_renderer()
+    texts = [ax.title for ax in fig.axes if ax.get_title()]
+    if fig._suptitle is not None:
+        texts.append(fig._suptitle)
+    boxes = [(t.get_text(), t.get_window_extent(r)) for t in texts]
+    out = []
+    for i in range(len(boxes)):
+        for j in range(i + 1, len(boxes)):
+            if boxes[i][1].overlaps(boxes[j][1]):
+                out.append((boxes[i][0], boxes[j][0]))
+    return out
+
+
+def array_fig(axes, title: str = "", signs=None):
+    """The array as mounted: each gyro's sensitive axis as an arrow from the origin, signs
+    included (a reversed gyro's arrow points the other way, drawn red), numbered 1..N
+    (a matplotlib Figure on an Agg canvas).
+
+    Parameters
+    ----------
+    axes : array_like (N, 3)
+        Unit vectors of the gyros as mounted [-] (``design --recommend``'s ``axes``).
+    title : str
+        The figure's title.
+    signs : array_like (N,), optional
+        ±1 per gyro (``mounting_signs``): −1 drawn red, as mounted reversed.
+    """
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+    a = np.asarray(axes, dtype=float)
+    sg = np.ones(len(a)) if signs is None else np.asarray(signs, dtype=float)
+    fig = Figure(figsize=(5.5, 5.0), layout="constrained")
+    FigureCanvasAgg(fig)
+    ax = fig.add_subplot(projection="3d")
+    for k, v in enumerate(a):
+        rev = sg[k] < 0
+        ax.quiver(0, 0, 0, v[0], v[1], v[2], color="C3" if rev else "C0", arrow_length_ratio=0.12, lw=1.6)
+        ax.text(1.1 * v[0], 1.1 * v[1], 1.1 * v[2], str(k + 1), fontsize=9)
+    ax.set(xlim=(-1, 1), ylim=(-1, 1), zlim=(-1, 1), xlabel="x", ylabel="y", zlabel="z")
+    ax.set_box_aspect((1, 1, 1))
+    if title:
+        ax.set_title(title, fontsize=9)
     return fig
 
 

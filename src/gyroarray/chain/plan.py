@@ -1,0 +1,240 @@
+"""How long to record: the record length at which each noise coefficient reaches a precision.
+
+``gyroarray plan`` answers "how long must I record for ±10 % on K?" with the machinery
+``gyroarray allan`` uses for its confidence intervals: the Allan variance of the model at the
+octave averaging times of a record of length T, the equivalent degrees of freedom of each
+point (:func:`gyroarray.analysis.allan.edf`, Greenhall's algorithm for sampled phase), the
+correlation between the points and the generalised least-squares noise fit
+(:func:`gyroarray.analysis.noise_fit.fit_noise_terms`). Fed the *noise-free* curve of the
+model, that fit returns the model's coefficients exactly and, as their 1σ, the spread the
+same fit would have on records of length T (its z-scores have standard deviations of
+0.94-1.02 on simulated gyros: ``tests/test_allan_fit.py``; ``tests/test_plan.py`` checks the
+prediction against the spread of fits on simulated records).
+
+The half-width of a two-sided interval at confidence c is ``z·σ``, ``z = √2·erfinv(c)``
+(1 at the 68.3 % of ``allan``'s bands). The 1σ falls about as 1/√T, in steps as octaves are
+added; the length is found by iterating ``T ← T·(σ_rel/precision)²`` and keeping the
+shortest length tried that meets the precision.
+
+SI inside (rad/s, s); datasheet units only in :meth:`Plan.to_json_dict`.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import special
+
+from gyroarray.analysis.allan import ONE_SIGMA, AllanResult, averaging_factors, edf
+from gyroarray.analysis.noise_fit import fit_noise_terms, term_basis
+from gyroarray.core import units
+from gyroarray.core.errors import InputError
+
+__all__ = ["PLAN_TERMS", "TERM_NAMES", "MAX_PLAN_S", "predicted_sigma", "plan_record", "Plan",
+           "model_terms"]
+
+#: The coefficients planned for: ARW N [rad/√s], bias instability B [rad/s], RRW K [rad/s/√s].
+PLAN_TERMS = ("n", "b", "k")
+
+#: Datasheet name, unit and SI -> datasheet converter of each planned coefficient.
+TERM_NAMES = {
+    "n": ("arw_deg_rt_h", "deg/√h", units.arw_rad_rt_s_to_deg_rt_h),
+    "b": ("bi_deg_h", "deg/h", units.rad_s_to_deg_h),
+    "k": ("rrw_deg_h_rt_h", "deg/h/√h", units.rrw_rad_s_rt_s_to_deg_h_rt_h),
+}
+
+#: Longest record planned for [s] (ten years); beyond it a precision is reported unreachable.
+MAX_PLAN_S = 10 * 365.25 * 86400.0
+
+#: Fewest samples a planned record has (a few octaves of the Allan variance).
+_MIN_SAMPLES = 64
+
+_ITERATIONS = 24
+
+
+def _z(confidence: float) -> float:
+    if not 0.0 < confidence < 1.0:
+        raise InputError(f"confidence must be in (0, 1), got {confidence!r}")
+    return float(math.sqrt(2.0) * special.erfinv(confidence))
+
+
+def predicted_sigma(coef: dict, rate_hz: float, duration_s: float) -> dict:
+    """The 1σ of each coefficient that the Allan noise fit of one record would have.
+
+    Parameters
+    ----------
+    coef : dict
+        ``{"n": N [rad/√s], "b": B [rad/s], "k": K [rad/s/√s]}``; terms with a zero (or
+        missing) value are neither simulated nor fitted.
+    rate_hz : float
+        Sample rate [Hz].
+    duration_s : float
+        Record length [s].
+
+    Returns
+    -------
+    dict
+        ``term -> σ`` in the unit of the coefficient (None where the fit's information matrix
+        is singular).
+
+    Raises
+    ------
+    InputError
+        No positive coefficient, or a record too short for an Allan variance.
+    """
+    terms = tuple(t for t in PLAN_TERMS if coef.get(t, 0.0) > 0.0)
+    if not terms:
+        raise InputError("give at least one positive noise coefficient (--arw, --bi or --rrw)")
+    dt = 1.0 / float(rate_hz)
+    n = max(int(round(duration_s * rate_hz)), _MIN_SAMPLES)
+    n_phase = n + 1
+    m = averaging_factors(n_phase, dt, "octave", "oadev")
+    taus = m * dt
+    avar = sum(coef[t] ** 2 * term_basis("oadev", t, taus) for t in terms)
+    curve = AllanResult(kind="oadev", tau0_s=dt, n_phase=n_phase, m=m, taus_s=taus,
+                        dev=np.sqrt(avar), n_terms=n_phase - 2 * m)
+    fit = fit_noise_terms(curve, lambda alpha: edf("oadev", n_phase, m, alpha), terms=terms)
+    return {t: fit.coefficient(t)[1] for t in terms}
+
+
+@dataclass(frozen=True)
+class Plan:
+    """Record lengths for a precision on each coefficient.
+
+    Parameters
+    ----------
+    coef : dict
+        The coefficients planned for, SI (``n`` [rad/√s], ``b`` [rad/s], ``k`` [rad/s/√s]).
+    rate_hz : float
+        Sample rate [Hz].
+    precision : float
+        Relative half-width asked for [-] (0.1 = ±10 %).
+    confidence : float
+        Two-sided confidence of the half-width.
+    duration_s : dict
+        ``term -> record length [s]`` reaching the precision (None: not within
+        :data:`MAX_PLAN_S`).
+    at_s : float or None
+        A record length asked about [s] (``--at-h``), or None.
+    at_precision : dict
+        ``term -> relative half-width [-]`` a record of ``at_s`` gives (empty without it).
+    """
+
+    coef: dict
+    rate_hz: float
+    precision: float
+    confidence: float
+    duration_s: dict
+    at_s: float | None
+    at_precision: dict
+
+    def to_json_dict(self) -> dict:
+        """The plan in datasheet units: per coefficient its value, the record length [s] and
+        [h] for the precision, and the precision a record of ``at_s`` gives."""
+        terms = {}
+        for t, value in self.coef.items():
+            name, unit, conv = TERM_NAMES[t]
+            d = self.duration_s.get(t)
+            terms[name] = {"value": float(conv(value)), "unit": unit,
+                           "record_s": d, "record_h": None if d is None else d / units.S_PER_H}
+            if self.at_s is not None:
+                terms[name]["precision_at_record"] = self.at_precision.get(t)
+        return {"rate_hz": self.rate_hz, "precision": self.precision,
+                "confidence": self.confidence, "at_record_s": self.at_s, "terms": terms,
+                "method": "1σ of the Allan GLS noise fit (allan's equivalent degrees of "
+                          "freedom and correlations) on the model's noise-free curve"}
+
+
+def _relative(coef, rate_hz, duration_s, z) -> dict:
+    sig = predicted_sigma(coef, rate_hz, duration_s)
+    return {t: (math.inf if s is None else z * s / coef[t]) for t, s in sig.items()}
+
+
+def _length_for(term, coef, rate_hz, precision, z) -> float | None:
+    """Shortest record length tried whose relative half-width on ``term`` <= precision."""
+    t_min = _MIN_SAMPLES / rate_hz
+    t = max(t_min, 1000.0 / rate_hz)
+    best = None
+    for _ in range(_ITERATIONS):
+        rel = _relative(coef, rate_hz, t, z)[term]
+        if rel <= precision:
+            best = t if best is None else min(best, t)
+            if rel >= 0.97 * precision or t <= t_min:
+                break
+        elif t >= MAX_PLAN_S:
+            break
+        ratio = (rel / precision) ** 2 if math.isfinite(rel) else 16.0
+        step = min(max(ratio, 0.25), 16.0)
+        if best is not None and t * step >= best:      # never above a length already enough
+            step = min(step, 0.5 * (1.0 + best / t))
+        t = min(max(t * step, t_min), MAX_PLAN_S)
+    return best
+
+
+def plan_record(coef: dict, rate_hz: float, precision: float, *,
+                confidence: float = ONE_SIGMA, at_s: float | None = None) -> Plan:
+    """Record length at which each coefficient's confidence half-width reaches ``precision``.
+
+    Parameters
+    ----------
+    coef : dict
+        ``{"n": N [rad/√s], "b": B [rad/s], "k": K [rad/s/√s]}`` (zeros: not in the model).
+    rate_hz : float
+        Sample rate [Hz].
+    precision : float
+        Relative half-width [-], in (0, 1).
+    confidence : float, default :data:`~gyroarray.analysis.allan.ONE_SIGMA`
+        Two-sided confidence of the interval (``allan``'s bands are 1σ).
+    at_s : float, optional
+        Also report the precision a record of this length [s] gives.
+
+    Returns
+    -------
+    Plan
+
+    Raises
+    ------
+    InputError
+        A precision or confidence out of range, no positive coefficient, a bad rate.
+    """
+    if not (math.isfinite(rate_hz) and rate_hz > 0):
+        raise InputError(f"--rate-hz must be positive, got {rate_hz!r}")
+    if not 0.0 < precision < 1.0:
+        raise InputError(f"--precision must be between 0 and 100 %, got {precision:g}")
+    z = _z(confidence)
+    coef = {t: float(coef[t]) for t in PLAN_TERMS if coef.get(t, 0.0) > 0.0}
+    durations = {t: _length_for(t, coef, rate_hz, precision, z) for t in coef}
+    at = {}
+    if at_s is not None:
+        at = {t: float(v) for t, v in _relative(coef, rate_hz, at_s, z).items()}
+    return Plan(coef=coef, rate_hz=float(rate_hz), precision=float(precision),
+                confidence=float(confidence), duration_s=durations, at_s=at_s,
+                at_precision=at)
+
+
+def model_terms(model, gyro: int) -> dict:
+    """ARW, bias instability and RRW of one gyro of a noise model, SI.
+
+    Parameters
+    ----------
+    model : NoiseModel
+        The model (:class:`gyroarray.effects.model.NoiseModel`).
+    gyro : int
+        1-based gyro; an entry for that gyro overrides an all-gyros entry.
+
+    Returns
+    -------
+    dict
+        ``{"n": N [rad/√s], "b": B [rad/s], "k": K [rad/s/√s]}`` (0 where absent).
+    """
+    si = {"arw": ("n", "n_rad_rt_s"), "bias_instability": ("b", "b_rad_s"),
+          "rrw": ("k", "k_rad_s_rt_s")}
+    out = {"n": 0.0, "b": 0.0, "k": 0.0}
+    for overriding in (False, True):
+        for e in model:
+            if e.effect in si and (e.gyro == gyro if overriding else e.gyro is None):
+                term, key = si[e.effect]
+                out[term] = float(e.si_params[key])
+    return out

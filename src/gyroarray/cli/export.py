@@ -1,0 +1,104 @@
+"""``gyroarray export``: one gyro's noise model as a Kalibr, OpenVINS, VINS-Fusion, ORB-SLAM3 or
+MATLAB file, with its convention in a comment header, an optional derived inflation and a
+round-trip check (:mod:`gyroarray.chain.export`).
+
+The chain (numpy, the simulator) is imported inside the command, so that building the parser
+(``gyroarray --help``, every other command) does not load it.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from gyroarray.cli.common import EXIT_FAIL, EXIT_OK, add_force, float_in, nonneg_int, output, positive_int
+from gyroarray.core.errors import InputError
+
+__all__ = ["add_parser", "cmd_export"]
+
+#: Formats (the keys of :data:`gyroarray.chain.export.FORMATS`, listed here so that building the
+#: parser loads no numpy).
+FORMAT_NAMES = ("kalibr", "openvins", "vins", "orbslam3", "matlab")
+
+_FACTOR = float_in("--inflate", 0.0, 1e6, lo_open=True)
+
+
+def _inflate(text: str):
+    """``auto`` or a factor > 0."""
+    return "auto" if text == "auto" else _FACTOR(text)
+
+
+def cmd_export(args):
+    # deferred: the chain (numpy, the simulator) loads only when the command runs
+    from gyroarray.chain.export import SUFFIXES, export_noise
+    from gyroarray.core.outputs import write_text
+    from gyroarray.effects.model import NoiseModel
+    out = output(args.out, args, "--out", inputs=[args.model], suffixes=SUFFIXES[args.format])
+    model = NoiseModel.from_toml(args.model)
+    try:
+        text, summary = export_noise(model, args.gyro, args.format, args.rate_hz,
+                                     inflate=args.inflate, verify=args.verify, seed=args.seed,
+                                     source=Path(args.model).name)
+    except InputError as err:
+        raise err if err.file is not None else err.with_file(args.model)
+    write_text(out, text, force=args.force)
+    summary["out"] = str(out)
+    v = summary["values"]
+    lines = [f"wrote {out} ({args.format}, gyro {args.gyro} of {args.model} at "
+             f"{args.rate_hz:g} Hz, {summary['convention']}):"]
+    lines += [f"  {k} = {val:.6e}" for k, val in v.items() if not k.lower().endswith(("rate", "frequency"))]
+    si = summary["stand_in"]
+    if si["covers"]:
+        lines.append(f"  stand-in random walk for {' + '.join(si['covers'])}: K_eq = "
+                     f"{si['k_eq_deg_h_rt_h']:.4g} deg/h/√h, bounds their ADEV for τ >= "
+                     f"{si['tau1_s']:.4g} s (within ×2 up to {si['tau2_s']:.4g} s)")
+    if "inflate_auto" in summary:
+        a = summary["inflate_auto"]
+        lines.append(f"  inflation ×{a['factor']:.4g}: {a['why']}")
+        if a["not_simulated"]:
+            lines.append(f"  not simulated: {', '.join(a['not_simulated'])}")
+    elif summary["inflate"] != 1.0:
+        lines.append(f"  inflation ×{summary['inflate']:.4g} (as asked)")
+    code = EXIT_OK
+    if "verify" in summary:
+        ver = summary["verify"]
+        for name, c in ver["coefficients"].items():
+            lines.append(f"  round trip {name}: file {c['file']:.5g}, re-identified "
+                         f"{c['reidentified']:.5g} ± {c['sigma']:.2g} (z = {c['z']:+.2f})")
+        b = ver["band"]
+        lines.append(f"  model ADEV inside the file's 95 % interval at {b['inside_fraction']:.0%} "
+                     f"of {b['n_taus']} taus (worst τ = {b['worst_tau_s']:.4g} s, model/file "
+                     f"{b['worst_model_over_file']:.3g}); {ver['record_s']:.0f} s simulated")
+        if ver["passed"]:
+            lines.append("verify: passed")
+        else:
+            lines += ["verify: FAILED"] + [f"  {p}" for p in ver["problems"]]
+            code = EXIT_FAIL
+    return summary, "\n".join(lines), code
+
+
+def add_parser(sub) -> None:
+    """The ``export`` subcommand."""
+    p = sub.add_parser("export", help="write a gyro's noise as a Kalibr/OpenVINS/VINS/ORB-SLAM3/"
+                                      "MATLAB file (--verify: round trip; exit 1 when it fails)")
+    p.add_argument("model", type=Path, metavar="MODEL.toml")
+    p.add_argument("--format", required=True, choices=FORMAT_NAMES,
+                   help="kalibr, openvins (continuous densities), vins (discrete per sample), "
+                        "orbslam3 (continuous; √rate inside), matlab (gyroparams .m)")
+    p.add_argument("--rate-hz", required=True, type=float_in("--rate-hz", 0.0, 1e6, lo_open=True,
+                                                             unit="Hz"),
+                   metavar="R", help="the IMU rate the tool runs at [Hz]")
+    p.add_argument("--out", required=True, type=Path, metavar="FILE",
+                   help="the file to write (.yaml/.yml; .m for matlab)")
+    p.add_argument("--gyro", type=positive_int("--gyro"), default=1, metavar="K",
+                   help="the model's gyro K (1-based; default 1)")
+    p.add_argument("--inflate", type=_inflate, default=1.0, metavar="auto|X",
+                   help="factor on both numbers, or auto: the one that makes a white + walk "
+                        "filter consistent (NIS = 1) on a record simulated from the full model")
+    p.add_argument("--verify", action="store_true",
+                   help="simulate what the tool reads from the file, re-identify ARW/RRW and "
+                        "check the model's ADEV is reproduced; exit 1 when it is not")
+    p.add_argument("--seed", type=nonneg_int("--seed"), default=0, help="seed of the simulations")
+    add_force(p)
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(func=cmd_export)
+

@@ -1,0 +1,144 @@
+"""``gyroarray plan``: how long to record for a precision on ARW, bias instability and RRW
+(:mod:`gyroarray.chain.plan`).
+
+The chain (numpy, scipy) is imported inside the command, so that building the parser
+(``gyroarray --help``, every other command) does not load it.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from gyroarray.cli.common import float_in, positive_int
+from gyroarray.core.errors import InputError
+
+__all__ = ["add_parser", "cmd_plan", "parse_precision"]
+
+
+def parse_precision(text: str) -> float:
+    """``10%`` or ``0.1`` -> 0.1 (a relative half-width in (0, 1))."""
+    raw = text.strip()
+    pct = raw.endswith("%")
+    try:
+        value = float(raw[:-1] if pct else raw)
+    except ValueError:
+        raise InputError(f"--precision must be a percentage like 10% or a fraction like 0.1, "
+                         f"got {text!r}") from None
+    value = value / 100.0 if pct else value
+    if not 0.0 < value < 1.0:
+        raise InputError(f"--precision must be between 0 and 100 % (exclusive), got {text!r}")
+    return value
+
+
+def _fmt_len(seconds) -> str:
+    if seconds is None:
+        return "not within 10 years"
+    if seconds < 120:
+        return f"{seconds:.3g} s"
+    if seconds < 2 * 3600:
+        return f"{seconds / 60:.3g} min ({seconds:.0f} s)"
+    return f"{seconds / 3600:.3g} h ({seconds:.0f} s)"
+
+
+def _gyros(model, asked):
+    if asked is not None:
+        return [asked]
+    own = sorted({e.gyro for e in model if e.gyro is not None
+                  and e.effect in ("arw", "bias_instability", "rrw")})
+    return own or [1]
+
+
+def _fitted_rel(model, gyro: int) -> dict:
+    """Relative 1σ the model file carries for each coefficient (``fit --out`` writes them)."""
+    keys = {"arw": ("n", "n_deg_rt_h"), "bias_instability": ("b", "b_deg_h"),
+            "rrw": ("k", "k_deg_h_rt_h")}
+    out = {}
+    for overriding in (False, True):
+        for e in model:
+            if e.effect in keys and (e.gyro == gyro if overriding else e.gyro is None):
+                term, key = keys[e.effect]
+                v, s = e.params.get(key), e.sigma.get(key)
+                if v and s is not None:
+                    out[term] = float(s) / float(v)
+    return out
+
+
+def cmd_plan(args):
+    # deferred: the chain (numpy, scipy) loads only when the command runs
+    from gyroarray.chain.plan import TERM_NAMES, model_terms, plan_record
+    from gyroarray.core import units
+    given = [o for o, v in (("--arw", args.arw), ("--bi", args.bi), ("--rrw", args.rrw)) if v is not None]
+    if args.model is not None and given:
+        raise InputError(f"give either --model or {'/'.join(given)}, not both")
+    precision = parse_precision(args.precision)
+    at_s = None if args.at_h is None else args.at_h * units.S_PER_H
+    if args.model is not None:
+        from gyroarray.effects.model import NoiseModel   # deferred: the effect registry
+        model = NoiseModel.from_toml(args.model)
+        cases = []
+        for g in _gyros(model, args.gyro):
+            coef = model_terms(model, g)
+            if not any(v > 0 for v in coef.values()):
+                raise InputError(f"the model has no arw, bias_instability or rrw for gyro {g}; "
+                                 "pick another with --gyro", file=str(args.model))
+            cases.append((g, coef, _fitted_rel(model, g)))
+    else:
+        if not given:
+            raise InputError("give the noise (--arw, --bi, --rrw) or a model (--model M.toml)")
+        coef = {"n": units.arw_deg_rt_h_to_rad_rt_s(args.arw or 0.0),
+                "b": units.deg_h_to_rad_s(args.bi or 0.0),
+                "k": units.rrw_deg_h_rt_h_to_rad_s_rt_s(args.rrw or 0.0)}
+        if not any(v > 0 for v in coef.values()):
+            raise InputError("--arw/--bi/--rrw: at least one must be > 0")
+        cases = [(None, coef, {})]
+    result = {"precision": precision, "confidence": args.confidence, "rate_hz": args.rate_hz,
+              "gyros": []}
+    lines = [f"record length for ±{precision:.1%} relative half-width ({args.confidence:.1%} "
+             f"two-sided) at {args.rate_hz:g} Hz (Allan GLS fit, allan's EDF):"]
+    for g, coef, fitted in cases:
+        plan = plan_record(coef, args.rate_hz, precision, confidence=args.confidence, at_s=at_s)
+        d = plan.to_json_dict()
+        d["gyro"] = g
+        for t, rel in fitted.items():
+            if TERM_NAMES[t][0] in d["terms"]:
+                d["terms"][TERM_NAMES[t][0]]["model_sigma_rel"] = rel
+        result["gyros"].append(d)
+        if g is not None:
+            lines.append(f"gyro {g}:")
+        for t in plan.coef:
+            name, unit, conv = TERM_NAMES[t]
+            row = f"  {name} = {conv(plan.coef[t]):.5g} {unit}: {_fmt_len(plan.duration_s[t])}"
+            if at_s is not None:
+                row += f"; a {args.at_h:g} h record gives ±{plan.at_precision[t]:.1%}"
+            if t in fitted:
+                row += f"; the model's own 1σ: ±{fitted[t]:.1%}"
+            lines.append(row)
+    return result, "\n".join(lines)
+
+
+def add_parser(sub) -> None:
+    """The ``plan`` subcommand."""
+    p = sub.add_parser("plan", help="how long to record for a precision on ARW, bias instability "
+                                    "and RRW")
+    p.add_argument("--arw", type=float_in("--arw", 0.0, 1e6, unit="deg/√h"), metavar="N",
+                   help="angle random walk [deg/√h]")
+    p.add_argument("--bi", type=float_in("--bi", 0.0, 1e6, unit="deg/h"), metavar="B",
+                   help="bias instability [deg/h]")
+    p.add_argument("--rrw", type=float_in("--rrw", 0.0, 1e7, unit="deg/h/√h"), metavar="K",
+                   help="rate random walk [deg/h/√h]")
+    p.add_argument("--model", type=Path, metavar="MODEL.toml",
+                   help="take ARW, bias instability and RRW from a noise model instead")
+    p.add_argument("--gyro", type=positive_int("--gyro"), metavar="K",
+                   help="the model's gyro K (default: each gyro the model names)")
+    p.add_argument("--rate-hz", required=True, type=float_in("--rate-hz", 0.0, 1e6, lo_open=True,
+                                                             unit="Hz"),
+                   metavar="R", help="sample rate [Hz]")
+    p.add_argument("--precision", default="10%", metavar="P",
+                   help="relative half-width asked for, e.g. 10%% or 0.1 (default 10%%)")
+    p.add_argument("--confidence", type=float_in("--confidence", 0.0, 0.999999, lo_open=True),
+                   default=0.6826894921370859, metavar="C",
+                   help="two-sided confidence of the half-width (default 0.683, allan's 1σ bands)")
+    p.add_argument("--at-h", type=float_in("--at-h", 0.0, 87660.0, lo_open=True, unit="h"),
+                   metavar="H", help="also give the precision a record of H hours reaches")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(func=cmd_plan)
