@@ -220,6 +220,7 @@ def test_case_noise_seed_redraws_the_noise_only():
     assert np.all(c.measurement.gyro_deg_s != other.measurement.gyro_deg_s)
 
 
+@pytest.mark.slow   # a study of 20-45 s: make score
 def test_a_scale_factor_after_a_curvature_is_tested_jointly():
     """Seed 109's curvature (gyro 1, k2 = −2.6e-5 per deg/s, no scale factor): after the fit its
     gyro's scale-factor test is the joint fit's (the slope the curvature's fit left behind, over
@@ -234,6 +235,7 @@ def test_a_scale_factor_after_a_curvature_is_tested_jointly():
     assert after.consistent
 
 
+@pytest.mark.slow   # a study of 20-45 s: make score
 def test_spikes_are_counted_at_the_noise_level_of_a_burst_in_the_model():
     """Seed 111's burst (180.65–439.29 s, variance × 5.70, every gyro). With the burst fitted,
     no gyro shows spikes: the count reads the record at the model's level. Read as it is, the
@@ -263,7 +265,7 @@ SHAPED = sorted({(e, 100) for e in EFFECTS} | set(RIVALS))
 SHAPED_XFAIL: dict = {}
 #: The cases make test runs (this round's new effects and the clipped record); the others are
 #: in make score (`pytest -m slow`), with benchmarks/diagnosis_score.py.
-SHAPED_FAST = {("bandwidth", 100), ("g_sensitivity", 100), ("outliers", 100), ("saturation", 100)}
+SHAPED_FAST = {("bandwidth", 100), ("g_sensitivity", 100)}   # outliers, saturation: make score
 
 
 def _shaped_marks(e, s):
@@ -407,6 +409,7 @@ def sf_files(tmp_path_factory):
     return csv
 
 
+@pytest.mark.slow   # a study of 20-45 s: make score
 def test_cli_diagnose_fit_and_model_round_trip(sf_files, tmp_path, cli):
     d = json.loads(cli("diagnose", sf_files, "--runs", 10, "--json").stdout)
     assert set(d) >= {"discrepancy", "consistent", "candidates"}

@@ -33,10 +33,10 @@ def _residual_deg_s(c):
     return m.gyro_deg_s - m.ref_deg_s @ H.T, m.time_s
 
 
-#: stuck and noise (the new rivalries: a frozen run, a burst that lasts to the end) run in make test;
+#: stuck (a frozen run) runs in make test; noise (a burst that lasts to the end),
 #: step and drift in make score (`pytest -m slow`; also benchmarks/diagnosis_score.py)
 FAULTS = [pytest.param("fault_step", marks=pytest.mark.slow), pytest.param("fault_drift", marks=pytest.mark.slow),
-          "fault_stuck", "fault_noise"]
+          "fault_stuck", pytest.param("fault_noise", marks=pytest.mark.slow)]
 
 
 @pytest.fixture(scope="module", params=FAULTS)

@@ -77,6 +77,7 @@ def test_a_line_near_nyquist_is_not_read_as_quantization(tmp_path):
     assert abs(top.fit.params["amp_deg_s"] - want["amp_deg_s"]) <= 3.0 * top.fit.sigma["amp_deg_s"]
 
 
+@pytest.mark.slow   # 19 s: make score
 def test_g_sensitivity_with_lever_arms_and_accelerometer_columns(tmp_path, monkeypatch):
     """Seed 501 with the gyros at ±0.25 m (``positions_m``) and the specific force at the origin
     in ``acc_x/y/z``: the generator adds the spec's f_k = f_0 + α × r_k + ω × (ω × r_k) itself.

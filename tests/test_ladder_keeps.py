@@ -79,6 +79,7 @@ def _thermal_knock(seed=1, static_s=600.0, rate_hz=20.0, knock=True):
     return replace(m, gyro_deg_s=y)
 
 
+@pytest.mark.slow   # 20 s of ladder; the rule itself is tested above: make score
 def test_a_step_that_raises_d_a_little_is_not_kept(monkeypatch):
     """A trial within the old 2 % slack (D up 1 %, the excess halved) was kept before; it is refused now,
     the refusal says why, and the ladder goes on to the candidates that do lower D."""
@@ -136,6 +137,7 @@ def test_a_displaced_candidate_is_tried_again_after_the_next_step(monkeypatch):
     assert "of the residual variance: tried again after any later step the ladder keeps" in note
 
 
+@pytest.mark.slow   # a 20 s ladder study: make score
 def test_ladder_on_a_thermal_record_with_a_knock_never_raises_d():
     """The real analyses, no fake: every kept step lowers D (or keeps it and lowers the excess),
     and the last step is the best model the ladder saw."""
@@ -185,7 +187,8 @@ def repaired(tmp_path_factory):
     return folder, path, repairs
 
 
-@pytest.mark.parametrize("command", ["fit", "diagnose", "ladder", "compare"])
+@pytest.mark.parametrize("command", ["fit", "diagnose", "ladder",
+                                     pytest.param("compare", marks=pytest.mark.slow)])   # compare: 10 s
 def test_every_command_that_repairs_lists_the_repairs(repaired, command):
     folder, path, repairs = repaired
     out = ["--out", folder / f"{command}.html"] if command in ("ladder", "compare") else []

@@ -10,6 +10,9 @@ Read with ``ast``: nothing is imported.
 from __future__ import annotations
 
 import ast
+import io
+import re
+import tokenize
 from pathlib import Path
 
 
@@ -203,3 +206,138 @@ def test_no_private_name_is_imported_across_modules(tmp_path):
     assert [b.split(":")[0:2] for b in private_imports(fake)] == [
         ["gyroarray/sim/c.py", "2"], ["gyroarray/sim/d.py", "1"], ["gyroarray/sim/d.py", "2"],
         ["gyroarray/sim/e.py", "1"]]
+
+
+def _comment_lines(text: str) -> tuple[set[int], set[int]]:
+    """The lines that carry a comment, and those that are only a comment (1-based)."""
+    carry, only = set(), set()
+    for tok in tokenize.generate_tokens(io.StringIO(text).readline):
+        if tok.type == tokenize.COMMENT:
+            carry.add(tok.start[0])
+            if not tok.line[:tok.start[1]].strip():
+                only.add(tok.start[0])
+    return carry, only
+
+
+def uncommented_function_imports(src: Path = SRC) -> list[str]:
+    """Function-level imports under ``src`` that say nowhere why they are deferred.
+
+    One is commented when a line of the statement carries a comment, or when the line
+    directly above it, or above the first of the consecutive import statements it ends, is a
+    comment line.
+    """
+    bad = []
+    for path in sorted(src.rglob("*.py")):
+        text = path.read_text(encoding="utf-8")
+        tree = ast.parse(text)
+        carry, only = _comment_lines(text)
+        imports = sorted((n for n in ast.walk(tree) if isinstance(n, (ast.Import, ast.ImportFrom))),
+                         key=lambda n: n.lineno)
+        ends = {n.end_lineno: n for n in imports}
+        inner = {id(n) for fn in ast.walk(tree) if isinstance(fn, (ast.FunctionDef, ast.AsyncFunctionDef))
+                 for n in ast.walk(fn) if isinstance(n, (ast.Import, ast.ImportFrom))}
+        for node in imports:
+            if id(node) not in inner or carry & set(range(node.lineno, node.end_lineno + 1)):
+                continue
+            first = node
+            while first.lineno - 1 in ends and first.lineno - 1 not in only:
+                first = ends[first.lineno - 1]
+            if first.lineno - 1 not in only:
+                line = text.splitlines()[node.lineno - 1].strip()
+                bad.append(f"{path.relative_to(src.parent).as_posix()}:{node.lineno}: {line}")
+    return bad
+
+
+def test_every_function_level_import_says_why_it_is_deferred(tmp_path):
+    bad = uncommented_function_imports()
+    assert bad == [], ("function-level imports without a comment (move them to module level, or "
+                       "say `# deferred: <why>` on the line or just above the block):\n" + "\n".join(bad))
+    # the check can fail: an import with no comment, or one after a code line below a commented
+    # block, is caught; a comment on the line, above the block, or on a continuation line is not
+    fake = tmp_path / "gyroarray"
+    fake.mkdir()
+    (fake / "m.py").write_text(
+        "import os  # module level: never checked\n"
+        "import sys\n"
+        "\n"
+        "def f():\n"
+        "    import json  # deferred: the line says why\n"
+        "    # deferred: the block says why\n"
+        "    import math\n"
+        "    from pathlib import (Path,\n"
+        "                         PurePath)\n"
+        "    import io\n"
+        "    x = 1\n"
+        "    import csv\n"
+        "    return x\n"
+        "\n"
+        "class C:\n"
+        "    def g(self):\n"
+        "        s = '# not a comment'\n"
+        "        import zlib\n"
+        "        from email import (message,  # deferred: a continuation line says why\n"
+        "                           parser)\n"
+        "        return s\n"
+        "\n"
+        "async def h():\n"
+        "    import asyncio\n")
+    assert [b.split(":")[1] for b in uncommented_function_imports(fake)] == ["12", "18", "24"]
+
+
+#: (file under src/gyroarray, literal) pairs that spell an effect's name but mean something else
+EFFECT_NAME_LOOKALIKES = {
+    ("sim/profiles.py", "sinusoid"),  # a motion profile's kind, not the sinusoid effect
+    # the layer below effects/: the correlation *statistic* (a field of ArrayCovariance)
+    ("analysis/array_covariance.py", "correlation"),
+}
+
+
+def effect_name_literals(root: Path = SRC) -> list[str]:
+    """``file:line: literal`` for each string in code outside ``effects/`` that names an effect.
+
+    A string is code when it is not a docstring; it names an effect when it is one of
+    :func:`gyroarray.effects.effect_names` or holds one in quotes (``"… ('arw') …"``).
+    Code that means one effect takes its name from :mod:`gyroarray.effects.names` (the class's
+    ``name``) or asks the registry, so the effect's module stays the one place that spells it.
+    """
+    from gyroarray import effects  # deferred: the other checks of this file import nothing
+    names = sorted(effects.effect_names())
+    quoted = re.compile(r'''["'](%s)["']''' % "|".join(map(re.escape, names)))
+    found = []
+    for path in sorted(root.rglob("*.py")):
+        rel = path.relative_to(root).as_posix()
+        if rel.split("/")[0] == "effects":
+            continue
+        tree = ast.parse(path.read_text(encoding="utf-8"))
+        docs = set()
+        for node in ast.walk(tree):
+            if isinstance(node, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef)):
+                body = node.body
+                if body and isinstance(body[0], ast.Expr) and isinstance(body[0].value, ast.Constant):
+                    docs.add(id(body[0].value))
+        for node in ast.walk(tree):
+            if (isinstance(node, ast.Constant) and isinstance(node.value, str) and id(node) not in docs
+                    and (node.value in names or quoted.search(node.value))
+                    and (rel, node.value) not in EFFECT_NAME_LOOKALIKES):
+                found.append(f"{rel}:{node.lineno}: {node.value[:60]!r}")
+    return found
+
+
+def test_no_effect_name_literal_outside_effects():
+    bad = effect_name_literals()
+    assert not bad, ("effect names spelled outside gyroarray/effects (take them from "
+                     "gyroarray.effects.names or ask the registry):\n" + "\n".join(bad))
+
+
+def test_effect_name_check_can_fail(tmp_path):
+    fake = tmp_path / "gyroarray"
+    (fake / "effects").mkdir(parents=True)
+    (fake / "effects" / "x.py").write_text('name = "arw"\n')
+    (fake / "m.py").write_text(
+        '"""Docs may say effect = "arw"."""\n'
+        'def f(e):\n'
+        '    """So may a function\'s: "rrw"."""\n'
+        '    if e == "arw":\n'
+        '        raise ValueError(f"no (\'rrw\') for {e}")\n'
+        '    return "arwx"\n')
+    assert [b.split(":")[1] for b in effect_name_literals(fake)] == ["4", "5"]

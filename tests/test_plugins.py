@@ -61,6 +61,7 @@ def record(tmp_path_factory):
     return folder / "out" / "thermostat_run.csv.gz"
 
 
+@pytest.mark.slow   # 30 s; the plugin chain runs fast in test_predictor_terms, the refusal in test_plugin_checks
 def test_diagnose_names_the_plugin_effect_and_fit_makes_d_fall(record, capsys):
     code, out, err = run(capsys, "diagnose", record, "--plugin", PLUGIN, "--runs", 20, "--json")
     assert code == 0, err
@@ -128,6 +129,7 @@ def test_the_example_passes_the_public_conformance_check():
     check_effect(type(REGISTRY["thermostat_bias"]))
 
 
+@pytest.mark.slow   # 30 s; the plugin chain runs fast in test_predictor_terms, the refusal in test_plugin_checks
 def test_the_conformance_check_rejects_a_broken_effect():
     """A check that cannot fail is a defect: an effect whose fit is off by 50 % fails it."""
     from gyroarray.effects import load_plugin, REGISTRY

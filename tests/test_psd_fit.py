@@ -6,6 +6,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 
 from gyroarray.analysis import psd_fit
 from gyroarray.core.units import arw_deg_rt_h_to_rad_rt_s, rrw_deg_h_rt_h_to_rad_s_rt_s
@@ -31,6 +32,7 @@ def _null_scores(n_records: int, n: int):
     return lr, np.array([psd_fit.filter_z(v) for v in lr])
 
 
+@pytest.mark.slow   # a calibration study of 14 s: make score
 def test_filter_score_is_calibrated_without_a_filter():
     """200 records of 15 000 samples, no filter. The scan's maximum, the bins' overlap counted
     once, is one χ²₁/2 + δ₀/2 test: mean 2Δℓ 0.59 and P(z > 1) 0.17 over 500 records (summing

@@ -26,6 +26,7 @@ import pytest
 ADIS = Path(__file__).resolve().parents[2] / "shared" / "measurements" / "real" / "adis16405_static.csv.gz"
 
 
+@pytest.mark.slow   # 15 s: make score
 @pytest.mark.skipif(not ADIS.exists(), reason="shared/measurements/real not present")
 def test_adis_excess_is_a_short_gauss_markov_not_quantization(cli):
     p = cli("diagnose", ADIS, "--runs", 10, "--json")

@@ -139,6 +139,7 @@ def test_without_the_flag_the_noisy_reference_is_instrumented_and_said():
     assert 0.010 <= lat.fit.params["delay_s"] <= 0.014, lat.fit.params
 
 
+@pytest.mark.slow   # 14 s: make score
 def test_a_line_added_on_continuous_motion_lowers_the_discrepancy():
     """No static part, so the stochastic tests read the whole record. Gyro 2 holds the 46.8 Hz
     line and the cross-axis pickup of the yaw plateaus (a tilt: outside check, the plain

@@ -7,6 +7,7 @@ design check (``design --recommend --check``) and the reports.
 from __future__ import annotations
 
 import numpy as np
+from scipy import stats
 
 __all__ = ["CI_LEVEL", "replicate_rng", "mean_ci", "rms_ci"]
 
@@ -24,7 +25,6 @@ def mean_ci(values, level: float = CI_LEVEL) -> dict:
     Returns ``{"mean", "ci_low", "ci_high", "n"}`` (None where undefined: no
     finite value, or one run for the interval).
     """
-    from scipy import stats
     x = np.asarray([v for v in values if v is not None and np.isfinite(v)], dtype=float)
     n = int(x.size)
     if n == 0:
@@ -48,7 +48,6 @@ def rms_ci(values, level: float = CI_LEVEL, *, gaussian: bool = False) -> dict:
     ``gaussian``: x is known to be a zero-mean Gaussian (linear in the noise),
     so ν = n exactly.
     """
-    from scipy import stats
     x = np.asarray([float(v) ** 2 for v in values if v is not None and np.isfinite(v)], dtype=float)
     n = int(x.size)
     if n == 0:

@@ -1780,7 +1780,6 @@ def split_measurement(m: Measurement, fraction: float) -> tuple[Measurement, Mea
 
     Raises InputError for a fraction outside (0, 1) or a part too short to analyse.
     """
-    from dataclasses import replace as _replace
     if not 0.0 < fraction < 1.0:
         raise InputError(f"--holdout must be a fraction in (0, 1), got {fraction:g}")
     n = m.time_s.size
@@ -1790,7 +1789,7 @@ def split_measurement(m: Measurement, fraction: float) -> tuple[Measurement, Mea
                          f"needs at least {MIN_STATIC} (a static part to calibrate on)", file=m.source)
 
     def part(a, b, what):
-        return _replace(m, time_s=m.time_s[a:b], gyro_deg_s=m.gyro_deg_s[a:b],
+        return replace(m, time_s=m.time_s[a:b], gyro_deg_s=m.gyro_deg_s[a:b],
                         ref_deg_s=None if m.ref_deg_s is None else m.ref_deg_s[a:b],
                         temp_c=None if m.temp_c is None else m.temp_c[a:b],
                         acc_m_s2=None if m.acc_m_s2 is None else m.acc_m_s2[a:b],

@@ -72,6 +72,7 @@ from gyroarray.core.physics import flicker_noise, gauss_markov_avar
 from gyroarray.effects.model import ModelEntry, NoiseModel
 from gyroarray.sim.effects import simulate_readings
 from gyroarray.sim.lab import lab_temperature
+from gyroarray.effects.names import ARW, BIAS_INSTABILITY, GAUSS_MARKOV, QUANTIZATION, RATE_RAMP, RRW, TEMPERATURE_BIAS
 
 __all__ = ["FORMATS", "SUFFIXES", "MAX_SIM_SAMPLES", "GyroNoise", "StandIn", "gyro_noise",
            "stand_in", "sampled_walk_n2", "exported_values", "tool_discrete", "render",
@@ -92,8 +93,8 @@ SUFFIXES = {"kalibr": (".yaml", ".yml"), "openvins": (".yaml", ".yml"), "vins": 
 
 #: Effects the simulation of a still gyro runs (the others need motion, a site or are
 #: array-wide; they are listed as not simulated).
-SIMULATED = ("arw", "rrw", "bias_instability", "gauss_markov", "quantization", "rate_ramp",
-             "temperature_bias")
+SIMULATED = (ARW, RRW, BIAS_INSTABILITY, GAUSS_MARKOV, QUANTIZATION, RATE_RAMP,
+             TEMPERATURE_BIAS)
 
 #: Most samples a simulated record has (--verify, --inflate auto): 2^21, 2.9 h at 200 Hz.
 MAX_SIM_SAMPLES = 2 ** 21
@@ -179,8 +180,8 @@ def gyro_noise(model: NoiseModel, gyro: int) -> GyroNoise:
     for e in model:
         if e.gyro == gyro:
             chosen[e.effect] = e
-    if "arw" not in chosen:
-        have = sorted({e.gyro for e in model if e.effect == "arw" and e.gyro is not None})
+    if ARW not in chosen:
+        have = sorted({e.gyro for e in model if e.effect == ARW and e.gyro is not None})
         hint = f" (gyros with one: {', '.join(map(str, have))}; pick one with --gyro)" if have else ""
         raise InputError(f"the model has no arw entry for gyro {gyro}: a noise file needs the "
                          f"white noise{hint}")
@@ -188,13 +189,13 @@ def gyro_noise(model: NoiseModel, gyro: int) -> GyroNoise:
     def si(effect, key):
         return float(chosen[effect].si_params.get(key, 0.0)) if effect in chosen else 0.0
     gm = ()
-    if "gauss_markov" in chosen:
-        p = chosen["gauss_markov"].si_params
+    if GAUSS_MARKOV in chosen:
+        p = chosen[GAUSS_MARKOV].si_params
         gm = ((float(p["sigma_rad_s"]), float(p["tau_s"])),)
-    return GyroNoise(gyro=gyro, n_rad_rt_s=si("arw", "n_rad_rt_s"),
-                     k_rad_s_rt_s=si("rrw", "k_rad_s_rt_s"),
-                     b_rad_s=si("bias_instability", "b_rad_s"), q_rad=si("quantization", "q_rad"),
-                     r_rad_s2=si("rate_ramp", "r_rad_s2"), gm=gm,
+    return GyroNoise(gyro=gyro, n_rad_rt_s=si(ARW, "n_rad_rt_s"),
+                     k_rad_s_rt_s=si(RRW, "k_rad_s_rt_s"),
+                     b_rad_s=si(BIAS_INSTABILITY, "b_rad_s"), q_rad=si(QUANTIZATION, "q_rad"),
+                     r_rad_s2=si(RATE_RAMP, "r_rad_s2"), gm=gm,
                      entries=tuple(chosen.values()))
 
 
@@ -221,15 +222,15 @@ class StandIn:
 def stand_in(noise: GyroNoise, rate_hz: float, *, keeps_b: bool) -> StandIn:
     """The stand-in random walk K_eq for bias instability (unless the format ``keeps_b``) and
     Gauss-Markov terms (module docstring)."""
-    covers = tuple(name for name, on in (("bias_instability", noise.b_rad_s > 0 and not keeps_b),
-                                         ("gauss_markov", bool(noise.gm))) if on)
+    covers = tuple(name for name, on in ((BIAS_INSTABILITY, noise.b_rad_s > 0 and not keeps_b),
+                                         (GAUSS_MARKOV, bool(noise.gm))) if on)
     if not covers:
         return StandIn(0.0, math.nan, math.nan, ())
     taus = np.logspace(math.log10(1.0 / rate_hz), 8.0, 801)
 
     def unmodelled(t):
         u = np.zeros_like(t)
-        if "bias_instability" in covers:
+        if BIAS_INSTABILITY in covers:
             u = u + _C_B * noise.b_rad_s ** 2
         for sigma, tau_c in noise.gm:
             u = u + gauss_markov_avar(t, sigma, tau_c)
@@ -339,8 +340,8 @@ def _header(noise: GyroNoise, fmt: str, rate_hz: float, inflate: float, why: str
                      "0.664·B)")
     else:
         lines.append("bias instability: none in the model; the walk is the fitted RRW")
-    lost = [e.effect for e in noise.entries if e.effect in ("quantization", "rate_ramp",
-                                                            "temperature_bias")]
+    lost = [e.effect for e in noise.entries if e.effect in (QUANTIZATION, RATE_RAMP,
+                                                            TEMPERATURE_BIAS)]
     if lost:
         lines.append(f"not representable here: {', '.join(lost)} (see --inflate auto)")
     lines.append(f"inflation: ×{inflate:.4g} on both numbers ({why})")
@@ -419,7 +420,7 @@ def simulate_model(noise: GyroNoise, rate_hz: float, n: int, rng: np.random.Gene
     model, dropped = _sim_model(noise)
     dt = 1.0 / rate_hz
     time_s = np.arange(n) * dt
-    temp = lab_temperature(time_s) if any(e.effect == "temperature_bias" for e in model) else None
+    temp = lab_temperature(time_s) if any(e.effect == TEMPERATURE_BIAS for e in model) else None
     out = simulate_readings(model, np.zeros((n, 3)), np.array([[1.0, 0.0, 0.0]]), dt, rng,
                             time_s=time_s, temp_c=temp)
     return out[:, 0], dropped

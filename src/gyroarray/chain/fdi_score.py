@@ -28,6 +28,10 @@ from gyroarray.core.errors import InputError
 from gyroarray.core.limits import check_memory
 from gyroarray.core.measurement import true_runs
 from gyroarray.core.units import rad_s_to_deg_s
+from gyroarray.effects.model import NoiseModel
+from gyroarray.estimators.fdi import (MIN_RECORD_SAMPLES, FaultDetector, FdiResult, estimate_noise, far_range_per_h,
+                                      fuse, isolability, minimum_detectable, model_noise, noise_spread,
+                                      parity_is_zero)
 
 __all__ = ["FDI_METRICS", "analyse_measurement", "format_fdi", "recovery_errors",
            "true_faults", "score_faults", "add_fdi_metrics", "summarise_scores"]
@@ -92,9 +96,6 @@ def analyse_measurement(meas, model=None, *, far_per_h: float = 0.01, p_md: floa
     noise as a fault of every direction at once). Without a model its
     minimum detectable faults are null (no noise to size them from).
     """
-    from gyroarray.estimators.fdi import (MIN_RECORD_SAMPLES, FaultDetector, estimate_noise,
-                                          far_range_per_h, minimum_detectable, model_noise,
-                                          noise_spread, parity_is_zero)
     z = meas.gyro_rad_s
     dt = meas.dt_s
     far_lo, far_hi = far_range_per_h(dt)
@@ -234,7 +235,6 @@ def _fit(detector, meas, noise, model):
 
 def _no_parity_noise(meas, model, detector, far_per_h, p_md, notes):
     """The answer for a record whose parity is zero at every sample: no fault (see Notes above)."""
-    from gyroarray.estimators.fdi import FdiResult, isolability, minimum_detectable
     notes.append("the gyros' outputs are exactly consistent with one body rate at every sample "
                  "(parity zero to rounding: identical, constant or noise-free outputs?): no "
                  "single-gyro fault is present, since any would make the parity non-zero")
@@ -318,7 +318,6 @@ def recovery_errors(z, H, noise, dt_s, exclusions, alarms, time_s, truth_rad_s=N
         ``unrecovered_deg_s`` (rms error of the worst axis, with a reference),
         ``shift_deg_s`` (rms of recovered − unrecovered, worst axis).
     """
-    from gyroarray.estimators.fdi import fuse
     rec = fuse(z, H, noise, dt_s, exclusions)
     raw = fuse(z, H, noise, dt_s, ())
     t = np.asarray(time_s)
@@ -445,7 +444,6 @@ def score_faults(result, faults: list[dict], time_s, *, readings=None, clean_rea
 
 
 def _fused_deviation(result, alarm, fault, t, z, z_clean, H, noise, dt_s) -> dict:
-    from gyroarray.estimators.fdi import fuse
     ref = fuse(z_clean, H, noise, dt_s, ())                   # fault-free, every gyro
     raw = fuse(z, H, noise, dt_s, ())
     rec = fuse(z, H, noise, dt_s, result.exclusions)
@@ -478,8 +476,7 @@ def add_fdi_metrics(run_result, scenario, sim_result, detector):
         faults, the scenario is simulated once more without them (same seed,
         same noise draws) for the fused-rate deviations.
     """
-    from gyroarray.effects.model import NoiseModel
-    from gyroarray.sim.scenario import simulate
+    from gyroarray.sim.scenario import simulate  # deferred: the simulator loads mujoco, only for a simulated run
     truth = sim_result.truth
     z = sim_result.readings_rad_s
     res = detector.detect(z, truth.time_s)

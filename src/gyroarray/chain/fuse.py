@@ -64,6 +64,7 @@ from gyroarray.core.measurement import Measurement, constant_gyros, true_runs
 from gyroarray.estimators import ArrayNoise, get_estimator, make
 from gyroarray.estimators.noise import array_noise, table_correlation
 from gyroarray.estimators.svo import allan_covariance
+from gyroarray.effects.names import ARW, CORRELATION
 
 __all__ = ["MIN_PART", "AXES", "WhiteWalk", "FuseResult", "fuse", "still_parts", "stitch",
            "octave_avar", "white_walk_fit", "design_rrw", "nnls2", "fused_measurement", "fused_files", "sha256_of",
@@ -447,7 +448,7 @@ def _model_noise(model, meas: Measurement, used: list[int], needs_arw: bool, mod
     arw = full.arw_rad_rt_s[idx]
     if needs_arw and np.any(arw <= 0):
         bad = [used[i] for i in np.flatnonzero(arw <= 0).tolist()]
-        raise InputError(f"the model gives no positive angle random walk ('arw') for gyro(s) "
+        raise InputError(f"the model gives no positive angle random walk ({ARW!r}) for gyro(s) "
                          f"{', '.join(map(str, bad))}: this estimator weights the gyros by their "
                          "white noise; add an arw entry for them, or --exclude them",
                          file=model_name)
@@ -853,7 +854,7 @@ def tau_verdict(taus, measured, low, high, predicted, *, n2: float, k2: float, u
                "about this factor squared")
         out["misses"].append({"from_tau_s": float(taus[mslow].min()), "to_tau_s": float(taus[mslow].max()),
                               "side": "above" if factor > 1 else "below", "factor": factor,
-                              "term": "correlation", "explanation": f"a consistent factor {factor:.3g} at every "
+                              "term": CORRELATION, "explanation": f"a consistent factor {factor:.3g} at every "
                               f"tau from {taus[mi[0]]:.3g} to {taus[mi[-1]]:.3g} s: {why}"})
     idx = np.flatnonzero(miss)
     groups: list[list] = []

@@ -31,6 +31,7 @@ from gyroarray.analysis.allan import ONE_SIGMA, AllanResult, averaging_factors, 
 from gyroarray.analysis.noise_fit import fit_noise_terms, term_basis
 from gyroarray.core import units
 from gyroarray.core.errors import InputError
+from gyroarray.effects.names import ARW, BIAS_INSTABILITY, RRW
 
 __all__ = ["PLAN_TERMS", "TERM_NAMES", "MAX_PLAN_S", "predicted_sigma", "plan_record", "Plan",
            "model_terms"]
@@ -229,8 +230,8 @@ def model_terms(model, gyro: int) -> dict:
     dict
         ``{"n": N [rad/√s], "b": B [rad/s], "k": K [rad/s/√s]}`` (0 where absent).
     """
-    si = {"arw": ("n", "n_rad_rt_s"), "bias_instability": ("b", "b_rad_s"),
-          "rrw": ("k", "k_rad_s_rt_s")}
+    si = {ARW: ("n", "n_rad_rt_s"), BIAS_INSTABILITY: ("b", "b_rad_s"),
+          RRW: ("k", "k_rad_s_rt_s")}
     out = {"n": 0.0, "b": 0.0, "k": 0.0}
     for overriding in (False, True):
         for e in model:

@@ -209,7 +209,7 @@ def check_effect(effect_cls, *, skip: Iterable[str] = ()) -> None:
 
 def parametrize_effect_checks(classes):
     """A pytest ``parametrize`` decorator: one test per (effect class, check), argument ``check``."""
-    import pytest
+    import pytest  # deferred: pytest is a test-only dependency, needed only by a test suite
     cases = [(f"{cls.__name__}-{name}", fn) for cls in classes for name, fn in effect_checks(cls)]
     return pytest.mark.parametrize("check", [fn for _, fn in cases], ids=[i for i, _ in cases])
 
@@ -233,6 +233,6 @@ def check_estimator(estimator_cls) -> None:
 
 def parametrize_estimator_checks(classes):
     """A pytest ``parametrize`` decorator: one test per (estimator class, check), argument ``check``."""
-    import pytest
+    import pytest  # deferred: pytest is a test-only dependency, needed only by a test suite
     cases = [(f"{cls.__name__}-{name}", fn) for cls in classes for name, fn in estimator_checks(cls)]
     return pytest.mark.parametrize("check", [fn for _, fn in cases], ids=[i for i, _ in cases])

@@ -248,6 +248,7 @@ def _spikes(meas, signal, gyros: list[int], parts, taus, kind: str, args):
 
 def _arw_of(series, parts, dt: float, taus, kind: str) -> float:
     """The fitted ARW [rad/√s] of one gyro's series over ``parts`` (0 when not fitted)."""
+    # deferred: numpy and the analysis (numba) load only when the command runs (a fast --help)
     from gyroarray.analysis.allan import allan_analysis
     from gyroarray.analysis.deviations import analyse_parts
     if parts == [(0, series.size)] and kind in ("oadev", "ohdev"):

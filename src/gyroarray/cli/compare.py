@@ -13,6 +13,7 @@ from pathlib import Path
 from gyroarray.cli.common import (add_bag_options, bag_options, add_force, add_plugin, check_count, count, finite_float, float_in,
                                   measurement_inputs, nonneg_int, output)
 from gyroarray.core.errors import InputError
+from gyroarray.effects.names import ARW, RRW
 
 __all__ = ["add_parser", "cmd_compare", "cmd_diagnose", "cmd_fit", "cmd_ladder"]
 
@@ -78,7 +79,7 @@ def _live_gyros(meas, model, args):
 def _model_lines(model) -> list[str]:
     out = []
     for e in model:
-        if e.effect in ("arw", "rrw"):
+        if e.effect in (ARW, RRW):
             continue
         params = ", ".join(f"{k} = {_short_num(v)}" for k, v in e.params.items())
         out.append(f"  {e.label}: {params}")

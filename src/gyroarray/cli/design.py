@@ -15,6 +15,7 @@ from gyroarray.core.errors import InputError
 from gyroarray.core.units import deg_s_to_rad_s, deg_to_rad, rad_to_deg
 from gyroarray.cli.common import (add_force, add_plugin, bounded_int, check_plot, count, finite_float,
                                   float_in, nonneg_int, output, write_json)
+from gyroarray.effects.names import ARW, BANDWIDTH, CORRELATION, GAUSS_MARKOV, G_SENSITIVITY, RRW
 
 __all__ = ["MAX_DESIGN_GYROS", "MAX_DESIGN_N", "add_parser", "cmd_gdop", "cmd_design",
            "parse_sensor_bandwidth"]
@@ -157,9 +158,9 @@ def _design_noise(args):
         raise InputError("gyroarray design: --alike goes with --model (a datasheet's gyros are alike)")
     elif args.arw is not None:
         g = GyroNoise(arw_deg_rt_h=args.arw, rrw_deg_h_rt_h=args.rrw or 0.0, bi_deg_h=args.bi or 0.0,
-                      sources={"arw": "user", "rrw": "user" if args.rrw is not None else "default",
+                      sources={ARW: "user", RRW: "user" if args.rrw is not None else "default",
                                "bi": "user" if args.bi is not None else "default",
-                               "gauss_markov": "default", "rho_arw": "default", "rho_rrw": "default"})
+                               GAUSS_MARKOV: "default", "rho_arw": "default", "rho_rrw": "default"})
     else:
         raise InputError("gyroarray design --recommend: give the gyro noise: --model MODEL.toml (from "
                          "gyroarray fit --out) or --arw N_DEG_RT_H [--rrw K] [--bi B]")
@@ -276,7 +277,7 @@ def _design_space(args):
             gsens = [0.0, 0.0, gsens[0]]
         if len(gsens) != 3:
             raise InputError(f"--g-sensitivity must be K or KX,KY,KZ [(deg/s)/g], got {args.g_sensitivity!r}")
-        src["g_sensitivity"] = "user"
+        src[G_SENSITIVITY] = "user"
     for key, v in (("rate_hz", args.rate_hz), ("horizon_s", args.horizon_s), ("ns", args.n),
                    ("estimators", args.estimators), ("failures", args.failures),
                    ("motion", args.swing or args.motion)):
@@ -327,7 +328,7 @@ def _sensor_bandwidth_arg(args, rate: float):
         return parse_sensor_bandwidth(args.sensor_bandwidth, rate), "user"
     if args.model is not None:
         from gyroarray.effects.model import NoiseModel  # deferred: numba and the effect registry
-        ents = [e for e in NoiseModel.from_toml(args.model).entries if e.effect == "bandwidth"]
+        ents = [e for e in NoiseModel.from_toml(args.model).entries if e.effect == BANDWIDTH]
         if ents:
             e = min(ents, key=lambda e: float(e.params["cutoff_hz"]))
             fc, order = float(e.params["cutoff_hz"]), int(e.params["order"])
@@ -383,7 +384,7 @@ def _design_as_built(args) -> tuple[dict, str]:
         write_json(args.out, res, args)
         res["written"] = str(args.out)
     lines = [f"Predicted on {args.layout_from} as built ({res['n_gyros']} gyros, "
-             f"{'per-gyro noise' if res['per_gyro'] else 'alike gyros'}, {res['correlation']}), "
+             f"{'per-gyro noise' if res['per_gyro'] else 'alike gyros'}, {res[CORRELATION]}), "
              f"over {res['horizon_s']:g} s:",
              f"{'estimator':<10} {'axis':<4} {'ARW deg/rt(h)':>13} {'RMS deg/s':>10} {'angle deg':>10}  "
              "ADEV deg/s at tau = " + ", ".join(f"{t:g}" for t in res["taus_s"][::3]) + " s"]
@@ -424,8 +425,8 @@ def _recommend_text(res: dict) -> str:
                          f"[{t['monte_carlo']['ci_low']:.4g}, {t['monte_carlo']['ci_high']:.4g}] deg/s")
     if "tracking_limit" in res:
         lines.append("tracking: " + res["tracking_limit"]["statement"])
-    if "g_sensitivity" in res:
-        lines.append(res["g_sensitivity"]["statement"])
+    if G_SENSITIVITY in res:
+        lines.append(res[G_SENSITIVITY]["statement"])
     lines += [f"what would change the choice: {w}" for w in res["what_changes_the_choice"]]
     lines += [f"note: {n}" for n in res["notes"]]
     w, t, ru = r["worst_case"], r["typical"], res.get("runner_up")

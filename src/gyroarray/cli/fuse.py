@@ -141,6 +141,7 @@ def _validation_text(val: dict) -> list[str]:
 
 
 def cmd_fuse(args) -> tuple[dict, str]:
+    # deferred: the chain (numpy, numba) loads only when the command runs (a fast --help)
     from gyroarray.chain.fuse import fuse, fused_files, sha256_of, validate_fuse
     from gyroarray.core.measurement import read_measurement
     from gyroarray.core.outputs import write_many

@@ -11,6 +11,7 @@ from pathlib import Path
 
 from gyroarray.cli.common import float_in, positive_int
 from gyroarray.core.errors import InputError
+from gyroarray.effects.names import ARW, BIAS_INSTABILITY, RRW
 
 __all__ = ["add_parser", "cmd_plan", "parse_precision"]
 
@@ -44,14 +45,14 @@ def _gyros(model, asked):
     if asked is not None:
         return [asked]
     own = sorted({e.gyro for e in model if e.gyro is not None
-                  and e.effect in ("arw", "bias_instability", "rrw")})
+                  and e.effect in (ARW, BIAS_INSTABILITY, RRW)})
     return own or [1]
 
 
 def _fitted_rel(model, gyro: int) -> dict:
     """Relative 1σ the model file carries for each coefficient (``fit --out`` writes them)."""
-    keys = {"arw": ("n", "n_deg_rt_h"), "bias_instability": ("b", "b_deg_h"),
-            "rrw": ("k", "k_deg_h_rt_h")}
+    keys = {ARW: ("n", "n_deg_rt_h"), BIAS_INSTABILITY: ("b", "b_deg_h"),
+            RRW: ("k", "k_deg_h_rt_h")}
     out = {}
     for overriding in (False, True):
         for e in model:

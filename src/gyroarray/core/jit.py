@@ -7,6 +7,9 @@ module is imported.
 
 from __future__ import annotations
 
+import os
+from importlib.util import find_spec
+
 __all__ = ["numba", "njit", "prange"]
 
 
@@ -22,9 +25,6 @@ def _numba_cache_fallback() -> None:
     system's temporary directory, before numba is first imported. A
     ``NUMBA_CACHE_DIR`` the user set is left alone.
     """
-    import os
-    from importlib.util import find_spec
-
     if os.environ.get("NUMBA_CACHE_DIR"):
         return
 

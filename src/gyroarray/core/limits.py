@@ -25,6 +25,7 @@ from __future__ import annotations
 import contextlib
 import functools
 import errno
+import json
 import math
 import os
 import re
@@ -257,8 +258,6 @@ def read_json(path, what: str = "JSON file", *, max_bytes: int | None = None,
         regular file, too large, not UTF-8, not JSON, nested deeper than
         ``max_depth``, or not of the ``expect`` type at its top.
     """
-    import json
-
     name = str(path)
     cap = min(MAX_JSON_BYTES, max(max_memory() // 16, 1 << 20)) if max_bytes is None else int(max_bytes)
     data = read_regular(path, what, max_bytes=cap)

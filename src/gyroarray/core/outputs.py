@@ -40,6 +40,7 @@ import errno
 import io
 import os
 import stat
+import sys
 import tempfile
 from pathlib import Path
 from typing import Iterable
@@ -527,7 +528,6 @@ def private_matplotlib_dir() -> str | None:
     str or None
         The folder set, or None when nothing was changed.
     """
-    import sys
     if os.environ.get("MPLCONFIGDIR") or "matplotlib" in sys.modules:
         return None
     uid = os.geteuid() if hasattr(os, "geteuid") else 0

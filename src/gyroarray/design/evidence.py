@@ -38,6 +38,7 @@ from gyroarray.design.recommend import DesignSpace, GyroNoise, design_label, est
 from gyroarray.design.robust import fixed_weights, kept_sets, mirror_pattern, mounted_axes, worst_over_interval
 from gyroarray.estimators import get_estimator
 from gyroarray.sim.effects import simulate_readings
+from gyroarray.effects.names import ARW, BIAS_INSTABILITY, GAUSS_MARKOV, RRW
 
 __all__ = ["ADEV_SEED", "GdopRobustnessRow", "noise_and_space", "recommended_adev",
            "cached_recommended_adev", "adev_file", "gdop_robustness_table", "mirror_comparison",
@@ -50,11 +51,11 @@ AXES = ("x", "y", "z")
 
 def noise_and_space(a: dict) -> tuple[GyroNoise, DesignSpace]:
     """The GyroNoise and DesignSpace of a result's ``assumptions`` (as :func:`~gyroarray.design.recommend.assumptions` writes them)."""
-    gm = a["gauss_markov"]["value"]
+    gm = a[GAUSS_MARKOV]["value"]
     rho = a["rho"]["value"]
     r0 = 0.0 if isinstance(rho, list) else float(rho)
-    g = GyroNoise(arw_deg_rt_h=a["arw"]["value"], rrw_deg_h_rt_h=a["rrw"]["value"],
-                  bi_deg_h=a["bias_instability"]["value"], gm_sigma_deg_h=gm["sigma_deg_h"],
+    g = GyroNoise(arw_deg_rt_h=a[ARW]["value"], rrw_deg_h_rt_h=a[RRW]["value"],
+                  bi_deg_h=a[BIAS_INSTABILITY]["value"], gm_sigma_deg_h=gm["sigma_deg_h"],
                   gm_tau_s=gm["tau_s"], rho_arw=r0, rho_rrw=r0)
     m = a["motion"]["value"]
     swing = None

@@ -90,9 +90,12 @@ from typing import Any
 
 import numpy as np
 import scipy.fft as sfft
+from scipy import signal
+from scipy.linalg import block_diag
 
 from gyroarray.core import units
 from gyroarray.core.errors import InputError
+from gyroarray.effects.model import ModelEntry, NoiseModel
 from gyroarray.effects.terms import (CorrelationTerm, DeterministicTerm, FlickerTerm, ForceTerm, GaussMarkovTerm,
                                      Motion, SensorFilter, WalkTerm, WhiteTerm, root_sum_square)
 
@@ -109,7 +112,6 @@ def declared_terms() -> dict:
     """Each registered effect's declared term class, probed on its placeholder parameters on
     three gyros (None: it declares none, or the probe fails)."""
     from gyroarray.effects import REGISTRY  # lazy: the registry and its plugins, at call time
-    from gyroarray.effects.model import ModelEntry, NoiseModel
     from gyroarray.estimators.noise import model_terms  # lazy: loads numba
     out: dict = {}
     for name, eff in REGISTRY.items():
@@ -254,7 +256,6 @@ class SensorBandwidth:
 
     def response(self, freq_hz: float) -> np.ndarray:
         """H_d(e^{j2πf dt}) of each gyro's filter (1 where none), shape (N,) [-]."""
-        from scipy import signal
         out = np.ones(self.order.size, dtype=complex)
         for k in np.flatnonzero(self.filtered):
             _, h = signal.sosfreqz(self.sos(int(k)), worN=[float(freq_hz)], fs=1.0 / self.dt_s)
@@ -274,7 +275,6 @@ class SensorBandwidth:
     def state_space(self, k: int):
         """Gyro k's filter as s_j = A s_{j-1} + B u_j, y_j = C s_{j-1} + D u_j (s_j the
         standard state of sample j + 1, :func:`scipy.signal.tf2ss`)."""
-        from scipy import signal
         b, a = signal.sos2tf(self.sos(k))
         while b.size > 1 and a[-1] == 0 and b[-1] == 0:             # order 1: drop the section's
             a, b = a[:-1], b[:-1]                                    # padding (a pole at 0)
@@ -323,7 +323,6 @@ def cascade(sys, sensor: SensorBandwidth | None):
     """
     if sensor is None or not sensor.filtered.any():
         return sys
-    from scipy.linalg import block_diag
     from gyroarray.estimators.base import LinearSystem  # lazy: loads numba
     N = sys.K.shape[1]
     blocks = []
@@ -1094,7 +1093,6 @@ def channel_response(sys, dt_s: float, n: int, k0: int, *, bi: bool = False,
         w = np.asarray(motion, dtype=float)
         est = np.zeros(w.shape, dtype=complex if np.iscomplexobj(sys.lam) else float)
         x = sys.X0 @ w[:1]                                            # x̂_{-1} = X0 z_0 (per axis)
-        from scipy import signal
         # x̂ in modal coordinates: m_k = λ m_{k-1} + (S⁻¹K) z_k
         m0 = sys.S_inv @ x
         bk = sys.S_inv @ sys.K

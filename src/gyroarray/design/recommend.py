@@ -62,7 +62,7 @@ from typing import Any
 import numpy as np
 from scipy.optimize import minimize_scalar
 
-from gyroarray.analysis.replicates import rms_ci
+from gyroarray.analysis.replicates import mean_ci, replicate_rng, rms_ci
 from gyroarray.core import units
 from gyroarray.core.constants import G0_M_S2
 from gyroarray.core.gdop import gdop_batch, correlation_matrix, fault_tolerance, worst_gdop_over_rho
@@ -73,6 +73,7 @@ from gyroarray.design.predict import (AXES, MODELLED, SensorBandwidth, Swing, ca
                                       predict_system, settle_start, swing_truth)
 from gyroarray.design.robust import (fixed_weights, kept_sets, mirror_pattern, mounted_axes,
                                      mounting_patterns, mounting_words, worst_over_interval)
+from gyroarray.effects.names import ARW, BANDWIDTH, BIAS_INSTABILITY, CONSTANT_BIAS, CORRELATION, GAUSS_MARKOV, G_SENSITIVITY, MISALIGNMENT, QUANTIZATION, RRW, SCALE_FACTOR, SCALE_NONLINEARITY, TEMPERATURE_BIAS
 
 __all__ = ["GyroNoise", "DesignSpace", "recommend", "design_label", "ESTIMATORS", "DEFAULT_BANDWIDTH_HZ"]
 
@@ -127,7 +128,7 @@ class GyroNoise:
     @property
     def n_gyros(self) -> int | None:
         """The gyro count a per-gyro model fixes (None: alike gyros, any N)."""
-        return None if self.per_gyro is None else int(len(self.per_gyro["arw"]))
+        return None if self.per_gyro is None else int(len(self.per_gyro[ARW]))
 
     def __post_init__(self):
         if not (math.isfinite(self.arw_deg_rt_h) and self.arw_deg_rt_h > 0):
@@ -165,26 +166,26 @@ class GyroNoise:
             v = per_gyro(model, effect, key, n)
             v = v[np.isfinite(v)]
             return float(np.sqrt(np.mean(v ** 2))) if v.size else 0.0
-        arw = units.arw_rad_rt_s_to_deg_rt_h(qmean("arw", "n_rad_rt_s"))
+        arw = units.arw_rad_rt_s_to_deg_rt_h(qmean(ARW, "n_rad_rt_s"))
         if arw <= 0:
-            raise InputError("the model has no angle random walk ('arw'): the estimators need "
+            raise InputError(f"the model has no angle random walk ({ARW!r}): the estimators need "
                              "the white-noise level of the gyros", file=source)
         rho = {"rho_arw": 0.0, "rho_rrw": 0.0}
         for e in model.entries:
-            if e.effect == "correlation":
+            if e.effect == CORRELATION:
                 for k in rho:
                     r = np.asarray(e.si_params[k], dtype=float)
                     rho[k] = float(r) if r.ndim == 0 else float(
                         (r.sum() - np.trace(r)) / (r.size - r.shape[0]))
-        tau = per_gyro(model, "gauss_markov", "tau_s", n)
+        tau = per_gyro(model, GAUSS_MARKOV, "tau_s", n)
         tau = tau[np.isfinite(tau)]
-        src = {k: source for k in ("arw", "rrw", "bi", "gauss_markov", "rho_arw", "rho_rrw")}
+        src = {k: source for k in (ARW, RRW, "bi", GAUSS_MARKOV, "rho_arw", "rho_rrw")}
         # the sensor's own effects come in through DesignSpace
-        modelled = tuple(m for m in MODELLED if m not in ("bandwidth", "g_sensitivity"))
+        modelled = tuple(m for m in MODELLED if m not in (BANDWIDTH, G_SENSITIVITY))
         return cls(arw_deg_rt_h=arw,
-                   rrw_deg_h_rt_h=units.rrw_rad_s_rt_s_to_deg_h_rt_h(qmean("rrw", "k_rad_s_rt_s")),
-                   bi_deg_h=units.rad_s_to_deg_h(qmean("bias_instability", "b_rad_s")),
-                   gm_sigma_deg_h=units.rad_s_to_deg_h(qmean("gauss_markov", "sigma_rad_s")),
+                   rrw_deg_h_rt_h=units.rrw_rad_s_rt_s_to_deg_h_rt_h(qmean(RRW, "k_rad_s_rt_s")),
+                   bi_deg_h=units.rad_s_to_deg_h(qmean(BIAS_INSTABILITY, "b_rad_s")),
+                   gm_sigma_deg_h=units.rad_s_to_deg_h(qmean(GAUSS_MARKOV, "sigma_rad_s")),
                    gm_tau_s=float(np.mean(tau)) if tau.size else 0.0, sources=src,
                    ignored=tuple(sorted({e.effect for e in model.entries} - set(modelled))), **rho)
 
@@ -201,16 +202,16 @@ class GyroNoise:
         from gyroarray.effects.model import ModelEntry, NoiseModel  # lazy: loads numba
         if self.per_gyro is not None:
             return self._per_gyro_model(n_gyros, keep)
-        entries = [ModelEntry("arw", None, {"n_deg_rt_h": self.arw_deg_rt_h})]
+        entries = [ModelEntry(ARW, None, {"n_deg_rt_h": self.arw_deg_rt_h})]
         if self.rrw_deg_h_rt_h > 0:
-            entries.append(ModelEntry("rrw", None, {"k_deg_h_rt_h": self.rrw_deg_h_rt_h}))
+            entries.append(ModelEntry(RRW, None, {"k_deg_h_rt_h": self.rrw_deg_h_rt_h}))
         if self.bi_deg_h > 0:
-            entries.append(ModelEntry("bias_instability", None, {"b_deg_h": self.bi_deg_h}))
+            entries.append(ModelEntry(BIAS_INSTABILITY, None, {"b_deg_h": self.bi_deg_h}))
         if self.gm_sigma_deg_h > 0 and self.gm_tau_s > 0:
-            entries.append(ModelEntry("gauss_markov", None, {"sigma_deg_h": self.gm_sigma_deg_h,
+            entries.append(ModelEntry(GAUSS_MARKOV, None, {"sigma_deg_h": self.gm_sigma_deg_h,
                                                              "tau_s": self.gm_tau_s}))
         if self.rho_arw or self.rho_rrw:
-            entries.append(ModelEntry("correlation", None, {"rho_arw": self.rho_arw,
+            entries.append(ModelEntry(CORRELATION, None, {"rho_arw": self.rho_arw,
                                                             "rho_rrw": self.rho_rrw}))
         model = NoiseModel(tuple(entries), description="typical gyro of the design search")
         model.check(n_gyros)
@@ -224,13 +225,13 @@ class GyroNoise:
         p = self.per_gyro
         entries = []
         for j, i in enumerate(idx):
-            entries.append(ModelEntry("arw", j + 1, {"n_deg_rt_h": float(p["arw"][i])}))
-            if p["rrw"][i] > 0:
-                entries.append(ModelEntry("rrw", j + 1, {"k_deg_h_rt_h": float(p["rrw"][i])}))
+            entries.append(ModelEntry(ARW, j + 1, {"n_deg_rt_h": float(p[ARW][i])}))
+            if p[RRW][i] > 0:
+                entries.append(ModelEntry(RRW, j + 1, {"k_deg_h_rt_h": float(p[RRW][i])}))
             if p["bi"][i] > 0:
-                entries.append(ModelEntry("bias_instability", j + 1, {"b_deg_h": float(p["bi"][i])}))
+                entries.append(ModelEntry(BIAS_INSTABILITY, j + 1, {"b_deg_h": float(p["bi"][i])}))
             if p["gm_sigma"][i] > 0 and p["gm_tau"][i] > 0:
-                entries.append(ModelEntry("gauss_markov", j + 1, {"sigma_deg_h": float(p["gm_sigma"][i]),
+                entries.append(ModelEntry(GAUSS_MARKOV, j + 1, {"sigma_deg_h": float(p["gm_sigma"][i]),
                                                                   "tau_s": float(p["gm_tau"][i])}))
         corr = {}
         for key, mat, rho in (("rho_arw", self.corr_arw, self.rho_arw), ("rho_rrw", self.corr_rrw, self.rho_rrw)):
@@ -241,7 +242,7 @@ class GyroNoise:
             elif rho:
                 corr[key] = float(rho)
         if corr:
-            entries.append(ModelEntry("correlation", None, corr))
+            entries.append(ModelEntry(CORRELATION, None, corr))
         model = NoiseModel(tuple(entries), description="the model's gyros, each its own noise")
         model.check(n_gyros)
         return model
@@ -257,7 +258,7 @@ class GyroNoise:
 
 #: The per-gyro levels of :class:`GyroNoise` (datasheet units): ARW [deg/√h], RRW [deg/h/√h],
 #: bias instability [deg/h], Gauss–Markov σ [deg/h] and τc [s].
-PER_GYRO_KEYS = ("arw", "rrw", "bi", "gm_sigma", "gm_tau")
+PER_GYRO_KEYS = (ARW, RRW, "bi", "gm_sigma", "gm_tau")
 
 
 def model_gyro_count(model) -> int:
@@ -324,7 +325,7 @@ def per_gyro_noise(model, typical: GyroNoise, source: str = "model") -> GyroNois
     table = getattr(model, "array", None)
     c_w = _table_matrix(table, "white_correlation", n, c_w)
     c_q = _table_matrix(table, "walk_correlation", n, c_q)
-    per = {"arw": arw, "rrw": units.rrw_rad_s_rt_s_to_deg_h_rt_h(of[WalkTerm]),
+    per = {ARW: arw, RRW: units.rrw_rad_s_rt_s_to_deg_h_rt_h(of[WalkTerm]),
            "bi": units.rad_s_to_deg_h(of[FlickerTerm]), "gm_sigma": units.rad_s_to_deg_h(gm_s),
            "gm_tau": gm_t}
     per = {k: np.asarray(v, dtype=float) for k, v in per.items()}
@@ -341,16 +342,16 @@ def _levels(g: GyroNoise, n: int, keep, dt: float):
     per sample [rad²/s²], flicker B² [rad²/s²], Gauss–Markov σ² [rad²/s²]."""
     p = g.per_gyro
     idx = list(range(n)) if keep is None else list(keep)
-    return (units.arw_deg_rt_h_to_rad_rt_s(p["arw"][idx]) ** 2 / dt,
-            units.rrw_deg_h_rt_h_to_rad_s_rt_s(p["rrw"][idx]) ** 2 * dt,
+    return (units.arw_deg_rt_h_to_rad_rt_s(p[ARW][idx]) ** 2 / dt,
+            units.rrw_deg_h_rt_h_to_rad_s_rt_s(p[RRW][idx]) ** 2 * dt,
             units.deg_h_to_rad_s(p["bi"][idx]) ** 2, units.deg_h_to_rad_s(p["gm_sigma"][idx]) ** 2)
 
 
 def _corr_of(g: GyroNoise, n: int, keep, which: str) -> np.ndarray:
     """The correlation of the kept gyros: the model's matrix when it has one, else equicorrelated."""
-    mat = g.corr_arw if which == "arw" else g.corr_rrw
+    mat = g.corr_arw if which == ARW else g.corr_rrw
     if mat is None:
-        return _corr(n, g.rho_arw if which == "arw" else g.rho_rrw)
+        return _corr(n, g.rho_arw if which == ARW else g.rho_rrw)
     idx = list(range(n)) if keep is None else list(keep)
     return np.asarray(mat, dtype=float)[np.ix_(idx, idx)]
 
@@ -359,7 +360,7 @@ def _cov(g: GyroNoise, n: int, keep, dt: float) -> tuple[np.ndarray, np.ndarray]
     """Per-sample white covariance R and walk increment covariance Q of the kept gyros [rad²/s²]."""
     s2, q, _, _ = _levels(g, n, keep, dt)
     s, qs = np.sqrt(s2), np.sqrt(q)
-    return np.outer(s, s) * _corr_of(g, n, keep, "arw"), np.outer(qs, qs) * _corr_of(g, n, keep, "rrw")
+    return np.outer(s, s) * _corr_of(g, n, keep, ARW), np.outer(qs, qs) * _corr_of(g, n, keep, RRW)
 
 
 @dataclass(frozen=True)
@@ -456,10 +457,10 @@ class DesignSpace:
         from gyroarray.effects.model import ModelEntry  # lazy: loads numba
         out = []
         if self.sensor_bandwidth is not None:
-            out.append(ModelEntry("bandwidth", None, {"cutoff_hz": float(self.sensor_bandwidth[0]),
+            out.append(ModelEntry(BANDWIDTH, None, {"cutoff_hz": float(self.sensor_bandwidth[0]),
                                                       "order": int(self.sensor_bandwidth[1])}))
         if self.g_sensitivity_deg_s_per_g is not None:
-            out.append(ModelEntry("g_sensitivity", None,
+            out.append(ModelEntry(G_SENSITIVITY, None,
                                   {"deg_s_per_g": tuple(float(v) for v in self.g_sensitivity_deg_s_per_g)}))
         return tuple(out)
 
@@ -637,7 +638,7 @@ def _with_sensor(model, space: DesignSpace, *, g_sensitivity: bool = True):
     (``g_sensitivity`` False), as the ranking does: it is reported on its own.
     """
     from gyroarray.effects.model import NoiseModel  # lazy: loads numba
-    extra = tuple(e for e in space.sensor_entries() if g_sensitivity or e.effect != "g_sensitivity")
+    extra = tuple(e for e in space.sensor_entries() if g_sensitivity or e.effect != G_SENSITIVITY)
     return model if not extra else NoiseModel(tuple(model.entries) + extra,
                                               description=model.description)
 
@@ -673,7 +674,7 @@ def _g_sensitivity(space: DesignSpace, dc_gain: np.ndarray) -> dict:
     k0 = settle_start(f0.shape[0], space.dt_s, space.settle_s) if f0.shape[0] > 1 else 0
     r = g_sensitivity_error(k, f, T0, k0)
     fused = r["fused_rms_deg_s"]
-    return {"g_sensitivity": {"per_gyro_rms_deg_s": float(np.mean(r["per_gyro_rms_deg_s"])),
+    return {G_SENSITIVITY: {"per_gyro_rms_deg_s": float(np.mean(r["per_gyro_rms_deg_s"])),
                               "fused_rms_deg_s": fused,
                               "fused_rms_3axis_deg_s": float(math.sqrt(sum(v * v for v in fused.values())))}}
 
@@ -1163,7 +1164,7 @@ def recommend(g: GyroNoise, space: DesignSpace, *, rhos=None) -> dict:
         out["tracking_limit"] = lim
     gst = g_sensitivity_statement(rec, space)
     if gst is not None:
-        out["g_sensitivity"] = {**rec["g_sensitivity"], "statement": gst}
+        out[G_SENSITIVITY] = {**rec[G_SENSITIVITY], "statement": gst}
     if not single:
         # the designs as decided (weights fixed at their design ρ), ranked at each true ρ
         out["per_rho"] = {}
@@ -1229,7 +1230,7 @@ def tracking_limit(d: dict, space: DesignSpace, g: GyroNoise | None = None) -> d
 
 def g_sensitivity_statement(d: dict, space: DesignSpace) -> str | None:
     """The g-sensitivity's rate error of a design beside its noise RMS, in words."""
-    gs = d.get("g_sensitivity")
+    gs = d.get(G_SENSITIVITY)
     if gs is None or space.g_sensitivity_deg_s_per_g is None:
         return None
     k = ", ".join(f"{v:g}" for v in space.g_sensitivity_deg_s_per_g)
@@ -1249,7 +1250,7 @@ def _short(d: dict) -> dict:
     """The JSON fields of one design (the issue's keys first)."""
     keys = ("rank", "scheme", "n", "alpha_deg", "estimator", "bandwidth_hz", "predicted",
             "worst_gdop_after_failures", "rms_3axis_deg_s", "gdop", "fault_tolerance", "rho",
-            "worst_rms_3axis_deg_s", "rms_by_rho", "g_sensitivity", "path", "axes", "mounting",
+            "worst_rms_3axis_deg_s", "rms_by_rho", G_SENSITIVITY, "path", "axes", "mounting",
             "mounting_signs", "design_rho", "design_rho_note", "objective", "rho_range", "worst_case",
             "typical", "oracle_worst_case", "error_budget", "mdb_deg_s", "mdb_per_gyro_deg_s",
             "mdb_worst_gyro", "far_per_h", "p_md", "tie", "excluded", "predicted_at", "scored")
@@ -1332,12 +1333,12 @@ def _what_changes(designs: list[dict], g: GyroNoise, space: DesignSpace, rhos) -
 
 #: The error sources of a real gyro that a noise model may leave out, and why each matters.
 _USUAL_EFFECTS = (
-    ("scale_factor", "a rate error proportional to the body rate (ppm of the motion)"),
-    ("scale_nonlinearity", "a rate error growing with the square of the body rate"),
-    ("misalignment", "each gyro's axis tilted from its mounted direction: cross-axis rate error"),
-    ("temperature_bias", "a bias that follows the temperature swing"),
-    ("quantization", "the output resolution (white angle noise)"),
-    ("constant_bias", "the turn-on bias: taken as calibrated at switch-on (biases start at zero)"),
+    (SCALE_FACTOR, "a rate error proportional to the body rate (ppm of the motion)"),
+    (SCALE_NONLINEARITY, "a rate error growing with the square of the body rate"),
+    (MISALIGNMENT, "each gyro's axis tilted from its mounted direction: cross-axis rate error"),
+    (TEMPERATURE_BIAS, "a bias that follows the temperature swing"),
+    (QUANTIZATION, "the output resolution (white angle noise)"),
+    (CONSTANT_BIAS, "the turn-on bias: taken as calibrated at switch-on (biases start at zero)"),
 )
 
 
@@ -1362,8 +1363,8 @@ def ignored_effects(g: GyroNoise, space: DesignSpace, budget_ignored=()) -> list
     present = set() if g.model is None else {e.effect for e in g.model.entries}
     out = []
     for name in g.ignored:
-        if (name == "bandwidth" and space.sensor_bandwidth is not None) or (
-                name == "g_sensitivity" and space.g_sensitivity_deg_s_per_g is not None):
+        if (name == BANDWIDTH and space.sensor_bandwidth is not None) or (
+                name == G_SENSITIVITY and space.g_sensitivity_deg_s_per_g is not None):
             continue
         out.append(f"{name}: in the model, not in the ranking's predictor (the error budget shows it "
                    "where the effect declares a term)")
@@ -1375,14 +1376,14 @@ def ignored_effects(g: GyroNoise, space: DesignSpace, budget_ignored=()) -> list
     for name, what in _USUAL_EFFECTS:
         if name not in present:
             out.append(f"{name}: not in {src}, taken as zero ({what})")
-    if space.g_sensitivity_deg_s_per_g is None and "g_sensitivity" not in present:
-        out.append(f"g_sensitivity: not in {src} (--g-sensitivity), taken as zero (a rate error "
+    if space.g_sensitivity_deg_s_per_g is None and G_SENSITIVITY not in present:
+        out.append(f"{G_SENSITIVITY}: not in {src} (--g-sensitivity), taken as zero (a rate error "
                    "proportional to the specific force)")
     elif space.g_sensitivity_deg_s_per_g is not None:
-        out.append("g_sensitivity: stated; in the error budget and reported beside the ranking, "
+        out.append(f"{G_SENSITIVITY}: stated; in the error budget and reported beside the ranking, "
                    "not ranked")
-    if space.sensor_bandwidth is None and "bandwidth" not in present:
-        out.append(f"bandwidth: not in {src} (--sensor-bandwidth), the gyros' own low-pass taken as flat")
+    if space.sensor_bandwidth is None and BANDWIDTH not in present:
+        out.append(f"{BANDWIDTH}: not in {src} (--sensor-bandwidth), the gyros' own low-pass taken as flat")
     return out
 
 
@@ -1394,11 +1395,11 @@ def assumptions(g: GyroNoise, space: DesignSpace, rhos, single: bool) -> dict:
         return {"value": value, "source": source, **({"unit": unit} if unit else {})}
     s = space.__dict__.get("_sources", {})
     return {
-        "arw": item(g.arw_deg_rt_h, src.get("arw", "user"), "deg/rt(h)"),
-        "rrw": item(g.rrw_deg_h_rt_h, src.get("rrw", "default"), "deg/h/rt(h)"),
-        "bias_instability": item(g.bi_deg_h, src.get("bi", "default"), "deg/h"),
-        "gauss_markov": item({"sigma_deg_h": g.gm_sigma_deg_h, "tau_s": g.gm_tau_s},
-                             src.get("gauss_markov", "default")),
+        ARW: item(g.arw_deg_rt_h, src.get(ARW, "user"), "deg/rt(h)"),
+        RRW: item(g.rrw_deg_h_rt_h, src.get(RRW, "default"), "deg/h/rt(h)"),
+        BIAS_INSTABILITY: item(g.bi_deg_h, src.get("bi", "default"), "deg/h"),
+        GAUSS_MARKOV: item({"sigma_deg_h": g.gm_sigma_deg_h, "tau_s": g.gm_tau_s},
+                             src.get(GAUSS_MARKOV, "default")),
         "rho": item(rhos[0] if single else list(rhos), src.get("rho_arw", "default"),
                     "common ARW and RRW correlation" if g.rho_arw == g.rho_rrw else
                     f"rho_arw {g.rho_arw:g}, rho_rrw {g.rho_rrw:g}"),
@@ -1409,7 +1410,7 @@ def assumptions(g: GyroNoise, space: DesignSpace, rhos, single: bool) -> dict:
                                      f"(gyro k of the model at position k of the layout); the search is "
                                      f"over the layouts with N = {g.n_gyros}; the values above are "
                                      "quadratic means, shown for reference (--alike uses them instead)",
-                        "correlation": ("the model's matrices" if g.corr_arw is not None
+                        CORRELATION: ("the model's matrices" if g.corr_arw is not None
                                         or g.corr_rrw is not None else "common ρ")},
                        src.get("per_gyro", "model"))),
         "rate_hz": item(space.rate_hz, s.get("rate_hz", "default"), "Hz"),
@@ -1436,8 +1437,8 @@ def assumptions(g: GyroNoise, space: DesignSpace, rhos, single: bool) -> dict:
                                  {"cutoff_hz": space.sensor_bandwidth[0], "order": space.sensor_bandwidth[1]},
                                  s.get("sensor_bandwidth", "default"),
                                  "every gyro's own low-pass, cascaded before the estimator (None: none)"),
-        "g_sensitivity": item(None if space.g_sensitivity_deg_s_per_g is None else
-                              list(space.g_sensitivity_deg_s_per_g), s.get("g_sensitivity", "default"),
+        G_SENSITIVITY: item(None if space.g_sensitivity_deg_s_per_g is None else
+                              list(space.g_sensitivity_deg_s_per_g), s.get(G_SENSITIVITY, "default"),
                               "(deg/s)/g, platform frame, every gyro alike; reported, not ranked"),
     }
 
@@ -1484,7 +1485,6 @@ def monte_carlo_check(designs: list[dict], g: GyroNoise, space: DesignSpace, *,
     """
     if designs and "worst_case" in designs[0]:
         return check_decision(designs, g, space, replicates=replicates, seed=seed)
-    from gyroarray.analysis.replicates import mean_ci, replicate_rng, rms_ci
     from gyroarray.estimators import get_estimator  # lazy: loads numba
     from gyroarray.sim.effects import simulate_readings  # lazy: loads numba
     picked = _pick_for_check(designs, top)
@@ -2049,8 +2049,8 @@ def _error_budget(d: dict, dec: _Decider, c: _Cand, H: np.ndarray) -> dict:
     m, _, _, _, ch, resp = _case(dec, c, H, keep, wc["rho"], c.rho_d)["_moments"]
     terms = {}
     for name, level, field_ in (("white", ch.white, "white"), ("rate_random_walk", ch.walk, "walk"),
-                                ("bias_instability", ch.flicker, "flicker"),
-                                ("gauss_markov", ch.gm, "gauss_markov")):
+                                (BIAS_INSTABILITY, ch.flicker, "flicker"),
+                                (GAUSS_MARKOV, ch.gm, GAUSS_MARKOV)):
         ms = sum(level[0, a] * getattr(resp[a], field_)[0] for a in range(3))
         sf = sum(level[0, a] * getattr(resp[a], field_)[2] for a in range(3))
         if ms > 0:
@@ -2391,7 +2391,6 @@ def check_decision(designs: list[dict], g: GyroNoise, space: DesignSpace, *, rep
         95 % intervals, ``rms_3axis_deg_s``, ``inside_95`` of ``compared``), ``paired`` (the
         recommendation against each other one), ``inside_95``, ``compared``.
     """
-    from gyroarray.analysis.replicates import mean_ci, replicate_rng
     from gyroarray.estimators import get_estimator  # lazy: loads numba
     from gyroarray.sim.effects import simulate_readings  # lazy: loads numba
     rec = designs[0]
@@ -2615,6 +2614,6 @@ def predict_as_built(model, axes: np.ndarray, dt_s: float, *, n_samples: int,
     return {"estimators": out, "taus_s": [float(t) for t in taus], "n_gyros": N,
             "horizon_s": float(n_samples * dt_s), "dt_s": float(dt_s),
             "noise": g.to_json_dict(), "per_gyro": g.per_gyro is not None,
-            "correlation": ("the model's [array] / correlation matrices" if g.corr_arw is not None
+            CORRELATION: ("the model's [array] / correlation matrices" if g.corr_arw is not None
                             or g.corr_rrw is not None else f"rho = {g.rho_arw:g}"),
             "ignored_effects": list(noise.ignored), "notes": notes}

@@ -31,6 +31,8 @@ import inspect
 import pkgutil
 import stat
 import sys
+import traceback
+from importlib import metadata
 from pathlib import Path
 from types import MappingProxyType, ModuleType
 from typing import Mapping, NoReturn
@@ -145,7 +147,6 @@ def installed_plugins() -> list[tuple[str, str]]:
 
 
 def _load_entry_points() -> None:
-    from importlib import metadata
     eps = metadata.entry_points(group=ENTRY_POINT_GROUP)
     for ep in sorted(eps, key=lambda e: e.name):
         source = f"entry point {ep.name} = {ep.value}"
@@ -246,7 +247,6 @@ def load_plugin(path) -> list[str]:
 
 def _plugin_line(err: BaseException, path: Path) -> int | None:
     """The line of ``path`` where ``err`` was raised (deepest frame in that file)."""
-    import traceback
     line = getattr(err, "lineno", None) if isinstance(err, SyntaxError) else None
     for frame in traceback.extract_tb(err.__traceback__):
         try:

@@ -154,7 +154,6 @@ def chi2_to_z(chi2: float, dof: int) -> float:
 def z_from_log_p(log_p: float) -> float:
     """z with Φ̄(z) = p for an upper-tail probability given by its log: finite however small
     p is (no cap at p = 1e-300, z = 37.05, where a linear p underflows)."""
-    import math
     if log_p > -700:
         return float(-special.ndtri(min(math.exp(log_p), 1.0)))
     z = math.sqrt(-2.0 * log_p)

@@ -29,6 +29,7 @@ body rate; ``None`` where the estimator has no such steady state.
 
 from __future__ import annotations
 
+import importlib
 import inspect
 import math
 from dataclasses import dataclass
@@ -325,7 +326,6 @@ def unregister(name: str) -> None:
 
 
 def _load_builtins() -> None:
-    import importlib
     for mod in _BUILTIN_MODULES:
         importlib.import_module(f"{__package__}.{mod}")
 

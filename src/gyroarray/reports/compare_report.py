@@ -51,6 +51,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from scipy import stats
 
 from gyroarray.core import units
 from gyroarray.chain.compare import Analysis
@@ -124,6 +125,7 @@ def _grid(n: int, ncols: int, w: float, h: float, *, title: bool = True):
     a constrained layout draws every figure twice, which doubles the
     report's time.
     """
+    # deferred: matplotlib loads only when a figure is drawn
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
     ncols = max(1, min(ncols, n))
@@ -149,7 +151,7 @@ def _log_ticks(ax, x: bool = True, y: bool = True):
     Minor log ticks cost most of a figure's drawing time and their labels
     crowd the small panels.
     """
-    from matplotlib import ticker
+    from matplotlib import ticker  # deferred: matplotlib loads only when a figure is drawn
     ax.minorticks_off()
     for on, axis, lim in ((x, ax.xaxis, ax.get_xlim()), (y, ax.yaxis, ax.get_ylim())):
         if not on:
@@ -258,7 +260,6 @@ def _ladder_fig(steps) -> bytes:
 
 def _adev_fig(analysis, n_gyros: int, title: str) -> bytes:
     """Measured ADEV against the model's 95 % Monte-Carlo band, one panel per gyro."""
-    from scipy import stats
     a = analysis.adev
     taus = np.asarray(a["taus_s"], float)
     to = units.rad_s_to_deg_h

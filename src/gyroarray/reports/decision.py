@@ -32,6 +32,7 @@ from gyroarray.design.evidence import (GdopRobustnessRow, fused_single_ratio, mi
                                        record_rho, what_would_change)
 from gyroarray.design.recommend import design_label as _recommend_label
 from gyroarray.reports.design_plots import agg_figure, array_fig, figure_png, accuracy_vs_n_fig
+from gyroarray.effects.names import G_SENSITIVITY
 
 __all__ = ["write_sections", "decision_summary", "decision_block", "adev_section",
            "equivalence_rows", "pct"]
@@ -321,8 +322,8 @@ def _worst_case_summary(res: dict) -> list[str]:
         lines.append(f"Runner-up: {_label(ru)}; worst case {_case_text(ru['worst_case'], horizon)}.")
     if res.get("tracking_limit"):
         lines.append("Tracking: " + res["tracking_limit"]["statement"] + ".")
-    if res.get("g_sensitivity"):
-        lines.append(res["g_sensitivity"]["statement"] + ".")
+    if res.get(G_SENSITIVITY):
+        lines.append(res[G_SENSITIVITY]["statement"] + ".")
     return lines
 
 
@@ -361,8 +362,8 @@ def decision_summary(res: dict) -> list[str]:
         lines.append(f"Runner-up: {_label(ru)} ({ru['rms_3axis_deg_s']:.4g} deg/s 3-axis RMS).")
     if res.get("tracking_limit"):                      # the sensor's own bandwidth (issue 15)
         lines.append("Tracking: " + res["tracking_limit"]["statement"] + ".")
-    if res.get("g_sensitivity"):
-        lines.append(res["g_sensitivity"]["statement"] + ".")
+    if res.get(G_SENSITIVITY):
+        lines.append(res[G_SENSITIVITY]["statement"] + ".")
     return lines
 
 

@@ -25,6 +25,7 @@ def _rho_grid(n: int, count: int = 200) -> np.ndarray:
 
 def agg_figure(w=9.0, h=5.0, ncols=1):
     """A figure of ``ncols`` panels side by side on an Agg canvas (no pyplot state), and its axes."""
+    # deferred: matplotlib loads only when a figure is drawn
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
     fig = Figure(figsize=(w, h), layout="constrained")
@@ -65,6 +66,7 @@ def design_fig():
     for several ρ (Scheme 1, N = 6), GDOP vs ρ at the ρ = 0 optimal α and the
     optimal α vs ρ (a matplotlib Figure on an Agg canvas; no pyplot state).
     """
+    # deferred: matplotlib loads only when a figure is drawn
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
@@ -168,6 +170,7 @@ def array_fig(axes, title: str = "", signs=None):
     signs : array_like (N,), optional
         ±1 per gyro (``mounting_signs``): −1 drawn red, as mounted reversed.
     """
+    # deferred: matplotlib loads only when a figure is drawn
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
     a = np.asarray(axes, dtype=float)
@@ -231,6 +234,7 @@ def plot_series(ax, series: dict, *, rtol: float) -> list:
 def accuracy_vs_n_fig(res: dict):
     """Predicted 3-axis RMS vs N per scheme and estimator (identical series merged), with the
     simulated check's 95 % interval as error bars at the checked designs."""
+    # deferred: matplotlib loads only when a figure is drawn
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
     fig = Figure(figsize=(8.5, 5.0), layout="constrained")

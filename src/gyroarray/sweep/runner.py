@@ -44,19 +44,26 @@ so in the summary's ``notes`` when it is not 1.
 
 from __future__ import annotations
 
+import asyncio
+import ctypes
 import hashlib
 import json
+import logging
 import os
 import re
 import signal
+import socket
 import sys
 import threading
 import time
-from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from concurrent.futures import FIRST_COMPLETED, CancelledError, ProcessPoolExecutor, wait
 from contextlib import contextmanager
 from pathlib import Path
 
 import multiprocessing as mp
+
+import pandas as pd
+import pyarrow as pa
 
 from gyroarray.core import outputs
 from gyroarray.core.errors import InputError
@@ -78,8 +85,6 @@ _STR_COLS = ("estimator", "axis", "scenario_id", "motion", "effects", "sweep", "
 
 def run_one(spec: ScenarioSpec, estimators, sweep_name: str):
     """Run one scenario (in a worker): its rows as a DataFrame with a fixed schema."""
-    import pandas as pd
-
     from gyroarray.chain.run import run_scenario  # lazy: loads numba
 
     result = run_scenario(spec.build(), list(estimators) if estimators else None)
@@ -98,7 +103,6 @@ def run_one(spec: ScenarioSpec, estimators, sweep_name: str):
 
 
 def _typed(df):
-    import pandas as pd
     for col in df.columns:
         if col in _STR_COLS:
             df[col] = df[col].astype(object)
@@ -123,8 +127,7 @@ def write_rows(df, folder: Path, sid: str, inputs=()) -> Path:
     :func:`~gyroarray.core.outputs.append_line` (no symbolic link, no input of the
     command, no partial line on a full disk).
     """
-    import pyarrow as pa
-    import pyarrow.parquet as pq
+    import pyarrow.parquet as pq  # deferred: pyarrow.parquet loads only when rows are written
 
     final = folder / f"{sid}.parquet"
     table = pa.Table.from_pandas(df, preserve_index=False)
@@ -171,7 +174,7 @@ def verify_rows_file(path: Path, record=None) -> str | None:
     hash to it; without one, its Parquet footer must read and hold at least
     one row.
     """
-    import pyarrow.parquet as pq
+    import pyarrow.parquet as pq  # deferred: pyarrow.parquet loads only when rows are read
 
     try:
         if path.stat().st_size == 0:
@@ -196,8 +199,6 @@ def load_results(out_dir):
     InputError
         A result file is corrupt (truncated, emptied, altered): named, with the way out.
     """
-    import pandas as pd
-
     out = Path(out_dir)
     folder = out / ROWS
     files = sorted(folder.glob("*.parquet")) if folder.is_dir() else []
@@ -222,7 +223,6 @@ def _watch_parent(parent_pid: int) -> None:
     os.environ["NUMBA_NUM_THREADS"] = "1"
     if sys.platform.startswith("linux"):
         try:
-            import ctypes
             libc = ctypes.CDLL(None, use_errno=True)
             libc.prctl(1, signal.SIGKILL, 0, 0, 0)      # PR_SET_PDEATHSIG
         except (OSError, AttributeError):
@@ -390,7 +390,6 @@ def parse_scheduler(address) -> tuple[str, str, int]:
 def _probe_scheduler(scheduler: str, host: str, port: int, timeout: float) -> None:
     """Refuse a scheduler whose host does not resolve or whose port does not accept a
     connection, within ``timeout`` seconds in all (name lookup included: it runs on a thread)."""
-    import socket
     outcome: list = []
 
     def probe():
@@ -412,7 +411,7 @@ def _probe_scheduler(scheduler: str, host: str, port: int, timeout: float) -> No
 def _ask_identity(scheduler: str, timeout: float) -> None:
     """Refuse a port that accepts connections but does not answer Dask's ``identity`` as a
     scheduler within ``timeout`` seconds (``distributed.Client`` waits for ever on a silent one)."""
-    import asyncio
+    # deferred: dask.distributed is optional (only for --scheduler) and slow to import
     from distributed.comm import connect
     from distributed.security import Security
 
@@ -447,7 +446,7 @@ def _dask_client(scheduler: str):
     :data:`SCHEDULER_TIMEOUT_S` (twice that at most: the probe, then the handshake)."""
     _, host, port = parse_scheduler(scheduler)
     try:
-        from distributed import Client
+        from distributed import Client  # deferred: optional dask.distributed, only for --scheduler
     except ImportError:
         raise InputError("a scheduler address needs dask[distributed] installed") from None
     _probe_scheduler(scheduler, host, port, SCHEDULER_TIMEOUT_S)
@@ -525,8 +524,7 @@ def _run_in_processes(todo: list, sweep: Sweep, workers: int, done) -> None:
 
 def _run_on_dask(todo: list, sweep: Sweep, scheduler: str, done, notes: list) -> None:
     """Run ``todo`` on a dask.distributed cluster, reporting each result to ``done``."""
-    import logging
-    from concurrent.futures import CancelledError
+    # deferred: dask.distributed is optional (only for --scheduler) and slow to import
     from distributed import as_completed
     from distributed.comm.core import CommClosedError
     lost = (CancelledError, CommClosedError, TimeoutError)
