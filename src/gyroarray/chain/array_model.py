@@ -22,6 +22,7 @@ table of a model file (:meth:`ArrayModel.table`, :class:`~gyroarray.effects.mode
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -77,8 +78,8 @@ class ArrayModel:
         sd = np.sqrt(np.diag(self.white.covariance))
         arw = units.arw_rad_rt_s_to_deg_rt_h(sd * np.sqrt(dt))
         nu = np.diag(self.white.dof)
-        out = {"gyros": self.gyros, "white_n_deg_rt_h": _sig(arw), "white_correlation": _rounded(self.white.correlation)}
-        sigma = {"white_n_deg_rt_h": _sig(arw / np.sqrt(2.0 * nu)),
+        out: dict[str, Any] = {"gyros": self.gyros, "white_n_deg_rt_h": _sig(arw), "white_correlation": _rounded(self.white.correlation)}
+        sigma: dict[str, Any] = {"white_n_deg_rt_h": _sig(arw / np.sqrt(2.0 * nu)),
                  "white_correlation": _rounded(self.white.corr_sigma)}
         if self.slow is not None:
             s = np.diag(self.slow.covariance)

@@ -166,7 +166,7 @@ def parse_add_all(text: str, n_gyros: int) -> tuple[list[tuple[str, int | None]]
         if eff is not None and not eff.per_gyro and g.strip().lower() == "all":
             raise InputError(f"--add {text}: {name} acts on the whole array; write just {name}")
         return [parse_add(text, n_gyros)], None
-    adds = [(name, k) for k in range(1, n_gyros + 1)]
+    adds: list[tuple[str, int | None]] = [(name, k) for k in range(1, n_gyros + 1)]
     note = (f"--add {text}: {name} acts on one gyro at a time; added to every gyro "
             f"(1..{n_gyros}), each fitted on its own (say {name}:K for one gyro)")
     return adds, note

@@ -59,6 +59,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import cast
 
 import numpy as np
 from scipy import optimize, signal
@@ -102,7 +103,7 @@ MAX_SIM_SAMPLES = 2 ** 21
 #: Longest filter update window of --inflate auto [s].
 MAX_WINDOW_S = 10.0
 
-_C_B = TERM_CONSTANTS["oadev"]["b"]            # 2 ln2/π: flicker Allan variance per B²
+_C_B = cast(float, TERM_CONSTANTS["oadev"]["b"])            # 2 ln2/π: flicker Allan variance per B²
 
 
 @dataclass(frozen=True)
@@ -188,7 +189,7 @@ def gyro_noise(model: NoiseModel, gyro: int) -> GyroNoise:
 
     def si(effect, key):
         return float(chosen[effect].si_params.get(key, 0.0)) if effect in chosen else 0.0
-    gm = ()
+    gm: tuple[tuple[float, float], ...] = ()
     if GAUSS_MARKOV in chosen:
         p = chosen[GAUSS_MARKOV].si_params
         gm = ((float(p["sigma_rad_s"]), float(p["tau_s"])),)
@@ -471,7 +472,7 @@ def auto_inflation(noise: GyroNoise, fmt: str, rate_hz: float, rng: np.random.Ge
     windows = sorted({int(w) for w in np.unique(np.round(np.logspace(
         0.0, math.log10(max(1.0, min(MAX_WINDOW_S * rate_hz, n / 1000))), 5)))})
     nis = {w / rate_hz: window_nis(rate, rate_hz, n_c, k_c, w) for w in windows}
-    worst_w = max(nis, key=nis.get)
+    worst_w = max(nis, key=lambda w: nis[w])
     factor = math.sqrt(nis[worst_w])
     why = (f"√ of the largest mean NIS, {nis[worst_w]:.3g} at {worst_w:.3g} s windows, of a "
            f"bias filter at the exported values on {n / rate_hz:.0f} s simulated from the full "
@@ -498,7 +499,7 @@ def verify_export(noise: GyroNoise, fmt: str, rate_hz: float, inflate: float,
     n = _record_samples(rate_hz, seconds)
     dt = 1.0 / rate_hz
     rate = sigma_d * rng.standard_normal(n) + np.cumsum(sigma_b * rng.standard_normal(n))
-    terms = ("n", "k")
+    terms: tuple[str, ...] = ("n", "k")
     b_file = values.get("BiasInstability", 0.0)
     if fmt == "matlab" and b_file > 0:
         rate = rate + flicker_noise(n, dt, [b_file], [rng])[:, 0]

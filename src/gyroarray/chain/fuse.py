@@ -49,6 +49,7 @@ import gzip
 import hashlib
 import math
 from dataclasses import dataclass, field
+from typing import Any, cast
 
 import numpy as np
 import tomli_w
@@ -61,7 +62,7 @@ from gyroarray.core.errors import InputError
 from gyroarray.core.gdop import unobservable_reason
 from gyroarray.core.layout import Layout
 from gyroarray.core.measurement import Measurement, constant_gyros, true_runs
-from gyroarray.estimators import ArrayNoise, get_estimator, make
+from gyroarray.estimators import ArrayNoise, Estimator, get_estimator, make
 from gyroarray.estimators.noise import array_noise, table_correlation
 from gyroarray.estimators.svo import allan_covariance
 from gyroarray.effects.names import ARW, CORRELATION
@@ -223,8 +224,8 @@ def white_walk_fit(x, dt_s: float, min_tau_s: float = 1.0) -> WhiteWalk:
         d = np.diff(x, axis=0) if n > 1 else np.zeros((1, c))
         arw = np.std(d, axis=0) / math.sqrt(2.0) * math.sqrt(dt_s)
         return WhiteWalk(arw, arw_s, rrw, rrw_s)
-    t, av = taus[use], avar[use]
-    edf = np.asarray(edf_simple(n_phase, m[use], 0), dtype=float)
+    t, av = cast(np.ndarray, taus)[use], cast(np.ndarray, avar)[use]      # set when use is
+    edf = np.asarray(edf_simple(n_phase, cast(np.ndarray, m)[use], 0), dtype=float)
     a = np.column_stack([1.0 / t, t / 3.0])
     for j in range(c):
         target = av[:, j]
@@ -551,7 +552,7 @@ def fuse(meas: Measurement, estimator: str, *, model=None, model_name: str | Non
     """
     params = dict(params or {})
     try:
-        cls = get_estimator(estimator)
+        cls = cast("type[Estimator]", get_estimator(estimator))
         est = make(estimator, **params)
     except InputError as err:
         raise InputError(f"--estimator: {err.message}") from None
@@ -625,11 +626,12 @@ def fuse(meas: Measurement, estimator: str, *, model=None, model_name: str | Non
     gain, tconst = _gain_of(est, dt)
     if excluded:
         notes.append(f"gyro(s) {', '.join(map(str, excluded))} left out (--exclude)")
+    adev: list[Any] | None
     single = fused_fit = adev = None
     if enough:
         e_fused = fused - meas.ref_rad_s if meas.has_reference else fused
         ef = stitch(e_fused, parts)
-        both = white_walk_fit(np.hstack([e_single, ef]), dt)
+        both = white_walk_fit(np.hstack([cast(np.ndarray, e_single), ef]), dt)
         c = len(used)
         single = WhiteWalk(*(v[:c] for v in (both.arw_rad_rt_s, both.arw_sigma, both.rrw_rad_s_rt_s,
                                               both.rrw_sigma)))
@@ -832,7 +834,7 @@ def tau_verdict(taus, measured, low, high, predicted, *, n2: float, k2: float, u
     frac = float(inside[use].mean()) if k else math.nan
     tau_c = math.sqrt(3.0 * n2 / k2) if k2 > 0 else math.inf
     ratio = meas / np.maximum(np.asarray(predicted, float), 1e-300)
-    out = {"inside": [bool(v) if u else None for v, u in zip(inside, use)], "fraction_inside": frac,
+    out: dict[str, Any] = {"inside": [bool(v) if u else None for v, u in zip(inside, use)], "fraction_inside": frac,
            "n_tau": k, "consistent": bool(k and frac >= CONSISTENT_FRACTION),
            "walk_from_tau_s": None if not math.isfinite(tau_c) else tau_c, "misses": []}
     miss = use & ~inside
@@ -971,6 +973,7 @@ def validate_fuse(meas: Measurement, estimator: str, *, holdout: float | None = 
     notes: list[str] = []
     fitted_json = None
     if model is None:
+        assert holdout is not None                 # the check above raises on a None holdout
         fit_p, held_p = split_parts(parts, float(holdout))
         n_fit, n_held = sum(b - a for a, b in fit_p), sum(b - a for a, b in held_p)
         if min(n_fit, n_held) < MIN_ANALYSED:
@@ -1000,8 +1003,8 @@ def validate_fuse(meas: Measurement, estimator: str, *, holdout: float | None = 
         arw = ww.arw_rad_rt_s.copy()
         weak = arw <= 0
         if weak.any():
-            d = np.diff(stitch(resid, fit_p)[:, weak], axis=0)
-            arw[weak] = np.maximum(np.std(d, axis=0) / math.sqrt(2.0) * math.sqrt(dt), 1e-30)
+            steps = np.diff(stitch(resid, fit_p)[:, weak], axis=0)
+            arw[weak] = np.maximum(np.std(steps, axis=0) / math.sqrt(2.0) * math.sqrt(dt), 1e-30)
         rrw_design, _ = design_rrw(ww)
         noise = ArrayNoise(arw, rrw_design, c_w, c_k)
         total_fit = n_fit * dt

@@ -206,8 +206,8 @@ def _spikes(meas, signal, gyros: list[int], parts, taus, kind: str, args):
     notes, info, clean = [], {}, None
     for k in gyros:
         col = signal[:, k - 1]
-        idx = [a + find_spikes(col[a:b]).index for a, b in parts if b - a >= 16]
-        idx = np.concatenate(idx) if idx else np.array([], int)
+        found = [a + find_spikes(col[a:b]).index for a, b in parts if b - a >= 16]
+        idx = np.concatenate(found) if found else np.array([], int)
         if not idx.size or not np.ptp(col):
             continue
         fixed = np.array(col, dtype=float)
@@ -218,7 +218,7 @@ def _spikes(meas, signal, gyros: list[int], parts, taus, kind: str, args):
             if good.size >= 2 and bad[a:b].any():
                 t = np.arange(b - a)
                 fixed[a:b][bad[a:b]] = np.interp(t[bad[a:b]], good, col[a:b][good])
-        arw = []
+        arw: list = []                      # the ARW of each series [rad/rt(s)], None where unfitted
         for series in (col, fixed):
             try:
                 with np.errstate(all="ignore"):

@@ -25,6 +25,7 @@ from __future__ import annotations
 import math
 from dataclasses import asdict, dataclass
 from pathlib import Path
+from typing import Any, cast
 
 import numpy as np
 
@@ -144,7 +145,7 @@ def fused_single_ratio(a: AdevFigure, min_tau_s: float = 1.0) -> dict:
         empty when no τ qualifies.
     """
     singles = a.singles
-    out = {"per_axis": {}, "reference": float(a.reference_factor), "min_tau_s": float(min_tau_s)}
+    out: dict[str, Any] = {"per_axis": {}, "reference": float(a.reference_factor), "min_tau_s": float(min_tau_s)}
     if not singles:
         return out
     taus = singles[0].taus_s
@@ -163,7 +164,7 @@ def fused_single_ratio(a: AdevFigure, min_tau_s: float = 1.0) -> dict:
 def _white_worst(axes: np.ndarray, design_rho: float, lo: float, hi: float, failures: int) -> dict:
     """Worst white-noise GDOP of the GLS with weights fixed for ``design_rho``, over ρ × failures."""
     n = axes.shape[0]
-    worst = {"gdop": -math.inf, "rho": None, "failed_gyros": []}
+    worst: dict[str, Any] = {"gdop": -math.inf, "rho": None, "failed_gyros": []}
     for keep in kept_sets(n, failures):
         k = list(keep)
         H = axes[k]
@@ -250,14 +251,14 @@ def what_would_change(res: dict) -> list[str]:
     ru = res.get("runner_up")
     v1 = _objective_value(ru, obj) if ru else None
     if v1 is not None and v0 > 0:
-        out.append(f"the runner-up ({design_label(ru)}) is {100 * (v1 / v0 - 1):.3g} % worse in the worst "
+        out.append(f"the runner-up ({design_label(cast(dict, ru))}) is {100 * (v1 / v0 - 1):.3g} % worse in the worst "
                    f"case ({v1:.4g} against {v0:.4g} {unit}): a larger error in the inputs than that "
                    "(noise, ρ range) can reverse the order")
     fewer = [d for d in res.get("designs", []) if d.get("n", 0) < rec.get("n", 0)
              and _objective_value(d, obj) is not None]
     if fewer:
-        b = min(fewer, key=lambda d: _objective_value(d, obj))
-        vb = _objective_value(b, obj)
+        b = min(fewer, key=lambda d: cast(float, _objective_value(d, obj)))    # fewer holds no None
+        vb = cast(float, _objective_value(b, obj))
         out.append(f"fewer gyros: the best N = {b['n']} design ({design_label(b)}) has a worst case of "
                    f"{vb:.4g} {unit}, {100 * (vb / v0 - 1):.3g} % more")
     return out

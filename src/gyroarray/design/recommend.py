@@ -57,7 +57,8 @@ import math
 import time
 from dataclasses import dataclass, field, replace
 from functools import lru_cache
-from typing import Any
+from types import ModuleType
+from typing import Any, Callable, cast
 
 import numpy as np
 from scipy.optimize import minimize_scalar
@@ -170,7 +171,7 @@ class GyroNoise:
         if arw <= 0:
             raise InputError(f"the model has no angle random walk ({ARW!r}): the estimators need "
                              "the white-noise level of the gyros", file=source)
-        rho = {"rho_arw": 0.0, "rho_rrw": 0.0}
+        rho: dict[str, Any] = {"rho_arw": 0.0, "rho_rrw": 0.0}
         for e in model.entries:
             if e.effect == CORRELATION:
                 for k in rho:
@@ -220,9 +221,9 @@ class GyroNoise:
     def _per_gyro_model(self, n_gyros: int, keep):
         from gyroarray.effects.model import ModelEntry, NoiseModel  # lazy: loads numba
         idx = list(range(n_gyros)) if keep is None else [int(k) for k in keep]
-        if len(idx) != n_gyros or max(idx) >= self.n_gyros:
+        if len(idx) != n_gyros or max(idx) >= cast(int, self.n_gyros):       # set with per_gyro
             raise ValueError(f"keep {idx} does not give {n_gyros} of the model's {self.n_gyros} gyros")
-        p = self.per_gyro
+        p = cast(dict, self.per_gyro)                   # called only when per_gyro is set
         entries = []
         for j, i in enumerate(idx):
             entries.append(ModelEntry(ARW, j + 1, {"n_deg_rt_h": float(p[ARW][i])}))
@@ -233,7 +234,7 @@ class GyroNoise:
             if p["gm_sigma"][i] > 0 and p["gm_tau"][i] > 0:
                 entries.append(ModelEntry(GAUSS_MARKOV, j + 1, {"sigma_deg_h": float(p["gm_sigma"][i]),
                                                                   "tau_s": float(p["gm_tau"][i])}))
-        corr = {}
+        corr: dict[str, Any] = {}
         for key, mat, rho in (("rho_arw", self.corr_arw, self.rho_arw), ("rho_rrw", self.corr_rrw, self.rho_rrw)):
             if mat is not None:
                 sub = np.asarray(mat, dtype=float)[np.ix_(idx, idx)]
@@ -248,7 +249,7 @@ class GyroNoise:
         return model
 
     def to_json_dict(self) -> dict:
-        out = {"arw_deg_rt_h": self.arw_deg_rt_h, "rrw_deg_h_rt_h": self.rrw_deg_h_rt_h,
+        out: dict[str, Any] = {"arw_deg_rt_h": self.arw_deg_rt_h, "rrw_deg_h_rt_h": self.rrw_deg_h_rt_h,
                "bi_deg_h": self.bi_deg_h, "gm_sigma_deg_h": self.gm_sigma_deg_h,
                "gm_tau_s": self.gm_tau_s, "rho_arw": self.rho_arw, "rho_rrw": self.rho_rrw}
         if self.per_gyro is not None:
@@ -340,7 +341,7 @@ def per_gyro_noise(model, typical: GyroNoise, source: str = "model") -> GyroNois
 def _levels(g: GyroNoise, n: int, keep, dt: float):
     """Per gyro (the kept ones): white variance per sample [rad²/s²], walk increment variance
     per sample [rad²/s²], flicker B² [rad²/s²], Gauss–Markov σ² [rad²/s²]."""
-    p = g.per_gyro
+    p = cast(dict, g.per_gyro)                          # per-gyro noise only
     idx = list(range(n)) if keep is None else list(keep)
     return (units.arw_deg_rt_h_to_rad_rt_s(p[ARW][idx]) ** 2 / dt,
             units.rrw_deg_h_rt_h_to_rad_s_rt_s(p[RRW][idx]) ** 2 * dt,
@@ -1710,9 +1711,10 @@ class _Decider:
                     chs.append(fixed_channels(est, H[:, list(keep)], gd, self.cond(rt), self.dt,
                                               keep=list(keep)))
                     combos.append((keep, rt))
-            stacked = _Channels(*(np.stack([getattr(c, f) for c in chs])
-                                  for f in ("white", "walk", "flicker", "gm")),
-                                None, True, design.kf_single_ratio, bias=np.stack([c.bias for c in chs]))
+            s_white, s_walk, s_flicker, s_gm = (np.stack([getattr(c, f) for c in chs])
+                                                for f in ("white", "walk", "flicker", "gm"))
+            stacked = _Channels(s_white, s_walk, s_flicker, s_gm, None, True, design.kf_single_ratio,
+                                bias=np.stack([cast(np.ndarray, c.bias) for c in chs]))  # fixed weights set bias
             return (design, stacked, combos) if with_combos else (design, stacked)
         parts, combos = [], []
         for rt in self.ends():
@@ -1724,13 +1726,17 @@ class _Decider:
             for rt in self.ends():
                 ch = fixed_channels(est, Hk, gd, self.cond(rt), self.dt)
                 K = len(keeps) - 1
-                parts.append(_Channels(*(a.reshape(K, G, 3) for a in (ch.white, ch.walk, ch.flicker, ch.gm)),
-                                       None, True, ch.kf_single_ratio, bias=ch.bias.reshape(K, G)))
+                k_white, k_walk, k_flicker, k_gm = (a.reshape(K, G, 3)
+                                                    for a in (ch.white, ch.walk, ch.flicker, ch.gm))
+                parts.append(_Channels(k_white, k_walk, k_flicker, k_gm, None, True, ch.kf_single_ratio,
+                                       bias=cast(np.ndarray, ch.bias).reshape(K, G)))   # fixed weights set bias
                 combos += [(k, rt) for k in keeps[1:]]
         arr = [np.concatenate([p_.__dict__[f][None] if p_.white.ndim == 2 else p_.__dict__[f]
                                for p_ in parts]) for f in ("white", "walk", "flicker", "gm")]
-        bias = np.concatenate([p_.bias[None] if p_.white.ndim == 2 else p_.bias for p_ in parts])
-        stacked = _Channels(*arr, None, True, design.kf_single_ratio, bias=bias)
+        bias = np.concatenate([cast(np.ndarray, p_.bias)[None] if p_.white.ndim == 2 else cast(np.ndarray, p_.bias)
+                               for p_ in parts])
+        a_white, a_walk, a_flicker, a_gm = arr
+        stacked = _Channels(a_white, a_walk, a_flicker, a_gm, None, True, design.kf_single_ratio, bias=bias)
         return (design, stacked, combos) if with_combos else (design, stacked)
 
     def worst_pair(self, est, bw, design: _Channels, stacked: _Channels) -> tuple[np.ndarray, np.ndarray]:
@@ -1742,7 +1748,7 @@ class _Decider:
         jr, ja = _scores(stacked, resp, self.dt)
         # weights that do not reproduce the motion (naive after a failure: HᵀH not diagonal)
         # leave a motion error the channel model does not hold: not a design that survives
-        ok = np.isfinite(jr) & np.isfinite(ja) & (stacked.bias <= BIAS_TOL)
+        ok = np.isfinite(jr) & np.isfinite(ja) & (cast(np.ndarray, stacked.bias) <= BIAS_TOL)   # fixed weights
         jr, ja = np.where(ok, jr, np.inf), np.where(ok, ja, np.inf)
         return np.max(jr, axis=0), np.max(ja, axis=0)
 
@@ -1878,11 +1884,13 @@ def _worst_case(dec: _Decider, c: _Cand, H: np.ndarray, *, oracle: bool = False)
     top = sorted(ends, key=lambda k: -ends[k])[:2 if oracle else 1]
     worst = None
     for keep in top:
-        v, r = worst_over_interval(lambda r, keep=keep: _case(dec, c, H, keep, r, rd(r))[key],
+        # cast: mypy cannot infer a lambda whose default argument binds the loop's kept set
+        v, r = worst_over_interval(cast("Callable[[float], float]",
+                                        lambda rt, keep=keep: _case(dec, c, H, keep, rt, rd(rt))[key]),
                                    dec.lo, dec.hi, xatol=1e-6)
         if worst is None or v > worst[0]:
             worst = (v, r, keep)
-    _, r, keep = worst
+    _, r, keep = cast(tuple, worst)                     # set: top holds at least one kept set
     return _case(dec, c, H, keep, r, rd(r))
 
 
@@ -2028,6 +2036,7 @@ def _error_budget(d: dict, dec: _Decider, c: _Cand, H: np.ndarray) -> dict:
     used when it exists), else the predictor's own noise terms of the fast path."""
     wc = d["worst_case"]
     keep = tuple(k for k in range(c.n) if k + 1 not in wc["failed_gyros"])
+    budget_mod: ModuleType | None
     try:
         from gyroarray.design import budget as budget_mod  # lazy: optional module, being added
     except ImportError:
@@ -2076,7 +2085,7 @@ def _budget_model(g: GyroNoise, keep):
     from gyroarray.effects.model import ModelEntry, NoiseModel  # lazy: loads numba
     from gyroarray.effects.terms import CorrelationTerm  # lazy: with the registry
     from gyroarray.estimators.noise import model_terms  # lazy: loads numba
-    corr = {eff.name for eff, t in model_terms(g.model, g.n_gyros) if isinstance(t, CorrelationTerm)}
+    corr = {eff.name for eff, t in model_terms(g.model, cast(int, g.n_gyros)) if isinstance(t, CorrelationTerm)}
     own = g.noise_model(len(keep), keep)
     own_corr = [e for e in own.entries if e.gyro is None]               # the condition's correlation
     pos = {k + 1: j + 1 for j, k in enumerate(keep)}
@@ -2432,6 +2441,7 @@ def check_decision(designs: list[dict], g: GyroNoise, space: DesignSpace, *, rep
     for j, (role, d, *_rest) in enumerate(setups):
         arr = np.array(per[j])                                        # (R, 4, 3)
         wc = d["worst_case"]
+        axes_out: dict[str, Any]
         axes_out, inside, compared = {}, 0, 0
         for a, ax in enumerate(AXES):
             axes_out[ax] = {}

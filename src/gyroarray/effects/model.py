@@ -389,9 +389,9 @@ def _matrix(value, key: str, n: int, where) -> tuple[tuple[float, ...], ...]:
                            key, where)
     asym = np.abs(a - a.T)
     if asym.max() > ARRAY_MATRIX_TOL:
-        i, j = np.unravel_index(int(np.argmax(asym)), a.shape)
-        raise _array_error(f"{key} is not symmetric: [{i}][{j}] = {float(a[i, j])!r} but [{j}][{i}] = "
-                           f"{float(a[j, i])!r} (a correlation matrix equals its transpose)",
+        r, c = np.unravel_index(int(np.argmax(asym)), a.shape)
+        raise _array_error(f"{key} is not symmetric: [{r}][{c}] = {float(a[r, c])!r} but [{c}][{r}] = "
+                           f"{float(a[c, r])!r} (a correlation matrix equals its transpose)",
                            key, where)
     low = float(np.linalg.eigvalsh(a)[0])
     if low <= 0.0:

@@ -856,7 +856,7 @@ class FaultDetector(Estimator):
         t = np.arange(n) * self.dt_s_ if time_s is None else np.asarray(time_s, dtype=float)
         alarms, excl, notes = [], [], []
         ratio = {f: np.zeros(n) for f in _FAMILIES} if trace else None
-        out_of = set()
+        out_of: set[int] = set()
         for a, b in parts:
             if b - a < MIN_RECORD_SAMPLES or self.n_gyros_ - len(out_of) < 4:
                 continue
@@ -866,6 +866,7 @@ class FaultDetector(Estimator):
             out_of.update(g for _, g in r.exclusions)
             notes += list(r.notes)
             if trace and r.trace:
+                assert ratio is not None                       # set whenever trace is
                 s0 = a + int(r.trace["start"])
                 for f in _FAMILIES:
                     v = r.trace["ratio"][f]
@@ -1618,7 +1619,7 @@ def _still_noise(z: np.ndarray, H: np.ndarray, dt_s: float, chunks: list) -> tup
         notes.append(f"gyro(s) {', '.join(map(str, bad))} barely move in the reference span: their "
                      "white noise is floored at 1e-6 of the median")
         s2 = np.maximum(s2, floor)
-    runs = []
+    runs: list[tuple[int, int]] = []
     for a, b in chunks:                                        # chunks of one run joined again
         if runs and runs[-1][1] == a:
             runs[-1] = (runs[-1][0], b)

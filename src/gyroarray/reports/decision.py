@@ -23,6 +23,7 @@ from __future__ import annotations
 import json
 import math
 import re
+from typing import Any
 
 import numpy as np
 
@@ -258,7 +259,7 @@ def _applies(kind: str, members: list[dict]) -> bool:
         return any(len(e & {"gls", "ols", "naive"}) > 1 for e in by_geo.values())
     if kind == "schemes":
         ns = {m["n"] for m in members}
-        gd = [m.get("gdop") for m in members]
+        gd: list[Any] = [m.get("gdop") for m in members]         # checked free of None below
         return (len({m["scheme"] for m in members}) > 1 and len(ns) == 1 and None not in gd
                 and max(gd) - min(gd) <= 1e-6 * max(gd))
     return False
