@@ -45,6 +45,7 @@ def test_generator_arw_meets_its_closed_form():
     assert adev == pytest.approx(math.radians(n_deg_rt_h / 60.0), rel=0.05)
 
 
+@pytest.mark.slow   # a 7-14 s study of the independent generator: make score
 def test_a_pure_delay_is_named_latency_not_a_filter(tmp_path):
     """Seed 500: an 11.2 ms delay on gyro 5. The motion explains it as well as a first-order
     filter at 11.6 Hz would (z 291.23 against 291.25); the noise spectrum, which that filter
@@ -61,6 +62,7 @@ def test_a_pure_delay_is_named_latency_not_a_filter(tmp_path):
     assert abs(got - want) <= max(3.0 * sig, 0.02 * want), (got, sig, want)
 
 
+@pytest.mark.slow   # a 7-14 s study of the independent generator: make score
 def test_a_line_near_nyquist_is_not_read_as_quantization(tmp_path):
     """Seed 510: a 0.051 deg/s line at 17.35 Hz on gyro 3 of a 50 Hz record lifts the ADEV at
     τ = 0.02 s as a τ^-1 slope would (quantization z 211 against the line's 179). With the line
