@@ -47,7 +47,10 @@ outside generator and gyroarray could differ -- see the report):
   sigma^2 = 3 Q^2/tau^2. The integrated angle is quantized with the angle
   step S = sqrt(12) Q (uniform error variance S^2/12 = Q^2, and the Allan
   variance of a differenced white angle error is 3 sigma_x^2/tau^2), and the
-  output is the difference of quantized angles / dt. (Quantizing with step Q
+  output is the difference of quantized angles / dt, the spec's definition:
+  y_k = (round(theta_k/S) - round(theta_{k-1}/S)) S/dt, theta_k = sum_{j<=k}
+  x_j dt of everything the gyro produces (after the bandwidth filter), from
+  theta_{-1} = 0. (Quantizing with step Q
   itself would give sigma = Q/(2 tau), i.e. Q_ieee = Q/sqrt(12).) With little
   dither (angle moving < 1 step per sample at rest) the rounding error is
   not white, and the short-tau ADEV departs from sqrt(3) Q/tau by a factor
@@ -59,13 +62,13 @@ outside generator and gyroarray could differ -- see the report):
 * Gauss-Markov: stationary AR(1), phi = exp(-dt/tau), started stationary.
 * Outliers: Poisson number of single-sample spikes (rate_per_h), each
   N(0, size^2) (rms = size_deg_s), at random samples.
-* Bandwidth: the continuous H(s) of the spec, discretised exactly for a
-  piecewise-linear input (first-order hold, scipy ``cont2discrete('foh')``),
-  started at steady state on the first sample. This keeps the continuous
-  low-frequency lag (1/wc, or sqrt2/wc for order 2) that the swings show.
-  :data:`BANDWIDTH_METHOD` = "bilinear_prewarp" switches to
-  ``scipy.signal.butter`` (exact -3 dB at cutoff in the discrete domain,
-  but a smaller lag) for diagnosis.
+* Bandwidth: the spec's discretisation, the bilinear transform prewarped at
+  the cut-off, i.e. ``scipy.signal.butter(order, cutoff_hz, fs=fs)`` (the
+  digital -3 dB point is the cut-off), run causally with ``lfilter`` from the
+  steady state of the first sample (``lfilter_zi * x[0]``).
+  :data:`BANDWIDTH_METHOD` = "foh" switches, for diagnosis, to the continuous
+  H(s) discretised exactly for a piecewise-linear input (first-order hold,
+  ``cont2discrete('foh')``, which keeps the continuous low-frequency lag).
 * Earth rate: heading is always 0 (platform x = north, y = west, z = up at
   t = 0), so the heading sign convention never matters; Earth rate in the
   level frame = w_e [cos(lat), 0, sin(lat)], rotated into the platform frame
@@ -111,7 +114,7 @@ DT_S = 1.0 / FS_HZ
 G0 = 9.80665                      # m/s^2
 EARTH_RATE_RAD_S = 7.2921150e-5   # rad/s
 DEG = math.pi / 180.0             # rad per deg
-BANDWIDTH_METHOD = "foh"          # or "bilinear_prewarp", "bilinear" (any cont2discrete method)
+BANDWIDTH_METHOD = "bilinear_prewarp"  # the spec's; or "foh", "bilinear" (any cont2discrete method)
 QUANTIZATION_METHOD = "round"     # or "white" (the IEEE-952 model: iid uniform angle error)
 LEVER_ARMS = False                # g_sensitivity: gyros at positions_m (±0.25 m) and acc_* columns
 

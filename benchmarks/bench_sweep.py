@@ -1,49 +1,49 @@
-"""Parallel speed-up of the sweep runner (:func:`gyroarray.sweep.runner.run_sweep`).
+"""Sweep speed-up on the cores this machine has: local processes and a Dask LocalCluster.
 
-The 48-scenario quick design sweep (``scenarios/sweeps/design_quick.toml``:
-both schemes, N = 4, 5, 6, 8 at the optimal α, ρ ∈ {−0.1, 0, 0.5}, static and
-swing, 90 s at 100 Hz, every estimator incl. the bound) run into a fresh folder with
-1 and with 2 local worker processes, then (``GYROARRAY_BENCH_DASK=0`` skips
-it) on a ``dask.distributed`` LocalCluster with 1 and with 2 workers. The
-rate-table truth is cached before timing (one warm-up run), so the timings
-are the simulation + estimators + metrics + Parquet writing. Target: a
-speed-up ≥ 1.8× from 1 to 2 workers (on a machine with ≥ 2 free cores);
-every run's dataset must be bit-identical to the 1-worker one.
+The 48-scenario quick design sweep (``scenarios/sweeps/design_quick.toml``: both
+schemes, N = 4, 5, 6, 8 at the optimal α, ρ ∈ {−0.1, 0, 0.5}, static and swing,
+90 s at 100 Hz, every estimator incl. the bound) run into a fresh folder with 1
+and with N workers, for local processes (``--workers``) and for a Dask
+``LocalCluster`` of the same size (``--dask local:N``: the cluster's start and
+close are inside the time, as a user meets them). One warm-up run first fills
+the rate-table truth cache and numba's cache. Every run's dataset must be
+bit-identical to the warm-up's. Target (issue 34): ≥ 1.8× at 2 workers for both
+backends on 2 quiet cores; ≥ 10× at 16 workers on a 480-scenario sweep
+(``--workers 16 --replicates 10``).
+
+``busy`` is the share of the workers' time spent in scenarios (their measured run
+times summed / (wall × N)); the rest is start-up (processes or cluster, imports,
+numba cache), the truth tasks, scheduling and the tail.
+
+Usage: ``python benchmarks/bench_sweep.py [--workers N] [--replicates R] [--no-dask]
+[--sweep FILE]`` (``make bench`` runs it with N = the CPUs available, at least 2).
 """
 
 from __future__ import annotations
 
-import os
+import argparse
+import re
 import shutil
+import sys
 import tempfile
+import time
 from pathlib import Path
 
 import numpy as np
-from _timing import best_of
+import pandas as pd
 
-from gyroarray.sweep.runner import THREAD_ENV, load_results, run_sweep
+from gyroarray.core.parallel import available_cpus
+from gyroarray.sweep.runner import THREAD_ENV, load_results, local_cluster, run_sweep
 from gyroarray.sweep.sweep import load_sweep
 
-SWEEP = Path(__file__).resolve().parents[1] / "src" / "gyroarray" / "data" / "scenarios" / "sweeps" / "design_quick.toml"
+SWEEP = (Path(__file__).resolve().parents[1] / "src" / "gyroarray" / "data" / "scenarios"
+         / "sweeps" / "design_quick.toml")
 TARGET = 1.8
-REPEATS = 1          # each run is ~1-2 min; one is enough for a ratio
-
-
-def _timed(tmp: Path, tag: str, **kw) -> tuple[float, object]:
-    counter = iter(range(10**6))
-
-    def once():
-        out = tmp / f"{tag}-{next(counter)}"
-        summary = run_sweep(SWEEP_OBJ, out, progress=False, **kw)
-        FAILED[tag] = len(summary["failed"])
-        return out
-
-    return best_of(once, REPEATS)
 
 
 def _same(a, b) -> bool:
+    """Equal datasets, floats compared by their bits."""
     try:
-        import pandas as pd
         pd.testing.assert_frame_equal(a, b, check_exact=True)
     except AssertionError:
         return False
@@ -51,57 +51,86 @@ def _same(a, b) -> bool:
                for c in a.columns if a[c].dtype == np.float64)
 
 
-SWEEP_OBJ = None
-FAILED: dict = {}
+def _sweep_file(tmp: Path, path: Path, replicates: int | None) -> Path:
+    """The sweep file, or a copy whose every scenario runs ``replicates`` times."""
+    if not replicates or replicates == 1:
+        return path
+    text = re.sub(r"(?m)^replicates\s*=.*$", "", path.read_text())
+    copy = tmp / f"{path.stem}_x{replicates}.toml"
+    head, sep, rest = text.partition("\n[")          # top-level keys come before the first table
+    copy.write_text(f"{head}\nreplicates = {int(replicates)}\n{sep}{rest}")
+    return copy
 
 
-def main() -> dict:
-    global SWEEP_OBJ
-    SWEEP_OBJ = load_sweep(SWEEP)
-    n = len(SWEEP_OBJ)
-    print(f"run_sweep: {SWEEP.name}, {n} scenarios, {os.cpu_count()} CPUs, "
-          f"workers with {THREAD_ENV}")
+def _run(tmp: Path, sweep, tag: str, **kw) -> dict:
+    out = tmp / tag
+    t0 = time.perf_counter()
+    summary = run_sweep(sweep, out, progress=False, **kw)
+    wall = time.perf_counter() - t0
+    n = kw.get("workers") or int(str(kw.get("dask", "local:1")).split(":")[1])
+    return {"wall_s": wall, "workers": n, "failed": len(summary["failed"]),
+            "busy": summary["worker_seconds"] / (wall * n), "out": out}
+
+
+def main(argv: list[str] | None = None) -> dict:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--workers", type=int, default=max(2, available_cpus()),
+                    help="N: the workers of the parallel runs (default: the CPUs available, >= 2)")
+    ap.add_argument("--replicates", type=int, default=None,
+                    help="run every scenario R times (design_quick x 10 = 480 scenarios)")
+    ap.add_argument("--sweep", type=Path, default=SWEEP, help="another sweep file")
+    ap.add_argument("--no-dask", action="store_true", help="local processes only")
+    args = ap.parse_args([] if argv is None else argv)
+    n = args.workers
     tmp = Path(tempfile.mkdtemp(prefix="bench_sweep_"))
-    results: dict = {"scenarios": n}
+    results: dict = {"workers": n, "cpus": available_cpus(), "thread_env": THREAD_ENV}
     try:
-        run_sweep(SWEEP_OBJ, tmp / "warmup", workers=2, progress=False)   # fills the truth cache
+        sweep = load_sweep(_sweep_file(tmp, args.sweep, args.replicates))
+        results["scenarios"] = len(sweep)
+        print(f"run_sweep: {sweep.name}, {len(sweep)} scenarios, {available_cpus()} CPUs "
+              f"available, N = {n} workers")
+        t0 = time.perf_counter()
+        run_sweep(sweep, tmp / "warmup", workers=n, progress=False)    # truth + numba caches
+        print(f"  warm-up run ({n} processes): {time.perf_counter() - t0:.1f} s")
         ref = load_results(tmp / "warmup")
-        t1, out1 = _timed(tmp, "local1", workers=1)
-        t2, out2 = _timed(tmp, "local2", workers=2)
-        same = _same(load_results(out1), ref) and _same(load_results(out2), ref)
-        results["local"] = {"1_worker_s": t1, "2_workers_s": t2, "speedup": t1 / t2,
-                            "identical": same, "failed_scenarios": FAILED["local1"]}
-        if FAILED["local1"]:
-            print(f"  note: {FAILED['local1']} of {n} scenarios failed (the same ones in every "
-                  "run; see the runner's summary['failed'])")
-        print(f"  local  1 worker  {t1:7.1f} s   ({t1 / n:.2f} s/scenario)")
-        print(f"  local  2 workers {t2:7.1f} s   speed-up {t1 / t2:.2f}x (target >= {TARGET}x)"
-              f"   datasets identical: {same}")
-        if os.environ.get("GYROARRAY_BENCH_DASK", "1") != "0":
-            results["dask"] = _dask(tmp, ref, n)
+        runs = {("processes", 1): _run(tmp, sweep, "p1", workers=1),
+                ("processes", n): _run(tmp, sweep, f"p{n}", workers=n)}
+        if not args.no_dask:
+            try:
+                t0 = time.perf_counter()
+                with local_cluster(n):
+                    started = time.perf_counter() - t0
+                print(f"  a LocalCluster of {n} workers starts and closes in {started:.1f} s")
+                results["dask_cluster_start_close_s"] = started
+                runs[("dask local", 1)] = _run(tmp, sweep, "d1", dask="local:1")
+                runs[("dask local", n)] = _run(tmp, sweep, f"d{n}", dask=f"local:{n}")
+            except Exception as err:                   # noqa: BLE001 - dask missing or no cluster
+                print(f"  dask: skipped ({err})")
+                results["dask_skipped"] = str(err)
+        base = runs[("processes", 1)]["wall_s"]
+        print(f"  {'backend':<12} {'workers':>7} {'wall [s]':>9} {'vs proc 1':>10} "
+              f"{'vs own 1':>9} {'busy':>6}  identical")
+        table = []
+        for (backend, k), r in runs.items():
+            same = _same(load_results(r["out"]), ref)
+            own = runs[(backend, 1)]["wall_s"] / r["wall_s"]
+            row = {"backend": backend, "workers": k, "wall_s": round(r["wall_s"], 2),
+                   "speedup_vs_processes_1": round(base / r["wall_s"], 3),
+                   "speedup_vs_own_1": round(own, 3), "busy": round(r["busy"], 3),
+                   "identical": same, "failed_scenarios": r["failed"]}
+            table.append(row)
+            print(f"  {backend:<12} {k:>7} {r['wall_s']:>9.1f} {base / r['wall_s']:>9.2f}x "
+                  f"{own:>8.2f}x {r['busy']:>6.2f}  {same}")
+        results["runs"] = table
+        if n == 2:
+            print(f"  target at 2 workers: >= {TARGET}x for both backends")
+        failed = {r["failed"] for r in runs.values()}
+        if failed != {0}:
+            print(f"  note: scenarios failed (the same in every run): {sorted(failed)}")
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
     return results
 
 
-def _dask(tmp: Path, ref, n: int) -> dict:
-    try:
-        import dask
-        from distributed import LocalCluster
-    except ImportError as err:
-        print(f"  dask: skipped ({err})")
-        return {"skipped": str(err)}
-    times = {}
-    for k in (1, 2):
-        with dask.config.set({"distributed.nanny.pre-spawn-environ": THREAD_ENV}), \
-                LocalCluster(n_workers=k, threads_per_worker=1, processes=True,
-                             dashboard_address=None, silence_logs=40) as cluster:
-            times[k], out = _timed(tmp, f"dask{k}", scheduler=cluster.scheduler_address)
-            same = _same(load_results(out), ref)
-        print(f"  dask   {k} worker{'s' if k > 1 else ' '} {times[k]:7.1f} s   identical: {same}")
-    print(f"  dask   speed-up {times[1] / times[2]:.2f}x")
-    return {"1_worker_s": times[1], "2_workers_s": times[2], "speedup": times[1] / times[2]}
-
-
 if __name__ == "__main__":
-    main()
+    main(sys.argv[1:])

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from gyroarray.chain.compare import ModelComparison
-from gyroarray.core.measurement import read_measurement
+from gyroarray.core.measurement import Measurement, read_measurement
 from gyroarray.core.units import rad_s_to_deg_h
 
 CATS = Path(__file__).resolve().parents[2] / "shared" / "measurements" / "real" / "cats_thermal_p1.csv.gz"
@@ -75,3 +75,35 @@ def test_gyro_1_temperature_coefficient_is_not_significant(comparison):
     _, a, _ = comparison
     t = {(c.effect, c.gyro): c for c in a.candidates}[("temperature_bias", 1)]
     assert not a.significant(t), t.evidence
+
+
+@pytest.mark.slow   # the record cut into three stitched parts and fitted (25-60 s): make score
+def test_stitched_parts_keep_the_temperature_coefficient():
+    """The record cut into three still parts by two 20 s turns (no reference rate, a bias step
+    with each orientation) is stitched; each part keeps its own offset in the regression and the
+    calibration's Allan fit reads one part, not the joins (there it read the temperature steps
+    between parts as random walk: K 169 against 65, and the coefficient fell to 58). Outside
+    truth: the plain per-part-intercept OLS of the cut record (86 deg/h/°C: the temperature
+    differences between parts are left to the offsets) and the whole record's own fit (91)."""
+    m = read_measurement(CATS)
+    y = np.array(m.gyro_deg_s, dtype=float)
+    n = y.shape[0]
+    cuts = ((n // 3, 0.05), (2 * n // 3, -0.08))
+    for cut, step in cuts:
+        y[cut:cut + 20] += 30.0                          # a 20 s turn [deg/s]
+        y[cut + 20:] += step                             # the new orientation's bias [deg/s]
+    cut_m = Measurement(time_s=m.time_s, gyro_deg_s=y, layout=m.layout,
+                        sample_rate_hz=m.sample_rate_hz, temp_c=m.temp_c)
+    comp = ModelComparison(cut_m, n_runs=5)
+    _, after = comp.fit([("temperature_bias", 2)])
+    assert len(comp.parts) == 3
+    k = after.fits[("temperature_bias", 2)].params["deg_h_per_c"]
+    s = after.fits[("temperature_bias", 2)].sigma["deg_h_per_c"]
+    still = np.ones(n, bool)
+    for cut, _ in cuts:
+        still[cut:cut + 20] = False
+    seg = np.cumsum(np.r_[0, np.diff(still.astype(int)) != 0])[still]
+    X = np.column_stack([seg == j for j in np.unique(seg)] + [np.asarray(m.temp_c, float)[still]])
+    ols = float(np.linalg.lstsq(X.astype(float), rad_s_to_deg_h(np.radians(y[still, 1])), rcond=None)[0][-1])
+    assert ols == pytest.approx(86.0, abs=1.0)     # within the parts only (the whole record's: 96)
+    assert k == pytest.approx(ols, rel=0.10) and abs(k - ols) < 3.0 * s, (k, s, ols)

@@ -137,22 +137,15 @@ def test_bandwidth_acts_after_sensing_and_noise_before_quantization_and_saturati
     rng = np.random.default_rng(3)
     y = simulate_readings(m, w, CONE4, DT, rng, time_s=t)
     # by hand: u = H ω; (1 + s) u + b + k·f/g0 (level, at the origin: f = [0, 0, g0]); filter;
-    # quantization noise (uniform angle errors from the effect's own stream, differenced); clip
+    # the spec's counter (increments of the rounded integrated angle, step √12·Q); clip
     u = w @ CONE4.H.T
     x = u + ppm * 1e-6 * u + deg_h_to_rad_s(bias) + deg_s_to_rad_s(k[2])
     x = bandwidth_filter(x, DT, 4.0, 2)
-    x = x + np.diff(_quantizer_errors(3, 4, n, math.sqrt(3) * deg_to_rad(q_deg)), axis=0) / DT
+    step = math.sqrt(12.0) * deg_to_rad(q_deg)
+    x = np.diff(np.round(np.cumsum(x * DT, axis=0) / step), axis=0, prepend=0.0) * (step / DT)
     x = np.clip(x, -deg_s_to_rad_s(r_deg_s), deg_s_to_rad_s(r_deg_s))
     np.testing.assert_allclose(y, x, rtol=0, atol=1e-12)
     assert np.any(np.abs(y) == deg_s_to_rad_s(r_deg_s))     # the clip did act
-
-
-def _quantizer_errors(seed, n_gyros, n, half):
-    """The angle errors the quantizer draws: n + 1 uniforms on [−half, half) per gyro."""
-    from gyroarray.effects.protocol import Streams
-    s = Streams.from_rng(np.random.default_rng(seed))
-    return np.stack([s.stream("quantization", g).uniform(-half, half, n + 1)
-                     for g in range(1, n_gyros + 1)], axis=1)
 
 
 # -- g_sensitivity: the closed form ------------------------------------------

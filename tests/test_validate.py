@@ -161,3 +161,23 @@ def test_a_line_found_again_elsewhere_is_as_evident_as_the_line():
     assert t.fit.params["freq_hz"] == pytest.approx(2.0, abs=0.35)        # one of the two lines
     assert t.z <= t.extra["z_without_model_sigma"] and not a.consistent
     assert t.z < 1e3
+
+
+@pytest.mark.slow   # a ladder step and a held-out validation of a 600 s five-gyro run (25-60 s): make score
+def test_ladder_holdout_says_whether_structure_or_transfer_fails(tmp_path, capsys):
+    """A run with a 3000 ppm scale factor on gyros 2 and 4 and a ladder allowed one step: the
+    model lacks one of them on the part it was fitted on as well, so the held-out verdict blames
+    its structure and names the term the fitted part's candidates ask for (the set answer: the
+    other gyro's scale factor)."""
+    model = NoiseModel((ModelEntry("arw", None, {"n_deg_rt_h": 0.15}), ModelEntry("rrw", None, {"k_deg_h_rt_h": 5.0}),
+                        ModelEntry("scale_factor", 2, {"ppm": 3000.0}), ModelEntry("scale_factor", 4, {"ppm": 3000.0})))
+    run = lab_run(model, LAYOUT, np.random.default_rng(6), static_s=300.0, motion_s=240.0, tail_s=60.0)
+    csv, _ = write_measurement(run, tmp_path / "run.csv")
+    code = main(["ladder", str(csv), "--max-steps", "1", "--holdout", "0.4", "--runs", "5",
+                 "--out", str(tmp_path / "r.html"), "--json"])
+    out = json.loads(capsys.readouterr().out)
+    assert code == 0 and not out["consistent"] and not out["holdout"]["consistent"]
+    added = out["steps"][1]["added"]
+    assert added["effect"] == "scale_factor" and added["gyro"] in (2, 4)
+    assert "its structure lacks a term" in out["holdout"]["structure"]
+    assert out["holdout"]["missing_terms"][0] == f"scale_factor:{6 - added['gyro']}"

@@ -57,6 +57,7 @@ __all__ = [
     "edf_greenhall",
     "confidence_interval",
     "allan_analysis",
+    "analysis_of",
 ]
 
 #: Deviation kinds and the order of the phase difference each one uses:
@@ -999,6 +1000,29 @@ def allan_analysis(rate_rad_s, tau0_s: float, taus="octave",
        based on finite differences", Proc. 35th PTTI Meeting, 2003.
     """
     res = deviation(rate_rad_s, tau0_s, kind, taus)
+    return analysis_of(res, confidence=confidence, terms=terms, fit_method=fit_method,
+                       edf_method=edf_method)
+
+
+def analysis_of(res: AllanResult, *, confidence: float = ONE_SIGMA,
+                terms: Sequence[str] | None = None, fit_method: str = "gls",
+                edf_method: str = "sampled") -> AllanAnalysis:
+    """The confidence intervals and noise fit of a computed deviation (the second half of
+    :func:`allan_analysis`, for a deviation computed elsewhere, e.g. streamed from a file by
+    :mod:`gyroarray.analysis.allan_stream`).
+
+    Parameters
+    ----------
+    res : AllanResult
+        The deviation [rad/s] at its taus, with ``n_phase`` and ``m``.
+    confidence, terms, fit_method, edf_method
+        As :func:`allan_analysis`.
+
+    Returns
+    -------
+    AllanAnalysis
+    """
+    kind = res.kind
     if np.any(res.dev <= 0):
         i = int(np.flatnonzero(res.dev <= 0)[0])
         raise InputError(f"the {kind} is zero at tau = {float(res.taus_s[i]):g} s: "

@@ -46,6 +46,7 @@ class Curve:
     caps: dict | None = None  # upper bounds of the capped coefficients (:func:`_caps`)
     white: np.ndarray | None = None  # the white term's Allan variance over N²/τ at each factor (a filter)
     walk: np.ndarray | None = None   # the random walk's Allan variance over K²τ/3 at each factor (a ramp removed)
+    quant: np.ndarray | None = None  # the quantizer's Allan variance over 3Q²/τ² at each factor (a quiet counter)
 
 
 #: Covariance models by (samples, dt): the gyros of one record share one.
@@ -77,9 +78,10 @@ def cov_model(n: int, dt_s: float, m_min: int = 1) -> AvarCovariance:
 
 
 def curve(x: np.ndarray, dt_s: float, cov: AvarCovariance | None = None, m_min: int = 1,
-           white_shape=None, walk_shape=None) -> Curve:
-    """``white_shape(m)`` / ``walk_shape(m)``: the white / random-walk term's Allan variance over
-    N²/τ / K²τ/3 at the factors ``m`` (a sensor's filter / a ramp taken out of the record)."""
+           white_shape=None, walk_shape=None, quant_shape=None) -> Curve:
+    """``white_shape(m)`` / ``walk_shape(m)`` / ``quant_shape(m)``: the white / random-walk /
+    quantization term's Allan variance over N²/τ / K²τ/3 / 3Q²/τ² at the factors ``m`` (a sensor's
+    filter / a ramp taken out of the record / a counter whose angle error is not white)."""
     m = factors(x.size, m_min)
     res = deviation(x, dt_s, "oadev", m * float(dt_s))
     # the bounds read the octaves up to a third of the record (the fit stops at an eighth)
@@ -92,7 +94,8 @@ def curve(x: np.ndarray, dt_s: float, cov: AvarCovariance | None = None, m_min: 
                   caps=_caps(int(x.size), m_all * float(dt_s), m_all, np.concatenate([res.dev ** 2, y_long]),
                              walk=walk),
                   white=None if white_shape is None else np.asarray(white_shape(m), dtype=float),
-                  walk=None if walk is None else walk[:m.size])
+                  walk=None if walk is None else walk[:m.size],
+                  quant=None if quant_shape is None else np.asarray(quant_shape(m), dtype=float))
 
 
 def cross_avar(X: np.ndarray, m: np.ndarray) -> np.ndarray:
@@ -166,6 +169,8 @@ def columns(cv: Curve, names: tuple, tau_c: float | None = None) -> np.ndarray:
             cols.append(term_basis("oadev", name, cv.taus) * cv.white)
         elif name == "k" and cv.walk is not None:       # a random walk with a ramp taken out
             cols.append(term_basis("oadev", name, cv.taus) * cv.walk)
+        elif name == "q" and cv.quant is not None:      # a quiet counter: its error follows the angle
+            cols.append(term_basis("oadev", name, cv.taus) * cv.quant)
         else:
             cols.append(term_basis("oadev", name, cv.taus))
     return np.column_stack(cols)

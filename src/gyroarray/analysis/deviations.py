@@ -44,6 +44,11 @@ KIND_ALIASES = {"hdev": "ohdev"}
 GAP_FACTOR = 1.5
 #: Fewest block means the lag-1 noise identification reads (Riley & Greenhall: about 30).
 MIN_ID_POINTS = 30
+#: Fewest block means of one part that the pooled lag-1 identification reads: each part's line
+#: taken out biases its lag-1 autocorrelation low (white FM: δ −0.12 at 20 means, −0.2 at 12,
+#: −0.35 at 8, −1 at 4, which reads as white PM and gave pieces between dropped samples EDFs of
+#: several hundred at τ where they hold a few), so shorter parts are left out.
+MIN_ID_PART_BLOCKS = MIN_ID_POINTS
 #: The formula behind each kind's EDF (said in the JSON).
 EDF_METHODS = {
     "oadev": "Greenhall & Riley (2003) algorithm, sampled phase (gyroarray.analysis.allan.edf)",
@@ -257,7 +262,8 @@ def noise_id_lag1(parts, m: int, *, dmax: int = 2) -> dict | None:
     dict or None
         ``alpha`` (the rate PSD exponent as an integer, +2 white PM .. -2 random-walk FM, below
         with ``dmax`` 3), ``alpha_float``, ``d`` (differences taken), ``rho`` [-]; None when the
-        parts hold fewer than :data:`MIN_ID_POINTS` block means at this ``m``.
+        parts of at least :data:`MIN_ID_PART_BLOCKS` block means hold fewer than
+        :data:`MIN_ID_POINTS` of them at this ``m``.
 
     Notes
     -----
@@ -277,7 +283,7 @@ def noise_id_lag1(parts, m: int, *, dmax: int = 2) -> dict | None:
     for p in parts:
         y = np.asarray(p, dtype=float).ravel()
         b = y.size // m
-        if b >= 3:
+        if b >= MIN_ID_PART_BLOCKS:
             series.append(_detrend(y[:b * m].reshape(b, m).mean(axis=1)))
     if sum(s.size for s in series) < MIN_ID_POINTS:
         return None

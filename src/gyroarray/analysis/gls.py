@@ -178,19 +178,36 @@ class RWWhitener:
     """The whitening transform of the baseline noise for one (n, r, q, use).
 
     Maps a length-n column x to z = L̃⁻¹Δx/√s (m values), with Δ the first
-    differences between consecutive used samples, s = q + 2r and
+    differences between consecutive used samples (none into a sample of
+    ``breaks``: the start of a new piece with its own offset), s = q + 2r and
     Σ = s·L̃L̃ᵀ the covariance of the differenced noise. Under the baseline
     model the whitened residual is iid N(0, 1). Built once, it whitens any
     number of columns in O(m) each (the sinusoid and latency searches reuse
     it).
     """
 
-    def __init__(self, n: int, r: float, q: float, use=None):
+    def __init__(self, n: int, r: float, q: float, use=None, breaks=None):
         r, q = float(r), float(q)
         if not (math.isfinite(r) and math.isfinite(q) and r >= 0.0 and q >= 0.0 and r + q > 0.0):
             raise ValueError(f"r and q must be finite, >= 0 and not both 0, got r={r!r}, q={q!r}")
         self.n = int(n)
-        if use is None:
+        self.idx: np.ndarray | None
+        if breaks is not None and len(breaks):
+            # a new piece starts at each break (its own unknown start): the difference into it is
+            # not taken, exactly as a per-piece intercept column would fit it away
+            b = np.asarray(breaks, dtype=int)
+            if b.ndim != 1 or np.any((b < 1) | (b >= max(self.n, 1))):
+                raise ValueError(f"breaks must be sample indices in [1, {self.n - 1}], got {b!r}")
+            u = np.ones(self.n, dtype=bool) if use is None else np.asarray(use, dtype=bool)
+            if u.shape != (n,):
+                raise ValueError(f"use must be {n} booleans, got shape {u.shape}")
+            later = np.flatnonzero(u[1:] & u[:-1]) + 1
+            self.idx = later[~np.isin(later, b)]
+            m = self.idx.size
+            self.n_used = int(u.sum())
+            link = np.zeros(m, dtype=np.bool_)
+            link[1:] = np.diff(self.idx) == 1
+        elif use is None:
             self.idx = None                                  # differences y[1:] − y[:-1]
             m = max(self.n - 1, 0)
             self.n_used = self.n
@@ -333,7 +350,7 @@ class RWWhitener:
         return self.fit_iv_whitened(w[:, -1], w[:, :p], w[:, p:2 * p])
 
 
-def gls_rw(y, X, r: float, q: float, *, use=None, Z=None) -> GLSFit:
+def gls_rw(y, X, r: float, q: float, *, use=None, Z=None, breaks=None) -> GLSFit:
     """Exact GLS for a regression under white noise plus a random-walk bias.
 
     Parameters
@@ -356,6 +373,11 @@ def gls_rw(y, X, r: float, q: float, *, use=None, Z=None) -> GLSFit:
         Instruments, one per regressor: the instrumental-variables GLS
         (:meth:`RWWhitener.fit_iv_whitened`), for regressors with errors of
         their own (read from a noisy reference).
+    breaks : array_like of int, optional
+        Samples at which a new piece starts (the first sample of each stitched
+        part after the first): the difference into a break is not taken, so
+        each piece has its own free offset. Exactly the GLS with one intercept
+        column per piece (a unit vector after differencing) added to X.
 
     Returns
     -------
@@ -426,4 +448,4 @@ def gls_rw(y, X, r: float, q: float, *, use=None, Z=None) -> GLSFit:
         zv = zv[:, None] if zv.ndim == 1 else zv
         if zv.shape != xv.shape:
             raise ValueError(f"Z must have the shape of X {xv.shape}, got {zv.shape}")
-    return RWWhitener(n, r, q, use).fit(yv, xv, zv)
+    return RWWhitener(n, r, q, use, breaks).fit(yv, xv, zv)

@@ -61,11 +61,14 @@ from gyroarray.effects.fitting import EffectFit, chi2_to_z, z_from_log_p
 from gyroarray.chain.localise import Localisation, plain_json, default_nperseg, residual_psd
 from gyroarray.chain.localise import localise as localise_residual
 from gyroarray.analysis.motion import still_mask
+from gyroarray.analysis.pipeline import PipelineReport, detect_pipeline, held_samples, passband_change
+from gyroarray.effects.outliers import MOTION_RAW, Outliers, clean_spikes
 from gyroarray.analysis.reference_noise import describe as describe_own_noise
 from gyroarray.analysis.reference_noise import reference_own_noise
 from gyroarray.analysis.gls import RWWhitener
 from gyroarray.effects.stochastic import fit_gyro_noise
 from gyroarray.effects import REGISTRY, did_you_mean, effect_names, get_effect
+from gyroarray.effects import names
 from gyroarray.core.errors import InputError
 from gyroarray.core.limits import check_memory, format_size, max_memory
 from gyroarray.core.measurement import Measurement, relative_time_s, true_runs
@@ -311,6 +314,8 @@ class Analysis:
     context: FitContext | None = None
     localisation: list = field(default_factory=list)
     localised: Localisation | None = None
+    #: The record's data pipeline (:meth:`PipelineReport.to_json_dict`) when one is seen, else None.
+    pipeline: dict | None = None
 
     @property
     def consistent(self) -> bool:
@@ -372,8 +377,10 @@ class Analysis:
                            "evidence": t.evidence} for t in self.tests if t.kind == "adev_band"],
             "unexplained": self.unexplained(),
             "shared_effects": [{k: v for k, v in d.items() if k != "z"} for d in self.shared_effects()],
+            "motion_locked": self.motion_locked(),
             "localisation": list(self.localisation),
             "notes": list(self.notes),
+            **({"pipeline": self.pipeline} if self.pipeline else {}),
         }
 
     def where_it_fails(self, top: int = 6) -> list[str]:
@@ -388,6 +395,21 @@ class Analysis:
         if len(self.localisation) > top:
             lines.append(f"  ... {len(self.localisation) - top} more (--json)")
         return lines
+
+    def motion_locked(self) -> list[dict]:
+        """Motion-locked responses: spikes or a step whose times sit on the reference's events
+        (reversals, plateau edges, jerks; :mod:`gyroarray.analysis.motion_events`), named so and
+        not as outliers or a fault. Each is the candidate fit's ``motion_locked`` dict: ``kind``
+        ("motion_locked"), ``candidate`` (the effect it would have been), ``gyro``, ``n_events``,
+        ``window_s``, ``fraction_near``, ``fraction_chance``, ``p_value`` and ``sentence``."""
+        return [dict(t.fit.extra["motion_locked"]) for t in self.candidates
+                if t.fit is not None and "motion_locked" in t.fit.extra]
+
+    def motion_lines(self) -> list[str]:
+        """Text lines of :meth:`motion_locked` (empty when none)."""
+        found = self.motion_locked()
+        return (["motion-locked responses (tested against the reference's events, not outliers or faults):"]
+                + [f"  {d['sentence']}" for d in found]) if found else []
 
     def shared_effects(self) -> list[dict]:
         """Effects that act one gyro at a time and are significant on all, or most, gyros alike.
@@ -510,7 +532,7 @@ def _noise_term_kwargs(ctx: FitContext, entries, gyro: int) -> dict:
             continue
         term = get_effect(e.effect).noise_term(ctx, e)
         kw["model_terms"] += tuple(term.get("terms", ()))
-        for key in ("gm_tau_s", "white_shape", "ramp_taken_out"):
+        for key in ("gm_tau_s", "white_shape", "ramp_taken_out", "quant_shape"):
             if key in term:
                 kw[key] = term[key]
     return kw
@@ -798,6 +820,10 @@ class ModelComparison:
         each part's mean replaced by the first part's (the bias steps with the
         orientation: Earth rate, g-sensitivity), so the diagnosis sees noise
         only; τ beyond a part's length and the drift between parts are lost.
+        The deterministic fits do not take those means as given: each part's
+        offset is a free parameter of their regressions (``FitContext.parts``,
+        ``breaks`` of :func:`~gyroarray.analysis.gls.gls_rw`), else the
+        equalised means would absorb part of a temperature signal.
         """
         still = still_mask(self.y, self.H, self.dt)
         if still.all():
@@ -926,7 +952,8 @@ class ModelComparison:
         ctx = FitContext(name=self.name, H=self.H, t=self.t, dt=self.dt, y=self.y, E0=self.E0, ref=self.ref,
                          temp=self.temp, acc=self.acc, positions=self.positions, site=self.m.site,
                          static=self.static, longest=self.longest, moving=self.moving, model=model,
-                         ref_raw=self.ref_raw, ref_instrument=self.ref_instrument)
+                         ref_raw=self.ref_raw, ref_instrument=self.ref_instrument,
+                         parts=tuple(self.parts) if len(self.parts) > 1 else ())
         ctx.services = _Services(self, ctx)
         return ctx
 
@@ -943,7 +970,7 @@ class ModelComparison:
         if not eff.slow or not np.isfinite(f.z) or f.z < 2.0:
             return f
         entry = self._entry_from_fit(eff, f, ModelEntry(eff.name, gyro, eff.placeholder()))
-        clean = E - eff.predict(ctx, entry)
+        clean = ctx.equalised(E - eff.predict(ctx, entry))
         q2 = np.array(ctx.q, dtype=float, copy=True)
         for g in (range(self.N) if gyro is None else [gyro - 1]):
             q2[g] = self._noise_rq(clean[:, g], g + 1, **self._allan_shape(ctx, ctx.model, g + 1, 1))[1]
@@ -968,7 +995,10 @@ class ModelComparison:
         k_up = rrw_deg_h_rt_h_to_rad_s_rt_s(base[1].params["k_deg_h_rt_h"]
                                             + 2.0 * base[1].sigma.get("k_deg_h_rt_h", 0.0))
         q_up = max(k_up ** 2 * self.dt, 1e-12 * r)
-        q_ml = _ml_q(e, r, np.ones(self.n, bool) if self.continuous else self.static)
+        # stitched parts: the walk does not run across a join (each part its own offset, as the
+        # regressions fit it); the step a join leaves is the orientation's, not random walk
+        breaks = np.array([a for a, _ in self.parts[1:]], dtype=int) if len(self.parts) > 1 else None
+        q_ml = _ml_q(e, r, np.ones(self.n, bool) if self.continuous else self.static, breaks)
         return r, max(q_ml, q_up)
 
     def _white_r(self, e: np.ndarray, gyro: int, white_shape=None) -> tuple:
@@ -976,7 +1006,12 @@ class ModelComparison:
         fit of the longest static part, or, on a record that never stands still, from a
         high-pass (the robust spread of the first differences)."""
         a, b = self.longest
-        base = fit_gyro_noise(e[a:b], self.dt, gyro, white_shape=white_shape)
+        if len(self.parts) > 1:
+            # stitched still parts: the Allan fit reads the longest part alone; across a join it
+            # reads the step each part's own offset leaves (a temperature between parts) as random
+            # walk, and that K + 2σ sets q, which decides what the slow regressors may explain
+            a, b = max(self.parts, key=lambda p: p[1] - p[0])
+        base = fit_gyro_noise(e[a:b], self.dt, gyro, white_shape=white_shape, **self.pipeline_fit_kw())
         n_rad = arw_deg_rt_h_to_rad_rt_s(base[0].params["n_deg_rt_h"])
         if self.continuous:                    # the white level from a high-pass: first differences
             d = np.diff(e)
@@ -994,19 +1029,23 @@ class ModelComparison:
         assert ctx.E is not None and ctx.r is not None and ctx.q is not None   # set by calibrate
         for e in model:                        # glitches the model knows of out of the record
             ctx.E = get_effect(e.effect).clean(ctx, e, ctx.E)
+        self._motion_clean(ctx, notes)
         tests = self._deterministic_candidates(ctx, notes)
         self._stochastic_record(ctx, tests, notes)
         fits.update(self._noise(ctx, tests, notes))
+        # what a fitted entry says beside its value (a scale factor's two estimates, reconciled)
+        notes += [f.extra["reconciled"] for f in fits.values() if f.extra.get("reconciled")]
         cal = NoiseModel(tuple(e if (e.effect, e.gyro) not in fits else
                                self._entry_from_fit(get_effect(e.effect), fits[(e.effect, e.gyro)], e)
                                for e in model), description=model.description)
         adev, band_tests = self._adev_band(cal, ctx.E, ctx.rec)
         tests += band_tests
         cands, zc, disc = self._rank(ctx, tests, absorbed=self._absorbed(model))
-        notes += self.setup_notes + self._record_notes()
+        notes += self.setup_notes + self._record_notes() + self._pipeline_notes()
         return Analysis(model=cal, fits=fits, tests=tests, candidates=cands, discrepancy=float(disc),
                         z_crit=zc, residual_rad_s=ctx.E, raw_residual_rad_s=self.E0, record=ctx.rec,
-                        static=self.static, adev=adev, notes=notes, r=ctx.r, q=ctx.q, context=ctx)
+                        static=self.static, adev=adev, notes=notes, r=ctx.r, q=ctx.q, context=ctx,
+                        pipeline=self._pipeline_json())
 
     def validate(self) -> Analysis:
         """Does the model, fitted on another record, predict this one? (``compare --validate``)
@@ -1041,7 +1080,7 @@ class ModelComparison:
             pred = get_effect(e.effect).predict(ctx, e)
             if pred is not None:
                 preds = preds + pred
-        ctx.E = self.E0 - preds
+        ctx.E = ctx.equalised(self.E0 - preds)
         for e in model:
             ctx.E = get_effect(e.effect).clean(ctx, e, ctx.E)
         ctx.r = self._test_white_level(ctx.r, ctx.E)
@@ -1058,11 +1097,11 @@ class ModelComparison:
         adev, band_tests = self._adev_band(model, ctx.E, ctx.rec)
         tests += band_tests
         cands, zc, disc = self._rank(ctx, tests)
-        notes += self.setup_notes + self._record_notes()
+        notes += self.setup_notes + self._record_notes() + self._pipeline_notes()
         return self.localise(Analysis(
             model=model, fits={}, tests=tests, candidates=cands, discrepancy=float(disc), z_crit=zc,
             residual_rad_s=ctx.E, raw_residual_rad_s=self.E0, record=ctx.rec, static=self.static,
-            adev=adev, notes=notes, r=ctx.r, q=ctx.q, context=ctx))
+            adev=adev, notes=notes, r=ctx.r, q=ctx.q, context=ctx, pipeline=self._pipeline_json()))
 
     def _test_white_level(self, r_model: np.ndarray, E: np.ndarray) -> np.ndarray:
         """The white variance the validation's tests whiten with [rad²/s²]: the larger of the
@@ -1119,7 +1158,7 @@ class ModelComparison:
         r, q = np.zeros(self.N), np.zeros(self.N)
         ctx.r, ctx.q = r, q
         for it in range(2):
-            E = self.E0 - sum(preds.values(), _zeros_like_outputs(self.n, self.N))
+            E = ctx.equalised(self.E0 - sum(preds.values(), _zeros_like_outputs(self.n, self.N)))
             for g in range(self.N):
                 r[g], q[g] = self._noise_rq(E[:, g], g + 1, **self._allan_shape(ctx, current.values(), g + 1, it))
             if not det:
@@ -1133,8 +1172,47 @@ class ModelComparison:
                 pred = eff.predict(ctx, current[key])
                 assert pred is not None                  # det: only effects that predict
                 preds[key] = pred
-        ctx.E = self.E0 - sum(preds.values(), _zeros_like_outputs(self.n, self.N))
+        # stitched parts: the fits kept each part's offset free; the residual the stochastic
+        # analysis reads has the parts' means set equal again, as the outputs were stitched
+        ctx.E = ctx.equalised(self.E0 - sum(preds.values(), _zeros_like_outputs(self.n, self.N)))
         return fits
+
+    def _motion_clean(self, ctx: FitContext, notes: list) -> None:
+        """Spikes locked to the reference's events out of the residual the tests read.
+
+        On each gyro without outliers in the model, the spikes
+        (:func:`~gyroarray.effects.outliers.find_spikes`) whose runs start near
+        the reference's reversals, plateau edges and jerks more often than
+        chance (:func:`~gyroarray.effects.outliers.motion_lock`) and lie near an
+        event are replaced by their neighbours' median, as a model's outliers
+        are: a response to the motion is neither noise (quantization, a
+        correlation, a burst), nor a line, nor a step. The residual before is
+        kept (``ctx.cache[MOTION_RAW]``) for the outliers test, which names the
+        response (:meth:`Analysis.motion_locked`); a note says what was taken out.
+        """
+        if ctx.ref is None or not self.moving or ctx.E is None:
+            return
+        eff = get_effect(Outliers.name)
+        assert isinstance(eff, Outliers)
+        in_model = {e.gyro for e in _model_of(ctx) if e.effect == Outliers.name}
+        E, out, said = ctx.E, None, []
+        level = ctx.at_model_level(E, self.t)[:ctx.noise_end]
+        for g in range(self.N):
+            if g + 1 in in_model:
+                continue
+            idx = eff.motion_locked_spikes(ctx, g + 1, level[:, g])
+            if not idx.size:
+                continue
+            out = np.array(E, copy=True) if out is None else out
+            out[:, g] = clean_spikes(E[:, g], idx)
+            said.append(f"{idx.size} on gyro {g + 1}")
+        if out is None:
+            return
+        ctx.cache[MOTION_RAW] = (out, E)
+        ctx.E = out
+        notes.append("spikes locked to the reference's events (motion-locked responses, not outliers) are "
+                     "replaced by their neighbours' median before the other tests read the record: "
+                     + ", ".join(said))
 
     @staticmethod
     def _allan_shape(ctx: FitContext, entries, gyro: int, it: int) -> dict:
@@ -1199,7 +1277,7 @@ class ModelComparison:
         det_z = [t.z for t in tests if np.isfinite(t.z)]
         zc = critical_z(len(det_z) + n_stoch + self._absorbed(model), self.alpha)
         det_sig = max(det_z, default=-math.inf) > zc
-        reasons = [get_effect(e.effect).static_noise for e in model if get_effect(e.effect).static_noise]
+        reasons = [r for r in (get_effect(e.effect).static_noise_in(ctx, e) for e in model) if r]
         ctx.static_record = bool(reasons)
         a, b = self.longest
         assert ctx.E is not None                         # set by calibrate
@@ -1300,9 +1378,92 @@ class ModelComparison:
         finite = [t.z for t in tests if np.isfinite(t.z)]
         zc = critical_z(len(finite) + absorbed, self.alpha)
         ctx.z_crit = zc
-        cands = _rank_rivals(ctx, cands, zc)
+        cands = self._pipeline_explains(ctx, _rank_rivals(ctx, cands, zc))
         worst = max(finite, default=0.0)
         return cands, zc, max(worst, 0.0) / zc
+
+    def pipeline(self) -> PipelineReport:
+        """The record's data pipeline (held samples, a brick-wall roll-off), read once on the
+        outputs as recorded (:func:`~gyroarray.analysis.pipeline.detect_pipeline`)."""
+        if getattr(self, "_pipeline", None) is None:
+            self._pipeline = detect_pipeline(self.y, self.dt)
+        return self._pipeline
+
+    def pipeline_fit_kw(self) -> dict:
+        """:func:`fit_gyro_noise`'s ``min_tau_s`` on a record decimated through a brick-wall filter:
+        the Allan fits start at :attr:`PipelineReport.tau_s`, above the τ the filter shapes (no
+        noise term is fitted to the processing); empty otherwise (the fits as they were)."""
+        p = self.pipeline()
+        return {"min_tau_s": p.tau_s} if p.filtered else {}
+
+    def _pipeline_json(self) -> dict | None:
+        """:attr:`Analysis.pipeline`: the report's JSON when the record was processed, else None."""
+        p = self.pipeline()
+        return p.to_json_dict() if p.processed else None
+
+    def _pipeline_notes(self) -> list[str]:
+        """The pipeline's verdict as a note (none for a record that shows no processing)."""
+        p = self.pipeline()
+        if not p.processed:
+            return []
+        if not (p.held or p.filtered):
+            return [p.verdict() + " (reported only: no test is changed by it)"]
+        return [p.verdict() + " (no effect is forced there: spikes next to held samples are not outliers, a "
+                "low-pass at the roll-off and noise terms read only at those τ are the pipeline's, a noise "
+                "change not seen below the roll-off is not a fault)"]
+
+    def _pipeline_explains(self, ctx: FitContext, cands: list) -> list:
+        """Candidates whose evidence the record's pipeline explains, marked ``explained_by``
+        ("pipeline", None) with the reason (not significant of their own; they stay in D's family).
+
+        * A causal low-pass (``Effect.lowpass``) whose cut-off lies at or above half the brick-wall
+          roll-off's corner: the fit reads the decimation filter's fall.
+        * A noise term read on the ADEV (its fit's ``extra["band_s"]``) only at τ where the
+          processing shapes the ADEV (:attr:`PipelineReport.tau_s`: a Gauss–Markov hump or a
+          flattening at the decimation filter's τ).
+        * A change of the noise level (``fault_noise``, ``burst``) that is not seen where the
+          processing does not act: with the held samples bridged and in the band below the
+          roll-off (:func:`~gyroarray.analysis.pipeline.passband_change`, |z| < 3 on every gyro
+          it names).
+
+        Only significant candidates are read. Spikes next to held samples are left out by the
+        outliers test itself."""
+        pipe = self.pipeline()
+        if not (pipe.held or pipe.filtered) or ctx.E is None:
+            return cands                     # a resampling alone is reported, no test changed
+        out = []
+        for t in cands:
+            if t.fit is None or t.explained_by is not None or not t.z > ctx.z_crit:
+                out.append(t)
+                continue
+            why = None
+            eff = get_effect(t.effect)
+            cut = t.fit.params.get("cutoff_hz")
+            band = t.fit.extra.get("band_s")
+            if eff.lowpass and pipe.corner_hz is not None and isinstance(cut, (int, float)) \
+                    and cut >= 0.5 * pipe.corner_hz:
+                why = (f"; but the record was decimated through a brick-wall filter with its corner at "
+                       f"{pipe.corner_hz:.3g} Hz: this low-pass is the processing's, not the sensor's")
+            elif (isinstance(band, (list, tuple)) and len(band) == 2 and pipe.tau_s > 0
+                  and float(band[1]) <= pipe.tau_s):
+                why = (f"; but it is read at τ {float(band[0]):.2g}–{float(band[1]):.2g} s only, where the record's "
+                       f"processing shapes the ADEV (τ below {pipe.tau_s:.2g} s): the pipeline's, not the sensor's")
+            elif t.effect in (names.FAULT_NOISE, names.BURST) and "start_s" in t.fit.params:
+                k0 = int(np.clip(np.searchsorted(ctx.t, float(t.fit.params["start_s"])), 0, ctx.n - 1))
+                k1 = (None if "end_s" not in t.fit.params else
+                      int(np.clip(np.searchsorted(ctx.t, float(t.fit.params["end_s"])), k0, ctx.n)))
+                gyros = [t.gyro] if t.gyro is not None else list(range(1, self.N + 1))
+                seen = [passband_change(ctx.E[:, g - 1], self.dt, k0, pipe, held=held_samples(self.y[:, g - 1]),
+                                        stop=k1) for g in gyros]
+                ratio, z = max(seen, key=lambda rz: rz[1])
+                if z < 3.0:
+                    band = (f"below {0.7 * pipe.corner_hz:.3g} Hz" if pipe.corner_hz is not None
+                            else f"below {0.25 / self.dt:.3g} Hz")
+                    what = "a fault" if t.effect == names.FAULT_NOISE else "a burst"
+                    why = (f"; but where the processing does not act (held samples bridged, {band}) the noise "
+                           f"changes by {ratio:.3g}x at most (z = {z:.1f}): the record's pipeline, not {what}")
+            out.append(t if why is None else replace(t, evidence=t.evidence + why, explained_by=("pipeline", None)))
+        return out
 
     def _record_notes(self) -> list[str]:
         """What a record without a reference rate cannot show."""
@@ -1316,7 +1477,8 @@ class ModelComparison:
             return [f"no reference rate: the outputs show motion, so only their {len(self.parts)} still "
                     f"parts ({self.n * self.dt:.0f} s of the {whole:.0f} s record, {min(lengths):.0f}–"
                     f"{max(lengths):.0f} s each, over {span:.0f} s) are "
-                    f"diagnosed, stitched with each part's mean set to the first's: times are on the "
+                    f"diagnosed, stitched with each part's mean set to the first's for the noise (the "
+                    f"deterministic fits keep one free offset per part): times are on the "
                     f"stitched record, τ beyond a part's length and the drift between parts are not seen; "
                     f"{needing} need ref_x, ref_y, ref_z"]
         return ["no reference rate: the outputs show no motion, the record is taken as static; "
@@ -1337,9 +1499,13 @@ class ModelComparison:
         eff = get_effect(effect)
         ctx = analysis.context
         label = effect + ("" if gyro is None else f":{gyro}")
+        named = ctx is not None and any(c.gyro == gyro and c.fit is not None and c.fit.extra.get("tested_as") == effect
+                                        for c in analysis.candidates)
         if t is not None and t.fit is not None:
             f = t.fit
-        elif not eff.candidate and ctx is not None:      # fitted on request only
+        elif (not eff.candidate or named) and ctx is not None:
+            # fitted on request only, or its test named another effect (a line whose phase
+            # wanders, tested as a sinusoid, named a narrowband line): fitted as asked
             f = self._fitted(ctx, eff, gyro, analysis.residual_rad_s)
         else:
             why = None if ctx is None else eff.why_not(ctx)
@@ -1666,7 +1832,8 @@ class _Services:
         if gyro not in self._noise:
             assert self.ctx.Er is not None               # set by the stochastic-record step
             fl = fit_gyro_noise(self.ctx.Er[:, gyro - 1], self.comp.dt, gyro,
-                                **_noise_term_kwargs(self.ctx, _model_of(self.ctx), gyro))
+                                **_noise_term_kwargs(self.ctx, _model_of(self.ctx), gyro),
+                                **self.comp.pipeline_fit_kw())
             self._noise[gyro] = {f.effect: f for f in fl}
         return self._noise[gyro]
 
@@ -1761,13 +1928,14 @@ def _rank_rivals(ctx: FitContext, cands: list, z_crit: float) -> list:
 
 
 @by_content(maxsize=16)
-def _ml_q(e: np.ndarray, r: float, use: np.ndarray) -> float:
-    """Maximum-likelihood random-walk increment variance q of ``e`` on the ``use`` samples, r fixed.
+def _ml_q(e: np.ndarray, r: float, use: np.ndarray, breaks: np.ndarray | None = None) -> float:
+    """Maximum-likelihood random-walk increment variance q of ``e`` on the ``use`` samples, r fixed
+    (``breaks``: first samples of stitched parts, no increment taken across them).
 
     Cached by content: a ladder step leaves most gyros' residuals as they were (0.14 s per call
     on 1e6 samples, six calls per analysis of the ADIS16405)."""
     def nll(lq):
-        w = RWWhitener(e.size, r, math.exp(lq), use)
+        w = RWWhitener(e.size, r, math.exp(lq), use, breaks)
         z = w.whiten(e)
         return 0.5 * (w.logdet + float(z @ z))
     lo, hi = math.log(1e-12 * r), math.log(r) + 3.0

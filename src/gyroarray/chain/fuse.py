@@ -37,6 +37,9 @@ z [deg/s], with the input's reference, temperature and specific force, so ``alla
 ``davar``, ``compare`` and ``fdi`` read it as any other measurement; its sidecar's
 ``[fused]`` table says how it was made (:func:`fused_files`).
 
+A record longer than memory is fused in chunks by :mod:`gyroarray.chain.fuse_stream` (the fixed
+linear filters, the whole record analysed; ``gyroarray fuse --stream``).
+
 Speed: the estimators run on the whole record at once (a static one is one matrix
 product, a Kalman filter its steady-state recursion); on the 24-gyro MIMU4444 record
 (37 439 samples) ``gyroarray fuse --estimator gls`` takes about 2.5 s of CPU, most of it
@@ -68,8 +71,10 @@ from gyroarray.estimators.svo import allan_covariance
 from gyroarray.effects.names import ARW, CORRELATION
 
 __all__ = ["MIN_PART", "AXES", "WhiteWalk", "FuseResult", "fuse", "still_parts", "stitch",
-           "octave_avar", "white_walk_fit", "design_rrw", "nnls2", "fused_measurement", "fused_files", "sha256_of",
-           "split_parts", "fused_terms", "band_basis", "predicted_band", "tau_verdict", "validate_fuse"]
+           "octave_avar", "white_walk_fit", "white_walk_of_avar", "design_rrw", "nnls2", "fused_measurement", "fused_files", "sha256_of",
+           "split_parts", "fused_terms", "band_basis", "predicted_band", "tau_verdict", "validate_fuse",
+           "used_gyros", "check_geometry", "model_noise", "gain_of", "predicted_arw", "plain_params",
+           "best_single_of", "axes_json", "fused_sidecar"]
 
 #: Shortest still part [samples] kept for the noise analysis (as ``compare``'s).
 MIN_PART = 256
@@ -212,20 +217,33 @@ def white_walk_fit(x, dt_s: float, min_tau_s: float = 1.0) -> WhiteWalk:
     """
     x = np.asarray(x, dtype=float)
     n, c = x.shape
-    arw, arw_s = np.zeros(c), np.full(c, np.nan)
-    rrw, rrw_s = np.zeros(c), np.full(c, np.nan)
-    taus, avar, m, n_phase = octave_avar(x, dt_s) if n >= 8 else (None, None, None, 0)
-    use = None
-    if taus is not None:
-        use = np.flatnonzero(m <= max(FIT_SPAN * n, 2))
-        slow = use[taus[use] >= min_tau_s * (1.0 - 1e-9)]
-        use = slow if slow.size >= MIN_FIT_OCTAVES else use[-MIN_FIT_OCTAVES:]
-    if use is None or use.size < 2:
+    ww = None
+    if n >= 8:
+        taus, avar, m, n_phase = octave_avar(x, dt_s)
+        ww = white_walk_of_avar(taus, avar, m, n_phase, min_tau_s)
+    if ww is None:
         d = np.diff(x, axis=0) if n > 1 else np.zeros((1, c))
         arw = np.std(d, axis=0) / math.sqrt(2.0) * math.sqrt(dt_s)
-        return WhiteWalk(arw, arw_s, rrw, rrw_s)
-    t, av = cast(np.ndarray, taus)[use], cast(np.ndarray, avar)[use]      # set when use is
-    edf = np.asarray(edf_simple(n_phase, cast(np.ndarray, m)[use], 0), dtype=float)
+        return WhiteWalk(arw, np.full(c, np.nan), np.zeros(c), np.full(c, np.nan))
+    return ww
+
+
+def white_walk_of_avar(taus, avar, m, n_phase: int, min_tau_s: float = 1.0) -> WhiteWalk | None:
+    """:func:`white_walk_fit` from the octave Allan variance (M, C) at ``taus`` [s] (averaging
+    factors ``m``, ``n_phase`` phase points: n + 1 for n samples), e.g. a streamed one; None
+    when fewer than two octaves are usable (the caller falls back on the differences)."""
+    taus, avar, m = np.asarray(taus, float), np.asarray(avar, float), np.asarray(m)
+    c = avar.shape[1]
+    n = n_phase - 1
+    arw, arw_s = np.zeros(c), np.full(c, np.nan)
+    rrw, rrw_s = np.zeros(c), np.full(c, np.nan)
+    use = np.flatnonzero(m <= max(FIT_SPAN * n, 2))
+    slow = use[taus[use] >= min_tau_s * (1.0 - 1e-9)]
+    use = slow if slow.size >= MIN_FIT_OCTAVES else use[-MIN_FIT_OCTAVES:]
+    if use.size < 2:
+        return None
+    t, av = taus[use], avar[use]
+    edf = np.asarray(edf_simple(n_phase, m[use], 0), dtype=float)
     a = np.column_stack([1.0 / t, t / 3.0])
     for j in range(c):
         target = av[:, j]
@@ -337,46 +355,14 @@ class FuseResult:
 
     def best_single(self) -> list[tuple[int | None, float]]:
         """Per axis: (best single gyro, 1-based, or None; its ARW on that axis [rad/√s])."""
-        out: list[tuple[int | None, float]] = []
-        if self.single is None:
-            return [(None, math.nan)] * 3
-        h = np.asarray(self.measurement.layout.axes)[[k - 1 for k in self.used]]
-        for a in range(3):
-            proj = np.abs(h[:, a])
-            ok = (proj > 1e-9) & (self.single.arw_rad_rt_s > 0)
-            if not ok.any():
-                out.append((None, math.nan))
-                continue
-            eq = np.where(ok, self.single.arw_rad_rt_s / np.where(ok, proj, 1.0), np.inf)
-            j = int(np.argmin(eq))
-            out.append((self.used[j], float(eq[j])))
-        return out
+        return best_single_of(self.single, self.used, self.measurement.layout.axes)
 
     def to_json_dict(self) -> dict:
         """The result in datasheet units (deg/h, deg/√h, deg/h/√h) for ``--json``."""
         arw = units.arw_rad_rt_s_to_deg_rt_h
         rrw = units.rrw_rad_s_rt_s_to_deg_h_rt_h
         m = self.measurement
-        axes: dict = {}
-        best = self.best_single()
-        for a, name in enumerate(AXES):
-            d: dict = {}
-            if self.adev is not None and self.adev[a] is not None:
-                j = self.adev[a].to_json_dict()
-                d.update({k: j[k] for k in ("kind", "confidence", "taus_s", "adev_deg_h",
-                                            "ci_low_deg_h", "ci_high_deg_h", "edf")})
-            if self.fused_fit is not None:
-                d["arw_deg_rt_h"] = float(arw(self.fused_fit.arw_rad_rt_s[a]))
-                d["arw_deg_rt_h_sigma"] = float(arw(self.fused_fit.arw_sigma[a]))
-                d["rrw_deg_h_rt_h"] = float(rrw(self.fused_fit.rrw_rad_s_rt_s[a]))
-            k, eq = best[a]
-            d["best_single_gyro"] = k
-            d["best_single_arw_deg_rt_h"] = None if k is None else float(arw(eq))
-            f = d.get("arw_deg_rt_h")
-            d["gain"] = (float(arw(eq)) / f) if (k is not None and f) else None
-            d["predicted_arw_deg_rt_h"] = (None if self.predicted_arw_rad_rt_s is None
-                                           else float(arw(self.predicted_arw_rad_rt_s[a])))
-            axes[name] = d
+        axes = axes_json(self.adev, self.fused_fit, self.best_single(), self.predicted_arw_rad_rt_s)
         single = None
         if self.single is not None:
             single = {str(k): {"arw_deg_rt_h": float(arw(self.single.arw_rad_rt_s[i])),
@@ -405,7 +391,52 @@ class FuseResult:
         }
 
 
-def _used_gyros(meas: Measurement, exclude) -> tuple[list[int], list[int], list[int], str | None]:
+def best_single_of(single: WhiteWalk | None, used, axes) -> list[tuple[int | None, float]]:
+    """Per axis: (best single gyro, 1-based, or None; its ARW on that axis [rad/√s]) of the
+    ``used`` gyros' white + walk fit ``single``, ``axes`` the record's layout (N, 3)."""
+    out: list[tuple[int | None, float]] = []
+    if single is None:
+        return [(None, math.nan)] * 3
+    h = np.asarray(axes)[[k - 1 for k in used]]
+    for a in range(3):
+        proj = np.abs(h[:, a])
+        ok = (proj > 1e-9) & (single.arw_rad_rt_s > 0)
+        if not ok.any():
+            out.append((None, math.nan))
+            continue
+        eq = np.where(ok, single.arw_rad_rt_s / np.where(ok, proj, 1.0), np.inf)
+        j = int(np.argmin(eq))
+        out.append((used[j], float(eq[j])))
+    return out
+
+
+def axes_json(adev, fused_fit: WhiteWalk | None, best, predicted) -> dict:
+    """The ``axes`` object of ``fuse --json``: per axis the fused ADEV with its CI, the fused
+    ARW, the best single gyro, the gain and the predicted ARW (datasheet units)."""
+    arw = units.arw_rad_rt_s_to_deg_rt_h
+    rrw = units.rrw_rad_s_rt_s_to_deg_h_rt_h
+    axes: dict = {}
+    for a, name in enumerate(AXES):
+        d: dict = {}
+        if adev is not None and adev[a] is not None:
+            j = adev[a].to_json_dict()
+            d.update({k: j[k] for k in ("kind", "confidence", "taus_s", "adev_deg_h",
+                                        "ci_low_deg_h", "ci_high_deg_h", "edf")})
+        if fused_fit is not None:
+            d["arw_deg_rt_h"] = float(arw(fused_fit.arw_rad_rt_s[a]))
+            d["arw_deg_rt_h_sigma"] = float(arw(fused_fit.arw_sigma[a]))
+            d["rrw_deg_h_rt_h"] = float(rrw(fused_fit.rrw_rad_s_rt_s[a]))
+        k, eq = best[a]
+        d["best_single_gyro"] = k
+        d["best_single_arw_deg_rt_h"] = None if k is None else float(arw(eq))
+        f = d.get("arw_deg_rt_h")
+        d["gain"] = (float(arw(eq)) / f) if (k is not None and f) else None
+        d["predicted_arw_deg_rt_h"] = (None if predicted is None else float(arw(predicted[a])))
+        axes[name] = d
+    return axes
+
+
+def used_gyros(meas: Measurement, exclude) -> tuple[list[int], list[int], list[int], str | None]:
     """(used, excluded, constant, note on the constant ones), all 1-based."""
     n = meas.n_gyros
     excluded = sorted({int(k) for k in exclude})
@@ -423,7 +454,7 @@ def _used_gyros(meas: Measurement, exclude) -> tuple[list[int], list[int], list[
     return used, excluded, constant, note
 
 
-def _check_geometry(meas: Measurement, used, excluded, constant) -> None:
+def check_geometry(meas: Measurement, used, excluded, constant) -> None:
     left = []
     if excluded:
         left.append(f"--exclude {','.join(map(str, excluded))}")
@@ -439,7 +470,7 @@ def _check_geometry(meas: Measurement, used, excluded, constant) -> None:
                          file=meas.source)
 
 
-def _model_noise(model, meas: Measurement, used: list[int], needs_arw: bool, model_name: str) -> ArrayNoise:
+def model_noise(model, meas: Measurement, used: list[int], needs_arw: bool, model_name: str) -> ArrayNoise:
     """The model's ARW/RRW/correlation for the used gyros (rows and columns of the others dropped)."""
     try:
         full = array_noise(model, meas.n_gyros, require_arw=False)
@@ -474,7 +505,7 @@ def design_rrw(ww: WhiteWalk) -> tuple[np.ndarray, list[int]]:
     return out, np.flatnonzero(low & (out > k)).tolist()
 
 
-def _plain_params(params: dict) -> dict:
+def plain_params(params: dict) -> dict:
     """Hyperparameters as JSON can hold them (arrays as nested lists, other objects by repr)."""
     out = {}
     for k, v in params.items():
@@ -487,7 +518,7 @@ def _plain_params(params: dict) -> dict:
     return out
 
 
-def _gain_of(est, dt_s: float) -> tuple[np.ndarray | None, float | None]:
+def gain_of(est, dt_s: float) -> tuple[np.ndarray | None, float | None]:
     """(gain to slow changes (3, N), slowest time constant [s]) of a fitted estimator, or
     (None, None) when it is not a fixed linear filter."""
     try:
@@ -501,7 +532,7 @@ def _gain_of(est, dt_s: float) -> tuple[np.ndarray | None, float | None]:
     return np.asarray(g, dtype=float), tc
 
 
-def _predicted_arw(est, noise: ArrayNoise) -> np.ndarray | None:
+def predicted_arw(est, noise: ArrayNoise) -> np.ndarray | None:
     """sqrt(diag(G R_c Gᵀ)) [rad/√s], G the estimator's gain to slow changes (module docstring)."""
     try:
         g = est.linear_system().dc_gain()
@@ -556,8 +587,8 @@ def fuse(meas: Measurement, estimator: str, *, model=None, model_name: str | Non
         est = make(estimator, **params)
     except InputError as err:
         raise InputError(f"--estimator: {err.message}") from None
-    used, excluded, constant, const_note = _used_gyros(meas, exclude)
-    _check_geometry(meas, used, excluded, constant)
+    used, excluded, constant, const_note = used_gyros(meas, exclude)
+    check_geometry(meas, used, excluded, constant)
     notes = [] if const_note is None else [const_note]
     idx = [k - 1 for k in used]
     dt = meas.dt_s
@@ -597,7 +628,7 @@ def fuse(meas: Measurement, estimator: str, *, model=None, model_name: str | Non
                          "2-sigma upper bound (a drift the record cannot tell from none is not ruled out)")
     else:
         name = model_name or "the model"
-        noise = _model_noise(model, meas, used, cls.needs_arw, name)
+        noise = model_noise(model, meas, used, cls.needs_arw, name)
         source = f"model {name}"
         if noise.ignored_effects:
             notes.append(f"the estimator models ARW, RRW and correlation only; the model's "
@@ -623,7 +654,7 @@ def fuse(meas: Measurement, estimator: str, *, model=None, model_name: str | Non
         # with a model, what the estimator cannot be designed with is the model's noise
         raise InputError(text, file=meas.source if model is None else (model_name or meas.source)) from None
     fused = np.asarray(est.estimate(y), dtype=float)
-    gain, tconst = _gain_of(est, dt)
+    gain, tconst = gain_of(est, dt)
     if excluded:
         notes.append(f"gyro(s) {', '.join(map(str, excluded))} left out (--exclude)")
     adev: list[Any] | None
@@ -648,11 +679,11 @@ def fuse(meas: Measurement, estimator: str, *, model=None, model_name: str | Non
     else:
         notes.append(f"the analysed part is {total} samples, fewer than {MIN_ANALYSED}: no ADEV, "
                      "no ARW, no gain (the fused record is written all the same)")
-    return FuseResult(measurement=meas, estimator=estimator, params=_plain_params(est.get_params()),
+    return FuseResult(measurement=meas, estimator=estimator, params=plain_params(est.get_params()),
                       fused_rad_s=fused, used=used, excluded=excluded, constant=constant,
                       noise=noise, model_source=source, parts=parts, analysed=analysed,
                       single=single, fused_fit=fused_fit, adev=adev,
-                      predicted_arw_rad_rt_s=_predicted_arw(est, noise), notes=notes,
+                      predicted_arw_rad_rt_s=predicted_arw(est, noise), notes=notes,
                       gain=gain, time_constant_s=tconst)
 
 
@@ -961,8 +992,8 @@ def validate_fuse(meas: Measurement, estimator: str, *, holdout: float | None = 
     name = meas.source
     if model is None and (holdout is None or not (0.0 < holdout < 1.0)):
         raise InputError(f"--holdout must be a fraction in (0, 1), got {holdout!r}", file=name)
-    used, _, _, _ = _used_gyros(meas, exclude)
-    _check_geometry(meas, used, sorted({int(k) for k in exclude}), [k for k in constant_gyros(meas)
+    used, _, _, _ = used_gyros(meas, exclude)
+    check_geometry(meas, used, sorted({int(k) for k in exclude}), [k for k in constant_gyros(meas)
                                                                      if k not in set(exclude)])
     idx = [k - 1 for k in used]
     dt = float(meas.dt_s)
@@ -1201,23 +1232,33 @@ def fused_files(res: FuseResult, gz: bool, *, input_sha256: str | None = None,
     csv = ("\n".join(lines) + "\n").encode("utf-8")
     if gz:
         csv = gzip.compress(csv, compresslevel=6, mtime=0)
-    arw = units.arw_rad_rt_s_to_deg_rt_h(res.noise.arw_rad_rt_s)
-    rrw = units.rrw_rad_s_rt_s_to_deg_h_rt_h(res.noise.rrw_rad_s_rt_s)
-    fused = {"estimator": res.estimator, "estimator_params": _toml_params(res.params),
-             "model": res.model_source, "gyros_used": list(res.used),
-             "excluded_gyros": list(res.excluded), "constant_gyros": list(res.constant),
+    toml = fused_sidecar(res.estimator, res.params, res.model_source, res.used, res.excluded,
+                         res.constant, res.noise, str(m.source), m.sample_rate_hz, fm.description,
+                         m.site, input_sha256=input_sha256, sidecar_sha256=sidecar_sha256)
+    return csv, toml
+
+
+def fused_sidecar(estimator: str, params: dict, model_source: str, used, excluded, constant,
+                  noise: ArrayNoise, source: str, sample_rate_hz: float, description: str, site,
+                  *, input_sha256: str | None = None, sidecar_sha256: str | None = None) -> bytes:
+    """The fused record's sidecar (TOML bytes): see :func:`fused_files`."""
+    arw = units.arw_rad_rt_s_to_deg_rt_h(noise.arw_rad_rt_s)
+    rrw = units.rrw_rad_s_rt_s_to_deg_h_rt_h(noise.rrw_rad_s_rt_s)
+    fused = {"estimator": estimator, "estimator_params": _toml_params(params),
+             "model": model_source, "gyros_used": list(used),
+             "excluded_gyros": list(excluded), "constant_gyros": list(constant),
              "design_arw_deg_rt_h": [float(v) for v in arw],
              "design_rrw_deg_h_rt_h": [float(v) for v in rrw],
-             "input": str(m.source), "gyroarray_version": __version__,
+             "input": source, "gyroarray_version": __version__,
              "columns": "gyro1, gyro2, gyro3: fused body rate about the platform x, y, z axes [deg/s]"}
     if input_sha256 is not None:
         fused["input_sha256"] = input_sha256
     if sidecar_sha256 is not None:
         fused["input_sidecar_sha256"] = sidecar_sha256
-    doc: dict = {"sample_rate_hz": m.sample_rate_hz, "description": fm.description,
+    doc: dict = {"sample_rate_hz": sample_rate_hz, "description": description,
                  "layout": {"axes": [list(r) for r in FUSED_AXES]}}
-    if m.site is not None:
-        doc["site"] = {"latitude_deg": _degrees(m.site.latitude_rad),
-                       "heading_deg": _degrees(m.site.heading_rad)}
+    if site is not None:
+        doc["site"] = {"latitude_deg": _degrees(site.latitude_rad),
+                       "heading_deg": _degrees(site.heading_rad)}
     doc["fused"] = fused
-    return csv, tomli_w.dumps(doc).encode("utf-8")
+    return tomli_w.dumps(doc).encode("utf-8")

@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-from gyroarray.cli.common import add_bag_options, bag_options, add_force, check_plot, measurement_inputs, positive_int
+from gyroarray.cli.common import add_bag_options, bag_options, add_force, check_plot, measurement_inputs, positive_int, stream_reason
 from gyroarray.core.errors import InputError
 
 __all__ = ["MAX_TAUS", "MIN_STILL_PART", "add_parser", "allan_signal", "cmd_allan", "cmd_davar"]
@@ -70,12 +70,17 @@ def cmd_allan(args) -> tuple[dict, str]:
     # deferred: numpy and the analysis (numba) load only when the command runs (a fast --help)
     from gyroarray.analysis.allan import fit_tau_count
     from gyroarray.analysis.deviations import RANGE_KIND, canonical_kind
+    from gyroarray.analysis.pipeline import detect_pipeline
     from gyroarray.core.measurement import read_measurement
     from gyroarray.reports.allan_plots import plot_allan
     kind = canonical_kind(args.kind)                  # hdev: the overlapping Hadamard
     taus = _parse_taus(args.taus)
     check_plot(args, inputs=measurement_inputs(args))
-    meas = read_measurement(args.measurement, repair=args.repair, **bag_options(args))
+    streamed = stream_reason(args)                    # a record too long for memory: in chunks
+    if streamed is not None:
+        return _cmd_allan_streamed(args, kind, taus, streamed)
+    # --gaps: dropped samples kept as gaps, never filled; _analysed_parts pools around them
+    meas = read_measurement(args.measurement, repair=args.repair, gaps=bool(args.gaps), **bag_options(args))
     if args.gyro is not None and not 1 <= args.gyro <= meas.n_gyros:
         raise InputError(f"--gyro {args.gyro} is out of range: the measurement has "
                          f"gyros 1..{meas.n_gyros}", file=str(args.measurement))
@@ -94,9 +99,15 @@ def cmd_allan(args) -> tuple[dict, str]:
     notes = [*meas.notes, *part_notes, *([tau_note] if tau_note else []),
              *_reference_noise_notes(meas, what != "gyro output", gyros), *skipped.values(),
              *spike_notes, *_white_notes(meas, signal, parts, analyses)]
+    pipe = detect_pipeline(meas.gyro_rad_s, meas.dt_s)        # held samples, a decimation filter
+    if pipe.processed:
+        notes.append(f"{pipe.verdict()}: the ADEV there (ARW, quantization, a hump) is the pipeline's; "
+                     f"read the noise terms at τ above {pipe.tau_s:.2g} s")
     out = {"gyros": {str(k): a.to_json_dict() for k, a in analyses.items()},
            "signal": what, "notes": notes,
            "not_analysed": {str(k): why for k, why in skipped.items()}}
+    if pipe.processed:
+        out["pipeline"] = pipe.to_json_dict()
     if part_info is not None:
         out["analysed_parts"] = part_info
     if spike_info:
@@ -107,6 +118,53 @@ def cmd_allan(args) -> tuple[dict, str]:
         lines.append(_format_allan(k, a.to_json_dict()))
     if args.plot is not None:
         path = plot_allan({f"gyro {k}": a for k, a in analyses.items()}, args.plot, force=args.force)
+        out["plot"] = str(path)
+        lines.append(f"wrote {path}")
+    return out, "\n".join(lines)
+
+
+def _cmd_allan_streamed(args, kind: str, taus, why: str) -> tuple[dict, str]:
+    """``allan`` on a record read in chunks (:mod:`gyroarray.analysis.allan_stream`): the
+    overlapping Allan deviation of the whole record, equal to the in-memory one to rounding."""
+    # deferred: numpy and the analysis (numba) load only when the command runs (a fast --help)
+    from gyroarray.analysis.allan import MAX_FIT_TAUS
+    from gyroarray.analysis.allan_stream import streamed_allan
+    from gyroarray.core.measurement import record_head
+    from gyroarray.reports.allan_plots import plot_allan
+    name = str(args.measurement)
+    way = ("; raise --max-memory to read it whole" if why != "--stream" else "; leave out --stream")
+    if kind != "oadev":
+        raise InputError(f"a streamed record is analysed with --kind oadev only ({why}){way}",
+                         file=name)
+    for flag, on in (("--repair", args.repair), ("--robust", args.robust),
+                     ("--gaps", getattr(args, "gaps", False))):
+        if on:
+            raise InputError(f"{flag} needs the record in memory, and this one is streamed ({why})"
+                             f"{way}", file=name)
+    head = record_head(args.measurement)
+    if args.gyro is not None and not 1 <= args.gyro <= head.n_gyros:
+        raise InputError(f"--gyro {args.gyro} is out of range: the measurement has "
+                         f"gyros 1..{head.n_gyros}", file=name)
+    gyros = [args.gyro] if args.gyro is not None else list(range(1, head.n_gyros + 1))
+    tau_note = []
+    if isinstance(taus, int) and taus > MAX_FIT_TAUS:
+        tau_note = [f"--taus {taus}: at most {MAX_FIT_TAUS} log-spaced taus on a streamed record "
+                    "(the most the noise fit takes); analysed those"]
+        taus = MAX_FIT_TAUS
+    res = streamed_allan(head, gyros, taus=taus, raw=args.raw, whole=args.all)
+    notes = [*head.notes, f"streamed ({why})", *res.notes, *tau_note, *res.skipped.values()]
+    out = {"gyros": {str(k): a.to_json_dict() for k, a in res.analyses.items()},
+           "signal": res.signal, "notes": notes,
+           "not_analysed": {str(k): why_not for k, why_not in res.skipped.items()},
+           "streamed": {"chunk_rows": res.chunk_rows, "work_bytes": res.work_bytes,
+                        "n_samples": res.n_samples}}
+    lines = [f"{args.measurement}: {res.n_samples} samples at {1 / res.dt_s:g} Hz, "
+             f"{head.n_gyros} gyros; analysed: {res.signal}", *[f"note: {n}" for n in notes]]
+    for k, a in res.analyses.items():
+        lines.append(_format_allan(k, a.to_json_dict()))
+    if args.plot is not None:
+        path = plot_allan({f"gyro {k}": a for k, a in res.analyses.items()}, args.plot,
+                          force=args.force)
         out["plot"] = str(path)
         lines.append(f"wrote {path}")
     return out, "\n".join(lines)
@@ -428,8 +486,15 @@ def add_parser(sub) -> None:
                    help="take isolated spikes out first (each replaced by its neighbours' interpolation; counted)")
     p.add_argument("--repair", action="store_true",
                    help="repair short gaps, missing values, exact duplicate rows and a jittering clock (each listed)")
+    p.add_argument("--gaps", action="store_true",
+                   help="accept gaps in the time stamps (dropped samples): the deviation is pooled over "
+                        "the contiguous parts, nothing interpolated (gaps and missing samples counted)")
     p.add_argument("--raw", action="store_true",
                    help="analyse the raw gyro output even when a moving reference is present")
+    p.add_argument("--stream", action="store_true",
+                   help="read the record in chunks, never whole (automatic for a record estimated "
+                        "beyond 2 GiB or --max-memory; Parquet recommended): the overlapping ADEV of "
+                        "the whole record, --kind oadev")
     p.add_argument("--plot", type=Path, metavar="OUT.png", help="write the ADEV plot")
     add_force(p)
     p.add_argument("--json", action="store_true", help="print one JSON object")

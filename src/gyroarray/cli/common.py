@@ -15,6 +15,7 @@ import json
 import math
 from collections.abc import Callable
 from pathlib import Path
+from gyroarray.core.errors import InputError
 
 __all__ = ["EXIT_OK", "EXIT_FAIL", "EXIT_USAGE", "COUNT_CAPS", "finite_float", "float_in", "count",
            "check_count", "bounded_int", "positive_int", "nonneg_int", "json_safe", "output",
@@ -202,3 +203,25 @@ def add_force(p):
     """``--force``: replace output files that exist."""
     p.add_argument("--force", action="store_true",
                    help="replace output files that exist (never an input of the command)")
+
+
+def stream_reason(args) -> str | None:
+    """Why a command (``allan``, ``fuse``) streams this record (``--stream``, or its reading estimated above
+    :data:`~gyroarray.core.limits.STREAM_BUDGET_BYTES` or the memory budget), or None."""
+    # deferred: the measurement module (numpy, pandas) loads only when the command runs
+    from gyroarray.core.bags import is_bag
+    from gyroarray.core.limits import STREAM_BUDGET_BYTES, format_size, max_memory
+    from gyroarray.core.measurement import read_bytes_estimate
+    if is_bag(args.measurement):
+        if args.stream:
+            raise InputError("--stream reads a measurement file (CSV, CSV.GZ or Parquet), not a bag: "
+                             "gyroarray convert BAG --out F.parquet first", file=str(args.measurement))
+        return None
+    if args.stream:
+        return "--stream"
+    need = read_bytes_estimate(args.measurement)
+    budget = min(STREAM_BUDGET_BYTES, max_memory())
+    if need is None or need <= budget:
+        return None
+    return (f"reading it whole would need about {format_size(need)}, more than the streaming "
+            f"threshold of {format_size(budget)} (STREAM_BUDGET_BYTES or --max-memory, the lower)")

@@ -17,9 +17,10 @@ from gyroarray.effects.names import ARW, RRW
 
 __all__ = ["add_parser", "cmd_compare", "cmd_diagnose", "cmd_fit", "cmd_ladder"]
 
-def _comparison(args):
+def _comparison(args, window: bool = False):
     """Check the outputs, read the measurement (and model) of a compare-family
-    command; build the chain."""
+    command; build the chain. ``window`` (diagnose): a record over the memory budget is read
+    as its longest window that fits (:mod:`gyroarray.chain.long_record`), ``args.window_plan``."""
     # deferred: the chain (numpy, numba) loads only when the command runs (a fast --help)
     from gyroarray.chain.compare import ModelComparison, check_record_needs
     from gyroarray.core.measurement import read_measurement
@@ -32,7 +33,23 @@ def _comparison(args):
     output(getattr(args, "model_out", None), args, "--model-out", inputs=inputs, suffixes=(".toml",))
     if getattr(args, "md", None) is not None:      # its figures beside it, checked now too
         markdown_figures(args.md, inputs=inputs, force=args.force)
-    meas = read_measurement(args.measurement, repair=args.repair, **bag_options(args))
+    args.window_plan = None
+    if window and not bag_options(args):
+        # deferred: the chain (numpy, numba) loads only when the command runs (a fast --help)
+        from gyroarray.chain.long_record import read_plan, window_plan
+        from gyroarray.core.bags import is_bag
+        args.window_plan = None if is_bag(args.measurement) else window_plan(args.measurement)
+    if args.window_plan is not None:
+        if args.repair:
+            raise InputError("--repair needs the record in memory, and this one is over the memory "
+                             "budget (diagnosed on its longest window that fits); raise --max-memory "
+                             "or repair a cut of it", file=str(args.measurement))
+        meas = read_plan(args.window_plan)
+        from gyroarray.core.measurement import constant_gyros  # deferred: numpy, pandas
+        dead = constant_gyros(meas)
+        args.window_gyros = [k for k in range(1, meas.n_gyros + 1) if k not in dead]
+    else:
+        meas = read_measurement(args.measurement, repair=args.repair, **bag_options(args))
     # what reading the file said, every --repair included (the text `allan` prints): in the notes
     # of every compare-family command (the report lists them as "reading the file")
     args.read_notes = list(meas.notes)
@@ -102,6 +119,9 @@ def _diagnosis_text(a, head: str) -> str:
     shared = a.shared_lines()
     if shared:
         lines += [""] + shared
+    locked = a.motion_lines()
+    if locked:
+        lines += [""] + locked
     bands = [t for t in a.tests if t.kind == "adev_band" and a.significant(t)]
     if bands:
         lines += ["", "ADEV outside the model band:"] + [f"  {t.evidence} (z = {t.z:.1f})" for t in bands]
@@ -196,7 +216,7 @@ def cmd_compare(args):
 
 
 def cmd_diagnose(args):
-    comp = _comparison(args)
+    comp = _comparison(args, window=not args.validate)
     if args.validate:
         if args.model is None:
             raise InputError("gyroarray diagnose --validate needs --model (the model to test)")
@@ -206,9 +226,22 @@ def cmd_diagnose(args):
         out["validated"] = True
         out["verdict"] = _validation_text(comp, a, args.model)
         return out, out["verdict"] + "\n" + _diagnosis_text(a, f"{comp.name}: {comp.N} gyros, {comp.n * comp.dt:.0f} s")
+    streamed = None
+    if args.window_plan is not None:
+        # deferred: the chain (numpy, numba) loads only when the command runs (a fast --help)
+        from gyroarray.chain.long_record import streamed_whole, whole_record_check
+        # before the comparison: the streaming's working memory does not add to its peak
+        streamed = streamed_whole(args.window_plan, args.window_gyros)
     a = comp.diagnose()
     a.notes[:0] = [*args.read_notes, *args.entry_notes]
-    return a.to_json_dict(), _diagnosis_text(a, f"{comp.name}: {comp.N} gyros, {comp.n * comp.dt:.0f} s")
+    out = a.to_json_dict()
+    text = _diagnosis_text(a, f"{comp.name}: {comp.N} gyros, {comp.n * comp.dt:.0f} s")
+    if args.window_plan is not None:
+        check, note = whole_record_check(args.window_plan, a, comp.m, args.window_gyros, streamed)
+        out.update(check)
+        out["notes"] = [note, *out["notes"]]
+        text = f"note: {note}\n" + text
+    return out, text
 
 
 def cmd_fit(args):
@@ -222,7 +255,9 @@ def cmd_fit(args):
     from gyroarray.chain.array_model import with_array_model  # deferred: the chain (numpy, numba)
     before, after = comp.fit(add)
     after.notes[:0] = args.entry_notes
-    notes = [*args.read_notes, *args.entry_notes, *add_notes]
+    notes = [*args.read_notes, *args.entry_notes, *add_notes,
+             # what a fitted entry says beside its value (a scale factor's two estimates, reconciled)
+             *(f.extra["reconciled"] for f in after.fits.values() if f.extra.get("reconciled"))]
     arr = _array_fit(comp, notes)
     res = {"discrepancy_before": before.discrepancy, "discrepancy_after": after.discrepancy,
            "consistent": after.consistent, "effects": after.effects_json(),
@@ -281,9 +316,24 @@ def cmd_ladder(args):
         v = ModelComparison(held.m, model, n_runs=args.runs, seed=args.seed, ref_smooth_s=args.ref_smooth)
         va = v.validate()
         verdict = _validation_text(v, va, comp.name)
+        # the test of a model's structure is its own record: a model that fails there fails on the
+        # held-out part for what it lacks, not because it does not transfer
+        missing = [t for t in final.candidates if final.significant(t)]
+        names = [t.effect if t.gyro is None else f"{t.effect}:{t.gyro}" for t in missing]
+        if not va.consistent and not final.consistent:
+            structure = (f"the model is not consistent on the part it was fitted on either (D = "
+                         f"{final.discrepancy:.3g} there, {va.discrepancy:.3g} held out): its structure "
+                         f"lacks a term, not its transfer; missing, by the fitted part's significant "
+                         f"candidates: {', '.join(names) if names else 'none named (see where it fails)'}")
+        elif not va.consistent:
+            structure = (f"consistent on the fitted part (D = {final.discrepancy:.3g}) but not held out "
+                         f"(D = {va.discrepancy:.3g}): the model does not transfer")
+        else:
+            structure = f"the model transfers (D = {final.discrepancy:.3g} fitted, {va.discrepancy:.3g} held out)"
         res["holdout"] = {"fraction": args.holdout, "discrepancy": va.discrepancy, "consistent": va.consistent,
-                          "verdict": verdict, "candidates": va.to_json_dict()["candidates"][:10]}
-        held_text = [f"held out ({args.holdout:g} of the record): {verdict}"]
+                          "verdict": verdict, "structure": structure, "missing_terms": names,
+                          "candidates": va.to_json_dict()["candidates"][:10]}
+        held_text = [f"held out ({args.holdout:g} of the record): {verdict}", f"  {structure}"]
     lines = [f"{comp.name}: the ladder"]
     for add, a in steps:
         what = "calibrated model" if add is None else f"+ {add[0]}{'' if add[1] is None else ':' + str(add[1])}"

@@ -11,12 +11,12 @@ import math
 from pathlib import Path
 
 from gyroarray.core.errors import InputError
-from gyroarray.cli.common import add_bag_options, bag_options, add_force, add_plugin, finite_float, measurement_inputs, output
+from gyroarray.cli.common import add_bag_options, bag_options, add_force, add_plugin, finite_float, measurement_inputs, output, stream_reason
 
 __all__ = ["add_parser", "cmd_fuse", "parse_exclude", "parse_params", "sidecar_path"]
 
-#: Suffixes of the fused record (the measurement format's CSV, plain or gzip).
-OUT_SUFFIXES = (".csv", ".csv.gz")
+#: Suffixes of the fused record (the measurement format's CSV, plain or gzip, or Parquet).
+OUT_SUFFIXES = (".csv", ".csv.gz", ".parquet")
 
 
 def parse_exclude(text: str | None) -> list[int]:
@@ -62,7 +62,7 @@ def parse_params(items) -> dict:
 def sidecar_path(csv_path: Path) -> Path:
     """``F.csv.gz`` / ``F.csv`` -> ``F.toml`` beside it."""
     name = csv_path.name
-    for suffix in (".csv.gz", ".csv"):
+    for suffix in (".csv.gz", ".csv", ".parquet"):
         if name.lower().endswith(suffix):
             return csv_path.with_name(name[: -len(suffix)] + ".toml")
     return csv_path.with_name(name + ".toml")
@@ -140,10 +140,41 @@ def _validation_text(val: dict) -> list[str]:
     return lines
 
 
+def _cmd_fuse_streamed(args, why: str, exclude, params, side) -> tuple[dict, str]:
+    """``fuse`` on a record read in chunks (:mod:`gyroarray.chain.fuse_stream`)."""
+    # deferred: the chain (numpy, numba) loads only when the command runs (a fast --help)
+    from gyroarray.chain.fuse import sha256_of
+    from gyroarray.chain.fuse_stream import streamed_fuse
+    from gyroarray.core.measurement import record_head
+    from gyroarray.core.outputs import write_bytes
+    from gyroarray.effects.model import NoiseModel
+    name = str(args.measurement)
+    way = "; raise --max-memory to fuse it in memory" if why != "--stream" else "; leave out --stream"
+    for flag, on in (("--validate", args.validate), ("--holdout", args.holdout is not None),
+                     ("--repair", args.repair)):
+        if on:
+            raise InputError(f"{flag} needs the record in memory, and this one is streamed ({why}){way}",
+                             file=name)
+    head = record_head(args.measurement)
+    model = None if args.model is None else NoiseModel.from_toml(args.model, n_gyros=head.n_gyros)
+    src = Path(head.source)
+    out = streamed_fuse(head, args.estimator, model=model,
+                        model_name=None if args.model is None else str(args.model), exclude=exclude,
+                        params=params, out=args.out, whole=args.all, site=head.site,
+                        input_sha256=sha256_of(src) if args.out is not None else None,
+                        sidecar_sha256=sha256_of(sidecar_path(src)) if args.out is not None else None)
+    toml = out.pop("sidecar_toml")
+    out["notes"] = [*head.notes, f"streamed ({why})", *out["notes"]]
+    if args.out is not None:
+        write_bytes(side, toml, force=True)         # checked before the work (output())
+        out["out"], out["sidecar"] = str(args.out), str(side)
+    return out, _text(out, args)
+
+
 def cmd_fuse(args) -> tuple[dict, str]:
     # deferred: the chain (numpy, numba) loads only when the command runs (a fast --help)
-    from gyroarray.chain.fuse import fuse, fused_files, sha256_of, validate_fuse
-    from gyroarray.core.measurement import read_measurement
+    from gyroarray.chain.fuse import fuse, fused_files, fused_measurement, sha256_of, validate_fuse
+    from gyroarray.core.measurement import parquet_bytes, read_measurement
     from gyroarray.core.outputs import write_many
     from gyroarray.effects.model import NoiseModel
     exclude = parse_exclude(args.exclude)
@@ -154,6 +185,9 @@ def cmd_fuse(args) -> tuple[dict, str]:
         output(args.out, args, "--out", inputs=inputs, suffixes=OUT_SUFFIXES)
         side = sidecar_path(Path(args.out))
         output(side, args, "--out (its sidecar)", inputs=inputs)
+    why = stream_reason(args)
+    if why is not None:
+        return _cmd_fuse_streamed(args, why, exclude, params, side)
     meas = read_measurement(args.measurement, repair=args.repair, **bag_options(args))
     model = None
     if args.model is not None:
@@ -178,6 +212,8 @@ def cmd_fuse(args) -> tuple[dict, str]:
         csv_bytes, toml_bytes = fused_files(
             res, str(args.out).lower().endswith(".gz"), input_sha256=sha256_of(csv_path),
             sidecar_sha256=sha256_of(sidecar_path(csv_path)))
+        if str(args.out).lower().endswith(".parquet"):
+            csv_bytes = parquet_bytes(fused_measurement(res))
         write_many([(args.out, csv_bytes), (side, toml_bytes)], force=args.force)
         out["out"], out["sidecar"] = str(args.out), str(side)
     text = _text(out, args)
@@ -217,6 +253,12 @@ def add_parser(sub) -> None:
                         "(with --model: the model's prediction on the whole record)")
     p.add_argument("--holdout", type=finite_float("--holdout"), metavar="FRACTION",
                    help="with --validate: the last FRACTION of the still data held out (0.5)")
+    p.add_argument("--stream", action="store_true",
+                   help="read the record in chunks, never whole (automatic for a record estimated "
+                        "beyond 2 GiB or --max-memory; Parquet recommended): fixed linear estimators "
+                        "(gls, ols, naive, svo with --model, kf_array, kf_single), the whole record analysed")
+    p.add_argument("--all", action="store_true",
+                   help="streamed: analyse a record without reference whole even when it moves")
     add_plugin(p)
     add_force(p)
     p.add_argument("--json", action="store_true", help="print one JSON object")

@@ -181,8 +181,12 @@ def cmd_sweep(args):
     from gyroarray.sweep.runner import run_sweep  # deferred: the sweep runner (pandas, numba, dask)
     if args.workers is not None and args.scheduler is not None:
         raise InputError("gyroarray sweep: --workers and --scheduler exclude each other")
+    if args.dask is not None and (args.workers is not None or args.scheduler is not None):
+        raise InputError("gyroarray sweep: --dask excludes --workers and --scheduler (give one: "
+                         "--dask local:N, --workers N or --scheduler tcp://HOST:PORT)")
     summary = run_sweep(args.sweep, args.out, workers=args.workers or 1,
-                        scheduler=args.scheduler, progress=None if not args.json else False)
+                        scheduler=args.scheduler, dask=args.dask,
+                        progress=None if not args.json else False)
     lines = [f"sweep {summary['sweep']}: {summary['scenarios']} scenarios, ran {summary['ran']}, "
              f"skipped {summary['skipped']} (already done), failed {len(summary['failed'])}, "
              f"{summary['rows_written']} rows in {summary['seconds']:.1f} s -> {summary['dataset']}"]
@@ -262,6 +266,9 @@ def add_parser(sub) -> None:
     p.add_argument("--workers", type=count("--workers"), metavar="K",
                    help="local worker processes (default 1)")
     p.add_argument("--scheduler", metavar="tcp://HOST:PORT", help="a Dask distributed scheduler")
+    p.add_argument("--dask", metavar="local:N",
+                   help="start a Dask LocalCluster of N single-thread worker processes, run there, "
+                        "close it after")
     p.add_argument("--json", action="store_true", help="print one JSON object (no progress bar)")
     p.set_defaults(func=cmd_sweep)
     p.plugin_help = True

@@ -36,11 +36,15 @@ class InputError(ValueError):
         1-based line number in that file.
     column : str or int, optional
         Column name (CSV) or 1-based column number, or a TOML key path.
+    row : int, optional
+        1-based data row in a file without lines (Parquet).
     """
 
     def __init__(self, message: str, file: str | None = None,
-                 line: int | None = None, column: str | int | None = None):
+                 line: int | None = None, column: str | int | None = None,
+                 row: int | None = None):
         self.message = message
+        self.row = row
         self.file = None if file is None else str(file)
         self.line = line
         self.column = column
@@ -52,6 +56,8 @@ class InputError(ValueError):
             where.append(self.file)
         if self.line is not None:
             where.append(f"line {self.line}")
+        if self.row is not None:
+            where.append(f"row {self.row}")
         if self.column is not None:
             where.append(f"column {self.column}")
         prefix = ", ".join(where)
@@ -65,4 +71,5 @@ class InputError(ValueError):
         """
         if self.file is not None or file is None:
             return self
-        return InputError(self.message, file=str(file), line=self.line, column=self.column)
+        return InputError(self.message, file=str(file), line=self.line, column=self.column,
+                          row=self.row)

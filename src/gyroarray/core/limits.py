@@ -37,7 +37,8 @@ from gyroarray.core.errors import InputError
 
 __all__ = ["MAX_RATE_DEG_S", "file_kind", "MEMORY_FRACTION", "max_memory", "set_max_memory", "memory_budget",
            "parse_size", "format_size", "check_memory", "open_regular", "read_regular",
-           "gunzip_bounded", "read_json", "MAX_JSON_DEPTH", "MAX_JSON_BYTES"]
+           "gunzip_bounded", "read_json", "MAX_JSON_DEPTH", "MAX_JSON_BYTES", "STREAM_BUDGET_BYTES",
+           "STREAM_WORK_BYTES", "stream_work_bytes"]
 
 #: Largest angular rate a gyro (or a rate table) can physically see [deg/s];
 #: beyond it a value is a unit or logging error, not a measurement.
@@ -46,6 +47,15 @@ MAX_RATE_DEG_S = 1e5
 MEMORY_FRACTION = 0.5
 #: Environment variable that overrides the default budget (a size, e.g. ``8G``).
 ENV_MAX_MEMORY = "GYROARRAY_MAX_MEMORY"
+#: A record whose reading into memory is estimated to need more than this [bytes] (or more than
+#: the memory budget, :func:`max_memory`) is streamed by ``gyroarray allan``: read in chunks
+#: twice, never whole (``allan --stream`` streams any record). 2 GiB: 1e7 samples x 4 gyros of
+#: Parquet (about 2e8 bytes whole) stay in memory, 1e8 samples are streamed.
+STREAM_BUDGET_BYTES = 2 * 2**30
+#: Working memory [bytes] a streamed analysis plans for (chunks of samples, windows of the
+#: phase), beyond the interpreter and its libraries; at most a quarter of the memory budget
+#: (:func:`stream_work_bytes`). Independent of the record's length.
+STREAM_WORK_BYTES = 256 * 2**20
 
 _override: int | None = None
 _UNITS = {"": 1, "b": 1, "k": 2**10, "kb": 10**3, "kib": 2**10, "m": 2**20, "mb": 10**6,
@@ -99,6 +109,12 @@ def max_memory() -> int:
     if env:
         return parse_size(env, ENV_MAX_MEMORY)
     return int(MEMORY_FRACTION * _machine_memory())
+
+
+def stream_work_bytes() -> int:
+    """Working memory [bytes] of a streamed analysis: :data:`STREAM_WORK_BYTES`, at most a
+    quarter of :func:`max_memory` (and at least 64 KiB)."""
+    return max(1 << 16, min(STREAM_WORK_BYTES, max_memory() // 4))
 
 
 def set_max_memory(nbytes: int | None) -> None:

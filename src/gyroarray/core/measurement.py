@@ -74,12 +74,14 @@ import csv
 import gzip
 import io
 import math
+import os
 import re
 import warnings
+import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import MappingProxyType
-from typing import Callable, Mapping
+from typing import Callable, Iterator, Mapping
 
 import numpy as np
 import pandas as pd
@@ -90,7 +92,7 @@ from gyroarray.core import units
 from gyroarray.core.errors import InputError
 from gyroarray.core.layout import UNIT_NORM_TOL, Layout, check_positions
 from gyroarray.core.limits import (MAX_RATE_DEG_S, check_memory, format_size, gunzip_bounded, max_memory,
-                              read_regular)
+                              open_regular, read_regular)
 from gyroarray.core.outputs import measurement_files, same_path, write_bytes
 from gyroarray.core.tomlio import (TomlDoc, finite_number, is_number, load_toml, short_repr, toml_number,
                                    toml_table, toml_type, utf8_text)
@@ -110,6 +112,16 @@ __all__ = [
     "MAX_CONE_GYROS",
     "RATE_NOTE_TOL",
     "ACCEPTED_UNITS",
+    "PARQUET_SUFFIX",
+    "PARQUET_ROW_GROUP",
+    "is_parquet",
+    "parquet_bytes",
+    "RecordHead",
+    "record_head",
+    "iter_record",
+    "read_bytes_estimate",
+    "parquet_batches",
+    "read_window",
 ]
 
 #: Fewest samples a measurement may have (a time step needs two).
@@ -351,7 +363,7 @@ def _frozen_array(x, name: str, *, ndim: int, shape: tuple | None = None) -> np.
 # Reading
 # =========================================================================
 def read_measurement(path, *, repair: bool = False, topic: str | None = None,
-                     extrinsics=None) -> Measurement:
+                     extrinsics=None, gaps: bool = False) -> Measurement:
     """Read a measurement (CSV + TOML sidecar, or a ROS bag) and check it.
 
     Parameters
@@ -369,6 +381,11 @@ def read_measurement(path, *, repair: bool = False, topic: str | None = None,
         A bag's IMU topic(s), comma separated (bags only).
     extrinsics : str or os.PathLike, optional
         Kalibr imu-chain YAML of a bag's IMUs (bags only).
+    gaps : bool
+        Keep gaps in ``time_s`` (dropped samples, steps longer than :data:`GAP_FACTOR`
+        periods) as they are, nothing interpolated, with a note counting them (default:
+        refuse them, or fill short ones with ``repair``). For analyses that pool the
+        contiguous parts (``gyroarray allan --gaps``); measurement CSVs only.
 
     Returns
     -------
@@ -392,11 +409,13 @@ def read_measurement(path, *, repair: bool = False, topic: str | None = None,
     csv_path, toml_path = _measurement_paths(path)
     csv_name = str(csv_path)
     side = _read_sidecar(toml_path)
+    if is_parquet(csv_path):
+        return _read_parquet_measurement(csv_path, side, repair, gaps)
     data, notes = _read_csv_bytes(csv_path)
     cols, table, line_notes = _parse_csv(data, csv_name)
     _check_gyro_count(cols, side, csv_name, table.header_line)
     values, repair_notes = _checked_values(table, cols, csv_name, repair,
-                                           _nominal_period(side, cols), side.units)
+                                           _nominal_period(side, cols), side.units, keep_gaps=gaps)
     values, unit_notes = _to_canonical(values, cols, side.units, side.name, csv_name)
     rate_note = _rate_note(values[:, 0], side)
     all_notes = (*notes, *line_notes, *side.notes, *unit_notes, *repair_notes, *rate_note)
@@ -459,25 +478,29 @@ def _measurement_paths(path) -> tuple[Path, Path]:
     """(CSV path, sidecar path) for a CSV, sidecar or stem path."""
     p = Path(path)
     low = p.name.lower()
-    if low.endswith(".csv") or low.endswith(".csv.gz"):
+    if low.endswith(".csv") or low.endswith(".csv.gz") or low.endswith(PARQUET_SUFFIX):
         if not p.is_file():
             raise InputError("measurement file not found" if not p.exists()
                              else "not a regular file", file=str(p))
         return p, _sidecar_of(p)
     stem = p.with_name(p.name[:-5]) if low.endswith(".toml") else p
     found = [c for c in (stem.with_name(stem.name + ".csv"),
-                         stem.with_name(stem.name + ".csv.gz")) if c.is_file()]
+                         stem.with_name(stem.name + ".csv.gz"),
+                         stem.with_name(stem.name + PARQUET_SUFFIX)) if c.is_file()]
     if len(found) != 1:
         what = "no measurement CSV" if not found else "two measurement CSVs"
         raise InputError(f"{what} for this stem: looked for {stem.name}.csv and "
-                         f"{stem.name}.csv.gz (give the CSV path)", file=str(path))
+                         f"{stem.name}.csv.gz (and {stem.name}{PARQUET_SUFFIX}; give the CSV "
+                         "path)", file=str(path))
     return found[0], _sidecar_of(found[0])
 
 
 def _sidecar_of(csv_path: Path) -> Path:
     """``<stem>.toml`` beside a ``<stem>.csv`` or ``<stem>.csv.gz``."""
     name = csv_path.name
-    stem = name[:-7] if name.lower().endswith(".csv.gz") else name[:-4]
+    low = name.lower()
+    stem = (name[:-7] if low.endswith(".csv.gz") else
+            name[:-len(PARQUET_SUFFIX)] if low.endswith(PARQUET_SUFFIX) else name[:-4])
     return csv_path.with_name(stem + ".toml")
 
 
@@ -672,7 +695,8 @@ def _check_read_memory(data: bytes, name: str) -> None:
     lines = data.count(b"\n") + 1
     need = _read_cost(data)
     check_memory(need, f"reading {lines} lines ({format_size(len(data))} of text)",
-                 "split the record or keep only the columns needed", file=name)
+                 "split the record or keep only the columns needed (gyroarray allan streams a "
+                 "record this long: --stream)", file=name)
 
 
 @dataclass(frozen=True)
@@ -737,6 +761,12 @@ def _parse_header(text: str, name: str, line: int) -> tuple[_Columns, list[str]]
         fields = [f.strip() for f in next(csv.reader([text]))]
     except (csv.Error, StopIteration) as e:
         raise error(f"malformed header: {e}") from None
+    return _header_columns(fields, text, name, error)
+
+
+def _header_columns(fields: list[str], text: str, name: str, error) -> tuple[_Columns, list[str]]:
+    """The columns of a header's field names (CSV header or Parquet schema); ``error(message,
+    column)`` builds the located refusal."""
     where: dict[str, int] = {}
     for k, f in enumerate(fields, 1):
         if not f:
@@ -812,6 +842,8 @@ def _cell_value(token: str) -> float:
 
 
 def _missing_kind(token: str) -> str:
+    if token == _NULL:
+        return "null value"
     return "empty cell" if not token.strip() else f"NaN value {short_repr(token)}"
 
 
@@ -946,7 +978,7 @@ def _row_values(fields, cols: _Columns, name: str, line: int, row: int,
 
 
 # -- checks and repairs -----------------------------------------------------
-def _check_gyro_count(cols: _Columns, side: _Sidecar, name: str, line: int) -> None:
+def _check_gyro_count(cols: _Columns, side: _Sidecar, name: str, line: int | None) -> None:
     if cols.n_gyros != side.layout.n_gyros:
         raise InputError(
             f"gyro count does not match the layout: {cols.n_gyros} gyro column(s) "
@@ -955,13 +987,14 @@ def _check_gyro_count(cols: _Columns, side: _Sidecar, name: str, line: int) -> N
 
 
 def _checked_values(table: _Table, cols: _Columns, name: str, repair: bool,
-                    nominal_s: float | None = None, declared: dict | None = None
-                    ) -> tuple[np.ndarray, list[str]]:
+                    nominal_s: float | None = None, declared: dict | None = None,
+                    keep_gaps: bool = False) -> tuple[np.ndarray, list[str]]:
     """Check cells, time and gaps; repair or refuse; values in file units.
 
     With ``repair``, in this order: exact duplicate rows are dropped, short
     gaps and runs of missing values are filled, and a jittering clock is
-    resampled onto the nominal grid (each step listed in the notes).
+    resampled onto the nominal grid (each step listed in the notes). With
+    ``keep_gaps`` gaps in the time stamps are kept as they are (counted in a note).
     """
     _check_infinite(table, cols, name)
     _check_physical(table, cols, declared or {}, name)
@@ -978,13 +1011,17 @@ def _checked_values(table: _Table, cols: _Columns, name: str, repair: bool,
     _check_time(table, name)
     _check_time_steps(table, name)
     values, lines = table.values, table.lines
-    gaps, gap_notes = _find_gaps(values[:, 0], lines, name, repair)
+    gaps: list[tuple[int, int]]
+    if keep_gaps:
+        gaps, gap_notes = [], _kept_gaps(values[:, 0], name)
+    else:
+        gaps, gap_notes = _find_gaps(values[:, 0], lines, name, repair)
     runs, run_notes = _find_missing_runs(table, cols, name, repair)
     if gaps or runs:
         values = _fill_runs(values.copy(), runs)
         values = _insert_gap_rows(values, gaps)
         _check_repaired(values, cols, name)
-    values, jitter_notes = _jitter(values, nominal_s, name, repair)
+    values, jitter_notes = _jitter(values, nominal_s, name, repair, keep_gaps=keep_gaps)
     return values, dup_notes + run_notes + gap_notes + jitter_notes
 
 
@@ -1065,21 +1102,30 @@ def _drop_duplicate_rows(table: _Table, name: str) -> tuple[_Table, list[str]]:
 
 
 def _jitter(values: np.ndarray, nominal_s: float | None, name: str,
-            repair: bool) -> tuple[np.ndarray, list[str]]:
+            repair: bool, keep_gaps: bool = False) -> tuple[np.ndarray, list[str]]:
     """Resample a jittering clock onto the nominal grid (``repair``), or note the jitter.
 
     The period is the median step, or the sidecar's nominal period when the
     two agree to 1 %. With ``repair`` every column is linearly interpolated
     in time onto ``t0 + k * period``, k = 0 .. round((t_end - t0) / period).
+    With ``keep_gaps`` the gaps' steps are not jitter (and a jittering clock with
+    gaps is not resampled: that would fill them).
     """
     t = values[:, 0]
     period = float(np.median(np.diff(t)))
     if nominal_s is not None and abs(period / nominal_s - 1.0) <= RATE_NOTE_TOL:
         period = nominal_s
-    dev = np.abs(np.diff(t) - period)
+    steps = np.diff(t)
+    gap = steps > GAP_FACTOR * float(np.median(steps)) if keep_gaps else np.zeros(steps.size, bool)
+    dev = np.abs(steps[~gap] - period)
     worst = float(dev.max()) if dev.size else 0.0
     if worst <= JITTER_TOL * period:
         return values, []
+    if repair and gap.any():
+        raise InputError(f"the time steps jitter by up to {worst:.3g} s and the record has "
+                         f"{int(gap.sum())} gap(s): resampling onto the nominal grid would fill them; "
+                         "leave out --repair to keep the stamps as they are (the jitter is noted), "
+                         "or without --gaps to have short gaps filled", file=name, column=_TIME)
     what = (f"the time steps jitter by up to {worst:.3g} s ({100 * worst / period:.3g} % of the "
             f"{period:.6g} s step; rms {float(np.sqrt(np.mean(dev ** 2))):.3g} s)")
     if not repair:
@@ -1087,11 +1133,11 @@ def _jitter(values: np.ndarray, nominal_s: float | None, name: str,
                         "to resample onto the nominal grid by linear interpolation)"]
     rel = t - t[0]
     with np.errstate(all="ignore"):
-        steps = float(rel[-1]) / period
-    if not (math.isfinite(steps) and steps <= 2 * len(t) + 10):
+        n_steps = float(rel[-1]) / period
+    if not (math.isfinite(n_steps) and n_steps <= 2 * len(t) + 10):
         raise InputError(f"cannot resample onto a {period:.6g} s grid: the record spans "
                          f"{_fmt(rel[-1])} s", file=name, column=_TIME)
-    k = int(round(steps))
+    k = int(round(n_steps))
     grid = np.arange(k + 1) * period
     grid = grid[grid <= rel[-1]]
     out = np.empty((grid.size, values.shape[1]))
@@ -1158,6 +1204,8 @@ def _find_gaps(t: np.ndarray, lines: np.ndarray, name: str,
             fix = (f"gaps longer than {MAX_REPAIR_SAMPLES} samples cannot be repaired"
                    if m > MAX_REPAIR_SAMPLES else
                    "rerun with --repair (repair=True in Python) to fill it by linear interpolation")
+            fix += ("; gyroarray allan --gaps (gaps=True in Python) keeps the gaps and pools the "
+                    "contiguous parts, nothing interpolated")
             raise InputError(f"gap of {m} missing sample(s) {span} (nominal period "
                              f"{period:.6g} s); {fix}", file=name,
                              line=int(lines[i + 1]), column=_TIME)
@@ -1165,6 +1213,19 @@ def _find_gaps(t: np.ndarray, lines: np.ndarray, name: str,
         notes.append(f"{name}: repaired a gap: inserted {m} sample(s) {span}, values "
                      "linearly interpolated in time")
     return gaps, _summarised(notes, "gaps repaired")
+
+
+def _kept_gaps(t: np.ndarray, name: str) -> list[str]:
+    """The note on gaps kept as they are (``gaps=True``): how many, how many samples missing."""
+    step = np.diff(t)
+    period = float(np.median(step))
+    where = np.flatnonzero(step > GAP_FACTOR * period)
+    if not where.size:
+        return []
+    with np.errstate(over="ignore"):
+        missing = int(np.sum(np.rint(np.minimum(step[where] / period, 1e15)) - 1))
+    return [f"{name}: {where.size} gap(s) in time_s kept as they are ({missing} sample(s) missing at "
+            f"the {period:.6g} s step), nothing interpolated"]
 
 
 def true_runs(mask: np.ndarray) -> list[tuple[int, int]]:
@@ -1305,6 +1366,499 @@ def _rate_note(time_s: np.ndarray, side: _Sidecar) -> list[str]:
 
 
 # =========================================================================
+# Parquet, and reading a record in chunks (records longer than memory)
+# =========================================================================
+#: Suffix of a Parquet measurement: the CSV's columns (``time_s``, ``gyro1..N``, optional
+#: ``ref_*``, ``acc_*``, ``temp_c``) and units, numeric (float or integer) columns, the same
+#: ``<stem>.toml`` sidecar beside it. The recommended format for long records: read in row
+#: groups without parsing text, and streamed by ``gyroarray allan``.
+PARQUET_SUFFIX = ".parquet"
+#: Rows per row group of the Parquet files gyroarray writes (a streamed reader holds about one
+#: row group of the columns it reads at a time).
+PARQUET_ROW_GROUP = 1 << 20
+#: Peak memory of reading a Parquet measurement whole, per value [bytes]: the arrow buffers,
+#: the float64 table and the checks' copies (rounded up from tracemalloc).
+_PARQUET_BYTES_PER_VALUE = 40
+_NULL = "null"
+
+
+def is_parquet(path) -> bool:
+    """True when ``path`` names a Parquet measurement (ends in :data:`PARQUET_SUFFIX`)."""
+    return Path(path).name.lower().endswith(PARQUET_SUFFIX)
+
+
+def _parquet_file(path: Path, name: str):
+    """The open ``pyarrow.parquet.ParquetFile``, refused in one line when it is not Parquet."""
+    # deferred: pyarrow (about 0.2 s to import) loads only for a Parquet file
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+    open_regular(path, "measurement file").close()        # no FIFO, device or folder
+    try:
+        return pq.ParquetFile(path)
+    except (pa.ArrowException, OSError, ValueError) as e:
+        raise InputError(f"not a readable Parquet file: {e}", file=name) from None
+
+
+def _parquet_columns(pf, name: str) -> tuple[_Columns, list[str]]:
+    """The measurement columns of a Parquet schema, each checked to hold numbers."""
+    # deferred: pyarrow loads only for a Parquet file
+    import pyarrow as pa
+    fields = [str(f) for f in pf.schema_arrow.names]
+
+    def error(message, column=None):
+        return InputError(message, file=name, column=column)
+
+    cols, notes = _header_columns(fields, ", ".join(fields), name, error)
+    for c in cols.names:
+        t = pf.schema_arrow.field(c).type
+        if not (pa.types.is_floating(t) or pa.types.is_integer(t) or pa.types.is_decimal(t)):
+            raise _parquet_type_error(pf, c, t, name)
+    return cols, notes
+
+
+def _parquet_type_error(pf, column: str, dtype, name: str) -> InputError:
+    """The refusal of a column that does not hold numbers, naming its first non-numeric cell."""
+    row, shown = None, None
+    start = 0
+    for batch in parquet_batches(pf, [column], _LOCATE_CHUNK_ROWS):
+        for i, v in enumerate(batch.column(0).to_pylist()):
+            if v is None:
+                continue
+            if isinstance(v, str):
+                try:
+                    _cell_value(v)
+                except _CellError:
+                    pass
+                else:
+                    if row is None:
+                        row, shown = start + i + 1, v      # a number written as text
+                    continue
+            return InputError(f"non-numeric value {short_repr(v)} in column {column} (a "
+                              f"{dtype} column; measurement columns hold numbers)",
+                              file=name, row=start + i + 1, column=column)
+        start += batch.num_rows
+    where = f" (row {row} holds {short_repr(shown)})" if row is not None else ""
+    return InputError(f"column {column} holds {dtype} values, not numbers{where}: write it as "
+                      "float64", file=name, row=row, column=column)
+
+
+def parquet_batches(pf, columns: list[str], batch_size: int):
+    """The record batches of ``columns`` of an open ``ParquetFile``, one row group at a time.
+
+    ``ParquetFile.iter_batches`` over the whole file reads ahead (pyarrow 26 held the whole
+    file's columns decoded by the end: 4 GB for 1e8 rows x 5 columns); one row group at a
+    time, without threads, it holds at most one row group.
+    """
+    for rg in range(pf.metadata.num_row_groups):
+        yield from pf.iter_batches(batch_size=batch_size, row_groups=[rg], columns=columns,
+                                   use_threads=False)
+
+
+def _parquet_values(columns, names) -> tuple[np.ndarray, dict[int, np.ndarray]]:
+    """The named arrow columns as one float64 array (n, k), nulls as NaN; and the null masks."""
+    # deferred: pyarrow loads only for a Parquet file
+    import pyarrow as pa
+    import pyarrow.compute as pc
+    out, nulls = [], {}
+    for j, c in enumerate(names):
+        col = columns(c)
+        if col.null_count:
+            nulls[j] = np.asarray(col.is_null().to_numpy(zero_copy_only=False), dtype=bool)
+        v = pc.cast(col, pa.float64(), safe=False).to_numpy(zero_copy_only=False)
+        out.append(np.asarray(v, dtype=np.float64))
+    return np.column_stack(out) if out else np.empty((0, 0)), nulls
+
+
+_LINE_WORD = re.compile(r"\bline(s?) (\d+)")
+
+
+def _as_rows(err: InputError) -> InputError:
+    """A refusal located by data row (Parquet, streamed CSV): ``line N`` said as ``row N``."""
+    return InputError(_LINE_WORD.sub(r"row\1 \2", err.message), file=err.file,
+                      row=err.line if err.row is None else err.row, column=err.column)
+
+
+def _parquet_table(values: np.ndarray, nulls: dict, first_row: int) -> _Table:
+    """A :class:`_Table` of Parquet rows (``lines`` hold 1-based data rows)."""
+    def token(row: int, j: int) -> str:
+        return _NULL if j in nulls and nulls[j][row] else repr(float(values[row, j]))
+    return _Table(values, np.arange(first_row, first_row + len(values)), 0, token)
+
+
+def _read_parquet_measurement(path: Path, side: _Sidecar, repair: bool, gaps: bool) -> Measurement:
+    """:func:`read_measurement` of a Parquet file (same checks and notes as the CSV, by row)."""
+    name = str(path)
+    pf = _parquet_file(path, name)
+    cols, col_notes = _parquet_columns(pf, name)
+    _check_gyro_count(cols, side, name, None)
+    n = int(pf.metadata.num_rows)
+    if n == 0:
+        raise InputError("no data rows (the Parquet file has columns but no samples)", file=name)
+    check_memory(n * len(cols.names) * _PARQUET_BYTES_PER_VALUE,
+                 f"reading {n} rows x {len(cols.names)} columns",
+                 "gyroarray allan streams a record this long (--stream); cut the record for the "
+                 "other commands", file=name)
+    table = pf.read(columns=list(cols.names))
+    values, nulls = _parquet_values(table.column, cols.names)
+    del table
+    try:
+        values, repair_notes = _checked_values(_parquet_table(values, nulls, 1), cols, name, repair,
+                                               _nominal_period(side, cols), side.units,
+                                               **({"keep_gaps": True} if gaps else {}))
+    except InputError as err:
+        raise _as_rows(err) from None
+    values, unit_notes = _to_canonical(values, cols, side.units, side.name, name)
+    all_notes = (*col_notes, *side.notes, *unit_notes, *repair_notes,
+                 *_rate_note(values[:, 0], side))
+    return _build(values, cols, side, name, all_notes)
+
+
+@dataclass(frozen=True)
+class RecordHead:
+    """What is known of a measurement before its samples are read (for reading in chunks).
+
+    Parameters
+    ----------
+    source : str
+        The data file (CSV, CSV.GZ or Parquet) as named.
+    layout : Layout
+        Sensitive axes of the N gyros (from the sidecar).
+    sample_rate_hz : float
+        Nominal sample rate [Hz] from the sidecar.
+    names : tuple of str
+        The columns read, in the order of each chunk's columns: ``time_s``, ``gyro1..N``, then
+        ``ref_x..z``, ``acc_x..z``, ``temp_c`` where present.
+    n_rows : int or None
+        Data rows (Parquet: from its metadata); None for a CSV (not known before reading).
+    text_bytes : int
+        Estimated size of the CSV text [bytes] (decompressed for .gz); 0 for Parquet.
+    notes : tuple of str
+        The sidecar's and the header's notes.
+    """
+
+    source: str
+    layout: Layout
+    sample_rate_hz: float
+    names: tuple[str, ...]
+    n_rows: int | None
+    text_bytes: int
+    notes: tuple[str, ...]
+    units: Mapping = field(default_factory=dict, repr=False)
+    columns: _Columns | None = field(default=None, repr=False)
+    #: The sidecar's site (None when it has none).
+    site: Site | None = field(default=None, repr=False)
+    #: The sidecar's description.
+    description: str = field(default="", repr=False)
+
+    @property
+    def n_gyros(self) -> int:
+        """Number of gyros N."""
+        return self.layout.n_gyros
+
+    @property
+    def has_reference(self) -> bool:
+        """True when the record has ``ref_x``, ``ref_y``, ``ref_z``."""
+        return "ref_x" in self.names
+
+    def in_memory_bytes(self) -> float:
+        """Estimated peak memory [bytes] of :func:`read_measurement` on this record."""
+        if self.n_rows is not None:
+            return float(self.n_rows) * len(self.names) * _PARQUET_BYTES_PER_VALUE
+        return float(self.text_bytes) * (_MEM_PER_BYTE + _MEM_PER_CELL / 8 + _MEM_PER_LINE / 64)
+
+
+def read_bytes_estimate(path) -> float | None:
+    """Estimated peak memory [bytes] of :func:`read_measurement` on ``path``, from the file's
+    size (CSV: its text, .gz: :data:`_GZ_TEXT_RATIO` times the compressed size) or a Parquet
+    file's row count; None when the path does not resolve to a measurement file (the reader
+    then says why). Reads no sample.
+    """
+    try:
+        data_path, _ = _measurement_paths(path)
+        if is_parquet(data_path):
+            # deferred: pyarrow loads only for a Parquet file
+            import pyarrow.parquet as pq
+            meta = pq.ParquetFile(data_path).metadata
+            return float(meta.num_rows) * meta.num_columns * _PARQUET_BYTES_PER_VALUE
+        size = data_path.stat().st_size
+    except (InputError, OSError, ValueError):   # a bad file (arrow's errors are these): the reader says why
+        return None
+    text = size * (_GZ_TEXT_RATIO if data_path.name.lower().endswith(".gz") else 1.0)
+    return text * (_MEM_PER_BYTE + _MEM_PER_CELL / 8 + _MEM_PER_LINE / 64)
+
+
+def record_head(path) -> RecordHead:
+    """The sidecar and the header (or Parquet schema) of a measurement, checked; no samples read.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The CSV, CSV.GZ or Parquet file, its sidecar or the stem (as :func:`read_measurement`).
+
+    Returns
+    -------
+    RecordHead
+
+    Raises
+    ------
+    InputError
+        Anything wrong with the sidecar or the header, as :func:`read_measurement` says it.
+    """
+    data_path, toml_path = _measurement_paths(path)
+    name = str(data_path)
+    side = _read_sidecar(toml_path)
+    if is_parquet(data_path):
+        pf = _parquet_file(data_path, name)
+        cols, notes = _parquet_columns(pf, name)
+        n_rows, text_bytes = int(pf.metadata.num_rows), 0
+        _check_gyro_count(cols, side, name, None)
+        meta = pf.metadata
+        biggest = max((meta.row_group(i).num_rows for i in range(meta.num_row_groups)), default=0)
+        check_memory(biggest * len(cols.names) * 16,     # decoded float64 + its compressed pages
+                     f"reading a row group of {biggest} rows x {len(cols.names)} columns",
+                     f"rewrite the file with smaller row groups (at most {PARQUET_ROW_GROUP} rows, "
+                     "what gyroarray convert writes)", file=name)
+    else:
+        header, line, text_bytes = _csv_header_line(data_path, name)
+        cols, notes = _parse_header(header, name, line)
+        _check_gyro_count(cols, side, name, line)
+        n_rows = None
+    return RecordHead(source=name, layout=side.layout, sample_rate_hz=side.sample_rate_hz,
+                      names=cols.names, n_rows=n_rows, text_bytes=text_bytes,
+                      notes=(*side.notes, *notes), units=MappingProxyType(dict(side.units)),
+                      columns=cols, site=side.site, description=side.description)
+
+
+def read_window(head: RecordHead, n_rows: int, chunk_rows: int) -> Measurement:
+    """The first ``n_rows`` samples of a record as a :class:`Measurement`, read in chunks of
+    ``chunk_rows`` rows (:func:`iter_record`, every chunk read checked) and never beyond them.
+
+    Parameters
+    ----------
+    head : RecordHead
+        From :func:`record_head`.
+    n_rows : int
+        Samples of the window (from the first one; fewer when the record is shorter).
+    chunk_rows : int
+        Rows per chunk read.
+
+    Returns
+    -------
+    Measurement
+        Its notes are the sidecar's and the header's (nothing repaired).
+    """
+    parts, got = [], 0
+    for chunk in iter_record(head, chunk_rows):
+        take = min(chunk.shape[0], int(n_rows) - got)
+        parts.append(chunk[:take])
+        got += take
+        if got >= n_rows:
+            break
+    values = np.vstack(parts)
+    cols = head.columns
+    assert cols is not None
+    side = _Sidecar(name=head.source, sample_rate_hz=head.sample_rate_hz, description=head.description,
+                    layout=head.layout, site=head.site, units=dict(head.units), notes=())
+    return _build(values, cols, side, head.source, tuple(head.notes))
+
+
+def _csv_header_line(path: Path, name: str) -> tuple[str, int, int]:
+    """(header text, its 1-based line, estimated text size [bytes]) of a CSV or CSV.GZ."""
+    size = open_regular(path, "measurement file")
+    try:
+        total = os.fstat(size.fileno()).st_size
+    finally:
+        size.close()
+    gz = name.lower().endswith(".gz")
+    opener = gzip.open if gz else open
+    try:
+        with opener(path, "rb") as fh:
+            for i, raw in enumerate(fh, 1):
+                text = raw.decode("utf-8-sig" if i == 1 else "utf-8").rstrip("\r\n")
+                if text and not text.startswith("#"):
+                    return text, i, int(total * (_GZ_TEXT_RATIO if gz else 1))
+                if i > _MAX_HEAD_LINES:
+                    break
+    except (OSError, EOFError, UnicodeDecodeError) as e:
+        raise InputError(f"cannot read the header: {e}", file=name) from None
+    raise InputError("empty file: no header line (only comments or blank lines)", file=name)
+
+
+#: Decompressed / compressed size of a measurement CSV.GZ assumed when deciding to stream [-]
+#: (printed doubles compress about 2.2-2.6x with gzip -6).
+_GZ_TEXT_RATIO = 2.5
+_MAX_HEAD_LINES = 100_000
+
+
+def iter_record(head: RecordHead, chunk_rows: int, *, check: bool = True) -> Iterator[np.ndarray]:
+    """The samples of a measurement in chunks of at most ``chunk_rows`` rows, checked.
+
+    Parameters
+    ----------
+    head : RecordHead
+        From :func:`record_head`.
+    chunk_rows : int
+        Rows per chunk (>= 2).
+    check : bool
+        Check every chunk (default). False skips the checks (only the unit conversion is
+        done): for a second pass over a file a first pass has checked.
+
+    Yields
+    ------
+    ndarray, shape (k, len(head.names))
+        The columns of ``head.names`` in canonical units (s, deg/s, degC, m/s²).
+
+    Raises
+    ------
+    InputError
+        The checks of :func:`read_measurement` without repair, said by data row (1-based, the
+        header not counted): a non-numeric, missing or infinite value, a rate beyond any gyro,
+        time not strictly increasing (across chunks too), a gap. Nothing is repaired.
+
+    Notes
+    -----
+    Parquet is read with ``ParquetFile.iter_batches``, a CSV with pandas' chunked C reader
+    (comment lines skipped). The last row of each chunk is checked again with the next one, so
+    steps and gaps across chunks are found.
+    """
+    cols = head.columns
+    assert cols is not None
+    name = head.source
+    nominal = (1.0 / head.sample_rate_hz) * (MS_PER_S if head.units.get("time") == "ms" else 1.0)
+    prev = None
+    row = 1
+    for raw, nulls in _raw_chunks(head, max(2, int(chunk_rows))):
+        if not check:
+            yield _to_canonical(raw, cols, dict(head.units), name, name)[0]
+            continue
+        values = raw if prev is None else np.vstack([prev, raw])
+        if prev is not None:
+            nulls = {j: np.concatenate(([False], m)) for j, m in nulls.items()}
+        first = row - (0 if prev is None else 1)
+        if len(values) >= MIN_SAMPLES or prev is None:
+            try:
+                checked, _ = _checked_values(_parquet_table(values, nulls, first), cols, name,
+                                             False, nominal, dict(head.units))
+            except InputError as err:
+                raise _as_rows(err) from None
+            checked, _ = _to_canonical(checked, cols, dict(head.units), name, name)
+            yield checked if prev is None else checked[1:]
+        row += len(raw)
+        prev = raw[-1:]
+
+
+def _raw_chunks(head: RecordHead, chunk_rows: int):
+    """(values in file units with NaN for missing, null masks) per chunk."""
+    cols = head.columns
+    assert cols is not None
+    names = list(cols.names)
+    if is_parquet(head.source):
+        pf = _parquet_file(Path(head.source), head.source)
+        for batch in parquet_batches(pf, names, chunk_rows):
+            yield _parquet_values(batch.column, names)
+        return
+    raw = open_regular(Path(head.source), "measurement file")
+    total = os.fstat(raw.fileno()).st_size
+    text = gzip.GzipFile(fileobj=raw, mode="rb") if head.source.lower().endswith(".gz") else raw
+    guarded = io.BufferedReader(_TextGuard(text, head.source, total))
+    with warnings.catch_warnings(), raw, guarded:
+        warnings.simplefilter("ignore")
+        reader = pd.read_csv(guarded, comment="#", skip_blank_lines=True, header=0,
+                             usecols=names, chunksize=chunk_rows, engine="c",
+                             keep_default_na=False, na_values=_PANDAS_NA, **_EXACT_FLOATS)
+        row = 1
+        with reader:
+            chunks = iter(reader)
+            while True:
+                try:
+                    df = next(chunks)
+                except StopIteration:
+                    break
+                except InputError:
+                    raise
+                except (pd.errors.ParserError, ValueError, OSError, EOFError, zlib.error) as e:
+                    raise InputError(f"malformed CSV (read in chunks of {chunk_rows} rows, after "
+                                     f"data row {row - 1}): {e}", file=head.source) from None
+                yield _numeric_chunk(df, names, head.source, row), {}
+                row += len(df)
+
+
+#: Longest line a streamed CSV may have [bytes]: a measurement row is under 1 KiB; a longer run
+#: without a newline is not a CSV of samples, and the chunked reader would have to hold it.
+MAX_STREAM_LINE_BYTES = 1 << 20
+
+
+class _TextGuard(io.RawIOBase):
+    """The bytes of a CSV as read, refusing a NUL byte or a line beyond
+    :data:`MAX_STREAM_LINE_BYTES` (the chunked reader's memory stays bounded)."""
+
+    def __init__(self, fh, name: str, total: int):
+        self._fh, self._name, self._total = fh, name, total
+        self._run = 0               # bytes since the last newline
+        self._pos = 0
+
+    def readable(self) -> bool:
+        return True
+
+    def readinto(self, b) -> int:
+        data = self._fh.read(min(len(b), 1 << 16))
+        if data:
+            nul = data.find(b"\x00")
+            if nul >= 0:
+                raise InputError(f"NUL byte at byte {self._pos + nul} of the text "
+                                 f"(the file is {format_size(self._total)}): not a text CSV of samples",
+                                 file=self._name)
+            first, last = data.find(b"\n"), data.rfind(b"\n")
+            longest = self._run + (len(data) if first < 0 else first)
+            self._run = len(data) if last < 0 else len(data) - last - 1
+            if first < 0:
+                self._run = longest
+            if longest > MAX_STREAM_LINE_BYTES:
+                raise InputError(f"a line longer than {format_size(MAX_STREAM_LINE_BYTES)} near byte "
+                                 f"{self._pos} of the text (the file is {format_size(self._total)}): "
+                                 "not a CSV of samples", file=self._name)
+            b[:len(data)] = data
+            self._pos += len(data)
+        return len(data)
+
+
+def _numeric_chunk(df, names: list[str], name: str, first_row: int) -> np.ndarray:
+    """A pandas chunk's columns as float64, refusing (by data row) a cell that is not a number."""
+    out = []
+    for c in names:
+        col = df[c]
+        if col.dtype.kind not in "fiu":
+            num = pd.to_numeric(col, errors="coerce")
+            bad = np.flatnonzero(num.isna().to_numpy() & col.notna().to_numpy())
+            if bad.size:
+                i = int(bad[0])
+                token = str(col.iloc[i])
+                try:
+                    _cell_value(token)
+                except _CellError as e:
+                    raise InputError(f"{e} in column {c}", file=name, row=first_row + i,
+                                     column=c) from None
+            col = num
+        out.append(col.to_numpy(dtype=np.float64))
+    return np.column_stack(out)
+
+
+def parquet_bytes(m: Measurement) -> bytes:
+    """The Parquet file of a measurement: the CSV's columns as float64, zstd, row groups of
+    :data:`PARQUET_ROW_GROUP` rows (what ``write_measurement(m, "F.parquet")`` writes)."""
+    # deferred: pyarrow loads only when a Parquet file is written
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+    names, blocks = _csv_columns(m)
+    table = pa.table({c: np.ascontiguousarray(b[:, j])
+                      for c, (b, j) in zip(names, ((b, j) for b in blocks
+                                                   for j in range(b.shape[1])))})
+    sink = io.BytesIO()
+    pq.write_table(table, sink, compression="zstd", row_group_size=PARQUET_ROW_GROUP)
+    return sink.getvalue()
+
+
+# =========================================================================
 # Writing
 # =========================================================================
 def write_measurement(m: Measurement, path, *, force: bool = True) -> tuple[Path, Path]:
@@ -1318,8 +1872,9 @@ def write_measurement(m: Measurement, path, *, force: bool = True) -> tuple[Path
         so ``read_measurement(write_measurement(m, p)[0])`` reproduces every
         array exactly. ``notes`` and ``source`` are not written.
     path : str or os.PathLike
-        Output CSV, ending in ``.csv`` or ``.csv.gz``; the sidecar is
-        ``<stem>.toml`` beside it.
+        Output CSV, ending in ``.csv`` or ``.csv.gz``, or Parquet (``.parquet``: the same
+        columns as float64, :func:`parquet_bytes`; recommended for long records); the sidecar
+        is ``<stem>.toml`` beside it.
     force : bool
         Replace existing files (atomically, never through a symlink; see
         :mod:`gyroarray.core.outputs`); False refuses an existing file.
@@ -1345,11 +1900,14 @@ def write_measurement(m: Measurement, path, *, force: bool = True) -> tuple[Path
     """
     csv_path = Path(path)
     low = csv_path.name.lower()
-    if not (low.endswith(".csv") or low.endswith(".csv.gz")):
-        raise InputError("output must end in .csv or .csv.gz", file=str(path))
+    if not (low.endswith(".csv") or low.endswith(".csv.gz") or low.endswith(PARQUET_SUFFIX)):
+        raise InputError(f"output must end in .csv or .csv.gz (or {PARQUET_SUFFIX})", file=str(path))
     toml_path = _sidecar_of(csv_path)
     _refuse_overwriting_source(m, (csv_path, toml_path))
-    text = _csv_text(m).encode("utf-8")
+    if low.endswith(PARQUET_SUFFIX):
+        text = parquet_bytes(m)
+    else:
+        text = _csv_text(m).encode("utf-8")
     if low.endswith(".gz"):
         text = gzip.compress(text, compresslevel=6, mtime=0)
     sidecar = tomli_w.dumps(_sidecar_dict(m)).encode("utf-8")
@@ -1369,6 +1927,18 @@ def _refuse_overwriting_source(m: Measurement, targets) -> None:
 
 
 def _csv_text(m: Measurement) -> str:
+    names, blocks = _csv_columns(m)
+    table = np.hstack(blocks)
+    row_format = ",".join(["%r"] * table.shape[1])   # %r of a float: shortest round trip
+    out = [f"# written by gyroarray {__version__}", ",".join(names)]
+    for start in range(0, len(table), _CSV_CHUNK_ROWS):
+        rows = table[start:start + _CSV_CHUNK_ROWS].tolist()
+        out.extend(map(row_format.__mod__, map(tuple, rows)))
+    return "\n".join(out) + "\n"
+
+
+def _csv_columns(m: Measurement) -> tuple[list[str], list[np.ndarray]]:
+    """The written columns' names and their (n, k) blocks, in the file's order."""
     names = [_TIME, *(f"gyro{k}" for k in range(1, m.n_gyros + 1))]
     blocks = [m.time_s[:, None], m.gyro_deg_s]
     if m.ref_deg_s is not None:
@@ -1380,13 +1950,7 @@ def _csv_text(m: Measurement) -> str:
     if m.acc_m_s2 is not None:
         names += _ACC_NAMES
         blocks.append(m.acc_m_s2)
-    table = np.hstack(blocks)
-    row_format = ",".join(["%r"] * table.shape[1])   # %r of a float: shortest round trip
-    out = [f"# written by gyroarray {__version__}", ",".join(names)]
-    for start in range(0, len(table), _CSV_CHUNK_ROWS):
-        rows = table[start:start + _CSV_CHUNK_ROWS].tolist()
-        out.extend(map(row_format.__mod__, map(tuple, rows)))
-    return "\n".join(out) + "\n"
+    return names, blocks
 
 
 def _exact_deg(rad: float) -> float:

@@ -81,19 +81,20 @@ def same_path(a, b) -> bool:
 
 
 def measurement_files(path) -> list[Path]:
-    """The files a measurement argument stands for: its CSV (plain or .gz) and its sidecar.
+    """The files a measurement argument stands for: its CSV (plain or .gz) or Parquet, and its
+    sidecar.
 
-    ``run42``, ``run42.csv``, ``run42.csv.gz`` and ``run42.toml`` all stand for
-    the same three candidate files, whichever of them exist.
+    ``run42``, ``run42.csv``, ``run42.csv.gz``, ``run42.parquet`` and ``run42.toml`` all stand
+    for the same four candidate files, whichever of them exist.
     """
     p = Path(path)
     name = p.name
-    for suffix in (".csv.gz", ".csv", ".toml"):
+    for suffix in (".csv.gz", ".csv", ".parquet", ".toml"):
         if name.lower().endswith(suffix):
             name = name[: -len(suffix)]
             break
     stem = p.with_name(name)
-    return [stem.with_name(name + s) for s in (".csv", ".csv.gz", ".toml")] + [p]
+    return [stem.with_name(name + s) for s in (".csv", ".csv.gz", ".parquet", ".toml")] + [p]
 
 
 def _refuse_inputs(path: Path, inputs: Iterable, what: str) -> None:

@@ -54,7 +54,7 @@ from scipy import signal
 from gyroarray.core.errors import InputError
 from gyroarray.core.constants import G0_M_S2
 
-__all__ = ["BANDWIDTH_ORDERS", "bandwidth_sos", "bandwidth_filter", "bandwidth_response",
+__all__ = ["BANDWIDTH_ORDERS", "bandwidth_sos", "bandwidth_filter", "quantize_rate", "output_lattice_step", "bandwidth_response",
            "bandwidth_warped_frequency", "g_sensitivity_bias", "rigid_body_specific_force",
            "gravity_specific_force"]
 
@@ -136,6 +136,85 @@ def bandwidth_filter(x, dt_s: float, cutoff_hz, order) -> np.ndarray:
         zi = signal.sosfilt_zi(sos) * y2[0, j]
         out[:, j], _ = signal.sosfilt(sos, y2[:, j], zi=zi)
     return out.reshape(a.shape)
+
+
+def quantize_rate(x, dt_s: float, step_rad) -> np.ndarray:
+    """The spec's ``quantization``: the increments of a rounded integrated angle.
+
+    Parameters
+    ----------
+    x : array_like, shape (n,) or (n, m)
+        What the gyro produces before its counter, one column per gyro [rad/s].
+    dt_s : float
+        Sample step dt [s].
+    step_rad : float or array_like, shape (m,)
+        Angle step Δ = √12·Q of each column [rad]; a column of step 0 passes unchanged.
+
+    Returns
+    -------
+    ndarray, same shape as ``x``
+        y_k = (round(θ_k/Δ) − round(θ_{k−1}/Δ))·Δ/dt [rad/s], θ_k = Σ_{j<=k} x_j·dt,
+        θ_{−1} = 0: every value an integer multiple of Δ/dt.
+
+    Notes
+    -----
+    # θ is a float64 cumulative sum: its rounding error grows like √n·ulp(θ), far below Δ
+    # (1e6 samples at 300 deg/s and 100 Hz: θ = 5.2e4 rad, ulp 7e-12 rad, the sum off the 80-bit
+    # one by 1.7e-9 rad at most, 3e-5 of a 0.0035 deg step; 9 of the 1e6 counts differ by one, a
+    # boundary crossed a sample early or late, as an input change of 2e-9 rad would do:
+    # tests/test_spec_quantization.py). The counts round(θ/Δ) are integers below 2⁵³, so their
+    # differences are exact.
+    """
+    a = np.asarray(x, dtype=float)
+    x2 = a.reshape(a.shape[0], -1)
+    step = np.broadcast_to(np.asarray(step_rad, dtype=float), (x2.shape[1],))
+    out = np.array(x2, copy=True)
+    dt = float(dt_s)
+    for j in np.flatnonzero(step > 0):
+        counts = np.round(np.cumsum(x2[:, j] * dt) / step[j])
+        out[:, j] = np.diff(counts, prepend=0.0) * (step[j] / dt)
+    return out.reshape(a.shape)
+
+
+def output_lattice_step(y, max_levels: int = 4096) -> float:
+    """The step c of the value grid a record's output lies on, or NaN when it lies on none.
+
+    Parameters
+    ----------
+    y : array_like, shape (n,)
+        One gyro's output [any unit].
+    max_levels : int
+        Most distinct grid values (spanned by the record) for the grid to count as coarse [-].
+
+    Returns
+    -------
+    float
+        c > 0 with every finite value an integer multiple of c (relative 1e-6 of c), and the
+        values spanning at most ``max_levels`` steps; NaN otherwise (a continuous output, a grid
+        finer than that, or fewer than two distinct values).
+
+    Notes
+    -----
+    # A gcd of the distinct values: start from the smallest non-zero distance between them and
+    # divide it while the values do not fit (a grid whose smallest seen distance is 2c or 3c),
+    # then refine c by least squares over the values' integer indices.
+    """
+    v = np.asarray(y, dtype=float)
+    v = np.unique(v[np.isfinite(v)])
+    if v.size < 2:
+        return math.nan
+    span = float(v[-1] - v[0])
+    d = np.diff(v)
+    c0 = float(d.min())
+    if not c0 > 0 or span / c0 > max_levels:
+        return math.nan
+    for div in range(1, 13):
+        c = c0 / div
+        k = np.round(v / c)
+        if np.all(np.abs(v / c - k) < 1e-6):
+            c = float(v @ k) / float(k @ k)           # least squares on the indices
+            return c if np.all(np.abs(v / c - k) < 1e-6) else math.nan
+    return math.nan
 
 
 def bandwidth_response(freq_hz, cutoff_hz: float, order: int) -> np.ndarray:

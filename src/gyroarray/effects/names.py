@@ -11,8 +11,10 @@ from __future__ import annotations
 from gyroarray.effects.arw import AngleRandomWalk
 from gyroarray.effects.bandwidth import Bandwidth
 from gyroarray.effects.bias_instability import BiasInstability
+from gyroarray.effects.burst import Burst
 from gyroarray.effects.constant_bias import ConstantBias
 from gyroarray.effects.correlation import Correlation
+from gyroarray.effects.faults.fault_noise import FaultNoise
 from gyroarray.effects.g_sensitivity import GSensitivity
 from gyroarray.effects.gauss_markov import GaussMarkov
 from gyroarray.effects.misalignment import Misalignment
@@ -25,7 +27,7 @@ from gyroarray.effects.temperature_bias import TemperatureBias
 
 __all__ = ["ARW", "RRW", "BIAS_INSTABILITY", "GAUSS_MARKOV", "QUANTIZATION", "RATE_RAMP",
            "TEMPERATURE_BIAS", "BANDWIDTH", "G_SENSITIVITY", "CORRELATION", "SCALE_FACTOR",
-           "SCALE_NONLINEARITY", "MISALIGNMENT", "CONSTANT_BIAS"]
+           "SCALE_NONLINEARITY", "MISALIGNMENT", "CONSTANT_BIAS", "BURST", "FAULT_NOISE"]
 
 #: Angle random walk (white rate noise).
 ARW: str = AngleRandomWalk.name
@@ -55,3 +57,7 @@ SCALE_NONLINEARITY: str = ScaleNonlinearity.name
 MISALIGNMENT: str = Misalignment.name
 #: Turn-on (constant) bias.
 CONSTANT_BIAS: str = ConstantBias.name
+#: A window of raised noise (dynamic Allan variance).
+BURST: str = Burst.name
+#: A gyro's noise fault (its noise level rises from a start time on).
+FAULT_NOISE: str = FaultNoise.name

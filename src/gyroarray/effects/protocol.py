@@ -632,6 +632,12 @@ class Effect:
             return None
         return ctx.simulate_entry(entry)
 
+    def static_noise_in(self, ctx: "FitContext", entry: "ModelEntry") -> str | None:
+        """Why, with ``entry`` in the model, the stochastic tests read the longest static part on
+        this record (the noise differs between still and moving parts), or None (default:
+        :attr:`static_noise`, whatever the record)."""
+        return self.static_noise
+
     def band_entries(self, ctx: "FitContext", entry: "ModelEntry") -> list:
         """The entries this calibrated entry puts into the model's Monte-Carlo band (default:
         itself if ``stochastic``, else none). An effect whose noise depends on what else the
@@ -755,8 +761,11 @@ class FitContext:
     None, ``static`` (n,) bool, ``longest`` (a, b) the longest static part,
     ``moving`` (the table turns somewhere), ``name`` (the file, for messages),
     ``ref_raw`` (n, 3) [rad/s] the reference as recorded when ``ref`` is it
-    smoothed (``--ref-smooth``), else None, and ``ref_instrument`` (n, 3)
-    [rad/s] the instrument of the regressions on it then.
+    smoothed (``--ref-smooth``), else None, ``ref_instrument`` (n, 3)
+    [rad/s] the instrument of the regressions on it then, and ``parts``
+    ((start, stop), ...) the still parts a record without reference was
+    stitched from (empty: one record); the deterministic fits keep one free
+    offset per part (:attr:`breaks`).
 
     Analysis (one calibration): ``model`` (the model being calibrated),
     ``r`` and ``q`` (N,) white and random-walk increment variances per sample
@@ -800,11 +809,46 @@ class FitContext:
     cache: dict = field(default_factory=dict)
     ref_raw: np.ndarray | None = None
     ref_instrument: np.ndarray | None = None
+    parts: tuple = ()
 
     @property
     def n(self) -> int:
         """Samples n."""
         return int(self.t.size)
+
+    @property
+    def breaks(self) -> np.ndarray | None:
+        """First sample of each stitched part after the first (``parts``), or None (one record).
+
+        A regression passes them to :func:`~gyroarray.analysis.gls.gls_rw` (``breaks``): each
+        part's offset (the bias steps with the orientation between parts) is then a free
+        parameter of the fit, one intercept per part, not set beforehand."""
+        if len(self.parts) < 2:
+            return None
+        return np.array([a for a, _ in self.parts[1:]], dtype=int)
+
+    def part_intercepts(self, n: int | None = None) -> np.ndarray:
+        """One indicator column per stitched part (n, K) (one column of ones for a single record):
+        the intercepts of a plain least-squares fit on the stitched record."""
+        n = self.n if n is None else int(n)
+        parts = self.parts if len(self.parts) >= 2 else ((0, n),)
+        out = np.zeros((n, len(parts)))
+        for k, (a, b) in enumerate(parts):
+            out[a:b, k] = 1.0
+        return out
+
+    def equalised(self, x: np.ndarray) -> np.ndarray:
+        """``x`` (n, ...) with each stitched part's mean set to the first part's, as the stitched
+        outputs were (what the stochastic analysis reads once a deterministic fit with free
+        per-part offsets is taken out); ``x`` itself without parts."""
+        if len(self.parts) < 2:
+            return x
+        x = np.array(x, dtype=float, copy=True)
+        a0, b0 = self.parts[0]
+        first = x[a0:b0].mean(axis=0)
+        for a, b in self.parts[1:]:
+            x[a:b] += first - x[a:b].mean(axis=0)
+        return x
 
     @property
     def N(self) -> int:
@@ -894,8 +938,13 @@ class FitContext:
     def without(self, prediction: np.ndarray) -> "FitContext":
         """The same analysis with ``prediction`` (n, N) [rad/s] taken out of the residual
         (and of the stochastic record): what the record would show without it."""
-        ctx = replace(self, E=self.E - prediction,
-                      Er=None if self.Er is None else self.Er - prediction[self.rec], cache={})
+        E = self.E - prediction
+        Er = None if self.Er is None else self.Er - prediction[self.rec]
+        if len(self.parts) >= 2:               # stitched parts: their means set equal again
+            shift = self.equalised(E) - E
+            E = E + shift
+            Er = None if Er is None else Er + shift[self.rec]
+        ctx = replace(self, E=E, Er=Er, cache={})
         ctx.services = self.services.derive(ctx)
         return ctx
 

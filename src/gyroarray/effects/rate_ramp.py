@@ -36,7 +36,7 @@ class RateRamp(RegressionEffect):
         return with_term(state, act.cols, state.ctx.time_s[:, None] * act.p["r_rad_s2"])
 
     def regress(self, ctx, gyro, e, r, q):
-        return fit_rate_ramp(e, ctx.t, ctx.dt, r, q, gyro, use=ctx.use)
+        return fit_rate_ramp(e, ctx.t, ctx.dt, r, q, gyro, use=ctx.use, breaks=ctx.breaks)
 
     def test(self, ctx, gyro):
         return ctx.gyro_noise(int(gyro))[self.name]
@@ -58,7 +58,8 @@ class RateRamp(RegressionEffect):
 
 
 # -- fit ----------------------------------------------------------------------------------
-def fit_rate_ramp(e, time_s, dt_s: float, r: float, q: float, gyro: int, *, use=None) -> EffectFit:
+def fit_rate_ramp(e, time_s, dt_s: float, r: float, q: float, gyro: int, *, use=None,
+                  breaks=None) -> EffectFit:
     """Rate ramp: a bias that grows linearly with time.
 
     Parameters
@@ -75,6 +76,9 @@ def fit_rate_ramp(e, time_s, dt_s: float, r: float, q: float, gyro: int, *, use=
         1-based gyro number.
     use : array_like of bool, shape (n,), optional
         Samples to include (:func:`~gyroarray.analysis.gls.gls_rw`).
+    breaks : array_like of int, optional
+        First sample of each stitched part after the first: each part's offset
+        is a free parameter (:func:`~gyroarray.analysis.gls.gls_rw`).
 
     Returns
     -------
@@ -95,7 +99,7 @@ def fit_rate_ramp(e, time_s, dt_s: float, r: float, q: float, gyro: int, *, use=
     n = e.size
     t = as_vector(time_s, n, "time_s")
     try:
-        fit = gls_rw(e, t - t[0], r, q, use=use)
+        fit = gls_rw(e, t - t[0], r, q, use=use, breaks=breaks)
     except NotIdentifiableError as err:
         return not_identifiable("rate_ramp", gyro, {"r_deg_h2": 0.0}, "no time passes", err)
     b, s = float(fit.beta[0]), float(fit.sigma[0])

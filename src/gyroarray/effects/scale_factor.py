@@ -2,13 +2,17 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from gyroarray.analysis.gls import gls_rw, GLSFit, NotIdentifiableError
+from gyroarray.analysis.transfer import cross_spectral_gain, NoSpectralLines, ZeroFrequencyGain
 from gyroarray.core.units import per_rad_s_to_per_deg_s, rad_s_to_deg_s, ratio_to_ppm
 from gyroarray.effects.fitting import (as_vector, EffectFit, fit_extra, not_identifiable, num, pm,
                                        projected_rate, Z_EVIDENT, z_two_sided)
 from gyroarray.effects import _draw
+from gyroarray.effects.outliers import MOTION_RAW
 from gyroarray.effects.protocol import Param, RegressionEffect, Stage, with_term
 from gyroarray.effects.terms import ScaleTerm, spread
 from gyroarray.core.units import ppm_to_ratio
@@ -45,12 +49,27 @@ class ScaleFactor(RegressionEffect):
         joint fit's: tested alone, with the smaller σ of a slope by itself, its z is wider than
         N(0, 1) wherever u and u² are collinear (rates mostly of one sign; seed 109: z 4.17 for
         no scale factor at all). Tested jointly, z is the joint slope over its own σ.
+
+        On a moving rig the slope is set beside the gain at the motion's spectral lines
+        (:func:`cross_spectral_scale`, :func:`reconcile_scale`): the evidence shows both, and
+        when they differ by more than their combined σ the model keeps the cross-spectral one.
         """
+        held = ctx.cache.get(MOTION_RAW)        # the residual before the motion-locked spikes were cleaned
+        raw = held[1][:, gyro - 1] if held is not None and np.shares_memory(e, held[0]) else e
         e, ref, inst = self.against_reference(ctx, gyro, e)
-        if any(x.gyro == gyro for x in ctx.entries("scale_nonlinearity")):
-            return fit_scale_and_nonlinearity(e, ref, ctx.H[gyro - 1], ctx.t, ctx.dt, r, q, gyro, use=ctx.use,
-                                              instrument=inst)[0]
-        return fit_scale_factor(e, ref, ctx.H[gyro - 1], ctx.t, ctx.dt, r, q, gyro, use=ctx.use, instrument=inst)
+        joint = any(x.gyro == gyro for x in ctx.entries("scale_nonlinearity"))
+        if joint:
+            fit = fit_scale_and_nonlinearity(e, ref, ctx.H[gyro - 1], ctx.t, ctx.dt, r, q, gyro, use=ctx.use,
+                                             instrument=inst)[0]
+        else:
+            fit = fit_scale_factor(e, ref, ctx.H[gyro - 1], ctx.t, ctx.dt, r, q, gyro, use=ctx.use, instrument=inst)
+        if not fit.extra.get("identifiable", True) or not ctx.moving:
+            return fit
+        # the lines read the output as recorded (less the model's deterministic part): the spikes at the
+        # reversals are part of its response to the motion, and cleaning them would reshape it
+        xs = cross_spectral_scale(self.against_reference(ctx, gyro, raw)[0], ref, ctx.H[gyro - 1], ctx.dt,
+                                  use=ctx.use)
+        return reconcile_scale(fit, xs, joint_with_nonlinearity=joint)
 
     def channel_line(self, fit, x, xm, ym):
         return fit.params["ppm"] * 1e-6 * x * 3600.0, self._label(fit, "ppm", unit=" ppm")
@@ -112,6 +131,104 @@ def fit_scale_factor(e, omega_ref_rad_s, h, time_s, dt_s: float, r: float, q: fl
     except NotIdentifiableError as err:
         return not_identifiable("scale_factor", gyro, {"ppm": 0.0}, "there is no rate about its axis", err)
     return _scale_fit(fit, 0, gyro, joint_with_nonlinearity=False, instrumented=ui is not None)
+
+
+def cross_spectral_scale(e, omega_ref_rad_s, h, dt_s: float, *, use=None) -> ZeroFrequencyGain | str:
+    """The scale factor read from the lines of a periodic motion (no plateau needed).
+
+    Parameters
+    ----------
+    e : array_like, shape (n,)
+        Residual y − h·ω_ref [rad/s], the scale factor's own part included.
+    omega_ref_rad_s : array_like, shape (n, 3)
+        Platform-frame reference rate [rad/s], as recorded (its own noise is no bias here).
+    h : array_like, shape (3,)
+        Nominal unit sensitive axis [-].
+    dt_s : float
+        Sample step [s].
+    use : array_like of bool, shape (n,), optional
+        Samples to read (glitches the model leaves out are bridged).
+
+    Returns
+    -------
+    ZeroFrequencyGain or str
+        |H(0)| of the output e + u over u = h·ω_ref at the motion's fundamental
+        and harmonics (:func:`~gyroarray.analysis.transfer.cross_spectral_gain`:
+        an instrumental-variable ratio per line, its magnitude, so that a latency
+        does not bias it, gradient-corrected over the harmonics to f → 0);
+        s = gain − 1. A phrase saying why not when the motion has no usable line.
+    """
+    e = np.asarray(e, dtype=float)
+    _, u = projected_rate(omega_ref_rad_s, h, e.size)
+    try:
+        return cross_spectral_gain(e + u, u, dt_s, use=use)
+    except NoSpectralLines as err:
+        return str(err)
+
+
+#: Why the model keeps the cross-spectral scale factor when the two estimates disagree.
+KEEP_CROSS_SPECTRAL = ("on a moving rig the time-domain residual also holds what the model misses of the lag, "
+                       "the bandwidth and the reversal jerks, which bias a slope on the rate; |H| at the "
+                       "motion's lines, read at f → 0, sees none of them")
+
+
+def _ppm(x: float) -> str:
+    """A difference in ppm as read: whole ppm from 10 on."""
+    return f"{x:.0f}" if abs(x) >= 10.0 else num(x, 2)
+
+
+def reconcile_scale(fit: EffectFit, xs: ZeroFrequencyGain | str, *, joint_with_nonlinearity: bool = False) -> EffectFit:
+    """The time-domain fit ``fit`` set beside the cross-spectral estimate ``xs``.
+
+    Parameters
+    ----------
+    fit : EffectFit
+        The regression's ``scale_factor`` (:func:`fit_scale_factor`).
+    xs : ZeroFrequencyGain or str
+        :func:`cross_spectral_scale`'s result, or why there is none.
+    joint_with_nonlinearity : bool
+        ``fit`` is the joint fit with a curvature (whose rate-squared term the
+        lines' gain does not separate): the time-domain value is kept.
+
+    Returns
+    -------
+    EffectFit
+        With ``extra["cross_spectral"]`` (``ppm``, ``sigma_ppm``, ``lines_hz``,
+        ``slope_per_hz2``, ``method``; None when unavailable, with
+        ``extra["cross_spectral_why"]``), ``extra["time_domain"]`` (``ppm``,
+        ``sigma_ppm``), ``extra["kept"]`` (``"time_domain"`` or
+        ``"cross_spectral"``) and ``extra["reconciled"]`` (one sentence). When the
+        two differ by more than their combined σ, the model keeps the
+        cross-spectral value (``params``/``sigma`` carry it; ``z`` stays the
+        time-domain test of a slope in the residual) and the evidence says so
+        and why; otherwise the time-domain fit is kept and the evidence shows
+        both.
+    """
+    ppm_t, sig_t = float(fit.params["ppm"]), float(fit.sigma["ppm"])
+    extra = dict(fit.extra, time_domain={"ppm": ppm_t, "sigma_ppm": sig_t}, kept="time_domain")
+    if isinstance(xs, str):
+        extra.update(cross_spectral=None, cross_spectral_why=xs)
+        return replace(fit, extra=extra)
+    ppm_x, sig_x = ratio_to_ppm(xs.gain - 1.0), ratio_to_ppm(xs.sigma)
+    extra["cross_spectral"] = {"ppm": ppm_x, "sigma_ppm": sig_x, "lines_hz": [ln.freq_hz for ln in xs.lines],
+                               "slope_per_hz2": xs.slope_per_hz2, "method": xs.describe()}
+    diff, comb = ppm_x - ppm_t, float(np.hypot(sig_t, sig_x))
+    both = (f"scale factor on gyro {fit.gyro}: time domain {pm(ppm_t, sig_t)} ppm, cross-spectral "
+            f"{pm(ppm_x, sig_x)} ppm (from {xs.describe()})")
+    params, sigma = fit.params, fit.sigma
+    if abs(diff) <= comb:
+        said = f"{both}: they agree within their combined σ ({_ppm(comb)} ppm); the model keeps the time-domain one"
+    elif joint_with_nonlinearity:
+        said = (f"{both}: they differ by {_ppm(diff)} ppm, more than their combined σ ({_ppm(comb)} ppm); "
+                "the model keeps the time-domain one, fitted jointly with the curvature, which the lines' "
+                "gain does not separate")
+    else:
+        said = (f"{both}: they differ by {_ppm(diff)} ppm, more than their combined σ ({_ppm(comb)} ppm); "
+                f"the model keeps the cross-spectral one: {KEEP_CROSS_SPECTRAL}")
+        params, sigma = dict(fit.params, ppm=ppm_x), dict(fit.sigma, ppm=sig_x)
+        extra["kept"] = "cross_spectral"
+    extra["reconciled"] = said
+    return replace(fit, params=params, sigma=sigma, evidence=f"{fit.evidence}; {said}", extra=extra)
 
 
 def _scale_fit(fit: GLSFit, i: int, gyro: int, **extra) -> EffectFit:

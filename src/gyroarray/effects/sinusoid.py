@@ -67,9 +67,25 @@ class Sinusoid(RegressionEffect):
         return fit_sinusoid(e, ctx.t, ctx.dt, r, q, gyro, use=ctx.use)
 
     def test(self, ctx, gyro):
+        """The strongest line of the stochastic record; a line whose phase wanders (its phase track
+        off a straight line, :mod:`gyroarray.effects.narrowband_line`) is named as the narrowband
+        process it is when the model has no sinusoid on this gyro: a fixed phase would not transfer."""
         g = int(gyro) - 1
-        return fit_sinusoid(ctx.Er[:, g], ctx.tr, ctx.dt, float(ctx.r[g]), float(ctx.q[g]), int(gyro),
-                            q_angle_rad=_white_angle_noise(ctx, int(gyro)))
+        fit = fit_sinusoid(ctx.Er[:, g], ctx.tr, ctx.dt, float(ctx.r[g]), float(ctx.q[g]), int(gyro),
+                           q_angle_rad=white_angle_noise(ctx, int(gyro)))
+        # one line per gyro of each kind: with a sinusoid or a narrowband line of this gyro in the
+        # model already, a line found is offered as the sinusoid
+        if fit.z >= Z_EVIDENT and not any(e.gyro == int(gyro) for e in (*ctx.entries(self.name),
+                                                                      *ctx.entries(NARROWBAND))):
+            try:
+                nb = ctx.effect(NARROWBAND)
+            except InputError:                   # not registered (a trimmed registry)
+                return fit
+            wander = nb.test(ctx, gyro)
+            if wander.extra.get("wanders"):
+                wander.extra["tested_as"] = self.name          # `fit --add sinusoid` still fits the fixed line
+                return wander
+        return fit
 
     def prefer(self, mine, other, ctx):
         """A tone of a few Hz is also an ADEV hump near τ = 1/(2.6 f), and one near Nyquist a τ^-1
@@ -83,7 +99,12 @@ class Sinusoid(RegressionEffect):
                                           "phase_deg": _draw.u(rng, 0.0, 360.0)}
 
 
-def _white_angle_noise(ctx, gyro: int) -> float:
+#: The effect a wandering line is named as (registered by its own module; named here, not imported:
+#: it imports this module's fit).
+NARROWBAND = "narrowband_line"
+
+
+def white_angle_noise(ctx, gyro: int) -> float:
     """Q [rad] of the gyro's white angle noise in the model (0 without one)."""
     for term in ctx.noise_terms(gyro):
         if "q_deg" in term.params:

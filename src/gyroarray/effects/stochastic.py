@@ -313,8 +313,8 @@ _FLOOR_FROM_REFERENCE = True
 
 
 def _rrw_reference(cv: Curve, names: tuple, gm_tau_s: float | None, label: str, gyro: int,
-                   common: dict) -> tuple[EffectFit, tuple | None, Curve]:
-    """The ``rrw`` entry: K read where the +1/2 slope is, not from what the model lacks.
+                   common: dict) -> tuple[EffectFit, EffectFit, tuple | None, Curve]:
+    """The ``arw`` and ``rrw`` entries: N and K read where the slopes are, not from what the model lacks.
 
     ``names``: the baseline's columns. Two things make ARW + RRW alone read a
     random walk the data rule out, and both are kept out of K here:
@@ -333,7 +333,7 @@ def _rrw_reference(cv: Curve, names: tuple, gm_tau_s: float | None, label: str, 
     column always in would read K 12 % low with 1.7 times the scatter on 2000 s
     records of K = 20 deg/h/√h: K² is clipped at 0 more often).
 
-    Returns the ``rrw`` entry; when a flicker column was added here and
+    Returns the ``arw`` and ``rrw`` entries of that fit; when a flicker column was added here and
     kept, (B and its 1σ as :func:`~gyroarray.analysis.allan_gls.root_sigma` gives them [rad/s], the first τ
     [s]), else None; and the curve from the first octave used (the flicker
     test reads the same octaves: :func:`fit_gyro_noise`).
@@ -343,6 +343,7 @@ def _rrw_reference(cv: Curve, names: tuple, gm_tau_s: float | None, label: str, 
         sub = cv if start == 0 else replace(cv, taus=cv.taus[start:], m=cv.m[start:], y=cv.y[start:],
                                             white=None if cv.white is None else cv.white[start:],
                                             walk=None if cv.walk is None else cv.walk[start:],
+                                            quant=None if cv.quant is None else cv.quant[start:],
                                             cov=cv.cov.block(start))
         used = names if "b" in names else names + ("b",)
         fit = gls(sub, used, gm_tau_s)
@@ -351,12 +352,38 @@ def _rrw_reference(cv: Curve, names: tuple, gm_tau_s: float | None, label: str, 
         if fit.dof <= 0 or stats.chi2.sf(fit.chi2, fit.dof) > _REF_P or cv.m.size - start <= 6:
             break
         start += 1
-    rrw = _baseline_fits(sub, fit, label, gyro, common)[1]
+    arw, rrw = _baseline_fits(sub, fit, label, gyro, common)
     rrw = replace(rrw, extra={**rrw.extra, "k_from_tau_s": float(sub.taus[0]),
                               "k_with_flicker_column": "b" in used})
+    arw = replace(arw, extra={**arw.extra, "n_from_tau_s": float(sub.taus[0]),
+                              "n_with_flicker_column": "b" in used})
     if used is names:
-        return rrw, None, sub
-    return rrw, (*root_sigma(float(fit.a[-1]), float(math.sqrt(fit.cov[-1, -1]))), float(sub.taus[0])), sub
+        return arw, rrw, None, sub
+    return arw, rrw, (*root_sigma(float(fit.a[-1]), float(math.sqrt(fit.cov[-1, -1]))), float(sub.taus[0])), sub
+
+
+def _white_level(per_sample: EffectFit, reference: EffectFit, sub: Curve, cv: Curve) -> EffectFit:
+    """The ``arw`` entry: the white level that reproduces the ADEV where the model describes it.
+
+    On a record whose short τ the baseline describes (``sub is cv``) it is the
+    baseline's N, as fitted from the first octave. Where a filter, lines or a
+    hump shape the short τ (the octaves of the K reference fit start later),
+    N is read beside K on those octaves: the per-sample level, which counts
+    the lines and bumps (or misses what a filter takes away), is a different
+    figure, kept in ``extra["per_sample_n_deg_rt_h"]``. On the ADIS16405's
+    gyro 1 (still, 2.78 h at 100 Hz) the per-sample N is 2.10 deg/√h, the
+    ADEV at τ = 1 s is 1.17 times the line it draws (a filter under 0.05 s),
+    and N read from τ ≥ the reference's first octave follows the ADEV there.
+    """
+    if sub is cv:
+        return per_sample
+    key = "n_deg_rt_h"
+    n_ps, s_ps = per_sample.params[key], per_sample.sigma.get(key, math.nan)
+    tau0 = float(sub.taus[0])
+    return replace(reference, evidence=(f"{reference.evidence} (read from τ >= {tau0:.3g} s, where the "
+                                        f"model describes the ADEV; per-sample level {n_ps:.3g} deg/√h)"),
+                   extra={**reference.extra, "per_sample_n_deg_rt_h": n_ps,
+                          "per_sample_n_sigma_deg_rt_h": s_ps})
 
 
 def _with_reference_b(bi: EffectFit, ref_b: tuple | None) -> EffectFit:
@@ -434,7 +461,7 @@ def _ramp_entry(r: float, sr: float, z_r: float, lr: float, span: float, label: 
 
 def fit_gyro_noise(e, dt_s: float, gyro: int, *, model_terms: tuple = (),
                    gm_tau_s: float | None = None, min_tau_s: float = 0.0,
-                   white_shape=None, ramp_taken_out: bool = False) -> list[EffectFit]:
+                   white_shape=None, ramp_taken_out: bool = False, quant_shape=None) -> list[EffectFit]:
     """Baseline noise and the non-baseline stochastic effects of one gyro.
 
     Parameters
@@ -466,6 +493,11 @@ def fit_gyro_noise(e, dt_s: float, gyro: int, *, model_terms: tuple = (),
         :func:`~gyroarray.analysis.psd_fit.filtered_white_avar_ratio`); it
         multiplies the N² column, so N is the noise before the filter even
         where the filter still lowers the variance by a few per cent.
+    quant_shape : callable, optional
+        ``quant_shape(m)``: the quantization term's Allan variance over 3Q²/τ² at the averaging
+        factors ``m`` [-] (a counter whose angle moves by less than a step per sample: its error
+        is correlated; :meth:`~gyroarray.effects.quantization.Quantization.noise_term`); it
+        multiplies the Q² column.
     ramp_taken_out : bool
         A ramp fitted by GLS was taken out of ``e`` before (a model's ``rate_ramp``): the
         random walk's column is then the walk with a ramp taken out
@@ -484,7 +516,11 @@ def fit_gyro_noise(e, dt_s: float, gyro: int, *, model_terms: tuple = (),
     Notes
     -----
     ``arw`` and ``rrw`` are the baseline fit (N², K² by GLS on the Allan
-    variance) and their z the Wald ratio of the coefficient. For each other
+    variance) and their z the Wald ratio of the coefficient; where the
+    baseline does not describe the short τ (a filter, lines, a hump), both are
+    read on the octaves from which it does (:func:`_rrw_reference`), so N is
+    the white level that reproduces the ADEV at those τ, and the per-sample
+    level is ``extra["per_sample_n_deg_rt_h"]`` (:func:`_white_level`). For each other
     term z ≈ N(0, 1) when the term is absent and the noise is ARW + RRW:
     ``bias_instability`` and ``quantization`` the Wald ratio Â/σ_Â of one
     more GLS column; ``rate_ramp`` the two-sided normal score of a
@@ -507,7 +543,7 @@ def fit_gyro_noise(e, dt_s: float, gyro: int, *, model_terms: tuple = (),
     label = f"gyro {gyro}"
     n = x.size
     m_min = 1 if not min_tau_s > dt else 2 ** int(math.ceil(math.log2(min_tau_s / dt)))
-    cv = curve(x, dt, m_min=m_min, white_shape=white_shape)
+    cv = curve(x, dt, m_min=m_min, white_shape=white_shape, quant_shape=quant_shape)
     terms = tuple(t for t in ("b", "q") if t in model_terms)
     if set(model_terms) - {"b", "q"}:
         raise ValueError(f"model_terms must be a subset of ('b', 'q'), got {model_terms!r}")
@@ -523,12 +559,14 @@ def fit_gyro_noise(e, dt_s: float, gyro: int, *, model_terms: tuple = (),
     if (ramp_removed or ramp_taken_out) and g is not None:
         # the random walk's column as the ramp taken out leaves it (:func:`_walk_after_ramp`)
         cv = curve(x - r * dt * np.arange(n) if ramp_removed else x, dt, cov=cv.cov, m_min=m_min,
-                    white_shape=white_shape, walk_shape=lambda mm: _walk_after_ramp(g, mm))
+                    white_shape=white_shape, walk_shape=lambda mm: _walk_after_ramp(g, mm),
+                    quant_shape=quant_shape)
         base = gls(cv, base_names, gm_tau_s)
     common = {"chi2_baseline": base.chi2, "dof_baseline": base.dof, "ramp_removed": ramp_removed}
 
     out = _baseline_fits(cv, base, label, gyro, common)                        # ARW, RRW
-    out[1], ref_b, sub = _rrw_reference(cv, base_names, gm_tau_s, label, gyro, common)
+    arw_ref, out[1], ref_b, sub = _rrw_reference(cv, base_names, gm_tau_s, label, gyro, common)
+    out[0] = _white_level(out[0], arw_ref, sub, cv)
     extra = _extra_column_fits(cv, base, terms, gm, gm_tau_s, label, gyro, common)  # B, Q
     if sub is not cv and _FLOOR_FROM_REFERENCE:
         # the short τ hold structure the model does not describe (a filter, a hump): the baseline

@@ -33,8 +33,9 @@ relative to the Earth, ω(t) (n×3, platform frame).
    ``temperature_bias``.
 5. ``bandwidth`` (``Stage.FILTER``): the sensor's own low-pass filter, on
    everything above (rate, biases and noise).
-6. ``quantization`` (``Stage.QUANTIZE``): the output angle is accumulated and
-   quantized with step q = √12·Q; output = Δ(quantized angle)/dt.
+6. ``quantization`` (``Stage.QUANTIZE``): the output angle θ_k = Σ x_j·dt is
+   accumulated from θ_{−1} = 0 and rounded to the step Δ = √12·Q; output
+   y_k = (round(θ_k/Δ) − round(θ_{k−1}/Δ))·Δ/dt (the spec's definition).
 7. ``saturation`` (``Stage.SATURATE``): clip at ±range.
 8. Faults (``Stage.FAULT``): what a failed gyro outputs from its onset.
 
@@ -81,8 +82,8 @@ with gyro the 1-based gyro number (0 for an array-wide source). So
 
 Draws per stream (gyro k): ``arw`` n standard normals; ``rrw`` n;
 ``bias_instability`` M ≥ 2n (FFT length); ``gauss_markov`` n (the first sets
-the stationary start); ``quantization`` one uniform (the counter's start
-phase); ``correlation`` (gyro 0) n normals for the common-mode ARW source
+the stationary start); ``quantization`` none (the counter is
+deterministic); ``correlation`` (gyro 0) n normals for the common-mode ARW source
 (source 1) and n for the RRW one (source 2), only with ``common_mode``.
 With a full correlation matrix, ARW/RRW draw on every gyro (Cholesky needs
 them all), also on gyros without that effect.

@@ -3,12 +3,27 @@
 :func:`run_sweep` runs every scenario of a sweep (:mod:`gyroarray.sweep.sweep`)
 in worker processes — a local ``ProcessPoolExecutor`` (spawned workers), or a
 ``dask.distributed`` cluster when ``scheduler`` is its address
-(``tcp://HOST:PORT``) — and writes, as each scenario finishes, its rows to
-``out_dir/rows/<id>.parquet``: one row per estimator × body axis (the
-chain's metric table) plus the scenario's parameters, id and seed. Each file
-is written to a hidden temporary file and moved into place with
+(``tcp://HOST:PORT``), or a ``LocalCluster`` it starts and closes itself
+(``dask="local:N"``, :func:`local_cluster`) — and the worker that ran a scenario
+writes its rows to ``out_dir/rows/<id>.parquet``: one row per estimator × body
+axis (the chain's metric table) plus the scenario's parameters, id and seed.
+Each file is written to a hidden temporary file and moved into place with
 ``os.replace``, so the dataset (``pandas.read_parquet(out_dir / "rows")`` or
-:func:`load_results`) is always the set of complete scenarios.
+:func:`load_results`) is always the set of complete scenarios. Only a small
+record (file name, SHA-256, rows, run time) travels back; this process checks
+the file against it and appends the checksum to ``rows.sha256``.
+
+Tasks are sized for the engine (:class:`TaskBatches`): one scenario per task
+until one has been timed, then as many as fit in :data:`TASK_TARGET_S`
+seconds, fewer at the end so the tail spreads over every worker. Before the
+scenarios, one task per distinct rate-table truth (profile, rate, duration)
+fills the truth cache, so the physics of a profile runs once per machine.
+Every worker warms once (:func:`warm_worker`: the imports, one numba thread).
+A Dask worker lost mid-sweep costs only its tasks: Dask runs them again on
+another worker (a task is retried :data:`TASK_RETRIES` times; a task that
+killed its workers past ``distributed.scheduler.allowed-failures`` is split and
+its scenarios run one per task, so only the culprit is reported failed). The
+file a dying worker was writing is a hidden temporary, never a result.
 
 A scenario that raises (in the chain) is reported in the summary's
 ``failed`` list (id and error) and the others go on; it has no file, so a
@@ -49,6 +64,7 @@ import ctypes
 import hashlib
 import json
 import logging
+import math
 import os
 import re
 import signal
@@ -56,8 +72,10 @@ import socket
 import sys
 import threading
 import time
-from concurrent.futures import FIRST_COMPLETED, CancelledError, ProcessPoolExecutor, wait
-from contextlib import contextmanager
+from collections import deque
+from concurrent.futures import FIRST_COMPLETED, CancelledError, Future, ProcessPoolExecutor, wait
+from concurrent.futures.process import BrokenProcessPool
+from contextlib import ExitStack, contextmanager
 from pathlib import Path
 
 import multiprocessing as mp
@@ -71,7 +89,9 @@ from gyroarray.core.limits import open_regular, read_json, read_regular
 
 from gyroarray.sweep.sweep import ScenarioSpec, Sweep, load_sweep
 
-__all__ = ["run_sweep", "load_results", "run_one", "verify_rows_file", "THREAD_ENV"]
+__all__ = ["run_sweep", "load_results", "run_one", "run_batch", "prepare_truth", "warm_worker",
+           "verify_rows_file", "encode_rows", "local_cluster", "parse_dask", "TaskBatches",
+           "THREAD_ENV", "TASK_TARGET_S"]
 
 #: Environment of every worker process (bitwise-reproducible BLAS).
 THREAD_ENV = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1",
@@ -118,6 +138,16 @@ def _typed(df):
     return df
 
 
+def encode_rows(df) -> tuple[bytes, str]:
+    """A scenario's rows as the bytes of its Parquet file and their SHA-256 (hex)."""
+    import pyarrow.parquet as pq  # deferred: pyarrow.parquet loads only when rows are written
+
+    sink = pa.BufferOutputStream()
+    pq.write_table(pa.Table.from_pandas(df, preserve_index=False), sink)
+    data = sink.getvalue().to_pybytes()
+    return data, hashlib.sha256(data).hexdigest()
+
+
 def write_rows(df, folder: Path, sid: str, inputs=()) -> Path:
     """Write a scenario's rows atomically and record the file's checksum beside the folder.
 
@@ -127,18 +157,98 @@ def write_rows(df, folder: Path, sid: str, inputs=()) -> Path:
     :func:`~gyroarray.core.outputs.append_line` (no symbolic link, no input of the
     command, no partial line on a full disk).
     """
-    import pyarrow.parquet as pq  # deferred: pyarrow.parquet loads only when rows are written
-
     final = folder / f"{sid}.parquet"
-    table = pa.Table.from_pandas(df, preserve_index=False)
-    sink = pa.BufferOutputStream()
-    pq.write_table(table, sink)
-    data = sink.getvalue().to_pybytes()
-    digest = hashlib.sha256(data).hexdigest()
+    data, digest = encode_rows(df)
     outputs.write_bytes(final, data, force=True)      # a rerun replaces a corrupt file
     outputs.append_line(folder.parent / CHECKSUMS, f"{digest} {len(df)} {final.name}",
                         inputs=inputs, what="sweep checksum file (rows.sha256)")
     return final
+
+
+# -- the worker's side: warm once, run a batch, write its files, return small records ----------
+
+_WARM: dict = {}
+
+
+def warm_worker() -> dict:
+    """Make this worker process ready for scenarios, once: the imports and one numba thread.
+
+    Loads the simulator, the estimators and the scorer (mujoco, numba, scipy;
+    1-2 s on a fresh process) and pyarrow's Parquet writer, so that a worker
+    pays them once and not in its first task's timing. Sets numba's thread
+    count to 1 for the calling thread (a Dask worker started without
+    ``NUMBA_NUM_THREADS=1`` would otherwise run a thread team per worker on
+    every core). Returns the worker's thread variables (:data:`THREAD_ENV`).
+    Idempotent; called by every task, so a worker that joins later (a restarted
+    one) warms itself.
+    """
+    if not _WARM:
+        # deferred on purpose: the heavy engine loads in the workers, never when the CLI parses
+        import pyarrow.parquet  # noqa: F401
+        import gyroarray.chain.run  # noqa: F401
+        _WARM["pid"] = os.getpid()
+    from gyroarray.core.jit import numba  # deferred: numba (loaded above already; a dict look-up)
+    if numba.get_num_threads() != 1:
+        numba.set_num_threads(1)      # per calling thread: the executor thread of a Dask worker
+    return {k: os.environ.get(k) for k in THREAD_ENV}
+
+
+def prepare_truth(spec: ScenarioSpec) -> str:
+    """Compute (or read) a scenario's rate-table truth into the cache folder, in a worker.
+
+    One such task per distinct (profile, rate, duration) runs before the
+    scenarios, so the physics of a profile runs once on a machine and not in
+    every worker that meets it first. Returns the cache key.
+    """
+    warm_worker()
+    from gyroarray.sim.truth import compute_truth  # deferred: mujoco (warm_worker loaded it)
+
+    sc = spec.build()
+    return compute_truth(sc.profile, sc.sample_rate_hz, duration_s=sc.duration_s).meta.key
+
+
+def one_line(err: BaseException) -> str:
+    """``Type: message`` on one line (a scenario's failure as the summary lists it)."""
+    return " ".join(f"{type(err).__name__}: {err}".split())
+
+
+def run_batch(specs, estimators, sweep_name: str, rows_dir) -> list[dict]:
+    """Run scenarios in a worker; each one's rows are written there, small records come back.
+
+    Each scenario's Parquet file is written by the worker itself
+    (``rows_dir/<id>.parquet``, atomically: a temporary file, then
+    ``os.replace``), so the rows never travel through a Dask scheduler or a
+    pipe; the caller checks the file's SHA-256 and appends it to
+    ``rows.sha256``. A scenario that raises is recorded and the others go on.
+
+    Returns
+    -------
+    list of dict
+        Per scenario: ``id``, ``seconds`` (its run time in the worker [s]) and
+        either ``file``, ``sha256``, ``rows`` (written), ``error`` (it raised:
+        one line), or ``write_error`` and ``file`` (its file could not be written).
+    """
+    warm_worker()
+    folder = Path(rows_dir)
+    out = []
+    for spec in specs:
+        t0 = time.perf_counter()
+        try:
+            df = run_one(spec, estimators, sweep_name)
+        except Exception as err:          # noqa: BLE001 - a scenario's failure is reported, not fatal
+            out.append({"id": spec.id, "error": one_line(err), "seconds": time.perf_counter() - t0})
+            continue
+        final = folder / f"{spec.id}.parquet"
+        data, digest = encode_rows(df)
+        try:
+            outputs.write_bytes(final, data, force=True)      # a rerun replaces a corrupt file
+        except InputError as err:
+            out.append({"id": spec.id, "write_error": err.message, "file": str(final),
+                        "seconds": time.perf_counter() - t0})
+            break                          # a full disk: the caller stops the sweep
+        out.append({"id": spec.id, "file": final.name, "sha256": digest, "rows": len(df),
+                    "seconds": time.perf_counter() - t0})
+    return out
 
 
 def _sha256(path: Path) -> str:
@@ -229,13 +339,17 @@ def _watch_parent(parent_pid: int) -> None:
             pass
     if os.getppid() != parent_pid:
         os._exit(1)
+    threading.Thread(target=_watch, args=(parent_pid,), name="gyroarray-parent-watch",
+                     daemon=True).start()
+    warm_worker()           # once per worker process: the imports before its first task
 
-    def watch():
-        while True:
-            time.sleep(0.5)
-            if os.getppid() != parent_pid:
-                os._exit(1)
-    threading.Thread(target=watch, name="gyroarray-parent-watch", daemon=True).start()
+
+def _watch(parent_pid: int) -> None:
+    """Poll the parent's pid twice a second; exit when the sweep process is gone."""
+    while True:
+        time.sleep(0.5)
+        if os.getppid() != parent_pid:
+            os._exit(1)
 
 
 _RECORD_END = re.compile(r"[0-9a-f]{64} [0-9]+ [^ ]+\.parquet\r?$")
@@ -494,24 +608,203 @@ def _scenarios_to_run(sweep: Sweep, rows_dir: Path, records: dict, notes: list) 
     return todo
 
 
-def _run_in_processes(todo: list, sweep: Sweep, workers: int, done) -> None:
-    """Run ``todo`` on a local spawn process pool, reporting each result to ``done``."""
+#: Target run time of one task (a batch of scenarios) [s]: long beside a task's own cost (a
+#: round trip through the scheduler, a few ms), short beside a sweep (the tail stays balanced).
+TASK_TARGET_S = 5.0
+#: Times Dask reruns a task that raised (a lost worker's task is rescheduled besides, up to
+#: ``distributed.scheduler.allowed-failures``).
+TASK_RETRIES = 2
+
+
+class TaskBatches:
+    """The scenarios to run, grouped into tasks of about ``target_s`` seconds each.
+
+    Until one scenario has been timed, a task holds one scenario. From then on
+    the measured time per unit of work (samples × gyros, :func:`_cost`) gives
+    each next task as many scenarios (in queue order: longest first) as fit in
+    ``target_s``, and at most ``ceil(left / (2 slots))`` so that the last tasks
+    still spread over every worker. The scenarios of a task that failed as a
+    whole (its worker died past Dask's retries) come back one per task
+    (``isolated``), so that only the scenario that kills its worker is lost.
+
+    Parameters
+    ----------
+    todo : list of ScenarioSpec
+        In the order to run them.
+    slots : int
+        Worker threads of the pool or cluster.
+    costs : dict
+        Scenario id -> work (samples × gyros).
+    target_s : float
+        Target run time of a task [s].
+    """
+
+    def __init__(self, todo, slots: int, costs: dict, target_s: float = TASK_TARGET_S):
+        self.queue = deque(todo)
+        self.slots = max(1, int(slots))
+        self.costs = costs
+        self.target_s = float(target_s)
+        self.retry: deque = deque()
+        self.spent_s = 0.0
+        self.spent_cost = 0.0
+
+    def measured(self, sid: str, seconds: float) -> None:
+        """Count a scenario's measured run time [s] in the time per unit of work."""
+        self.spent_s += float(seconds)
+        self.spent_cost += float(self.costs.get(sid, 0.0))
+
+    def split(self, specs) -> None:
+        """Run these scenarios again, one per task."""
+        self.retry.extend(specs)
+
+    def take(self):
+        """The next task: ``(scenarios, isolated)``, or None when nothing is left."""
+        if self.retry:
+            return [self.retry.popleft()], True
+        if not self.queue:
+            return None
+        batch = [self.queue.popleft()]
+        if self.spent_cost > 0:
+            rate = self.spent_s / self.spent_cost
+            cap = max(1, math.ceil((len(self.queue) + 1) / (2 * self.slots)))
+            est = rate * self.costs.get(batch[0].id, 0.0)
+            while (self.queue and len(batch) < cap
+                   and est + rate * self.costs.get(self.queue[0].id, 0.0) <= self.target_s):
+                spec = self.queue.popleft()
+                batch.append(spec)
+                est += rate * self.costs.get(spec.id, 0.0)
+        return batch, False
+
+
+def _truth_group(spec: ScenarioSpec) -> tuple:
+    sc = spec.build()
+    return (sc.profile.fingerprint, float(sc.sample_rate_hz), sc.duration_s)
+
+
+class _Processes:
+    """The local process pool as the dispatcher sees it (a dead worker breaks the pool)."""
+
+    retry_lost = False
+
+    def __init__(self, pool):
+        self.pool = pool
+
+    def submit(self, fn, *args):
+        try:
+            return self.pool.submit(fn, *args)
+        except BrokenProcessPool as err:           # a worker died: every later task fails so
+            fut: Future = Future()
+            fut.set_exception(err)
+            return fut
+
+    def wait_any(self, pending):
+        finished, _ = wait(pending, return_when=FIRST_COMPLETED)
+        return [(f, f.exception()) for f in sorted(finished, key=id)]
+
+    @staticmethod
+    def result(fut):
+        return fut.result()
+
+
+class _Dask:
+    """A dask.distributed client as the dispatcher sees it (lost workers' tasks run elsewhere)."""
+
+    retry_lost = True
+
+    def __init__(self, client, gone):
+        # deferred: dask.distributed is optional (only for --scheduler/--dask) and slow to import
+        from distributed import as_completed
+        from distributed.comm.core import CommClosedError
+        self.client, self.gone = client, gone
+        self.finished = as_completed(loop=client.loop)      # every submitted task, as it ends
+        self.lost = (CancelledError, CommClosedError, TimeoutError)
+        self.count = 0
+        self.token = os.urandom(4).hex()     # keys of this run only (a shared scheduler)
+
+    def submit(self, fn, *args):
+        self.count += 1
+        first = getattr(args[0], "id", None) or getattr((args[0] or [None])[0], "id", "task")
+        try:
+            fut = self.client.submit(fn, *args, key=f"gyroarray-{fn.__name__}-{self.token}-{self.count}-{first}",
+                                     pure=False, retries=TASK_RETRIES)
+        except self.lost as exc:
+            raise self.gone(exc) from None
+        self.finished.add(fut)
+        return fut
+
+    def wait_any(self, pending):
+        try:
+            finished = [next(self.finished)] + self.finished.next_batch(block=False)
+            out = []
+            for f in finished:
+                if f.cancelled():
+                    raise CancelledError(f"task {f.key} was cancelled (the scheduler restarted?)")
+                out.append((f, f.exception() if f.status == "error" else None))
+            return out
+        except self.lost as exc:
+            raise self.gone(exc) from None
+
+    def result(self, fut):
+        try:
+            return fut.result()
+        except self.lost as exc:
+            raise self.gone(exc) from None
+
+
+def _dispatch(backend, slots: int, todo: list, sweep: Sweep, rows_dir: Path, costs: dict,
+              record, lost) -> None:
+    """Run ``todo`` on ``backend``: the truths first (one task per distinct truth), then the
+    scenarios in batches (:class:`TaskBatches`), at most two tasks per slot in flight; each
+    scenario's record goes to ``record``, a scenario whose task failed as a whole to ``lost``."""
+    firsts: dict = {}
+    for spec in todo:
+        try:
+            firsts.setdefault(_truth_group(spec), spec)
+        except Exception:                  # noqa: BLE001 - the scenario itself will report it
+            pass
+    pending: dict = {backend.submit(prepare_truth, spec): None for spec in firsts.values()}
+    while pending:
+        for fut, _exc in backend.wait_any(pending):  # a failed truth: its scenarios report it
+            pending.pop(fut)
+    batches = TaskBatches(todo, slots, costs)
+
+    def fill():
+        while len(pending) < 2 * max(1, slots):
+            nxt = batches.take()
+            if nxt is None:
+                return
+            pending[backend.submit(run_batch, nxt[0], sweep.estimators, sweep.name,
+                                   str(rows_dir))] = nxt
+
+    fill()
+    while pending:
+        for fut, exc in backend.wait_any(pending):
+            specs, _isolated = pending.pop(fut)
+            if exc is None:
+                for rec in sorted(backend.result(fut), key=lambda r: r["id"]):
+                    batches.measured(rec["id"], rec["seconds"])
+                    record(rec)
+            elif len(specs) > 1 and backend.retry_lost:
+                batches.split(specs)
+            else:
+                for spec in specs:
+                    lost(spec, exc)
+        fill()
+
+
+def _run_in_processes(todo: list, sweep: Sweep, workers: int, rows_dir: Path, costs: dict,
+                      record, lost) -> None:
+    """Run ``todo`` on a local spawn process pool (:func:`_dispatch`)."""
     ctx = mp.get_context("spawn")
     blas = {k: v for k, v in THREAD_ENV.items() if k != "NUMBA_NUM_THREADS"}
-    with _env(blas), ProcessPoolExecutor(max_workers=min(workers, len(todo)),
-                                         mp_context=ctx, initializer=_watch_parent,
+    n = min(workers, len(todo))
+    with _env(blas), ProcessPoolExecutor(max_workers=n, mp_context=ctx, initializer=_watch_parent,
                                          initargs=(os.getpid(),)) as pool:
-        futures = {pool.submit(run_one, s, sweep.estimators, sweep.name): s for s in todo}
-        pending = set(futures)
         try:
-            while pending:
-                finished, pending = wait(pending, return_when=FIRST_COMPLETED)
-                for fut in sorted(finished, key=lambda fu: futures[fu].id):
-                    exc = fut.exception()
-                    done(futures[fut], None if exc else fut.result(), exc)
+            _dispatch(_Processes(pool), n, todo, sweep, rows_dir, costs, record, lost)
         except BaseException:
-            # a result that cannot be written (a full disk) or an interrupt: stop now, do not
-            # run the rest first (the workers write nothing themselves; a rerun resumes)
+            # a result that cannot be recorded (a full disk) or an interrupt: stop now, do not
+            # run the rest first (a rerun resumes; a file being written is a hidden temporary)
             procs = dict(getattr(pool, "_processes", None) or {})   # before shutdown clears it
             pool.shutdown(wait=False, cancel_futures=True)
             for proc in procs.values():
@@ -522,52 +815,130 @@ def _run_in_processes(todo: list, sweep: Sweep, workers: int, done) -> None:
             raise
 
 
-def _run_on_dask(todo: list, sweep: Sweep, scheduler: str, done, notes: list) -> None:
-    """Run ``todo`` on a dask.distributed cluster, reporting each result to ``done``."""
-    # deferred: dask.distributed is optional (only for --scheduler) and slow to import
-    from distributed import as_completed
+#: Most worker processes ``--dask local:N`` starts.
+MAX_LOCAL_WORKERS = 1024
+
+
+def parse_dask(text) -> int:
+    """The worker count N of a ``--dask local:N`` request, refused up front when malformed.
+
+    Raises
+    ------
+    InputError
+        One line naming ``--dask``, what is wrong and the expected form.
+    """
+    t = str(text)
+    shown = t if len(t) <= 80 and t.isprintable() else repr(t[:80]) + "..."
+    form = ("give local:N (a Dask LocalCluster of N single-thread worker processes on this "
+            "machine, e.g. local:4); for a running cluster use --scheduler tcp://HOST:PORT")
+    kind, sep, n = t.partition(":")
+    if kind.strip().lower() != "local" or not sep:
+        raise InputError(f"--dask {shown}: not a cluster gyroarray can start; {form}")
+    n = n.strip()
+    if not (n.isascii() and n.isdigit() and 1 <= int(n) <= MAX_LOCAL_WORKERS):
+        raise InputError(f"--dask {shown}: N must be a whole number from 1 to "
+                         f"{MAX_LOCAL_WORKERS}, got {n!r}; {form}")
+    return int(n)
+
+
+@contextmanager
+def local_cluster(n_workers: int):
+    """A dask.distributed ``LocalCluster`` of ``n_workers`` single-thread worker processes,
+    set up as the local process pool's workers are (:data:`THREAD_ENV`), closed on exit.
+
+    The BLAS/OpenMP variables reach the workers through
+    ``distributed.nanny.pre-spawn-environ`` (set in this process while the
+    cluster lives, then restored), ``NUMBA_NUM_THREADS=1`` through the
+    workers' own environment (never this process's: numba here keeps its
+    default), and the workers' statistical profiler is off (it samples the
+    running task's stack every 10 ms).
+
+    Raises
+    ------
+    InputError
+        The cluster did not start (one line, with the way out).
+    """
+    try:
+        import dask  # deferred: dask.distributed is optional (only for --dask) and slow to import
+        from distributed import LocalCluster  # deferred: as dask, just above
+    except ImportError:
+        raise InputError("--dask needs dask[distributed] installed (pip install "
+                         "'gyroarray[dask]'), or use --workers N") from None
+    blas = {k: v for k, v in THREAD_ENV.items() if k != "NUMBA_NUM_THREADS"}
+    config = {"distributed.nanny.pre-spawn-environ": blas,
+              "distributed.worker.profile.enabled": False}
+    with _env(blas), dask.config.set(config):
+        try:
+            cluster = LocalCluster(n_workers=int(n_workers), threads_per_worker=1, processes=True,
+                                   # its HTTP routes on a free local port: never a warning
+                                   # that another cluster holds Dask's default 8787
+                                   dashboard_address="127.0.0.1:0", silence_logs=logging.CRITICAL,
+                                   env={"NUMBA_NUM_THREADS": "1"})
+        except Exception as err:                  # noqa: BLE001 - any start failure, in one line
+            raise InputError(f"--dask local:{n_workers}: the local Dask cluster did not start "
+                             f"({one_line(err)[:200]}); use --workers {n_workers} (local "
+                             "processes) instead") from None
+        try:
+            yield cluster
+        finally:
+            try:
+                cluster.close(timeout=10)
+            except Exception:                      # noqa: BLE001 - closing what is already gone
+                pass
+
+
+def _run_on_dask(todo: list, sweep: Sweep, scheduler: str | None, n_local: int | None,
+                 rows_dir: Path, costs: dict, record, lost, notes: list) -> None:
+    """Run ``todo`` on a dask.distributed cluster (``scheduler``) or on a LocalCluster of
+    ``n_local`` workers started here (:func:`_dispatch`)."""
+    # deferred: dask.distributed is optional (only for --scheduler/--dask) and slow to import
     from distributed.comm.core import CommClosedError
-    lost = (CancelledError, CommClosedError, TimeoutError)
+    lost_conn = (CancelledError, CommClosedError, TimeoutError)
+    where = f"the Dask scheduler at {scheduler}" if scheduler else f"the local Dask cluster (local:{n_local})"
 
     def gone(err) -> InputError:
-        return InputError(f"--scheduler: lost the connection to the Dask scheduler at {scheduler} "
-                          f"({type(err).__name__}: {' '.join(str(err).split())[:160]}); the scenarios "
-                          "finished so far are kept: run the same command again to resume")
+        return InputError(f"{'--scheduler' if scheduler else '--dask'}: lost the connection to "
+                          f"{where} ({type(err).__name__}: {' '.join(str(err).split())[:160]}); the "
+                          "scenarios finished so far are kept: run the same command again to resume")
 
     log = logging.getLogger("distributed")
     level = log.level
     log.setLevel(logging.CRITICAL)        # its reconnection errors: stderr carries one line at most
     client = None
     try:
-        client = _dask_client(scheduler)
-        try:
-            envs = client.run(lambda: {k: os.environ.get(k) for k in THREAD_ENV})
-            futures = {client.submit(run_one, s, sweep.estimators, sweep.name, key=f"sweep-{s.id}",
-                                     pure=False): s for s in todo}
-        except lost as exc:
-            raise gone(exc) from None
-        off = sorted(w for w, e in envs.items() if e.get("OPENBLAS_NUM_THREADS") != "1")
-        if off:
-            notes.append(f"{len(off)} Dask worker(s) without OPENBLAS_NUM_THREADS=1: results "
-                         "may differ in the last bits from a local run")
-        for dfut in as_completed(list(futures), loop=client.loop):
-            spec = futures[dfut]
+        with ExitStack() as stack:
+            if scheduler is None:
+                from distributed import Client  # deferred: optional dask.distributed
+                cluster = stack.enter_context(local_cluster(n_local or 1))
+                client = Client(cluster, set_as_default=False)
+            else:
+                client = _dask_client(scheduler)
             try:
-                df, err = (None, dfut.exception()) if dfut.status == "error" else (dfut.result(), None)
-            except lost as exc:
+                # every worker warms once (imports, numba) and says its thread variables
+                envs = client.run(warm_worker)
+                slots = sum(client.nthreads().values()) or 1
+            except lost_conn as exc:
                 raise gone(exc) from None
-            done(spec, df, err)
+            except Exception as err:              # noqa: BLE001 - a worker without gyroarray
+                raise InputError(f"the Dask workers cannot run gyroarray ({one_line(err)[:200]}): "
+                                 "install the same gyroarray on every worker") from None
+            off = sorted(w for w, e in envs.items() if e.get("OPENBLAS_NUM_THREADS") != "1")
+            if off:
+                notes.append(f"{len(off)} Dask worker(s) without OPENBLAS_NUM_THREADS=1: results "
+                             "may differ in the last bits from a local run")
+            try:
+                _dispatch(_Dask(client, gone), slots, todo, sweep, rows_dir, costs, record, lost)
+            finally:
+                try:
+                    client.close(timeout=5)
+                except Exception:                      # noqa: BLE001 - a scheduler already gone
+                    pass
     finally:
-        try:
-            if client is not None:
-                client.close(timeout=5)
-        except Exception:                      # noqa: BLE001 - a scheduler already gone
-            pass
         log.setLevel(level)
 
 
 def run_sweep(sweep, out_dir, *, workers: int = 1, scheduler: str | None = None,
-              progress=None) -> dict:
+              dask: str | None = None, progress=None) -> dict:
     """Run (or resume) a sweep into ``out_dir``; one Parquet file per finished scenario.
 
     Parameters
@@ -580,6 +951,9 @@ def run_sweep(sweep, out_dir, *, workers: int = 1, scheduler: str | None = None,
         Local worker processes (ignored with ``scheduler``).
     scheduler : str, optional
         A ``dask.distributed`` scheduler address (``tcp://HOST:PORT``): run there.
+    dask : str, optional
+        ``"local:N"``: start a Dask ``LocalCluster`` of N single-thread worker
+        processes (:func:`local_cluster`), run there, close it after.
     progress : bool or None
         Progress bar on stderr; None: when stderr is a terminal.
 
@@ -588,14 +962,19 @@ def run_sweep(sweep, out_dir, *, workers: int = 1, scheduler: str | None = None,
     dict
         ``sweep``, ``out_dir``, ``dataset``, ``scenarios``, ``ran``, ``skipped``,
         ``failed`` (list of {id, error}), ``complete``, ``rows_written``,
-        ``seconds``, ``workers``, ``backend``, ``notes``, ``excluded`` (grid
-        combinations left out by ``skip_invalid``: {id, reason}).
+        ``seconds``, ``worker_seconds`` (the scenarios' run times in their
+        workers, summed [s]), ``workers``, ``scheduler``, ``dask``, ``backend``,
+        ``notes``, ``excluded`` (grid combinations left out by ``skip_invalid``:
+        {id, reason}).
     """
     t0 = time.perf_counter()
     if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
         raise InputError(f"workers must be an integer >= 1, got {workers!r}")
+    if scheduler is not None and dask is not None:
+        raise InputError("--scheduler and --dask exclude each other: give one cluster")
     if scheduler is not None:
         parse_scheduler(scheduler)                          # a malformed address: refused before work
+    n_local = parse_dask(dask) if dask is not None else None
     out = Path(out_dir)
     # the folder and the files gyroarray keeps there, before the (possibly long) expansion
     if out.exists() or out.is_symlink():
@@ -611,27 +990,50 @@ def run_sweep(sweep, out_dir, *, workers: int = 1, scheduler: str | None = None,
     records = _recorded_checksums(out)
     todo = _scenarios_to_run(sweep, rows_dir, records, notes)
     # longest first (a better finish on few workers); results do not depend on the order
-    todo.sort(key=lambda s: (-_cost(s), s.id))
+    costs = {s.id: _cost(s) for s in todo}
+    todo.sort(key=lambda s: (-costs[s.id], s.id))
     skipped = len(sweep.scenarios) - len(todo)
     bar = _Progress(len(sweep.scenarios), skipped, progress)
-    failed, rows_written = [], 0
+    failed, rows_written, busy = [], 0, [0.0]
 
-    def done(spec, df=None, err=None):
+    def record(rec: dict) -> None:
+        """A scenario's record from its worker: its file checked here and its checksum kept."""
         nonlocal rows_written
-        if err is not None:
-            failed.append({"id": spec.id, "error": f"{type(err).__name__}: {err}"})
+        busy[0] += rec.get("seconds", 0.0)
+        if "write_error" in rec:                  # a full disk: stop (a rerun resumes)
+            raise InputError(rec["write_error"], file=rec["file"])
+        if "error" in rec:
+            failed.append({"id": rec["id"], "error": rec["error"]})
         else:
-            write_rows(df, rows_dir, spec.id, inputs)
-            rows_written += len(df)
+            path = rows_dir / rec["file"]
+            if not (path.exists() or path.is_symlink()):
+                raise InputError(f"a worker wrote {rec['file']} but it is not in this folder: --out "
+                                 "must be a folder every Dask worker and this machine share (a "
+                                 "network file system), or run with --workers N", file=str(rows_dir))
+            try:
+                same = _sha256(path) == rec["sha256"]
+            except (OSError, InputError):
+                same = False
+            if not same:                          # changed since its worker wrote it: not kept
+                failed.append({"id": rec["id"], "error": "its file differs from what its worker "
+                               "wrote; run the same command again to redo it"})
+            else:
+                outputs.append_line(out / CHECKSUMS, f"{rec['sha256']} {rec['rows']} {path.name}",
+                                    inputs=inputs, what="sweep checksum file (rows.sha256)")
+                rows_written += rec["rows"]
         bar.step()
 
-    if todo and scheduler is None:
+    def lost(spec: ScenarioSpec, err: BaseException) -> None:
+        """A scenario whose task failed as a whole (its worker died, the pool broke)."""
+        failed.append({"id": spec.id, "error": f"its task failed: {one_line(err)}"})
+        bar.step()
+
+    if todo and scheduler is None and n_local is None:
         backend = "processes"
-        _run_in_processes(todo, sweep, workers, done)
+        _run_in_processes(todo, sweep, workers, rows_dir, costs, record, lost)
     elif todo:
         backend = "dask"
-        assert scheduler is not None                          # the process pool took the None case
-        _run_on_dask(todo, sweep, scheduler, done, notes)
+        _run_on_dask(todo, sweep, scheduler, n_local, rows_dir, costs, record, lost, notes)
     else:
         backend = "none (all done)"
     bar.show(final=True)
@@ -639,7 +1041,7 @@ def run_sweep(sweep, out_dir, *, workers: int = 1, scheduler: str | None = None,
     return {"sweep": sweep.name, "out_dir": str(out), "dataset": str(rows_dir),
             "scenarios": len(sweep.scenarios), "ran": len(todo) - len(failed), "skipped": skipped,
             "failed": failed, "complete": complete, "rows_written": rows_written,
-            "seconds": time.perf_counter() - t0,
-            "workers": None if scheduler else workers, "scheduler": scheduler,
-            "backend": backend, "notes": notes,
+            "seconds": time.perf_counter() - t0, "worker_seconds": busy[0],
+            "workers": n_local if n_local else (None if scheduler else workers),
+            "scheduler": scheduler, "dask": dask, "backend": backend, "notes": notes,
             "excluded": [{"id": i, "reason": r} for i, r in sweep.excluded]}

@@ -26,6 +26,7 @@ from typing import ClassVar
 import numpy as np
 
 from gyroarray.analysis.memo import by_content
+from gyroarray.analysis.motion_events import locking_test, near_events, reference_events, window_samples
 from gyroarray.effects.fitting import EffectFit
 from gyroarray.effects.faults.scan import fit_fault
 from gyroarray.core.errors import InputError
@@ -130,9 +131,47 @@ class FaultEffect(Effect):
             why = (f"{end - start:.3g} s before the record's end ({end:.6g} s): too few samples after "
                    "it to tell a fault from a glitch of the last ones")
         else:
-            return f
+            return self._at_motion_event(ctx, int(gyro), f) if self.fault_kind == "step" else f
         return replace(f, extra={**f.extra, "identifiable": False,
                                  "reason": f"onset {start:.6g} ± {sig:.2g} s, {why}"})
+
+    def _at_motion_event(self, ctx, gyro: int, f: EffectFit) -> EffectFit:
+        """A step whose onset lies within :data:`~gyroarray.analysis.motion_events.WINDOW_S` of
+        an event of the reference (a reversal, a plateau edge, a jerk) is fitted again with the
+        samples near every event bridged (linear between the samples either side): a step that
+        is no longer seen (z <= 3) was the gyro's response to the motion (a jerk sensitivity, or
+        the reference's own error), and is named so (``extra["motion_locked"]``, z of the
+        bridged fit), not a fault. A real step at an event stays: the levels either side of
+        the bridge still differ."""
+        if ctx.ref is None or not ctx.moving:
+            return f
+        key = ("motion_events",)
+        if key not in ctx.cache:
+            ctx.cache[key] = reference_events(ctx.ref, ctx.dt)
+        n = ctx.noise_end
+        ev = ctx.cache[key][ctx.cache[key] < n]
+        w = window_samples(ctx.dt)
+        i = int(np.clip(np.searchsorted(ctx.t[:n], float(f.params["start_s"])), 0, n - 1))
+        if ev.size == 0 or not near_events(ev, n, w)[i]:
+            return f
+        near = near_events(ev, ctx.n, w)
+        if near.all():
+            return f
+        E = np.array(ctx.E, dtype=float, copy=True)
+        k = np.arange(ctx.n)
+        E[near, gyro - 1] = np.interp(k[near], k[~near], E[~near, gyro - 1])
+        g = self.fit(ctx, gyro, E)
+        if not (np.isfinite(g.z) and g.z <= 3.0):
+            return f
+        _, chance, p = locking_test(ev, [i], n, w)
+        sentence = (f"gyro {gyro}: motion-locked response: the step at {f.params['start_s']:.6g} s lies within "
+                    f"{w * ctx.dt:g} s of the reference's reversals/plateau edges/jerks ({100 * chance:.1f} % of "
+                    f"the record by chance) and, with the samples near them bridged, no step is seen (z = "
+                    f"{g.z:.1f}, was {f.z:.1f}); a jerk sensitivity or the reference's own error, not a fault")
+        lock = {"kind": "motion_locked", "candidate": self.name, "gyro": gyro, "n_events": 1,
+                "window_s": w * ctx.dt, "fraction_near": 1.0, "fraction_chance": chance, "p_value": p,
+                "z_bridged": float(g.z), "sentence": sentence}
+        return replace(f, z=float(g.z), evidence=sentence, extra={**f.extra, "motion_locked": lock})
 
     def free_parameters(self, fit):
         return 2                                         # the onset and the size

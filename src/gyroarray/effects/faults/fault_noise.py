@@ -54,6 +54,21 @@ class FaultNoise(FaultEffect):
         x[after, g] = level + (x[after, g] - level) / max(float(entry.params["ratio"]), 1e-6)
         return x
 
+    def test(self, ctx, gyro):
+        """The candidate test, except on a quiet quantized counter (the spec's ``quantization`` in
+        its correlated regime: output on a coarse grid, the angle moving by less than a couple of
+        steps per sample): its increments are mostly 0 with rare ±1 steps, runs of zeros have no
+        variance at all, and a Gaussian variance scan reads them as a noise change (a counter of
+        step 0.0069 deg whose first 1.5 s read 0: ratio 1e150 at z 211). Not identifiable there."""
+        f = super().test(ctx, gyro)
+        lat = ctx.effect("quantization").lattice(ctx, int(gyro))
+        if not (lat["correlated"] and np.isfinite(f.z) and f.z > 3.0):
+            return f
+        return replace(f, extra={**f.extra, "identifiable": False,
+                                 "reason": (f"the output lies on a grid (angle step {np.degrees(lat['step_rad']):.4g} deg) "
+                                            f"and moves by {lat['counts_sd']:.2g} steps per sample: a quiet "
+                                            "quantized counter, whose increments a variance scan cannot read")})
+
     @staticmethod
     def _burst_reading(mine, burst, ctx) -> tuple[bool, bool, float]:
         """(the burst's window reaches an end of the record, only ``mine``'s gyro changed, the

@@ -1,0 +1,251 @@
+"""Sweeps on Dask (issue 34): ``--dask local:N``, batched tasks whose workers write their own
+result files, failures reported per scenario, a lost worker's scenarios run elsewhere, resume.
+
+Every comparison is bit for bit against ``--workers 1`` (the local process pool). The cluster
+tests share one LocalCluster of 2 single-thread workers (:func:`gyroarray.sweep.runner.local_cluster`,
+set up as the process pool's workers are); events are awaited by polling with generous bounds,
+never by sleeping a fixed time.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+from hostile import assert_contract, run_cli
+
+from gyroarray.core.errors import InputError
+from gyroarray.sweep.runner import (TaskBatches, load_results, local_cluster, parse_dask,
+                                    run_sweep)
+from gyroarray.sweep.sweep import load_sweep
+
+distributed = pytest.importorskip("distributed")
+
+# 6 scenarios of 10 s at 50 Hz: 3 run, 3 fail (kf_array's bias states need RRW; "arwonly" has none)
+SWEEP = """\
+name = "dask_tiny"
+seed = 11
+estimators = ["kf_array", "ols"]
+[base]
+sample_rate_hz = 50.0
+duration_s = 10.0
+effects = [{ effect = "arw", n_deg_rt_h = 0.1 }, { effect = "rrw", k_deg_h_rt_h = 600.0 }]
+[base.layout]
+scheme = 1
+n_gyros = 4
+alpha_deg = 54.7356
+[base.motion]
+profile = "p003_sine_5dps_0p03hz"
+[effect_sets]
+arwonly = [{ effect = "arw", n_deg_rt_h = 0.1 }]
+[grid]
+n_gyros = [4, 5, 6]
+effects = ["base", "arwonly"]
+"""
+
+
+def assert_same_bits(a: pd.DataFrame, b: pd.DataFrame) -> None:
+    """Equal frames, floats compared by their bits (NaN included)."""
+    assert list(a.columns) == list(b.columns) and len(a) == len(b) > 0
+    pd.testing.assert_frame_equal(a, b, check_exact=True)
+    for col in a.columns:
+        if a[col].dtype == np.float64:
+            assert np.array_equal(a[col].to_numpy().view(np.uint64),
+                                  b[col].to_numpy().view(np.uint64)), col
+
+
+@pytest.fixture(scope="module")
+def sweep_file(tmp_path_factory):
+    """The sweep file, with a private truth cache every worker inherits."""
+    old = os.environ.get("GYROARRAY_CACHE")
+    os.environ["GYROARRAY_CACHE"] = str(tmp_path_factory.mktemp("truth_cache"))
+    path = tmp_path_factory.mktemp("sweep") / "dask_tiny.toml"
+    path.write_text(SWEEP)
+    yield path
+    if old is None:
+        os.environ.pop("GYROARRAY_CACHE", None)
+    else:
+        os.environ["GYROARRAY_CACHE"] = old
+
+
+@pytest.fixture(scope="module")
+def reference(sweep_file, tmp_path_factory):
+    """``--workers 1``: the summary and the dataset every other run must equal."""
+    out = tmp_path_factory.mktemp("ref") / "out"
+    summary = run_sweep(sweep_file, out, workers=1, progress=False)
+    return summary, load_results(out)
+
+
+@pytest.fixture(scope="module")
+def cluster(sweep_file):
+    """One LocalCluster of 2 single-thread workers for the module (started after the cache
+    variable is set, so its workers inherit it)."""
+    try:
+        with local_cluster(2) as c:
+            yield c
+    except InputError as err:
+        pytest.skip(f"a local Dask cluster could not start here: {err.message}")
+
+
+def failing_ids(sweep_file) -> list[str]:
+    return sorted(s.id for s in load_sweep(sweep_file).scenarios if "arwonly" in s.id)
+
+
+# -- refusals and the task sizing (no cluster) ------------------------------------------------
+
+@pytest.mark.parametrize("text", ["local:0", "foo", "local:", "local:2:3", "local:99999",
+                                  "tcp://127.0.0.1:8786", "local:\u0662"])
+def test_bad_dask_text_is_one_line_exit_2(tmp_path, text):
+    (tmp_path / "s.toml").write_text(SWEEP)
+    o = run_cli(["sweep", tmp_path / "s.toml", "--out", tmp_path / "out", "--dask", text])
+    assert o.code == 2
+    assert_contract(o, "--dask")
+    assert "local:N" in o.err and not (tmp_path / "out").exists()
+    with pytest.raises(InputError):
+        parse_dask(text)
+
+
+def test_dask_excludes_workers_and_scheduler(tmp_path):
+    (tmp_path / "s.toml").write_text(SWEEP)
+    for extra in (["--workers", "2"], ["--scheduler", "tcp://127.0.0.1:8786"]):
+        o = run_cli(["sweep", tmp_path / "s.toml", "--out", tmp_path / "out", "--dask", "local:2",
+                     *extra])
+        assert o.code == 2 and "--dask" in o.err
+        assert_contract(o)
+    assert parse_dask("local:16") == 16 and parse_dask(" LOCAL:3") == 3
+
+
+class _Spec:
+    def __init__(self, sid):
+        self.id = sid
+
+
+def test_tasks_are_sized_from_the_measured_time():
+    specs = [_Spec(f"s{i:03d}") for i in range(100)]
+    costs = {s.id: 1.0 for s in specs}
+    b = TaskBatches(specs, slots=2, costs=costs, target_s=5.0)
+    first = [b.take() for _ in range(4)]                  # nothing measured: one per task
+    assert [len(t[0]) for t in first] == [1, 1, 1, 1] and not any(t[1] for t in first)
+    b.measured("s000", 1.0)                               # 1 s per scenario: 5 per task
+    assert len(b.take()[0]) == 5
+    b.measured("s001", 3.0)                               # now 2 s per scenario: 2 per task
+    assert len(b.take()[0]) == 2
+    # the tail: at most ceil(left / (2 slots)) per task, so the last tasks spread over the slots
+    b2 = TaskBatches(specs[:6], slots=2, costs=costs, target_s=100.0)
+    b2.measured("s000", 0.01)
+    sizes = []
+    while (t := b2.take()) is not None:
+        sizes.append(len(t[0]))
+    assert sizes == [2, 1, 1, 1, 1] and sum(sizes) == 6
+    # a task that failed as a whole comes back one scenario per task, marked isolated
+    b2.split(specs[:3])
+    assert [b2.take() for _ in range(3)] == [([specs[i]], True) for i in range(3)]
+    assert b2.take() is None
+
+
+# -- on a cluster ----------------------------------------------------------------------------
+
+def test_dask_local_gives_the_same_bits_and_names_each_failure(sweep_file, reference, tmp_path):
+    """``--dask local:2`` (a cluster started and closed by the command): the same dataset as
+    ``--workers 1``, each failing scenario named with its reason, the others complete."""
+    ref_summary, ref = reference
+    out = tmp_path / "dask"
+    o = run_cli(["sweep", sweep_file, "--out", out, "--dask", "local:2", "--json"], timeout=300)
+    assert "Traceback" not in o.err
+    summary = json.loads(o.out)
+    assert o.code == 1 and summary["backend"] == "dask" and summary["workers"] == 2
+    assert sorted(f["id"] for f in summary["failed"]) == failing_ids(sweep_file)
+    assert sorted(f["id"] for f in ref_summary["failed"]) == failing_ids(sweep_file)
+    assert all("rate random walk" in f["error"] and "\n" not in f["error"]
+               for f in summary["failed"])
+    assert summary["ran"] == 3 and summary["rows_written"] == len(ref)
+    assert_same_bits(load_results(out), ref)
+    # the workers wrote the files, this process recorded their checksums: all verify
+    lines = (out / "rows.sha256").read_text().splitlines()
+    assert len(lines) == 3 and all(len(x.split()) == 3 for x in lines)
+
+
+class _KillOnce(distributed.WorkerPlugin):
+    """Test only: the first worker to start a scenario batch dies (``os._exit``) as soon as a
+    result file appears, once per test (a flag file); a restarted worker is left alone."""
+
+    name = "gyroarray-test-kill-once"
+
+    def __init__(self, flag_dir: str, rows_dir: str):
+        self.flag_dir, self.rows_dir = flag_dir, rows_dir
+
+    def transition(self, key, start, finish, **kwargs):
+        if finish != "executing" or "run_batch" not in str(key):
+            return
+        try:
+            os.close(os.open(os.path.join(self.flag_dir, "armed"), os.O_CREAT | os.O_EXCL))
+        except FileExistsError:
+            return
+        rows = Path(self.rows_dir)
+
+        def later():
+            n0 = len(list(rows.glob("*.parquet")))
+            deadline = time.monotonic() + 300
+            while len(list(rows.glob("*.parquet"))) <= n0 and time.monotonic() < deadline:
+                time.sleep(0.005)
+            Path(self.flag_dir, "killed").write_text(str(os.getpid()))
+            os._exit(1)
+
+        threading.Thread(target=later, daemon=True).start()
+
+
+@pytest.mark.slow   # a worker killed mid-sweep on the shared cluster (~15 s on 2 busy cores): make score
+def test_a_worker_killed_mid_sweep_costs_only_its_scenarios(sweep_file, reference, cluster,
+                                                             tmp_path):
+    import cloudpickle
+    _, ref = reference
+    out = tmp_path / "killed"
+    flags = tmp_path / "flags"
+    flags.mkdir()
+    cloudpickle.register_pickle_by_value(sys.modules[__name__])   # the plugin class goes by value
+    client = distributed.Client(cluster, set_as_default=False)
+    try:
+        client.register_plugin(_KillOnce(str(flags), str(out / "rows")))
+        summary = run_sweep(sweep_file, out, scheduler=cluster.scheduler_address, progress=False)
+    finally:
+        client.unregister_worker_plugin(_KillOnce.name)
+        client.close()
+        cloudpickle.unregister_pickle_by_value(sys.modules[__name__])
+    assert (flags / "killed").exists(), "no worker was killed during the sweep"
+    assert sorted(f["id"] for f in summary["failed"]) == failing_ids(sweep_file)
+    assert summary["ran"] == 3
+    assert_same_bits(load_results(out), ref)
+    assert not [p for p in (out / "rows").iterdir() if not p.name.endswith(".parquet")
+                and not p.name.startswith(".")]
+
+
+@pytest.mark.slow   # a SIGKILLed sweep on the shared cluster, then resumed (~15 s on 2 busy cores): make score
+def test_resume_after_an_interrupted_dask_sweep(sweep_file, reference, cluster, tmp_path):
+    _, ref = reference
+    out = tmp_path / "interrupted"
+    code = ("import sys; from gyroarray.sweep.runner import run_sweep; "
+            "run_sweep(sys.argv[1], sys.argv[2], scheduler=sys.argv[3], progress=False)")
+    proc = subprocess.Popen([sys.executable, "-c", code, str(sweep_file), str(out),
+                             cluster.scheduler_address], env=os.environ.copy())
+    try:
+        deadline = time.monotonic() + 300
+        while not list((out / "rows").glob("*.parquet")):
+            assert proc.poll() is None, "the sweep ended before it could be killed"
+            assert time.monotonic() < deadline, "no result file within 300 s"
+            time.sleep(0.02)
+    finally:
+        os.kill(proc.pid, signal.SIGKILL)
+        proc.wait()
+    summary = run_sweep(sweep_file, out, scheduler=cluster.scheduler_address, progress=False)
+    assert summary["skipped"] >= 1 and summary["ran"] + summary["skipped"] == 3
+    assert sorted(f["id"] for f in summary["failed"]) == failing_ids(sweep_file)
+    assert_same_bits(load_results(out), ref)
