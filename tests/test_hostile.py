@@ -339,6 +339,7 @@ sys.exit(main(sys.argv[1:]))
 """
 
 
+@pytest.mark.slow   # a fresh interpreter with no writable home runs the chain (10 s on 2 cores): make score
 def test_runs_without_a_writable_home_or_install(d, tmp_path):
     """HOME=/nonexistent, and (emulated) a read-only install: numba caches in a private temp folder."""
     env = {k: v for k, v in os.environ.items() if not k.startswith("NUMBA_")}

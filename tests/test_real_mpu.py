@@ -105,7 +105,7 @@ def test_a_gauss_markov_hump_with_no_positive_amplitude_is_not_significant(analy
     assert gms and all(t.fit.params["sigma_deg_h"] > 0 for t in gms if a.significant(t))
 
 
-@pytest.mark.parametrize("smooth_s", [0.05, 0.3])
+@pytest.mark.parametrize("smooth_s", [0.05, pytest.param(0.3, marks=pytest.mark.slow)])   # 0.3: 5 s, make score
 def test_fitted_scale_factor_does_not_depend_on_the_smoothing(smooth_s):
     """Errors in variables: the reference's own noise is in the regressor. Fitted against the
     recorded reference, with the smoothed one as instrument, the scale factor (latency and the

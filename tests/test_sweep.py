@@ -291,6 +291,7 @@ def test_refuses_to_resume_a_different_sweep(reference, tmp_path):
     assert "different sweep" in info.value.message and info.value.file.endswith("sweep.json")
 
 
+@pytest.mark.slow   # a sweep SIGKILLed and resumed (7 s on 2 cores; test_dask_sweep has the cluster's twin): make score
 def test_sigkill_and_resume_gives_the_same_dataset(reference, tmp_path):
     sweep_file, _, df = reference
     out = tmp_path / "killed"
