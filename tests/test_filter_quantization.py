@@ -23,6 +23,7 @@ from gyroarray.effects.model import ModelEntry, NoiseModel
 Q_DEG = 0.002
 
 
+@pytest.mark.slow   # a filtered, quantized lab run diagnosed (6 s on 2 cores): make score
 def test_quantization_behind_a_filter_is_read_at_the_shortest_tau():
     import allantools
 

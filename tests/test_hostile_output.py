@@ -128,7 +128,8 @@ def test_unreachable_scheduler_refused_at_once(sweep_file, tmp_path):
     assert time.monotonic() - t0 < 60
 
 
-@pytest.mark.parametrize("answer", [b"", b"HTTP/1.1 400 Bad Request\r\n\r\n" + b"\xff" * 64])
+@pytest.mark.parametrize("answer", [pytest.param(b"", marks=pytest.mark.slow),   # waits the 10 s timeout: make score
+                                    b"HTTP/1.1 400 Bad Request\r\n\r\n" + b"\xff" * 64])
 def test_scheduler_that_is_not_dask_refused_within_the_timeout(sweep_file, tmp_path, answer):
     """A port that accepts but stays silent, or answers garbage: refused within the stated
     10 s connection timeout (plus set-up), one line, no traceback at the client's cleanup."""

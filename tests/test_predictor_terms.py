@@ -296,6 +296,7 @@ def warmup_record(tmp_path_factory):
     return folder / "out" / "warmup_run.csv.gz"
 
 
+@pytest.mark.slow   # simulate, diagnose and fit the plugin effect (8 s on 2 cores): make score
 def test_the_plugin_is_simulated_diagnosed_and_fitted(warmup_record):
     o = run_cli(["diagnose", warmup_record, "--plugin", PLUGIN, "--runs", 20, "--json"], timeout=900)
     assert o.code == 0, o.err

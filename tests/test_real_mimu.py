@@ -24,6 +24,7 @@ MIMU = Path(__file__).resolve().parents[2] / "shared" / "measurements" / "real" 
 pytestmark = pytest.mark.skipif(not MIMU.exists(), reason="shared/measurements/real not present")
 
 
+@pytest.mark.slow   # diagnose on the 24-gyro record (12 s on 2 cores; the still-part allan test stays): make score
 def test_mimu_motion_is_cut_out_and_the_still_parts_diagnosed(cli):
     d = json.loads(cli("diagnose", MIMU, "--runs", 10, "--json").stdout)
     assert any("the outputs show motion, so only their 20 still parts" in n for n in d["notes"])

@@ -319,6 +319,7 @@ def test_sigkill_and_resume_gives_the_same_dataset(reference, tmp_path):
     assert len(pd.read_parquet(out / "rows")) == len(df)
 
 
+@pytest.mark.slow   # a scheduler + workers started by hand (7 s; test_dask_sweep runs --dask local:2 fast): make score
 def test_dask_cluster_equals_local(reference, tmp_path):
     sweep_file, _, df = reference
     try:
