@@ -73,7 +73,7 @@ from gyroarray.effects.names import ARW, CORRELATION
 __all__ = ["MIN_PART", "AXES", "WhiteWalk", "FuseResult", "fuse", "still_parts", "stitch",
            "octave_avar", "white_walk_fit", "white_walk_of_avar", "design_rrw", "nnls2", "fused_measurement", "fused_files", "sha256_of",
            "split_parts", "fused_terms", "band_basis", "predicted_band", "tau_verdict", "validate_fuse",
-           "used_gyros", "check_geometry", "model_noise", "gain_of", "predicted_arw", "plain_params",
+           "used_gyros", "check_geometry", "model_noise", "fitted_noise", "noise_of_model", "gain_of", "predicted_arw", "plain_params",
            "best_single_of", "axes_json", "fused_sidecar"]
 
 #: Shortest still part [samples] kept for the noise analysis (as ``compare``'s).
@@ -470,6 +470,36 @@ def check_geometry(meas: Measurement, used, excluded, constant) -> None:
                          file=meas.source)
 
 
+
+def fitted_noise(arw: np.ndarray, ww: "WhiteWalk", used, notes: list, how: str = "") -> tuple[ArrayNoise, str]:
+    """The estimator's noise without a model: per gyro ``arw`` [rad/√s] and the rate random walk
+    :func:`design_rrw` gives from the white + walk fit ``ww``, no correlation between gyros; the
+    notes say so (``how``: how the Allan variance was read) and name the gyros whose walk is
+    designed with its 2σ bound. Returns (noise, its source text)."""
+    rrw, floored = design_rrw(ww)
+    noise = ArrayNoise(arw, rrw, np.eye(len(used)), np.eye(len(used)))
+    source = ("fitted on the record's analysed part: per gyro ARW + RRW from the octave Allan "
+              "variance, no correlation between gyros")
+    notes.append("no --model: the estimator's noise was " + source + how)
+    if floored:
+        notes.append(f"the rate random walk of gyro(s) {', '.join(str(used[i]) for i in floored)} "
+                     "is not resolved from 0 on this record: the estimator is designed with its "
+                     "2-sigma upper bound (a drift the record cannot tell from none is not ruled out)")
+    return noise, source
+
+
+def noise_of_model(model, meas, used, needs_arw: bool, model_name: str | None,
+                   notes: list) -> tuple[ArrayNoise, str]:
+    """The estimator's noise from a model (:func:`model_noise`), with a note naming the model's
+    effects the estimator does not use. Returns (noise, its source text)."""
+    name = model_name or "the model"
+    noise = model_noise(model, meas, used, needs_arw, name)
+    if noise.ignored_effects:
+        notes.append(f"the estimator models ARW, RRW and correlation only; the model's "
+                     f"{', '.join(noise.ignored_effects)} are not used by it")
+    return noise, f"model {name}"
+
+
 def model_noise(model, meas: Measurement, used: list[int], needs_arw: bool, model_name: str) -> ArrayNoise:
     """The model's ARW/RRW/correlation for the used gyros (rows and columns of the others dropped)."""
     try:
@@ -617,22 +647,9 @@ def fuse(meas: Measurement, estimator: str, *, model=None, model_name: str | Non
         if weak.any():                    # a walk alone: the white level from the differences
             d = np.diff(e_single[:, weak], axis=0)
             arw[weak] = np.maximum(np.std(d, axis=0) / math.sqrt(2.0) * math.sqrt(dt), 1e-30)
-        rrw, floored = design_rrw(ww)
-        noise = ArrayNoise(arw, rrw, np.eye(len(used)), np.eye(len(used)))
-        source = ("fitted on the record's analysed part: per gyro ARW + RRW from the octave Allan "
-                  "variance, no correlation between gyros")
-        notes.append("no --model: the estimator's noise was " + source)
-        if floored:
-            notes.append(f"the rate random walk of gyro(s) {', '.join(str(used[i]) for i in floored)} "
-                         "is not resolved from 0 on this record: the estimator is designed with its "
-                         "2-sigma upper bound (a drift the record cannot tell from none is not ruled out)")
+        noise, source = fitted_noise(arw, ww, used, notes)
     else:
-        name = model_name or "the model"
-        noise = model_noise(model, meas, used, cls.needs_arw, name)
-        source = f"model {name}"
-        if noise.ignored_effects:
-            notes.append(f"the estimator models ARW, RRW and correlation only; the model's "
-                         f"{', '.join(noise.ignored_effects)} are not used by it")
+        noise, source = noise_of_model(model, meas, used, cls.needs_arw, model_name, notes)
     if model is None and "allan_covariance" in est.get_params() and est.get_params()["allan_covariance"] is None:
         tau = est.get_params().get("tau_s")
         if isinstance(tau, (int, float)) and math.isfinite(tau) and tau > 0:

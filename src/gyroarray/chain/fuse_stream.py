@@ -55,11 +55,11 @@ from gyroarray.core.errors import InputError
 from gyroarray.core.layout import Layout
 from gyroarray.core.limits import format_size, stream_work_bytes
 from gyroarray.core.measurement import Measurement, RecordHead, iter_record
-from gyroarray.estimators import ArrayNoise, Estimator, get_estimator, make
+from gyroarray.estimators import Estimator, get_estimator, make
 from gyroarray.estimators.base import LinearSystem
 from gyroarray.chain.fuse import (AXES, axes_json, best_single_of,
-                                  check_geometry, design_rrw, fused_sidecar, gain_of,
-                                  model_noise, plain_params, predicted_arw, white_walk_of_avar)
+                                  check_geometry, fitted_noise, fused_sidecar, gain_of,
+                                  noise_of_model, plain_params, predicted_arw, white_walk_of_avar)
 
 __all__ = ["STREAMING_ESTIMATORS", "ChunkFilter", "streamed_fuse"]
 
@@ -279,23 +279,10 @@ def streamed_fuse(head: RecordHead, estimator: str, *, model=None, model_name: s
         if weak.any():               # a walk alone: the white level at the shortest tau
             first = np.array([single_sa.analyses[used[i]].adev_rad_s[0] for i in np.flatnonzero(weak)])
             arw[weak] = np.maximum(first * math.sqrt(dt), 1e-30)
-        rrw, floored = design_rrw(single)
-        noise = ArrayNoise(arw, rrw, np.eye(len(used)), np.eye(len(used)))
-        source = ("fitted on the record's analysed part: per gyro ARW + RRW from the octave Allan "
-                  "variance, no correlation between gyros")
-        notes.append("no --model: the estimator's noise was " + source + " (streamed: the whole "
-                     "record's overlapping Allan variance)")
-        if floored:
-            notes.append(f"the rate random walk of gyro(s) {', '.join(str(used[i]) for i in floored)} "
-                         "is not resolved from 0 on this record: the estimator is designed with its "
-                         "2-sigma upper bound (a drift the record cannot tell from none is not ruled out)")
+        noise, source = fitted_noise(arw, single, used, notes,
+                                     " (streamed: the whole record's overlapping Allan variance)")
     else:
-        mname = model_name or "the model"
-        noise = model_noise(model, stand_in, used, cls.needs_arw, mname)
-        source = f"model {mname}"
-        if noise.ignored_effects:
-            notes.append(f"the estimator models ARW, RRW and correlation only; the model's "
-                         f"{', '.join(noise.ignored_effects)} are not used by it")
+        noise, source = noise_of_model(model, stand_in, used, cls.needs_arw, model_name, notes)
     try:
         est.fit(Layout.from_axes(h, source=name), noise, dt)
     except InputError as err:
