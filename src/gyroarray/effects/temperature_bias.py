@@ -285,8 +285,9 @@ def thermal_lag_scan(e, temp_c, dt_s: float, max_shift_s: float, *, parts=(), us
         e_c[a:b] = e[a:b] - (e[a:b][k].mean() if k.any() else 0.0)
     e_c[~keep] = 0.0
     ee = _dot(e_c, e_c)
-    rss = np.empty(shifts.size)
-    for j, s in enumerate(shifts):
+
+    def shifted(s: float) -> np.ndarray:
+        """The temperature reading shifted by s [s] within each part, less its part's mean."""
         x = np.empty(n)
         for a, b in pts:
             i = np.arange(b - a, dtype=float)
@@ -294,6 +295,11 @@ def thermal_lag_scan(e, temp_c, dt_s: float, max_shift_s: float, *, parts=(), us
             k = keep[a:b]
             x[a:b] -= x[a:b][k].mean() if k.any() else 0.0
         x[~keep] = 0.0
+        return x
+
+    rss = np.empty(shifts.size)
+    for j, s in enumerate(shifts):
+        x = shifted(float(s))
         xx = _dot(x, x)
         rss[j] = ee - (_dot(x, e_c) ** 2 / xx if xx > 0 else 0.0)
     j = int(np.argmin(rss))
@@ -303,13 +309,7 @@ def thermal_lag_scan(e, temp_c, dt_s: float, max_shift_s: float, *, parts=(), us
     curv = (y0 - 2.0 * y1 + y2) / (2.0 * step ** 2)         # RSS ≈ RSS_min + curv·(s − ŝ)²
     lead = float(shifts[j] + 0.5 * step * (y0 - y2) / (y0 - 2.0 * y1 + y2)) if curv > 0 else float(shifts[j])
     # the residual at the minimum, its long-run variance per sample from block means
-    x = np.empty(n)
-    for a, b in pts:
-        i = np.arange(b - a, dtype=float)
-        x[a:b] = np.interp(i + lead / dt_s, i, temp[a:b])
-        k = keep[a:b]
-        x[a:b] -= x[a:b][k].mean() if k.any() else 0.0
-    x[~keep] = 0.0
+    x = shifted(lead)
     xx = _dot(x, x)
     res = e_c - (_dot(x, e_c) / xx) * x if xx > 0 else e_c
     m = int(keep.sum())
