@@ -13,10 +13,28 @@ backends on 2 quiet cores; ≥ 10× at 16 workers on a 480-scenario sweep
 
 ``busy`` is the share of the workers' time spent in scenarios (their measured run
 times summed / (wall × N)); the rest is start-up (processes or cluster, imports,
-numba cache), the truth tasks, scheduling and the tail.
+numba cache), the truth tasks, scheduling and the tail. ``core`` is the CPU time
+the scenarios' threads got over their run time: below 1 when a worker waited for
+a core (the machine shared with other work, or Dask's own threads). The runner's
+profile (``run_sweep(...)["profile"]``) splits each wall time into phases.
+
+A shared host also changes speed from minute to minute (here the same four
+scenarios took 3.2 to 4.3 s of CPU time in one process, runs a minute apart), so
+runs done minutes apart differ by ±15 % whatever the backend. ``cpu/wall`` — the
+scenarios' CPU time per second of wall time, i.e. cores' worth of scenario work
+done per second — moves with the host's speed in both runs, and the ratio of
+the N-worker run's to the one-worker run's (``drift-free``) is the speed-up
+with that drift taken out. It hides what makes each scenario's CPU time longer
+when N run at once (shared caches, memory bandwidth), which the raw speed-up
+keeps; both are printed, with the rounds' medians (``--repeat``).
+
+Two CPU-bound processes do not always get two cores on a shared (virtual)
+machine: before each timed run, ``capacity`` measures what N processes that only
+compute get together, in cores (N on a quiet machine). A speed-up is bounded by
+it; both are printed, so a run on a busy host reads as such.
 
 Usage: ``python benchmarks/bench_sweep.py [--workers N] [--replicates R] [--no-dask]
-[--sweep FILE]`` (``make bench`` runs it with N = the CPUs available, at least 2).
+[--repeat R] [--sweep FILE]`` (``make bench`` runs it with N = the CPUs available, at least 2).
 """
 
 from __future__ import annotations
@@ -24,6 +42,7 @@ from __future__ import annotations
 import argparse
 import re
 import shutil
+import subprocess
 import sys
 import tempfile
 import time
@@ -62,14 +81,33 @@ def _sweep_file(tmp: Path, path: Path, replicates: int | None) -> Path:
     return copy
 
 
+_SPIN = ("import time\nt = time.perf_counter() + {s}\nx = 0\n"
+         "while time.perf_counter() < t:\n    x += 1\nprint(time.process_time())")
+
+
+def capacity(n: int, seconds: float = 2.0) -> float:
+    """The cores ``n`` CPU-bound processes get together on this machine now: each spins
+    ``seconds``; their CPU times summed / ``seconds`` (``n`` on a quiet machine with ``n``
+    cores)."""
+    procs = [subprocess.Popen([sys.executable, "-c", _SPIN.format(s=seconds)],
+                              stdout=subprocess.PIPE, text=True) for _ in range(n)]
+    cpu = [float(p.communicate()[0].split()[-1]) for p in procs]
+    return sum(cpu) / seconds
+
+
 def _run(tmp: Path, sweep, tag: str, **kw) -> dict:
     out = tmp / tag
+    n = kw.get("workers") or int(str(kw.get("dask", "local:1")).split(":")[1])
+    cap = capacity(n)
     t0 = time.perf_counter()
     summary = run_sweep(sweep, out, progress=False, **kw)
     wall = time.perf_counter() - t0
-    n = kw.get("workers") or int(str(kw.get("dask", "local:1")).split(":")[1])
+    prof = summary["profile"]
     return {"wall_s": wall, "workers": n, "failed": len(summary["failed"]),
-            "busy": summary["worker_seconds"] / (wall * n), "out": out}
+            "busy": summary["worker_seconds"] / (wall * n), "out": out, "capacity": cap,
+            "core": prof["cpu_s"] / prof["busy_s"] if prof["busy_s"] else float("nan"),
+            "cpu_per_wall": prof["cpu_s"] / wall,
+            "profile": prof}
 
 
 def main(argv: list[str] | None = None) -> dict:
@@ -80,6 +118,8 @@ def main(argv: list[str] | None = None) -> dict:
                     help="run every scenario R times (design_quick x 10 = 480 scenarios)")
     ap.add_argument("--sweep", type=Path, default=SWEEP, help="another sweep file")
     ap.add_argument("--no-dask", action="store_true", help="local processes only")
+    ap.add_argument("--repeat", type=int, default=1,
+                    help="R rounds of every run (each round in another order); medians reported")
     args = ap.parse_args([] if argv is None else argv)
     n = args.workers
     tmp = Path(tempfile.mkdtemp(prefix="bench_sweep_"))
@@ -93,8 +133,7 @@ def main(argv: list[str] | None = None) -> dict:
         run_sweep(sweep, tmp / "warmup", workers=n, progress=False)    # truth + numba caches
         print(f"  warm-up run ({n} processes): {time.perf_counter() - t0:.1f} s")
         ref = load_results(tmp / "warmup")
-        runs = {("processes", 1): _run(tmp, sweep, "p1", workers=1),
-                ("processes", n): _run(tmp, sweep, f"p{n}", workers=n)}
+        configs = [(("processes", 1), {"workers": 1}), (("processes", n), {"workers": n})]
         if not args.no_dask:
             try:
                 t0 = time.perf_counter()
@@ -102,29 +141,60 @@ def main(argv: list[str] | None = None) -> dict:
                     started = time.perf_counter() - t0
                 print(f"  a LocalCluster of {n} workers starts and closes in {started:.1f} s")
                 results["dask_cluster_start_close_s"] = started
-                runs[("dask local", 1)] = _run(tmp, sweep, "d1", dask="local:1")
-                runs[("dask local", n)] = _run(tmp, sweep, f"d{n}", dask=f"local:{n}")
+                configs += [(("dask local", 1), {"dask": "local:1"}),
+                            (("dask local", n), {"dask": f"local:{n}"})]
             except Exception as err:                   # noqa: BLE001 - dask missing or no cluster
                 print(f"  dask: skipped ({err})")
                 results["dask_skipped"] = str(err)
-        base = runs[("processes", 1)]["wall_s"]
+        # R rounds, each in another order (a drift of the host's load spreads over all)
+        runs: dict = {key: [] for key, _ in configs}
+        for rnd in range(args.repeat):
+            for key, kw in configs[rnd % len(configs):] + configs[:rnd % len(configs)]:
+                r = _run(tmp, sweep, f"{key[0][0]}{key[1]}_{rnd}", **kw)
+                r["identical"] = _same(load_results(r["out"]), ref)
+                shutil.rmtree(r.pop("out"), ignore_errors=True)
+                runs[key].append(r)
+        med = {key: float(np.median([r["wall_s"] for r in rs])) for key, rs in runs.items()}
+        rate = {key: float(np.median([r["cpu_per_wall"] for r in rs])) for key, rs in runs.items()}
+        base = med[("processes", 1)]
         print(f"  {'backend':<12} {'workers':>7} {'wall [s]':>9} {'vs proc 1':>10} "
-              f"{'vs own 1':>9} {'busy':>6}  identical")
+              f"{'vs own 1':>9} {'drift-free':>10} {'busy':>6} {'core':>5} {'capacity':>9}  identical"
+              + (f"   (medians of {args.repeat} rounds)" if args.repeat > 1 else ""))
         table = []
-        for (backend, k), r in runs.items():
-            same = _same(load_results(r["out"]), ref)
-            own = runs[(backend, 1)]["wall_s"] / r["wall_s"]
-            row = {"backend": backend, "workers": k, "wall_s": round(r["wall_s"], 2),
-                   "speedup_vs_processes_1": round(base / r["wall_s"], 3),
-                   "speedup_vs_own_1": round(own, 3), "busy": round(r["busy"], 3),
-                   "identical": same, "failed_scenarios": r["failed"]}
-            table.append(row)
-            print(f"  {backend:<12} {k:>7} {r['wall_s']:>9.1f} {base / r['wall_s']:>9.2f}x "
-                  f"{own:>8.2f}x {r['busy']:>6.2f}  {same}")
+        for (backend, k), rs in runs.items():
+            wall = med[(backend, k)]
+            own = med[(backend, 1)] / wall
+            busy, core, cap = (float(np.median([r[f] for r in rs]))
+                               for f in ("busy", "core", "capacity"))
+            same = all(r["identical"] for r in rs)
+            free = rate[(backend, k)] / rate[("processes", 1)]
+            table.append({"backend": backend, "workers": k, "wall_s": round(wall, 2),
+                          "walls_s": [round(r["wall_s"], 2) for r in rs],
+                          "speedup_vs_processes_1": round(base / wall, 3),
+                          "speedup_vs_own_1": round(own, 3),
+                          "speedup_drift_free_vs_processes_1": round(free, 3),
+                          "cpu_per_wall": [round(r["cpu_per_wall"], 3) for r in rs],
+                          "busy": round(busy, 3),
+                          "core": round(core, 3), "capacity_cores": round(cap, 2),
+                          "identical": same, "failed_scenarios": rs[0]["failed"],
+                          "profiles": [r["profile"] for r in rs]})
+            print(f"  {backend:<12} {k:>7} {wall:>9.1f} {base / wall:>9.2f}x "
+                  f"{own:>8.2f}x {free:>9.2f}x {busy:>6.2f} {core:>5.2f} {cap:>9.2f}  {same}")
+        if args.repeat > 1:
+            for (backend, k), rs in runs.items():
+                print(f"  {backend:<12} {k:>7}  rounds' walls [s]: "
+                      + ", ".join(f"{r['wall_s']:.1f}" for r in rs) + "; cpu/wall: "
+                      + ", ".join(f"{r['cpu_per_wall']:.2f}" for r in rs))
+        print("  where the time went [s] (phases of the runner's profile, last round; tail: a "
+              "worker idle at the end)")
+        for (backend, k), rs in runs.items():
+            prof = rs[-1]["profile"]
+            phases = ", ".join(f"{name} {v:.2f}" for name, v in prof["phases_s"].items())
+            print(f"  {backend:<12} {k:>7}  {phases}; tail {prof['tail_s']:.2f}")
         results["runs"] = table
         if n == 2:
             print(f"  target at 2 workers: >= {TARGET}x for both backends")
-        failed = {r["failed"] for r in runs.values()}
+        failed = {r["failed"] for rs in runs.values() for r in rs}
         if failed != {0}:
             print(f"  note: scenarios failed (the same in every run): {sorted(failed)}")
     finally:

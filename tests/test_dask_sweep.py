@@ -152,6 +152,128 @@ def test_tasks_are_sized_from_the_measured_time():
     assert b2.take() is None
 
 
+class _PoolLike:
+    """Test only: a process pool as the dispatcher sees it, run by hand. A task holding the
+    culprit ``bad`` breaks the pool: every task in flight fails (``BrokenProcessPool``), as a
+    ``ProcessPoolExecutor`` does when one worker dies; the others finish one by one."""
+
+    retry_lost = True
+    serial_retry = True
+
+    def __init__(self, bad):
+        self.bad, self.flight, self.tasks = bad, [], []
+        self.suspects: list = []      # the scenarios in flight when the pool broke
+        self.after: list = []         # (task, tasks in flight) of each submit after the break
+
+    def submit(self, fn, *args):
+        from concurrent.futures import Future
+        fut = Future()
+        if fn.__name__ == "run_batch":
+            ids = [s.id for s in args[0]]
+            self.tasks.append(ids)
+            self.flight.append((fut, ids))
+            if self.suspects:
+                self.after.append((ids, len(self.flight)))
+        else:
+            fut.set_result("truth")
+        return fut
+
+    def wait_any(self, pending):
+        from concurrent.futures.process import BrokenProcessPool
+        done = [f for f in pending if f.done()]
+        if done:
+            return [(f, f.exception()) for f in done]
+        if any(self.bad in ids for _, ids in self.flight):
+            out = [(f, BrokenProcessPool("a worker died")) for f, _ in self.flight]
+            self.suspects = self.suspects or sorted(i for _, ids in self.flight for i in ids)
+            self.flight.clear()
+            return out
+        fut, ids = self.flight.pop(0)
+        fut.set_result([{"id": i, "file": f"{i}.parquet", "sha256": "0", "rows": 1,
+                         "seconds": 0.1} for i in ids])
+        return [(fut, None)]
+
+    @staticmethod
+    def result(fut):
+        return fut.result()
+
+
+def test_a_broken_pool_loses_only_the_scenario_that_breaks_it():
+    """The local pool's dispatch (no processes): after a break, the tasks in flight run again
+    one scenario at a time with nothing else in flight, so only the culprit is lost."""
+    from types import SimpleNamespace
+
+    from gyroarray.sweep.runner import _dispatch
+    specs = [_Spec(f"s{i:02d}") for i in range(12)]
+    backend = _PoolLike(bad="s05")
+    ok, lost = [], []
+    _dispatch(backend, 2, specs, SimpleNamespace(estimators=["ols"], name="t"), Path("."),
+              {s.id: 1.0 for s in specs}, lambda rec: ok.append(rec["id"]),
+              lambda spec, err: lost.append((spec.id, type(err).__name__)))
+    assert lost == [("s05", "BrokenProcessPool")]
+    assert sorted(ok) == sorted(s.id for s in specs if s.id != "s05")     # each once
+    # the break caught the culprit beside others; each of them ran again alone, then the rest
+    k = len(backend.suspects)
+    assert k >= 2 and "s05" in backend.suspects
+    assert sorted(i for ids, _ in backend.after[:k] for i in ids) == backend.suspects
+    assert all(len(ids) == 1 and n == 1 for ids, n in backend.after[:k])
+    assert max(n for _, n in backend.after[k:]) > 1          # then the pool is used in full
+
+
+@pytest.mark.slow   # a real pool broken and restarted (~5 s on 2 cores; the dispatch's part is tested above without processes): make score
+def test_a_pool_worker_killed_mid_sweep_costs_nothing(sweep_file, reference, tmp_path, capfd):
+    """``--workers 2``: a worker SIGKILLed while scenarios are in flight breaks the process
+    pool as a whole; the pool starts again and the same dataset comes out, with only the
+    chain's own failures reported (each on its own line under the progress bar). The workers
+    are frozen (SIGSTOP) at the first result file, so that the kill lands while work is left,
+    however loaded the machine."""
+    psutil = pytest.importorskip("psutil")
+    _, ref = reference
+    me = psutil.Process()
+    before = {c.pid for c in me.children(recursive=True)}
+    n_ok = len(ref["scenario_id"].unique())
+    for attempt in range(3):              # a sweep that finished before the freeze: again
+        out = tmp_path / f"killed{attempt}"
+        state: dict = {}
+
+        def killer():
+            rows = out / "rows"
+            deadline = time.monotonic() + 300
+            while not (rows.exists() and list(rows.glob("*.parquet"))):
+                if time.monotonic() > deadline or "done" in state:
+                    return
+                time.sleep(0.002)
+            # the pool's workers (not multiprocessing's resource tracker)
+            pool = [c for c in me.children(recursive=True) if c.pid not in before
+                    and "spawn_main" in " ".join(c.cmdline())]
+            for c in pool:
+                c.send_signal(signal.SIGSTOP)
+            state["left"] = n_ok - len(list(rows.glob("*.parquet")))
+            pool[0].send_signal(signal.SIGKILL)
+            for c in pool[1:]:
+                c.send_signal(signal.SIGCONT)
+            state["killed"] = pool[0].pid
+
+        t = threading.Thread(target=killer, daemon=True)
+        t.start()
+        capfd.readouterr()
+        summary = run_sweep(sweep_file, out, workers=2, progress=True)
+        state["done"] = True
+        t.join(60)
+        if state.get("left", 0) > 0:
+            break
+    assert state.get("left", 0) > 0, "every try finished before a worker could be killed"
+    assert sorted(f["id"] for f in summary["failed"]) == failing_ids(sweep_file)
+    assert summary["ran"] == 3 and any("died" in n for n in summary["notes"])
+    assert_same_bits(load_results(out), ref)
+    err = capfd.readouterr().err
+    assert "6/6" in err and "Traceback" not in err
+    said = [line for line in err.splitlines() if " failed: " in line]
+    assert sorted(line.split()[1] for line in said) == failing_ids(sweep_file)
+    assert all(line.startswith("sweep: ") for line in said)
+    assert all("rate random walk" in line for line in said)
+
+
 # -- on a cluster ----------------------------------------------------------------------------
 
 def test_dask_local_gives_the_same_bits_and_names_each_failure(sweep_file, reference, tmp_path):
@@ -172,6 +294,33 @@ def test_dask_local_gives_the_same_bits_and_names_each_failure(sweep_file, refer
     # the workers wrote the files, this process recorded their checksums: all verify
     lines = (out / "rows.sha256").read_text().splitlines()
     assert len(lines) == 3 and all(len(x.split()) == 3 for x in lines)
+    # where the time went: the phases add up to the command's run time (the summary's clock);
+    # every scenario ran in one of the two workers, inside its span
+    prof = summary["profile"]
+    assert list(prof["phases_s"]) == ["prepare", "cluster", "warm", "truth", "scenarios", "closed"]
+    assert sum(prof["phases_s"].values()) == pytest.approx(summary["seconds"], abs=0.01)
+    assert len(prof["workers"]) == 2 and sum(w["scenarios"] for w in prof["workers"].values()) == 6
+    assert prof["busy_s"] == pytest.approx(summary["worker_seconds"], abs=0.01)
+    for w in prof["workers"].values():
+        assert 0 < w["first_start_s"] < w["last_end_s"] <= summary["seconds"]
+        assert w["write_s"] <= w["busy_s"] and w["between_s"] >= -0.01
+        assert 0 < w["cpu_s"] <= w["busy_s"] * 1.02 + 0.01    # a thread's CPU time ≤ its wall time
+
+
+def test_sweep_profile_adds_up():
+    """The profile of hand-made phase marks and runs, by hand."""
+    from gyroarray.sweep.runner import sweep_profile
+    stamps = {"prepare": 0.5, "truth": 2.0, "scenarios": 10.0, "closed": 10.25}
+    runs = [("a", 2.0, 3.0, 2.5, 0.1), ("a", 5.5, 4.0, 4.0, 0.2), ("b", 2.1, 5.0, 5.0, 0.3)]
+    prof = sweep_profile(stamps, runs)
+    assert prof["phases_s"] == {"prepare": 0.5, "truth": 1.5, "scenarios": 8.0, "closed": 0.25}
+    assert prof["busy_s"] == 12.0 and prof["cpu_s"] == 11.5 and prof["write_s"] == 0.6
+    a, b = prof["workers"]["a"], prof["workers"]["b"]
+    assert (a["first_start_s"], a["last_end_s"], a["between_s"], a["scenarios"]) == (2.0, 9.5, 0.5, 2)
+    assert (b["last_end_s"], b["between_s"]) == (7.1, 0.0)
+    assert prof["first_scenario_s"] == 2.0 and prof["tail_s"] == pytest.approx(2.9)
+    assert prof["between_s"] == 0.5
+    assert sweep_profile({}, [])["tail_s"] is None
 
 
 class _KillOnce(distributed.WorkerPlugin):

@@ -15,6 +15,7 @@ import json
 import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
+import pytest
 
 from hostile import SIDECAR_3, assert_contract, axes_sidecar, run_cli
 from gyroarray.chain.compare import COMPARISON_BYTES_PER_CELL, FIXED_BYTES
@@ -127,3 +128,34 @@ def test_diagnose_over_budget_analyses_a_window(tmp_path):
     o = run_cli(["diagnose", path, "--max-memory", str(FIXED_BYTES + 100 * COMPARISON_BYTES_PER_CELL)])
     assert_contract(o, "long.parquet")
     assert o.code == 2 and "--max-memory" in o.err
+
+
+def test_a_streamed_fuse_that_fails_late_leaves_the_old_pair(tmp_path, monkeypatch):
+    """The fused record is written chunk by chunk before its ADEV is computed: a failure after
+    that (here the phase files' ADEV) names nothing, so an existing record and its sidecar given
+    with --force stay as they were, side by side, and no temporary file is left."""
+    from gyroarray.chain import fuse_stream
+    from gyroarray.core.errors import InputError
+    from gyroarray.core.measurement import record_head
+    path = _array(tmp_path, n=3000)
+    out, side = tmp_path / "fused.parquet", tmp_path / "fused.toml"
+    out.write_bytes(b"old record")
+    side.write_text("old sidecar\n")
+    before = sorted(p.name for p in tmp_path.iterdir())
+
+    def boom(*args, **kwargs):
+        raise InputError("no space left on device (test)")
+
+    monkeypatch.setattr(fuse_stream, "phase_oadev", boom)
+    head = record_head(path)
+    with pytest.raises(InputError):
+        fuse_stream.streamed_fuse(head, "gls", out=out, sidecar=side, force=True,
+                                  work_bytes=1 << 19)
+    assert out.read_bytes() == b"old record" and side.read_text() == "old sidecar\n"
+    assert sorted(p.name for p in tmp_path.iterdir()) == before
+    monkeypatch.undo()
+    res = fuse_stream.streamed_fuse(head, "gls", out=out, sidecar=side, force=True,
+                                    work_bytes=1 << 19)
+    assert res["streamed"]["chunk_rows"] < 3000                  # it did stream
+    assert read_measurement(out).n_samples == 3000 and "[fused]" in side.read_text()
+    assert sorted(p.name for p in tmp_path.iterdir()) == before

@@ -36,7 +36,6 @@ from __future__ import annotations
 
 import gzip
 import math
-import os
 import shutil
 import tempfile
 from pathlib import Path
@@ -50,7 +49,7 @@ from gyroarray import __version__
 from gyroarray.analysis.allan import analysis_of
 from gyroarray.analysis.allan_stream import (PhaseFiles, chunk_rows_for, phase_oadev,
                                              streamed_allan)
-from gyroarray.core import units
+from gyroarray.core import outputs, units
 from gyroarray.core.errors import InputError
 from gyroarray.core.layout import Layout
 from gyroarray.core.limits import format_size, stream_work_bytes
@@ -140,24 +139,29 @@ class _FusedWriter:
     def __init__(self, path: Path, names: list[str], header: str):
         self.path = Path(path)
         self.names = names
-        self.tmp = self.path.with_name(f".{self.path.name}.{os.getpid()}.part")
+        # a new hidden file beside the output (never through a link), named only at the end
+        self._raw, self.staged = outputs.open_staged(self.path)
         low = self.path.name.lower()
         self.parquet = low.endswith(".parquet")
         self._pq = None
-        if self.parquet:
-            # deferred: pyarrow (about 0.2 s to import) loads only for a Parquet output
-            import pyarrow as pa
-            import pyarrow.parquet as pq
-            self._pa = pa
-            self._pq = pq.ParquetWriter(self.tmp, pa.schema([(c, pa.float64()) for c in names]),
-                                        compression="zstd")
-        else:
-            raw = open(self.tmp, "wb")
-            self._raw = raw
-            self._fh = (gzip.GzipFile(filename="", fileobj=raw, mode="wb", compresslevel=6, mtime=0)
-                        if low.endswith(".gz") else raw)
-            self._fh.write((header + "\n" + ",".join(names) + "\n").encode("utf-8"))
-            self._row = ",".join(["%r"] * len(names))
+        try:
+            if self.parquet:
+                # deferred: pyarrow (about 0.2 s to import) loads only for a Parquet output
+                import pyarrow as pa
+                import pyarrow.parquet as pq
+                self._pa = pa
+                self._pq = pq.ParquetWriter(self._raw, pa.schema([(c, pa.float64()) for c in names]),
+                                            compression="zstd")
+            else:
+                self._fh = (gzip.GzipFile(filename="", fileobj=self._raw, mode="wb",
+                                          compresslevel=6, mtime=0)
+                            if low.endswith(".gz") else self._raw)
+                self._fh.write((header + "\n" + ",".join(names) + "\n").encode("utf-8"))
+                self._row = ",".join(["%r"] * len(names))
+        except BaseException:
+            self._raw.close()
+            self.staged.discard()
+            raise
 
     def write(self, table: np.ndarray) -> None:
         if self._pq is not None:
@@ -166,26 +170,29 @@ class _FusedWriter:
             self._fh.write(("\n".join(map(self._row.__mod__, map(tuple, table.tolist())))
                             + "\n").encode("utf-8"))
 
-    def close(self, keep: bool) -> None:
-        if self._pq is not None:
-            self._pq.close()
-        else:
-            self._fh.close()
-            if self._fh is not self._raw:
-                self._raw.close()
+    def close(self, keep: bool):
+        """Finish the file; the :class:`~gyroarray.core.outputs.Staged` handle when ``keep``
+        (named later, with its sidecar), else the file is removed and None comes back."""
+        try:
+            if self._pq is not None:
+                self._pq.close()
+            elif self._fh is not self._raw:
+                self._fh.close()
+            self._raw.close()
+        except BaseException:
+            self.staged.discard()
+            raise
         if keep:
-            os.replace(self.tmp, self.path)
-        else:
-            try:
-                os.unlink(self.tmp)
-            except OSError:
-                pass
+            return self.staged
+        self.staged.discard()
+        return None
 
 
 def streamed_fuse(head: RecordHead, estimator: str, *, model=None, model_name: str | None = None,
                   exclude=(), params: dict | None = None, out=None, whole: bool = False,
                   work_bytes: int | None = None, tmp_dir=None, site=None,
-                  input_sha256: str | None = None, sidecar_sha256: str | None = None) -> dict:
+                  input_sha256: str | None = None, sidecar_sha256: str | None = None,
+                  sidecar=None, force: bool = False) -> dict:
     """Fuse a record read in chunks (module docstring); the ``fuse --json`` object.
 
     Parameters
@@ -203,8 +210,14 @@ def streamed_fuse(head: RecordHead, estimator: str, *, model=None, model_name: s
     params : dict, optional
         The estimator's hyperparameters.
     out : path, optional
-        The fused record (``.parquet`` recommended, ``.csv``, ``.csv.gz``); its sidecar is
-        written by the caller from the returned ``"sidecar_toml"`` bytes.
+        The fused record (``.parquet`` recommended, ``.csv``, ``.csv.gz``), written piece by
+        piece to a hidden temporary file and named only when the whole analysis succeeded.
+    sidecar : path, optional
+        The fused record's sidecar, named together with it
+        (:func:`~gyroarray.core.outputs.write_many`: a crash or a refusal never leaves a new
+        record beside an old sidecar); None: the caller writes it from ``"sidecar_toml"``.
+    force : bool
+        Replace existing ``out`` and ``sidecar`` (checked by the caller before the work).
     whole : bool
         Analyse a record without reference whole even when it moves (``--all``).
     work_bytes : int, optional
@@ -325,6 +338,7 @@ def streamed_fuse(head: RecordHead, estimator: str, *, model=None, model_name: s
     total = np.zeros(3)
     count = 0
     ok = False
+    staged = None
     try:
         for chunk, fused, e in fused_chunks():
             total += e.sum(axis=0)
@@ -335,73 +349,81 @@ def streamed_fuse(head: RecordHead, estimator: str, *, model=None, model_name: s
         ok = True
     finally:
         if writer is not None:
-            writer.close(keep=ok and count == n)
-    if count != n:
-        raise InputError(f"the file changed while it was read: {n} rows before, {count} now; "
-                         "rerun when it is complete", file=name)
-    # 3. its ADEV: the phase of each axis to a temporary file, the sums at every start index
-    mean = total / n
-    adev: list = []
-    folder = tempfile.mkdtemp(prefix="gyroarray-fuse-", dir=tmp_dir)
+            staged = writer.close(keep=ok and count == n)
     try:
-        phases = PhaseFiles(folder, {a: mean[a] for a in range(3)}, n, name)
+        if count != n:
+            raise InputError(f"the file changed while it was read: {n} rows before, {count} now; "
+                             "rerun when it is complete", file=name)
+        # 3. its ADEV: the phase of each axis to a temporary file, the sums at every start index
+        mean = total / n
+        adev: list = []
+        folder = tempfile.mkdtemp(prefix="gyroarray-fuse-", dir=tmp_dir)
         try:
-            for _, _, e in fused_chunks():
-                for a in range(3):
-                    phases.add(a, e[:, a])
+            phases = PhaseFiles(folder, {a: mean[a] for a in range(3)}, n, name)
+            try:
+                for _, _, e in fused_chunks():
+                    for a in range(3):
+                        phases.add(a, e[:, a])
+            finally:
+                phases.close()
+            results = [phase_oadev(phases.paths[a], n + 1, dt, "octave", work) for a in range(3)]
         finally:
-            phases.close()
-        results = [phase_oadev(phases.paths[a], n + 1, dt, "octave", work) for a in range(3)]
+            shutil.rmtree(folder, ignore_errors=True)
+        for a, res in enumerate(results):
+            try:
+                with np.errstate(all="ignore"):
+                    adev.append(analysis_of(res))
+            except (InputError, np.linalg.LinAlgError, ValueError, FloatingPointError) as err:
+                adev.append(None)
+                notes.append(f"fused {AXES[a]}: no ADEV ({getattr(err, 'message', err)})")
+        fused_fit = white_walk_of_avar(results[0].taus_s, np.column_stack([r.dev ** 2 for r in results]),
+                                       results[0].m, n + 1)
+        predicted = predicted_arw(est, noise)
+        arw_u = units.arw_rad_rt_s_to_deg_rt_h
+        rrw_u = units.rrw_rad_s_rt_s_to_deg_h_rt_h
+        single_json = None
+        if single is not None:
+            single_json = {str(k): {"arw_deg_rt_h": float(arw_u(single.arw_rad_rt_s[i])),
+                                    "arw_deg_rt_h_sigma": float(arw_u(single.arw_sigma[i])),
+                                    "rrw_deg_h_rt_h": float(rrw_u(single.rrw_rad_s_rt_s[i]))}
+                           for i, k in enumerate(used)}
+        if n < 256:
+            notes.append(f"the record is {n} samples: its ADEV and fits are short")
+        notes.append(f"streamed fuse: the record read in chunks of {rows} rows, four times (the single "
+                     f"gyros' ADEV twice, the fused rate twice), working budget {format_size(work)}; "
+                     "the estimator's filter ran chunk by chunk with its state carried across chunks")
+        out_params = plain_params(est.get_params())
+        analysed = ("the whole record, output minus layout·reference" if has_ref else
+                    "the whole record (no reference rate; streamed: analysed whole)")
+        res_json = {
+            "measurement": name, "n_samples": n, "dt_s": dt,
+            "estimator": estimator, "estimator_params": out_params, "model_source": source,
+            "gyros_used": list(used), "excluded_gyros": excluded, "constant_gyros": constant,
+            "design_noise": {
+                "arw_deg_rt_h": [float(v) for v in arw_u(noise.arw_rad_rt_s)],
+                "rrw_deg_h_rt_h": [float(v) for v in rrw_u(noise.rrw_rad_s_rt_s)],
+                "correlated": bool(not np.array_equal(noise.corr_arw, np.eye(len(used))))},
+            "analysed": analysed, "analysed_parts": [[0, n]],
+            "analysed_parts_s": [[0.0, float(n * dt)]],
+            "axes": axes_json(adev, fused_fit, best_single_of(single, used, axes_all), predicted),
+            "single_gyros": single_json,
+            "gain_definition": "gain = min over used gyros k of (ARW_k / |h_k,axis|) / fused ARW "
+                               "of the axis; ARWs from the same white + walk Allan fit on the "
+                               "analysed part",
+            "notes": notes,
+            "streamed": {"chunk_rows": rows, "work_bytes": work, "passes": 4,
+                         "gain": None if gain is None else gain.tolist(), "time_constant_s": tconst},
+        }
+        description = (f"fused body rate of {name} by gyroarray fuse (estimator {estimator}, "
+                       f"{len(used)} gyros): gyro1, gyro2, gyro3 are the rate about the platform x, y, z axes")
+        res_json["sidecar_toml"] = fused_sidecar(estimator, out_params, source, used, excluded, constant,
+                                                 noise, name, head.sample_rate_hz, description, site,
+                                                 input_sha256=input_sha256, sidecar_sha256=sidecar_sha256)
+        if staged is not None:  # the fused record and its sidecar named together, at the end
+            items = [(out, staged)] + ([(sidecar, res_json["sidecar_toml"])] if sidecar else [])
+            outputs.write_many(items, force=force)
+            staged = None
     finally:
-        shutil.rmtree(folder, ignore_errors=True)
-    for a, res in enumerate(results):
-        try:
-            with np.errstate(all="ignore"):
-                adev.append(analysis_of(res))
-        except (InputError, np.linalg.LinAlgError, ValueError, FloatingPointError) as err:
-            adev.append(None)
-            notes.append(f"fused {AXES[a]}: no ADEV ({getattr(err, 'message', err)})")
-    fused_fit = white_walk_of_avar(results[0].taus_s, np.column_stack([r.dev ** 2 for r in results]),
-                                   results[0].m, n + 1)
-    predicted = predicted_arw(est, noise)
-    arw_u = units.arw_rad_rt_s_to_deg_rt_h
-    rrw_u = units.rrw_rad_s_rt_s_to_deg_h_rt_h
-    single_json = None
-    if single is not None:
-        single_json = {str(k): {"arw_deg_rt_h": float(arw_u(single.arw_rad_rt_s[i])),
-                                "arw_deg_rt_h_sigma": float(arw_u(single.arw_sigma[i])),
-                                "rrw_deg_h_rt_h": float(rrw_u(single.rrw_rad_s_rt_s[i]))}
-                       for i, k in enumerate(used)}
-    if n < 256:
-        notes.append(f"the record is {n} samples: its ADEV and fits are short")
-    notes.append(f"streamed fuse: the record read in chunks of {rows} rows, four times (the single "
-                 f"gyros' ADEV twice, the fused rate twice), working budget {format_size(work)}; "
-                 "the estimator's filter ran chunk by chunk with its state carried across chunks")
-    out_params = plain_params(est.get_params())
-    analysed = ("the whole record, output minus layout·reference" if has_ref else
-                "the whole record (no reference rate; streamed: analysed whole)")
-    res_json = {
-        "measurement": name, "n_samples": n, "dt_s": dt,
-        "estimator": estimator, "estimator_params": out_params, "model_source": source,
-        "gyros_used": list(used), "excluded_gyros": excluded, "constant_gyros": constant,
-        "design_noise": {
-            "arw_deg_rt_h": [float(v) for v in arw_u(noise.arw_rad_rt_s)],
-            "rrw_deg_h_rt_h": [float(v) for v in rrw_u(noise.rrw_rad_s_rt_s)],
-            "correlated": bool(not np.array_equal(noise.corr_arw, np.eye(len(used))))},
-        "analysed": analysed, "analysed_parts": [[0, n]],
-        "analysed_parts_s": [[0.0, float(n * dt)]],
-        "axes": axes_json(adev, fused_fit, best_single_of(single, used, axes_all), predicted),
-        "single_gyros": single_json,
-        "gain_definition": "gain = min over used gyros k of (ARW_k / |h_k,axis|) / fused ARW "
-                           "of the axis; ARWs from the same white + walk Allan fit on the "
-                           "analysed part",
-        "notes": notes,
-        "streamed": {"chunk_rows": rows, "work_bytes": work, "passes": 4,
-                     "gain": None if gain is None else gain.tolist(), "time_constant_s": tconst},
-    }
-    description = (f"fused body rate of {name} by gyroarray fuse (estimator {estimator}, "
-                   f"{len(used)} gyros): gyro1, gyro2, gyro3 are the rate about the platform x, y, z axes")
-    res_json["sidecar_toml"] = fused_sidecar(estimator, out_params, source, used, excluded, constant,
-                                             noise, name, head.sample_rate_hz, description, site,
-                                             input_sha256=input_sha256, sidecar_sha256=sidecar_sha256)
+        if staged is not None:      # a failure after the record was written: nothing is named
+            staged.discard()
     return res_json

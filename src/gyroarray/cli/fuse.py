@@ -146,7 +146,6 @@ def _cmd_fuse_streamed(args, why: str, exclude, params, side) -> tuple[dict, str
     from gyroarray.chain.fuse import sha256_of
     from gyroarray.chain.fuse_stream import streamed_fuse
     from gyroarray.core.measurement import record_head
-    from gyroarray.core.outputs import write_bytes
     from gyroarray.effects.model import NoiseModel
     name = str(args.measurement)
     way = "; raise --max-memory to fuse it in memory" if why != "--stream" else "; leave out --stream"
@@ -162,11 +161,11 @@ def _cmd_fuse_streamed(args, why: str, exclude, params, side) -> tuple[dict, str
                         model_name=None if args.model is None else str(args.model), exclude=exclude,
                         params=params, out=args.out, whole=args.all, site=head.site,
                         input_sha256=sha256_of(src) if args.out is not None else None,
-                        sidecar_sha256=sha256_of(sidecar_path(src)) if args.out is not None else None)
-    toml = out.pop("sidecar_toml")
+                        sidecar_sha256=sha256_of(sidecar_path(src)) if args.out is not None else None,
+                        sidecar=side, force=args.force)   # both named together at the end
+    out.pop("sidecar_toml")
     out["notes"] = [*head.notes, f"streamed ({why})", *out["notes"]]
     if args.out is not None:
-        write_bytes(side, toml, force=True)         # checked before the work (output())
         out["out"], out["sidecar"] = str(args.out), str(side)
     return out, _text(out, args)
 

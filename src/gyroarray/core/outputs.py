@@ -24,7 +24,9 @@ Every file the CLI writes goes through this module:
   (:func:`file_mode`), as ``open`` would give it. A full disk or a read-only
   folder is one :class:`~gyroarray.core.errors.InputError`, and nothing is left.
 * :func:`write_many` writes several files (a report, its Markdown twin and
-  figures) all or nothing.
+  figures) all or nothing; a file too long to hold in memory (a streamed fused
+  record) is written piece by piece into :func:`open_staged`'s temporary file
+  and given its name with the others.
 * :func:`check_own_file` / :func:`append_line` guard the files gyroarray keeps
   and appends to in an output folder (a sweep's ``sweep.json`` and
   ``rows.sha256``): never a symbolic link (gyroarray makes none), never a
@@ -50,7 +52,7 @@ from gyroarray.core.limits import file_kind
 
 __all__ = ["PLOT_SUFFIXES", "measurement_files", "check_output", "check_output_dir", "write_bytes",
            "write_many", "write_text", "save_figure", "same_path", "file_mode", "check_own_file",
-           "append_line", "markdown_figures", "private_matplotlib_dir"]
+           "append_line", "markdown_figures", "private_matplotlib_dir", "Staged", "open_staged"]
 
 #: Suffixes matplotlib writes without extra software.
 PLOT_SUFFIXES = (".png", ".svg", ".pdf")
@@ -277,6 +279,45 @@ def _stage(p: Path, data: bytes) -> str:
     return tmp
 
 
+class Staged:
+    """A file written in full beside its final name and not yet given it (:func:`open_staged`);
+    :func:`write_many` commits it with the other files, or :meth:`discard` removes it."""
+
+    def __init__(self, tmp: str, final: Path):
+        self.tmp, self.final = tmp, final
+
+    def discard(self) -> None:
+        _unlink(self.tmp)
+
+
+def open_staged(path):
+    """A hidden temporary file beside ``path`` (created new: never a name that exists, never
+    through a symbolic link), open for binary writing, and its :class:`Staged` handle.
+
+    The caller writes, closes the file object, then passes the handle to
+    :func:`write_many` in place of the bytes (it is synced and given its name
+    there) or calls :meth:`Staged.discard`.
+
+    Raises
+    ------
+    InputError
+        The folder cannot be written.
+    """
+    p = Path(path)
+    folder = p.parent if str(p.parent) else Path(".")
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{p.name[:64]}.", suffix=".tmp", dir=folder)
+    except OSError as err:
+        raise _refusal(err, p, f"cannot write in {folder}") from None
+    try:
+        os.fchmod(fd, file_mode())
+        return os.fdopen(fd, "wb"), Staged(tmp, p)
+    except BaseException:
+        os.close(fd)
+        _unlink(tmp)
+        raise
+
+
 def _commit(tmp: str, p: Path, force: bool) -> None:
     """Give the staged ``tmp`` its final name ``p`` (module docstring)."""
     try:
@@ -313,7 +354,7 @@ def write_bytes(path, data: bytes, *, force: bool = False) -> Path:
 
 
 def write_many(items, *, force: bool = False) -> list[Path]:
-    """Write several files all or nothing: ``items`` is ``[(path, bytes), ...]``.
+    """Write several files all or nothing: ``items`` is ``[(path, bytes or Staged), ...]``.
 
     Every file is first written in full to a temporary file beside its final
     name (so a full disk or a read-only folder is met before any final name
@@ -322,12 +363,24 @@ def write_many(items, *, force: bool = False) -> list[Path]:
     replaced with ``force`` stays replaced), so a refusal leaves no half
     report behind.
     """
+    items = list(items)
     staged: list[tuple[str, Path]] = []
     done: list[tuple[Path, tuple]] = []
     try:
         for path, data in items:
             p = Path(path)
-            staged.append((_stage(p, bytes(data)), p))
+            if isinstance(data, Staged):          # written already: synced here
+                try:
+                    fd = os.open(data.tmp, os.O_RDONLY)
+                    try:
+                        os.fsync(fd)
+                    finally:
+                        os.close(fd)
+                except OSError as err:
+                    raise _refusal(err, p) from None
+                staged.append((data.tmp, p))
+            else:
+                staged.append((_stage(p, bytes(data)), p))
         for tmp, p in staged:
             st = os.stat(tmp)
             new = not (p.exists() or p.is_symlink())
@@ -346,6 +399,9 @@ def write_many(items, *, force: bool = False) -> list[Path]:
     finally:
         for tmp, _ in staged:
             _unlink(tmp)
+        for _, data in items:                     # a handle the loop did not reach
+            if isinstance(data, Staged):
+                data.discard()
     return [p for _, p in staged]
 
 

@@ -224,21 +224,29 @@ def run_batch(specs, estimators, sweep_name: str, rows_dir) -> list[dict]:
     Returns
     -------
     list of dict
-        Per scenario: ``id``, ``seconds`` (its run time in the worker [s]) and
-        either ``file``, ``sha256``, ``rows`` (written), ``error`` (it raised:
-        one line), or ``write_error`` and ``file`` (its file could not be written).
+        Per scenario: ``id``, ``seconds`` (its run time in the worker [s]),
+        ``cpu_seconds`` (the CPU time of the thread that ran it [s]),
+        ``write_seconds`` (of which its Parquet file's encoding and writing
+        [s]), ``started`` (its start, Unix time [s]), ``worker`` (``host:pid``)
+        and either
+        ``file``, ``sha256``, ``rows`` (written), ``error`` (it raised: one
+        line), or ``write_error`` and ``file`` (its file could not be written).
     """
     warm_worker()
     folder = Path(rows_dir)
     out = []
+    worker = f"{socket.gethostname()}:{os.getpid()}"
     for spec in specs:
-        t0 = time.perf_counter()
+        t0, c0, started = time.perf_counter(), time.thread_time(), time.time()
         try:
             df = run_one(spec, estimators, sweep_name)
         except Exception as err:          # noqa: BLE001 - a scenario's failure is reported, not fatal
-            out.append({"id": spec.id, "error": one_line(err), "seconds": time.perf_counter() - t0})
+            out.append({"id": spec.id, "error": one_line(err), "seconds": time.perf_counter() - t0,
+                        "cpu_seconds": time.thread_time() - c0, "started": started,
+                        "worker": worker})
             continue
         final = folder / f"{spec.id}.parquet"
+        t_write = time.perf_counter()
         data, digest = encode_rows(df)
         try:
             outputs.write_bytes(final, data, force=True)      # a rerun replaces a corrupt file
@@ -246,8 +254,10 @@ def run_batch(specs, estimators, sweep_name: str, rows_dir) -> list[dict]:
             out.append({"id": spec.id, "write_error": err.message, "file": str(final),
                         "seconds": time.perf_counter() - t0})
             break                          # a full disk: the caller stops the sweep
+        t1 = time.perf_counter()
         out.append({"id": spec.id, "file": final.name, "sha256": digest, "rows": len(df),
-                    "seconds": time.perf_counter() - t0})
+                    "seconds": t1 - t0, "cpu_seconds": time.thread_time() - c0,
+                    "write_seconds": t1 - t_write, "started": started, "worker": worker})
     return out
 
 
@@ -424,32 +434,22 @@ def _env(values: dict):
 
 
 class _Progress:
+    """The sweep's progress bar on stderr (tqdm): scenarios done of the sweep's, rate and time
+    left; a scenario that fails is said on its own line as it is reported."""
+
     def __init__(self, total: int, done: int, enabled):
-        self.total, self.done, self.t0 = total, done, time.perf_counter()
-        self.start = done
-        self.on = sys.stderr.isatty() if enabled is None else bool(enabled)
-        self.show()
+        from tqdm import tqdm  # deferred: only a sweep draws a bar
+        on = sys.stderr.isatty() if enabled is None else bool(enabled)
+        self.bar = tqdm(total=total, initial=done, disable=not on, file=sys.stderr,
+                        desc="sweep", unit="scenario", dynamic_ncols=True, leave=True)
 
-    def show(self, final=False):
-        if not self.on:
-            return
-        if final:
-            sys.stderr.write("\n")
-            sys.stderr.flush()
-            return
-        el = time.perf_counter() - self.t0
-        ran = self.done - self.start
-        left = self.total - self.done
-        eta = f", eta {el / ran * left:.0f} s" if ran and left else ""
-        width = 30
-        fill = int(width * self.done / max(self.total, 1))
-        sys.stderr.write(f"\rsweep [{'#' * fill}{'.' * (width - fill)}] {self.done}/{self.total} "
-                         f"{el:.0f} s{eta}   " + ("\n" if final else ""))
-        sys.stderr.flush()
+    def step(self, failed: str | None = None) -> None:
+        if failed is not None and not self.bar.disable:
+            self.bar.write(f"sweep: {failed}", file=sys.stderr)
+        self.bar.update(1)
 
-    def step(self):
-        self.done += 1
-        self.show()
+    def close(self) -> None:
+        self.bar.close()
 
 
 def _cost(spec: ScenarioSpec) -> float:
@@ -682,28 +682,69 @@ def _truth_group(spec: ScenarioSpec) -> tuple:
 
 
 class _Processes:
-    """The local process pool as the dispatcher sees it (a dead worker breaks the pool)."""
+    """The local process pool as the dispatcher sees it.
 
-    retry_lost = False
+    A worker that dies (a native abort, the kernel's out-of-memory killer, a
+    signal) breaks a ``ProcessPoolExecutor`` as a whole: every task in flight
+    fails with ``BrokenProcessPool``, whichever worker died. The pool is then
+    started again (:meth:`submit`), and the dispatcher runs the scenarios of
+    those tasks again one at a time with nothing else in flight
+    (``serial_retry``), so that a scenario that kills its worker again is the
+    only one reported lost.
+    """
 
-    def __init__(self, pool):
-        self.pool = pool
+    retry_lost = True
+    serial_retry = True
+    #: Most times the pool is started again in one sweep, and in a row without a task that
+    #: finished in between (a pool that cannot start, a machine that kills every worker): then
+    #: the tasks fail, each scenario reported, instead of starting workers forever.
+    MAX_RESTARTS = 32
+    MAX_FRUITLESS = 3
+
+    def __init__(self, start):
+        self.start = start
+        self.pool = start()
+        self.restarts = 0
+        self.fruitless = 0
 
     def submit(self, fn, *args):
         try:
             return self.pool.submit(fn, *args)
-        except BrokenProcessPool as err:           # a worker died: every later task fails so
-            fut: Future = Future()
-            fut.set_exception(err)
-            return fut
+        except BrokenProcessPool as err:           # a worker died: a fresh pool for what is left
+            if self.restarts >= self.MAX_RESTARTS or self.fruitless >= self.MAX_FRUITLESS:
+                fut: Future = Future()
+                fut.set_exception(err)
+                return fut
+            self.restarts += 1
+            self.fruitless += 1
+            _stop_pool(self.pool)
+            self.pool = self.start()
+            return self.pool.submit(fn, *args)
 
     def wait_any(self, pending):
         finished, _ = wait(pending, return_when=FIRST_COMPLETED)
-        return [(f, f.exception()) for f in sorted(finished, key=id)]
+        out = [(f, f.exception()) for f in sorted(finished, key=id)]
+        if any(exc is None for _, exc in out):
+            self.fruitless = 0
+        return out
 
     @staticmethod
     def result(fut):
         return fut.result()
+
+    def close(self):
+        _stop_pool(self.pool)
+
+
+def _stop_pool(pool) -> None:
+    """Shut a process pool down now: queued tasks cancelled, its workers terminated."""
+    procs = dict(getattr(pool, "_processes", None) or {})   # before shutdown clears it
+    pool.shutdown(wait=False, cancel_futures=True)
+    for proc in procs.values():
+        try:
+            proc.terminate()
+        except (OSError, AttributeError, ValueError):
+            pass
 
 
 class _Dask:
@@ -752,7 +793,7 @@ class _Dask:
 
 
 def _dispatch(backend, slots: int, todo: list, sweep: Sweep, rows_dir: Path, costs: dict,
-              record, lost) -> None:
+              record, lost, stamp=lambda name: None) -> None:
     """Run ``todo`` on ``backend``: the truths first (one task per distinct truth), then the
     scenarios in batches (:class:`TaskBatches`), at most two tasks per slot in flight; each
     scenario's record goes to ``record``, a scenario whose task failed as a whole to ``lost``."""
@@ -766,10 +807,14 @@ def _dispatch(backend, slots: int, todo: list, sweep: Sweep, rows_dir: Path, cos
     while pending:
         for fut, _exc in backend.wait_any(pending):  # a failed truth: its scenarios report it
             pending.pop(fut)
+    stamp("truth")
     batches = TaskBatches(todo, slots, costs)
 
     def fill():
         while len(pending) < 2 * max(1, slots):
+            if getattr(backend, "serial_retry", False) and pending and (
+                    batches.retry or any(task[1] for task in pending.values() if task)):
+                return                      # suspects of a broken pool: one at a time, alone
             nxt = batches.take()
             if nxt is None:
                 return
@@ -779,40 +824,46 @@ def _dispatch(backend, slots: int, todo: list, sweep: Sweep, rows_dir: Path, cos
     fill()
     while pending:
         for fut, exc in backend.wait_any(pending):
-            specs, _isolated = pending.pop(fut)
+            specs, isolated = pending.pop(fut)
             if exc is None:
                 for rec in sorted(backend.result(fut), key=lambda r: r["id"]):
                     batches.measured(rec["id"], rec["seconds"])
                     record(rec)
-            elif len(specs) > 1 and backend.retry_lost:
-                batches.split(specs)
+            elif backend.retry_lost and not isolated and (
+                    len(specs) > 1 or getattr(backend, "serial_retry", False)):
+                batches.split(specs)        # run again one by one: only the culprit is lost
             else:
                 for spec in specs:
                     lost(spec, exc)
         fill()
+    stamp("scenarios")
 
 
 def _run_in_processes(todo: list, sweep: Sweep, workers: int, rows_dir: Path, costs: dict,
-                      record, lost) -> None:
-    """Run ``todo`` on a local spawn process pool (:func:`_dispatch`)."""
+                      record, lost, notes: list, stamp) -> None:
+    """Run ``todo`` on a local spawn process pool (:func:`_dispatch`); a worker that died and
+    the pool's restarts are said in ``notes``."""
     ctx = mp.get_context("spawn")
     blas = {k: v for k, v in THREAD_ENV.items() if k != "NUMBA_NUM_THREADS"}
     n = min(workers, len(todo))
-    with _env(blas), ProcessPoolExecutor(max_workers=n, mp_context=ctx, initializer=_watch_parent,
-                                         initargs=(os.getpid(),)) as pool:
+
+    def start():
+        return ProcessPoolExecutor(max_workers=n, mp_context=ctx, initializer=_watch_parent,
+                                   initargs=(os.getpid(),))
+
+    with _env(blas):                # the workers start at the first submit (and at a restart)
+        backend = _Processes(start)
         try:
-            _dispatch(_Processes(pool), n, todo, sweep, rows_dir, costs, record, lost)
-        except BaseException:
-            # a result that cannot be recorded (a full disk) or an interrupt: stop now, do not
-            # run the rest first (a rerun resumes; a file being written is a hidden temporary)
-            procs = dict(getattr(pool, "_processes", None) or {})   # before shutdown clears it
-            pool.shutdown(wait=False, cancel_futures=True)
-            for proc in procs.values():
-                try:
-                    proc.terminate()
-                except (OSError, AttributeError, ValueError):
-                    pass
-            raise
+            _dispatch(backend, n, todo, sweep, rows_dir, costs, record, lost, stamp)
+        finally:
+            # also on a result that cannot be recorded (a full disk) or an interrupt: stop now,
+            # do not run the rest first (a rerun resumes; a file being written is a hidden
+            # temporary)
+            backend.close()
+            if backend.restarts:
+                notes.append(f"a worker process died {backend.restarts} time(s) (killed, out of "
+                             "memory or a native abort): the pool started again and the scenarios "
+                             "it was running ran again one at a time")
 
 
 #: Most worker processes ``--dask local:N`` starts.
@@ -850,8 +901,10 @@ def local_cluster(n_workers: int):
     ``distributed.nanny.pre-spawn-environ`` (set in this process while the
     cluster lives, then restored), ``NUMBA_NUM_THREADS=1`` through the
     workers' own environment (never this process's: numba here keeps its
-    default), and the workers' statistical profiler is off (it samples the
-    running task's stack every 10 ms).
+    default), the workers' statistical profiler is off (it samples the
+    running task's stack every 10 ms) and the event loops' health check runs
+    once a second instead of every 20 ms. On exit the workers are ended at
+    once (:func:`_stop_workers`).
 
     Raises
     ------
@@ -866,7 +919,12 @@ def local_cluster(n_workers: int):
                          "'gyroarray[dask]'), or use --workers N") from None
     blas = {k: v for k, v in THREAD_ENV.items() if k != "NUMBA_NUM_THREADS"}
     config = {"distributed.nanny.pre-spawn-environ": blas,
-              "distributed.worker.profile.enabled": False}
+              "distributed.worker.profile.enabled": False,
+              # the event loops' health check wakes every loop (scheduler, nannies, workers)
+              # each 20 ms by default: 0.6 s of CPU per 10 s here and 0.2 s per worker, idle
+              # (measured), taken from the scenarios when every core runs one; once a second
+              # it costs a tenth of that and still warns of a loop blocked 3 s
+              "distributed.admin.tick.interval": "1s"}
     with _env(blas), dask.config.set(config):
         try:
             cluster = LocalCluster(n_workers=int(n_workers), threads_per_worker=1, processes=True,
@@ -881,14 +939,34 @@ def local_cluster(n_workers: int):
         try:
             yield cluster
         finally:
+            _stop_workers(cluster)
             try:
                 cluster.close(timeout=10)
             except Exception:                      # noqa: BLE001 - closing what is already gone
                 pass
 
 
+def _stop_workers(cluster) -> None:
+    """End a LocalCluster's worker processes at once, before the cluster closes.
+
+    A worker asked to close exits its interpreter in full (the engine's modules torn
+    down: 0.5 s, measured, per worker and in series with the sweep's end). Every
+    result is on disk (written atomically) and recorded by then, so the nannies are
+    told not to restart their workers and the processes are killed, as the local
+    process pool's are (:func:`_stop_pool`).
+    """
+    for nanny in list(getattr(cluster, "workers", {}).values()):
+        try:
+            nanny.close_gracefully(reason="gyroarray-sweep-done")   # no restart of its worker
+            proc = nanny.process.process
+            if proc is not None and proc.pid:
+                os.kill(proc.pid, signal.SIGKILL)
+        except (AttributeError, OSError, ProcessLookupError):       # not started, already gone
+            pass
+
+
 def _run_on_dask(todo: list, sweep: Sweep, scheduler: str | None, n_local: int | None,
-                 rows_dir: Path, costs: dict, record, lost, notes: list) -> None:
+                 rows_dir: Path, costs: dict, record, lost, notes: list, stamp) -> None:
     """Run ``todo`` on a dask.distributed cluster (``scheduler``) or on a LocalCluster of
     ``n_local`` workers started here (:func:`_dispatch`)."""
     # deferred: dask.distributed is optional (only for --scheduler/--dask) and slow to import
@@ -913,10 +991,12 @@ def _run_on_dask(todo: list, sweep: Sweep, scheduler: str | None, n_local: int |
                 client = Client(cluster, set_as_default=False)
             else:
                 client = _dask_client(scheduler)
+            stamp("cluster")
             try:
                 # every worker warms once (imports, numba) and says its thread variables
                 envs = client.run(warm_worker)
                 slots = sum(client.nthreads().values()) or 1
+                stamp("warm")
             except lost_conn as exc:
                 raise gone(exc) from None
             except Exception as err:              # noqa: BLE001 - a worker without gyroarray
@@ -927,7 +1007,8 @@ def _run_on_dask(todo: list, sweep: Sweep, scheduler: str | None, n_local: int |
                 notes.append(f"{len(off)} Dask worker(s) without OPENBLAS_NUM_THREADS=1: results "
                              "may differ in the last bits from a local run")
             try:
-                _dispatch(_Dask(client, gone), slots, todo, sweep, rows_dir, costs, record, lost)
+                _dispatch(_Dask(client, gone), slots, todo, sweep, rows_dir, costs, record, lost,
+                          stamp)
             finally:
                 try:
                     client.close(timeout=5)
@@ -935,6 +1016,73 @@ def _run_on_dask(todo: list, sweep: Sweep, scheduler: str | None, n_local: int |
                     pass
     finally:
         log.setLevel(level)
+
+
+def sweep_profile(stamps: dict, runs: list) -> dict:
+    """Where a sweep's wall time went, from the runner's phase marks and the scenarios' runs.
+
+    Parameters
+    ----------
+    stamps : dict
+        Phase name -> its end, seconds after the sweep started: ``prepare`` (the
+        sweep expanded, the folder checked, the finished scenarios verified),
+        ``cluster`` and ``warm`` (Dask: connected or started; every worker warm),
+        ``truth`` (the truth tasks done), ``scenarios`` (the last result
+        recorded), ``closed`` (the pool or cluster closed).
+    runs : list of (worker, start [s after the sweep started], seconds, CPU seconds,
+    write seconds)
+        Each scenario's run in its worker.
+
+    Returns
+    -------
+    dict
+        ``phases_s`` (each phase's duration [s], in order), ``first_scenario_s``
+        (the first scenario's start [s]: start-up and truth before it),
+        ``busy_s`` (the scenarios' run times summed [s]), ``cpu_s`` (the CPU
+        time their threads got, summed [s]: below ``busy_s`` when the workers
+        waited for a core, e.g. more workers than cores, or a shared machine),
+        ``write_s`` (of ``busy_s``: the Parquet files encoded and written [s]),
+        ``between_s`` (summed over workers, the time between a worker's first
+        start and last end in which it ran no scenario: its tasks' round trips
+        [s]), ``workers`` (per worker: the same, ``first_start_s``,
+        ``last_end_s``, ``scenarios``) and
+        ``tail_s`` (the last result minus the earliest worker's last end [s]: the
+        time some worker had nothing left to run). Clock offsets between
+        machines enter ``first_start_s`` and ``last_end_s`` on a remote cluster.
+    """
+    order = ["prepare", "cluster", "warm", "truth", "scenarios", "closed"]
+    phases, last = {}, 0.0
+    for name in order:
+        if name in stamps:
+            phases[name] = round(stamps[name] - last, 3)
+            last = stamps[name]
+    per: dict = {}
+    for worker, start, seconds, cpu, write in runs:
+        w = per.setdefault(str(worker), {"busy_s": 0.0, "cpu_s": 0.0, "write_s": 0.0,
+                                         "first_start_s": math.inf, "last_end_s": -math.inf,
+                                         "scenarios": 0})
+        w["busy_s"] += seconds
+        w["cpu_s"] += cpu if math.isfinite(cpu) else seconds
+        w["write_s"] += write
+        w["first_start_s"] = min(w["first_start_s"], start)
+        w["last_end_s"] = max(w["last_end_s"], start + seconds)
+        w["scenarios"] += 1
+    for w in per.values():
+        # between its first start and last end, the time the worker ran no scenario: the
+        # round trips of its tasks (scheduling, serialisation, the records sent back)
+        w["between_s"] = w["last_end_s"] - w["first_start_s"] - w["busy_s"]
+        for k in ("busy_s", "cpu_s", "write_s", "between_s", "first_start_s", "last_end_s"):
+            w[k] = round(w[k], 3)
+    end = stamps.get("scenarios")
+    return {"phases_s": phases,
+            "first_scenario_s": min((w["first_start_s"] for w in per.values()), default=None),
+            "busy_s": round(sum(w["busy_s"] for w in per.values()), 3),
+            "cpu_s": round(sum(w["cpu_s"] for w in per.values()), 3),
+            "write_s": round(sum(w["write_s"] for w in per.values()), 3),
+            "between_s": round(sum(w["between_s"] for w in per.values()), 3),
+            "workers": per,
+            "tail_s": round(end - min(w["last_end_s"] for w in per.values()), 3)
+            if per and end is not None else None}
 
 
 def run_sweep(sweep, out_dir, *, workers: int = 1, scheduler: str | None = None,
@@ -965,9 +1113,14 @@ def run_sweep(sweep, out_dir, *, workers: int = 1, scheduler: str | None = None,
         ``seconds``, ``worker_seconds`` (the scenarios' run times in their
         workers, summed [s]), ``workers``, ``scheduler``, ``dask``, ``backend``,
         ``notes``, ``excluded`` (grid combinations left out by ``skip_invalid``:
-        {id, reason}).
+        {id, reason}), ``profile`` (where the wall time went: :func:`sweep_profile`).
     """
-    t0 = time.perf_counter()
+    t0, t0_unix = time.perf_counter(), time.time()
+    stamps: dict = {}
+
+    def stamp(name: str) -> None:
+        stamps[name] = time.perf_counter() - t0
+
     if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
         raise InputError(f"workers must be an integer >= 1, got {workers!r}")
     if scheduler is not None and dask is not None:
@@ -995,48 +1148,60 @@ def run_sweep(sweep, out_dir, *, workers: int = 1, scheduler: str | None = None,
     skipped = len(sweep.scenarios) - len(todo)
     bar = _Progress(len(sweep.scenarios), skipped, progress)
     failed, rows_written, busy = [], 0, [0.0]
+    runs: list = []                 # (worker, start, seconds) of each scenario [s from t0]
+    stamp("prepare")
 
     def record(rec: dict) -> None:
         """A scenario's record from its worker: its file checked here and its checksum kept."""
         nonlocal rows_written
         busy[0] += rec.get("seconds", 0.0)
+        if "started" in rec:
+            runs.append((rec.get("worker"), rec["started"] - t0_unix, rec.get("seconds", 0.0),
+                         rec.get("cpu_seconds", math.nan), rec.get("write_seconds", 0.0)))
         if "write_error" in rec:                  # a full disk: stop (a rerun resumes)
             raise InputError(rec["write_error"], file=rec["file"])
         if "error" in rec:
-            failed.append({"id": rec["id"], "error": rec["error"]})
-        else:
-            path = rows_dir / rec["file"]
-            if not (path.exists() or path.is_symlink()):
-                raise InputError(f"a worker wrote {rec['file']} but it is not in this folder: --out "
-                                 "must be a folder every Dask worker and this machine share (a "
-                                 "network file system), or run with --workers N", file=str(rows_dir))
-            try:
-                same = _sha256(path) == rec["sha256"]
-            except (OSError, InputError):
-                same = False
-            if not same:                          # changed since its worker wrote it: not kept
-                failed.append({"id": rec["id"], "error": "its file differs from what its worker "
-                               "wrote; run the same command again to redo it"})
-            else:
-                outputs.append_line(out / CHECKSUMS, f"{rec['sha256']} {rec['rows']} {path.name}",
-                                    inputs=inputs, what="sweep checksum file (rows.sha256)")
-                rows_written += rec["rows"]
+            fail(rec["id"], rec["error"])
+            return
+        path = rows_dir / rec["file"]
+        if not (path.exists() or path.is_symlink()):
+            raise InputError(f"a worker wrote {rec['file']} but it is not in this folder: --out "
+                             "must be a folder every Dask worker and this machine share (a "
+                             "network file system), or run with --workers N", file=str(rows_dir))
+        try:
+            same = _sha256(path) == rec["sha256"]
+        except (OSError, InputError):
+            same = False
+        if not same:                          # changed since its worker wrote it: not kept
+            fail(rec["id"], "its file differs from what its worker wrote; run the same command "
+                 "again to redo it")
+            return
+        outputs.append_line(out / CHECKSUMS, f"{rec['sha256']} {rec['rows']} {path.name}",
+                            inputs=inputs, what="sweep checksum file (rows.sha256)")
+        rows_written += rec["rows"]
         bar.step()
+
+    def fail(sid: str, error: str) -> None:
+        failed.append({"id": sid, "error": error})
+        bar.step(f"{sid} failed: {error}")
 
     def lost(spec: ScenarioSpec, err: BaseException) -> None:
         """A scenario whose task failed as a whole (its worker died, the pool broke)."""
-        failed.append({"id": spec.id, "error": f"its task failed: {one_line(err)}"})
-        bar.step()
+        fail(spec.id, f"its task failed: {one_line(err)}")
 
-    if todo and scheduler is None and n_local is None:
-        backend = "processes"
-        _run_in_processes(todo, sweep, workers, rows_dir, costs, record, lost)
-    elif todo:
-        backend = "dask"
-        _run_on_dask(todo, sweep, scheduler, n_local, rows_dir, costs, record, lost, notes)
-    else:
-        backend = "none (all done)"
-    bar.show(final=True)
+    try:
+        if todo and scheduler is None and n_local is None:
+            backend = "processes"
+            _run_in_processes(todo, sweep, workers, rows_dir, costs, record, lost, notes, stamp)
+        elif todo:
+            backend = "dask"
+            _run_on_dask(todo, sweep, scheduler, n_local, rows_dir, costs, record, lost, notes,
+                         stamp)
+        else:
+            backend = "none (all done)"
+    finally:
+        bar.close()
+    stamp("closed")
     complete = not failed and all((rows_dir / f"{s.id}.parquet").exists() for s in sweep.scenarios)
     return {"sweep": sweep.name, "out_dir": str(out), "dataset": str(rows_dir),
             "scenarios": len(sweep.scenarios), "ran": len(todo) - len(failed), "skipped": skipped,
@@ -1044,4 +1209,5 @@ def run_sweep(sweep, out_dir, *, workers: int = 1, scheduler: str | None = None,
             "seconds": time.perf_counter() - t0, "worker_seconds": busy[0],
             "workers": n_local if n_local else (None if scheduler else workers),
             "scheduler": scheduler, "dask": dask, "backend": backend, "notes": notes,
+            "profile": sweep_profile(stamps, runs),
             "excluded": [{"id": i, "reason": r} for i, r in sweep.excluded]}
