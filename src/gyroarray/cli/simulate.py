@@ -190,6 +190,15 @@ def cmd_sweep(args):
     lines = [f"sweep {summary['sweep']}: {summary['scenarios']} scenarios, ran {summary['ran']}, "
              f"skipped {summary['skipped']} (already done), failed {len(summary['failed'])}, "
              f"{summary['rows_written']} rows in {summary['seconds']:.1f} s -> {summary['dataset']}"]
+    prof = summary.get("profile") or {}
+    if prof.get("workers"):
+        phases = ", ".join(f"{k} {v:.1f}" for k, v in prof["phases_s"].items())
+        n_w = summary.get("workers") or len(prof["workers"])     # a remote cluster: those seen
+        span = max(sum(prof["phases_s"].values()), 1e-9)
+        lines.append(f"time [s]: {phases}; {n_w} worker(s) ran scenarios "
+                     f"{100 * prof['busy_s'] / (n_w * span):.0f} % of the time, with a core "
+                     f"{100 * prof['cpu_s'] / max(prof['busy_s'], 1e-9):.0f} % of theirs "
+                     "(--json: profile)")
     lines += [f"failed {f['id']}: {f['error']}" for f in summary["failed"]]
     lines += [f"note: {n}" for n in summary.get("notes", [])]
     lines += [f"left out (skip_invalid) {x['id']}: {x['reason']}" for x in summary["excluded"]]
