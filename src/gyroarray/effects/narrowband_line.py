@@ -21,6 +21,7 @@ from gyroarray.core.units import deg_s_to_rad_s, rad_s_to_deg_s
 from gyroarray.effects.fitting import EffectFit, Z_EVIDENT, pm
 from gyroarray.effects.protocol import Kind, Param, Stage, identity, no_longer_seen, Effect, with_term
 from gyroarray.effects.sinusoid import fit_sinusoid, white_angle_noise
+from gyroarray.effects.terms import LineTerm, spread
 
 __all__ = ["NarrowbandLine", "fit_narrowband_line", "WANDER_Z", "line_of"]
 
@@ -78,6 +79,13 @@ class NarrowbandLine(Effect):
         if params["freq_hz"] >= 0.5 / dt_s:
             raise InputError(f"freq_hz = {params['freq_hz']:g} Hz must be below the Nyquist frequency "
                              f"{0.5 / dt_s:g} Hz (half the sample rate)", column="freq_hz")
+
+    def predictor_term(self, act, n_gyros):
+        """The line at its centre frequency, phase 0 (:class:`~gyroarray.effects.terms.LineTerm`:
+        its mean square through the filter does not depend on the phase; its width is taken
+        narrow beside the filter's features)."""
+        amp = spread(act, "amp_rad_s", n_gyros)
+        return LineTerm(amp, spread(act, "freq_hz", n_gyros), np.where(np.isnan(amp), np.nan, 0.0))
 
     def simulate(self, state, act, streams):
         ctx = state.ctx

@@ -15,6 +15,7 @@ from gyroarray.effects.fitting import as_vector, EffectFit, fit_extra, logp_to_z
 from gyroarray.effects import _draw
 from gyroarray.core.errors import InputError
 from gyroarray.effects.protocol import Param, RegressionEffect, Stage, explains_away, identity, with_term
+from gyroarray.effects.terms import LineTerm, spread
 from gyroarray.core.units import RAD_PER_DEG, deg_s_to_rad_s, deg_to_rad
 
 
@@ -53,6 +54,11 @@ class Sinusoid(RegressionEffect):
         if params["freq_hz"] >= nyquist:
             raise InputError(f"freq_hz = {params['freq_hz']:g} Hz must be below the Nyquist frequency "
                              f"{nyquist:g} Hz (half the sample rate)", column="freq_hz")
+
+    def predictor_term(self, act, n_gyros):
+        """The line itself, a deterministic error amp·sin(2π f t + phase) on every motion."""
+        return LineTerm(spread(act, "amp_rad_s", n_gyros), spread(act, "freq_hz", n_gyros),
+                        spread(act, "phase_rad", n_gyros))
 
     def simulate(self, state, act, streams):
         ctx = state.ctx

@@ -59,7 +59,7 @@ from gyroarray.core.physics import tilted_axes
 
 __all__ = ["PredictorTerm", "WhiteTerm", "WalkTerm", "FlickerTerm", "GaussMarkovTerm", "CorrelationTerm",
            "SensorFilter", "Motion", "DeterministicTerm", "ScaleTerm", "AxisTerm", "ForceTerm",
-           "TemperatureTerm", "FunctionTerm", "spread"]
+           "TemperatureTerm", "LineTerm", "FunctionTerm", "spread"]
 
 
 def spread(act, key: str, n_gyros: int, shape: tuple[int, ...] = ()) -> np.ndarray:
@@ -274,6 +274,33 @@ class TemperatureTerm(DeterministicTerm):
         if motion.temp_swing_k is None:
             return None
         return np.asarray(motion.temp_swing_k, dtype=float)[:, None] * np.nan_to_num(self.coeff_rad_s_per_k)
+
+
+@dataclass(frozen=True, eq=False)
+class LineTerm(DeterministicTerm):
+    """A spectral line on each gyro: e_i = A_i·sin(2π f_i t + φ_i), A_i [rad/s], f_i [Hz],
+    φ_i [rad] per gyro (NaN: none), on the motion's sample times.
+
+    Exact for a fixed line (its stated phase). A line whose phase wanders (a narrowband
+    process) is given its centre frequency and phase 0: over a window of many periods the
+    mean square of a sinusoid through a linear filter, A²·|T(f)|²/2, does not depend on its
+    phase, and the line's width is taken as narrow beside the filter's features (|T| flat
+    over it); its cross terms with the other deterministic errors are then those of one
+    phase, not their average (zero) — small unless another error has the line's frequency —
+    and its angle error (the integral, bounded by A·|T(f)|/(π f)) is that of phase 0, not
+    the average over phases.
+    """
+
+    amp_rad_s: np.ndarray
+    freq_hz: np.ndarray
+    phase_rad: np.ndarray
+    needs: ClassVar[str] = "the sample times"
+
+    def rate_error(self, motion):
+        t = np.asarray(motion.time_s, dtype=float)[:, None]
+        amp = np.nan_to_num(self.amp_rad_s)
+        return amp * np.sin(2.0 * np.pi * np.nan_to_num(self.freq_hz) * t
+                            + np.nan_to_num(self.phase_rad))
 
 
 @dataclass(frozen=True, eq=False)
