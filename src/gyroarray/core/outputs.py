@@ -255,14 +255,20 @@ def _unlink(path) -> None:
         pass
 
 
+def _new_temp(p: Path) -> tuple[int, str]:
+    """A new hidden temporary file beside ``p`` (``mkstemp``: created, never through a link):
+    its descriptor and path."""
+    folder = p.parent if str(p.parent) else Path(".")
+    try:
+        return tempfile.mkstemp(prefix=f".{p.name[:64]}.", suffix=".tmp", dir=folder)
+    except OSError as err:
+        raise _refusal(err, p, f"cannot write in {folder}") from None
+
+
 def _stage(p: Path, data: bytes) -> str:
     """``data`` in a hidden temporary file beside ``p``, synced, with :func:`file_mode`;
     returns its path. Nothing is left behind on failure."""
-    folder = p.parent if str(p.parent) else Path(".")
-    try:
-        fd, tmp = tempfile.mkstemp(prefix=f".{p.name[:64]}.", suffix=".tmp", dir=folder)
-    except OSError as err:
-        raise _refusal(err, p, f"cannot write in {folder}") from None
+    fd, tmp = _new_temp(p)
     try:
         try:
             os.fchmod(fd, file_mode())
@@ -304,11 +310,7 @@ def open_staged(path):
         The folder cannot be written.
     """
     p = Path(path)
-    folder = p.parent if str(p.parent) else Path(".")
-    try:
-        fd, tmp = tempfile.mkstemp(prefix=f".{p.name[:64]}.", suffix=".tmp", dir=folder)
-    except OSError as err:
-        raise _refusal(err, p, f"cannot write in {folder}") from None
+    fd, tmp = _new_temp(p)
     try:
         os.fchmod(fd, file_mode())
         return os.fdopen(fd, "wb"), Staged(tmp, p)
