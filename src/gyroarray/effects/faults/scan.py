@@ -1056,14 +1056,85 @@ def _fit_noise(eps, K, S, t, dt, sides: str = "both") -> FaultFit:
     return FaultFit("noise", onset, onset_sig, ratio, ratio_sig, z, float(dll[best]), params, psig)
 
 
+#: Fewest runs of identical outputs before the terminal one from which their own length
+#: distribution is the null (fewer: the i.i.d. repeat probability).
+STUCK_MIN_RUNS = 50
+#: Quantile of the earlier runs' lengths above which their excess is read as geometric (the
+#: tail the terminal run is compared with).
+STUCK_TAIL_QUANTILE = 0.9
+
+
+def run_lengths(output: np.ndarray) -> np.ndarray:
+    """Lengths of the runs of identical consecutive values of ``output``, in order [samples]."""
+    y = np.asarray(output)
+    if y.size == 0:
+        return np.zeros(0, dtype=np.int64)
+    edges = np.flatnonzero(y[1:] != y[:-1]) + 1
+    return np.diff(np.r_[0, edges, y.size]).astype(np.int64)
+
+
+#: Fewest earlier runs beyond the threshold u, and distinct lengths among them, from which their
+#: excess is fitted a generalized Pareto law (fewer: geometric).
+STUCK_GPD_MIN = (30, 5)
+
+
+def log_p_run_at_least(lengths: np.ndarray, run: int) -> tuple[float, str]:
+    """log P(one run >= ``run``) from the record's own earlier run lengths, and how it was read.
+
+    A quantized output whose bias wanders slowly (a quiet counter of a few levels) repeats in
+    long clusters: its runs are far longer than independent repeats at the record's repeat
+    rate would give, and heavy-tailed (numpy counters at 0.15-0.4 LSB of white noise and a
+    slow walk, each record cut at the end of its longest run: z 2-75 under the i.i.d. rate).
+    So the terminal run is compared with the record's own runs (peaks over a threshold): up
+    to the :data:`STUCK_TAIL_QUANTILE` quantile u of their lengths the empirical survival
+    (Laplace); beyond it the excess over u follows a generalized Pareto law fitted by maximum
+    likelihood (scipy.stats.genpareto, shape ξ held >= 0: never a lighter tail than
+    geometric, i.e. than independent repeats), or, with too few long runs to fit one
+    (:data:`STUCK_GPD_MIN`), a geometric excess whose ratio is read from their mean excess.
+    Independent repeats give geometric runs, ξ = 0: the law of the i.i.d. test, read from the
+    runs instead of the samples.
+    """
+    L = np.asarray(lengths, dtype=float)
+    k = L.size
+    u = max(2.0, float(np.floor(np.quantile(L, STUCK_TAIL_QUANTILE))))
+    if run <= u:
+        return math.log((np.sum(L >= run) + 1.0) / (k + 1.0)), "its earlier runs' lengths"
+    tail = L[L >= u] - u
+    log_tail = math.log((tail.size + 1.0) / (k + 1.0))
+    if tail.size >= STUCK_GPD_MIN[0] and np.unique(tail).size >= STUCK_GPD_MIN[1]:
+        from scipy import stats  # deferred: scipy.stats loads only when a long run is judged
+        ex = tail + 0.5     # whole samples: the excess is the floor of a continuous one
+        xi, _, scale = stats.genpareto.fit(ex, floc=0.0)
+        if not (math.isfinite(xi) and math.isfinite(scale) and scale > 0):
+            xi = 0.0
+        xi = max(float(xi), 0.0)
+        if xi == 0.0:
+            # the exponential whose floor is the geometric excess of this mean m: its
+            # ratio m/(1+m) is e^(-1/scale)
+            scale = 1.0 / math.log1p(1.0 / max(float(np.mean(tail)), 1e-12))
+        log_sf = float(stats.genpareto.logsf(run - u, xi, 0.0, scale))  # P(floor >= run - u)
+        return (log_tail + log_sf, f"the tail of its earlier runs (beyond {u:.0f} samples, "
+                f"generalized Pareto, shape {xi:.2g}, scale {scale:.3g} samples)")
+    ratio = (tail.sum() + 0.5) / (tail.sum() + tail.size + 1.0)    # geometric excess, Laplace
+    return (log_tail + (run - u) * math.log(ratio),
+            f"the tail of its earlier runs (beyond {u:.0f} samples, geometric, ratio {ratio:.3g})")
+
+
 def _fit_stuck_output(out: np.ndarray, t: np.ndarray, dt: float) -> FaultFit:
     start = stuck_run(out)
     run = out.size - start                                    # samples in the terminal run
     before = out[:start + 1]
-    same = int(np.sum(before[1:] == before[:-1]))
-    p0 = (same + 1.0) / (before.size + 1.0)                   # Laplace: never 0
-    log_p = (run - 1) * math.log(p0)                          # P(run − 1 repeats) = p0^(run−1)
-    log_np = math.log(out.size) + log_p                       # anywhere in the record:
+    lengths = run_lengths(out[:start])                        # the runs before the terminal one
+    if lengths.size >= STUCK_MIN_RUNS:
+        log_p, how = log_p_run_at_least(lengths, run)         # one run this long ...
+        log_np = math.log(lengths.size + 1.0) + log_p         # ... among the record's runs
+        said = f"against {how}, {lengths.size} runs"
+    else:
+        same = int(np.sum(before[1:] == before[:-1]))
+        p0 = (same + 1.0) / (before.size + 1.0)               # Laplace: never 0
+        log_p = (run - 1) * math.log(p0)                      # P(run − 1 repeats) = p0^(run−1)
+        log_np = math.log(out.size) + log_p                   # anywhere in the record
+        said = f"p0 = {p0:.3g} before it"
     log_pmax = math.log(-math.expm1(-math.exp(log_np))) if log_np > -20 else log_np   # 1 − e^(−n·p)
     z = _z_of_logp(min(log_pmax, 0.0)) if run >= 2 else -math.inf
     onset_i = min(start + 1, out.size - 1)
@@ -1071,7 +1142,7 @@ def _fit_stuck_output(out: np.ndarray, t: np.ndarray, dt: float) -> FaultFit:
     sig = dt / math.sqrt(12.0)
     return FaultFit("stuck", onset, sig, math.nan, math.nan, z, float(-log_p) if run >= 2 else 0.0,
                     {"start_s": onset}, {"start_s": sig},
-                    (f"terminal run of {run} identical outputs (p0 = {p0:.3g} before it)",))
+                    (f"terminal run of {run} identical outputs ({said})",))
 
 
 def fit_faults(residual_rad_s, dt_s: float, r: float, q: float, **kw) -> dict[str, FaultFit]:
