@@ -1,11 +1,12 @@
 """The stuck-output test's null: a terminal run compared with the record's own runs.
 
 Outside truth: independent repeats among three equally likely values give runs of
-geometric length, P(run >= r) = (1/3)^(r-1), a closed form; numpy-written quantized
-counters (a few LSB levels, white noise of 0.25-0.4 LSB and a slow random walk) whose
-record ends with its longest run are no stuck gyro, and the i.i.d. repeat rate written out
-here calls some of them stuck (z > 3) where the record's own runs do not; a frozen tail
-appended to the same counters and to a fine-grained output is still found.
+geometric length, P(run >= r) = (1/3)^(r-1), a closed form; numpy-written quantized outputs
+whose record ends with its longest run are no stuck gyro — a rate quantizer of a few LSB
+levels (white noise of 0.25-0.4 LSB and a slow random walk) and the spec's angle counter
+(increments floor(θ) steps, θ moving 0.1 step per sample: a ternary output) — and the i.i.d.
+repeat rate written out here calls some of them stuck (z > 3) where the record's own runs do
+not; a frozen tail appended to a counter and to a fine-grained output is still found.
 """
 
 from __future__ import annotations
@@ -62,6 +63,22 @@ def test_a_quiet_counter_ending_in_its_longest_run_is_not_stuck(sigma_lsb):
         assert fit.z < Z_EVIDENT, (seed, L[i], fit.z, fit.notes)
         old.append(_iid_z(cut))
     assert max(old) > Z_EVIDENT, old                  # the i.i.d. null called one stuck
+
+
+def test_a_quiet_angle_counter_ending_in_its_longest_run_is_not_stuck():
+    old = []
+    for seed in range(4):
+        rng = np.random.default_rng(seed)
+        y = np.diff(np.floor(np.cumsum(0.1 * rng.standard_normal(100_001))))   # steps per sample
+        assert np.unique(y).size <= 5
+        L = run_lengths(y)
+        starts = np.r_[0, np.cumsum(L)[:-1]]
+        i = int(np.argmax(np.where(starts > y.size // 5, L, 0)))
+        cut = y[:starts[i] + L[i]]
+        fit = _fit_stuck_output(cut, np.arange(cut.size) * DT, DT)
+        assert fit.z < Z_EVIDENT, (seed, L[i], fit.z, fit.notes)
+        old.append(_iid_z(cut))
+    assert min(old) > Z_EVIDENT, old                  # the i.i.d. null called every one stuck
 
 
 @pytest.mark.parametrize("sigma_lsb,q,frozen,z_min", [(1.0, 1e-3, 50, 10.0), (0.4, 1.0, 2000, 10.0)])
