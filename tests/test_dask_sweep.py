@@ -18,10 +18,9 @@ import threading
 import time
 from pathlib import Path
 
-import numpy as np
-import pandas as pd
 import pytest
 from hostile import assert_contract, run_cli
+from same_bits import assert_same_bits
 
 from gyroarray.core.errors import InputError
 from gyroarray.sweep.runner import (TaskBatches, load_results, local_cluster, parse_dask,
@@ -51,16 +50,6 @@ arwonly = [{ effect = "arw", n_deg_rt_h = 0.1 }]
 n_gyros = [4, 5, 6]
 effects = ["base", "arwonly"]
 """
-
-
-def assert_same_bits(a: pd.DataFrame, b: pd.DataFrame) -> None:
-    """Equal frames, floats compared by their bits (NaN included)."""
-    assert list(a.columns) == list(b.columns) and len(a) == len(b) > 0
-    pd.testing.assert_frame_equal(a, b, check_exact=True)
-    for col in a.columns:
-        if a[col].dtype == np.float64:
-            assert np.array_equal(a[col].to_numpy().view(np.uint64),
-                                  b[col].to_numpy().view(np.uint64)), col
 
 
 @pytest.fixture(scope="module")

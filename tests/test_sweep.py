@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
+from same_bits import assert_same_bits
 
 from gyroarray.core.errors import InputError
 from gyroarray.sweep.runner import load_results, run_sweep
@@ -234,16 +235,6 @@ def test_invalid_top_level(tmp_path):
 # -- the runner ----------------------------------------------------------------
 
 RUN_GRID = "[grid]\nn_gyros = [4, 6]\n[[points]]\nscheme = 2\nn_gyros = 5\nalpha_deg = \"optimal\"\n"
-
-
-def assert_same_bits(a: pd.DataFrame, b: pd.DataFrame):
-    """Equal frames, floats compared by their bits (NaN included)."""
-    assert list(a.columns) == list(b.columns) and len(a) == len(b) > 0
-    pd.testing.assert_frame_equal(a, b, check_exact=True)
-    for col in a.columns:
-        if a[col].dtype == np.float64:
-            assert np.array_equal(a[col].to_numpy().view(np.uint64),
-                                  b[col].to_numpy().view(np.uint64)), col
 
 
 @pytest.fixture(scope="module")

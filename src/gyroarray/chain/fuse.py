@@ -73,7 +73,7 @@ from gyroarray.effects.names import ARW, CORRELATION
 __all__ = ["MIN_PART", "AXES", "WhiteWalk", "FuseResult", "fuse", "still_parts", "stitch",
            "octave_avar", "white_walk_fit", "white_walk_of_avar", "design_rrw", "nnls2", "fused_measurement", "fused_files", "sha256_of",
            "split_parts", "fused_terms", "band_basis", "predicted_band", "tau_verdict", "validate_fuse",
-           "used_gyros", "check_geometry", "model_noise", "fitted_noise", "noise_of_model", "gain_of", "predicted_arw", "plain_params",
+           "resolve_estimator", "used_gyros", "check_geometry", "model_noise", "fitted_noise", "noise_of_model", "gain_of", "predicted_arw", "plain_params",
            "best_single_of", "axes_json", "fused_sidecar"]
 
 #: Shortest still part [samples] kept for the noise analysis (as ``compare``'s).
@@ -436,6 +436,15 @@ def axes_json(adev, fused_fit: WhiteWalk | None, best, predicted) -> dict:
     return axes
 
 
+def resolve_estimator(estimator: str, params: dict) -> tuple[type[Estimator], Estimator]:
+    """The registry class of ``estimator`` and an unfitted instance with ``params``; a bad name or
+    hyperparameter is refused as ``--estimator``'s."""
+    try:
+        return cast("type[Estimator]", get_estimator(estimator)), make(estimator, **params)
+    except InputError as err:
+        raise InputError(f"--estimator: {err.message}") from None
+
+
 def used_gyros(meas: Measurement, exclude) -> tuple[list[int], list[int], list[int], str | None]:
     """(used, excluded, constant, note on the constant ones), all 1-based."""
     n = meas.n_gyros
@@ -612,11 +621,7 @@ def fuse(meas: Measurement, estimator: str, *, model=None, model_name: str | Non
         by it), or no model and no still part to fit the noise on; each names the file.
     """
     params = dict(params or {})
-    try:
-        cls = cast("type[Estimator]", get_estimator(estimator))
-        est = make(estimator, **params)
-    except InputError as err:
-        raise InputError(f"--estimator: {err.message}") from None
+    cls, est = resolve_estimator(estimator, params)
     used, excluded, constant, const_note = used_gyros(meas, exclude)
     check_geometry(meas, used, excluded, constant)
     notes = [] if const_note is None else [const_note]

@@ -43,7 +43,6 @@ from types import SimpleNamespace
 from typing import cast
 
 import numpy as np
-from scipy import signal
 
 from gyroarray import __version__
 from gyroarray.analysis.allan import analysis_of
@@ -54,11 +53,12 @@ from gyroarray.core.errors import InputError
 from gyroarray.core.layout import Layout
 from gyroarray.core.limits import format_size, stream_work_bytes
 from gyroarray.core.measurement import Measurement, RecordHead, iter_record
-from gyroarray.estimators import Estimator, get_estimator, make
 from gyroarray.estimators.base import LinearSystem
+from gyroarray.estimators.kalman import modal_lfilter
 from gyroarray.chain.fuse import (AXES, axes_json, best_single_of,
                                   check_geometry, fitted_noise, fused_sidecar, gain_of,
-                                  noise_of_model, plain_params, predicted_arw, white_walk_of_avar)
+                                  noise_of_model, plain_params, predicted_arw, resolve_estimator,
+                                  white_walk_of_avar)
 
 __all__ = ["STREAMING_ESTIMATORS", "ChunkFilter", "streamed_fuse"]
 
@@ -107,19 +107,9 @@ class ChunkFilter:
             m0 = self.m_start @ z[0]
             self.unit_part = self.m_out[:, self.unit] @ m0[self.unit]
             self.state = self.lam[live] * m0[live]
-        u = z @ self.m_in[live].T                                        # (n, d)
-        y = np.empty_like(u)
-        lam = self.lam[live]
-        start = 0
-        while start < live.size:                                         # equal λ share a call
-            stop = start + 1
-            while stop < live.size and lam[stop] == lam[start]:
-                stop += 1
-            a = lam[start]
-            y[:, start:stop], zf = signal.lfilter([1.0], [1.0, -a], u[:, start:stop], axis=0,
-                                                  zi=self.state[None, start:stop])
-            self.state[start:stop] = zf[0]
-            start = stop
+        u = (z @ self.m_in[live].T).T                                    # (d, n)
+        y, self.state = modal_lfilter(self.lam[live], u, self.state)
+        y = y.T
         out = y @ self.m_out[:, live].T
         out += self.unit_part
         return out
@@ -243,11 +233,7 @@ def streamed_fuse(head: RecordHead, estimator: str, *, model=None, model_name: s
     """
     name = head.source
     params = dict(params or {})
-    try:
-        cls = cast("type[Estimator]", get_estimator(estimator))
-        est = make(estimator, **params)
-    except InputError as err:
-        raise InputError(f"--estimator: {err.message}") from None
+    cls, est = resolve_estimator(estimator, params)
     n_g = head.n_gyros
     excluded = sorted({int(k) for k in exclude})
     bad = [k for k in excluded if not 1 <= k <= n_g]

@@ -25,13 +25,46 @@ from scipy.optimize import brentq
 
 from gyroarray.core.errors import InputError
 
-__all__ = ["StateModel", "state_model", "SteadyStateFilter", "steady_state", "NoSteadyState",
+__all__ = ["modal_lfilter", "StateModel", "state_model", "SteadyStateFilter", "steady_state", "NoSteadyState",
            "kf_step", "first_order_lowpass", "lowpass_pole", "solve_log"]
 
 
 class NoSteadyState(InputError):
     """The Riccati equation of the observable subsystem has no stabilising solution."""
 
+
+
+def modal_lfilter(lam: np.ndarray, u: np.ndarray, zi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Run decoupled first-order modes m_k = λ m_{k-1} + u_k through ``scipy.signal.lfilter``.
+
+    Parameters
+    ----------
+    lam : ndarray (d,)
+        Real eigenvalues; modes of equal λ next to each other share one call.
+    u : ndarray (d, n)
+        Inputs, one row per mode.
+    zi : ndarray (d,)
+        lfilter's initial condition per mode (λ·m_{-1}).
+
+    Returns
+    -------
+    y : ndarray (d, n)
+        The modes.
+    zf : ndarray (d,)
+        The final conditions (``zi`` of the next block).
+    """
+    y = np.empty_like(u)
+    zf = np.empty(lam.size)
+    start = 0
+    while start < lam.size:                                      # equal eigenvalues share a call
+        stop = start + 1
+        while stop < lam.size and lam[stop] == lam[start]:
+            stop += 1
+        y[start:stop], z_end = signal.lfilter([1.0], [1.0, -lam[start]], u[start:stop], axis=-1,
+                                              zi=zi[start:stop, None])
+        zf[start:stop] = z_end[:, 0]
+        start = stop
+    return y, zf
 
 @dataclass(frozen=True, eq=False)
 class StateModel:
@@ -132,17 +165,7 @@ class SteadyStateFilter:
         keep = np.arange(d) if full else self.rate_modes
         lam, m0 = self.lam[keep], m0[keep]
         u = self.B[keep] @ z.T                                       # (d, n): B z_k
-        y = np.empty_like(u)
-        start = 0
-        while start < keep.size:                                     # equal eigenvalues share a call
-            stop = start + 1
-            while stop < keep.size and lam[stop] == lam[start]:
-                stop += 1
-            a = lam[start]
-            # m_k = λ m_{k-1} + u_k
-            y[start:stop], _ = signal.lfilter([1.0], [1.0, -a], u[start:stop], axis=-1,
-                                              zi=(a * m0[start:stop])[:, None])
-            start = stop
+        y, _ = modal_lfilter(lam, u, lam * m0)
         out = y.T @ self.modes[rows][:, keep].T
         out += self.Vu[rows] @ c
         return out

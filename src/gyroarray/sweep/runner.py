@@ -751,6 +751,7 @@ class _Dask:
     """A dask.distributed client as the dispatcher sees it (lost workers' tasks run elsewhere)."""
 
     retry_lost = True
+    serial_retry = False          # a lost worker costs only its own tasks: Dask reruns them
 
     def __init__(self, client, gone):
         # deferred: dask.distributed is optional (only for --scheduler/--dask) and slow to import
@@ -812,7 +813,7 @@ def _dispatch(backend, slots: int, todo: list, sweep: Sweep, rows_dir: Path, cos
 
     def fill():
         while len(pending) < 2 * max(1, slots):
-            if getattr(backend, "serial_retry", False) and pending and (
+            if backend.serial_retry and pending and (
                     batches.retry or any(task[1] for task in pending.values() if task)):
                 return                      # suspects of a broken pool: one at a time, alone
             nxt = batches.take()
@@ -830,7 +831,7 @@ def _dispatch(backend, slots: int, todo: list, sweep: Sweep, rows_dir: Path, cos
                     batches.measured(rec["id"], rec["seconds"])
                     record(rec)
             elif backend.retry_lost and not isolated and (
-                    len(specs) > 1 or getattr(backend, "serial_retry", False)):
+                    len(specs) > 1 or backend.serial_retry):
                 batches.split(specs)        # run again one by one: only the culprit is lost
             else:
                 for spec in specs:
