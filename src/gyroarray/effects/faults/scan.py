@@ -1123,13 +1123,13 @@ def log_p_run_at_least(lengths: np.ndarray, run: int) -> tuple[float, str]:
 def _fit_stuck_output(out: np.ndarray, t: np.ndarray, dt: float) -> FaultFit:
     start = stuck_run(out)
     run = out.size - start                                    # samples in the terminal run
-    before = out[:start + 1]
     lengths = run_lengths(out[:start])                        # the runs before the terminal one
     if lengths.size >= STUCK_MIN_RUNS:
         log_p, how = log_p_run_at_least(lengths, run)         # one run this long ...
         log_np = math.log(lengths.size + 1.0) + log_p         # ... among the record's runs
         said = f"against {how}, {lengths.size} runs"
     else:
+        before = out[:start + 1]
         same = int(np.sum(before[1:] == before[:-1]))
         p0 = (same + 1.0) / (before.size + 1.0)               # Laplace: never 0
         log_p = (run - 1) * math.log(p0)                      # P(run − 1 repeats) = p0^(run−1)
