@@ -62,7 +62,7 @@ docs: $(STAMP)
 # generated examples in all (tests/test_fuzz.py shares them out); make test runs a small fixed sample
 FUZZ_EXAMPLES ?= 2000
 fuzz: $(STAMP)
-	GYROARRAY_FUZZ_EXAMPLES=$(FUZZ_EXAMPLES) $(PY) -m pytest -q -n $(WORKERS) tests/test_fuzz.py tests/test_fuzz_args.py \
+	GYROARRAY_FUZZ_EXAMPLES=$(FUZZ_EXAMPLES) $(PY) -m pytest -q -n $(WORKERS) tests/test_fuzz.py tests/test_fuzz_args.py tests/test_fuzz_readers.py \
 		tests/test_hostile.py tests/test_hostile_files.py tests/test_hostile_fdi.py tests/test_hostile_counts.py \
 		tests/test_hostile_models.py tests/test_hostile_output.py
 

@@ -16,6 +16,7 @@ import gzip
 import io
 import json
 import math
+import os
 import signal
 import time
 import zlib
@@ -132,12 +133,25 @@ class Outcome:
         return json.loads(self.out)
 
 
+def load_factor() -> float:
+    """How many times slower than idle a call may run now: the 1-minute load average per CPU
+    this process may use (at least 1). A hang never ends; a slow call on a loaded machine does,
+    so the alarm that tells them apart scales with the load (a suite run beside another on 2
+    cores sees a load of 12-15, 6-8 per core)."""
+    try:
+        cpus = len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):
+        cpus = os.cpu_count() or 1
+    return max(1.0, os.getloadavg()[0] / max(cpus, 1))
+
+
 def run_cli(argv, timeout: float = 120.0) -> Outcome:
-    """``gyroarray.cli.main.main(argv)`` in this process, stdout/stderr captured, under an alarm."""
+    """``gyroarray.cli.main.main(argv)`` in this process, stdout/stderr captured, under an alarm
+    of ``timeout`` seconds on an idle machine (times :func:`load_factor` on a loaded one)."""
     from gyroarray.cli.main import main
     out, err = io.StringIO(), io.StringIO()
     start = time.process_time()
-    with alarm(timeout), contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+    with alarm(timeout * load_factor()), contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
         code = main([str(a) for a in argv])
     return Outcome(code, out.getvalue(), err.getvalue(), time.process_time() - start)
 

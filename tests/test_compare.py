@@ -322,6 +322,32 @@ def test_quantization_as_the_spec_defines_it_is_found_fitted_and_explained(seed)
     assert abs(f.params["q_deg"] - q) <= max(0.10 * q, 2.0 * f.sigma["q_deg"])
 
 
+@pytest.mark.parametrize("seed", [0, 1])
+def test_the_spec_counters_repeats_are_not_holds_and_held_samples_still_are(seed):
+    """The repeats of the spec's counter (the increments of the rounded integrated angle, numpy
+    here: white rate at 0.2 and 0.4 step per sample, at rest) are the quantizer's, not a
+    pipeline's: it repeats as often two samples apart as one apart (the practice-shaped
+    quantization case, seed 100, was read as holds at z 15 and its quantization explained away;
+    at these two rates the density's null alone calls holds in every seed). A pipeline that
+    holds 2 % of the samples (each one repeats the sample before it; numpy) is still found on a
+    finer grid (3 steps per sample: 1.2 % repeats by chance, 2 % more held)."""
+    from gyroarray.analysis.pipeline import gyro_holds
+    rng = np.random.default_rng(seed)
+    n = 60000
+
+    def counter(sd_steps):
+        return np.diff(np.round(np.cumsum(rng.normal(0.0, sd_steps, n))), prepend=0.0)
+
+    for sd in (0.2, 0.4):
+        h = gyro_holds(counter(sd))
+        assert h.fraction > 0.15 and not h.significant, (sd, h)
+    y = counter(3.0)
+    held = rng.random(n) < 0.02
+    held[0] = False
+    h = gyro_holds(y[np.maximum.accumulate(np.where(held, 0, np.arange(n)))])
+    assert h.significant and h.n_held - h.chance > 0.5 * held.sum(), h
+
+
 @pytest.mark.slow
 def test_ladder_keeps_only_steps_that_help(monkeypatch):
     """A step that makes D worse is refused, the next candidate tried, the refusal noted."""

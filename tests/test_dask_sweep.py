@@ -21,6 +21,7 @@ from pathlib import Path
 import pytest
 from hostile import assert_contract, run_cli
 from same_bits import assert_same_bits
+from wall_bound import bound_s
 
 from gyroarray.core.errors import InputError
 from gyroarray.sweep.runner import (TaskBatches, load_results, local_cluster, parse_dask,
@@ -270,7 +271,7 @@ def test_dask_local_gives_the_same_bits_and_names_each_failure(sweep_file, refer
     ``--workers 1``, each failing scenario named with its reason, the others complete."""
     ref_summary, ref = reference
     out = tmp_path / "dask"
-    o = run_cli(["sweep", sweep_file, "--out", out, "--dask", "local:2", "--json"], timeout=300)
+    o = run_cli(["sweep", sweep_file, "--out", out, "--dask", "local:2", "--json"], timeout=bound_s(300.0))
     assert "Traceback" not in o.err
     summary = json.loads(o.out)
     assert o.code == 1 and summary["backend"] == "dask" and summary["workers"] == 2
@@ -375,10 +376,11 @@ def test_resume_after_an_interrupted_dask_sweep(sweep_file, reference, cluster, 
     proc = subprocess.Popen([sys.executable, "-c", code, str(sweep_file), str(out),
                              cluster.scheduler_address], env=os.environ.copy())
     try:
-        deadline = time.monotonic() + 300
+        limit = bound_s(300.0)                       # scaled to this machine's speed now
+        deadline = time.monotonic() + limit
         while not list((out / "rows").glob("*.parquet")):
             assert proc.poll() is None, "the sweep ended before it could be killed"
-            assert time.monotonic() < deadline, "no result file within 300 s"
+            assert time.monotonic() < deadline, f"no result file within {limit:.0f} s"
             time.sleep(0.02)
     finally:
         os.kill(proc.pid, signal.SIGKILL)

@@ -32,7 +32,8 @@ from hostile import assert_contract, axes_sidecar, finite_numbers, run_cli, writ
 LONG = int(os.environ.get("GYROARRAY_FUZZ_EXAMPLES", "0"))
 # GYROARRAY_FUZZ_EXAMPLES is the total of a `make fuzz` run, shared out among the fuzz tests:
 # 17 % each to the allan and simulate tests here, 3 % to diagnose (each example is a whole
-# diagnosis), 7 % to each of the nine commands of tests/test_fuzz_args.py
+# diagnosis), 4 % to each of the thirteen commands of tests/test_fuzz_args.py, 3 % to each of
+# the two reader tests of tests/test_fuzz_readers.py
 FUZZ = settings(max_examples=max(LONG * 17 // 100, 1) if LONG else 25, deadline=None, derandomize=not LONG, database=None,
                 suppress_health_check=list(HealthCheck))
 

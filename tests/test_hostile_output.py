@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from hostile import assert_contract, axes_sidecar, run_cli, tiny_sweep, write_measurement
+from hostile import assert_contract, axes_sidecar, load_factor, run_cli, tiny_sweep, write_measurement
 
 N = 3000
 RATE_HZ = 50.0
@@ -103,11 +103,9 @@ def sweep_file(tmp_path):
 ])
 def test_malformed_scheduler_refused_before_any_work(sweep_file, tmp_path, address, why):
     out = tmp_path / "out"
-    t0 = time.monotonic()
     o = run_cli(["sweep", sweep_file, "--out", out, "--scheduler", address], timeout=60)
     assert_contract(o, "--scheduler")
     assert o.code == 2 and why in o.err and "tcp://HOST:PORT" in o.err, o.err
-    assert time.monotonic() - t0 < 30
     assert not out.exists()                          # refused before the output folder is made
 
 
@@ -125,7 +123,8 @@ def test_unreachable_scheduler_refused_at_once(sweep_file, tmp_path):
     assert_contract(o)
     assert o.code == 2 and o.err.startswith(f"gyroarray: --scheduler: cannot reach the Dask scheduler at {address}: "), o.err
     assert "refused" in o.err.lower() and "waited at most 10 s" in o.err
-    assert time.monotonic() - t0 < 60
+    # no 20-40 s wait: 60 s on an idle machine, scaled with the load (a slow call is not a wait)
+    assert time.monotonic() - t0 < 60 * load_factor()
 
 
 @pytest.mark.parametrize("answer", [pytest.param(b"", marks=pytest.mark.slow),   # waits the 10 s timeout: make score
@@ -165,7 +164,7 @@ def test_scheduler_that_is_not_dask_refused_within_the_timeout(sweep_file, tmp_p
     assert_contract(o)
     assert o.code == 2 and o.err.startswith(f"gyroarray: --scheduler: cannot reach the Dask scheduler at {address}: "), o.err
     assert "(waited at most 10 s)" in o.err
-    assert elapsed < 90, elapsed
+    assert elapsed < 90 * load_factor(), elapsed
 
 
 # -- --max-memory covers the whole of diagnose -----------------------------------------------

@@ -206,11 +206,12 @@ def test_cli_parity_names_the_gyro(tmp_path, capsys):
     assert max(zmax, key=zmax.get) == "5"
 
 
-def test_cli_parity_static_record_has_no_calibration(tmp_path, capsys):
+def test_cli_parity_static_record_has_no_calibration(tmp_path):
+    # a static record gives no answer: exit 2 with the reason, never a null calibration
     path = _record(tmp_path, False)
-    assert main(["parity", str(path), "--json"]) == 0
-    out = json.loads(capsys.readouterr().out)
-    assert out["calibration"] is None
+    o = run_cli(["parity", path, "--json"])
+    assert_contract(o, "static.csv")
+    assert o.code == 2 and "the record has no motion" in o.err
 
 
 def test_cli_parity_refuses_three_gyros(tmp_path):

@@ -220,3 +220,65 @@ def test_the_ladder_goes_past_refused_candidates_to_the_scale_factor():
         delay += float(np.mean(signal.group_delay((b, a), w=[0.05, 0.5, 2.0], fs=1.0 / m.dt_s)[1])) * m.dt_s
     assert abs(delay - _plain_delay_s(m)) <= 0.002, (delay, _plain_delay_s(m))
     assert any("the ladder did not add quantization on gyro 2" in n for n in final.notes)
+
+
+def test_the_ladders_tie_is_read_beyond_the_blas_summation_order():
+    """The ladder keeps a step that leaves D where it was and lowers the excess. On this record
+    the last two steps it keeps are such ties (D 14.071319048982406, the excess 3552 → 3428 →
+    3410), and an untouched test is recomputed in each trial bit for bit only at a fixed BLAS
+    thread count: at 1 and 8 OpenBLAS threads its D's differ by up to 2.3e-13 relative (the
+    excess by 1.3e-13). Read exactly, a tie one such rounding above is refused and one below is
+    kept whatever its excess; the rule reads them as ties (chain.compare.LADDER_TIE, 1e-9: four
+    orders above the rounding, six below the smallest real step of the ladder, 4e-3)."""
+    from gyroarray.chain.compare import LADDER_TIE, ladder_improves
+
+    class A:                                # the two numbers the rule reads
+        def __init__(self, d, e):
+            self.discrepancy, self.excess = d, e
+    d, e0, e1 = 14.071319048982406, 3428.270656986625, 3409.9278439893096
+    up, down = d * (1.0 + 2.3e-13), d * (1.0 - 2.3e-13)
+    assert up > d > down                                      # apart in the last bits
+    assert ladder_improves(A(d, e0), A(up, e1))               # a tie, less excess: kept
+    assert not ladder_improves(A(d, e0), A(down, e0 * (1.0 + 1e-3)))   # a tie, more excess: refused
+    assert not ladder_improves(A(d, e0), A(d, e0 * (1.0 - 1.3e-13)))   # the same excess: refused
+    assert ladder_improves(A(d, e0), A(d * (1.0 - 4e-3), 2.0 * e0))     # a real step down: kept
+    assert not ladder_improves(A(d, e0), A(d * (1.0 + 10 * LADDER_TIE), e1))   # a real rise: refused
+
+
+#: The ladder's first steps on this record, its decisions and D's as JSON (run in a subprocess at a
+#: given OpenBLAS thread count; numpy reads the count when it is imported).
+_LADDER_JSON = """\
+import json, sys
+from gyroarray.chain.compare import ModelComparison
+from gyroarray.core.measurement import read_measurement
+steps = ModelComparison(read_measurement(sys.argv[1], repair=True), n_runs=10).ladder(max_steps=int(sys.argv[2]))
+final = steps[-1][1]
+print(json.dumps({"added": [list(s) for s, _ in steps[1:]], "d": [a.discrepancy for _, a in steps],
+                  "notes": [n for n in final.notes if n.startswith("the ladder did not add")],
+                  "top": [[t.effect, t.gyro] for t in final.candidates[:6]]}))
+"""
+
+
+@pytest.mark.slow   # two ladders of 3 steps on this record (1-3 min each on 2 cores): make score
+def test_the_ladder_decides_the_same_at_1_and_8_blas_threads():
+    """The same ladder in two processes, at OPENBLAS_NUM_THREADS 1 and 8: the same steps, the same
+    refusals (their text prints D and the excess to 4 digits), the same candidates' order, and D's
+    within chain.compare.LADDER_TIE (their last bits may differ: the BLAS summation order)."""
+    import json
+    import os
+    import subprocess
+    import sys
+
+    from gyroarray.chain.compare import LADDER_TIE
+    out = {}
+    for threads in ("1", "8"):
+        env = {**os.environ, "OPENBLAS_NUM_THREADS": threads, "OMP_NUM_THREADS": threads}
+        p = subprocess.run([sys.executable, "-c", _LADDER_JSON, str(MPU), "3"], env=env,
+                           capture_output=True, text=True, timeout=3600)
+        assert p.returncode == 0, p.stderr[-2000:]
+        out[threads] = json.loads(p.stdout.strip().splitlines()[-1])
+    one, eight = out["1"], out["8"]
+    assert one["added"] == eight["added"] and len(one["added"]) == 3, (one["added"], eight["added"])
+    assert one["notes"] == eight["notes"] and one["top"] == eight["top"]
+    assert len(one["d"]) == len(eight["d"])
+    assert all(abs(a - b) <= LADDER_TIE * max(abs(a), abs(b)) for a, b in zip(one["d"], eight["d"]))

@@ -37,7 +37,6 @@ from __future__ import annotations
 import math
 import os
 import shutil
-import tempfile
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -392,7 +391,8 @@ def streamed_allan(head: RecordHead, gyros: list[int], *, taus="octave", raw: bo
     mean = (sum_minus if minus_ref else sum_out) / n
     analyses: dict = {}
     if todo:
-        folder = tempfile.mkdtemp(prefix="gyroarray-allan-", dir=tmp_dir)
+        from gyroarray.core.outputs import make_temp_dir  # deferred: only a streamed ADEV
+        folder = make_temp_dir("allan", tmp_dir)   # named for this process (a SIGKILL's: removed by the next run)
         try:
             phases = PhaseFiles(folder, {k: mean[k - 1] for k in todo}, n, head.source)
             paths = phases.paths

@@ -40,6 +40,7 @@ import math
 import numpy as np
 from scipy import stats
 
+from gyroarray.analysis.memo import by_content
 from gyroarray.core.errors import InputError
 
 __all__ = ["reference_events", "locking_test", "cluster_starts", "near_events",
@@ -110,6 +111,7 @@ def _component_events(r: np.ndarray, dt_s: float) -> list[np.ndarray]:
     return out
 
 
+@by_content(maxsize=4)
 def reference_events(ref_rad_s, dt_s: float) -> np.ndarray:
     """Sample indices of the events of a reference rate: reversals, plateau edges, jerk peaks.
 
@@ -132,6 +134,12 @@ def reference_events(ref_rad_s, dt_s: float) -> np.ndarray:
     InputError
         A reference that is not 1-D or 2-D, holds a non-finite value, or a
         ``dt_s`` that is not a positive number.
+
+    Notes
+    -----
+    Kept by content (:func:`~gyroarray.analysis.memo.by_content`): every test that reads the
+    motion's events asks for those of the same reference (each candidate's, on each record the
+    ranking cuts); the result is read-only.
     """
     ref = np.asarray(ref_rad_s, dtype=float)
     if ref.ndim == 1:
@@ -143,9 +151,9 @@ def reference_events(ref_rad_s, dt_s: float) -> np.ndarray:
     if not (math.isfinite(dt_s) and dt_s > 0):
         raise InputError(f"dt_s must be a positive number of seconds, got {dt_s!r}")
     parts = [e for j in range(ref.shape[1]) for e in _component_events(ref[:, j], float(dt_s))]
-    if not parts:
-        return np.array([], dtype=np.int64)
-    return np.unique(np.concatenate(parts).astype(np.int64))
+    out = np.unique(np.concatenate(parts).astype(np.int64)) if parts else np.array([], dtype=np.int64)
+    out.flags.writeable = False
+    return out
 
 
 def cluster_starts(index, gap_samples: int) -> np.ndarray:

@@ -23,9 +23,11 @@ from dataclasses import replace
 from pathlib import Path
 
 from gyroarray.chain.fdi_score import FDI_METRICS
+from gyroarray.chain import run as chain_run   # chain_run.run_scenario: looked up at each call
 from gyroarray.core.errors import InputError
 from gyroarray.core.tomlio import load_toml
 from gyroarray.core.data import data_path
+from gyroarray.estimators import available
 
 #: Metrics a check may bound (columns of :attr:`gyroarray.chain.run.RunResult.table`).
 METRICS = ("sigma_1_deg_s", "mean_error_deg_s", "rms_deg_s", "angle_error_deg", "reduction",
@@ -52,7 +54,6 @@ def _is_number(v) -> bool:
 
 def load_thresholds(path) -> list[dict]:
     """Read and strictly validate a thresholds file; InputError names the file and key."""
-    from gyroarray.estimators import available  # lazy: loads numba
     path = Path(path)
     f = str(path)
     data = load_toml(path, "thresholds file").data
@@ -132,8 +133,7 @@ def run_check(path=None, *, quick: bool = True) -> dict:
         ``{"passed": bool, "results": [{"scenario", "metric", "estimator", "axis",
         "bound", "value", "pass"}, ...]}``; a missing or non-finite value fails.
     """
-    from gyroarray.chain.run import run_scenario  # lazy: loads numba, pandas
-    from gyroarray.sim.scenario import load_scenario  # lazy: loads mujoco, numba, pandas
+    from gyroarray.sim.scenario import load_scenario  # lazy: loads mujoco
     checks = load_thresholds(default_thresholds() if path is None else path)
     groups: dict[tuple, list[dict]] = {}
     for c in checks:
@@ -148,7 +148,7 @@ def run_check(path=None, *, quick: bool = True) -> dict:
         names = list(dict.fromkeys(c["estimator"] for c in group))
         if any(c["metric"] == "efficiency" for c in group) and "bound" not in names:
             names.append("bound")
-        table = run_scenario(scenario, names).table
+        table = chain_run.run_scenario(scenario, names).table
         for c in group:
             for axis in (_AXES if c["axis"] == "all" else (c["axis"],)):
                 row = table[(table.estimator == c["estimator"]) & (table.axis == axis)]

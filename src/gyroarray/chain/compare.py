@@ -49,12 +49,13 @@ Units: SI inside; spec units only in ``EffectFit.params`` and the model.
 from __future__ import annotations
 
 import math
+import weakref
 from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy import optimize, special, stats
 
-from gyroarray.analysis.memo import by_content
+from gyroarray.analysis.memo import by_content, content_key
 from gyroarray.analysis.allan import averaging_factors, oadev
 from gyroarray.effects.earth_rate import attitude_from_rates
 from gyroarray.effects.fitting import EffectFit, chi2_to_z, z_from_log_p
@@ -75,7 +76,7 @@ from gyroarray.core.measurement import Measurement, relative_time_s, true_runs
 from gyroarray.core.parallel import available_cpus, map_runs
 from gyroarray.sim.effects import sim_context, simulate_on, simulate_readings
 from gyroarray.effects.model import ModelEntry, NoiseModel
-from gyroarray.effects.protocol import Effect, Explained, FitContext, Kind
+from gyroarray.effects.protocol import Effect, Explained, FitContext, Kind, drop_kept
 from gyroarray.core.sensor import gravity_specific_force, rigid_body_specific_force
 from gyroarray.core.units import RAD_PER_DEG, arw_deg_rt_h_to_rad_rt_s, rad_s_to_deg_h, rrw_deg_h_rt_h_to_rad_s_rt_s
 
@@ -809,6 +810,8 @@ class ModelComparison:
         self._attitude = None
         self._force: np.ndarray | None = None
         self._sim_inputs: dict = {}                 # site -> checked simulator inputs (simulate_entry)
+        self._entry_sims = _KeptSims()              # entry -> what it adds (simulate_entry), by live columns
+        self._rq_kept: dict = {}                    # content of (e, gyro, shape) -> (r, q) (_noise_rq)
 
     # -- set-up -----------------------------------------------------------
     def _keep_still_parts(self) -> None:
@@ -918,7 +921,20 @@ class ModelComparison:
         return get_effect(name)
 
     def simulate_entry(self, entry: ModelEntry) -> np.ndarray:
-        """What one model entry adds to the outputs [rad/s], (n, N): simulated alone on the reference."""
+        """What one model entry adds to the outputs [rad/s], (n, N): simulated alone on the reference.
+
+        Kept by the entry's content (the ranking and the slow effects' refits predict the same
+        fitted entry again on each record they cut), a new array each call, the same bits."""
+        key = _entry_key(entry)
+        hit = None if key is None else self._entry_sims.get(key)
+        if hit is not None:
+            return hit.dense()
+        out = self._simulate_entry(entry)
+        if key is not None:
+            self._entry_sims.put(key, out)
+        return out
+
+    def _simulate_entry(self, entry: ModelEntry) -> np.ndarray:
         truth = self.ref if self.ref is not None else np.zeros((self.n, 3))
         s = self.m.site
         site = None
@@ -930,10 +946,18 @@ class ModelComparison:
             site = (float(entry.params["latitude_deg"]) * RAD_PER_DEG, 0.0)
         if site not in self._sim_inputs:             # the record's inputs, checked once per site
             if len(self._sim_inputs) >= 8:
-                self._sim_inputs.clear()
-            self._sim_inputs[site] = sim_context(truth, self.m.layout, self.dt, time_s=self.t_sim,
-                                                 temp_c=self.temp, site=site, specific_force=self.acc,
-                                                 attitude=self.attitude() if self.ref is not None else None)
+                self._sim_inputs = {k: v for k, v in list(self._sim_inputs.items())[:1]}
+            if self._sim_inputs:
+                # another site of the same record: the same checked arrays (read-only), shared; the
+                # site checked as sim_context checks it (on two samples). Each site's own copy of
+                # the record was 60 MB on 46 min of 6 gyros, and a fitted Earth rate asks for many.
+                first = next(iter(self._sim_inputs.values()))
+                probe = sim_context(truth[:2], self.m.layout, self.dt, site=site)
+                self._sim_inputs[site] = replace(first, site=probe.site)
+            else:
+                self._sim_inputs[site] = sim_context(truth, self.m.layout, self.dt, time_s=self.t_sim,
+                                                     temp_c=self.temp, site=site, specific_force=self.acc,
+                                                     attitude=self.attitude() if self.ref is not None else None)
         sim = simulate_on(NoiseModel((entry,)), self._sim_inputs[site], np.random.default_rng(0))
         return sim - truth @ self.H.T
 
@@ -991,6 +1015,9 @@ class ModelComparison:
         shapes at short τ, a sensor's own filter, is not white noise:
         :meth:`_allan_shape`).
         """
+        key = content_key(e, int(gyro), white_shape)
+        if key is not None and key in self._rq_kept:
+            return self._rq_kept[key]
         r, base = self._white_r(e, gyro, white_shape)
         k_up = rrw_deg_h_rt_h_to_rad_s_rt_s(base[1].params["k_deg_h_rt_h"]
                                             + 2.0 * base[1].sigma.get("k_deg_h_rt_h", 0.0))
@@ -999,6 +1026,10 @@ class ModelComparison:
         # regressions fit it); the step a join leaves is the orientation's, not random walk
         breaks = np.array([a for a, _ in self.parts[1:]], dtype=int) if len(self.parts) > 1 else None
         q_ml = _ml_q(e, r, np.ones(self.n, bool) if self.continuous else self.static, breaks)
+        if key is not None:
+            if len(self._rq_kept) >= 512:
+                self._rq_kept.clear()
+            self._rq_kept[key] = (r, max(q_ml, q_up))
         return r, max(q_ml, q_up)
 
     def _white_r(self, e: np.ndarray, gyro: int, white_shape=None) -> tuple:
@@ -1379,6 +1410,7 @@ class ModelComparison:
         zc = critical_z(len(finite) + absorbed, self.alpha)
         ctx.z_crit = zc
         cands = self._pipeline_explains(ctx, _rank_rivals(ctx, cands, zc))
+        drop_kept(ctx)                     # the winners' predictions the rivals' tests were cut by
         worst = max(finite, default=0.0)
         return cands, zc, max(worst, 0.0) / zc
 
@@ -1685,8 +1717,10 @@ class ModelComparison:
         test is one the step does not touch; the Monte-Carlo band draws each
         effect and gyro from its own keyed stream, so an untouched test keeps
         its z, and a candidate fitted in stays in the family, :meth:`_absorbed`)
-        and lowers the excess Σ (z − z_crit)² of the significant tests.
-        D therefore never rises at a kept step, and the last step is the best
+        and lowers the excess Σ (z − z_crit)² of the significant tests
+        ("where it was": within :data:`LADDER_TIE`, the BLAS summation order's
+        last bits, which the thread count changes).
+        D therefore never rises at a kept step (beyond that), and the last step is the best
         model the ladder saw: every analysis it tried and refused had a
         larger (D, excess), every one it kept a smaller one than the step
         before. (Before, a step could raise D by up to 2 %, and on a thermal
@@ -1765,14 +1799,30 @@ def ladder_improves(cur: Analysis, trial: Analysis) -> bool:
 
     True when D falls, or D stays exactly as it was and the excess
     Σ (z − z_crit)² of the significant tests falls (the pair (D, excess),
-    compared in that order, falls).
+    compared in that order, falls). "Stays" and "falls" are read beyond
+    :data:`LADDER_TIE` (relative): two D's that differ only by the BLAS
+    summation order are one D, so the decision does not depend on the
+    thread count.
     """
     d0, d1 = cur.discrepancy, trial.discrepancy
     if not math.isfinite(d1):
         return False
-    if d1 < d0:
-        return True
-    return bool(d1 == d0 and trial.excess < cur.excess)
+    if not _same_level(d0, d1):
+        return d1 < d0
+    return bool(trial.excess < cur.excess and not _same_level(cur.excess, trial.excess))
+
+
+#: Relative difference within which two analyses' D (or excess) are the same number: an untouched
+#: test recomputed in a trial keeps its z only up to the summation order of the BLAS products
+#: around it, which the thread count changes (the MPU-6050 ladder at 1 and 8 OpenBLAS threads:
+#: D apart by at most 2.3e-13 relative, the excess by 1.3e-13); the smallest step it took moved
+#: D by 4e-3 and the excess by 5e-3 relative. 1e-9 is four orders above the one, six below the other.
+LADDER_TIE = 1e-9
+
+
+def _same_level(a: float, b: float) -> bool:
+    """``a`` and ``b`` equal within :data:`LADDER_TIE` (relative): one D, or one excess, for the ladder."""
+    return a == b or abs(a - b) <= LADDER_TIE * max(abs(a), abs(b))
 
 
 def _variance_share(cur: Analysis, trial: Analysis, gyro: int | None) -> float:
@@ -1787,7 +1837,7 @@ def _variance_share(cur: Analysis, trial: Analysis, gyro: int | None) -> float:
 
 def _refusal_text(cur: Analysis, trial: Analysis, share: float) -> str:
     """Why the ladder refused a step: D (and the excess where D stays), and a large variance share."""
-    if trial.discrepancy == cur.discrepancy:
+    if _same_level(trial.discrepancy, cur.discrepancy):
         text = (f"the discrepancy would stay at {cur.discrepancy:.4g} and the excess would go from "
                 f"{cur.excess:.4g} to {trial.excess:.4g}")
     else:
@@ -1798,12 +1848,89 @@ def _refusal_text(cur: Analysis, trial: Analysis, share: float) -> str:
     return text
 
 
+def _frozen(v):
+    """A hashable stand-in of one parameter value (numbers, strings, sequences, arrays by content)."""
+    if isinstance(v, (list, tuple)):
+        return tuple(_frozen(x) for x in v)
+    key = content_key(v)
+    if key is None:
+        raise TypeError
+    return type(v).__name__, key[0]                 # 1, 1.0 and True apart
+
+
+def _entry_key(entry: ModelEntry):
+    """(effect, gyro, parameters) of an entry as a dict key, or None (a value that is not plain)."""
+    try:
+        return (entry.effect, entry.gyro, tuple((k, _frozen(v)) for k, v in sorted(entry.params.items())))
+    except TypeError:
+        return None
+
+
+class _KeptSim:
+    """One entry's simulated contribution (n, N) kept by its live columns (the others +0.0)."""
+
+    __slots__ = ("shape", "cols", "values")
+
+    def __init__(self, x: np.ndarray):
+        self.shape = x.shape
+        live = np.flatnonzero(np.ascontiguousarray(x).view(np.uint64).any(axis=0)) if x.ndim == 2 \
+            else np.arange(0)
+        self.cols = None if x.ndim != 2 or live.size == x.shape[1] else live
+        self.values = np.array(x if self.cols is None else x[:, self.cols])
+
+    @property
+    def nbytes(self) -> int:
+        return int(self.values.nbytes)
+
+    def dense(self) -> np.ndarray:
+        if self.cols is None:
+            return self.values.copy()
+        out = np.zeros(self.shape)
+        out[:, self.cols] = self.values
+        return out
+
+
+class _KeptSims:
+    """The latest entries' contributions, within :data:`KEPT_SIMS_BYTES`."""
+
+    def __init__(self):
+        self._d: dict = {}
+
+    def get(self, key):
+        hit = self._d.pop(key, None)
+        if hit is not None:
+            self._d[key] = hit                      # the latest last
+        return hit
+
+    def put(self, key, x: np.ndarray) -> None:
+        if x.dtype != np.float64:
+            return
+        kept = _KeptSim(x)
+        self._d.pop(key, None)
+        self._d[key] = kept
+        while len(self._d) > 1 and sum(v.nbytes for v in self._d.values()) > KEPT_SIMS_BYTES:
+            self._d.pop(next(iter(self._d)))
+
+
+#: Memory the kept entry simulations may hold [bytes] (:meth:`ModelComparison.simulate_entry`).
+KEPT_SIMS_BYTES = 64 * 2 ** 20
+
+
 class _Services:
     """What a :class:`FitContext` asks the comparison for (kept apart so effects never import the chain)."""
 
     def __init__(self, comp: ModelComparison, ctx: FitContext):
-        self.comp, self.ctx = comp, ctx
+        # the context by a weak reference: ctx.services -> self -> ctx would be a cycle, and a
+        # context the ranking cuts (its E and Er, two copies of the record) would wait for the
+        # garbage collector, not its last reference (1.1 GB of them on a 46 min, 6-gyro record)
+        self.comp, self._ctx = comp, weakref.ref(ctx)
         self._noise: dict = {}
+
+    @property
+    def ctx(self) -> FitContext:
+        ctx = self._ctx()
+        assert ctx is not None                 # asked through the context, which is alive
+        return ctx
 
     def attitude(self):
         return self.comp.attitude()

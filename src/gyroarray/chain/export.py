@@ -76,7 +76,7 @@ from gyroarray.sim.lab import lab_temperature
 from gyroarray.effects.names import ARW, BIAS_INSTABILITY, GAUSS_MARKOV, QUANTIZATION, RATE_RAMP, RRW, TEMPERATURE_BIAS
 
 __all__ = ["FORMATS", "SUFFIXES", "MAX_SIM_SAMPLES", "GyroNoise", "StandIn", "gyro_noise",
-           "stand_in", "sampled_walk_n2", "exported_values", "tool_discrete", "render",
+           "stand_in", "check_exportable", "sampled_walk_n2", "exported_values", "tool_discrete", "render",
            "simulate_model", "window_nis", "auto_inflation", "verify_export", "export_noise"]
 
 #: The formats and what each file is.
@@ -99,6 +99,10 @@ SIMULATED = (ARW, RRW, BIAS_INSTABILITY, GAUSS_MARKOV, QUANTIZATION, RATE_RAMP,
 
 #: Most samples a simulated record has (--verify, --inflate auto): 2^21, 2.9 h at 200 Hz.
 MAX_SIM_SAMPLES = 2 ** 21
+
+#: IMU rates exported for [Hz] (as ``plan``'s: below 1 mHz no white-noise region is left, above
+#: 1 MHz no gyro output exists).
+MIN_RATE_HZ, MAX_RATE_HZ = 1e-3, 1e6
 
 #: Longest filter update window of --inflate auto [s].
 MAX_WINDOW_S = 10.0
@@ -240,7 +244,7 @@ def stand_in(noise: GyroNoise, rate_hz: float, *, keeps_b: bool) -> StandIn:
     above = np.flatnonzero(u >= noise.n_rad_rt_s ** 2 / taus)
     i1 = int(above[0]) if above.size else int(np.argmax(u * taus))
     tau1 = float(taus[i1])
-    if 0 < i1 and noise.n_rad_rt_s > 0:             # the crossing itself, between two grid points
+    if above.size and 0 < i1 and noise.n_rad_rt_s > 0:   # the crossing, between two grid points
         tau1 = float(optimize.brentq(
             lambda t: float(unmodelled(np.array([t]))[0]) - noise.n_rad_rt_s ** 2 / t,
             float(taus[i1 - 1]), tau1, rtol=1e-12))
@@ -248,6 +252,42 @@ def stand_in(noise: GyroNoise, rate_hz: float, *, keeps_b: bool) -> StandIn:
     grid = np.concatenate([[tau1], taus[later]])
     k_eq2 = float(np.max(3.0 * unmodelled(grid) / grid))
     return StandIn(math.sqrt(k_eq2), tau1, 4.0 * tau1, covers)
+
+
+def check_exportable(noise: GyroNoise, fmt: str, rate_hz: float) -> None:
+    """Refuse a gyro the format's reader would refuse, or whose model means nothing at the rate.
+
+    * No white noise (N = 0): every tool inverts the measurement noise; Kalibr's reader
+      (``kalibr_common/ConfigReader.py``, ``checkGyroStatistics``) refuses a
+      ``gyroscope_noise_density`` <= 0, and so a file of zeros.
+    * Kalibr: its reader refuses ``gyroscope_random_walk`` <= 0 too (no rrw, bias instability
+      or Gauss-Markov term to make a walk of).
+    * A Gauss-Markov correlation time below the sample step 1/rate: sampled at the rate the
+      process is white noise of per-sample σ (what the simulation draws) but its continuous
+      Allan variance is 2σ²τc/τ, a different level; the file's stand-in walk has no meaning
+      there. τc >= 1/rate_hz is required (export at --rate-hz >= 1/τc, or fold it into arw).
+
+    Raises
+    ------
+    InputError
+    """
+    if not noise.n_rad_rt_s > 0:
+        reader = ("a Kalibr noise density of 0 is refused by Kalibr's reader" if fmt in ("kalibr", "openvins")
+                  else f"a {fmt} white noise of 0 makes the tool's measurement covariance singular")
+        raise InputError(f"the model has no white noise for gyro {noise.gyro} (arw n_deg_rt_h = 0): "
+                         f"{reader}; give the arw entry a value > 0")
+    if fmt == "kalibr":
+        k_eq = stand_in(noise, rate_hz, keeps_b=False).k_eq_rad_s_rt_s
+        if not math.hypot(noise.k_rad_s_rt_s, k_eq) > 0:
+            raise InputError(f"the model has no random walk for gyro {noise.gyro} (rrw, "
+                             "bias_instability or gauss_markov): a Kalibr gyroscope_random_walk "
+                             "of 0 is refused by Kalibr's reader; give an rrw entry a value > 0")
+    for sigma, tau_c in noise.gm:
+        if sigma > 0 and tau_c < 1.0 / rate_hz:
+            raise InputError(f"gauss_markov tau_s = {tau_c:g} s of gyro {noise.gyro} is shorter than "
+                             f"the sample step at --rate-hz {rate_hz:g} ({1.0 / rate_hz:g} s): at this "
+                             f"rate it is white noise, not a bias; tau_s must be >= 1/rate "
+                             f"(export at --rate-hz >= {1.0 / tau_c:g}, or fold it into arw)")
 
 
 def exported_values(noise: GyroNoise, fmt: str, rate_hz: float, inflate: float = 1.0) -> dict:
@@ -568,9 +608,10 @@ def export_noise(model: NoiseModel, gyro: int, fmt: str, rate_hz: float, *,
     """
     if fmt not in FORMATS:
         raise InputError(f"unknown format {fmt!r}; expected one of {', '.join(FORMATS)}")
-    if not (math.isfinite(rate_hz) and rate_hz > 0):
-        raise InputError(f"--rate-hz must be positive, got {rate_hz!r}")
+    if not (math.isfinite(rate_hz) and MIN_RATE_HZ <= rate_hz <= MAX_RATE_HZ):
+        raise InputError(f"--rate-hz must be in [{MIN_RATE_HZ:g}, {MAX_RATE_HZ:g}] Hz, got {rate_hz!r}")
     noise = gyro_noise(model, gyro)
+    check_exportable(noise, fmt, rate_hz)
     rng = np.random.default_rng(seed)
     summary: dict = {"format": fmt, "gyro": gyro, "rate_hz": rate_hz}
     if inflate == "auto":

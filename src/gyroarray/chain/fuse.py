@@ -59,11 +59,13 @@ import tomli_w
 
 from gyroarray import __version__
 from gyroarray.analysis.allan import allan_analysis, averaging_factors, edf_simple
+from gyroarray.analysis.avar_covariance import AvarCovariance
 from gyroarray.analysis.motion import still_mask
 from gyroarray.core import units
 from gyroarray.core.errors import InputError
 from gyroarray.core.gdop import unobservable_reason
 from gyroarray.core.layout import Layout
+from gyroarray.core.limits import open_regular
 from gyroarray.core.measurement import Measurement, constant_gyros, true_runs
 from gyroarray.estimators import ArrayNoise, Estimator, get_estimator, make
 from gyroarray.estimators.noise import array_noise, table_correlation
@@ -86,6 +88,14 @@ MIN_ANALYSED = 256
 FIT_SPAN = 1.0 / 8.0
 #: Fewest octaves of the white + walk fit.
 MIN_FIT_OCTAVES = 3
+#: Smallest positive ARW of a model's gyro an estimator is designed with [deg/√h]: far below any
+#: gyro built; below it N²/dt underflows towards 0 and the noise covariance is singular.
+MIN_MODEL_ARW_DEG_RT_H = 1e-9
+#: Largest ratio of two used gyros' model ARWs [-]: a gyro 1e4 times noisier than the best
+#: carries 1e-8 of its weight (nothing a fused rate can show), while the noise covariance's
+#: condition number (ratio²) beyond 1e8 stalls the Kalman designs (kf_array's bandwidth
+#: search ran > 100 s at 1e5, "Eigenvalues did not converge" at 6e7).
+MAX_MODEL_ARW_SPREAD = 1e4
 
 
 # =========================================================================
@@ -195,7 +205,11 @@ def white_walk_fit(x, dt_s: float, min_tau_s: float = 1.0) -> WhiteWalk:
     non-negative least squares, each point weighted by its standard error
     σ²_model(τ)·sqrt(2/edf) (white-FM EDF, :func:`~gyroarray.analysis.allan.edf_simple`;
     two passes: the weights from the measured, then from the fitted variance). 1σ of N and
-    K from the weighted normal equations. A record too short for two octaves gets N from
+    K from the sandwich covariance B Σ Bᵀ of the weighted fit, B = (AᵀWA)⁻¹AᵀW, Σ the exact
+    finite-record covariance of the octave estimates under the fitted model
+    (:class:`~gyroarray.analysis.avar_covariance.AvarCovariance`: neighbouring octaves
+    correlate; ``tests/test_hostile_numbers.py`` checks the z spread on simulated 120 s
+    records). A record too short for two octaves gets N from
     the spread of its first differences (σ_Δ/√2·√dt) and K = 0.
 
     Parameters
@@ -245,6 +259,7 @@ def white_walk_of_avar(taus, avar, m, n_phase: int, min_tau_s: float = 1.0) -> W
     t, av = taus[use], avar[use]
     edf = np.asarray(edf_simple(n_phase, m[use], 0), dtype=float)
     a = np.column_stack([1.0 / t, t / 3.0])
+    cov_model = None
     for j in range(c):
         target = av[:, j]
         if not np.any(target > 0):
@@ -255,9 +270,19 @@ def white_walk_of_avar(taus, avar, m, n_phase: int, min_tau_s: float = 1.0) -> W
             se = np.maximum(model, 1e-300) * np.sqrt(2.0 / edf)
             coef = nnls2(a / se[:, None], target / se)
             model = a @ coef
-        aw = a / (np.maximum(model, 1e-300) * np.sqrt(2.0 / edf))[:, None]
+        w = 1.0 / (np.maximum(model, 1e-300) * np.sqrt(2.0 / edf)) ** 2
         with np.errstate(all="ignore"):
-            cov = np.linalg.pinv(aw.T @ aw)
+            cov = np.linalg.pinv((a * w[:, None]).T @ a)
+            # the octave estimates correlate (about 0.5 between neighbours for white FM): the
+            # weighted fit's covariance is the sandwich B Σ Bᵀ, B = (AᵀWA)⁻¹AᵀW, with Σ the
+            # exact finite-record covariance of the estimates under the fitted N² and K²
+            # (taken as independent, (AᵀWA)⁻¹ gave z spreads of 1.2-1.3 on 120 s records)
+            if cov_model is None:
+                cov_model = AvarCovariance(m[use], n_phase - 2 * m[use], 2, float(t[0] / m[use][0]))
+            b = cov @ (a * w[:, None]).T
+            sandwich = b @ cov_model.covariance({"n": float(coef[0]), "k": float(coef[1])}) @ b.T
+            if np.all(np.isfinite(sandwich)) and sandwich[0, 0] >= 0 and sandwich[1, 1] >= 0:
+                cov = sandwich
         arw[j], rrw[j] = math.sqrt(max(coef[0], 0.0)), math.sqrt(max(coef[1], 0.0))
         # σ of sqrt(c): σ_c / (2 sqrt c), or sqrt(σ_c) at c = 0
         for v, s, col, out in ((arw[j], cov[0, 0], 0, arw_s), (rrw[j], cov[1, 1], 1, rrw_s)):
@@ -509,6 +534,30 @@ def noise_of_model(model, meas, used, needs_arw: bool, model_name: str | None,
     return noise, f"model {name}"
 
 
+def check_model_arw(arw: np.ndarray, used: list[int], model_name: str) -> None:
+    """Refuse model ARWs [rad/√s] of the used gyros the estimators cannot be designed with:
+    a positive one below :data:`MIN_MODEL_ARW_DEG_RT_H`, or two more than
+    :data:`MAX_MODEL_ARW_SPREAD` apart (module constants say why)."""
+    deg = np.array([units.arw_rad_rt_s_to_deg_rt_h(float(v)) for v in arw])
+    tiny = [(used[i], deg[i]) for i in range(deg.size) if 0.0 < arw[i] and deg[i] < MIN_MODEL_ARW_DEG_RT_H]
+    if tiny:
+        k, v = tiny[0]
+        raise InputError(f"the model's angle random walk of gyro {k} is {v:.3g} deg/√h: an "
+                         f"estimator's white-noise covariance needs it in "
+                         f"[{MIN_MODEL_ARW_DEG_RT_H:g}, 6e+06] deg/√h (far below any gyro built, "
+                         "N²/dt is no longer representable)", file=model_name)
+    pos = np.flatnonzero(arw > 0)
+    if pos.size >= 2:
+        lo, hi = pos[np.argmin(arw[pos])], pos[np.argmax(arw[pos])]
+        if arw[hi] > MAX_MODEL_ARW_SPREAD * arw[lo]:
+            raise InputError(f"the model's angle random walk of gyro {used[hi]} ({deg[hi]:.3g} deg/√h) "
+                             f"is more than {MAX_MODEL_ARW_SPREAD:g} times gyro {used[lo]}'s "
+                             f"({deg[lo]:.3g} deg/√h): it would carry under 1e-8 of the weight and "
+                             f"the noise covariance is too ill-conditioned to design with; the used "
+                             f"gyros' ARWs must lie within a factor {MAX_MODEL_ARW_SPREAD:g}: "
+                             f"--exclude {used[hi]}, or correct the model", file=model_name)
+
+
 def model_noise(model, meas: Measurement, used: list[int], needs_arw: bool, model_name: str) -> ArrayNoise:
     """The model's ARW/RRW/correlation for the used gyros (rows and columns of the others dropped)."""
     try:
@@ -523,6 +572,7 @@ def model_noise(model, meas: Measurement, used: list[int], needs_arw: bool, mode
                          f"{', '.join(map(str, bad))}: this estimator weights the gyros by their "
                          "white noise; add an arw entry for them, or --exclude them",
                          file=model_name)
+    check_model_arw(arw, used, model_name)
     # the [array] table's correlations are in these already (array_noise reads it)
     c_arw, c_rrw = full.corr_arw[np.ix_(idx, idx)], full.corr_rrw[np.ix_(idx, idx)]
     try:
@@ -1009,7 +1059,7 @@ def validate_fuse(meas: Measurement, estimator: str, *, holdout: float | None = 
     InputError
         As :func:`fuse`; a holdout outside (0, 1); a fit or held-out part too short.
     """
-    # deferred on purpose: chain.array_model loads chain.compare (the simulator, numba), which plain fuse does not need
+    # deferred on purpose: chain.array_model loads chain.compare (the simulator), which plain fuse does not need
     from gyroarray.chain.array_model import array_model
     name = meas.source
     if model is None and (holdout is None or not (0.0 < holdout < 1.0)):
@@ -1192,13 +1242,14 @@ def _description(res: FuseResult) -> str:
 
 
 def sha256_of(path) -> str | None:
-    """SHA-256 of a file's bytes (hex), or None when it cannot be read."""
+    """SHA-256 of a file's bytes (hex), or None when it cannot be read or is no regular file
+    (a FIFO, a device, a link to /dev/zero: never opened blocking, never read without end)."""
     h = hashlib.sha256()
     try:
-        with open(path, "rb") as fh:
+        with open_regular(path) as fh:
             for block in iter(lambda: fh.read(1 << 20), b""):
                 h.update(block)
-    except OSError:
+    except (OSError, InputError):
         return None
     return h.hexdigest()
 

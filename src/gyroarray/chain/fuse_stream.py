@@ -37,7 +37,6 @@ from __future__ import annotations
 import gzip
 import math
 import shutil
-import tempfile
 from pathlib import Path
 from types import SimpleNamespace
 from typing import cast
@@ -136,7 +135,7 @@ class _FusedWriter:
         self._pq = None
         try:
             if self.parquet:
-                # deferred: pyarrow (about 0.2 s to import) loads only for a Parquet output
+                # deferred: pyarrow.parquet (with ssl) loads only for a Parquet output; pyarrow itself comes with pandas
                 import pyarrow as pa
                 import pyarrow.parquet as pq
                 self._pa = pa
@@ -343,7 +342,7 @@ def streamed_fuse(head: RecordHead, estimator: str, *, model=None, model_name: s
         # 3. its ADEV: the phase of each axis to a temporary file, the sums at every start index
         mean = total / n
         adev: list = []
-        folder = tempfile.mkdtemp(prefix="gyroarray-fuse-", dir=tmp_dir)
+        folder = outputs.make_temp_dir("fuse", tmp_dir)   # named for this process (a SIGKILL's: removed by the next run)
         try:
             phases = PhaseFiles(folder, {a: mean[a] for a in range(3)}, n, name)
             try:

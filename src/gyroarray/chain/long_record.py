@@ -108,14 +108,9 @@ def window_plan(path) -> WindowPlan | None:
 
 def _row_group_bytes(head: RecordHead) -> int:
     """What the streamed reader holds of a Parquet file beyond its working budget [bytes]: its
-    largest row group, decoded, with its compressed pages (0 for a CSV, read in chunks)."""
-    if head.n_rows is None:
-        return 0
-    # deferred: pyarrow (about 0.2 s to import) loads only for a Parquet file
-    import pyarrow.parquet as pq
-    meta = pq.ParquetFile(head.source).metadata
-    biggest = max((meta.row_group(i).num_rows for i in range(meta.num_row_groups)), default=0)
-    return int(biggest) * len(head.names) * 16
+    largest row group, decoded, with its compressed pages (0 for a CSV, read in chunks): from the
+    footer :func:`~gyroarray.core.measurement.record_head` checked (the file is not opened again)."""
+    return int(head.group_bytes) if head.n_rows is not None else 0
 
 
 def check_work_bytes(budget: int) -> int:

@@ -138,6 +138,16 @@ class ParityCalibration:
         acceleration (:meth:`excess_scale`).
     gauge : str
     notes : tuple of str
+    gauge_dependent : bool
+        True when no gauge makes the per-gyro numbers per-gyro errors: with N = 4 there is
+        one parity equation, the record determines only the 3 numbers of ``observable``
+        and any split of them over the gyros fits as well (the per-gyro numbers are one
+        split, the gauge's; ``off`` is empty: which gyro is off cannot be told).
+    observable : dict or None
+        N = 4: what the record determines, gauge-free: ``parity_vector`` v (unit, vᵀH = 0,
+        largest entry positive), ``response_ppm`` c = Σ_i v_i e_i (e_i gyro i's error row,
+        y ≈ (H + E) ω: the parity v·y reads c·ω), its ``sigma_ppm`` and ``z`` per body axis
+        (None: not excited), and a ``statement``. None for N >= 5.
     """
 
     scale_ppm: np.ndarray
@@ -158,6 +168,8 @@ class ParityCalibration:
     gauge: str
     notes: tuple = field(default_factory=tuple)
     excess: tuple = (0.0, 0.0)
+    gauge_dependent: bool = False
+    observable: dict | None = None
 
     def correct(self, y: np.ndarray, H: np.ndarray, R: np.ndarray | None = None) -> np.ndarray:
         """The readings less the fitted errors, y − E ω̂ [rad/s] (n, N).
@@ -192,8 +204,9 @@ class ParityCalibration:
 
     @property
     def significant(self) -> bool:
-        """Whether the motion-dependent parity is real (Wald p < 1e-3 and a gyro off)."""
-        return bool(self.p_value < 1e-3 and self.off)
+        """Whether the motion-dependent parity is real (Wald p < 1e-3 and a gyro off; with
+        N = 4, where no gyro can be singled out, the Wald test alone)."""
+        return bool(self.p_value < 1e-3 and (self.off or self.gauge_dependent))
 
     def to_json_dict(self) -> dict:
         """Per gyro (1-based keys) scale factor [ppm] and tilts [mrad] with 1σ and z; summary."""
@@ -215,7 +228,12 @@ class ParityCalibration:
                                      "after": num(self.parity_rms_deg_s[1])},
                 "explained": num(self.explained), "chi2": num(self.chi2), "dof": int(self.dof),
                 "p_value": num(self.p_value), "significant": self.significant,
-                "gauge": self.gauge, "notes": list(self.notes)}
+                "gauge": self.gauge, "gauge_dependent": bool(self.gauge_dependent),
+                **({"observable": {**self.observable,
+                                   **{k: {ax: num(v) for ax, v in zip(_AXIS_NAMES, self.observable[k])}
+                                      for k in ("response_ppm", "sigma_ppm", "z")}}}
+                   if self.observable is not None else {}),
+                "notes": list(self.notes)}
 
 
 def tilt_axes(H: np.ndarray) -> tuple[np.ndarray, np.ndarray, tuple]:
@@ -478,7 +496,15 @@ def self_calibrate(y: np.ndarray, H: np.ndarray, dt_s: float, *, R: np.ndarray |
                      "terms are not identified (σ None); turn the array about all three axes")
     th3 = th.reshape(N, 3)
     s3 = sig.reshape(N, 3)
+    observable = None
+    if N == 4:
+        # one parity equation: only c = vᵀE (3 numbers, gauge-free since vᵀH = 0) is seen; which
+        # gyro carries it cannot be told, so no gyro is named off
+        observable = _observable_4(theta, cov, H, U, Wt, Vu[0], (Pz if extra_null else None))
+        off = ()
+        notes.append(observable["statement"])
     return ParityCalibration(
+        gauge_dependent=N == 4, observable=observable,
         scale_ppm=th3[:, 0] * 1e6, scale_sigma_ppm=s3[:, 0] * 1e6,
         tilt_mrad=th3[:, 1:] * 1e3, tilt_sigma_mrad=s3[:, 1:] * 1e3, toward=names, z=z3, off=off,
         E=_error_matrix(np.where(np.isfinite(th), th, 0.0), H, U, Wt), n_samples=int(k), rms_rate_deg_s=float(rad_s_to_deg_s(rate)),
@@ -486,6 +512,33 @@ def self_calibrate(y: np.ndarray, H: np.ndarray, dt_s: float, *, R: np.ndarray |
                           float(rad_s_to_deg_s(math.sqrt(res_u / max(cnt, 1))))),
         explained=float(1.0 - res_sq / sq) if sq > 0 else 0.0, chi2=chi2, dof=int(dof),
         p_value=pval, excess=excess, gauge=gauge_text, notes=tuple(notes))
+
+
+def _observable_4(theta, cov, H, U, Wt, v, Pz) -> dict:
+    """What a 4-gyro record determines: c = Σ_i v_i e_i [ppm] per body axis with its σ and z
+    (None where the motion leaves it unseen, ``Pz`` the projector on the unseen beyond gauge)."""
+    v = v * np.sign(v[int(np.argmax(np.abs(v)))])
+    N = H.shape[0]
+    J = np.zeros((3, 3 * N))                                   # c = J θ
+    for i in range(N):
+        J[:, 3 * i], J[:, 3 * i + 1], J[:, 3 * i + 2] = v[i] * H[i], v[i] * U[i], v[i] * Wt[i]
+    c = J @ theta
+    sc = np.sqrt(np.maximum(np.diag(J @ cov @ J.T), 0.0))
+    seen = np.ones(3, dtype=bool)
+    if Pz is not None:
+        seen = np.diag(J @ Pz @ J.T) <= 1e-6 * np.diag(J @ J.T)
+    c, sc = np.where(seen, c, np.nan), np.where(seen, sc, np.nan)
+    z = np.where(seen & (sc > 0), c / np.where(sc > 0, sc, 1.0), np.nan)
+    vs = ", ".join(f"{x:+.4f}" for x in v)
+    statement = ("4 gyros give one parity equation (N − 3 = 1): the record determines only the 3 "
+                 f"numbers c = Σ_i v_i e_i, v = [{vs}] (e_i gyro i's error row: scale factor along "
+                 "its axis, tilts across), the parity's response to a rate about x, y, z "
+                 f"(observable: c = [{', '.join('unseen' if not math.isfinite(x) else f'{x * 1e6:.4g}' for x in c)}] "
+                 "ppm); the per-gyro scale factors and tilts are gauge-dependent (one split of c "
+                 "over the gyros; any other fits as well), not per-gyro errors, and no gyro can be "
+                 "named off (with 5 or more gyros, N − 3 >= 2 parity equations, one off gyro can be singled out)")
+    return {"parity_vector": [float(x) for x in v], "response_ppm": c * 1e6, "sigma_ppm": sc * 1e6,
+            "z": z, "statement": statement}
 
 
 def _jerk2(om: np.ndarray, dt_s: float) -> np.ndarray:
@@ -565,12 +618,19 @@ def calibrate_measurement(meas: Measurement, *, R: np.ndarray | None = None,
         None when the record has too little motion (rms variation of the fused
         rate of the moving samples below :data:`MIN_MOTION_DEG_S`, or too few
         samples). A record in which no still part is found but whose rate
-        varies that much is fitted whole.
+        varies that much is fitted whole. :func:`calibrate_record` says why.
     """
+    return _calibrate_or_reason(meas, R, still)[0]
+
+
+def _calibrate_or_reason(meas: Measurement, R: np.ndarray | None = None,
+                         still: np.ndarray | None = None) -> tuple[ParityCalibration | None, str | None]:
+    """:func:`calibrate_measurement` and, when it gives None, why (one sentence)."""
     y = meas.gyro_rad_s
     H = meas.layout.H
     if meas.n_gyros < 4 or np.linalg.matrix_rank(H) < 3:
-        return None
+        return None, (f"the parity self-calibration needs at least 4 gyros whose axes span 3-D, the "
+                      f"measurement has {meas.n_gyros}")
     if still is None:
         try:
             still = still_mask(y, H, meas.dt_s)
@@ -587,10 +647,8 @@ def calibrate_measurement(meas: Measurement, *, R: np.ndarray | None = None,
         whole = _rms_variation_deg_s(om_all) >= MIN_MOTION_DEG_S
         if whole:
             use = ~sat
-    if use.sum() < need:
-        return None
-    if not whole and _rms_variation_deg_s(fused_rate(y[use], H, R)) < MIN_MOTION_DEG_S:
-        return None
+    if use.sum() < need or (not whole and _rms_variation_deg_s(fused_rate(y[use], H, R)) < MIN_MOTION_DEG_S):
+        return None, _no_calibration_reason(y, H, R, use, sat, need)
     cal = self_calibrate(y, H, meas.dt_s, R=R, use=use)
     if whole:
         cal = _with_notes(cal, list(cal.notes) + ["no still part found: the whole record is fitted"])
@@ -601,10 +659,28 @@ def calibrate_measurement(meas: Measurement, *, R: np.ndarray | None = None,
                                    f"({n_sat * meas.dt_s:.3g} s with {SATURATION_GUARD} samples on "
                                    "each side) left out: a saturated gyro reads its limit, not its rate"]
         cal = _with_notes(cal, notes)
-    return cal
+    return cal, None
 
 
-def calibrate_record(meas: Measurement, model=None) -> tuple[ParityCalibration | None, list]:
+def _no_calibration_reason(y, H, R, use, sat, need: int) -> str:
+    """Why a record gives no parity self-calibration: too short, no motion, too few moving samples."""
+    n, N = y.shape
+    what = (f"parity self-calibration of {N} gyros needs at least {need} moving samples "
+            f"({MIN_SAMPLES_PER_UNKNOWN} per unknown, 3 unknowns per gyro)")
+    if n < need:
+        return f"the record has {n} samples: {what}; record longer, turning about all three axes"
+    spread = _rms_variation_deg_s(fused_rate(y, H, R))
+    moving = _rms_variation_deg_s(fused_rate(y[use], H, R)) if use.any() else 0.0
+    if spread < MIN_MOTION_DEG_S or (use.sum() >= need and moving < MIN_MOTION_DEG_S):
+        return (f"the record has no motion: parity self-calibration needs the array to turn, its fused "
+                f"rate varying by at least {MIN_MOTION_DEG_S:g} deg/s rms over the moving samples (about "
+                f"all three axes to identify every term); the rate's spread is {spread:.3g} deg/s"
+                + (f" ({moving:.3g} deg/s over the {int(use.sum())} moving samples)" if use.any() else ""))
+    return (f"too few moving samples: {int(use.sum())} of the record's {n} samples are moving with no "
+            f"gyro at its output limit ({int(sat.sum())} near a limit): {what}; record more motion")
+
+
+def calibrate_record(meas: Measurement, model=None) -> tuple[ParityCalibration, list]:
     """``gyroarray parity``: :func:`calibrate_measurement` with the record's own noise weighting.
 
     Parameters
@@ -617,13 +693,14 @@ def calibrate_record(meas: Measurement, model=None) -> tuple[ParityCalibration |
 
     Returns
     -------
-    ParityCalibration or None, list of str (notes)
+    ParityCalibration, list of str (notes)
 
     Raises
     ------
     InputError
         Fewer than 4 gyros, axes that do not span 3 dimensions, a model the
-        parity cannot be weighted with (each naming the file).
+        parity cannot be weighted with, a record too short or with too little
+        motion (the reason, with the rate's spread) (each naming the file).
     """
     if meas.n_gyros < 4:
         raise InputError(f"the parity self-calibration needs at least 4 gyros (a parity), the "
@@ -655,7 +732,9 @@ def calibrate_record(meas: Measurement, model=None) -> tuple[ParityCalibration |
     if meas.has_reference:
         notes.append("the record's reference rate is not used: the parity needs none (compare "
                      "gives the absolute errors against it)")
-    cal = calibrate_measurement(meas, R=R, still=still)
+    cal, why = _calibrate_or_reason(meas, R=R, still=still)
+    if cal is None:
+        raise InputError(why or "no parity self-calibration", file=meas.source)
     return cal, notes
 
 
@@ -682,6 +761,17 @@ def format_parity(cal: ParityCalibration | None, source: str) -> str:
            f"after the fitted errors ({100 * cal.explained:.1f} % of the parity variance explained); "
            f"Wald chi2 {cal.chi2:.4g} on {cal.dof} dof, p = {cal.p_value:.3g}",
            "gyro  scale factor [%]      tilt 1 [mrad]          tilt 2 [mrad]"]
+    if cal.gauge_dependent and cal.observable is not None:
+        ob = cal.observable
+        cells = []
+        for ax, c, sg in zip(_AXIS_NAMES, ob["response_ppm"], ob["sigma_ppm"]):
+            cells.append(f"{ax} unseen" if not math.isfinite(sg) else f"{ax} {c:+.4g} ± {sg:.3g}")
+        out[-1:] = [f"observable (the one parity equation's response to a rate, c = Σ v_i e_i with "
+                    f"v = [{', '.join(f'{x:+.4f}' for x in ob['parity_vector'])}]): "
+                    + ", ".join(cells) + " ppm",
+                    "gauge-dependent split over the gyros (NOT per-gyro errors: with 4 gyros any "
+                    "split of c fits as well)",
+                    "gyro  scale factor [%]      tilt 1 [mrad]          tilt 2 [mrad]"]
     for i in range(cal.scale_ppm.size):
         def pm(v, s, f=1.0):
             return "not identified" if not math.isfinite(s) else f"{v * f:+8.3f} ± {s * f:6.3f}"
@@ -690,7 +780,11 @@ def format_parity(cal: ParityCalibration | None, source: str) -> str:
         out.append(f"{i + 1:>4}  {pm(cal.scale_ppm[i], cal.scale_sigma_ppm[i], 1e-4)}   "
                    f"{pm(cal.tilt_mrad[i, 0], cal.tilt_sigma_mrad[i, 0])} →{t1}   "
                    f"{pm(cal.tilt_mrad[i, 1], cal.tilt_sigma_mrad[i, 1])} →{t2}{flag}")
-    out.append("off (terms together beyond the %g-sigma tail): %s" % (Z_OFF, ", ".join(map(str, cal.off)) or "none"))
+    if cal.gauge_dependent:
+        out.append("off: cannot be told with 4 gyros (one parity equation); motion-dependent parity "
+                   + ("detected" if cal.p_value < 1e-3 else "not detected") + f" (p = {cal.p_value:.3g})")
+    else:
+        out.append("off (terms together beyond the %g-sigma tail): %s" % (Z_OFF, ", ".join(map(str, cal.off)) or "none"))
     out.append(f"gauge: {cal.gauge}")
     c2, d2 = cal.excess
     if c2 > 0 or d2 > 0:

@@ -52,6 +52,26 @@ MAX_PLAN_S = 10 * 365.25 * 86400.0
 #: Fewest samples a planned record has (a few octaves of the Allan variance).
 _MIN_SAMPLES = 64
 
+#: Sample rates planned for [Hz]. Below 1 mHz the 64 samples of the shortest record already
+#: take 18 h and no ARW region is left to see; above 1 MHz no gyro output exists, and a
+#: 10-year record (3e14 samples at 1 MHz) stays well inside an int64 sample count.
+MIN_RATE_HZ, MAX_RATE_HZ = 1e-3, 1e6
+
+#: Smallest positive coefficient planned for, in its datasheet unit (deg/√h, deg/h, deg/h/√h):
+#: far below any gyro built, and with the CLI's upper bounds (1e6, 1e7) every ratio of two
+#: terms, and so every crossover time τ = (N/B)², √3·N/K, 3·B²/K² (times constants), stays a
+#: representable double (the variances of the terms then differ by < 1e36).
+MIN_COEF_DATASHEET = 1e-9
+
+#: Largest coefficient planned for, datasheet unit: what a model may hold
+#: (:data:`gyroarray.effects.model.PLAUSIBLE`, rates within 1e5 deg/s).
+_MAX_COEF_DATASHEET = {"n": 6e6, "b": 3.6e8, "k": 3.6e8}
+
+#: Finest relative 1σ any coefficient reaches within :data:`MAX_PLAN_S`: the ARW's at the
+#: fastest rate (2.08e-7 for 10 years at 1 MHz, :func:`predicted_sigma`); a precision finer
+#: than z times it is unreachable for every term and is refused.
+MIN_SIGMA_REL = 2.0e-7
+
 _ITERATIONS = 24
 
 
@@ -166,7 +186,7 @@ def _length_for(term, coef, rate_hz, precision, z) -> float | None:
                 break
         elif t >= MAX_PLAN_S:
             break
-        ratio = (rel / precision) ** 2 if math.isfinite(rel) else 16.0
+        ratio = min(rel / precision, 4.0) ** 2 if math.isfinite(rel) else 16.0
         step = min(max(ratio, 0.25), 16.0)
         if best is not None and t * step >= best:      # never above a length already enough
             step = min(step, 0.5 * (1.0 + best / t))
@@ -200,11 +220,28 @@ def plan_record(coef: dict, rate_hz: float, precision: float, *,
     InputError
         A precision or confidence out of range, no positive coefficient, a bad rate.
     """
-    if not (math.isfinite(rate_hz) and rate_hz > 0):
-        raise InputError(f"--rate-hz must be positive, got {rate_hz!r}")
-    if not 0.0 < precision < 1.0:
+    if not (math.isfinite(rate_hz) and MIN_RATE_HZ <= rate_hz <= MAX_RATE_HZ):
+        raise InputError(f"--rate-hz must be in [{MIN_RATE_HZ:g}, {MAX_RATE_HZ:g}] Hz, got {rate_hz!r}")
+    if not (math.isfinite(precision) and 0.0 < precision < 1.0):
         raise InputError(f"--precision must be between 0 and 100 %, got {precision:g}")
     z = _z(confidence)
+    if precision < z * MIN_SIGMA_REL:
+        raise InputError(f"--precision {precision:g} is finer than any noise coefficient can be "
+                         f"measured within 10 years at up to {MAX_RATE_HZ:g} Hz (the best, ARW, "
+                         f"reaches a relative 1σ of {MIN_SIGMA_REL:g}): give a precision in "
+                         f"[{z * MIN_SIGMA_REL:.3g}, 1) at confidence {confidence:g}")
+    for t in PLAN_TERMS:
+        v = coef.get(t, 0.0)
+        name, unit, conv = TERM_NAMES[t]
+        opt = {"n": "--arw", "b": "--bi", "k": "--rrw"}[t]
+        hi = _MAX_COEF_DATASHEET[t]
+        if not (math.isfinite(v) and v >= 0.0) or (v > 0.0 and not MIN_COEF_DATASHEET <= conv(v) <= hi):
+            raise InputError(f"{opt} ({name}) must be 0 (not in the model) or in "
+                             f"[{MIN_COEF_DATASHEET:g}, {hi:g}] {unit}, got {conv(v):g} {unit}")
+    if at_s is not None and not (math.isfinite(at_s) and _MIN_SAMPLES / rate_hz <= at_s <= MAX_PLAN_S):
+        raise InputError(f"--at-h must be in [{_MIN_SAMPLES / rate_hz / units.S_PER_H:.3g}, "
+                         f"{MAX_PLAN_S / units.S_PER_H:g}] h at {rate_hz:g} Hz (at least "
+                         f"{_MIN_SAMPLES} samples, at most 10 years), got {at_s / units.S_PER_H:g} h")
     coef = {t: float(coef[t]) for t in PLAN_TERMS if coef.get(t, 0.0) > 0.0}
     durations = {t: _length_for(t, coef, rate_hz, precision, z) for t in coef}
     at = {}

@@ -13,7 +13,6 @@ from pathlib import Path
 from gyroarray.cli.common import (add_bag_options, bag_options, add_force, add_plugin, check_count, count, finite_float, float_in,
                                   measurement_inputs, nonneg_int, output)
 from gyroarray.core.errors import InputError
-from gyroarray.effects.names import ARW, RRW
 
 __all__ = ["add_parser", "cmd_compare", "cmd_diagnose", "cmd_fit", "cmd_ladder"]
 
@@ -88,12 +87,14 @@ def _live_gyros(meas, model, args):
                          "gyro out of the record (and renumber the model) first",
                          file=str(args.model))
     mapping = ", ".join(f"{old} as {new}" for new, old in enumerate(live, 1) if old != new)
+    args.left_out = (live, meas.n_gyros, note)      # a written model takes the record's numbers back
     note += (": left out; the analysis below numbers the others "
              + (mapping if mapping else "as before"))
     return without_gyros(meas, dead, note), model, [note]
 
 
 def _model_lines(model) -> list[str]:
+    from gyroarray.effects.names import ARW, RRW  # deferred: the effect registry (numpy, scipy, numba)
     out = []
     for e in model:
         if e.effect in (ARW, RRW):
@@ -141,13 +142,28 @@ def _write_report(comp, steps, args) -> dict:
     return write_compare_report(comp, steps, args.out, args.md, title=title, force=args.force)
 
 
-def _write_model(path: Path, model, args) -> str:
-    """The fitted model as TOML at ``path`` (checked by :func:`_comparison`); returns the path."""
+def _write_model(path: Path, model, args, notes: list | None = None) -> str:
+    """The fitted model as TOML at ``path`` (checked by :func:`_comparison`); returns the path.
+
+    Fitted on a record with constant gyros left out (``args.left_out``), the model takes the
+    record's gyro numbers back, the left-out gyros without entries of their own, said in its
+    description and in ``notes``."""
     # deferred: numba and the effect registry load only when the command runs (a fast --help)
     from gyroarray.core.outputs import write_text
     from gyroarray.effects.model import NoiseModel
     model = NoiseModel(model.entries, description=f"fitted to {args.measurement} by gyroarray {args.command}",
                        array=model.array)
+    left = getattr(args, "left_out", None)
+    if left is not None:
+        live, n_all, why = left
+        nums = ", ".join(map(str, live))
+        note = (f"{why}: left out of the fit; the entries use the record's gyro numbers ({nums} of "
+                f"1..{n_all}), the left-out gyro(s) have no entry of their own")
+        model = model.renumbered(live, n_all, note)
+        if notes is not None:
+            notes.append(f"the model written to {path} keeps the record's gyro numbers ({nums}); {why}, "
+                         "so it is left out of the model (no entry of its own; an all-gyros entry is "
+                         "the analysed gyros' value)")
     return str(write_text(path, model.to_toml(), force=args.force))
 
 
@@ -266,7 +282,7 @@ def cmd_fit(args):
         res["array_model"] = None if arr is None else arr.to_json_dict()
     if args.out is not None:
         model = after.model if arr is None else with_array_model(after.model, arr)
-        res["model"] = _write_model(args.out, model, args)
+        res["model"] = _write_model(args.out, model, args, notes)
     text = "\n".join([f"{comp.name}: discrepancy {before.discrepancy:.3g} -> {after.discrepancy:.3g} "
                       f"({'consistent' if after.consistent else 'NOT consistent'})",
                       "fitted model (beyond ARW + RRW):"] + (_model_lines(after.model) or ["  (baseline only)"])
@@ -309,7 +325,7 @@ def cmd_ladder(args):
             res["array_model"] = None if arr is None else arr.to_json_dict()
         arr_lines = [] if arr is None else arr.text_lines()
         model = final.model if arr is None else with_array_model(final.model, arr)
-        res["model"] = _write_model(args.model_out, model, args)
+        res["model"] = _write_model(args.model_out, model, args, res["notes"])
     held_text = []
     if held is not None:
         model = NoiseModel(final.model.entries, description=f"the ladder on {comp.name}")
@@ -350,7 +366,7 @@ def cmd_ladder(args):
     lines += arr_lines
     lines += [f"note: {x}" for x in args.read_notes]
     lines += [f"note: {x}" for x in final.notes if x.startswith("the ladder")]
-    lines += [f"note: {x}" for x in res["notes"] if x.startswith("no array model")]
+    lines += [f"note: {x}" for x in res["notes"] if x.startswith(("no array model", "the model written"))]
     lines += held_text
     lines.append(f"report: {args.out}")
     return res, "\n".join(lines)

@@ -15,7 +15,6 @@ from gyroarray.core.errors import InputError
 from gyroarray.core.units import deg_s_to_rad_s, deg_to_rad, rad_to_deg
 from gyroarray.cli.common import (add_force, add_plugin, bounded_int, check_plot, count, finite_float,
                                   float_in, nonneg_int, output, write_json)
-from gyroarray.effects.names import ARW, BANDWIDTH, CORRELATION, GAUSS_MARKOV, G_SENSITIVITY, RRW
 
 __all__ = ["MAX_DESIGN_GYROS", "MAX_DESIGN_N", "add_parser", "cmd_gdop", "cmd_design",
            "parse_sensor_bandwidth"]
@@ -147,6 +146,7 @@ def _design_noise(args):
     # deferred: numpy and the design chain load only when the command runs (a fast --help)
     import numpy as np
     from gyroarray.design.recommend import GyroNoise
+    from gyroarray.effects.names import ARW, GAUSS_MARKOV, RRW
     if args.model is not None and any(v is not None for v in (args.arw, args.rrw, args.bi)):
         raise InputError("gyroarray design: give the noise as --model MODEL.toml or as a datasheet "
                          "(--arw, --rrw, --bi), not both")
@@ -234,18 +234,20 @@ def _design_bandwidth(args, rate: float, at_rest: bool, src: dict) -> list:
 def _design_space(args):
     """The DesignSpace and GyroNoise of ``design --recommend`` (every default recorded)."""
     from gyroarray.design.recommend import ESTIMATORS, DesignSpace  # deferred: numpy and the design chain
+    from gyroarray.effects.names import G_SENSITIVITY  # deferred: the effect registry (numpy, scipy, numba)
     src = {}
     g, rhos = _design_noise(args)
     rate = 100.0 if args.rate_hz is None else args.rate_hz
     if not rate > 0:
         raise InputError(f"--rate-hz must be > 0, got {rate:g}")
     horizon = 600.0 if args.horizon_s is None else args.horizon_s
-    if not horizon > 0:
-        raise InputError(f"--horizon-s must be > 0, got {horizon:g}")
-    if horizon * rate > 2e7:
-        raise InputError(f"--horizon-s {horizon:g} at {rate:g} Hz is {horizon * rate:.3g} samples "
-                         "(at most 2e7): shorten the horizon or lower the rate")
+    # the samples DesignSpace.n_samples counts (gyroarray.sim.table.n_samples, without its import)
+    _check_horizon(horizon, rate, max(1, math.ceil(round(horizon * rate, 9))) if horizon > 0 else 0)
     ns = tuple(_number_list(args.n, "--n", integer=True)) if args.n is not None else (4, 5, 6, 8)
+    dup = sorted({n for n in ns if ns.count(n) > 1})
+    if dup:
+        raise InputError(f"--n {args.n}: N = {dup[0]} is listed more than once; give each N once "
+                         "(refused, not deduplicated)")
     if g.n_gyros is not None:             # a per-gyro model: its gyro count fixes N
         if args.n is not None and set(ns) != {g.n_gyros}:
             raise InputError(f"--n {args.n}: the model {args.model} has {g.n_gyros} gyros, each with its "
@@ -260,6 +262,18 @@ def _design_space(args):
     failures = 0 if args.failures is None else args.failures
     if failures < 0 or failures > 2:
         raise InputError(f"--failures must be 0, 1 or 2, got {failures}")
+    short = [n for n in ns if n - failures < 3]
+    if short and (args.n is not None or g.n_gyros is not None):
+        # the design search asks for a 3-axis rate (GDOP finite) from the gyros left after every
+        # set of `failures` failed ones (design.robust.kept_sets): 3 must remain; the minimum
+        # detectable bias needs a parity of the intact array, N >= 4, which N - failures >= 3
+        # with failures >= 1 gives (the default list leaves such N out with a note)
+        n = short[0]
+        what = f"the model's {n} gyros" if g.n_gyros is not None else f"--n {n}"
+        raise InputError(f"--failures {failures} with {what}: N − failures must be ≥ 3 (a 3-axis "
+                         f"rate needs 3 gyros left after every set of {failures} failed one(s)); "
+                         f"{n} − {failures} = {n - failures}: give N ≥ {failures + 3} or --failures "
+                         f"≤ {max(n - 3, 0)}", file=args.model if g.n_gyros is not None else None)
     ests = ESTIMATORS
     if args.estimators is not None:
         ests = tuple(e.strip() for e in args.estimators.split(",") if e.strip())
@@ -302,6 +316,38 @@ def _design_space(args):
     return g, space, rhos
 
 
+#: Lowest sensor cut-off, as a share of the sample rate [-].
+MIN_SENSOR_BANDWIDTH_SHARE = 1e-6
+
+#: Lowest datasheet ARW [deg/√h] (design.recommend.MIN_ARW_DEG_RT_H; below it the white
+#: variance per sample underflows).
+MIN_ARW_DEG_RT_H = 1e-9
+
+#: Most samples a design prediction runs over (its arrays are this long).
+MAX_DESIGN_SAMPLES = 20_000_000
+
+#: Start-up the design's window metrics leave out [s] (DesignSpace.settle_s, predict_as_built).
+DESIGN_SETTLE_S = 2.0
+
+
+def _horizon_range(rate: float) -> tuple[int, int]:
+    """Fewest and most samples a design run may have at ``rate`` [Hz]: the start-up of
+    :data:`DESIGN_SETTLE_S` and 2 samples after it, at most :data:`MAX_DESIGN_SAMPLES`."""
+    from gyroarray.design.predict import settle_start  # deferred: numpy
+    k0 = settle_start(int(math.ceil(DESIGN_SETTLE_S * rate)) + 3, 1.0 / rate, DESIGN_SETTLE_S)
+    return k0 + 2, MAX_DESIGN_SAMPLES
+
+
+def _check_horizon(horizon: float, rate: float, n: int, *, option: str = "--horizon-s") -> None:
+    """Refuse a run of ``n`` samples (``horizon`` [s] at ``rate`` [Hz]) outside
+    :func:`_horizon_range`, naming ``option`` and the valid range in seconds."""
+    lo, hi = _horizon_range(rate)
+    if not (horizon > 0 and lo <= n <= hi):
+        raise InputError(f"{option} must be from {lo / rate:g} to {hi / rate:g} s at {rate:g} Hz "
+                         f"({lo} to {hi:.3g} samples: the first {DESIGN_SETTLE_S:g} s are the start-up "
+                         f"the metrics leave out, and 2 samples must follow), got {horizon:g}")
+
+
 def parse_sensor_bandwidth(text: str, rate_hz: float) -> tuple[float, int]:
     """``HZ[,ORDER]`` of ``--sensor-bandwidth``: the gyros' own −3 dB cut-off [Hz] and filter
     order (1, default, or 2 = Butterworth), checked against the Nyquist frequency."""
@@ -311,8 +357,11 @@ def parse_sensor_bandwidth(text: str, rate_hz: float) -> tuple[float, int]:
         raise InputError(f"--sensor-bandwidth must be HZ or HZ,ORDER, got {text!r}")
     fc = vals[0]
     order = vals[1] if len(vals) == 2 else 1
-    if not fc > 0:
-        raise InputError(f"--sensor-bandwidth: the cut-off must be > 0 Hz, got {fc:g}")
+    if not fc >= MIN_SENSOR_BANDWIDTH_SHARE * rate_hz:
+        # far below it the filter's pole rounds to 1 (a singular steady state)
+        raise InputError(f"--sensor-bandwidth: the cut-off must be from {MIN_SENSOR_BANDWIDTH_SHARE * rate_hz:g} "
+                         f"Hz ({MIN_SENSOR_BANDWIDTH_SHARE:g} of --rate-hz {rate_hz:g}) to below the "
+                         f"Nyquist frequency {nyq:g} Hz, got {fc:g}")
     if order not in (1, 2):
         raise InputError(f"--sensor-bandwidth: the order must be 1 or 2 (Butterworth), got {order:g}")
     if not fc < nyq:
@@ -328,6 +377,7 @@ def _sensor_bandwidth_arg(args, rate: float):
         return parse_sensor_bandwidth(args.sensor_bandwidth, rate), "user"
     if args.model is not None:
         from gyroarray.effects.model import NoiseModel  # deferred: numba and the effect registry
+        from gyroarray.effects.names import BANDWIDTH  # deferred: the effect registry (numpy, scipy, numba)
         ents = [e for e in NoiseModel.from_toml(args.model).entries if e.effect == BANDWIDTH]
         if ents:
             e = min(ents, key=lambda e: float(e.params["cutoff_hz"]))
@@ -335,6 +385,10 @@ def _sensor_bandwidth_arg(args, rate: float):
             if not fc < 0.5 * rate:
                 raise InputError(f"the model's bandwidth cut-off {fc:g} Hz is not below the Nyquist "
                                  f"frequency {0.5 * rate:g} Hz of --rate-hz {rate:g}", file=args.model)
+            if not fc >= MIN_SENSOR_BANDWIDTH_SHARE * rate:
+                raise InputError(f"the model's bandwidth cut-off {fc:g} Hz is below "
+                                 f"{MIN_SENSOR_BANDWIDTH_SHARE * rate:g} Hz ({MIN_SENSOR_BANDWIDTH_SHARE:g} "
+                                 f"of --rate-hz {rate:g}), the lowest the design predicts", file=args.model)
             return (fc, order), f"model {args.model} (lowest cut-off)"
     return None, "default"
 
@@ -344,7 +398,13 @@ def _design_recommend(args) -> tuple[dict, str]:
     output(args.out, args, "--out", inputs=[args.model] if args.model is not None else [],
             suffixes=(".json",))
     g, space, rhos = _design_space(args)
-    res = recommend(g, space, rhos=rhos)
+    try:
+        res = recommend(g, space, rhos=rhos)
+    except InputError as err:
+        if not err.message.startswith("no design meets"):
+            raise
+        raise InputError(f"{err.message} (the search's conditions: --n, --failures, --rho-range, "
+                         "--bandwidth-hz)", file=err.file) from None
     if args.check:
         res["check"] = monte_carlo_check(res["designs"], g, space, replicates=args.check,
                                          seed=20260412 if args.seed is None else args.seed)
@@ -362,22 +422,48 @@ def _design_as_built(args) -> tuple[dict, str]:
     from gyroarray.core.measurement import read_measurement
     from gyroarray.design.recommend import predict_as_built
     from gyroarray.effects.model import NoiseModel
+    from gyroarray.effects.names import CORRELATION
     if args.model is None:
         raise InputError("gyroarray design --layout-from: give the array's noise model, --model ARRAY.toml "
                          "(gyroarray fit --out on the record)")
     extra = [o for o, v in (("--n", args.n), ("--scheme", args.scheme), ("--alike", args.alike or None),
                             ("--arw", args.arw), ("--rrw", args.rrw), ("--bi", args.bi),
-                            ("--rho", args.rho), ("--rho-range", args.rho_range)) if v is not None]
+                            ("--rho", args.rho), ("--rho-range", args.rho_range),
+                            # the search's own options: the record fixes the rate, nothing is searched
+                            ("--rate-hz", args.rate_hz), ("--swing", args.swing), ("--motion", args.motion),
+                            ("--failures", args.failures), ("--bandwidth-hz", args.bandwidth_hz),
+                            ("--sensor-bandwidth", args.sensor_bandwidth),
+                            ("--g-sensitivity", args.g_sensitivity), ("--objective", args.objective),
+                            ("--design-rho", args.design_rho), ("--far-per-h", args.far_per_h),
+                            ("--p-md", args.p_md), ("--mdb-max", args.mdb_max), ("--check", args.check),
+                            ("--seed", args.seed), ("--paper-tables", args.paper_tables or None),
+                            ("--plot", args.plot)) if v is not None]
     if extra:
-        raise InputError(f"gyroarray design --layout-from: {extra[0]} does not apply (the layout is the "
-                         "measurement's and the noise the model's)")
+        raise InputError(f"gyroarray design --layout-from: {extra[0]} does not apply (the layout and the "
+                         "sample rate are the measurement's, the noise the model's, and nothing is "
+                         "searched; --horizon-s, --estimators and --out apply)")
     output(args.out, args, "--out", inputs=[args.model, args.layout_from], suffixes=(".json",))
     meas = read_measurement(args.layout_from)
+    axes = np.asarray(meas.layout.axes, dtype=float)
+    _check_as_built_layout(axes, str(args.layout_from))
     model = NoiseModel.from_toml(args.model)
     ests = None if args.estimators is None else tuple(e.strip() for e in args.estimators.split(",") if e.strip())
-    n = meas.n_samples if args.horizon_s is None else max(2, int(round(args.horizon_s / meas.dt_s)))
-    res = predict_as_built(model, np.asarray(meas.layout.axes, dtype=float), meas.dt_s, n_samples=n,
-                           estimators=ests, source=str(args.model))
+    rate = 1.0 / meas.dt_s
+    if args.horizon_s is None:
+        n = meas.n_samples
+        lo, hi = _horizon_range(rate)
+        if not lo <= n <= hi:
+            raise InputError(f"the record has {n} samples ({n * meas.dt_s:g} s), outside the {lo} to "
+                             f"{hi:.3g} a prediction runs over (the first {DESIGN_SETTLE_S:g} s are the "
+                             f"start-up, 2 samples must follow): give --horizon-s from {lo / rate:g} to "
+                             f"{hi / rate:g} s", file=str(args.layout_from))
+    else:
+        n = int(round(args.horizon_s / meas.dt_s)) if args.horizon_s > 0 else 0
+        _check_horizon(args.horizon_s, rate, n)
+    from gyroarray.core.limits import check_memory  # deferred with the rest of the command
+    check_memory(AS_BUILT_BYTES_PER_SAMPLE * n, f"the prediction over {n} samples",
+                 "shorten --horizon-s")
+    res = predict_as_built(model, axes, meas.dt_s, n_samples=n, estimators=ests, source=str(args.model))
     res["measurement"] = str(args.layout_from)
     res["model"] = str(args.model)
     if args.out is not None:
@@ -397,8 +483,35 @@ def _design_as_built(args) -> tuple[dict, str]:
     return res, "\n".join(lines)
 
 
+#: Peak memory of ``design --layout-from`` per sample of the run [bytes] (a few float64 arrays
+#: of the run's length: the start-up's time axis, the predictor's windows).
+AS_BUILT_BYTES_PER_SAMPLE = 32
+
+
+def _check_as_built_layout(axes, source: str) -> None:
+    """Refuse a measured layout that cannot give a 3-axis rate: fewer than 3 gyros, or axes
+    that do not span 3-D (naming the gyros whose axes are coplanar or collinear)."""
+    import numpy as np  # deferred: numpy
+    from gyroarray.core.gdop import unobservable_reason  # deferred: numpy
+    n = axes.shape[0]
+    if n < 3:
+        raise InputError(f"--layout-from: the array has {n} gyro(s); a 3-axis rate needs at least 3 "
+                         "whose axes span 3-D", file=source)
+    rank = int(np.linalg.matrix_rank(axes, tol=1e-9 * max(1.0, float(np.abs(axes).max()))))
+    if rank < 3:
+        gyros = ", ".join(str(k + 1) for k in range(n))
+        shape = "coplanar" if rank == 2 else "collinear (identical or opposite)" if rank == 1 else "zero"
+        raise InputError(f"--layout-from: the axes of gyros {gyros} are {shape}: rank {rank} of 3, so no "
+                         "3-axis rate; check the sidecar's [layout]", file=source)
+    why = unobservable_reason(axes)
+    if why is not None:
+        raise InputError(f"--layout-from: the measured axes give no 3-axis rate: {why}; check the "
+                         "sidecar's [layout]", file=source)
+
+
 def _recommend_text(res: dict) -> str:
     from gyroarray.design.recommend import design_label  # deferred: numpy and the design chain
+    from gyroarray.effects.names import G_SENSITIVITY  # deferred: the effect registry (numpy, scipy, numba)
     r = res["recommended"]
     lo, hi = r.get("rho_range", [None, None])
     lines = [f"Designs, best worst case first ({r.get('objective', 'rate')} objective; worst over "
@@ -492,7 +605,7 @@ def add_parser(sub) -> None:
                    help="with --model: predict each estimator's fused ADEV, RMS and angle error on the "
                         "array as built (the measurement sidecar's axes, the model's per-gyro noise "
                         "and [array] covariance)")
-    p.add_argument("--arw", type=float_in("--arw", 0.0, 6e6, lo_open=True, unit="deg/√h"), metavar="DEG_RT_H",
+    p.add_argument("--arw", type=float_in("--arw", MIN_ARW_DEG_RT_H, 6e6, unit="deg/√h"), metavar="DEG_RT_H",
                    help="--recommend: angle random walk [deg/rt(h)]")
     p.add_argument("--rrw", type=float_in("--rrw", 0.0, 3.6e8, unit="deg/h/√h"), metavar="DEG_H_RT_H",
                    help="--recommend: rate random walk [deg/h/rt(h)] (default 0)")

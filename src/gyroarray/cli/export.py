@@ -84,8 +84,7 @@ def add_parser(sub) -> None:
     p.add_argument("--format", required=True, choices=FORMAT_NAMES,
                    help="kalibr, openvins (continuous densities), vins (discrete per sample), "
                         "orbslam3 (continuous; √rate inside), matlab (gyroparams .m)")
-    p.add_argument("--rate-hz", required=True, type=float_in("--rate-hz", 0.0, 1e6, lo_open=True,
-                                                             unit="Hz"),
+    p.add_argument("--rate-hz", required=True, type=float_in("--rate-hz", 1e-3, 1e6, unit="Hz"),
                    metavar="R", help="the IMU rate the tool runs at [Hz]")
     p.add_argument("--out", required=True, type=Path, metavar="FILE",
                    help="the file to write (.yaml/.yml; .m for matlab)")

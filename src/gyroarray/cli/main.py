@@ -14,19 +14,76 @@ in :mod:`~gyroarray.cli.common`.
 
 from __future__ import annotations
 
-import argparse
-import json
 import os
-import re
+import signal
 import sys
-import warnings
 
-from gyroarray import __version__
-from gyroarray.cli import allan, compare, convert, design, fdi, fuse, simulate
-from gyroarray.cli import export as export_cmd, plan as plan_cmd
-from gyroarray.cli import parity as parity_cmd
-from gyroarray.cli.common import EXIT_FAIL, EXIT_OK, EXIT_USAGE, json_safe
-from gyroarray.core.errors import InputError, one_line
+#: What an interrupt (Ctrl-C, SIGINT) prints, whenever it comes; the exit code is 130.
+INTERRUPTED = "gyroarray: interrupted"
+EXIT_INTERRUPTED = 130
+
+_sigint = {"program": False,   # this process is the command (console script, python -m)
+           "raised": False,    # main's handler raised a KeyboardInterrupt
+           "said": False}      # INTERRUPTED is on stderr
+
+
+def _exit_interrupted(signum=None, frame=None) -> None:
+    """SIGINT where nothing is left to clean up (the command line still loading, a second
+    interrupt while the first one's clean-ups run, the interpreter exiting): :data:`INTERRUPTED`
+    unless it is said, and exit 130 now."""
+    if not _sigint["said"]:
+        _sigint["said"] = True
+        try:
+            os.write(2, (INTERRUPTED + "\n").encode())
+        except OSError:                 # stderr closed: the exit code says it
+            pass
+    os._exit(EXIT_INTERRUPTED)
+
+
+def _raise_interrupt(signum, frame) -> None:
+    """SIGINT while :func:`main` runs: a KeyboardInterrupt, so that the command's clean-ups run
+    (no temporary file left, workers stopped); in the command's own process a second interrupt
+    while they run exits at once."""
+    _sigint["raised"] = True
+    if _sigint["program"]:
+        signal.signal(signal.SIGINT, _exit_interrupted)
+    raise KeyboardInterrupt
+
+
+def _loaded_by_the_program() -> bool:
+    """Whether this import is the command's own start: this module runs as ``__main__``, or the
+    first frame above the import machinery is the ``__main__`` module's (the console script,
+    ``python -m gyroarray.cli``), not a test's, a library's or a spawned worker's
+    (``__mp_main__``)."""
+    if __name__ == "__main__":
+        return True
+    frame = sys._getframe(1).f_back             # the frame that imports this module, or importlib's
+    while frame is not None and frame.f_code.co_filename.startswith("<frozen importlib"):
+        frame = frame.f_back
+    return frame is not None and frame.f_globals.get("__name__") == "__main__"
+
+
+# The first thing, before the imports below (tens of ms): in the command's own process an
+# interrupt while the command line loads is the one line and exit 130, not a traceback, until
+# main() takes over. A handler someone else set, or SIGINT ignored (`nohup`, `cmd &`), is kept.
+try:
+    if signal.getsignal(signal.SIGINT) is signal.default_int_handler and _loaded_by_the_program():
+        _sigint["program"] = True
+        signal.signal(signal.SIGINT, _exit_interrupted)
+except ValueError:                              # imported outside the main thread: not ours to set
+    pass
+
+import argparse  # noqa: E402 - the imports after the start-up SIGINT handler
+import json  # noqa: E402
+import re  # noqa: E402
+import warnings  # noqa: E402
+
+from gyroarray import __version__  # noqa: E402
+from gyroarray.cli import allan, compare, convert, design, fdi, fuse, simulate  # noqa: E402
+from gyroarray.cli import export as export_cmd, plan as plan_cmd  # noqa: E402
+from gyroarray.cli import parity as parity_cmd  # noqa: E402
+from gyroarray.cli.common import EXIT_FAIL, EXIT_OK, EXIT_USAGE, json_safe  # noqa: E402
+from gyroarray.core.errors import InputError, one_line  # noqa: E402
 
 
 class _Parser(argparse.ArgumentParser):
@@ -121,11 +178,56 @@ def _located_input_error(err: InputError, args, argv=()) -> InputError:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Run the CLI; returns the exit code (0 ok, 1 failure, 2 bad input)."""
+    """Run the CLI; returns the exit code (0 ok, 1 failure, 2 bad input, 130 interrupted).
+
+    An interrupt (SIGINT, Ctrl-C) at any moment, the imports of the commands, the parser and the
+    output included, prints :data:`INTERRUPTED` and returns 130, never a traceback; the handler
+    the caller had is back on return (the command's own process keeps one that exits 130 at
+    once, for the interpreter's exit).
+    """
+    _sigint["said"] = _sigint["raised"] = False
+    previous = signal.getsignal(signal.SIGINT)
+    ours = previous is signal.default_int_handler or previous is _exit_interrupted
+    try:
+        if ours:
+            try:
+                signal.signal(signal.SIGINT, _raise_interrupt)
+            except ValueError:          # not the main thread: signals are not ours to set
+                ours = False
+        return _main(argv)
+    except KeyboardInterrupt:           # outside the command's own try: imports, parser, output
+        return _interrupted()
+    except Exception:
+        if _sigint["raised"]:           # an interrupt that became another error
+            return _interrupted()
+        raise
+    finally:
+        if ours:                        # first, before anything can raise
+            signal.signal(signal.SIGINT, previous)
+
+
+def _interrupted() -> int:
+    """Print :data:`INTERRUPTED` once (a further interrupt ignored meanwhile); 130."""
+    if signal.getsignal(signal.SIGINT) in (_raise_interrupt, _exit_interrupted):
+        try:
+            signal.signal(signal.SIGINT, signal.SIG_IGN)
+        except ValueError:              # not the main thread
+            pass
+    if not _sigint["said"]:
+        print(INTERRUPTED, file=sys.stderr)
+        _sigint["said"] = True
+    return EXIT_INTERRUPTED
+
+
+def _main(argv: list[str] | None) -> int:
+    """:func:`main` without its SIGINT handling."""
     # deferred: core.outputs (tempfile, shutil) and core.limits: `import gyroarray.cli.main` stays light
     from gyroarray.core.limits import memory_budget
     from gyroarray.core.outputs import private_matplotlib_dir
     private_matplotlib_dir()            # matplotlib's font cache not in the user's home
+    from gyroarray.core.outputs import Terminated, handle_termination  # deferred, as above
+    if argv is None:    # the CLI's own process: SIGTERM/SIGHUP raise Terminated, clean-ups run
+        handle_termination()
     parser = build_parser()
     try:
         with warnings.catch_warnings():
@@ -144,10 +246,14 @@ def main(argv: list[str] | None = None) -> int:
     except InputError as err:
         print(f"gyroarray: {_located_input_error(err, locals().get('args'), argv if argv is not None else sys.argv[1:])}", file=sys.stderr)
         return EXIT_USAGE
+    except Terminated as stop:     # SIGTERM/SIGHUP: no temporary file left, none half-named
+        print(f"gyroarray: {stop}", file=sys.stderr)
+        return stop.exit_code
     except KeyboardInterrupt:
-        print("gyroarray: interrupted", file=sys.stderr)
-        return 130
+        return _interrupted()
     except Exception as err:  # an internal bug, not bad input: keep stderr to one line
+        if _sigint["raised"]:   # an interrupt that became another error (a C extension's import)
+            return _interrupted()
         if os.environ.get("GYROARRAY_DEBUG"):
             raise
         print(f"gyroarray: internal error: {type(err).__name__}: {one_line(err)} "

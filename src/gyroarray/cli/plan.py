@@ -11,7 +11,6 @@ from pathlib import Path
 
 from gyroarray.cli.common import float_in, positive_int
 from gyroarray.core.errors import InputError
-from gyroarray.effects.names import ARW, BIAS_INSTABILITY, RRW
 
 __all__ = ["add_parser", "cmd_plan", "parse_precision"]
 
@@ -42,6 +41,7 @@ def _fmt_len(seconds) -> str:
 
 
 def _gyros(model, asked):
+    from gyroarray.effects.names import ARW, BIAS_INSTABILITY, RRW  # deferred: the effect registry (numpy, scipy, numba)
     if asked is not None:
         return [asked]
     own = sorted({e.gyro for e in model if e.gyro is not None
@@ -51,6 +51,7 @@ def _gyros(model, asked):
 
 def _fitted_rel(model, gyro: int) -> dict:
     """Relative 1σ the model file carries for each coefficient (``fit --out`` writes them)."""
+    from gyroarray.effects.names import ARW, BIAS_INSTABILITY, RRW  # deferred: the effect registry (numpy, scipy, numba)
     keys = {ARW: ("n", "n_deg_rt_h"), BIAS_INSTABILITY: ("b", "b_deg_h"),
             RRW: ("k", "k_deg_h_rt_h")}
     out = {}
@@ -86,6 +87,12 @@ def cmd_plan(args):
     else:
         if not given:
             raise InputError("give the noise (--arw, --bi, --rrw) or a model (--model M.toml)")
+        from gyroarray.chain.plan import MIN_COEF_DATASHEET  # deferred: chain.plan loads numpy, scipy
+        for opt, v, hi, unit in (("--arw", args.arw, 1e6, "deg/√h"), ("--bi", args.bi, 1e6, "deg/h"),
+                                 ("--rrw", args.rrw, 1e7, "deg/h/√h")):
+            if v is not None and 0.0 < v < MIN_COEF_DATASHEET:     # before SI can underflow it
+                raise InputError(f"{opt} must be 0 (not in the model) or in "
+                                 f"[{MIN_COEF_DATASHEET:g}, {hi:g}] {unit}, got {v:g}")
         coef = {"n": units.arw_deg_rt_h_to_rad_rt_s(args.arw or 0.0),
                 "b": units.deg_h_to_rad_s(args.bi or 0.0),
                 "k": units.rrw_deg_h_rt_h_to_rad_s_rt_s(args.rrw or 0.0)}
@@ -97,7 +104,12 @@ def cmd_plan(args):
     lines = [f"record length for ±{precision:.1%} relative half-width ({args.confidence:.1%} "
              f"two-sided) at {args.rate_hz:g} Hz (Allan GLS fit, allan's EDF):"]
     for g, coef, fitted in cases:
-        plan = plan_record(coef, args.rate_hz, precision, confidence=args.confidence, at_s=at_s)
+        try:
+            plan = plan_record(coef, args.rate_hz, precision, confidence=args.confidence, at_s=at_s)
+        except InputError as err:
+            if args.model is None or err.file is not None:
+                raise
+            raise err.with_file(str(args.model)) from None
         d = plan.to_json_dict()
         d["gyro"] = g
         for t, rel in fitted.items():
@@ -131,8 +143,7 @@ def add_parser(sub) -> None:
                    help="take ARW, bias instability and RRW from a noise model instead")
     p.add_argument("--gyro", type=positive_int("--gyro"), metavar="K",
                    help="the model's gyro K (default: each gyro the model names)")
-    p.add_argument("--rate-hz", required=True, type=float_in("--rate-hz", 0.0, 1e6, lo_open=True,
-                                                             unit="Hz"),
+    p.add_argument("--rate-hz", required=True, type=float_in("--rate-hz", 1e-3, 1e6, unit="Hz"),
                    metavar="R", help="sample rate [Hz]")
     p.add_argument("--precision", default="10%", metavar="P",
                    help="relative half-width asked for, e.g. 10%% or 0.1 (default 10%%)")

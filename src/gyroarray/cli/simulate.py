@@ -273,11 +273,13 @@ def add_parser(sub) -> None:
     p.add_argument("sweep", type=Path, metavar="SWEEP.toml")
     p.add_argument("--out", type=Path, required=True, metavar="DIR", help="output directory")
     p.add_argument("--workers", type=count("--workers"), metavar="K",
-                   help="local worker processes (default 1)")
+                   help="local worker processes (default 1; at most 4 per CPU, and as many as "
+                        "the memory budget holds at about 320 MiB each plus the largest scenario's arrays)")
     p.add_argument("--scheduler", metavar="tcp://HOST:PORT", help="a Dask distributed scheduler")
     p.add_argument("--dask", metavar="local:N",
                    help="start a Dask LocalCluster of N single-thread worker processes, run there, "
-                        "close it after")
+                        "close it after (N: as for --workers; each worker bounded at its share of "
+                        "--max-memory)")
     p.add_argument("--json", action="store_true", help="print one JSON object (no progress bar)")
     p.set_defaults(func=cmd_sweep)
     p.plugin_help = True

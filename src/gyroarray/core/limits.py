@@ -10,7 +10,9 @@ blocks:
 * :func:`read_regular` reads it whole, refusing a file larger than a cap;
 * :func:`gunzip_bounded` decompresses gzip (every member) in pieces and stops
   at a cap, so a gzip bomb ends with a message instead of the machine's
-  memory;
+  memory; :func:`decompress_bounded` does the same for bz2, zstd and lz4
+  (ROS bag chunks), into memory or a file, and :func:`check_disk_space`
+  refuses writing more than a folder's free space;
 * :func:`check_memory` compares an estimate of what a step will allocate
   with the memory budget (:func:`max_memory`) and refuses with the size
   needed and the way out, before the step runs.
@@ -22,6 +24,7 @@ that is lower); the CLI's ``--max-memory SIZE`` or the environment variable
 
 from __future__ import annotations
 
+import bz2
 import contextlib
 import functools
 import errno
@@ -29,6 +32,7 @@ import json
 import math
 import os
 import re
+import shutil
 import stat
 import zlib
 from pathlib import Path
@@ -38,7 +42,7 @@ from gyroarray.core.errors import InputError
 __all__ = ["MAX_RATE_DEG_S", "file_kind", "MEMORY_FRACTION", "max_memory", "set_max_memory", "memory_budget",
            "parse_size", "format_size", "check_memory", "open_regular", "read_regular",
            "gunzip_bounded", "read_json", "MAX_JSON_DEPTH", "MAX_JSON_BYTES", "STREAM_BUDGET_BYTES",
-           "STREAM_WORK_BYTES", "stream_work_bytes"]
+           "STREAM_WORK_BYTES", "stream_work_bytes", "decompress_bounded", "check_disk_space"]
 
 #: Largest angular rate a gyro (or a rate table) can physically see [deg/s];
 #: beyond it a value is a unit or logging error, not a measurement.
@@ -374,3 +378,104 @@ def gunzip_bounded(data: bytes, max_bytes: int, name: str, cost=None, max_cost: 
                                  "after the last member", file=name)
             break
     return bytes(out)
+
+
+# -- bounded decompression of bz2 / zstd / lz4 and the free space of a folder (ROS bags) -----
+def _decompressor(fmt: str):
+    """A new streaming decompressor of ``fmt`` (``bz2``, ``zstd``, ``lz4``) with
+    ``decompress(data, max_length)``, ``eof``, ``unused_data`` and ``needs_input``."""
+    if fmt == "bz2":
+        return bz2.BZ2Decompressor()
+    if fmt == "zstd":
+        try:
+            from compression import zstd  # type: ignore[import-not-found]
+        except ImportError:  # Python < 3.14: the backport rosbags depends on
+            from backports import zstd  # type: ignore[import-not-found,no-redef]
+        return zstd.ZstdDecompressor()
+    if fmt == "lz4":
+        import lz4.frame  # type: ignore[import-untyped]
+        return lz4.frame.LZ4FrameDecompressor()
+    raise ValueError(f"unknown compression {fmt!r}")
+
+
+def decompress_bounded(data, fmt: str, max_bytes: int, name: str, what: str = "the data",
+                       sink=None) -> bytes:
+    """Decompress ``data`` (every concatenated stream/frame of ``fmt``: ``bz2``, ``zstd`` or
+    ``lz4``) in pieces of at most 1 MiB, refusing more than ``max_bytes`` of output.
+
+    With ``sink`` (a callable taking each piece) the pieces go there and b"" is returned
+    (nothing is held in memory: decompression to a file).
+
+    Raises
+    ------
+    InputError
+        Naming ``name``: output beyond ``max_bytes`` (the decompression stops there, said
+        with both sizes), or data that is not valid ``fmt`` (truncated, corrupt).
+    """
+    out = bytearray()
+    total = 0
+    rest = data if isinstance(data, bytes) else bytes(data)
+    try:
+        while rest:
+            d = _decompressor(fmt)
+            chunk = rest
+            while not d.eof:
+                piece = d.decompress(chunk, _GZIP_PIECE)
+                chunk = b""
+                total += len(piece)
+                if total > max_bytes:
+                    raise InputError(
+                        f"{what} decompresses to more than {format_size(max_bytes)} (from "
+                        f"{format_size(len(data))} of {fmt}); stopped there: more than gyroarray "
+                        "decompresses (raise --max-memory if it is a real record)", file=name)
+                if sink is not None:
+                    sink(piece)
+                else:
+                    out += piece
+                if not piece and d.needs_input:
+                    break
+            if not d.eof:
+                raise InputError(f"{what}: the {fmt} data ends early (truncated or corrupt)",
+                                 file=name)
+            rest = d.unused_data
+    except InputError:
+        raise
+    except Exception as err:  # bz2/zstd/lz4 errors (OSError, ZstdError, RuntimeError): corrupt
+        raise InputError(f"{what} is not valid {fmt} data ({type(err).__name__}: "
+                         f"{' '.join(str(err).split())[:120]})", file=name) from None
+    return bytes(out)
+
+
+def check_disk_space(folder, nbytes: float, what: str, *, file: str | None = None,
+                     margin: int = 64 << 20) -> None:
+    """Refuse writing ``nbytes`` into ``folder`` when its file system has less free (plus a
+    ``margin``), saying how much is needed and how much is free."""
+    try:
+        free = shutil.disk_usage(folder).free
+    except OSError as err:
+        raise InputError(f"cannot see the free space of {folder}: {err.strerror or err}",
+                         file=file) from None
+    if nbytes + margin > free:
+        raise InputError(f"{what} needs {format_size(nbytes)} of disk in {folder}, but only "
+                         f"{format_size(free)} is free; free some space or point $TMPDIR at a "
+                         "larger disk", file=file)
+
+
+# -- lines of text read with a bounded length (CSV headers, streamed CSV rows) ---------------
+#: Longest line of text gyroarray reads from a file the user gave [bytes]: a measurement row is
+#: under 1 KiB and a CSV header of the most columns a measurement may have well under 100 KiB;
+#: a longer run without a newline is not a CSV of samples (a sparse file, a binary file).
+MAX_LINE_BYTES = 1 << 20
+
+
+def read_line_bounded(fh, max_bytes: int = MAX_LINE_BYTES) -> tuple[bytes, bool]:
+    """The next line of the binary stream ``fh`` (its ``\\n`` kept; ``b""`` at the end of the
+    stream), and False when it runs past ``max_bytes`` without a newline (then the bytes are
+    its first ``max_bytes + 1``, the rest unread).
+
+    At most ``max_bytes + 1`` bytes are read (``readline(size)``), never the whole line: a file
+    whose first line never ends (a sparse file of zeros, a gzip of one) costs ``max_bytes`` of
+    memory, not its size.
+    """
+    raw = fh.readline(int(max_bytes) + 1)
+    return raw, not (len(raw) > max_bytes and not raw.endswith(b"\n"))

@@ -90,9 +90,9 @@ import tomli_w
 from gyroarray import __version__
 from gyroarray.core import units
 from gyroarray.core.errors import InputError
-from gyroarray.core.layout import UNIT_NORM_TOL, Layout, check_positions
-from gyroarray.core.limits import (MAX_RATE_DEG_S, check_memory, format_size, gunzip_bounded, max_memory,
-                              open_regular, read_regular)
+from gyroarray.core.layout import MAX_GYROS, UNIT_NORM_TOL, Layout, check_positions
+from gyroarray.core.limits import (MAX_LINE_BYTES, MAX_RATE_DEG_S, check_memory, format_size, gunzip_bounded,
+                              max_memory, open_regular, read_line_bounded, read_regular)
 from gyroarray.core.outputs import measurement_files, same_path, write_bytes
 from gyroarray.core.tomlio import (TomlDoc, finite_number, is_number, load_toml, short_repr, toml_number,
                                    toml_table, toml_type, utf8_text)
@@ -122,6 +122,10 @@ __all__ = [
     "read_bytes_estimate",
     "parquet_batches",
     "read_window",
+    "MAX_COLUMNS",
+    "MAX_EXTRA_COLUMNS",
+    "MAX_HEADER_BYTES",
+    "MAX_PARQUET_FOOTER_BYTES",
 ]
 
 #: Fewest samples a measurement may have (a time step needs two).
@@ -153,6 +157,18 @@ _BOM = b"\xef\xbb\xbf"
 _CSV_CHUNK_ROWS = 65536
 _LOCATE_CHUNK_ROWS = 16384
 _MAX_NOTES = 10          # per kind of repair; the rest are counted
+#: Extra columns (beyond the spec's) a measurement may have [-]: allowed, and ignored with a note.
+MAX_EXTRA_COLUMNS = 256
+#: Most columns a measurement may have [-]: ``time_s``, at most ``layout.MAX_GYROS`` gyros, the
+#: spec's seven optional columns (``ref_x..z``, ``acc_x..z``, ``temp_c``) and at most
+#: :data:`MAX_EXTRA_COLUMNS` extra ones. A CSV header or a Parquet schema with more is refused
+#: before its names are matched or any sample is read (a Parquet file of 20,000 columns took
+#: 267 s of CPU before its refusal).
+MAX_COLUMNS = 1 + MAX_GYROS + 7 + MAX_EXTRA_COLUMNS
+#: Longest line read before the samples [bytes]: the header and the comment or blank lines
+#: before it (:func:`gyroarray.core.limits.read_line_bounded`); :data:`_MAX_HEAD_BYTES` in all.
+MAX_HEADER_BYTES = MAX_LINE_BYTES
+_MAX_HEAD_BYTES = 16 * MAX_HEADER_BYTES
 # pandas >= 3.1 parses floats exactly by default and deprecates the option.
 _EXACT_FLOATS = ({} if tuple(int(p) for p in pd.__version__.split(".")[:2]) >= (3, 1)
                  else {"float_precision": "round_trip"})
@@ -411,6 +427,7 @@ def read_measurement(path, *, repair: bool = False, topic: str | None = None,
     side = _read_sidecar(toml_path)
     if is_parquet(csv_path):
         return _read_parquet_measurement(csv_path, side, repair, gaps)
+    _check_csv_head(csv_path, csv_name)               # the header's length, before the file is read
     data, notes = _read_csv_bytes(csv_path)
     cols, table, line_notes = _parse_csv(data, csv_name)
     _check_gyro_count(cols, side, csv_name, table.header_line)
@@ -767,6 +784,10 @@ def _parse_header(text: str, name: str, line: int) -> tuple[_Columns, list[str]]
 def _header_columns(fields: list[str], text: str, name: str, error) -> tuple[_Columns, list[str]]:
     """The columns of a header's field names (CSV header or Parquet schema); ``error(message,
     column)`` builds the located refusal."""
+    if len(fields) > MAX_COLUMNS:
+        raise error(f"{len(fields)} columns, more than the {MAX_COLUMNS} a measurement may have "
+                    f"(time_s, at most {MAX_GYROS} gyros, ref_x..z, acc_x..z, temp_c and at most "
+                    f"{MAX_EXTRA_COLUMNS} extra columns): not a measurement file")
     where: dict[str, int] = {}
     for k, f in enumerate(fields, 1):
         if not f:
@@ -788,7 +809,8 @@ def _header_columns(fields: list[str], text: str, name: str, error) -> tuple[_Co
                     f"{', '.join(accs)} ({', '.join(missing)} missing)", accs[0])
     names = (_TIME, *(f"gyro{k}" for k in range(1, n_gyros + 1)), *refs, *accs,
              *([_TEMP] if _TEMP in where else []))
-    extras = [f for f in fields if f not in names]
+    used = set(names)
+    extras = [f for f in fields if f not in used]
     notes = ([f"{name}: ignored extra column(s) {', '.join(extras)}"] if extras else [])
     cols = _Columns(n_fields=len(fields), positions=tuple(where[c] - 1 for c in names),
                     names=names, n_gyros=n_gyros, has_ref=bool(refs),
@@ -803,8 +825,9 @@ def _gyro_count(fields: list[str], error) -> int:
         raise error("no gyro columns (gyro1, gyro2, ... required)")
     expected = [f"gyro{k}" for k in range(1, len(found) + 1)]
     if set(found) != set(expected):
-        wrong = next(f for f in found if f not in expected)
-        missing = next(f for f in expected if f not in found)
+        wanted, have = set(expected), set(found)
+        wrong = next(f for f in found if f not in wanted)
+        missing = next(f for f in expected if f not in have)
         raise error(f"gyro columns must be numbered gyro1..gyro{len(found)} "
                     f"consecutively: found {', '.join(found)} ({wrong} is out of "
                     f"sequence, {missing} is missing)", wrong)
@@ -1387,40 +1410,187 @@ def is_parquet(path) -> bool:
     return Path(path).name.lower().endswith(PARQUET_SUFFIX)
 
 
+#: Largest Parquet footer (the file's metadata) read [bytes]; at most a sixty-fourth of the
+#: memory budget, at least 1 MiB (:func:`_footer_cap`). pyarrow holds about 18 times a footer
+#: while parsing it; a measurement's footer takes about 200 bytes per column and row group
+#: (2 MB for 10 columns in 1000 row groups of 2**20 rows).
+MAX_PARQUET_FOOTER_BYTES = 64 << 20
+#: Most rows per byte of a row group's ``time_s`` column as encoded, before compression [-]:
+#: time is strictly increasing, so its values are distinct; a float takes at least 4 bytes in
+#: every encoding (its dictionary page too) and pyarrow's DELTA_BINARY_PACKED of evenly spaced
+#: integers 42 rows per byte (measured); 1024 leaves a margin of 24 for other writers.
+_MAX_ROWS_PER_TIME_BYTE = 1024
+#: Largest column chunk (one row group, decoded) searched for the first cell that is not a number
+#: [bytes], at most a sixteenth of the budget (at least 1 MiB); a larger non-numeric column is
+#: refused from its type alone (a 600 MiB text cell in a 21 kB file was decoded whole: 2.76 GB).
+_LOCATE_MAX_BYTES = 16 << 20
+_PARQUET_MAGIC = b"PAR1"
+_PARQUET_ERRORS: tuple = (OSError, ValueError, MemoryError)   # with pyarrow.ArrowException
+
+
+def _footer_cap() -> int:
+    """The largest Parquet footer read now [bytes] (:data:`MAX_PARQUET_FOOTER_BYTES`)."""
+    return max(1 << 20, min(MAX_PARQUET_FOOTER_BYTES, max_memory() // 64))
+
+
+def _arrow_errors() -> tuple:
+    # not deferred: pandas (imported above) loads pyarrow; the import names it here
+    import pyarrow as pa
+    return (pa.ArrowException, *_PARQUET_ERRORS)
+
+
+def _said(e: BaseException) -> str:
+    """An exception in one short line (its type and message)."""
+    return f"{type(e).__name__}: {' '.join(str(e).split())[:160]}"
+
+
 def _parquet_file(path: Path, name: str):
-    """The open ``pyarrow.parquet.ParquetFile``, refused in one line when it is not Parquet."""
-    # deferred: pyarrow (about 0.2 s to import) loads only for a Parquet file
-    import pyarrow as pa
+    """The open ``pyarrow.parquet.ParquetFile``, refused in one line when it is not Parquet.
+
+    Before pyarrow reads the footer, its length (the 4 bytes before the closing ``PAR1``) is
+    checked against the file and :func:`_footer_cap`; before the schema's names are matched,
+    its column count against :data:`MAX_COLUMNS`. No sample is read.
+    """
+    # deferred: pyarrow.parquet (with ssl) loads only for a Parquet file; pyarrow itself comes with pandas
     import pyarrow.parquet as pq
-    open_regular(path, "measurement file").close()        # no FIFO, device or folder
+    with open_regular(path, "measurement file") as fh:      # no FIFO, device or folder
+        size = os.fstat(fh.fileno()).st_size
+        head = fh.read(4)
+        fh.seek(max(size - 8, 0))
+        tail = fh.read(8)
+    if size < 12 or head != _PARQUET_MAGIC or tail[4:] not in (_PARQUET_MAGIC, b"PARE"):
+        raise InputError(f"not a readable Parquet file: {format_size(size)} that do not start and "
+                         "end with PAR1 (Parquet's magic bytes)", file=name)
+    if tail[4:] == b"PARE":
+        raise InputError("an encrypted Parquet file (its footer is encrypted): gyroarray reads "
+                         "plain Parquet", file=name)
+    footer = int.from_bytes(tail[:4], "little")
+    if footer > size - 12:
+        raise InputError(f"not a readable Parquet file: its footer says it is {footer} bytes, "
+                         f"more than the file's {size} bytes hold", file=name)
+    cap = _footer_cap()
+    if footer > cap:
+        raise InputError(f"Parquet footer (the file's metadata) of {format_size(footer)}, more than "
+                         f"the {format_size(cap)} gyroarray reads (a measurement's footer takes about "
+                         "200 bytes per column and row group): too many columns or row groups for a "
+                         "measurement (raise --max-memory if it is a real record)", file=name)
     try:
-        return pq.ParquetFile(path)
-    except (pa.ArrowException, OSError, ValueError) as e:
-        raise InputError(f"not a readable Parquet file: {e}", file=name) from None
+        pf = pq.ParquetFile(path)
+        n_columns = pf.metadata.num_columns
+        if n_columns <= MAX_COLUMNS:
+            pf.schema_arrow                                # the arrow schema, parsed once here
+    except _arrow_errors() as e:
+        raise InputError(f"not a readable Parquet file: {_said(e)}", file=name) from None
+    if n_columns > MAX_COLUMNS:
+        raise InputError(f"{n_columns} columns, more than the {MAX_COLUMNS} a measurement may have "
+                         f"(time_s, at most {MAX_GYROS} gyros, ref_x..z, acc_x..z, temp_c and at "
+                         f"most {MAX_EXTRA_COLUMNS} extra columns): not a measurement file "
+                         "(nothing read beyond its footer)", file=name)
+    return pf
 
 
-def _parquet_columns(pf, name: str) -> tuple[_Columns, list[str]]:
-    """The measurement columns of a Parquet schema, each checked to hold numbers."""
-    # deferred: pyarrow loads only for a Parquet file
+@dataclass(frozen=True)
+class _ParquetPlan:
+    """What a Parquet file's footer says of the columns read, checked against itself and the
+    file's size (:func:`_parquet_plan`)."""
+
+    rows: int                        # data rows
+    group_rows: tuple[int, ...]      # rows of each row group
+    group_bytes: int                 # the largest row group's columns read: stored + decoded pages
+    column_bytes: Mapping            # column -> its largest chunk, stored + decoded [bytes]
+
+
+def _parquet_plan(pf, names, name: str) -> _ParquetPlan:
+    """The rows and sizes of the columns ``names`` of an open Parquet file, from its footer.
+
+    Refused (one line naming the file, the row group and the column) before any data is read: a
+    negative row count, row groups whose rows do not add up to the file's, a column chunk whose
+    value count is not its row group's rows, a chunk outside the file's data, more rows than a
+    row group's ``time_s`` can hold (:data:`_MAX_ROWS_PER_TIME_BYTE`).
+    """
+    meta = pf.metadata
+    forged = "a corrupt or forged Parquet footer"
+    data_end = os.stat(name).st_size - 8 - meta.serialized_size
+    leaf: dict[str, int] = {}
+    for j in range(meta.num_columns):
+        leaf.setdefault(meta.schema.column(j).path, j)
+    used = [(c, leaf[c]) for c in names if c in leaf]     # a nested column: its type refuses it
+    groups, total, biggest = [], 0, 0
+    col_bytes = dict.fromkeys((c for c, _ in used), 0)
+    n_groups = meta.num_row_groups
+    for i in range(n_groups):
+        rg = meta.row_group(i)
+        n = int(rg.num_rows)
+        where = f"row group {i + 1} of {n_groups}"
+        if n < 0:
+            raise InputError(f"{where}: the footer says {n} rows (a count of rows is never "
+                             f"negative): {forged}", file=name)
+        group = 0
+        for c, j in used:
+            cc = rg.column(j)
+            values = int(cc.num_values)
+            if values != n:
+                raise InputError(f"{where}: the footer says {n} rows, and column {c}'s data holds "
+                                 f"{values} values: {forged}", file=name, column=c)
+            dictionary = cc.dictionary_page_offset if cc.has_dictionary_page else None
+            first = int(cc.data_page_offset if dictionary is None else min(dictionary, cc.data_page_offset))
+            stored, decoded = int(cc.total_compressed_size), int(cc.total_uncompressed_size)
+            if first < 4 or stored < 0 or decoded < 0 or first + stored > data_end:
+                raise InputError(f"{where}: column {c}'s data (bytes {first} to {first + stored}) "
+                                 f"lies outside the file's data (bytes 4 to {data_end}): a corrupt "
+                                 "or truncated Parquet file", file=name, column=c)
+            if c == _TIME and n > _MAX_ROWS_PER_TIME_BYTE * max(decoded, 1):
+                raise InputError(f"{where}: the footer says {n} rows, but its time_s data "
+                                 f"({format_size(decoded)} decoded) holds at most "
+                                 f"{_MAX_ROWS_PER_TIME_BYTE * max(decoded, 1)} rows (time is strictly "
+                                 f"increasing, and no encoding stores distinct values denser than "
+                                 f"{_MAX_ROWS_PER_TIME_BYTE} per byte): {forged}", file=name,
+                                 column=c)
+            group += stored + decoded
+            col_bytes[c] = max(col_bytes[c], stored + decoded)
+        groups.append(n)
+        total += n
+        biggest = max(biggest, group)
+    if total != int(meta.num_rows):
+        raise InputError(f"the footer says {meta.num_rows} rows, its row groups hold {total}: "
+                         f"{forged}", file=name)
+    return _ParquetPlan(rows=total, group_rows=tuple(groups), group_bytes=biggest,
+                        column_bytes=MappingProxyType(col_bytes))
+
+
+def _parquet_columns(pf, name: str) -> tuple[_Columns, list[str], _ParquetPlan]:
+    """The measurement columns of a Parquet schema, each checked to hold numbers; and the
+    footer's plan of them (:func:`_parquet_plan`). A column that is not numeric is searched for
+    its first cell that is not a number only when its chunks are small
+    (:data:`_LOCATE_MAX_BYTES`); else it is refused from its type, nothing read."""
+    # not deferred: pandas (imported above) loads pyarrow; the import names it here
     import pyarrow as pa
-    fields = [str(f) for f in pf.schema_arrow.names]
+    schema = pf.schema_arrow
+    fields = [str(f) for f in schema.names]
 
     def error(message, column=None):
         return InputError(message, file=name, column=column)
 
     cols, notes = _header_columns(fields, ", ".join(fields), name, error)
+    plan = _parquet_plan(pf, cols.names, name)
+    locate = max(1 << 20, min(_LOCATE_MAX_BYTES, max_memory() // 16))
     for c in cols.names:
-        t = pf.schema_arrow.field(c).type
+        t = schema.field(c).type
         if not (pa.types.is_floating(t) or pa.types.is_integer(t) or pa.types.is_decimal(t)):
+            size = plan.column_bytes.get(c)
+            if size is None or size > locate:
+                what = "a nested column" if size is None else f"{format_size(size)} in a row group"
+                raise InputError(f"column {c} holds {t} values, not numbers ({what}, not read): "
+                                 "write it as float64", file=name, column=c)
             raise _parquet_type_error(pf, c, t, name)
-    return cols, notes
+    return cols, notes, plan
 
 
 def _parquet_type_error(pf, column: str, dtype, name: str) -> InputError:
     """The refusal of a column that does not hold numbers, naming its first non-numeric cell."""
     row, shown = None, None
     start = 0
-    for batch in parquet_batches(pf, [column], _LOCATE_CHUNK_ROWS):
+    for batch in parquet_batches(pf, [column], _LOCATE_CHUNK_ROWS, name):
         for i, v in enumerate(batch.column(0).to_pylist()):
             if v is None:
                 continue
@@ -1442,21 +1612,36 @@ def _parquet_type_error(pf, column: str, dtype, name: str) -> InputError:
                       "float64", file=name, row=row, column=column)
 
 
-def parquet_batches(pf, columns: list[str], batch_size: int):
+def parquet_batches(pf, columns: list[str], batch_size: int, name: str | None = None):
     """The record batches of ``columns`` of an open ``ParquetFile``, one row group at a time.
 
     ``ParquetFile.iter_batches`` over the whole file reads ahead (pyarrow 26 held the whole
     file's columns decoded by the end: 4 GB for 1e8 rows x 5 columns); one row group at a
     time, without threads, it holds at most one row group.
+
+    A row group whose data holds other rows than its footer says is refused when it ends, and
+    pyarrow's errors on corrupt data are said in one line (:class:`InputError` naming ``name``).
     """
-    for rg in range(pf.metadata.num_row_groups):
-        yield from pf.iter_batches(batch_size=batch_size, row_groups=[rg], columns=columns,
-                                   use_threads=False)
+    meta = pf.metadata
+    for rg in range(meta.num_row_groups):
+        want, got = int(meta.row_group(rg).num_rows), 0
+        try:
+            for batch in pf.iter_batches(batch_size=batch_size, row_groups=[rg], columns=columns,
+                                         use_threads=False):
+                got += batch.num_rows
+                yield batch
+        except _arrow_errors() as e:
+            raise InputError(f"row group {rg + 1} of {meta.num_row_groups} cannot be read "
+                             f"({_said(e)}): a corrupt Parquet file", file=name) from None
+        if got != want:
+            raise InputError(f"row group {rg + 1} of {meta.num_row_groups}: the footer says {want} "
+                             f"rows, the data holds {got}: a corrupt or forged Parquet footer",
+                             file=name)
 
 
 def _parquet_values(columns, names) -> tuple[np.ndarray, dict[int, np.ndarray]]:
     """The named arrow columns as one float64 array (n, k), nulls as NaN; and the null masks."""
-    # deferred: pyarrow loads only for a Parquet file
+    # not deferred: pandas (imported above) loads pyarrow; the import names it here
     import pyarrow as pa
     import pyarrow.compute as pc
     out, nulls = [], {}
@@ -1485,20 +1670,42 @@ def _parquet_table(values: np.ndarray, nulls: dict, first_row: int) -> _Table:
     return _Table(values, np.arange(first_row, first_row + len(values)), 0, token)
 
 
+def _parquet_read_bytes(plan: _ParquetPlan, k: int) -> float:
+    """Peak memory [bytes] of reading ``k`` columns of a Parquet file whole:
+    :data:`_PARQUET_BYTES_PER_VALUE` per value (an honest row group's pages, 16 bytes a value,
+    included), and what the footer says the largest row group's pages take beyond that."""
+    pages = max(0.0, plan.group_bytes - 16.0 * max(plan.group_rows, default=0) * k)
+    return float(plan.rows) * k * _PARQUET_BYTES_PER_VALUE + pages
+
+
+def _parquet_group_bytes(plan: _ParquetPlan, k: int) -> int:
+    """What a streamed reader holds of a Parquet file [bytes]: its largest row group of ``k``
+    columns, decoded with its pages (16 bytes a value), or what the footer says its pages take
+    when that is more."""
+    return int(max(16 * max(plan.group_rows, default=0) * k, plan.group_bytes))
+
+
 def _read_parquet_measurement(path: Path, side: _Sidecar, repair: bool, gaps: bool) -> Measurement:
     """:func:`read_measurement` of a Parquet file (same checks and notes as the CSV, by row)."""
     name = str(path)
     pf = _parquet_file(path, name)
-    cols, col_notes = _parquet_columns(pf, name)
+    cols, col_notes, plan = _parquet_columns(pf, name)
     _check_gyro_count(cols, side, name, None)
-    n = int(pf.metadata.num_rows)
+    n = plan.rows
     if n == 0:
         raise InputError("no data rows (the Parquet file has columns but no samples)", file=name)
-    check_memory(n * len(cols.names) * _PARQUET_BYTES_PER_VALUE,
+    check_memory(_parquet_read_bytes(plan, len(cols.names)),
                  f"reading {n} rows x {len(cols.names)} columns",
                  "gyroarray allan streams a record this long (--stream); cut the record for the "
                  "other commands", file=name)
-    table = pf.read(columns=list(cols.names))
+    try:
+        table = pf.read(columns=list(cols.names))
+    except _arrow_errors() as e:
+        raise InputError(f"the Parquet data cannot be read ({_said(e)}): a corrupt file",
+                         file=name) from None
+    if table.num_rows != n:
+        raise InputError(f"the footer says {n} rows, the data holds {table.num_rows}: a corrupt or "
+                         "forged Parquet footer", file=name)
     values, nulls = _parquet_values(table.column, cols.names)
     del table
     try:
@@ -1549,6 +1756,9 @@ class RecordHead:
     site: Site | None = field(default=None, repr=False)
     #: The sidecar's description.
     description: str = field(default="", repr=False)
+    #: What a chunked reader holds of a Parquet file beyond its chunks [bytes]: its largest row
+    #: group read, decoded with its pages, from the footer (0 for a CSV, read in chunks).
+    group_bytes: int = field(default=0, repr=False)
 
     @property
     def n_gyros(self) -> int:
@@ -1576,9 +1786,7 @@ def read_bytes_estimate(path) -> float | None:
     try:
         data_path, _ = _measurement_paths(path)
         if is_parquet(data_path):
-            # deferred: pyarrow loads only for a Parquet file
-            import pyarrow.parquet as pq
-            meta = pq.ParquetFile(data_path).metadata
+            meta = _parquet_file(data_path, str(data_path)).metadata   # the footer checked first
             return float(meta.num_rows) * meta.num_columns * _PARQUET_BYTES_PER_VALUE
         size = data_path.stat().st_size
     except (InputError, OSError, ValueError):   # a bad file (arrow's errors are these): the reader says why
@@ -1609,12 +1817,12 @@ def record_head(path) -> RecordHead:
     side = _read_sidecar(toml_path)
     if is_parquet(data_path):
         pf = _parquet_file(data_path, name)
-        cols, notes = _parquet_columns(pf, name)
-        n_rows, text_bytes = int(pf.metadata.num_rows), 0
+        cols, notes, plan = _parquet_columns(pf, name)
+        n_rows, text_bytes = plan.rows, 0
         _check_gyro_count(cols, side, name, None)
-        meta = pf.metadata
-        biggest = max((meta.row_group(i).num_rows for i in range(meta.num_row_groups)), default=0)
-        check_memory(biggest * len(cols.names) * 16,     # decoded float64 + its compressed pages
+        biggest = max(plan.group_rows, default=0)
+        group_bytes = _parquet_group_bytes(plan, len(cols.names))
+        check_memory(group_bytes,                       # decoded float64 + its compressed pages
                      f"reading a row group of {biggest} rows x {len(cols.names)} columns",
                      f"rewrite the file with smaller row groups (at most {PARQUET_ROW_GROUP} rows, "
                      "what gyroarray convert writes)", file=name)
@@ -1622,11 +1830,12 @@ def record_head(path) -> RecordHead:
         header, line, text_bytes = _csv_header_line(data_path, name)
         cols, notes = _parse_header(header, name, line)
         _check_gyro_count(cols, side, name, line)
-        n_rows = None
+        n_rows, group_bytes = None, 0
     return RecordHead(source=name, layout=side.layout, sample_rate_hz=side.sample_rate_hz,
                       names=cols.names, n_rows=n_rows, text_bytes=text_bytes,
                       notes=(*side.notes, *notes), units=MappingProxyType(dict(side.units)),
-                      columns=cols, site=side.site, description=side.description)
+                      columns=cols, site=side.site, description=side.description,
+                      group_bytes=group_bytes)
 
 
 def read_window(head: RecordHead, n_rows: int, chunk_rows: int) -> Measurement:
@@ -1663,25 +1872,63 @@ def read_window(head: RecordHead, n_rows: int, chunk_rows: int) -> Measurement:
 
 
 def _csv_header_line(path: Path, name: str) -> tuple[str, int, int]:
-    """(header text, its 1-based line, estimated text size [bytes]) of a CSV or CSV.GZ."""
-    size = open_regular(path, "measurement file")
-    try:
-        total = os.fstat(size.fileno()).st_size
-    finally:
-        size.close()
+    """(header text, its 1-based line, estimated text size [bytes]) of a CSV or CSV.GZ, every
+    line up to the header read with a bounded length (:func:`_head_line`)."""
     gz = name.lower().endswith(".gz")
-    opener = gzip.open if gz else open
-    try:
-        with opener(path, "rb") as fh:
-            for i, raw in enumerate(fh, 1):
-                text = raw.decode("utf-8-sig" if i == 1 else "utf-8").rstrip("\r\n")
-                if text and not text.startswith("#"):
-                    return text, i, int(total * (_GZ_TEXT_RATIO if gz else 1))
-                if i > _MAX_HEAD_LINES:
-                    break
-    except (OSError, EOFError, UnicodeDecodeError) as e:
-        raise InputError(f"cannot read the header: {e}", file=name) from None
-    raise InputError("empty file: no header line (only comments or blank lines)", file=name)
+    with open_regular(path, "measurement file") as fh:
+        total = os.fstat(fh.fileno()).st_size
+        try:
+            found = _head_line(gzip.GzipFile(fileobj=fh, mode="rb") if gz else fh, name)
+            text = None if found is None else found[0].decode("utf-8")
+        except (OSError, EOFError, zlib.error, UnicodeDecodeError) as e:
+            raise InputError(f"cannot read the header: {e}", file=name) from None
+    if found is None or text is None:
+        raise InputError("empty file: no header line (only comments or blank lines)", file=name)
+    return text, found[1], int(total * (_GZ_TEXT_RATIO if gz else 1))
+
+
+def _head_line(fh, name: str) -> tuple[bytes, int] | None:
+    """(the header line's bytes, without its end and a byte-order mark; its 1-based line) of a
+    CSV's binary text stream, or None when the text ends before a header.
+
+    Each line up to the header is read with at most :data:`MAX_HEADER_BYTES` (a sparse file of
+    zeros, or a gzip of one, is refused after 1 MiB instead of being held whole: it reached
+    4.5 GB), the comment and blank lines before the header :data:`_MAX_HEAD_BYTES` and
+    :data:`_MAX_HEAD_LINES` in all.
+    """
+    spent = 0
+    for i in range(1, _MAX_HEAD_LINES + 1):
+        raw, whole = read_line_bounded(fh, MAX_HEADER_BYTES)
+        body = raw[len(_BOM):] if i == 1 and raw.startswith(_BOM) else raw
+        if not whole:
+            what = "a comment line" if body.startswith(b"#") else "the header line"
+            raise InputError(f"{what} is longer than {format_size(MAX_HEADER_BYTES)} (no end of "
+                             f"line in its first {MAX_HEADER_BYTES + 1} bytes): not a CSV of samples "
+                             f"(a header of {MAX_COLUMNS} columns is far shorter)", file=name, line=i)
+        if not raw:
+            return None
+        body = body.rstrip(b"\r\n")
+        if body and not body.startswith(b"#"):
+            return body, i
+        spent += len(raw)
+        if spent > _MAX_HEAD_BYTES:
+            raise InputError(f"no header line in the first {format_size(spent)} of text ({i} comment "
+                             "or blank lines): not a CSV of samples", file=name, line=i)
+    return None
+
+
+def _check_csv_head(path: Path, name: str) -> None:
+    """Refuse, before a CSV (or CSV.GZ) is read whole, a header or a line before it longer than
+    :data:`MAX_HEADER_BYTES` (:func:`_head_line`: only the lines up to the header are read).
+    Anything else (not gzip, no header, not UTF-8) is left to the reader, which says it."""
+    gz = name.lower().endswith(".gz")
+    with open_regular(path, "measurement file") as fh:
+        if not gz and fh.peek(2)[:2] == _GZIP_MAGIC:
+            return
+        try:
+            _head_line(gzip.GzipFile(fileobj=fh, mode="rb") if gz else fh, name)
+        except (OSError, EOFError, zlib.error):
+            return
 
 
 #: Decompressed / compressed size of a measurement CSV.GZ assumed when deciding to stream [-]
@@ -1754,7 +2001,7 @@ def _raw_chunks(head: RecordHead, chunk_rows: int):
     names = list(cols.names)
     if is_parquet(head.source):
         pf = _parquet_file(Path(head.source), head.source)
-        for batch in parquet_batches(pf, names, chunk_rows):
+        for batch in parquet_batches(pf, names, chunk_rows, head.source):
             yield _parquet_values(batch.column, names)
         return
     raw = open_regular(Path(head.source), "measurement file")
@@ -1785,7 +2032,7 @@ def _raw_chunks(head: RecordHead, chunk_rows: int):
 
 #: Longest line a streamed CSV may have [bytes]: a measurement row is under 1 KiB; a longer run
 #: without a newline is not a CSV of samples, and the chunked reader would have to hold it.
-MAX_STREAM_LINE_BYTES = 1 << 20
+MAX_STREAM_LINE_BYTES = MAX_LINE_BYTES
 
 
 class _TextGuard(io.RawIOBase):
@@ -1846,7 +2093,7 @@ def _numeric_chunk(df, names: list[str], name: str, first_row: int) -> np.ndarra
 def parquet_bytes(m: Measurement) -> bytes:
     """The Parquet file of a measurement: the CSV's columns as float64, zstd, row groups of
     :data:`PARQUET_ROW_GROUP` rows (what ``write_measurement(m, "F.parquet")`` writes)."""
-    # deferred: pyarrow loads only when a Parquet file is written
+    # deferred: pyarrow.parquet (with ssl) loads only for a Parquet file written; pyarrow itself comes with pandas
     import pyarrow as pa
     import pyarrow.parquet as pq
     names, blocks = _csv_columns(m)

@@ -19,8 +19,14 @@ Every file the CLI writes goes through this module:
     existing symlink at the final name is replaced by the new file, its
     target is never written through.
 
-  A reader never sees a half-written file, and a crash leaves at most a
-  hidden ``.*.tmp`` file behind. A new file gets ``0o666`` less the umask
+  A reader never sees a half-written file under its final name. The temporary
+  is named for its output, its machine and its process
+  (``.NAME.gyroarray-tmp-<host>-<pid>-<random>.tmp``, :data:`TEMP_MARK`): a
+  SIGTERM or SIGHUP is an exception in the CLI (:func:`handle_termination`,
+  :class:`Terminated`), so the clean-ups on the way out remove it (SIGINT is
+  ``KeyboardInterrupt``); after a SIGKILL, which runs no clean-up, the next
+  write into the folder removes it (:func:`remove_stale_temps`: only this
+  machine's temporaries of processes that are gone). A new file gets ``0o666`` less the umask
   (:func:`file_mode`), as ``open`` would give it. A full disk or a read-only
   folder is one :class:`~gyroarray.core.errors.InputError`, and nothing is left.
 * :func:`write_many` writes several files (a report, its Markdown twin and
@@ -34,16 +40,24 @@ Every file the CLI writes goes through this module:
   command; an append that fails is cut back, no partial line is kept.
 * :func:`markdown_figures` checks a Markdown twin's figure folder before the work.
 * :func:`private_matplotlib_dir` keeps matplotlib's caches out of the user's home.
+* :func:`make_temp_dir` makes a scratch folder (a streamed ADEV's phase files) named the same
+  way; what this process still holds at exit is removed (:func:`remove_own_temps`).
 """
 
 from __future__ import annotations
 
+import atexit
 import errno
 import io
 import os
+import re
+import shutil
+import signal
 import stat
 import sys
 import tempfile
+import threading
+import zlib
 from pathlib import Path
 from typing import Iterable
 
@@ -52,7 +66,9 @@ from gyroarray.core.limits import file_kind
 
 __all__ = ["PLOT_SUFFIXES", "measurement_files", "check_output", "check_output_dir", "write_bytes",
            "write_many", "write_text", "save_figure", "same_path", "file_mode", "check_own_file",
-           "append_line", "markdown_figures", "private_matplotlib_dir", "Staged", "open_staged"]
+           "append_line", "markdown_figures", "private_matplotlib_dir", "Staged", "open_staged",
+           "TEMP_MARK", "temp_prefix", "pid_gone", "stale_temp", "remove_stale_temps", "make_temp_dir",
+           "remove_own_temps", "Terminated", "handle_termination"]
 
 #: Suffixes matplotlib writes without extra software.
 PLOT_SUFFIXES = (".png", ".svg", ".pdf")
@@ -249,20 +265,184 @@ def _refusal(err: OSError, p: Path, doing: str = "cannot write") -> InputError:
 
 
 def _unlink(path) -> None:
+    _LIVE.discard(str(path))
     try:
         os.unlink(path)
     except OSError:
         pass
 
 
-def _new_temp(p: Path) -> tuple[int, str]:
-    """A new hidden temporary file beside ``p`` (``mkstemp``: created, never through a link):
-    its descriptor and path."""
-    folder = p.parent if str(p.parent) else Path(".")
+# -- temporary files and folders: named for their process, removed on a signal or by the next run --
+
+#: The mark in the name of every temporary file and folder gyroarray makes:
+#: ``<name>.gyroarray-tmp-<host>-<pid>-<random>`` (a file beside an output is hidden and ends in
+#: ``.tmp``: ``.run42.csv.gz.gyroarray-tmp-1a2b3c4d-4711-k2j3h4g5.tmp``). The host (a hash of its
+#: name) and the pid say whose it is, so a later run can tell one left by a process that is gone
+#: (a SIGKILL, a power cut: no clean-up of its own ran) from one a live process is writing.
+TEMP_MARK = ".gyroarray-tmp-"
+_TEMP_RE = re.compile(re.escape(TEMP_MARK) + r"([0-9a-f]{8})-([0-9]+)-[A-Za-z0-9_]+(?:\.tmp)?")
+#: Temporary files and folders this process made and has not yet named or removed.
+_LIVE: set[str] = set()
+#: Folders this process has already cleared of stale temporaries (once per folder).
+_SWEPT: set[str] = set()
+
+
+def _host_tag() -> str:
+    """This machine's name, hashed to 8 hex digits."""
     try:
-        return tempfile.mkstemp(prefix=f".{p.name[:64]}.", suffix=".tmp", dir=folder)
+        host = os.uname().nodename
+    except AttributeError:                          # not POSIX
+        host = os.environ.get("COMPUTERNAME", "")
+    return f"{zlib.crc32(host.encode('utf-8', 'replace')):08x}"
+
+
+def temp_prefix(name: str) -> str:
+    """The ``mkstemp``/``mkdtemp`` prefix of a temporary named for ``name`` and this process."""
+    return f"{name}{TEMP_MARK}{_host_tag()}-{os.getpid()}-"
+
+
+def pid_gone(pid: int) -> bool:
+    """True when no process ``pid`` runs on this machine (a zombie counts as gone)."""
+    if pid <= 0:
+        return False
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return True
+    except OSError:                # another user's live process (EPERM)
+        return False
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except (OSError, IndexError):
+        return False
+    return state in ("Z", "X")
+
+
+def stale_temp(name: str) -> bool:
+    """Whether ``name`` is a gyroarray temporary of this machine whose process is gone."""
+    m = _TEMP_RE.search(name)
+    return (m is not None and m.end() == len(name) and m.group(1) == _host_tag()
+            and int(m.group(2)) != os.getpid() and pid_gone(int(m.group(2))))
+
+
+def remove_stale_temps(folder, *, once: bool = False) -> list[str]:
+    """Remove the temporary files and folders gyroarray left in ``folder`` (not below it) whose
+    process is gone; returns their names.
+
+    Only entries marked :data:`TEMP_MARK` with this machine's host and the pid of a process that
+    no longer runs, owned by this user, are removed: a temporary of a live process (another
+    gyroarray writing beside this one, a Dask worker on another machine sharing the folder) is
+    left alone. ``once``: only the first call for a folder in this process looks (a folder is
+    cleared when its first output is written, not at every file).
+    """
+    key = os.path.abspath(folder)
+    if once and key in _SWEPT:
+        return []
+    _SWEPT.add(key)
+    removed = []
+    try:
+        with os.scandir(folder) as it:
+            entries = [e for e in it if TEMP_MARK in e.name]
+    except OSError:
+        return removed
+    uid = os.geteuid() if hasattr(os, "geteuid") else None
+    for e in entries:
+        if not stale_temp(e.name):
+            continue
+        try:
+            st = os.lstat(e.path)
+            if uid is not None and st.st_uid != uid:
+                continue
+            if stat.S_ISDIR(st.st_mode):
+                shutil.rmtree(e.path, ignore_errors=True)
+            elif stat.S_ISREG(st.st_mode):
+                os.unlink(e.path)
+            else:
+                continue
+            removed.append(e.name)
+        except OSError:
+            pass
+    return removed
+
+
+def make_temp_dir(what: str, dir=None) -> str:
+    """A new private temporary folder (``mkdtemp``) named ``gyroarray-<what>`` and this process
+    (:data:`TEMP_MARK`), in ``dir`` or the system's temporary folder; stale ones of processes
+    that are gone are removed there first. The caller removes it (``shutil.rmtree`` in a
+    ``finally``; a SIGTERM is an exception in the CLI, :func:`handle_termination`), else
+    :func:`remove_own_temps` does at exit."""
+    folder = tempfile.gettempdir() if dir is None else os.fspath(dir)
+    remove_stale_temps(folder, once=True)
+    path = tempfile.mkdtemp(prefix=temp_prefix(f"gyroarray-{what}"), dir=folder)
+    for gone in [q for q in list(_LIVE) if not os.path.lexists(q)]:   # removed by their callers
+        _LIVE.discard(gone)
+    _LIVE.add(path)
+    return path
+
+
+def remove_own_temps() -> None:
+    """Remove every temporary file and folder this process made and still holds (at exit, after
+    a SIGTERM: whatever a clean-up on the way out did not reach)."""
+    for path in list(_LIVE):
+        _LIVE.discard(path)
+        try:
+            if os.path.isdir(path) and not os.path.islink(path):
+                shutil.rmtree(path, ignore_errors=True)
+            else:
+                os.unlink(path)
+        except OSError:
+            pass
+
+
+atexit.register(remove_own_temps)
+
+
+def _new_temp(p: Path) -> tuple[int, str]:
+    """A new hidden temporary file beside ``p`` (``mkstemp``: created, never through a link),
+    named for ``p`` and this process (:data:`TEMP_MARK`): its descriptor and path. The folder's
+    stale temporaries (of processes that are gone) are removed the first time."""
+    folder = p.parent if str(p.parent) else Path(".")
+    remove_stale_temps(folder, once=True)
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=temp_prefix(f".{p.name[:64]}"), suffix=".tmp", dir=folder)
     except OSError as err:
         raise _refusal(err, p, f"cannot write in {folder}") from None
+    _LIVE.add(tmp)
+    return fd, tmp
+
+
+class Terminated(BaseException):
+    """A SIGTERM or SIGHUP turned into an exception in the main thread
+    (:func:`handle_termination`), so that every ``finally`` and ``except BaseException``
+    clean-up runs (temporary files and folders removed, workers stopped) before the CLI exits
+    with ``128 + signal``. Not an ``Exception``: nothing that handles errors swallows it."""
+
+    def __init__(self, signum: int):
+        self.signum = int(signum)
+        self.exit_code = 128 + self.signum
+        try:
+            name = signal.Signals(self.signum).name
+        except ValueError:
+            name = f"signal {self.signum}"
+        super().__init__(f"terminated by {name}")
+
+
+def handle_termination() -> None:
+    """In the main thread: SIGTERM and SIGHUP raise :class:`Terminated` (a second one ends the
+    process at once, as the signal would). A signal the process was started ignoring (``nohup``)
+    stays ignored; one with a handler of someone else's is left alone. SIGINT is Python's
+    ``KeyboardInterrupt`` already."""
+    if threading.current_thread() is not threading.main_thread():
+        return
+
+    def raise_terminated(signum, frame):
+        signal.signal(signum, signal.SIG_DFL)          # a second one: the default, at once
+        raise Terminated(signum)
+
+    for name in ("SIGTERM", "SIGHUP"):
+        signum = getattr(signal, name, None)
+        if signum is not None and signal.getsignal(signum) == signal.SIG_DFL:
+            signal.signal(signum, raise_terminated)
 
 
 def _stage(p: Path, data: bytes) -> str:

@@ -194,7 +194,7 @@ def error_budget(sys, H, noise_model, *, n_samples: int, dt_s: float, settle_s: 
     elif motion is not None and not isinstance(motion, Motion):
         motion = Motion(omega_rad_s=np.asarray(motion, dtype=float))
     motion = Motion() if motion is None else motion
-    from gyroarray.estimators.noise import model_terms  # lazy: loads numba
+    from gyroarray.estimators.noise import model_terms  # lazy: the estimators load pandas (core.measurement)
     noise = noise_sources(noise_model, N, dt)
     declared = model_terms(noise_model, N)
     csys = cascade(sys, noise.sensor)

@@ -95,6 +95,7 @@ from scipy.linalg import block_diag
 
 from gyroarray.core import units
 from gyroarray.core.errors import InputError
+from gyroarray.core.sensor import bandwidth_filter, bandwidth_sos, g_sensitivity_bias
 from gyroarray.effects.model import ModelEntry, NoiseModel
 from gyroarray.effects.terms import (CorrelationTerm, DeterministicTerm, FlickerTerm, ForceTerm, GaussMarkovTerm,
                                      Motion, SensorFilter, WalkTerm, WhiteTerm, root_sum_square)
@@ -112,7 +113,7 @@ def declared_terms() -> dict:
     """Each registered effect's declared term class, probed on its placeholder parameters on
     three gyros (None: it declares none, or the probe fails)."""
     from gyroarray.effects import REGISTRY  # lazy: the registry and its plugins, at call time
-    from gyroarray.estimators.noise import model_terms  # lazy: loads numba
+    from gyroarray.estimators.noise import model_terms  # lazy: the estimators load pandas (core.measurement)
     out: dict = {}
     for name, eff in REGISTRY.items():
         try:
@@ -198,7 +199,7 @@ def noise_sources(noise_model, n_gyros: int, dt_s: float) -> NoiseSources:
     the gyros one sensor filter (a second one on the same gyro is listed as
     ignored); the deterministic terms are kept for :func:`predict`.
     """
-    from gyroarray.estimators.noise import array_noise, model_terms  # lazy: loads numba
+    from gyroarray.estimators.noise import array_noise, model_terms  # lazy: the estimators load pandas (core.measurement)
     an = array_noise(noise_model, n_gyros)
     terms = model_terms(noise_model, n_gyros)
     ignored = {eff.name for eff, t in terms if t is None}
@@ -251,7 +252,6 @@ class SensorBandwidth:
     def sos(self, k: int) -> np.ndarray:
         """Gyro k's (0-based) digital filter as second-order sections
         (:func:`gyroarray.core.sensor.bandwidth_sos`, the simulator's own)."""
-        from gyroarray.core.sensor import bandwidth_sos  # lazy: loads scipy.signal
         return bandwidth_sos(float(self.cutoff_hz[k]), int(self.order[k]), self.dt_s)
 
     def response(self, freq_hz: float) -> np.ndarray:
@@ -265,7 +265,6 @@ class SensorBandwidth:
     def apply(self, x: np.ndarray) -> np.ndarray:
         """The readings (n, N) through each gyro's filter, started at the first sample's
         steady state, as the simulator runs it (:func:`gyroarray.core.sensor.bandwidth_filter`)."""
-        from gyroarray.core.sensor import bandwidth_filter  # lazy: loads scipy.signal
         y = np.array(x, dtype=float)
         m = self.filtered
         if m.any():
@@ -289,7 +288,7 @@ def sensor_bandwidth(noise_model, n_gyros: int, dt_s: float) -> SensorBandwidth 
     InputError
         An order other than 1 or 2, or a cut-off not inside (0, Nyquist).
     """
-    from gyroarray.estimators.noise import model_terms  # lazy: loads numba
+    from gyroarray.estimators.noise import model_terms  # lazy: the estimators load pandas (core.measurement)
     sensors = [t for _, t in model_terms(noise_model, n_gyros) if isinstance(t, SensorFilter)]
     return _sensor(sensors[0] if sensors else None, dt_s)
 
@@ -323,7 +322,7 @@ def cascade(sys, sensor: SensorBandwidth | None):
     """
     if sensor is None or not sensor.filtered.any():
         return sys
-    from gyroarray.estimators.base import LinearSystem  # lazy: loads numba
+    from gyroarray.estimators.base import LinearSystem  # lazy: the estimators load pandas (core.measurement)
     N = sys.K.shape[1]
     blocks = []
     for k in range(N):
@@ -404,7 +403,7 @@ def swing_response(sys, H: np.ndarray, sensor: SensorBandwidth | None, freq_hz: 
 def g_sensitivity_coeffs(noise_model, n_gyros: int) -> np.ndarray | None:
     """The g-sensitivity of each gyro (the declared force terms), shape (N, 3), platform frame
     [(rad/s)/(m/s²)] (None: the model has none; an entry for gyro k overrides one for all)."""
-    from gyroarray.estimators.noise import model_terms  # lazy: loads numba
+    from gyroarray.estimators.noise import model_terms  # lazy: the estimators load pandas (core.measurement)
     det = tuple((eff.name, t) for eff, t in model_terms(noise_model, n_gyros) if isinstance(t, ForceTerm))
     return _force_coeffs(det, n_gyros)
 
@@ -487,7 +486,6 @@ def g_sensitivity_error(coeff_rad_s_per_m_s2: np.ndarray, specific_force_m_s2: n
         ``fused_mean_deg_s`` (axis -> value; absent without a DC gain),
         RMS over the scored window.
     """
-    from gyroarray.core.sensor import g_sensitivity_bias  # lazy: loads scipy.signal
     c = np.asarray(coeff_rad_s_per_m_s2, dtype=float)
     f = np.asarray(specific_force_m_s2, dtype=float)
     if f.ndim == 1:
@@ -988,8 +986,8 @@ def channel_filter(kind: str, dt_s: float, bandwidth_hz: float | None = None,
     and the gain splits as K = (1 − λ)[κ, 1 − κ] with κ = q_ω·dt/Q, the DC gain
     of the rate estimate.
     """
-    from gyroarray.estimators.kalman import lowpass_pole  # lazy: loads numba
-    from gyroarray.estimators.base import LinearSystem  # lazy: loads numba
+    from gyroarray.estimators.kalman import lowpass_pole  # lazy: the estimators load pandas (core.measurement)
+    from gyroarray.estimators.base import LinearSystem  # lazy: the estimators load pandas (core.measurement)
     one = np.ones((1, 1))
     if kind == "none":
         return LinearSystem(A=np.zeros((1, 1)), K=one, C=one, X0=np.zeros((1, 1)),

@@ -72,9 +72,17 @@ from gyroarray.core.layout import Layout, conical_axes
 from gyroarray.design.predict import (AXES, MODELLED, SensorBandwidth, Swing, cascade, channel_filter,
                                       channel_response, g_sensitivity_error, noise_sources, predict,
                                       predict_system, settle_start, swing_truth)
+from gyroarray.core.sensor import bandwidth_sos
+from gyroarray.effects.model import ModelEntry, NoiseModel
+from gyroarray.effects.terms import (CorrelationTerm, FlickerTerm, GaussMarkovTerm, WalkTerm, WhiteTerm,
+                                     root_sum_square)
 from gyroarray.design.robust import (fixed_weights, kept_sets, mirror_pattern, mounted_axes,
                                      mounting_patterns, mounting_words, worst_over_interval)
 from gyroarray.effects.names import ARW, BANDWIDTH, BIAS_INSTABILITY, CONSTANT_BIAS, CORRELATION, GAUSS_MARKOV, G_SENSITIVITY, MISALIGNMENT, QUANTIZATION, RRW, SCALE_FACTOR, SCALE_NONLINEARITY, TEMPERATURE_BIAS
+from gyroarray.estimators import available, get_estimator
+from gyroarray.estimators.fdi import minimum_detectable
+from gyroarray.estimators.noise import model_terms, per_gyro
+from gyroarray.sim.effects import simulate_readings
 
 __all__ = ["GyroNoise", "DesignSpace", "recommend", "design_label", "ESTIMATORS", "DEFAULT_BANDWIDTH_HZ"]
 
@@ -82,6 +90,10 @@ __all__ = ["GyroNoise", "DesignSpace", "recommend", "design_label", "ESTIMATORS"
 ESTIMATORS = ("kf_array", "kf_single", "gls", "ols", "naive")
 #: The bandwidth a filter is held at when no motion is given to trade it against [Hz].
 DEFAULT_BANDWIDTH_HZ = 10.0
+
+#: Lowest ARW of a gyro the design takes [deg/√h]: below it the white variance per sample
+#: underflows (cli.design.MIN_ARW_DEG_RT_H, the --arw floor, is the same).
+MIN_ARW_DEG_RT_H = 1e-9
 #: Cone angles per scheme on the search grid.
 ALPHA_POINTS = 100
 #: Bandwidths per decade on the search grid.
@@ -132,8 +144,10 @@ class GyroNoise:
         return None if self.per_gyro is None else int(len(self.per_gyro[ARW]))
 
     def __post_init__(self):
-        if not (math.isfinite(self.arw_deg_rt_h) and self.arw_deg_rt_h > 0):
-            raise InputError(f"the gyros need an angle random walk > 0 [deg/√h], got {self.arw_deg_rt_h!r}")
+        if not (math.isfinite(self.arw_deg_rt_h) and MIN_ARW_DEG_RT_H <= self.arw_deg_rt_h):
+            raise InputError(f"the gyros need an angle random walk of at least {MIN_ARW_DEG_RT_H:g} "
+                             f"deg/√h (below it the white variance per sample underflows), got "
+                             f"{self.arw_deg_rt_h!r}")
         for k in ("rrw_deg_h_rt_h", "bi_deg_h", "gm_sigma_deg_h", "gm_tau_s"):
             v = getattr(self, k)
             if not (math.isfinite(v) and v >= 0):
@@ -160,7 +174,6 @@ class GyroNoise:
 
     @classmethod
     def _typical(cls, model, source: str) -> "GyroNoise":
-        from gyroarray.estimators.noise import per_gyro  # lazy: loads numba
         n = max([e.gyro or 1 for e in model.entries] + [1])
 
         def qmean(effect, key):
@@ -200,7 +213,6 @@ class GyroNoise:
 
         Per-gyro noise: gyro k of the model on gyro k of the array; ``keep`` (0-based indices
         of the model's gyros, len ``n_gyros``): the gyros left after a failure, renumbered."""
-        from gyroarray.effects.model import ModelEntry, NoiseModel  # lazy: loads numba
         if self.per_gyro is not None:
             return self._per_gyro_model(n_gyros, keep)
         entries = [ModelEntry(ARW, None, {"n_deg_rt_h": self.arw_deg_rt_h})]
@@ -219,7 +231,6 @@ class GyroNoise:
         return model
 
     def _per_gyro_model(self, n_gyros: int, keep):
-        from gyroarray.effects.model import ModelEntry, NoiseModel  # lazy: loads numba
         idx = list(range(n_gyros)) if keep is None else [int(k) for k in keep]
         if len(idx) != n_gyros or max(idx) >= cast(int, self.n_gyros):       # set with per_gyro
             raise ValueError(f"keep {idx} does not give {n_gyros} of the model's {self.n_gyros} gyros")
@@ -294,9 +305,6 @@ def per_gyro_noise(model, typical: GyroNoise, source: str = "model") -> GyroNois
     ``[array]`` table's ``white_correlation`` / ``walk_correlation`` for the gyros it names.
     A model that names fewer than 3 gyros (no array) gives ``typical`` back (alike gyros).
     """
-    from gyroarray.effects.terms import (CorrelationTerm, FlickerTerm, GaussMarkovTerm,  # lazy: numba
-                                         WalkTerm, WhiteTerm, root_sum_square)
-    from gyroarray.estimators.noise import model_terms  # lazy: loads numba
     n = model_gyro_count(model)
     if n < 3:                     # names no array (0) or fewer gyros than a 3-axis rate needs
         return typical
@@ -437,7 +445,6 @@ class DesignSpace:
 
     def __post_init__(self):
         if self.sensor_bandwidth is not None:
-            from gyroarray.core.sensor import bandwidth_sos  # lazy: loads scipy.signal
             fc, order = self.sensor_bandwidth
             bandwidth_sos(fc, order, self.dt_s)                     # order 1/2, 0 < fc < Nyquist
 
@@ -455,7 +462,6 @@ class DesignSpace:
 
     def sensor_entries(self) -> tuple:
         """The sensor's ``bandwidth`` and ``g_sensitivity`` as model entries on every gyro."""
-        from gyroarray.effects.model import ModelEntry  # lazy: loads numba
         out = []
         if self.sensor_bandwidth is not None:
             out.append(ModelEntry(BANDWIDTH, None, {"cutoff_hz": float(self.sensor_bandwidth[0]),
@@ -638,7 +644,6 @@ def _with_sensor(model, space: DesignSpace, *, g_sensitivity: bool = True):
     The Monte-Carlo check and the full predictor leave the g-sensitivity out
     (``g_sensitivity`` False), as the ranking does: it is reported on its own.
     """
-    from gyroarray.effects.model import NoiseModel  # lazy: loads numba
     extra = tuple(e for e in space.sensor_entries() if g_sensitivity or e.effect != G_SENSITIVITY)
     return model if not extra else NoiseModel(tuple(model.entries) + extra,
                                               description=model.description)
@@ -851,7 +856,6 @@ def estimator_kwargs(est: str, bw, g: GyroNoise) -> dict:
 def generic_design(scheme, n, est, alpha, bw, rho, space: DesignSpace, g: GyroNoise,
                     failures: int) -> dict:
     """A design predicted by the full predictor (used where the fast path does not apply)."""
-    from gyroarray.estimators import get_estimator  # lazy: loads numba
     gr = g.with_rho(rho) if g.rho_arw == g.rho_rrw else g
     layout = Layout.conical(scheme, n, alpha)
     model = gr.noise_model(n)
@@ -1146,7 +1150,8 @@ def recommend(g: GyroNoise, space: DesignSpace, *, rhos=None) -> dict:
     designs, nt = decide(g, space, lo, hi, rhos_shown=None if single else rho_list)
     notes += nt
     if not designs:
-        raise InputError("no design meets the requirements (see the notes: failures, rho, bandwidth)")
+        why = "; ".join(sorted(set(notes))[:3]) or "failures, rho or bandwidth"
+        raise InputError(f"no design meets the requirements: {why}")
     rec = designs[0]
     other = [d for d in designs[1:] if (d["scheme"], d["n"]) != (rec["scheme"], rec["n"])]
     out: dict[str, Any] = {"recommended": _short(rec),
@@ -1486,8 +1491,6 @@ def monte_carlo_check(designs: list[dict], g: GyroNoise, space: DesignSpace, *,
     """
     if designs and "worst_case" in designs[0]:
         return check_decision(designs, g, space, replicates=replicates, seed=seed)
-    from gyroarray.estimators import get_estimator  # lazy: loads numba
-    from gyroarray.sim.effects import simulate_readings  # lazy: loads numba
     picked = _pick_for_check(designs, top)
     n, dt = space.n_samples, space.dt_s
     k0 = settle_start(n, dt, space.settle_s)
@@ -1938,7 +1941,6 @@ def exact_predictions(dec: _Decider, c: _Cand, H: np.ndarray, extra_rhos=()) -> 
     dict
         (kept set, ρ) -> Prediction.
     """
-    from gyroarray.estimators import get_estimator  # lazy: loads numba
     space = dec.space
     motion = None if space.motion is None else np.asarray(space.motion, dtype=float)[:space.n_samples]
     gd = dec.cond(dec.lo if c.rho_d is None else c.rho_d)
@@ -2012,7 +2014,6 @@ def _nominal_rho(dec: _Decider, c: _Cand) -> float:
 def _mdb(H: np.ndarray, dec: _Decider) -> dict:
     """Minimum detectable bias step per gyro [deg/s], worst over the ρ range's ends, from the
     parity detector (:func:`gyroarray.estimators.fdi.minimum_detectable`)."""
-    from gyroarray.estimators.fdi import minimum_detectable  # lazy: loads numba
     cache = dec.space.__dict__.setdefault("_mdb_cache", {})
     key = (np.round(H, 9).tobytes(), dec.lo, dec.hi, dec.space.far_per_h, dec.space.p_md)
     if key not in cache:
@@ -2042,7 +2043,6 @@ def _error_budget(d: dict, dec: _Decider, c: _Cand, H: np.ndarray) -> dict:
     except ImportError:
         budget_mod = None
     if budget_mod is not None and hasattr(budget_mod, "error_budget"):
-        from gyroarray.estimators import get_estimator  # lazy: loads numba
         Hk = H[0, list(keep)]
         gd = dec.cond(c.rho_d if c.rho_d is not None else wc["rho"])
         est = get_estimator(c.est)(**_estimator_kwargs(c.est, c.bw, dec.g)).fit(
@@ -2082,9 +2082,7 @@ def _budget_model(g: GyroNoise, keep):
     keep = list(keep)
     if g.model is None or g.per_gyro is None:
         return g.noise_model(len(keep), keep)
-    from gyroarray.effects.model import ModelEntry, NoiseModel  # lazy: loads numba
     from gyroarray.effects.terms import CorrelationTerm  # lazy: with the registry
-    from gyroarray.estimators.noise import model_terms  # lazy: loads numba
     corr = {eff.name for eff, t in model_terms(g.model, cast(int, g.n_gyros)) if isinstance(t, CorrelationTerm)}
     own = g.noise_model(len(keep), keep)
     own_corr = [e for e in own.entries if e.gyro is None]               # the condition's correlation
@@ -2260,6 +2258,11 @@ def decide(g: GyroNoise, space: DesignSpace, rho_lo: float, rho_hi: float, *,
     cands = []
     for scheme in space.schemes:
         for n in space.ns:
+            if n - space.failures < 3:
+                notes.append(f"N = {n}: {space.failures} failed gyro(s) leave {n - space.failures}, "
+                             "fewer than the 3 a 3-axis rate needs (N − failures must be ≥ 3); "
+                             "left out")
+                continue
             floor = -1.0 / (n - space.failures - 1) if n - space.failures > 1 else 0.0
             if dec.ranged and rho_lo <= floor:
                 notes.append(f"scheme {scheme}, N = {n}: rho = {rho_lo:g} is not a correlation "
@@ -2275,6 +2278,8 @@ def decide(g: GyroNoise, space: DesignSpace, rho_lo: float, rho_hi: float, *,
                     continue
                 cands.append((best, alphas))
     cands.sort(key=lambda t: t[0].J)
+    if not cands:                       # nothing survives: recommend() refuses, with these notes
+        return [], notes
     refined = [_refine(dec, c, a, bandwidth=i < REFINE_TOP) for i, (c, a) in enumerate(cands)]
     designs = _rank_decision([_decision_dict(dec, c, rhos_shown) for c in refined], objective, None)
     # the screening is approximate for the array KF: the top designs, then the recommendation
@@ -2400,8 +2405,6 @@ def check_decision(designs: list[dict], g: GyroNoise, space: DesignSpace, *, rep
         95 % intervals, ``rms_3axis_deg_s``, ``inside_95`` of ``compared``), ``paired`` (the
         recommendation against each other one), ``inside_95``, ``compared``.
     """
-    from gyroarray.estimators import get_estimator  # lazy: loads numba
-    from gyroarray.sim.effects import simulate_readings  # lazy: loads numba
     rec = designs[0]
     other = [d for d in designs[1:] if (d["scheme"], d["n"]) != (rec["scheme"], rec["n"])] or designs[1:2]
     picked = [("recommended", rec)] + [("runner-up", d) for d in other[:1]]
@@ -2571,7 +2574,6 @@ def predict_as_built(model, axes: np.ndarray, dt_s: float, *, n_samples: int,
     and Gauss–Markov terms pass the DC gain T₀ (independent between gyros): flicker at its
     floor (2 ln 2/π)·Σ T₀² B², Gauss–Markov by its closed form.
     """
-    from gyroarray.estimators import available, get_estimator  # lazy: loads numba
     H = np.asarray(axes, dtype=float)
     N = H.shape[0]
     nm = model_gyro_count(model)
@@ -2584,7 +2586,13 @@ def predict_as_built(model, axes: np.ndarray, dt_s: float, *, n_samples: int,
                          "parameters (gyroarray fit --out on this record)", file=source)
     full = _budget_model(g, range(N))
     noise = noise_sources(full, N, dt_s)
-    names = [e for e in (estimators or AS_BUILT_ESTIMATORS) if e in set(available())]
+    known = [e for e in AS_BUILT_ESTIMATORS if e in set(available())]
+    if estimators is not None:
+        unknown = [e for e in estimators if e not in set(available())]
+        if unknown or not list(estimators):
+            raise InputError(f"--estimators: {unknown[0] if unknown else '(none)'} is not an estimator "
+                             f"(known: {', '.join(sorted(available()))}; default {', '.join(known)})")
+    names = list(dict.fromkeys(estimators)) if estimators is not None else known
     taus = list(taus) if taus is not None else as_built_taus(dt_s, n_samples * dt_s)
     notes = []
     out: dict[str, Any] = {}
@@ -2621,6 +2629,8 @@ def predict_as_built(model, axes: np.ndarray, dt_s: float, *, n_samples: int,
                             "arw_deg_rt_h": float(arw[a]),
                             "rms_deg_s": p.axes[ax]["rms_deg_s"], "angle_deg": p.axes[ax]["angle_deg"]}
         out[name] = per_axis
+    if not out:
+        raise InputError("no estimator could be predicted on this array: " + "; ".join(notes))
     return {"estimators": out, "taus_s": [float(t) for t in taus], "n_gyros": N,
             "horizon_s": float(n_samples * dt_s), "dt_s": float(dt_s),
             "noise": g.to_json_dict(), "per_gyro": g.per_gyro is not None,

@@ -2,24 +2,76 @@
 
 from __future__ import annotations
 
+import functools
 import math
 from functools import partial
 
 import numpy as np
-from scipy import optimize
+from scipy import optimize, signal
 
 from gyroarray.effects.fitting import EffectFit
 from gyroarray.analysis.psd_fit import EFFECTIVE_TESTS, filter_z, filtered_white_avar_ratio, fit_psd
 from gyroarray.analysis.gls import RWWhitener
+from gyroarray.analysis.memo import ContentMemo
 from gyroarray.effects import _draw
 from gyroarray.core.errors import InputError
 from gyroarray.effects.protocol import Param, RegressionEffect, Stage, explains_away, identity, with_cols
 from gyroarray.effects.terms import SensorFilter, spread
-from gyroarray.core.sensor import bandwidth_filter
+from gyroarray.core.sensor import bandwidth_filter, bandwidth_sos
 
 #: Lowest cut-off a model may give [Hz]: a time constant of about two days, beyond any gyro's
 #: own low-pass (below it the filter's pole rounds to 1 and the filter to an integrator).
 MIN_CUTOFF_HZ = 1e-6
+
+
+@functools.lru_cache(maxsize=512)
+def _sos_zi(cutoff_hz: float, order: int, dt_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """The filter's sections and their unit steady state (:func:`bandwidth_filter`'s, made once)."""
+    sos = bandwidth_sos(cutoff_hz, order, dt_s)
+    return sos, signal.sosfilt_zi(sos)
+
+
+def _lowpassed(u: np.ndarray, dt_s: float, cutoff_hz: float, order: int) -> np.ndarray:
+    """:func:`bandwidth_filter` of one signal (n,), the same bits, its design made once per
+    (cut-off, order, step) (the motion's likelihood scans the same grid on every residual)."""
+    sos, zi = _sos_zi(float(cutoff_hz), int(round(float(order))), float(dt_s))
+    y, _ = signal.sosfilt(sos, u, zi=zi * u[0])
+    return y
+
+
+#: The motion's likelihood results (grid, refined fit, values) by the content of the residual,
+#: sensed rate, noise and samples they read: a rival's test on a record cut by another gyro's fit
+#: reads this gyro's residual as it was, bit for bit.
+_MOTION_MEMO = ContentMemo(maxsize=32)
+
+
+class _MotionLR:
+    """2·Δℓ(fc, order) of the residual ``e`` with the filter's effect on the sensed rate ``u``
+    removed (``memo``: what was already computed on the same content)."""
+
+    def __init__(self, e, u, dt, r, q, use):
+        self.e, self.u, self.dt, self.r, self.q, self.use = e, np.asarray(u, dtype=float), float(dt), r, q, use
+        self.memo = _MOTION_MEMO.slot(e, self.u, self.dt, float(r), float(q), use)
+        self._w = None
+
+    def _whitener(self):
+        if self._w is None:
+            w = RWWhitener(self.e.size, self.r, self.q, self.use)
+            z0 = w.whiten(self.e)
+            self._w = (w, float(z0 @ z0))
+        return self._w
+
+    def __call__(self, fc: float, order: int) -> float:
+        w, base = self._whitener()
+        z = w.whiten(self.e - (_lowpassed(self.u, self.dt, fc, order) - self.u))
+        return base - float(z @ z)
+
+    def at(self, fc: float, order: int) -> float:
+        """The value at one (fc, order), kept."""
+        key = ("at", float(fc), int(order))
+        if key not in self.memo:
+            self.memo[key] = self(fc, order)
+        return self.memo[key]
 
 
 class Bandwidth(RegressionEffect):
@@ -124,15 +176,7 @@ class Bandwidth(RegressionEffect):
         """2·Δℓ(fc, order) of the residual with the filter's effect on the sensed rate removed, or None."""
         if ctx.ref is None or not ctx.moving:
             return None
-        u = ctx.ref @ ctx.H[gyro - 1]
-        w = RWWhitener(e.size, r, q, ctx.use)
-        z0 = w.whiten(e)
-        base = float(z0 @ z0)
-
-        def lr(fc: float, order: int) -> float:
-            z = w.whiten(e - (bandwidth_filter(u, ctx.dt, fc, order) - u))
-            return base - float(z @ z)
-        return lr
+        return _MotionLR(e, ctx.ref @ ctx.H[gyro - 1], ctx.dt, r, q, ctx.use)
 
     def fit(self, ctx, gyro, E):
         """Order and cut-off by the joint likelihood of the spectrum and (with motion) the motion."""
@@ -142,7 +186,10 @@ class Bandwidth(RegressionEffect):
         motion = self._motion_lr(ctx, g, E[:, g - 1], float(ctx.r[g - 1]), float(ctx.q[g - 1]))
 
         fcs = np.geomspace(0.01 * nyq, 0.95 * nyq, 24)
-        mgrid = None if motion is None else {o: np.array([motion(fc, o) for fc in fcs]) for o in (1, 2)}
+        memo = {} if motion is None else motion.memo
+        if motion is not None and "grid" not in memo:
+            memo["grid"] = {o: np.array([motion(fc, o) for fc in fcs]) for o in (1, 2)}
+        mgrid = memo.get("grid")
         # the motion measures the filter directly (a sensed rate of known shape); the spectrum
         # through a Welch estimate whose fit is biased by about 1 % in fc at these record sizes:
         # when the motion sees the filter clearly, it alone gives the cut-off
@@ -156,12 +203,14 @@ class Bandwidth(RegressionEffect):
             use_motion = 0 < int(np.argmax(mgrid[order])) < fcs.size - 1
 
         if use_motion:
-            fc, s_fc = self._motion_fit(motion, mgrid[order], order, fcs)
+            if ("fit", order) not in memo:
+                memo[("fit", order)] = self._motion_fit(motion, mgrid[order], order, fcs)
+            fc, s_fc = memo[("fit", order)]
         else:          # the spectrum's own fit: its better family (continuous or digital), refined
             fc, order, s_fc = psd.filter_cutoff_hz, psd.filter_order, psd.filter_cutoff_sigma_hz
             if not fc < 0.95 * nyq:      # the continuous family scans past Nyquist: no roll-off here
                 fc, s_fc = 0.95 * nyq, math.nan
-        lr_motion = 0.0 if motion is None else max(motion(fc, order), 0.0)
+        lr_motion = 0.0 if motion is None else max(motion.at(fc, order), 0.0)
         lr = max(psd.lr_filter, 0.0) + lr_motion
         z = filter_z(lr, n_tests=EFFECTIVE_TESTS if motion is None else 2.0 * EFFECTIVE_TESTS)
         sigma = {"cutoff_hz": float(s_fc)} if math.isfinite(s_fc) else {}

@@ -44,7 +44,7 @@ import json
 import math
 import os
 import re
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from types import MappingProxyType
 from typing import Any, Iterator, Mapping, Sequence
 
@@ -601,6 +601,18 @@ def _array_sigma(value, have: dict, n: int, where) -> dict:
     return out
 
 
+_GYRO_LIST_RE = re.compile(r"\b(gyros?|gyro\(s\)) (\d+(?:(?:, | and )\d+)*)")
+
+
+def _renumber_text(text: str, gyros: list[int]) -> str:
+    """A generated note's gyro numbers (``gyro 2``, ``gyro(s) 1, 3``) renamed k → gyros[k − 1]."""
+    def sub(m):
+        nums = re.sub(r"\d+", lambda d: str(gyros[int(d.group()) - 1]) if 1 <= int(d.group()) <= len(gyros)
+                      else d.group(), m.group(2))
+        return f"{m.group(1)} {nums}"
+    return _GYRO_LIST_RE.sub(sub, text)
+
+
 @dataclass(frozen=True)
 class NoiseModel:
     """A noise model: the effects of a gyro array, one entry each.
@@ -741,6 +753,56 @@ class NoiseModel:
         if len(kept) == len(self.entries):
             raise KeyError((effect, gyro))
         return NoiseModel(kept, description=self.description, source=self.source, array=self.array)
+
+    def renumbered(self, gyros, n_gyros: int, note: str = "") -> "NoiseModel":
+        """This model, fitted on a record of ``len(gyros)`` gyros cut from one of ``n_gyros``,
+        with the cut record's gyro k named ``gyros[k − 1]`` (the full record's number).
+
+        Per-gyro entries and the ``[array]`` table (its rows, its shared lines) take the full
+        record's numbers; an all-gyros entry stays one (it is the analysed gyros' common value);
+        a matrix-valued parameter (a ``correlation`` matrix) is placed in the ``n_gyros`` ×
+        ``n_gyros`` one, the gyros left out uncorrelated (unit diagonal). ``note`` is appended
+        to the description (and to the ``[array]`` notes): which gyros were left out and why.
+
+        Raises
+        ------
+        ValueError
+            ``gyros`` not distinct, increasing numbers in 1..``n_gyros``, or fewer than the
+            model's own gyro numbers need.
+        """
+        gyros = [int(g) for g in gyros]
+        if sorted(set(gyros)) != gyros or not gyros or gyros[0] < 1 or gyros[-1] > n_gyros:
+            raise ValueError(f"gyros must be increasing numbers in 1..{n_gyros}, got {gyros}")
+        used = [e.gyro for e in self.entries if e.gyro is not None]
+        if self.array is not None:
+            used += list(self.array.gyros)
+        if used and max(used) > len(gyros):
+            raise ValueError(f"the model names gyro {max(used)}, beyond the {len(gyros)} renumbered")
+        rows = [g - 1 for g in gyros]
+
+        def full(value, base):
+            # an array-wide effect's N'×N' matrix (rows and columns are gyros) into the N×N one
+            if not isinstance(value, (tuple, list)) or np.ndim(value) != 2 \
+                    or np.shape(value) != (len(gyros), len(gyros)):
+                return value
+            out = base(n_gyros)
+            out[np.ix_(rows, rows)] = np.asarray(value, dtype=float)
+            return tuple(tuple(float(v) for v in r) for r in out)
+
+        entries = []
+        for e in self.entries:
+            params, sigma = dict(e.params), dict(e.sigma)
+            if not REGISTRY[e.effect].per_gyro:
+                params = {k: full(v, np.eye) for k, v in params.items()}
+                sigma = {k: full(v, lambda n: np.zeros((n, n))) for k, v in sigma.items()}
+            entries.append(ModelEntry(e.effect, None if e.gyro is None else gyros[e.gyro - 1], params, sigma))
+        array = self.array
+        if array is not None:
+            shared = tuple({**s, "gyros": tuple(gyros[g - 1] for g in s["gyros"])} for s in array.shared)
+            array = replace(array, gyros=tuple(gyros[g - 1] for g in array.gyros), shared=shared,
+                            notes=tuple(_renumber_text(t, gyros) for t in array.notes) + ((note,) if note else ()))
+        description = self.description + (("; " if self.description else "") + note if note else "")
+        return NoiseModel(tuple(entries), description=description, source=self.source, array=array)
 
     def with_array(self, array: ArrayNoise | None) -> "NoiseModel":
         """A new model with the ``[array]`` table ``array`` (None: without one)."""

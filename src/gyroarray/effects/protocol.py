@@ -45,6 +45,7 @@ import numpy as np
 
 from gyroarray.core.errors import InputError
 from gyroarray.core.formatting import sig
+from gyroarray.core.sensor import rigid_body_specific_force
 
 if TYPE_CHECKING:                                    # pragma: no cover - types only
     from gyroarray.effects.fitting import EffectFit
@@ -53,7 +54,7 @@ if TYPE_CHECKING:                                    # pragma: no cover - types 
 
 __all__ = ["Stage", "Kind", "NEEDS", "RECORD_NEEDS", "Param", "Effect", "SimContext", "ChainState", "Active", "Mixer",
            "SIM_NEEDS", "WhiteShaping", "Streams", "FitContext", "RegressionEffect", "NoiseTermEffect", "same_noise_preference",
-           "explains_away", "no_longer_seen", "Explained", "terminal_cut", "with_term", "with_cols", "unit_draws", "identity"]
+           "explains_away", "no_longer_seen", "kept_prediction", "drop_kept", "KeptPrediction", "Explained", "terminal_cut", "with_term", "with_cols", "unit_draws", "identity"]
 
 #: What an effect may need from a record: the reference rates, a part where the
 #: table turns, the temperature, the site (heading), the specific force (``acc_*``
@@ -215,7 +216,6 @@ class SimContext:
     @functools.cached_property
     def specific_force_m_s2(self) -> np.ndarray:
         """Specific force at each gyro (n, N, 3) [m/s²] (see the class notes)."""
-        from gyroarray.core.sensor import rigid_body_specific_force  # lazy: loads scipy.signal
         a = rigid_body_specific_force(self.specific_force_origin_m_s2, self.omega_body_rad_s,
                                       self.angular_accel_rad_s2, self.positions_m)
         a = np.array(a, dtype=float, copy=True)
@@ -1079,10 +1079,74 @@ def explains_away(mine_effect: Effect, mine: "EffectFit", other: "EffectFit", ct
     Gauss–Markov one), and their fit statistics are not comparable; what is
     comparable is whether one still sees the other once it is removed.
     """
-    pred = ctx.fit_prediction(mine_effect, mine)
-    if pred is None:
+    kept = kept_prediction(ctx, mine_effect, mine)
+    if kept is None:
         return None
-    return no_longer_seen(ctx.without(pred), other, ctx, f"the {mine_effect.name.replace('_', ' ')} removed")
+    return no_longer_seen(kept.cut(ctx), other, ctx, f"the {mine_effect.name.replace('_', ' ')} removed")
+
+
+#: ``FitContext.cache`` key of the predictions :func:`kept_prediction` keeps, (effect, id(fit)) ->
+#: (fit, :class:`KeptPrediction` or None); the ranking drops them when done (:func:`drop_kept`).
+KEPT_PREDICTIONS = "kept_fit_predictions"
+
+
+class KeptPrediction:
+    """A fit's prediction (n, N) kept by its non-zero columns only: a per-gyro entry predicts on
+    its own gyro, the other columns are +0.0 exactly (their bits are zero), so ``E - prediction``
+    is ``E`` there, bit for bit. :meth:`cut` is :meth:`FitContext.without` of the whole
+    prediction, the same bits, without rebuilding the (n, N) array."""
+
+    __slots__ = ("cols", "values", "full")
+
+    def __init__(self, pred: np.ndarray):
+        pred = np.asarray(pred)
+        bits = np.ascontiguousarray(pred).view(np.uint8).reshape(pred.shape[0], -1) if pred.ndim == 2 else None
+        if bits is None or pred.dtype != np.float64:
+            self.cols, self.values, self.full = None, None, pred
+            return
+        live = np.flatnonzero(bits.reshape(pred.shape[0], pred.shape[1], 8).any(axis=(0, 2)))
+        if live.size == pred.shape[1]:
+            self.cols, self.values, self.full = None, None, pred
+        else:
+            self.cols, self.values, self.full = live, np.array(pred[:, live]), None
+
+    def cut(self, ctx: "FitContext") -> "FitContext":
+        """``ctx.without(prediction)``."""
+        if self.full is not None or len(ctx.parts) >= 2 or ctx.E is None:
+            return ctx.without(self.full if self.full is not None else self.dense(ctx.E.shape))
+        E = np.array(ctx.E, dtype=np.result_type(ctx.E, self.values), copy=True)
+        if self.cols.size:
+            E[:, self.cols] = ctx.E[:, self.cols] - self.values
+        Er = None
+        if ctx.Er is not None:
+            Er = np.array(ctx.Er, dtype=np.result_type(ctx.Er, self.values), copy=True)
+            if self.cols.size:
+                Er[:, self.cols] = ctx.Er[:, self.cols] - self.values[ctx.rec]
+        out = replace(ctx, E=E, Er=Er, cache={})
+        out.services = ctx.services.derive(out)
+        return out
+
+    def dense(self, shape) -> np.ndarray:
+        out = np.zeros(shape)
+        out[:, self.cols] = self.values
+        return out
+
+
+def kept_prediction(ctx: "FitContext", effect: "Effect", fit: "EffectFit") -> KeptPrediction | None:
+    """:meth:`FitContext.fit_prediction` of ``fit``, made once per context and fit (the ranking
+    asks for the same winner's prediction against every rival), kept by its live columns."""
+    store = ctx.cache.setdefault(KEPT_PREDICTIONS, {})
+    key = (effect.name, id(fit))
+    hit = store.get(key)
+    if hit is None or hit[0] is not fit:
+        pred = ctx.fit_prediction(effect, fit)
+        hit = store[key] = (fit, None if pred is None else KeptPrediction(pred))
+    return hit[1]
+
+
+def drop_kept(ctx: "FitContext") -> None:
+    """Forget the predictions :func:`kept_prediction` kept on ``ctx`` (their memory)."""
+    ctx.cache.pop(KEPT_PREDICTIONS, None)
 
 
 def no_longer_seen(cut: FitContext, other: "EffectFit", ctx: FitContext, what: str) -> Explained | None:

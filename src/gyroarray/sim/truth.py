@@ -329,7 +329,9 @@ def _write(path: Path, truth: Truth) -> None:
     tmp = None
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.stem[:16] + ".", suffix=".tmp")
+        from gyroarray.core.outputs import remove_stale_temps, temp_prefix  # deferred: a cache write
+        remove_stale_temps(path.parent, once=True)     # left by a SIGKILLed writer (its pid gone)
+        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=temp_prefix("." + path.stem[:16]), suffix=".tmp")
         os.chmod(tmp, 0o644)
         with os.fdopen(fd, "wb") as f:
             np.savez_compressed(f, meta=np.array(header),

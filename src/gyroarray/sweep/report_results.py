@@ -120,7 +120,7 @@ def load_sweep_dir(path) -> SweepData:
 
 def _check_row_files(path: Path, ids: set) -> None:
     """Every ``rows/<id>.parquet`` belongs to the manifest and has the schema of the others."""
-    import pyarrow.parquet as pq  # lazy: pyarrow only to check the row files' schemas
+    import pyarrow.parquet as pq  # lazy: pyarrow.parquet only to check the row files' schemas
     files = sorted((path / "rows").glob("*.parquet")) if (path / "rows").is_dir() else []
     schema, first = None, None
     for f in files:

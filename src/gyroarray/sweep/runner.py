@@ -23,7 +23,18 @@ A Dask worker lost mid-sweep costs only its tasks: Dask runs them again on
 another worker (a task is retried :data:`TASK_RETRIES` times; a task that
 killed its workers past ``distributed.scheduler.allowed-failures`` is split and
 its scenarios run one per task, so only the culprit is reported failed). The
-file a dying worker was writing is a hidden temporary, never a result.
+file a dying worker was writing is a hidden temporary, never a result; it is
+removed when the sweep ends (its workers stopped and waited for, also on an
+error or a SIGTERM) or, after a SIGKILL of the sweep, by the next run into the
+folder (:func:`gyroarray.core.outputs.remove_stale_temps`).
+
+Workers are budgets: ``workers`` and ``dask="local:N"`` are refused past
+:data:`~gyroarray.core.parallel.MAX_WORKERS_PER_CPU` per CPU, and when the
+workers (each an idle worker process,
+:data:`~gyroarray.core.parallel.WORKER_BASELINE_BYTES`, plus the sweep's
+largest scenario's working memory) need more than the memory budget
+(``--max-memory``), before any work; a LocalCluster's workers are bounded at
+run time by their share of the budget (:func:`local_cluster`).
 
 A scenario that raises (in the chain) is reported in the summary's
 ``failed`` list (id and error) and the others go on; it has no file, so a
@@ -341,6 +352,9 @@ def _watch_parent(parent_pid: int) -> None:
     # pool starts: a parent that launched numba's threads in that window would keep 1 and refuse
     # the default later ("Cannot set NUMBA_NUM_THREADS ... once the threads have been launched")
     os.environ["NUMBA_NUM_THREADS"] = "1"
+    # a terminal's Ctrl-C reaches the whole process group: the sweep process answers it (one
+    # line, exit 130, the pool stopped); a worker's own KeyboardInterrupt would print a traceback
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     if sys.platform.startswith("linux"):
         try:
             libc = ctypes.CDLL(None, use_errno=True)
@@ -454,9 +468,36 @@ class _Progress:
 
 def _cost(spec: ScenarioSpec) -> float:
     """Rough work of a scenario: samples × gyros (for scheduling only)."""
+    return _cost_and_memory(spec)[0]
+
+
+def _cost_and_memory(spec: ScenarioSpec) -> tuple[float, float]:
+    """A scenario's work (:func:`_cost`) and its working memory in a worker [bytes]
+    (:func:`gyroarray.sim.scenario.memory_needed` of its run: simulation and scoring), from one
+    build."""
+    from gyroarray.sim.scenario import memory_needed  # deferred: loaded by spec.build already
     sc = spec.build()
     duration = sc.duration_s if sc.duration_s is not None else sc.profile.duration_s
-    return duration * sc.sample_rate_hz * sc.layout.n_gyros
+    return duration * sc.sample_rate_hz * sc.layout.n_gyros, memory_needed(sc, "run")
+
+
+def _check_workers_fit(todo: list, sized: dict, workers: int, n_local: int | None,
+                       scheduler: str | None) -> int | None:
+    """Refuse, before any worker starts, local workers whose memory passes the budget
+    (:func:`gyroarray.core.parallel.check_workers_memory`: each an idle worker plus the largest
+    scenario's working memory); returns a Dask worker's share of the budget [bytes] (None:
+    nothing starts here, or a remote cluster, whose memory is its own)."""
+    if not todo or scheduler is not None:
+        return None
+    from gyroarray.core.parallel import (DASK_WORKER_EXTRA_BYTES, WORKER_BASELINE_BYTES,
+                                         check_workers_memory)  # deferred: a light module
+    work = max(v[1] for v in sized.values())
+    if n_local is not None:         # a LocalCluster starts all N, whatever is left to run
+        return check_workers_memory(n_local, work, "--dask", "local:{n}",
+                                    baseline_bytes=WORKER_BASELINE_BYTES + DASK_WORKER_EXTRA_BYTES)
+    check_workers_memory(min(workers, len(todo)), work, "--workers",
+                         baseline_bytes=WORKER_BASELINE_BYTES, asked=workers)
+    return None
 
 
 #: Longest wait for the Dask scheduler to answer, name lookup included [s].
@@ -736,14 +777,25 @@ class _Processes:
         _stop_pool(self.pool)
 
 
-def _stop_pool(pool) -> None:
-    """Shut a process pool down now: queued tasks cancelled, its workers terminated."""
+def _stop_pool(pool, grace_s: float = 10.0) -> None:
+    """Shut a process pool down now: queued tasks cancelled, its workers terminated and waited
+    for (killed after ``grace_s`` seconds), so that the files they were writing are those of
+    dead processes when the caller clears them (:func:`gyroarray.core.outputs.remove_stale_temps`)."""
     procs = dict(getattr(pool, "_processes", None) or {})   # before shutdown clears it
     pool.shutdown(wait=False, cancel_futures=True)
     for proc in procs.values():
         try:
             proc.terminate()
         except (OSError, AttributeError, ValueError):
+            pass
+    end = time.monotonic() + grace_s
+    for proc in procs.values():
+        try:
+            proc.join(max(0.0, end - time.monotonic()))
+            if proc.exitcode is None:
+                proc.kill()
+                proc.join(1.0)
+        except (OSError, AttributeError, ValueError, AssertionError):
             pass
 
 
@@ -894,9 +946,15 @@ def parse_dask(text) -> int:
 
 
 @contextmanager
-def local_cluster(n_workers: int):
+def local_cluster(n_workers: int, memory_limit: int | None = None):
     """A dask.distributed ``LocalCluster`` of ``n_workers`` single-thread worker processes,
     set up as the local process pool's workers are (:data:`THREAD_ENV`), closed on exit.
+
+    ``memory_limit`` [bytes]: each worker's bound (the memory budget over the workers,
+    :func:`run_sweep`); a worker whose memory passes it is ended by its nanny and its task runs
+    again (then is reported lost, :data:`TASK_RETRIES`). Dask's pausing and spilling are off: a
+    worker holds no results (they are on disk), and one paused near its bound would wait for
+    ever. None: Dask's default (the machine's memory over the workers).
 
     The BLAS/OpenMP variables reach the workers through
     ``distributed.nanny.pre-spawn-environ`` (set in this process while the
@@ -926,13 +984,19 @@ def local_cluster(n_workers: int):
               # (measured), taken from the scenarios when every core runs one; once a second
               # it costs a tenth of that and still warns of a loop blocked 3 s
               "distributed.admin.tick.interval": "1s"}
+    if memory_limit is not None:
+        config.update({"distributed.worker.memory.target": False,
+                       "distributed.worker.memory.spill": False,
+                       "distributed.worker.memory.pause": False,
+                       "distributed.worker.memory.terminate": 1.0})
     with _env(blas), dask.config.set(config):
         try:
             cluster = LocalCluster(n_workers=int(n_workers), threads_per_worker=1, processes=True,
                                    # its HTTP routes on a free local port: never a warning
                                    # that another cluster holds Dask's default 8787
                                    dashboard_address="127.0.0.1:0", silence_logs=logging.CRITICAL,
-                                   env={"NUMBA_NUM_THREADS": "1"})
+                                   env={"NUMBA_NUM_THREADS": "1"},
+                                   memory_limit="auto" if memory_limit is None else int(memory_limit))
         except Exception as err:                  # noqa: BLE001 - any start failure, in one line
             raise InputError(f"--dask local:{n_workers}: the local Dask cluster did not start "
                              f"({one_line(err)[:200]}); use --workers {n_workers} (local "
@@ -940,36 +1004,52 @@ def local_cluster(n_workers: int):
         try:
             yield cluster
         finally:
-            _stop_workers(cluster)
+            _wait_gone(_stop_workers(cluster))
             try:
                 cluster.close(timeout=10)
             except Exception:                      # noqa: BLE001 - closing what is already gone
                 pass
 
 
-def _stop_workers(cluster) -> None:
+def _stop_workers(cluster) -> list[int]:
     """End a LocalCluster's worker processes at once, before the cluster closes.
 
     A worker asked to close exits its interpreter in full (the engine's modules torn
     down: 0.5 s, measured, per worker and in series with the sweep's end). Every
     result is on disk (written atomically) and recorded by then, so the nannies are
     told not to restart their workers and the processes are killed, as the local
-    process pool's are (:func:`_stop_pool`).
+    process pool's are (:func:`_stop_pool`). Returns the pids killed.
     """
+    pids = []
     for nanny in list(getattr(cluster, "workers", {}).values()):
         try:
             nanny.close_gracefully(reason="gyroarray-sweep-done")   # no restart of its worker
             proc = nanny.process.process
             if proc is not None and proc.pid:
                 os.kill(proc.pid, signal.SIGKILL)
+                pids.append(proc.pid)
         except (AttributeError, OSError, ProcessLookupError):       # not started, already gone
             pass
+    return pids
+
+
+def _wait_gone(pids, timeout_s: float = 10.0) -> None:
+    """Wait (polled, at most ``timeout_s``) until the processes ``pids`` no longer run (a zombie
+    counts as gone), so that their temporary files can be told from a live writer's."""
+    end = time.monotonic() + timeout_s
+    left = [int(p) for p in pids]
+    while left and time.monotonic() < end:
+        left = [p for p in left if not outputs.pid_gone(p)]
+        if left:
+            time.sleep(0.02)
 
 
 def _run_on_dask(todo: list, sweep: Sweep, scheduler: str | None, n_local: int | None,
-                 rows_dir: Path, costs: dict, record, lost, notes: list, stamp) -> None:
+                 rows_dir: Path, costs: dict, record, lost, notes: list, stamp,
+                 memory_limit: int | None = None) -> None:
     """Run ``todo`` on a dask.distributed cluster (``scheduler``) or on a LocalCluster of
-    ``n_local`` workers started here (:func:`_dispatch`)."""
+    ``n_local`` workers started here (:func:`_dispatch`), each bounded to ``memory_limit``
+    bytes (:func:`local_cluster`)."""
     # deferred: dask.distributed is optional (only for --scheduler/--dask) and slow to import
     from distributed.comm.core import CommClosedError
     lost_conn = (CancelledError, CommClosedError, TimeoutError)
@@ -988,7 +1068,7 @@ def _run_on_dask(todo: list, sweep: Sweep, scheduler: str | None, n_local: int |
         with ExitStack() as stack:
             if scheduler is None:
                 from distributed import Client  # deferred: optional dask.distributed
-                cluster = stack.enter_context(local_cluster(n_local or 1))
+                cluster = stack.enter_context(local_cluster(n_local or 1, memory_limit=memory_limit))
                 client = Client(cluster, set_as_default=False)
             else:
                 client = _dask_client(scheduler)
@@ -1129,6 +1209,12 @@ def run_sweep(sweep, out_dir, *, workers: int = 1, scheduler: str | None = None,
     if scheduler is not None:
         parse_scheduler(scheduler)                          # a malformed address: refused before work
     n_local = parse_dask(dask) if dask is not None else None
+    # deferred: the machine's cores and the workers' memory (a light module)
+    from gyroarray.core.parallel import check_worker_count
+    if n_local is not None:                     # this machine's cores: refused before any work
+        check_worker_count(n_local, "--dask", "local:{n}")
+    elif scheduler is None:
+        check_worker_count(workers, "--workers")
     out = Path(out_dir)
     # the folder and the files gyroarray keeps there, before the (possibly long) expansion
     if out.exists() or out.is_symlink():
@@ -1136,15 +1222,20 @@ def run_sweep(sweep, out_dir, *, workers: int = 1, scheduler: str | None = None,
     if not isinstance(sweep, Sweep):
         sweep = load_sweep(sweep)
     inputs = _sweep_inputs(sweep)
+    # the workers' memory against the budget, before the folder is made or written: each worker
+    # may meet the sweep's largest scenario
+    sized = {s.id: _cost_and_memory(s) for s in sweep.scenarios}
+    memory_limit = _check_workers_fit(sweep.scenarios, sized, workers, n_local, scheduler)
     check_out(out, inputs)
     outputs.check_output_dir(out / ROWS, what="--out")
     _check_manifest(out, sweep)
     rows_dir = out / ROWS
+    outputs.remove_stale_temps(rows_dir)      # what workers of a SIGKILLed sweep were writing
     notes: list[str] = []
     records = _recorded_checksums(out)
     todo = _scenarios_to_run(sweep, rows_dir, records, notes)
     # longest first (a better finish on few workers); results do not depend on the order
-    costs = {s.id: _cost(s) for s in todo}
+    costs = {s.id: sized[s.id][0] for s in todo}
     todo.sort(key=lambda s: (-costs[s.id], s.id))
     skipped = len(sweep.scenarios) - len(todo)
     bar = _Progress(len(sweep.scenarios), skipped, progress)
@@ -1197,11 +1288,14 @@ def run_sweep(sweep, out_dir, *, workers: int = 1, scheduler: str | None = None,
         elif todo:
             backend = "dask"
             _run_on_dask(todo, sweep, scheduler, n_local, rows_dir, costs, record, lost, notes,
-                         stamp)
+                         stamp, memory_limit=memory_limit)
         else:
             backend = "none (all done)"
     finally:
         bar.close()
+        # the workers are stopped by now (also on an error or a SIGTERM): the files they were
+        # writing when they were ended are hidden temporaries of dead processes, removed here
+        outputs.remove_stale_temps(rows_dir)
     stamp("closed")
     complete = not failed and all((rows_dir / f"{s.id}.parquet").exists() for s in sweep.scenarios)
     return {"sweep": sweep.name, "out_dir": str(out), "dataset": str(rows_dir),

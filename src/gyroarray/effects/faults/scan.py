@@ -1102,7 +1102,6 @@ def log_p_run_at_least(lengths: np.ndarray, run: int) -> tuple[float, str]:
     tail = L[L >= u] - u
     log_tail = math.log((tail.size + 1.0) / (k + 1.0))
     if tail.size >= STUCK_GPD_MIN[0] and np.unique(tail).size >= STUCK_GPD_MIN[1]:
-        from scipy import stats  # deferred: scipy.stats loads only when a long run is judged
         ex = tail + 0.5     # whole samples: the excess is the floor of a continuous one
         xi, _, scale = stats.genpareto.fit(ex, floc=0.0)
         if not (math.isfinite(xi) and math.isfinite(scale) and scale > 0):
