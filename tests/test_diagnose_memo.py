@@ -25,7 +25,7 @@ from gyroarray.chain.compare import ModelComparison
 from gyroarray.core.layout import Layout
 from gyroarray.core.sensor import bandwidth_filter
 from gyroarray.effects import get_effect
-from gyroarray.effects.bandwidth import _lowpassed
+from gyroarray.effects.bandwidth import _lowpassed, _residual_minus_filter
 from gyroarray.effects.model import ModelEntry, NoiseModel
 from gyroarray.effects.protocol import KEPT_PREDICTIONS, KeptPrediction, drop_kept, kept_prediction
 from gyroarray.sim.lab import lab_run
@@ -146,3 +146,21 @@ def test_content_memo_slots():
     assert content_key(x, object()) is None and memo.slot(object()) == {}
     memo.slot(x, 3.0)                                   # the third key: the oldest goes
     assert "a" not in memo.slot(x, 1.0)
+
+
+def test_zero_tail_shortcut_is_the_full_residual_bit_for_bit():
+    rng = np.random.default_rng(5)
+    n, t0 = 30000, 6000
+    u = np.zeros(n)
+    u[:t0] = np.sin(np.arange(t0) * 0.01) * 0.5
+    e = rng.normal(0.0, 1e-3, n)
+    e_zero = e.copy()
+    e_zero[20000] = 0.0                                  # the tail's bound fails: filtered in full
+    u_live = u.copy()
+    u_live[t0:] = rng.normal(0.0, 1e-3, n - t0)          # no zero tail: 'u[t0:]' is not zero
+    for fc, order in ((0.4, 1), (8.0, 2), (30.0, 2)):
+        for ee in (e, e_zero):
+            full = ee - (_lowpassed(u, 0.01, fc, order) - u)
+            assert _same(_residual_minus_filter(ee, u, t0, 0.01, fc, order), full)
+    nz = np.flatnonzero(u_live)
+    assert int(nz[-1]) + 1 == n                          # the caller finds no tail to skip
