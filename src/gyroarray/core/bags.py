@@ -407,10 +407,10 @@ def _guard_rosbags() -> None:
     for fmt in ("bz2", "lz4"):
         if fmt in ros1_reader.decompressors:
             ros1_reader.decompressors[fmt] = (
-                lambda data, fmt=fmt: decompress_bounded(data, fmt, _chunk_cap(), None, "a chunk"))
+                lambda data, fmt=fmt: decompress_bounded(data, fmt, _chunk_cap(), None, "a chunk"))  # type: ignore[misc]
     for fmt in ("zstd", "lz4"):
         if fmt in storage_mcap.DECOMPRESSORS:
-            storage_mcap.DECOMPRESSORS[fmt] = lambda data, size, fmt=fmt: _mcap_chunk(data, fmt, size)
+            storage_mcap.DECOMPRESSORS[fmt] = lambda data, size, fmt=fmt: _mcap_chunk(data, fmt, size)  # type: ignore[misc]
 
     def ros1_read(src, size, read=ros1_reader.read_bytes):
         _record_size(size)
@@ -435,7 +435,7 @@ class _Bag:
         self.path = path
         self.ros1 = path.name.lower().endswith(".bag")
         self.zstd_messages = False
-        self._tmp = None
+        self._tmp: tempfile.TemporaryDirectory | None = None
         self.reader = None
         try:
             src = path
@@ -452,6 +452,7 @@ class _Bag:
                                err) from None
             storage = getattr(self.reader, "storage", None)     # ROS2 only
             if info is not None:
+                assert storage is not None                      # a ROS2 folder has its storage
                 if info["compression_mode"] == "message":   # decompressed here, bounded
                     storage.metadata = storage.metadata._replace(compression_mode=None)
                     self.zstd_messages = True
@@ -491,8 +492,8 @@ class _Bag:
         limit = min(max_memory(), MAX_DECOMPRESSED_FILE_BYTES)
         from gyroarray.core.outputs import remove_stale_temps, temp_prefix  # deferred: a rare path
         remove_stale_temps(tempfile.gettempdir(), once=True)   # a SIGKILLed run's (its pid gone)
-        self._tmp = tempfile.TemporaryDirectory(prefix=temp_prefix("gyroarray-bag"))
-        tmp = Path(self._tmp.name)
+        self._tmp = tmp_dir = tempfile.TemporaryDirectory(prefix=temp_prefix("gyroarray-bag"))
+        tmp = Path(tmp_dir.name)
         names = []
         for f in _storage_paths(path, info):
             data = read_regular(f, "compressed ROS2 storage file", max_bytes=max(1 << 20, max_memory() // 4))
@@ -571,6 +572,7 @@ class _Bag:
     def topics(self) -> dict[str, tuple[str, int]]:
         """``{topic: (message type, message count)}``."""
         out: dict[str, tuple[str, int]] = {}
+        assert self.reader is not None                  # open until close()
         for c in self.reader.connections:
             kind, n = out.get(c.topic, (c.msgtype, 0))
             out[c.topic] = (kind if kind == c.msgtype else "mixed types", n + int(c.msgcount))
@@ -583,7 +585,7 @@ def _zstd_content_size(data: bytes) -> int | None:
         try:
             from compression import zstd  # type: ignore[import-not-found]
         except ImportError:  # Python < 3.14: the backport rosbags depends on
-            from backports import zstd  # type: ignore[import-not-found,no-redef]
+            from backports import zstd  # type: ignore[import-not-found,no-redef,unused-ignore]
         size = zstd.get_frame_info(data[:32]).decompressed_size
     except Exception:  # not a zstd frame: decompress_bounded says so
         return None
@@ -671,6 +673,7 @@ def _read_topic(bag: _Bag, topic: str, count: int) -> _Record:
                  file=str(path))
     stamps = np.empty(count, dtype=np.int64)
     values = np.empty((count, 7))           # angular velocity, linear acceleration, its cov[0]
+    assert bag.reader is not None
     conns = [c for c in bag.reader.connections if c.topic == topic]
     i, batch = 0, list[bytes]()
     it = iter(bag.messages(conns))
@@ -1001,7 +1004,7 @@ def _transform(value, name: str, key: str) -> np.ndarray:
     rows = value if isinstance(value, list) else None
     ok = (rows is not None and len(rows) == 4 and all(isinstance(r, list) and len(r) == 4 for r in rows)
           and all(isinstance(v, (int, float)) and not isinstance(v, bool) for r in rows for v in r))
-    if not ok:
+    if not ok or rows is None:
         raise InputError("must be 4 rows of 4 numbers (the body-to-IMU transform)", file=name,
                          column=key)
     for i, r in enumerate(rows):

@@ -390,7 +390,7 @@ def _decompressor(fmt: str):
         try:
             from compression import zstd  # type: ignore[import-not-found]
         except ImportError:  # Python < 3.14: the backport rosbags depends on
-            from backports import zstd  # type: ignore[import-not-found,no-redef]
+            from backports import zstd  # type: ignore[import-not-found,no-redef,unused-ignore]
         return zstd.ZstdDecompressor()
     if fmt == "lz4":
         import lz4.frame  # type: ignore[import-untyped]
@@ -398,7 +398,7 @@ def _decompressor(fmt: str):
     raise ValueError(f"unknown compression {fmt!r}")
 
 
-def decompress_bounded(data, fmt: str, max_bytes: int, name: str, what: str = "the data",
+def decompress_bounded(data, fmt: str, max_bytes: int, name: str | None, what: str = "the data",
                        sink=None) -> bytes:
     """Decompress ``data`` (every concatenated stream/frame of ``fmt``: ``bz2``, ``zstd`` or
     ``lz4``) in pieces of at most 1 MiB, refusing more than ``max_bytes`` of output.

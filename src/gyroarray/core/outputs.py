@@ -339,7 +339,7 @@ def remove_stale_temps(folder, *, once: bool = False) -> list[str]:
     if once and key in _SWEPT:
         return []
     _SWEPT.add(key)
-    removed = []
+    removed: list = []
     try:
         with os.scandir(folder) as it:
             entries = [e for e in it if TEMP_MARK in e.name]

@@ -1099,6 +1099,9 @@ class KeptPrediction:
     __slots__ = ("cols", "values", "full")
 
     def __init__(self, pred: np.ndarray):
+        self.cols: np.ndarray | None
+        self.values: np.ndarray | None
+        self.full: np.ndarray | None
         pred = np.asarray(pred)
         bits = np.ascontiguousarray(pred).view(np.uint8).reshape(pred.shape[0], -1) if pred.ndim == 2 else None
         if bits is None or pred.dtype != np.float64:
@@ -1112,8 +1115,12 @@ class KeptPrediction:
 
     def cut(self, ctx: "FitContext") -> "FitContext":
         """``ctx.without(prediction)``."""
-        if self.full is not None or len(ctx.parts) >= 2 or ctx.E is None:
-            return ctx.without(self.full if self.full is not None else self.dense(ctx.E.shape))
+        if self.full is not None:
+            return ctx.without(self.full)
+        assert ctx.E is not None                 # a record cut by a fit has its outputs
+        if len(ctx.parts) >= 2:                  # stitched parts: without() handles the joins
+            return ctx.without(self.dense(ctx.E.shape))
+        assert self.cols is not None and self.values is not None     # kept by columns (no full)
         E = np.array(ctx.E, dtype=np.result_type(ctx.E, self.values), copy=True)
         if self.cols.size:
             E[:, self.cols] = ctx.E[:, self.cols] - self.values
@@ -1127,6 +1134,7 @@ class KeptPrediction:
         return out
 
     def dense(self, shape) -> np.ndarray:
+        assert self.cols is not None and self.values is not None
         out = np.zeros(shape)
         out[:, self.cols] = self.values
         return out
