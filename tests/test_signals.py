@@ -34,7 +34,7 @@ import pytest
 
 from gyroarray.core import outputs
 from hostile import run_cli, tiny_sweep
-from wall_bound import bound_s
+from wall_bound import as_from_a_terminal, bound_s
 
 MARK = outputs.TEMP_MARK
 
@@ -64,13 +64,6 @@ if _dir:
 
 
 
-def _as_from_a_terminal() -> None:
-    """``preexec_fn`` of a child that a test interrupts: SIGINT, SIGHUP and SIGTERM at their
-    defaults, as a command typed at a terminal has them. A suite started in the background
-    (``cmd &`` in a script: SIGINT ignored) or under ``nohup`` (SIGHUP ignored) would hand the
-    ignored signals down, and the child rightly keeps what it was given."""
-    for sig in (signal.SIGINT, signal.SIGHUP, signal.SIGTERM):
-        signal.signal(sig, signal.SIG_DFL)
 
 def _marked(folder: Path) -> list[str]:
     """Every gyroarray temporary (file or folder) under ``folder``."""
@@ -233,7 +226,7 @@ def _held(argv: list, where: Path, i: dict, tmp_path: Path) -> subprocess.Popen:
     (tmp_path / "tmp").mkdir(exist_ok=True)
     proc = subprocess.Popen([sys.executable, "-m", "gyroarray.cli.main", *argv], env=env,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            start_new_session=True, preexec_fn=_as_from_a_terminal)
+                            start_new_session=True, preexec_fn=as_from_a_terminal)
     limit = bound_s(120.0)
     deadline = time.monotonic() + limit
     while not flag.exists():

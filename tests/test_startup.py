@@ -30,6 +30,8 @@ from pathlib import Path
 
 import pytest
 
+from wall_bound import as_from_a_terminal
+
 SRC = Path(__file__).resolve().parents[1] / "src"
 SCRIPT = Path(sys.executable).with_name("gyroarray")   # the console script of this venv
 
@@ -44,14 +46,6 @@ LONG = ["design", "--recommend", "--arw", "0.1", "--check", "1000", "--horizon-s
 
 
 
-def _as_from_a_terminal() -> None:
-    """``preexec_fn`` of a child that a test interrupts: SIGINT, SIGHUP and SIGTERM at their
-    defaults, as a command typed at a terminal has them. A suite started in the background
-    (``cmd &`` in a script: SIGINT ignored) or under ``nohup`` (SIGHUP ignored) would hand the
-    ignored signals down, and the child rightly keeps what it was given."""
-    for sig in (signal.SIGINT, signal.SIGHUP, signal.SIGTERM):
-        signal.signal(sig, signal.SIG_DFL)
-
 
 def _env() -> dict:
     env = dict(os.environ, OPENBLAS_NUM_THREADS="1", NUMBA_NUM_THREADS="1")
@@ -61,7 +55,7 @@ def _env() -> dict:
 
 def _python(code: str, timeout: float = 120) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                          env=_env(), timeout=timeout, preexec_fn=_as_from_a_terminal)
+                          env=_env(), timeout=timeout, preexec_fn=as_from_a_terminal)
 
 
 _HEAVY_LOADED = f"sorted({{m.split('.')[0] for m in sys.modules}} & set({HEAVY!r}))"
@@ -183,7 +177,7 @@ def _interrupt_once_loaded(marker: str, argv: list[str], tmp_path) -> subprocess
     with open(err, "w") as fh:
         proc = subprocess.Popen([sys.executable, "-X", "importtime", str(SCRIPT), *argv],
                                 stdout=subprocess.DEVNULL, stderr=fh, env=_env(),
-                                preexec_fn=_as_from_a_terminal)
+                                preexec_fn=as_from_a_terminal)
     loaded = re.compile(r"^import time:.*\| +" + re.escape(marker) + r"$", re.M)
     try:
         deadline = time.monotonic() + 300          # generous: a loaded machine

@@ -9,6 +9,7 @@ multiple of what one such start-up takes here, measured just before the wait.
 
 from __future__ import annotations
 
+import signal
 import subprocess
 import sys
 import time
@@ -31,3 +32,12 @@ def bound_s(floor_s: float, starts: float = 20.0) -> float:
     same busy cores), so 20 of them is a generous margin at any load, and on an idle machine the
     floor stands (the measurement adds one start-up to the test, ~2 s)."""
     return max(float(floor_s), starts * spawn_s())
+
+
+def as_from_a_terminal() -> None:
+    """``preexec_fn`` of a child that a test interrupts: SIGINT, SIGHUP and SIGTERM at their
+    defaults, as a command typed at a terminal has them. A suite started in the background
+    (``cmd &`` in a script: SIGINT ignored) or under ``nohup`` (SIGHUP ignored) would hand the
+    ignored signals down, and the child rightly keeps what it was given."""
+    for sig in (signal.SIGINT, signal.SIGHUP, signal.SIGTERM):
+        signal.signal(sig, signal.SIG_DFL)
