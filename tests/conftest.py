@@ -21,6 +21,15 @@ def _registry_as_shipped():
         live.update(copy)
 
 
+@pytest.fixture(autouse=True)
+def _empty_content_caches():
+    """A test starts with the content caches empty (analysis.memo): what it computes never
+    depends on the tests the same worker ran before it."""
+    from gyroarray.analysis.memo import clear_all
+    clear_all()
+    yield
+
+
 @pytest.fixture
 def cli(request):
     """Run ``gyroarray ARGS...`` as a user would, in this process (``gyroarray.cli.main.main`` with

@@ -312,9 +312,13 @@ def test_array_model_of_a_measurement_writes_a_table_that_reads_back(tmp_path):
     assert am.gyros == (1, 2, 3, 4) and am.slow is not None
     np.testing.assert_allclose(am.white.covariance, np.cov(np.diff(np.radians(g), axis=0).T) / 2, rtol=1e-12)
     table = am.table()
-    # white ARW [deg/√h] = σ_sample [deg/s] · √dt [√s] · 60
-    np.testing.assert_allclose(table.white_n_deg_rt_h, np.sqrt(np.diag(np.cov(np.diff(g, axis=0).T) / 2)) * 0.1 * 60,
-                               rtol=1e-5)
+    # white ARW [deg/√h] = ADEV(τ1) [deg/s] · √τ1 [√s] · 60, τ1 = 100 samples = 1 s (the level every
+    # command reads: issue 41); the per-sample covariance stays in the JSON's "white"
+    phase = np.vstack([np.zeros((1, N)), np.cumsum(g - g.mean(axis=0), axis=0)])
+    d = phase[200:] - 2 * phase[100:-100] + phase[:-200]
+    adev1 = np.sqrt((d ** 2).sum(axis=0) / (2.0 * 100 ** 2 * d.shape[0]))
+    np.testing.assert_allclose(table.white_n_deg_rt_h, adev1 * 1.0 * 60, rtol=1e-5)
+    assert table.white_tau_s == pytest.approx(1.0)
     model = with_array_model(NoiseModel((ModelEntry("arw", None, {"n_deg_rt_h": 0.1}),)), am)
     p = tmp_path / "m.toml"
     p.write_text(model.to_toml())

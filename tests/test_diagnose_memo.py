@@ -164,3 +164,73 @@ def test_zero_tail_shortcut_is_the_full_residual_bit_for_bit():
             assert _same(_residual_minus_filter(ee, u, t0, 0.01, fc, order), full)
     nz = np.flatnonzero(u_live)
     assert int(nz[-1]) + 1 == n                          # the caller finds no tail to skip
+
+
+def test_zero_lead_shortcut_is_the_full_residual_bit_for_bit():
+    """The static start of a table record (u exactly +0.0 there) is not filtered: the filter
+    rests at its zero state, e - (+0.0 - +0.0) is e - 0.0; the same bits as filtering it all,
+    written into a reused buffer or a fresh array."""
+    from gyroarray.effects.bandwidth import _LEAD_MIN, _MotionLR
+
+    def bits(a, b):
+        return a.shape == b.shape and np.array_equal(a.view(np.uint64), b.view(np.uint64))
+
+    rng = np.random.default_rng(9)
+    n, lead, t0 = 40000, 12000, 20000
+    u = np.zeros(n)
+    u[lead:t0] = np.sin(np.arange(t0 - lead) * 0.01) * 0.5
+    e = rng.normal(0.0, 1e-3, n)
+    e[100] = -0.0                                        # a negative zero in the skipped part
+    buf = np.full(n, np.nan)
+    for fc, order in ((0.4, 1), (8.0, 2), (30.0, 2)):
+        full = e - (_lowpassed(u, 0.01, fc, order) - u)
+        for out in (None, buf):
+            got = _residual_minus_filter(e, u, t0, 0.01, fc, order, lead, out)
+            assert bits(got, full)
+        assert bits(_residual_minus_filter(e, u, t0, 0.01, fc, order, _LEAD_MIN - 1), full)  # too short
+    assert _MotionLR(e, u, 0.01, 1e-6, 1e-12, None)._lead == lead + 1     # sin(0): +0.0 too
+    u_neg = u.copy()
+    u_neg[5] = -0.0                                      # -0.0 in the lead: the lead ends there
+    assert _MotionLR(e, u_neg, 0.01, 1e-6, 1e-12, None)._lead == 5
+
+
+def test_explains_away_keeps_the_last_cut_record_only(monkeypatch):
+    """The same winner against its rivals in a row: one cut record (read-only), shared by their
+    tests; another winner in between: cut again (only the last cut is kept), dropped with the
+    kept predictions."""
+    from gyroarray.effects import protocol as P
+    from gyroarray.effects.fitting import EffectFit
+    n, N = 60, 3
+    seen = []
+
+    class Eff:
+        name = "fake"
+
+        def test(self, cut, gyro):
+            seen.append(cut)
+            return EffectFit("other", gyro, {}, z=10.0)
+
+    class Services:
+        def effect(self, name):
+            return Eff()
+
+        def derive(self, ctx):
+            return self
+
+    E = np.random.default_rng(3).normal(size=(n, N))
+    ctx = P.FitContext(name="t", H=np.eye(N, 3), t=np.arange(n) * 0.1, dt=0.1, y=E.copy(), E0=E.copy(),
+                       ref=None, temp=None, acc=None, positions=None, site=None, static=np.ones(n, bool),
+                       longest=(0, n), moving=False, services=Services(), E=E, z_crit=3.0)
+    preds = {2: np.zeros((n, N)), 3: np.zeros((n, N))}
+    preds[2][:, 1], preds[3][:, 2] = 1.0, 2.0
+    monkeypatch.setattr(P.FitContext, "fit_prediction", lambda self, effect, fit: preds[fit.gyro])
+    a, b = EffectFit("fake", 2, {}, z=5.0), EffectFit("fake", 3, {}, z=5.0)
+    other = EffectFit("other", 2, {}, z=4.0)
+    for mine in (a, a, b, a):
+        assert P.explains_away(Eff(), mine, other, ctx) is None          # still seen (z 10)
+    assert seen[0] is seen[1] and seen[2] is not seen[0] and seen[3] is not seen[0]
+    for cut, mine in zip(seen, (a, a, b, a)):
+        assert not cut.E.flags.writeable
+        assert np.array_equal(cut.E, E - preds[mine.gyro])
+    drop_kept(ctx)
+    assert KEPT_PREDICTIONS not in ctx.cache

@@ -311,3 +311,42 @@ def test_too_few_gyros_are_refused():
         FaultDetector().fit(Layout.triad(), model(*PAPER), DT)
     with pytest.raises(InputError, match="far_per_h"):
         FaultDetector(far_per_h=-1).fit(cone(1, 5), model(*PAPER), DT)
+
+
+# -- a noise fault is an increase (issue 41, item 4) -------------------------------------------
+
+def test_variance_threshold_is_set_on_the_upper_tail_only():
+    """n_dir · Σ_L P(χ²_L/L > λ_hi(g))/L = the family's share per sample, λ_hi > 1 the root of
+    L/2·(λ − 1 − ln λ) = g (scipy's brentq and χ² here, not the detector's helpers)."""
+    from scipy import optimize
+    det = FaultDetector().fit(cone(1, 6), model(*PAPER), DT)
+    d = det.design_
+    g = d.thresholds["variance"]
+    n_dir = len(d.groups)
+
+    def upper(L):
+        hi = optimize.brentq(lambda x: 0.5 * L * (x - 1.0 - math.log(x)) - g, 1.0 + 1e-12, 1e3)
+        return stats.chi2.sf(L * hi, L)
+    rate = n_dir * sum(upper(L) / L for L in d.scales["variance"])
+    assert rate == pytest.approx(0.01 / 3 * DT / 3600, rel=1e-6)
+    # the two-sided level for the same rate would be higher: the lower tail is no longer spent
+    two = n_dir * sum((upper(L) + stats.chi2.cdf(L * optimize.brentq(
+        lambda x: 0.5 * L * (x - 1.0 - math.log(x)) - g, 1e-9, 1.0 - 1e-12), L)) / L
+        for L in d.scales["variance"])
+    assert two > rate
+
+
+def test_a_gyro_that_gets_quieter_is_no_fault():
+    """A real gyro's level drops between orientations (MIMU4444: x0.4 in variance): no alarm,
+    while the same record with the gyro x2.5 noisier is found."""
+    lay = cone(1, 6)
+    N_arw = math.radians(0.1 / 60)
+    det = FaultDetector().fit(lay, ArrayNoise.identical(6, N_arw), DT)
+    sigma = N_arw / math.sqrt(DT)
+    white = np.random.default_rng(12).standard_normal((16000, 6)) * sigma
+    quiet, loud = white.copy(), white.copy()
+    quiet[6000:, 3] *= 0.4                                     # gyro 4: amplitude x0.4 from 60 s
+    loud[6000:, 3] *= 2.5
+    assert not det.detect(quiet).alarms
+    a = det.detect(loud).alarms[0]
+    assert (a.gyro, a.kind) == (4, "noise") and a.detected_s >= 60.0

@@ -48,8 +48,11 @@ def test_step_record_gives_the_issues_object(tmp_path, capsys, model_file):
     csv = _record(tmp_path, "step", [{"effect": "fault_step", "gyro": 5, "start_s": 60.0,
                                       "size_deg_s": 0.1}])
     out = _json(capsys, ["fdi", str(csv), "--model", str(model_file), "--json"])
-    assert set(out) == {"alarms", "far_per_h", "minimum_detectable", "notes"}
+    assert set(out) == {"alarms", "far_per_h", "minimum_detectable", "tested", "notes"}
     assert out["far_per_h"] == 0.01
+    # a record at rest: every sample tested, nothing untested
+    assert out["tested"]["untested"] == [] and out["tested"]["moving_s"] == 0.0
+    assert out["tested"]["still_s"] > 100.0
     a, = out["alarms"]
     assert set(a) == ALARM_KEYS
     assert (a["gyro"], a["kind"], a["isolated"], a["size_unit"]) == (5, "step", True, "deg/s")

@@ -76,10 +76,25 @@ def _fuse(cut, *extra, name=None) -> dict:
     return o.json
 
 
+def _pooled_oadev(x: np.ndarray, parts, m: int) -> np.ndarray:
+    """Overlapping Allan deviation pooled over still parts (each part's mean out, no difference
+    across a join): Σ_parts Σ d² / (2 m² Σ terms), parts shorter than 2m + 1 left out."""
+    num, den = 0.0, 0
+    for a, b in parts:
+        if b - a + 1 - 2 * m < 1:
+            continue
+        s = x[a:b] - x[a:b].mean(axis=0)
+        phase = np.vstack([np.zeros((1, x.shape[1])), np.cumsum(s, axis=0)])
+        d = phase[2 * m:] - 2 * phase[m:-m] + phase[:-2 * m]
+        num = num + (d ** 2).sum(axis=0)
+        den += d.shape[0]
+    return np.sqrt(num / (2.0 * m * m * den))
+
+
 def _check_adev(res: dict, fused_deg_s: np.ndarray) -> int:
-    """The JSON's fused ADEV at 0.1-10 s equals numpy's on the same still parts; returns the
-    number of τ compared."""
-    z = _stitched(fused_deg_s, res["analysed_parts"])
+    """The JSON's fused ADEV at 0.1-10 s equals numpy's pooled over the same still parts (never
+    across a join: issue 41); returns the number of τ compared."""
+    parts = res["analysed_parts"]
     dt = res["dt_s"]
     compared = 0
     for a, axis in enumerate("xyz"):
@@ -88,7 +103,8 @@ def _check_adev(res: dict, fused_deg_s: np.ndarray) -> int:
             if not 0.1 <= tau <= 10.0:
                 continue
             m = int(round(tau / dt))
-            ours = _oadev(z[:, a:a + 1], m)[0] * DEG_H
+            ours = (_pooled_oadev(fused_deg_s[:, a:a + 1], parts, m)[0] if len(parts) > 1 else
+                    _oadev(_stitched(fused_deg_s, parts)[:, a:a + 1], m)[0]) * DEG_H
             assert adev == pytest.approx(ours, rel=1e-9), (axis, tau)
             compared += 1
     return compared
@@ -245,10 +261,19 @@ def test_constant_gyro_left_out_and_model_used(tmp_path):
         f'  {{effect = "arw", gyro = {k}, n_deg_rt_h = {v}}}' for k, v in
         enumerate((0.3, 0.6, 1.2, 0.3), 1)) + "\n]\n")
     path = _white_array(tmp_path, "alive")
-    r = run_cli(["fuse", path, "--estimator", "gls", "--model", model, "--json"])
+    r = run_cli(["fuse", path, "--estimator", "gls", "--model", model, "--off-levels", "model", "--json"])
     assert r.code == 0, r.err
     assert r.json["design_noise"]["arw_deg_rt_h"] == pytest.approx([0.3, 0.6, 1.2, 0.3])
     assert str(model) in r.json["model_source"]
+    # the record's levels (0.05-0.2 deg/s per sample at 50 Hz: 0.42, 0.85, 1.70, 0.42 deg/√h) are
+    # 1.41x the model's, beyond the record's own 95 % interval (EDF ~115 at 1 s: ±13 %): by default
+    # each gyro is named and designed with the record's level
+    d = run_cli(["fuse", path, "--estimator", "gls", "--model", model, "--json"])
+    assert d.code == 0, d.err
+    assert d.json["model_check"]["off"] == [1, 2, 3, 4]
+    assert d.json["design_noise"]["arw_deg_rt_h"] == pytest.approx(
+        [d.json["model_check"]["gyros"][str(k)]["record_n_deg_rt_h"] for k in range(1, 5)])
+    assert any("outside the model's 95% range" in n for n in d.json["notes"])
     # a model without arw for a used gyro: refused, naming the model
     model.write_text('effects = [{effect = "arw", gyro = 1, n_deg_rt_h = 0.3}]\n')
     b = run_cli(["fuse", path, "--estimator", "gls", "--model", model])

@@ -60,9 +60,11 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import stats
 
+from gyroarray.analysis.allan import edf_simple
+from gyroarray.analysis.white_level import pooled_allan_covariance, white_m
 from gyroarray.core.errors import InputError
 
-__all__ = ["MatrixEstimate", "SharedLine", "MIN_EIGENVALUE", "white_covariance", "allan_covariance",
+__all__ = ["MatrixEstimate", "SharedLine", "MIN_EIGENVALUE", "white_covariance", "white_at_tau", "allan_covariance",
            "slow_covariance", "default_block", "regularised", "coherence_matrix", "shared_lines", "parts_of"]
 
 #: Smallest eigenvalue a correlation matrix keeps after regularisation [-].
@@ -357,6 +359,59 @@ def white_covariance(x, dt_s: float, *, parts=None, level: float = 0.95, regular
     return MatrixEstimate("white", dt, c, lo, hi, rho, rlo, rhi, sig, nu, n, lv, seen, tuple(notes))
 
 
+def white_at_tau(x, dt_s: float, *, parts=None, tau_s: float = 1.0, level: float = 0.95,
+                 regularise: str = "refuse", name: str | None = None) -> MatrixEstimate:
+    """Cross-covariance of the white part where white noise is read: the overlapping Allan
+    covariance at τ1 ≈ ``tau_s``, pooled over ``parts``
+    (:func:`~gyroarray.analysis.white_level.pooled_allan_covariance`).
+
+    A per-sample covariance (:func:`white_covariance`) reads every frequency up to Nyquist:
+    a narrow common-mode line (the MIMU4444 board's 17.6 Hz line on its 8 z gyros) makes the
+    z pairs correlated +0.03…+0.07 per sample, while at τ >= 1 s, where a fused rate's ARW
+    is read, they are uncorrelated (−0.014…+0.018). This estimate is the one a prediction at
+    τ1 uses: the fused Allan variance of a static fusion w is exactly wᵀ A(τ1) w.
+
+    Returns
+    -------
+    MatrixEstimate
+        ``what = "white_tau"``, ``tau_s = τ1``; ``covariance`` = A(τ1) [rad²/s²] (N_i N_j ρ_ij
+        / τ1 for white noise); ``dof`` the pooled white-FM EDF (every element); correlation
+        intervals Fisher's with σ = (1 − ρ²)/√EDF. Unless ``regularise="refuse"``, the
+        correlation is always shrunk toward the identity with the Schäfer–Strimmer weight
+        (:func:`regularised`, ``force``): its pairs' noise would otherwise go into the weights.
+    """
+    X, dt = _record(x, dt_s)
+    lv = _check_level(level)
+    pts = parts_of(X.shape[0], parts)
+    N = X.shape[1]
+    m = white_m(dt, tau_s)
+    A, total = pooled_allan_covariance(X, dt, m, pts)
+    if total == 0:
+        raise InputError(f"no still part is longer than {2 * m * dt:.3g} s: the white covariance at tau = "
+                         f"{m * dt:.3g} s cannot be read", file=name)
+    edf = float(sum(float(edf_simple(b - a + 1, m, 0)) for a, b in pts if b - a + 1 - 2 * m >= 1))
+    flat = np.flatnonzero(np.diag(A) <= 0)
+    if flat.size:
+        raise InputError(f"gyro(s) {', '.join(str(k + 1) for k in flat)} have no noise at tau = {m * dt:.3g} s "
+                         "(constant): leave them out", file=name)
+    nu = np.full((N, N), max(edf, 2.0))
+    lo, hi = _cov_interval(A, nu, lv)
+    seen = np.ones(N, bool)
+    rho = _correlation(A, seen)
+    sig = (1.0 - rho ** 2) / np.sqrt(nu)
+    np.fill_diagonal(sig, 0.0)
+    # always shrunk toward the identity (Schäfer–Strimmer λ): weights optimised against a noisy
+    # correlation predict their own fused ARW too low (MIMU4444, a model of one record's 276
+    # correlations, σ 0.04 each: x predicted 6-9 % below what the next records measured)
+    rho, notes, sig = _regularised_with_sigma(rho, sig, "shrink" if regularise != "refuse" else regularise,
+                                              "white", int(total), name, force=regularise != "refuse")
+    rlo, rhi = _fisher(rho, sig, lv)
+    np.fill_diagonal(rlo, 1.0)
+    np.fill_diagonal(rhi, 1.0)
+    return MatrixEstimate("white_tau", m * dt, A, lo, hi, rho, rlo, rhi, sig, nu, int(total), lv, seen,
+                          tuple(notes))
+
+
 # -- slow part ----------------------------------------------------------------
 def allan_covariance(x, m: int, *, parts=None) -> tuple[np.ndarray, list[np.ndarray]]:
     """Non-overlapping Allan covariance matrix at m samples.
@@ -601,6 +656,30 @@ def _components(n: int, edges: list[tuple[int, int]]) -> list[list[int]]:
     return sorted(groups.values())
 
 
+#: A coherent pair links two gyros into one line's group when its coherence is at least this share
+#: of the group's strongest pair [-]: a weak bridge (0.09–0.12) does not fold the MIMU4444 z
+#: gyros' 17.6 Hz line (0.29–0.46 between them) into one group with 14 other gyros.
+GROUP_SHARE = 0.5
+
+
+def _line_groups(n: int, iu, sel, peak) -> list[list[int]]:
+    """The groups of gyros that share one band's line: connected components of its coherent pairs
+    ``sel`` (indices into the pairs ``iu``), each split where it hangs on pairs weaker than
+    :data:`GROUP_SHARE` of its strongest (``peak``: each pair's largest coherence in the band);
+    the gyros only such weak pairs reach form their own groups."""
+    out: list[list[int]] = []
+    edges = [(int(iu[0][p]), int(iu[1][p]), float(peak[p])) for p in sel]
+    for comp in _components(n, [(i, j) for i, j, _ in edges]):
+        mine = [(i, j, c) for i, j, c in edges if i in comp and j in comp]
+        top = max(c for _, _, c in mine)
+        strong = _components(n, [(i, j) for i, j, c in mine if c >= GROUP_SHARE * top])
+        covered = {k for g in strong for k in g}
+        weak = _components(n, [(i, j) for i, j, c in mine
+                               if c < GROUP_SHARE * top and i not in covered and j not in covered])
+        out += strong + weak
+    return sorted(out)
+
+
 #: Welch segments transformed at once (bounds the memory of a long record: 2048 × 256 × N).
 SEGMENT_CHUNK = 2048
 
@@ -721,7 +800,7 @@ def shared_lines(x, dt_s: float, *, parts=None, nperseg: int | None = None, alph
             bands.append([int(b)])
     for bins in bands:
         sel = np.flatnonzero(hot[bins].any(axis=0))
-        for gy in _components(N, [(int(iu[0][p]), int(iu[1][p])) for p in sel]):
+        for gy in _line_groups(N, iu, sel, pair[bins].max(axis=0)):
             if len(gy) < min_gyros:
                 continue
             own = [p for p in sel if iu[0][p] in gy and iu[1][p] in gy]

@@ -8,6 +8,13 @@ their bytes; numbers and strings by value), so such a call is answered
 from the cache: the same result, not an approximation. Calls with any other
 kind of argument are not cached. Thread-safe (the Monte-Carlo band runs on
 threads).
+
+The digest of an array made read-only where it was created (:func:`freeze`) is kept by the
+array's identity: a record's clock, reference and residuals are read by many tests, each keyed
+by content, and were hashed again on every call (5 s of a 46-min, 5-gyro diagnosis). Kept only
+for an array that cannot change: read-only itself, a view of (or itself) an array that owns its
+memory and is read-only too; dropped when that array is freed. A writeable array is hashed on
+every call.
 """
 
 from __future__ import annotations
@@ -15,24 +22,104 @@ from __future__ import annotations
 import functools
 import hashlib
 import threading
+import weakref
 from collections import OrderedDict
 
 import numpy as np
 
-__all__ = ["by_content", "content_key", "ContentMemo"]
+__all__ = ["by_content", "content_key", "ContentMemo", "clear_all", "freeze"]
+
+#: Every cache this module made (the functions' and the memos' clear methods), for
+#: :func:`clear_all`.
+_CACHES: list = []
+
+
+def clear_all() -> None:
+    """Empty every content cache of the process.
+
+    A command (a ladder, a diagnosis) starts from empty caches, so that what it returns never
+    depends on what the process computed before it: the caches hold only results of pure
+    functions of their arguments, but a module constant changed between two calls (a test's
+    monkeypatch, a user's experiment) would otherwise be answered with the old constant's result.
+    """
+    for clear in list(_CACHES):
+        clear()
+    with _DIGEST_LOCK:
+        _DIGESTS.clear()
 
 
 class _Uncacheable(Exception):
     pass
 
 
+def freeze(*arrays):
+    """Make each ndarray of ``arrays`` read-only (None and other objects pass as they are) and
+    return the first (or all, for several): what the caller created and will not change, so
+    that its digest is kept (:func:`_digest`). Only for an array no writeable view of which
+    has been handed out: a frozen array must not change while it lives."""
+    for a in arrays:
+        if isinstance(a, np.ndarray):
+            a.flags.writeable = False
+    return arrays[0] if len(arrays) == 1 else arrays
+
+
+#: id(owner) -> (weakref to the owner, {view key: digest}): the digests of read-only views of a
+#: read-only array that owns its memory (:func:`_digest`); an entry leaves with its owner.
+_DIGESTS: dict = {}
+_DIGEST_LOCK = threading.Lock()
+
+
+def _forget(owner_id: int) -> None:
+    # without the lock (one dict operation, atomic): the owner's finalizer may run inside a
+    # garbage collection that an allocation under the lock started, in the same thread
+    _DIGESTS.pop(owner_id, None)
+
+
+def _owner(a: np.ndarray) -> np.ndarray | None:
+    """The array that owns ``a``'s memory, when it and ``a`` are read-only, else None."""
+    if a.flags.writeable:
+        return None
+    o = a
+    while isinstance(o.base, np.ndarray):
+        o = o.base
+    if o.base is not None or o.flags.writeable:          # memory of another object, or changeable
+        return None
+    return o
+
+
+def _sha256(a: np.ndarray) -> bytes:
+    c = np.ascontiguousarray(a)
+    # SHA-256: 2.5x BLAKE2b's speed here (the CPU's SHA extensions), the same use of a digest
+    return hashlib.sha256(c.view(np.uint8).reshape(-1)).digest()
+
+
+def _digest(a: np.ndarray) -> bytes:
+    """SHA-256 of ``a``'s bytes (C order), kept for a read-only view of a read-only owner."""
+    owner = _owner(a)
+    if owner is None:
+        return _sha256(a)
+    key = (a.__array_interface__["data"][0], a.shape, a.strides, a.dtype.str)
+    with _DIGEST_LOCK:
+        hit = _DIGESTS.get(id(owner))
+        if hit is not None and hit[0]() is owner:
+            d = hit[1].get(key)
+            if d is not None:
+                return d
+    d = _sha256(a)
+    with _DIGEST_LOCK:
+        hit = _DIGESTS.get(id(owner))
+        if hit is None or hit[0]() is not owner:
+            hit = _DIGESTS[id(owner)] = (weakref.ref(owner), {})
+            weakref.finalize(owner, _forget, id(owner))
+        hit[1][key] = d
+    return d
+
+
 def _part(v):
     if isinstance(v, np.ndarray):
         if v.dtype.hasobject:
             raise _Uncacheable
-        a = np.ascontiguousarray(v)
-        # SHA-256: 2.5x BLAKE2b's speed here (the CPU's SHA extensions), the same use of a digest
-        return ("nd", a.dtype.str, a.shape, hashlib.sha256(a.view(np.uint8).reshape(-1)).digest())
+        return ("nd", v.dtype.str, v.shape, _digest(v))
     if isinstance(v, np.generic):
         return v.item()
     if v is None or isinstance(v, (bool, int, float, str)):
@@ -63,7 +150,11 @@ def by_content(maxsize: int = 16):
                     cache.popitem(last=False)
             return out
 
-        wrapper.cache_clear = cache.clear
+        def cache_clear():
+            with lock:
+                cache.clear()
+        wrapper.cache_clear = cache_clear
+        _CACHES.append(cache_clear)
         return wrapper
     return deco
 
@@ -85,6 +176,7 @@ class ContentMemo:
         self.maxsize = int(maxsize)
         self._d: OrderedDict = OrderedDict()
         self._lock = threading.Lock()
+        _CACHES.append(self.clear)
 
     def slot(self, *args) -> dict:
         """The results dict of these arguments (a fresh, unkept one when they cannot be keyed)."""

@@ -55,7 +55,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from scipy import optimize, special, stats
 
-from gyroarray.analysis.memo import by_content, content_key
+from gyroarray.analysis.memo import by_content, clear_all, content_key
 from gyroarray.analysis.allan import averaging_factors, oadev
 from gyroarray.effects.earth_rate import attitude_from_rates
 from gyroarray.effects.fitting import EffectFit, chi2_to_z, z_from_log_p
@@ -67,6 +67,7 @@ from gyroarray.effects.outliers import MOTION_RAW, Outliers, clean_spikes
 from gyroarray.analysis.reference_noise import describe as describe_own_noise
 from gyroarray.analysis.reference_noise import reference_own_noise
 from gyroarray.analysis.gls import RWWhitener
+from gyroarray.analysis.white_level import pooled_white_level, white_walk_fit
 from gyroarray.effects.stochastic import fit_gyro_noise
 from gyroarray.effects import REGISTRY, did_you_mean, effect_names, get_effect
 from gyroarray.effects import names
@@ -78,7 +79,8 @@ from gyroarray.sim.effects import sim_context, simulate_on, simulate_readings
 from gyroarray.effects.model import ModelEntry, NoiseModel
 from gyroarray.effects.protocol import Effect, Explained, FitContext, Kind, drop_kept
 from gyroarray.core.sensor import gravity_specific_force, rigid_body_specific_force
-from gyroarray.core.units import RAD_PER_DEG, arw_deg_rt_h_to_rad_rt_s, rad_s_to_deg_h, rrw_deg_h_rt_h_to_rad_s_rt_s
+from gyroarray.core.units import (RAD_PER_DEG, arw_deg_rt_h_to_rad_rt_s, arw_rad_rt_s_to_deg_rt_h, rad_s_to_deg_h,
+                                  rrw_deg_h_rt_h_to_rad_s_rt_s)
 
 __all__ = ["ALPHA", "LADDER_RULE", "LADDER_RETRY_SHARE", "Test", "Analysis", "ModelComparison",
            "baseline_model", "check_record_needs", "critical_z", "ladder_improves", "parse_add",
@@ -914,7 +916,10 @@ class ModelComparison:
     def attitude(self):
         """Platform -> local-level rotations integrated from the reference (cached), or None."""
         if self._attitude is None and self.ref is not None:
-            self._attitude = attitude_from_rates(self.ref, self.dt)
+            # an array of its own (numba's has a foreign base), read-only: its digest is kept by
+            # the content caches that read it many times (memo.freeze); the same values
+            self._attitude = np.array(attitude_from_rates(self.ref, self.dt))
+            self._attitude.flags.writeable = False
         return self._attitude
 
     def effect(self, name: str) -> Effect:
@@ -959,7 +964,11 @@ class ModelComparison:
                                                      temp_c=self.temp, site=site, specific_force=self.acc,
                                                      attitude=self.attitude() if self.ref is not None else None)
         sim = simulate_on(NoiseModel((entry,)), self._sim_inputs[site], np.random.default_rng(0))
-        return sim - truth @ self.H.T
+        sensed = getattr(self, "_sensed_truth", None)
+        if sensed is None:                           # truth @ H.T, the same bits every entry: made once
+            sensed = self._sensed_truth = truth @ self.H.T
+            sensed.flags.writeable = False
+        return sim - sensed
 
     def specific_force(self) -> np.ndarray:
         """Specific force at each gyro (n, N, 3) [m/s²] (cached): ``acc`` or gravity through the
@@ -969,6 +978,7 @@ class ModelComparison:
             f0 = self.acc if self.acc is not None else gravity_specific_force(self.attitude(), self.n)
             pos = self.positions if self.positions is not None else np.zeros((self.N, 3))
             self._force = rigid_body_specific_force(f0, omega, np.gradient(omega, self.dt, axis=0), pos)
+            self._force.flags.writeable = False        # read by content many times (memo.freeze)
         return self._force
 
     def _context(self, model: NoiseModel) -> FitContext:
@@ -1044,10 +1054,44 @@ class ModelComparison:
             a, b = max(self.parts, key=lambda p: p[1] - p[0])
         base = fit_gyro_noise(e[a:b], self.dt, gyro, white_shape=white_shape, **self.pipeline_fit_kw())
         n_rad = arw_deg_rt_h_to_rad_rt_s(base[0].params["n_deg_rt_h"])
+        if len(self.parts) > 1:
+            # the white level of every still part, pooled, at the τ where white noise dominates
+            # (:meth:`pooled_white`): one part read alone left gyro 1 of the MIMU4444 board at
+            # 0.28 deg/√h where its ADEV·√τ on that part was >= 0.82 at every τ
+            n_rad = self.white_level(n_rad, e)[0]
         if self.continuous:                    # the white level from a high-pass: first differences
             d = np.diff(e)
             n_rad = 1.4826 * float(np.median(np.abs(d - np.median(d)))) / math.sqrt(2.0) * math.sqrt(self.dt)
         return max(n_rad ** 2 / self.dt, 1e-30), base
+
+    def white_level(self, n_fit: float, e: np.ndarray) -> tuple[float, bool]:
+        """(N [rad/√s], whether it is the pooled reading) of one gyro on stitched still parts: the
+        Allan fit's ``n_fit`` while it lies within :data:`WHITE_AGREE` σ of the pooled reading
+        at τ ≈ 1 s (:meth:`pooled_white`; white noise: the fit reads every τ, the more precise),
+        else the pooled reading (a real gyro's short-τ humps, lines and quantization pull the
+        fit off the level its angle error sees)."""
+        n1, s1 = self.pooled_white(e)
+        if s1 > 0 and abs(n_fit - n1) <= WHITE_AGREE * s1:
+            return float(n_fit), False
+        return float(n1), True
+
+    def pooled_white(self, e: np.ndarray) -> tuple[float, float]:
+        """(N, its 1σ) [rad/√s] of one gyro's residual ``e`` (n,) on stitched still parts: the
+        Allan deviation pooled over the parts, never across a join, read at τ ≈ 1 s, N = σ(τ)·√τ
+        (:func:`~gyroarray.analysis.white_level.pooled_white_level`; what ``fuse`` and the
+        ``[array]`` table read). Kept by content."""
+        key = ("pooled_white",) + (content_key(e) or (id(e),))
+        hit = self._rq_kept.get(key)
+        if hit is None:
+            lev = pooled_white_level(np.asarray(e, float), self.dt, self.parts)
+            if lev is None:                       # no part longer than 2 s: the fit's reading
+                ww = white_walk_fit(np.asarray(e, float)[:, None], self.dt, parts=self.parts)
+                hit = (float(ww.arw_rad_rt_s[0]), float(np.nan_to_num(ww.arw_sigma[0])))
+            else:
+                hit = (float(lev[0][0]), float(lev[1][0]))
+            if content_key(e) is not None:
+                self._rq_kept[key] = hit
+        return hit
 
     # -- the chain, step by step -----------------------------------------------
     def analyse(self, model: NoiseModel | None = None) -> Analysis:
@@ -1678,6 +1722,7 @@ class ModelComparison:
     # -- the user's loop ------------------------------------------------------
     def diagnose(self) -> Analysis:
         """The calibrated model's analysis, localised where no effect explains it."""
+        clear_all()                              # what it returns never depends on the calls before
         return self.localise(self.analyse())
 
     def steps_to_model(self) -> list[tuple[tuple | None, Analysis]]:
@@ -1687,6 +1732,7 @@ class ModelComparison:
         in the model's order (what ``compare --model`` reports); just
         ``[(None, analysis)]`` when the model is the baseline.
         """
+        clear_all()
         base = [e for e in self.model if get_effect(e.effect).baseline]
         extra = [e for e in self.model if not get_effect(e.effect).baseline]
         model = NoiseModel(tuple(base), description=self.model.description, source=self.model.source)
@@ -1699,6 +1745,7 @@ class ModelComparison:
 
     def fit(self, add=()) -> tuple[Analysis, Analysis]:
         """(before, after): the model calibrated, then with the ``add`` effects fitted in."""
+        clear_all()
         before = self.analyse()
         model = self.model
         for effect, gyro in add:
@@ -1743,6 +1790,7 @@ class ModelComparison:
         quantization, a hump or a filter) make D worse, and with three tries
         the ladder stopped before the scale factor of gyro 3.
         """
+        clear_all()                              # a ladder starts from empty caches (memo.clear_all)
         steps: list[tuple[tuple | None, Analysis]] = [(None, self.analyse())]
         model = self.model
         refused: list[str] = []
@@ -1782,6 +1830,11 @@ class ModelComparison:
             steps[-1][1].notes.extend(refused)
         self.localise(steps[-1][1])
         return steps
+
+
+#: σ of the pooled white reading at 1 s within which a stitched record's Allan fit keeps its own N
+#: (:meth:`ModelComparison.white_level`) [-].
+WHITE_AGREE = 2.0
 
 
 #: The ladder's rule, as its output states it (:func:`ladder_improves`).
@@ -1961,7 +2014,22 @@ class _Services:
             fl = fit_gyro_noise(self.ctx.Er[:, gyro - 1], self.comp.dt, gyro,
                                 **_noise_term_kwargs(self.ctx, _model_of(self.ctx), gyro),
                                 **self.comp.pipeline_fit_kw())
-            self._noise[gyro] = {f.effect: f for f in fl}
+            fits = {f.effect: f for f in fl}
+            if len(self.comp.parts) > 1 and self.ctx.E is not None and names.ARW in fits:
+                # stitched still parts: the model's white level is the one every command reads,
+                # pooled over all the parts (ModelComparison.pooled_white), not the one part's
+                f = fits[names.ARW]
+                e = self.ctx.E[:, gyro - 1]
+                n, pooled = self.comp.white_level(float(arw_deg_rt_h_to_rad_rt_s(f.params["n_deg_rt_h"])), e)
+                if pooled:
+                    sn = self.comp.pooled_white(e)[1]
+                    fits[names.ARW] = replace(
+                        f, params={**f.params, "n_deg_rt_h": float(arw_rad_rt_s_to_deg_rt_h(n))},
+                        sigma={**f.sigma, "n_deg_rt_h": float(arw_rad_rt_s_to_deg_rt_h(sn))},
+                        extra={**f.extra, "allan_fit_n_deg_rt_h": f.params.get("n_deg_rt_h"),
+                               "white_level": "ADEV(1 s)·√(1 s) pooled over the still parts (the Allan "
+                                              f"fit's N is more than {WHITE_AGREE:g}σ from it)"})
+            self._noise[gyro] = fits
         return self._noise[gyro]
 
     def specific_force(self) -> np.ndarray:

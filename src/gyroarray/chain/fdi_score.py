@@ -3,7 +3,12 @@
 
 * :func:`analyse_measurement` — what ``gyroarray fdi MEAS.csv`` prints: the
   alarms, the false-alarm rate the thresholds are set for, the minimum
-  detectable fault per gyro and kind, and notes (noise source, recovery).
+  detectable fault per gyro and kind, what was tested and what not (with
+  the seconds and why), and notes (noise source, recovery).
+* :func:`record_noise`, :func:`test_record` — its two stages: the per-sample
+  levels and their between-part wander read on the record (a model's ARW is
+  a long-τ level), and the detector run over the still parts (each with its
+  common level) and the motion (after the parity self-calibration).
 * :func:`recovery_errors` — the fused rate before, during and after each
   exclusion, with and without the recovery.
 * :func:`score_faults` — for a simulated run whose model holds ``fault_*``
@@ -23,23 +28,25 @@ from dataclasses import replace
 import numpy as np
 
 from gyroarray.analysis.motion import still_mask
-from gyroarray.chain.parity import calibrate_measurement
+from gyroarray.chain.parity import (MIN_MOTION_DEG_S, MIN_SAMPLES_PER_UNKNOWN, fused_rate, jerk2,
+                                    self_calibrate)
 from gyroarray.core.errors import InputError
 from gyroarray.core.limits import check_memory
 from gyroarray.core.measurement import true_runs
 from gyroarray.core.units import rad_s_to_deg_s
 from gyroarray.effects.model import NoiseModel
-from gyroarray.estimators.fdi import (MIN_RECORD_SAMPLES, FaultDetector, FdiResult, estimate_noise, far_range_per_h,
+from gyroarray.estimators.fdi import (FLAT_ONLY_SCALE, MIN_RECORD_SAMPLES, FaultDetector, clips_broken,
+                                      common_scale, saturated_mask, FdiResult, estimate_noise, far_range_per_h,
                                       fuse, isolability, minimum_detectable, model_noise, noise_spread,
-                                      parity_is_zero)
+                                      parity_is_zero, parity_matrix, per_sample_noise)
 
-__all__ = ["FDI_METRICS", "analyse_measurement", "format_fdi", "recovery_errors",
+__all__ = ["FDI_METRICS", "analyse_measurement", "record_noise", "test_record", "format_fdi", "recovery_errors",
            "true_faults", "score_faults", "add_fdi_metrics", "summarise_scores"]
 
 #: Largest spread (times the white level) of the parity a moving array may leave after its fitted
-#: scale-factor and axis errors for the detector to watch it while it turns, widened by that spread
-#: (:meth:`~gyroarray.chain.parity.ParityCalibration.excess_scale`); beyond it only the still parts
-#: are tested.
+#: scale-factor and axis errors for the detector to test a moving sample, its innovation widened by
+#: that spread (:meth:`~gyroarray.chain.parity.ParityCalibration.excess_scale`); samples beyond it
+#: are named untested (:func:`test_record`).
 MAX_MOTION_EXCESS = 2.0
 
 #: Columns :func:`add_fdi_metrics` adds to the chain's table (``gyroarray check`` may bound them).
@@ -67,7 +74,10 @@ def analyse_measurement(meas, model=None, *, far_per_h: float = 0.01, p_md: floa
     Returns
     -------
     out : dict
-        ``{"alarms": [...], "far_per_h", "minimum_detectable": {gyro: {kind: ...}}, "notes"}``.
+        ``{"alarms": [...], "far_per_h", "minimum_detectable": {gyro: {kind: ...}}, "tested",
+        "notes"}`` (``tested``: the seconds tested still and moving, and each
+        untested span with its reason, :func:`test_record`); ``calibration``
+        too for a record that turns.
     result : FdiResult
     detector : FaultDetector or None
         None for a record whose parity is zero (below), analysed without a model.
@@ -124,67 +134,19 @@ def analyse_measurement(meas, model=None, *, far_per_h: float = 0.01, p_md: floa
     if parity_is_zero(z, meas.layout.H):
         return _no_parity_noise(meas, model, detector, far_per_h, p_md, notes)
     still = _still(meas)
-    if model is None:
-        try:
-            noise, more = estimate_noise(z, meas.layout, dt, meas.ref_rad_s, still=still)
-        except InputError as err:
-            raise InputError(err.message, file=meas.source) from None
-        notes += more
-        if still is not None:
-            kappa, more = noise_spread(z, dt, still)
-            detector.variance_tolerance = kappa if np.any(kappa > 1.0) else None
-            notes += more
-    else:
-        noise = model
-        if getattr(model, "array", None) is not None:          # its [array] correlations too
-            try:
-                noise = model_noise(model, meas.n_gyros)
-            except InputError as err:
-                raise InputError(err.message, file=getattr(model, "source", None) or meas.source) from None
-            notes.append("the model's [array] table gives the white and walk correlations of the "
-                         "gyros it names")
-        faults = sorted({e.effect for e in model.entries if e.effect.startswith("fault_")})
-        if faults:
-            notes.append(f"the model's {', '.join(faults)} entries are not used: the detector "
-                         "looks for faults, it does not assume them")
+    noise, kappa, more = record_noise(meas, model, still)
+    notes += more
+    detector.variance_tolerance = kappa
     det = _fit(detector, meas, noise, model)
     other = [e for e in det.noise_.ignored_effects if not e.startswith("fault_")]
     if other:
         notes.append("the detector models ARW, RRW and their correlation only; also in the model: "
                      + ", ".join(other))
-    cal, scale, parts = None, None, None
-    if still is not None and not still.all():
-        R = det.noise_.R(dt)
-        cal = calibrate_measurement(meas, R=R, still=still)
-        if cal is not None and cal.significant:
-            # a motion-dependent parity is a calibration finding, not a fault: the fitted scale
-            # factor and axis errors are taken out of the readings the detector watches
-            z = cal.correct(z, meas.layout.H, R)
-            notes.append(f"calibration finding (not a fault): the parity follows the rate while the "
-                         f"array turns ({100 * cal.explained:.0f} % of the moving parity variance; "
-                         f"gyros off: {', '.join(map(str, cal.off)) or 'none'}); the fitted scale "
-                         "factor and axis errors are removed before detection (see 'calibration', "
-                         "or gyroarray parity MEAS)")
-            scale = cal.excess_scale(z, meas.layout.H, dt, R)
-            if float(scale.max()) > MAX_MOTION_EXCESS:
-                # what the motion leaves beyond them is not white noise of a known level (e.g.
-                # sampling instants that differ between the gyros): the moving parts are not
-                # tested, the still parts are, each on its own
-                parts = [(a, b) for a, b in true_runs(still)]
-                moving = float(np.sum(~still)) * dt
-                notes.append(f"the parity left after them still follows the motion (its spread up "
-                             f"to x{float(scale.max()):.3g} the white level at the fastest "
-                             f"changes): the {moving:.1f} s where the array turns are not tested "
-                             "for faults, the still parts are (each on its own)")
-                scale = None
-            elif float(scale.max()) > 1.0:
-                notes.append(f"the parity left after them grows with the motion: the tests are "
-                             f"widened by up to x{float(scale.max()):.3g} where the array turns")
-    if parts is not None:
-        res = det.detect_parts(z, parts, meas.time_s, trace=True)
-    else:
-        res = det.detect(z, meas.time_s, trace=True, innovation_scale=scale)
-    md = minimum_detectable(meas.layout, det.noise_, far_per_h, p_md, dt_s=dt, design=det.design_)
+    res, more, info = test_record(det, z, meas.layout.H, dt, meas.time_s, still, trace=True)
+    notes += more
+    cal = info["calibration"]
+    md = minimum_detectable(meas.layout, det.noise_, far_per_h, p_md, dt_s=dt, design=det.design_,
+                            repeat_share=_repeat_share(z, still))
     notes.append(f"minimum_detectable: found with probability {1 - p_md:g} at {far_per_h:g} false "
                  f"alarms/h; drift within {md['drift_window_s']:g} s; stuck_static_s for a gyro "
                  "stuck at rest")
@@ -196,10 +158,284 @@ def analyse_measurement(meas, model=None, *, far_per_h: float = 0.01, p_md: floa
     notes += list(res.notes)
     notes += _recovery_notes(z, meas, det, res)
     out = {"alarms": [a.to_json_dict() for a in res.alarms], "far_per_h": float(far_per_h),
-           "minimum_detectable": _md_json(md), "notes": notes}
+           "minimum_detectable": _md_json(md), "tested": info["tested"], "notes": notes}
     if cal is not None:                                        # only for a record that turns
         out["calibration"] = cal.to_json_dict()
     return out, res, det
+
+
+def record_noise(meas, model, still) -> tuple:
+    """The detector's noise for a record: (ArrayNoise or NoiseModel, κ or None, notes).
+
+    Without a model each gyro's per-sample level is read on the record's still
+    parts (:func:`~gyroarray.estimators.fdi.estimate_noise`). With one, its RRW
+    and correlations are kept and its ARW, a long-τ white level, is replaced
+    per gyro by the per-sample level of the still parts where that is higher
+    (:func:`~gyroarray.estimators.fdi.per_sample_noise`). Either way the levels'
+    wander between still parts (:func:`~gyroarray.estimators.fdi.noise_spread`,
+    κ relative to the levels designed with) is allowed by the variance test.
+
+    Raises
+    ------
+    InputError
+        No noise in the reference span, or a model the detector cannot use
+        (each naming the file).
+    """
+    z, dt = meas.gyro_rad_s, meas.dt_s
+    notes: list[str] = []
+    if model is None:
+        try:
+            noise, more = estimate_noise(z, meas.layout, dt, meas.ref_rad_s, still=still)
+        except InputError as err:
+            raise InputError(err.message, file=meas.source) from None
+        notes += more
+    else:
+        src = getattr(model, "source", None) or meas.source
+        try:
+            noise = model_noise(model, meas.n_gyros)
+        except InputError as err:
+            raise InputError(err.message, file=src) from None
+        if getattr(model, "array", None) is not None:          # its [array] correlations too
+            notes.append("the model's [array] table gives the white and walk correlations of the "
+                         "gyros it names")
+        faults = sorted({e.effect for e in model.entries if e.effect.startswith("fault_")})
+        if faults:
+            notes.append(f"the model's {', '.join(faults)} entries are not used: the detector "
+                         "looks for faults, it does not assume them")
+        try:                                                   # the model's own R must be usable
+            parity_matrix(meas.layout.H, noise.R(dt))
+        except InputError as err:
+            raise InputError(err.message, file=src) from None
+        noise, more = per_sample_noise(noise, z, dt, still)
+        notes += more
+    kappa = None
+    if still is not None:
+        ref = np.asarray(noise.arw_rad_rt_s, dtype=float) ** 2 / dt
+        k, more = noise_spread(z, dt, still, reference=ref)
+        kappa = k if np.any(k > 1.0) else None
+        notes += more
+    return noise, kappa, notes
+
+
+
+#: Samples of a moving stretch the detector needs to test it (one shortest variance block).
+MIN_TESTED_SAMPLES = MIN_RECORD_SAMPLES
+
+
+def test_record(det: FaultDetector, z: np.ndarray, H: np.ndarray, dt: float, time_s=None,
+                still=None, *, trace: bool = False, test_motion: bool = False) -> tuple:
+    """Run a fitted detector over a record, still parts and motion: (FdiResult, notes, info).
+
+    Parameters
+    ----------
+    det : FaultDetector
+        Fitted with the record's per-sample levels (:func:`record_noise`).
+    z : ndarray, shape (n, N)
+        Gyro outputs [rad/s].
+    H : ndarray, shape (N, 3)
+    dt : float
+        Sample step [s].
+    time_s : ndarray, shape (n,), optional
+    still : ndarray of bool, shape (n,), optional
+        Still samples; None (a reference rate, or too short to tell) or all
+        True: the record is tested whole, as it is.
+    trace : bool
+    test_motion : bool
+        Also test the moving samples whose spread after the calibration is at
+        most :data:`MAX_MOTION_EXCESS` (default False: see Notes).
+
+    Returns
+    -------
+    FdiResult, list of str, dict
+        ``info``: ``calibration`` (:class:`~gyroarray.chain.parity.ParityCalibration`
+        or None) and ``tested`` (:func:`_tested_json`).
+
+    Notes
+    -----
+    Still parts are tested each on its own, their innovations widened by the
+    part's common level c = max(1, median over the gyros of the part's
+    variance over the level designed with): a level that rises on every gyro
+    at once (the board after a hand rotation) is the environment, not a
+    single gyro's noise fault, which leaves the median of the others alone.
+
+    While the array turns, its parity follows the rate through each gyro's
+    scale-factor and axis errors: they are fitted on the moving samples
+    (:func:`~gyroarray.chain.parity.self_calibrate`) and taken out, and what
+    the fit leaves is a spread √(1 + c²|ω̂|² + d²|ω̂'|²) of the white level
+    (:meth:`~gyroarray.chain.parity.ParityCalibration.excess_scale`: c from the
+    errors the calibration does not resolve, d from sampling instants that
+    differ between the chips, a rate derivative times their timing spread).
+    With ``test_motion`` the moving samples are tested with their
+    innovations divided by it where it is at most :data:`MAX_MOTION_EXCESS`.
+    It is off by default: on the MIMU4444 board (five records) the moving
+    samples the spread model admits, the hand placements between still parts
+    and the slow ends of the rotation, raise 3–8 false alarms per record,
+    single-sample step statistics up to x5 the threshold (knocks whose
+    parity the spread model, fitted over the whole rotation, does not
+    follow). Every moving sample not tested is named with its reason: a gyro
+    at its output limit (it reads the clip, not its rate), the spread beyond
+    :data:`MAX_MOTION_EXCESS` (dominated by the rate's derivative, i.e.
+    sampling instants that differ between the chips, or by the rate), or
+    motion within it left untested. All of the motion is still watched for
+    a stuck gyro (:func:`~gyroarray.estimators.fdi.flat_alarm`), which needs
+    no parity model: on the raw outputs, a gyro's repeats at its own output
+    limit broken first (a clipped gyro is not stuck).
+
+    A record whose parity does not follow its motion (no significant
+    calibration: a simulated or well-calibrated array) is tested whole,
+    moving samples included, around its clipped samples.
+    """
+    z = np.asarray(z, dtype=float)
+    n = z.shape[0]
+    t = np.arange(n) * dt if time_s is None else np.asarray(time_s, dtype=float)
+    notes: list[str] = []
+    info: dict = {"calibration": None}
+    if still is None or bool(np.all(still)):
+        res = det.detect(z, t, trace=trace)
+        info["tested"] = _tested_json(t, dt, np.ones(n, dtype=bool), np.zeros(n, dtype=bool), [])
+        return res, notes, info
+    still = np.asarray(still, dtype=bool)
+    R = det.noise_.R(dt)
+    sat, clip = saturated_mask(z)
+    raw = z
+    cal = _calibration(z, H, dt, R, still, sat)
+    info["calibration"] = cal
+    exc = np.ones(n)
+    if cal is not None and cal.significant:
+        # a motion-dependent parity is a calibration finding, not a fault: the fitted scale
+        # factor and axis errors are taken out of the readings the detector watches
+        zc = cal.correct(z, H, R)
+        exc = cal.excess_scale(zc, H, dt, R)
+        # the still parts keep their raw outputs: there the correction is E·ω̂ of a rate at rest
+        # (a constant the trackers take as bias, plus 1 % of the fused noise), and a stuck
+        # gyro's flat line must stay flat for the flat-line test
+        z = np.where(still[:, None], z, zc)
+        notes.append(f"calibration finding (not a fault): the parity follows the rate while the "
+                     f"array turns ({100 * cal.explained:.0f} % of the moving parity variance; "
+                     f"gyros off: {', '.join(map(str, cal.off)) or 'none'}); the fitted scale "
+                     "factor and axis errors are removed before detection (see 'calibration', "
+                     "or gyroarray parity MEAS)")
+    parts: list[tuple] = []
+    moving = ~still
+    short = np.zeros(n, dtype=bool)
+    flat_only = np.zeros(n, dtype=bool)
+    if cal is None or not cal.significant:
+        # the parity does not follow the motion: the record is tested through its moving samples
+        # (a fault can look like motion to the still test: a step on one gyro), around the
+        # clipped ones, each still run widened by its common level
+        scale = np.ones(n)
+        for a, b in true_runs(still):
+            scale[a:b] = common_scale(z[a:b], R) if b - a >= MIN_RECORD_SAMPLES else 1.0
+        for a, b in true_runs(~sat):
+            if b - a >= MIN_RECORD_SAMPLES:
+                parts.append((a, b, scale[a:b]))
+    else:
+        for a, b in true_runs(still):
+            if b - a >= MIN_RECORD_SAMPLES:
+                parts.append((a, b, common_scale(z[a:b], R)))
+        ok = moving & ~sat & (exc <= MAX_MOTION_EXCESS)
+        for a, b in true_runs(ok):
+            if test_motion and b - a >= MIN_TESTED_SAMPLES:
+                parts.append((a, b, np.maximum(exc[a:b], 1.0)))
+            else:
+                short[a:b] = True
+        if not test_motion:
+            # the rest of the motion is watched for a stuck gyro only: a flat line needs no
+            # parity model (its innovations are divided by FLAT_ONLY_SCALE, so no parity
+            # statistic can cross its threshold there)
+            for a, b in true_runs(moving):
+                if b - a >= MIN_RECORD_SAMPLES:
+                    parts.append((a, b, FLAT_ONLY_SCALE))
+                    flat_only[a:b] = True
+    parts.sort(key=lambda x: x[0])
+    tested = np.zeros(n, dtype=bool)
+    for a, b, _ in parts:
+        tested[a:b] = True
+    tested &= ~flat_only
+    spans = []
+    for a, b in true_runs(moving & ~tested):
+        spans += _untested_spans(a, b, sat, exc, short, cal, dt, z, H, R)
+    info["tested"] = _tested_json(t, dt, tested, moving, spans)
+    widened = [float(np.max(sc)) for _, _, sc in parts if np.max(sc) > 1.0]
+    if widened:
+        notes.append(f"{len(widened)} stretch(es) tested with their innovations widened by up to "
+                     f"x{max(widened):.3g}: still parts whose level rose on every gyro at once, "
+                     f"moving ones by the spread the calibration leaves (at most x{MAX_MOTION_EXCESS:g})")
+    tt = info["tested"]
+    notes.append(f"tested for faults: {tt['still_s']:.1f} s still and {tt['moving_s']:.1f} s of "
+                 f"{tt['moving_s'] + tt['untested_s']:.1f} s moving; not tested: "
+                 + (", ".join(f"{k} {v:.1f} s" for k, v in tt["untested_by_reason_s"].items()) or "none")
+                 + " (see 'tested')")
+    if flat_only.any():
+        # watched by the flat line on the raw outputs (a stuck gyro's corrected output is not
+        # flat), whose repeats at a gyro's own output limit are broken first: a clipped gyro
+        # repeats its limit, it is not stuck
+        z = clips_broken(raw, z, flat_only, clip)
+    res = det.detect_parts(z, parts, t, trace=trace)
+    return res, notes, info
+
+
+def _calibration(z, H, dt, R, still, sat):
+    """The parity self-calibration of the moving, unsaturated samples, or None (too little motion)."""
+    use = ~still & ~sat
+    need = MIN_SAMPLES_PER_UNKNOWN * 3 * z.shape[1]
+    if use.sum() < need:
+        return None
+    om = fused_rate(z[use], H, R)
+    d = om - om.mean(axis=0)
+    if float(rad_s_to_deg_s(math.sqrt(float(np.mean(np.sum(d * d, axis=1)))))) < MIN_MOTION_DEG_S:
+        return None
+    return self_calibrate(z, H, dt, R=R, use=use)
+
+
+def _untested_spans(a: int, b: int, sat, exc, left, cal, dt, z, H, R) -> list:
+    """(start, stop, reason) pieces of an untested moving stretch [a, b)."""
+    names = ("a gyro at its output limit (watched for another gyro stuck only)",
+             "rate derivative x inter-chip timing: parity spread beyond the calibration "
+             "(watched for a stuck gyro only)",
+             "rate: parity spread beyond the calibration (watched for a stuck gyro only)",
+             "motion within the calibration's spread, not tested by parity (watched for a stuck "
+             "gyro only)")
+    timing = np.zeros(b - a, dtype=bool)
+    if cal is not None and cal.significant:
+        c2, d2 = cal.excess
+        om = fused_rate(z[a:b], H, R)
+        timing = d2 * jerk2(om, dt) >= c2 * np.sum(om * om, axis=1)
+    reason = np.where(sat[a:b], 0, np.where(left[a:b] | (exc[a:b] <= MAX_MOTION_EXCESS), 3,
+                                            np.where(timing, 1, 2)))
+    edges = np.r_[0, np.flatnonzero(np.diff(reason)) + 1, b - a]
+    return [(a + int(i0), a + int(i1), names[int(reason[i0])]) for i0, i1 in zip(edges[:-1], edges[1:])]
+
+
+def _tested_json(t, dt, tested, moving, spans) -> dict:
+    """What was tested: seconds still and moving, and the untested spans with their reasons.
+
+    Returns
+    -------
+    dict
+        ``still_s``, ``moving_s`` (tested) and ``untested_s`` [s];
+        ``untested_by_reason_s`` {reason: s}; ``untested``: list of
+        ``{"start_s", "end_s", "reason"}``.
+    """
+    by: dict[str, float] = {}
+    for a, b, why in spans:
+        by[why] = by.get(why, 0.0) + (b - a) * dt
+    return {"still_s": float(np.sum(tested & ~moving) * dt),
+            "moving_s": float(np.sum(tested & moving) * dt),
+            "untested_s": float(sum((b - a) for a, b, _ in spans) * dt),
+            "untested_by_reason_s": by,
+            "untested": [{"start_s": float(t[a]), "end_s": float(t[b - 1] + dt), "reason": why}
+                         for a, b, why in spans]}
+
+
+def _repeat_share(z, still):
+    """Share of each gyro's still samples that repeat the previous output (None: not known)."""
+    if still is None:
+        return None
+    keep = np.asarray(still, dtype=bool)[1:] & np.asarray(still, dtype=bool)[:-1]
+    if keep.sum() < MIN_RECORD_SAMPLES:
+        return None
+    return np.mean(z[1:][keep] == z[:-1][keep], axis=0)
 
 
 def _still(meas):
@@ -249,7 +485,7 @@ def _no_parity_noise(meas, model, detector, far_per_h, p_md, notes):
         notes.append("minimum_detectable: not available, the record has no noise to size the "
                      "thresholds from (give --model MODEL.toml with the gyros' ARW and RRW)")
         return ({"alarms": [], "far_per_h": float(far_per_h), "minimum_detectable": md,
-                 "notes": notes}, res, None)
+                 "tested": _all_tested(meas), "notes": notes}, res, None)
     det = _fit(detector, meas, model, model)
     md = minimum_detectable(meas.layout, det.noise_, far_per_h, p_md, dt_s=meas.dt_s,
                             design=det.design_)
@@ -257,7 +493,14 @@ def _no_parity_noise(meas, model, detector, far_per_h, p_md, notes):
                  f"alarms/h; drift within {md['drift_window_s']:g} s; stuck_static_s for a gyro "
                  "stuck at rest; the record itself has none of the noise the model gives")
     return ({"alarms": [], "far_per_h": float(far_per_h), "minimum_detectable": _md_json(md),
-             "notes": notes}, res, det)
+             "tested": _all_tested(meas), "notes": notes}, res, det)
+
+
+def _all_tested(meas) -> dict:
+    """``tested`` of a record whose parity is zero: every sample answered (no fault)."""
+    n = meas.gyro_rad_s.shape[0]
+    return _tested_json(np.asarray(meas.time_s), meas.dt_s, np.ones(n, dtype=bool),
+                        np.zeros(n, dtype=bool), [])
 
 
 def _md_json(md: dict) -> dict:
@@ -368,6 +611,15 @@ def format_fdi(out: dict, source: str = "") -> str:
         lines.append(f"  {g:>4} {f(d['step_deg_s'], '.4g'):>11} {f(d['drift_deg_s2'], '.4g'):>13} "
                      f"{f(d['noise_ratio'], '.4g'):>12} {f(d['stuck_static_s'], '.4g'):>15} "
                      f"{'yes' if d['isolable'] else 'no'}")
+    tested = out.get("tested")
+    if tested is not None:
+        lines.append(f"tested for faults: {tested['still_s']:.1f} s still, {tested['moving_s']:.1f} s "
+                     f"moving; not tested: {tested['untested_s']:.1f} s")
+        for why, sec in tested["untested_by_reason_s"].items():
+            spans = [u for u in tested["untested"] if u["reason"] == why]
+            shown = ", ".join(f"{u['start_s']:.2f}-{u['end_s']:.2f}" for u in spans[:6])
+            more = f" and {len(spans) - 6} more" if len(spans) > 6 else ""
+            lines.append(f"  {sec:7.1f} s  {why}: {shown}{more} s")
     lines += [f"note: {n}" for n in out["notes"]]
     return "\n".join(lines)
 

@@ -56,10 +56,12 @@ from typing import Any, cast
 
 import numpy as np
 import tomli_w
+from scipy import stats
 
 from gyroarray import __version__
-from gyroarray.analysis.allan import allan_analysis, averaging_factors, edf_simple
-from gyroarray.analysis.avar_covariance import AvarCovariance
+from gyroarray.analysis.allan import ONE_SIGMA, allan_analysis
+from gyroarray.analysis.white_level import (WhiteWalk, nnls2, octave_avar, pooled_deviation,
+                                            pooled_white_level, white_walk_fit, white_walk_of_avar)
 from gyroarray.analysis.motion import still_mask
 from gyroarray.core import units
 from gyroarray.core.errors import InputError
@@ -74,7 +76,7 @@ from gyroarray.effects.names import ARW, CORRELATION
 
 __all__ = ["MIN_PART", "AXES", "WhiteWalk", "FuseResult", "fuse", "still_parts", "stitch",
            "octave_avar", "white_walk_fit", "white_walk_of_avar", "design_rrw", "nnls2", "fused_measurement", "fused_files", "sha256_of",
-           "split_parts", "fused_terms", "band_basis", "predicted_band", "tau_verdict", "validate_fuse",
+           "split_parts", "joined", "fused_terms", "band_basis", "predicted_band", "tau_verdict", "validate_fuse",
            "resolve_estimator", "used_gyros", "check_geometry", "model_noise", "fitted_noise", "noise_of_model", "gain_of", "predicted_arw", "plain_params",
            "best_single_of", "axes_json", "fused_sidecar"]
 
@@ -84,10 +86,6 @@ MIN_PART = 256
 AXES = ("x", "y", "z")
 #: Fewest samples of analysed part for the Allan fits (6 octaves up to n/8).
 MIN_ANALYSED = 256
-#: Slowest octave τ of the white + walk fit, as a fraction of the analysed length [-].
-FIT_SPAN = 1.0 / 8.0
-#: Fewest octaves of the white + walk fit.
-MIN_FIT_OCTAVES = 3
 #: Smallest positive ARW of a model's gyro an estimator is designed with [deg/√h]: far below any
 #: gyro built; below it N²/dt underflows towards 0 and the noise covariance is singular.
 MIN_MODEL_ARW_DEG_RT_H = 1e-9
@@ -141,173 +139,14 @@ def stitch(x: np.ndarray, parts) -> np.ndarray:
     return np.concatenate([x[a:b] - x[a:b].mean(axis=0) for a, b in parts])
 
 
-def octave_avar(x, dt_s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
-    """Overlapping Allan variance of each column at the octave τ (numpy, all columns at once).
-
-    Parameters
-    ----------
-    x : array_like, shape (n, C)
-        Rate samples [rad/s].
-    dt_s : float
-        Sample step [s].
-
-    Returns
-    -------
-    taus_s : ndarray (M,)
-        Averaging times [s].
-    avar : ndarray (M, C)
-        Allan variance [rad²/s²].
-    m : ndarray (M,)
-        Averaging factors.
-    n_phase : int
-        n + 1 phase points.
-
-    Notes
-    -----
-    σ²(mτ0) = Σ_i (X_{i+2m} − 2X_{i+m} + X_i)² / (2 m² (n+1 − 2m)), X the cumulative sum
-    of the rate minus its mean (NIST SP 1065 eq. 11, angle in rate·samples).
-    """
-    x = np.asarray(x, dtype=float)
-    n = x.shape[0]
-    phase = np.zeros((n + 1, x.shape[1]))
-    np.cumsum(x - x.mean(axis=0), axis=0, out=phase[1:])
-    m = averaging_factors(n + 1, dt_s, "octave")
-    avar = np.empty((m.size, x.shape[1]))
-    for i, mm in enumerate(m.tolist()):
-        d = phase[2 * mm:] - 2.0 * phase[mm:n + 1 - mm] + phase[:n + 1 - 2 * mm]
-        avar[i] = np.einsum("ij,ij->j", d, d) / (2.0 * mm * mm * (n + 1 - 2 * mm))
-    return m * dt_s, avar, m, n + 1
-
-
-@dataclass(frozen=True)
-class WhiteWalk:
-    """White + random-walk fit of C rate series [SI].
-
-    Attributes
-    ----------
-    arw_rad_rt_s, arw_sigma : ndarray (C,)
-        Angle random walk N and its 1σ [rad/√s].
-    rrw_rad_s_rt_s, rrw_sigma : ndarray (C,)
-        Rate random walk K and its 1σ [rad/s/√s].
-    """
-
-    arw_rad_rt_s: np.ndarray
-    arw_sigma: np.ndarray
-    rrw_rad_s_rt_s: np.ndarray
-    rrw_sigma: np.ndarray
-
-
-def white_walk_fit(x, dt_s: float, min_tau_s: float = 1.0) -> WhiteWalk:
-    """ARW and RRW of each column from its octave Allan variance.
-
-    σ²(τ) = N²/τ + K²τ/3 fitted at the octave τ from ``min_tau_s`` up to :data:`FIT_SPAN`
-    of the record (the last :data:`MIN_FIT_OCTAVES` octaves below it when fewer are left) by
-    non-negative least squares, each point weighted by its standard error
-    σ²_model(τ)·sqrt(2/edf) (white-FM EDF, :func:`~gyroarray.analysis.allan.edf_simple`;
-    two passes: the weights from the measured, then from the fitted variance). 1σ of N and
-    K from the sandwich covariance B Σ Bᵀ of the weighted fit, B = (AᵀWA)⁻¹AᵀW, Σ the exact
-    finite-record covariance of the octave estimates under the fitted model
-    (:class:`~gyroarray.analysis.avar_covariance.AvarCovariance`: neighbouring octaves
-    correlate; ``tests/test_hostile_numbers.py`` checks the z spread on simulated 120 s
-    records). A record too short for two octaves gets N from
-    the spread of its first differences (σ_Δ/√2·√dt) and K = 0.
-
-    Parameters
-    ----------
-    x : array_like, shape (n, C)
-        Rate samples [rad/s].
-    dt_s : float
-        Sample step [s].
-    min_tau_s : float
-        Shortest τ of the fit [s]. The default 1 s is the IEEE Std 952 reading of ARW (the
-        τ^-1/2 line at τ = 1 s) extended to the white level over τ >= 1 s, which the angle
-        error over seconds and longer sees; the shorter τ, where a sensor's own filter,
-        vibration lines and quantization shape the variance of a real gyro (MIMU4444: lines
-        at 5-31 Hz), are left out. On white noise every τ range gives the same N.
-
-    Returns
-    -------
-    WhiteWalk
-    """
-    x = np.asarray(x, dtype=float)
-    n, c = x.shape
-    ww = None
-    if n >= 8:
-        taus, avar, m, n_phase = octave_avar(x, dt_s)
-        ww = white_walk_of_avar(taus, avar, m, n_phase, min_tau_s)
-    if ww is None:
-        d = np.diff(x, axis=0) if n > 1 else np.zeros((1, c))
-        arw = np.std(d, axis=0) / math.sqrt(2.0) * math.sqrt(dt_s)
-        return WhiteWalk(arw, np.full(c, np.nan), np.zeros(c), np.full(c, np.nan))
-    return ww
-
-
-def white_walk_of_avar(taus, avar, m, n_phase: int, min_tau_s: float = 1.0) -> WhiteWalk | None:
-    """:func:`white_walk_fit` from the octave Allan variance (M, C) at ``taus`` [s] (averaging
-    factors ``m``, ``n_phase`` phase points: n + 1 for n samples), e.g. a streamed one; None
-    when fewer than two octaves are usable (the caller falls back on the differences)."""
-    taus, avar, m = np.asarray(taus, float), np.asarray(avar, float), np.asarray(m)
-    c = avar.shape[1]
-    n = n_phase - 1
-    arw, arw_s = np.zeros(c), np.full(c, np.nan)
-    rrw, rrw_s = np.zeros(c), np.full(c, np.nan)
-    use = np.flatnonzero(m <= max(FIT_SPAN * n, 2))
-    slow = use[taus[use] >= min_tau_s * (1.0 - 1e-9)]
-    use = slow if slow.size >= MIN_FIT_OCTAVES else use[-MIN_FIT_OCTAVES:]
-    if use.size < 2:
-        return None
-    t, av = taus[use], avar[use]
-    edf = np.asarray(edf_simple(n_phase, m[use], 0), dtype=float)
-    a = np.column_stack([1.0 / t, t / 3.0])
-    cov_model = None
-    for j in range(c):
-        target = av[:, j]
-        if not np.any(target > 0):
-            continue
-        model = target.copy()
-        coef = np.zeros(2)
-        for _ in range(2):
-            se = np.maximum(model, 1e-300) * np.sqrt(2.0 / edf)
-            coef = nnls2(a / se[:, None], target / se)
-            model = a @ coef
-        w = 1.0 / (np.maximum(model, 1e-300) * np.sqrt(2.0 / edf)) ** 2
-        with np.errstate(all="ignore"):
-            cov = np.linalg.pinv((a * w[:, None]).T @ a)
-            # the octave estimates correlate (about 0.5 between neighbours for white FM): the
-            # weighted fit's covariance is the sandwich B Σ Bᵀ, B = (AᵀWA)⁻¹AᵀW, with Σ the
-            # exact finite-record covariance of the estimates under the fitted N² and K²
-            # (taken as independent, (AᵀWA)⁻¹ gave z spreads of 1.2-1.3 on 120 s records)
-            if cov_model is None:
-                cov_model = AvarCovariance(m[use], n_phase - 2 * m[use], 2, float(t[0] / m[use][0]))
-            b = cov @ (a * w[:, None]).T
-            sandwich = b @ cov_model.covariance({"n": float(coef[0]), "k": float(coef[1])}) @ b.T
-            if np.all(np.isfinite(sandwich)) and sandwich[0, 0] >= 0 and sandwich[1, 1] >= 0:
-                cov = sandwich
-        arw[j], rrw[j] = math.sqrt(max(coef[0], 0.0)), math.sqrt(max(coef[1], 0.0))
-        # σ of sqrt(c): σ_c / (2 sqrt c), or sqrt(σ_c) at c = 0
-        for v, s, col, out in ((arw[j], cov[0, 0], 0, arw_s), (rrw[j], cov[1, 1], 1, rrw_s)):
-            sc = math.sqrt(max(s, 0.0))
-            out[j] = sc / (2.0 * v) if v > 0 else math.sqrt(sc)
-    return WhiteWalk(arw, arw_s, rrw, rrw_s)
-
-
-def nnls2(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """argmin ||a c − b|| over c >= 0 for a (M, 2) design (closed form: the unconstrained
-    solution, else the better of the two one-column fits)."""
-    scale = np.linalg.norm(a, axis=0)
-    scale[scale == 0] = 1.0
-    u = a / scale
-    c, *_ = np.linalg.lstsq(u, b, rcond=None)
-    if np.all(c >= 0):
-        return c / scale
-    best, best_r = np.zeros(2), float(b @ b)
-    for j in range(2):
-        cj = max(float(u[:, j] @ b), 0.0)            # unit column: the one-column fit
-        r = float(np.sum((b - cj * u[:, j]) ** 2))
-        if r < best_r:
-            best, best_r = np.zeros(2), r
-            best[j] = cj
-    return best / scale
+def joined(parts) -> list[tuple[int, int]]:
+    """Where each part lies in :func:`stitch`'s output, ``[start, stop)``: the Allan fits pool
+    them without differencing across a join (:func:`~gyroarray.analysis.white_level.white_walk_fit`)."""
+    out, start = [], 0
+    for a, b in parts:
+        out.append((start, start + b - a))
+        start += b - a
+    return out
 
 
 # =========================================================================
@@ -377,6 +216,7 @@ class FuseResult:
     notes: list = field(default_factory=list)
     gain: np.ndarray | None = None
     time_constant_s: float | None = None
+    model_check: dict | None = None
 
     def best_single(self) -> list[tuple[int | None, float]]:
         """Per axis: (best single gyro, 1-based, or None; its ARW on that axis [rad/√s])."""
@@ -408,7 +248,7 @@ class FuseResult:
             "analysed_parts": [[int(a), int(b)] for a, b in self.parts],
             "analysed_parts_s": [[float(m.time_s[a] - m.time_s[0]), float(m.time_s[b - 1] - m.time_s[0] + m.dt_s)]
                                  for a, b in self.parts],
-            "axes": axes, "single_gyros": single,
+            "axes": axes, "single_gyros": single, "model_check": self.model_check,
             "gain_definition": "gain = min over used gyros k of (ARW_k / |h_k,axis|) / fused ARW "
                                "of the axis; ARWs from the same white + walk Allan fit on the "
                                "analysed part",
@@ -633,9 +473,82 @@ def predicted_arw(est, noise: ArrayNoise) -> np.ndarray | None:
     return np.sqrt(np.maximum(v, 0.0))
 
 
+#: How ``fuse --model`` treats a gyro whose white level on the record lies outside the model's
+#: range: ``"record"`` (default) designs the estimator with the record's own level for it,
+#: ``"model"`` keeps the model's (the check is reported either way).
+OFF_LEVELS = ("record", "model")
+#: Confidence level of the model check [-] (the record's level and the model's range).
+CHECK_LEVEL = 0.95
+#: Worst fused ARW a model's weights may give against OLS on the same record before it is said [-].
+OLS_MARGIN = 1.05
+
+
+def model_levels(model, n_gyros: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Each gyro's white level in a model: (central N, 1σ, low, high) [rad/√s], NaN where the model
+    has none. Central and 1σ: the ``arw`` entry (its ``sigma``); low/high: the ``[array]`` table's
+    credible range of a model fitted on several records, else central·exp(∓z·σ/N) (z the normal
+    quantile of :data:`CHECK_LEVEL`)."""
+    cen, sig = np.full(n_gyros, np.nan), np.zeros(n_gyros)
+    every = None
+    for e in model:
+        if e.effect != ARW:
+            continue
+        v = float(e.params.get("n_deg_rt_h", np.nan))
+        sv = float((e.sigma or {}).get("n_deg_rt_h", 0.0) or 0.0)
+        if e.gyro is None:
+            every = (v, sv)
+        elif 1 <= e.gyro <= n_gyros:
+            cen[e.gyro - 1], sig[e.gyro - 1] = v, sv
+    if every is not None:
+        fill = np.isnan(cen)
+        cen[fill], sig[fill] = every
+    z = float(stats.norm.ppf(0.5 + CHECK_LEVEL / 2))
+    rel = np.where(cen > 0, sig / np.where(cen > 0, cen, 1.0), 0.0)
+    low, high = cen * np.exp(-z * rel), cen * np.exp(z * rel)
+    table = getattr(model, "array", None)
+    if table is not None and getattr(table, "white_n_low_deg_rt_h", None) is not None:
+        for g, lo, hi in zip(table.gyros, table.white_n_low_deg_rt_h, table.white_n_high_deg_rt_h):
+            if 1 <= g <= n_gyros:
+                low[g - 1], high[g - 1] = lo, hi
+    to_si = units.arw_deg_rt_h_to_rad_rt_s
+    return to_si(cen), to_si(sig), to_si(low), to_si(high)
+
+
+def check_model(model, level: "WhiteWalk", used: list[int], n_gyros: int) -> dict:
+    """Each used gyro's white level on the record (``level``: the pooled reading, with its 1σ)
+    against the model's range (:func:`model_levels`): a gyro is *off* when the record's
+    :data:`CHECK_LEVEL` interval and the model's range do not overlap. JSON-ready (deg/√h)."""
+    cen, _, low, high = model_levels(model, n_gyros)
+    z = float(stats.norm.ppf(0.5 + CHECK_LEVEL / 2))
+    arw = units.arw_rad_rt_s_to_deg_rt_h
+    gyros, off = {}, []
+    for i, k in enumerate(used):
+        n, s = float(level.arw_rad_rt_s[i]), float(np.nan_to_num(level.arw_sigma[i]))
+        lo_r, hi_r = n * math.exp(-z * s / n) if n > 0 else 0.0, n * math.exp(z * s / n) if n > 0 else 0.0
+        lo_m, hi_m = float(low[k - 1]), float(high[k - 1])
+        bad = bool(np.isfinite(lo_m) and (hi_r < lo_m or lo_r > hi_m))
+        gyros[str(k)] = {"record_n_deg_rt_h": float(arw(n)), "record_sigma_deg_rt_h": float(arw(s)),
+                         "model_n_deg_rt_h": float(arw(cen[k - 1])), "model_low_deg_rt_h": float(arw(lo_m)),
+                         "model_high_deg_rt_h": float(arw(hi_m)), "off": bad}
+        if bad:
+            off.append(k)
+    return {"level": CHECK_LEVEL, "off": off, "gyros": gyros,
+            "definition": "white level N = ADEV(tau1)*sqrt(tau1), tau1 ~ 1 s, pooled over the still parts; "
+                          "a gyro is off when the record's interval and the model's range do not overlap"}
+
+
+def _off_text(check: dict) -> str:
+    parts = []
+    for k in check["off"]:
+        g = check["gyros"][str(k)]
+        parts.append(f"gyro {k} {g['record_n_deg_rt_h']:.3g} (model {g['model_low_deg_rt_h']:.3g}-"
+                     f"{g['model_high_deg_rt_h']:.3g})")
+    return ", ".join(parts)
+
+
 def fuse(meas: Measurement, estimator: str, *, model=None, model_name: str | None = None,
          exclude=(), params: dict | None = None, noise: ArrayNoise | None = None,
-         noise_source: str | None = None) -> FuseResult:
+         noise_source: str | None = None, off_levels: str = "record") -> FuseResult:
     """Fuse a recorded array with a registered estimator (module docstring).
 
     Parameters
@@ -696,7 +609,7 @@ def fuse(meas: Measurement, estimator: str, *, model=None, model_name: str | Non
                              f"the gyros' noise on (at least {MIN_ANALYSED} samples are needed): give "
                              "--model M.toml (e.g. from gyroarray fit)", file=meas.source)
         assert e_single is not None
-        ww = white_walk_fit(e_single, dt)
+        ww = white_walk_fit(e_single, dt, parts=joined(parts))
         arw = ww.arw_rad_rt_s.copy()
         weak = arw <= 0
         if weak.any():                    # a walk alone: the white level from the differences
@@ -705,6 +618,47 @@ def fuse(meas: Measurement, estimator: str, *, model=None, model_name: str | Non
         noise, source = fitted_noise(arw, ww, used, notes)
     else:
         noise, source = noise_of_model(model, meas, used, cls.needs_arw, model_name, notes)
+    check = None
+    pred_noise = None
+    pred_levels = None
+    if model is not None and noise_source is None and enough:
+        # the model against the record before it is used: each gyro's white level here
+        if off_levels not in OFF_LEVELS:
+            raise InputError(f"--off-levels must be one of {', '.join(OFF_LEVELS)}, got {off_levels!r}")
+        here = white_walk_fit(cast(np.ndarray, e_single), dt, parts=joined(parts))
+        check = check_model(model, here, used, meas.n_gyros)
+        if check["off"]:
+            what = (f"the white level of {_off_text(check)} deg/√h on this record lies outside the model's "
+                    f"{CHECK_LEVEL:.0%} range")
+            if off_levels == "record" and cls.needs_arw:
+                arw = noise.arw_rad_rt_s.copy()
+                for k in check["off"]:
+                    arw[used.index(k)] = max(float(here.arw_rad_rt_s[used.index(k)]), 1e-30)
+                noise = ArrayNoise(arw, noise.rrw_rad_s_rt_s, noise.corr_arw, noise.corr_rrw,
+                                   noise.ignored_effects, zero_arw_ok=noise.zero_arw_ok)
+                notes.append(what + ": the estimator is designed with the record's own level for "
+                             f"gyro(s) {', '.join(map(str, check['off']))} (--off-levels record, the default; "
+                             "--off-levels model keeps the model's)")
+                source += f", the record's own white level for gyro(s) {', '.join(map(str, check['off']))}"
+            else:
+                notes.append(what + ": the model's levels are kept (--off-levels model)")
+        check["action"] = off_levels if check["off"] else None
+        # the prediction reads each gyro at the model's central level (the record's own for a
+        # gyro found off, with --off-levels record), not at the high end the estimator is designed with
+        cen = model_levels(model, meas.n_gyros)[0][[k - 1 for k in used]]
+        n_pred = np.where(np.isfinite(cen) & (cen > 0), cen, noise.arw_rad_rt_s)
+        if off_levels == "record":
+            for k in check["off"]:
+                n_pred[used.index(k)] = noise.arw_rad_rt_s[used.index(k)]
+        pred_noise = ArrayNoise(np.maximum(n_pred, 1e-30), noise.rrw_rad_s_rt_s, noise.corr_arw, noise.corr_rrw,
+                                noise.ignored_effects, zero_arw_ok=noise.zero_arw_ok)
+        s_pred = model_levels(model, meas.n_gyros)[1][[k - 1 for k in used]]
+        s_pred = np.where(np.isfinite(s_pred), s_pred, 0.0)
+        if off_levels == "record":
+            for k in check["off"]:
+                s_pred[used.index(k)] = float(np.nan_to_num(here.arw_sigma[used.index(k)]))
+        lev1 = pooled_white_level(cast(np.ndarray, e_single)[:, :1], dt, joined(parts))
+        pred_levels = (s_pred, 0.0 if lev1 is None else float(lev1[3]))
     if model is None and "allan_covariance" in est.get_params() and est.get_params()["allan_covariance"] is None:
         tau = est.get_params().get("tau_s")
         if isinstance(tau, (int, float)) and math.isfinite(tau) and tau > 0:
@@ -734,17 +688,54 @@ def fuse(meas: Measurement, estimator: str, *, model=None, model_name: str | Non
     if enough:
         e_fused = fused - meas.ref_rad_s if meas.has_reference else fused
         ef = stitch(e_fused, parts)
-        both = white_walk_fit(np.hstack([cast(np.ndarray, e_single), ef]), dt)
+        both = white_walk_fit(np.hstack([cast(np.ndarray, e_single), ef]), dt, parts=joined(parts))
         c = len(used)
         single = WhiteWalk(*(v[:c] for v in (both.arw_rad_rt_s, both.arw_sigma, both.rrw_rad_s_rt_s,
                                               both.rrw_sigma)))
         fused_fit = WhiteWalk(*(v[c:] for v in (both.arw_rad_rt_s, both.arw_sigma, both.rrw_rad_s_rt_s,
                                                  both.rrw_sigma)))
+        if check is not None and gain is not None and pred_levels is not None and pred_noise is not None:
+            # the prediction's interval: the model's levels on a new record (their 1σ) and this
+            # record's own sampling of the fused ADEV at τ1 (χ² with the pooled EDF)
+            n2, n2_sd = fused_terms(gain, pred_noise.arw_rad_rt_s, pred_levels[0], pred_noise.corr_arw)
+            rel_model = n2_sd / np.maximum(2.0 * n2, 1e-300)                  # 1σ of ln N_fused
+            edf = max(pred_levels[1], 1.0)
+            z = float(stats.norm.ppf(0.5 + CHECK_LEVEL / 2))
+            lo_s = math.sqrt(edf / float(stats.chi2.ppf(0.5 + CHECK_LEVEL / 2, edf)))
+            hi_s = math.sqrt(edf / float(stats.chi2.ppf(0.5 - CHECK_LEVEL / 2, edf)))
+            p = np.sqrt(n2)
+            lo = p * np.exp(-np.sqrt((z * rel_model) ** 2 + math.log(1.0 / lo_s) ** 2))
+            hi = p * np.exp(np.sqrt((z * rel_model) ** 2 + math.log(hi_s) ** 2))
+            arw_d = units.arw_rad_rt_s_to_deg_rt_h
+            check["predicted_arw_deg_rt_h"] = [float(v) for v in arw_d(p)]
+            check["predicted_interval_deg_rt_h"] = [[float(arw_d(a_)), float(arw_d(b_))] for a_, b_ in zip(lo, hi)]
+            check["measured_arw_deg_rt_h"] = [float(v) for v in arw_d(fused_fit.arw_rad_rt_s)] \
+                if fused_fit is not None else None
+            check["interval"] = (f"{CHECK_LEVEL:.0%}: the model's levels on a new record (their 1σ, the "
+                                 "between-record spread of a model fitted on several records) and the record's "
+                                 f"own sampling of ADEV(tau1) (chi-square, EDF {edf:.0f})")
+        if check is not None and gain is not None:
+            # never silently worse than OLS on the same record
+            assert fused_fit is not None
+            e_ols = stitch((y - meas.ref_rad_s @ h.T if meas.has_reference else y) @ np.linalg.pinv(h).T, parts)
+            ww_ols = white_walk_fit(e_ols, dt, parts=joined(parts))
+            ratio = fused_fit.arw_rad_rt_s / np.maximum(ww_ols.arw_rad_rt_s, 1e-300)
+            check["ols_arw_deg_rt_h"] = [float(v) for v in units.arw_rad_rt_s_to_deg_rt_h(ww_ols.arw_rad_rt_s)]
+            check["fused_over_ols"] = [float(v) for v in ratio]
+            worse = [AXES[a] for a in range(3) if ratio[a] > OLS_MARGIN]
+            if worse:
+                notes.append(f"with the model's weights the fused ARW is worse than plain OLS on this record on "
+                             f"{', '.join(f'{a} (x{ratio[AXES.index(a)]:.2f})' for a in worse)}: the model's "
+                             "levels or correlations do not hold here; refit on this record (gyroarray fit) or "
+                             "fuse with --estimator ols")
         adev = []
         for a in range(3):
             try:
                 with np.errstate(all="ignore"):
-                    adev.append(allan_analysis(ef[:, a], dt))
+                    # stitched parts: the ADEV pooled within them (a τ beyond one part would
+                    # read the joins), its interval from the parts' summed EDF
+                    adev.append(allan_analysis(ef[:, a], dt) if len(parts) == 1 else
+                                pooled_deviation(ef[:, a], dt, joined(parts), ONE_SIGMA))
             except (InputError, np.linalg.LinAlgError, ValueError, FloatingPointError) as err:
                 adev.append(None)
                 notes.append(f"fused {AXES[a]}: no ADEV ({getattr(err, 'message', err)})")
@@ -755,8 +746,9 @@ def fuse(meas: Measurement, estimator: str, *, model=None, model_name: str | Non
                       fused_rad_s=fused, used=used, excluded=excluded, constant=constant,
                       noise=noise, model_source=source, parts=parts, analysed=analysed,
                       single=single, fused_fit=fused_fit, adev=adev,
-                      predicted_arw_rad_rt_s=predicted_arw(est, noise), notes=notes,
-                      gain=gain, time_constant_s=tconst)
+                      predicted_arw_rad_rt_s=predicted_arw(est, noise if pred_noise is None else pred_noise),
+                      notes=notes,
+                      gain=gain, time_constant_s=tconst, model_check=check)
 
 
 # =========================================================================
@@ -1014,7 +1006,7 @@ def _mapped(table, key: str, used: list[int], matrix, default: np.ndarray) -> np
 
 def validate_fuse(meas: Measurement, estimator: str, *, holdout: float | None = 0.5, exclude=(),
                   params: dict | None = None, model=None, model_name: str | None = None,
-                  seed: int = 0, runs: int = VALIDATE_RUNS) -> tuple[FuseResult, dict]:
+                  seed: int = 0, runs: int = VALIDATE_RUNS, off_levels: str = "record") -> tuple[FuseResult, dict]:
     """Fit the array model on part of a record, predict the fused ADEV, and check it on the rest.
 
     1. The analysed part (:func:`still_parts`) is split in time (:func:`split_parts`): the
@@ -1083,7 +1075,7 @@ def validate_fuse(meas: Measurement, estimator: str, *, holdout: float | None = 
             raise InputError(f"--holdout {holdout:g} leaves {n_fit} samples to fit on and {n_held} to validate "
                              f"on; each needs at least {MIN_ANALYSED}: record a longer still part or change "
                              "--holdout", file=name)
-        ww = white_walk_fit(stitch(resid, fit_p), dt)
+        ww = white_walk_fit(stitch(resid, fit_p), dt, parts=joined(fit_p))
         mask = np.zeros(meas.n_samples, bool)
         for a, b in fit_p:
             mask[a:b] = True
@@ -1097,7 +1089,8 @@ def validate_fuse(meas: Measurement, estimator: str, *, holdout: float | None = 
         if arr is not None:
             tab = arr.table()
             c_w = table_correlation(tab, "white_correlation", used, eye)
-            c_w_sd = _mapped(tab, "white_correlation", used, arr.white.corr_sigma, np.zeros_like(eye))
+            w_est = arr.white_tau if arr.white_tau is not None and arr.correlation_basis == "tau" else arr.white
+            c_w_sd = _mapped(tab, "white_correlation", used, w_est.corr_sigma, np.zeros_like(eye))
             if arr.slow is not None:
                 c_k = table_correlation(tab, "walk_correlation", used, eye)
                 c_k_sd = _mapped(tab, "walk_correlation", used, arr.slow.corr_sigma, np.zeros_like(eye))
@@ -1119,14 +1112,35 @@ def validate_fuse(meas: Measurement, estimator: str, *, holdout: float | None = 
         if holdout is not None:
             raise InputError("--holdout splits the record to fit a model on; with --model the whole "
                              "record is validated: leave out --holdout or --model", file=name)
-        res = fuse(meas, estimator, model=model, model_name=model_name, exclude=exclude, params=params)
+        res = fuse(meas, estimator, model=model, model_name=model_name, exclude=exclude, params=params,
+                   off_levels=off_levels)
         fit_p, held_p = [], list(parts)
         if sum(b - a for a, b in held_p) < MIN_ANALYSED:
             raise InputError(f"the analysed part has {sum(b - a for a, b in held_p)} samples; validating "
                              f"needs at least {MIN_ANALYSED}", file=name)
         noise = res.noise
         zero = np.zeros(len(used))
-        lev = (noise.arw_rad_rt_s, zero, noise.rrw_rad_s_rt_s, zero)
+        # the prediction reads each gyro at the model's central level with its 1σ on a new record
+        # (a model fitted on several records: the between-record spread), not at the high end the
+        # estimator is designed with; a gyro found off is read at the record's own level
+        cen, sig, _, _ = model_levels(model, meas.n_gyros)
+        idx_u = [k - 1 for k in used]
+        n_c = np.where(np.isfinite(cen[idx_u]), cen[idx_u], noise.arw_rad_rt_s)
+        s_c = np.where(np.isfinite(cen[idx_u]), sig[idx_u], 0.0)
+        table = getattr(model, "array", None)
+        if table is not None and getattr(table, "white_n_low_deg_rt_h", None) is not None:
+            # several records: 1σ of a new record's level, from the credible range (±q·σ in ln N)
+            lo, hi = model_levels(model, meas.n_gyros)[2:]
+            q = float(stats.norm.ppf(0.975))                 # as levels_across's range
+            s_c = np.where(np.isfinite(cen[idx_u]), n_c * np.log(np.maximum(hi[idx_u], 1e-300)
+                                                                   / np.maximum(n_c, 1e-300)) / q, s_c)
+        chk = res.model_check or {"off": []}
+        for k in chk["off"]:
+            if off_levels == "record":
+                i = used.index(k)
+                n_c[i] = noise.arw_rad_rt_s[i]
+                s_c[i] = float(units.arw_deg_rt_h_to_rad_rt_s(chk["gyros"][str(k)]["record_sigma_deg_rt_h"]))
+        lev = (n_c, s_c, noise.rrw_rad_s_rt_s, zero)
         c_w, c_k, c_w_sd, c_k_sd = noise.corr_arw, noise.corr_rrw, None, None
     if res.gain is None:
         raise InputError(f"{estimator} is not a fixed linear filter: its fused noise cannot be predicted "
@@ -1138,7 +1152,7 @@ def validate_fuse(meas: Measurement, estimator: str, *, holdout: float | None = 
     # method (errors taken independent) does not see
     floor_n = floor_k = np.zeros(3)
     if fit_p:
-        fw = white_walk_fit(stitch(resid, fit_p) @ w.T, dt)
+        fw = white_walk_fit(stitch(resid, fit_p) @ w.T, dt, parts=joined(fit_p))
         sn, sk = np.nan_to_num(fw.arw_sigma), np.nan_to_num(fw.rrw_sigma)
         floor_n = 2.0 * fw.arw_rad_rt_s * sn + sn ** 2
         floor_k = np.where(fw.rrw_rad_s_rt_s > 0, 2.0 * fw.rrw_rad_s_rt_s * sk, sk ** 2)
@@ -1151,8 +1165,8 @@ def validate_fuse(meas: Measurement, estimator: str, *, holdout: float | None = 
     ef = stitch(e_fused, held_p)
     lengths = [b - a for a, b in held_p]
     taus, avar_m, _, _ = octave_avar(ef, dt)
-    held_ww = white_walk_fit(ef, dt)
-    single_ww = white_walk_fit(stitch(resid, held_p), dt)
+    held_ww = white_walk_fit(ef, dt, parts=joined(held_p))
+    single_ww = white_walk_fit(stitch(resid, held_p), dt, parts=joined(held_p))
     tc = res.time_constant_s or 0.0
     use = taus >= 10.0 * tc * (1.0 - 1e-9) if tc > 0 else np.ones(taus.size, bool)
     if tc > 0:
@@ -1192,6 +1206,11 @@ def validate_fuse(meas: Measurement, estimator: str, *, holdout: float | None = 
             assert pt.size == taus.size
             v = tau_verdict(taus, m_adev, plo, phi, padev, n2=float(n2[a]), k2=float(k2[a]), use=use,
                             independent=kind == "independent")
+            off_here = [k for k in (res.model_check or {}).get("off", []) if abs(h[used.index(k), a]) > 1e-9]
+            if off_here:
+                v["verdict"] += (f"; the model's white level does not hold on this record for gyro(s) "
+                                 f"{', '.join(map(str, off_here))} ({_off_text(res.model_check or {})} deg/√h)")
+                v["off_gyros"] = off_here
             d["predicted"][kind] = {
                 "arw_deg_rt_h": float(arw_u(math.sqrt(n2[a]))),
                 "arw_deg_rt_h_sigma": float(arw_u(n2_sd[a] / (2.0 * math.sqrt(n2[a])))) if n2[a] > 0 else None,
@@ -1206,7 +1225,7 @@ def validate_fuse(meas: Measurement, estimator: str, *, holdout: float | None = 
            "fit_parts_s": [[float(meas.time_s[a] - t0), float(meas.time_s[b - 1] - t0 + dt)] for a, b in fit_p],
            "held_parts_s": span, "fit_s": sum(b - a for a, b in fit_p) * dt,
            "held_s": sum(lengths) * dt, "model": res.model_source,
-           "fitted_array": fitted_json, "axes": axes, "notes": notes,
+           "fitted_array": fitted_json, "axes": axes, "notes": notes, "model_check": res.model_check,
            "method": ("prediction: per axis, n2 = w'(C_w o N N')w and k2 = w'(C_k o K K')w with w the "
                       "estimator's gain; white n2 + walk k2 simulated on the held-out parts "
                       f"({runs} runs, each part's mean out, the fit's 1-sigma drawn): the band is its "

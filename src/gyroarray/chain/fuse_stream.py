@@ -281,6 +281,8 @@ def streamed_fuse(head: RecordHead, estimator: str, *, model=None, model_name: s
                                      " (streamed: the whole record's overlapping Allan variance)")
     else:
         noise, source = noise_of_model(model, stand_in, used, cls.needs_arw, model_name, notes)
+        notes.append("streamed: the model's white levels are used as they are, not checked against the "
+                     "record first (a fuse in memory checks them: --off-levels)")
     try:
         est.fit(Layout.from_axes(h, source=name), noise, dt)
     except InputError as err:

@@ -70,6 +70,7 @@ from gyroarray.analysis.motion import still_mask
 from gyroarray.core.errors import InputError
 from gyroarray.core.measurement import Measurement, true_runs
 from gyroarray.core.units import rad_s_to_deg_s
+from gyroarray.estimators.fdi import MIN_CLIP_RUN, SATURATION_GUARD, saturated_mask  # noqa: F401 (the home of the clip test)
 from gyroarray.estimators.fdi import estimate_noise, model_noise
 
 __all__ = ["Z_OFF", "ParityCalibration", "tilt_axes", "saturated_mask", "fused_rate",
@@ -86,15 +87,9 @@ MIN_MOTION_DEG_S = 5.0
 #: Fewest moving samples per unknown (3 per gyro) the fit needs [-].
 MIN_SAMPLES_PER_UNKNOWN = 4
 
-#: Samples within this many of a clipped output are left out as well (the outputs' filters
-#: smear the clip over a few samples) [samples].
-SATURATION_GUARD = 2
-
 #: Passes that refit with the fused rate of the readings less the errors fitted so far [-].
 REFINE_PASSES = 2
 
-#: A gyro clips when at least this many samples repeat its largest |output| exactly [-].
-MIN_CLIP_RUN = 3
 
 _AXIS_NAMES = ("x", "y", "z")
 
@@ -200,7 +195,7 @@ class ParityCalibration:
         """
         om = fused_rate(y, H, R)
         c2, d2 = self.excess
-        return np.sqrt(1.0 + c2 * np.sum(om * om, axis=1) + d2 * _jerk2(om, dt_s))
+        return np.sqrt(1.0 + c2 * np.sum(om * om, axis=1) + d2 * jerk2(om, dt_s))
 
     @property
     def significant(self) -> bool:
@@ -265,44 +260,6 @@ def tilt_axes(H: np.ndarray) -> tuple[np.ndarray, np.ndarray, tuple]:
         U[i], W[i] = u, w
         names.append((_AXIS_NAMES[a], _AXIS_NAMES[b]))
     return U, W, tuple(names)
-
-
-def saturated_mask(y: np.ndarray, *, guard: int = SATURATION_GUARD) -> tuple[np.ndarray, np.ndarray]:
-    """Samples at which some gyro reads its output limit.
-
-    A gyro clips when at least :data:`MIN_CLIP_RUN` samples repeat its largest
-    |output| exactly (a quantised noise value does not repeat at the extreme
-    of a record that turns).
-
-    Parameters
-    ----------
-    y : ndarray, shape (n, N)
-        Outputs [rad/s].
-    guard : int
-        Samples also marked on each side of a clipped one.
-
-    Returns
-    -------
-    mask : ndarray of bool, shape (n,)
-        True where any gyro is at (or within ``guard`` samples of) its limit.
-    clip_rad_s : ndarray, shape (N,)
-        Each gyro's limit [rad/s]; NaN for a gyro that does not clip.
-    """
-    y = np.asarray(y, dtype=float)
-    a = np.abs(y)
-    top = a.max(axis=0) if y.shape[0] else np.zeros(y.shape[1])
-    at = (a >= top[None, :]) & (top[None, :] > 0)
-    clips = at.sum(axis=0) >= MIN_CLIP_RUN
-    clip = np.where(clips, top, np.nan)
-    mask = (at & clips[None, :]).any(axis=1)
-    if guard > 0 and mask.any():
-        idx = np.flatnonzero(mask)
-        grown = np.zeros_like(mask)
-        for d in range(-guard, guard + 1):
-            j = idx + d
-            grown[j[(j >= 0) & (j < mask.size)]] = True
-        mask = grown
-    return mask, clip
 
 
 def _whitening(R: np.ndarray | None, n: int) -> np.ndarray:
@@ -435,7 +392,7 @@ def self_calibrate(y: np.ndarray, H: np.ndarray, dt_s: float, *, R: np.ndarray |
         fit = (gf.reshape(-1, N, 3) * theta.reshape(N, 3)[None]).sum(axis=2) @ P.T
         e = p - fit
         res_sq += float(np.sum(e * e))
-        ex_rows.append(np.c_[np.sum(om * om, axis=1), _jerk2(om, dt_s)])
+        ex_rows.append(np.c_[np.sum(om * om, axis=1), jerk2(om, dt_s)])
         ex_b.append(np.mean(e * e, axis=1) - 1.0)
         fit_u = om @ E.T @ Vu.T
         pu = pu - pu.mean(axis=0)
@@ -541,7 +498,7 @@ def _observable_4(theta, cov, H, U, Wt, v, Pz) -> dict:
             "z": z, "statement": statement}
 
 
-def _jerk2(om: np.ndarray, dt_s: float) -> np.ndarray:
+def jerk2(om: np.ndarray, dt_s: float) -> np.ndarray:
     """|ω̂'|² per sample [rad²/s⁴]: the larger of the backward and forward differences (a sampling
     instant that differs between gyros shows at the sharpest change next to the sample)."""
     if om.shape[0] < 2:

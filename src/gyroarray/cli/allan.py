@@ -106,6 +106,9 @@ def cmd_allan(args) -> tuple[dict, str]:
     out = {"gyros": {str(k): a.to_json_dict() for k, a in analyses.items()},
            "signal": what, "notes": notes,
            "not_analysed": {str(k): why for k, why in skipped.items()}}
+    white = _white_levels(signal, meas.dt_s, parts, analyses)
+    for k, w in white.items():
+        out["gyros"][str(k)]["white_level"] = w
     if pipe.processed:
         out["pipeline"] = pipe.to_json_dict()
     if part_info is not None:
@@ -116,6 +119,10 @@ def cmd_allan(args) -> tuple[dict, str]:
              f"{meas.n_gyros} gyros; analysed: {what}", *[f"note: {n}" for n in notes]]
     for k, a in analyses.items():
         lines.append(_format_allan(k, a.to_json_dict()))
+        if k in white:
+            w = white[k]
+            lines.append(f"  white level: N = ADEV({w['tau_s']:.4g} s)·√τ = {w['n_deg_rt_h']:.4g} ± "
+                         f"{w['n_deg_rt_h_sigma']:.2g} deg/√h (the one fit, fuse and the [array] table read)")
     if args.plot is not None:
         path = plot_allan({f"gyro {k}": a for k, a in analyses.items()}, args.plot, force=args.force)
         out["plot"] = str(path)
@@ -186,6 +193,26 @@ def _reference_noise_notes(meas, minus_ref: bool, gyros: list[int]) -> list[str]
                        f"{', '.join(map(str, hit))} (output minus layout·ref) holds it, and its short-τ terms "
                        "(quantization, white noise) are then the reference's, not the gyro's; --raw analyses "
                        "the output alone")
+    return out
+
+
+def _white_levels(signal, dt_s: float, parts, analyses) -> dict:
+    """Each analysed gyro's white level read as ``fit``, ``fuse`` and the ``[array]`` table read it:
+    N = ADEV(τ1)·√τ1 pooled over the analysed parts, τ1 ≈ 1 s
+    (:func:`~gyroarray.analysis.white_level.pooled_white_level`); empty when no part is longer
+    than 2τ1. JSON-ready (deg/√h)."""
+    # deferred: numpy and the analysis load only when the command runs (a fast --help)
+    import numpy as np
+    from gyroarray.analysis.white_level import pooled_white_level
+    from gyroarray.core import units
+    out = {}
+    for k in analyses:
+        lev = pooled_white_level(np.asarray(signal, float)[:, k - 1], dt_s, parts)
+        if lev is None:
+            continue
+        out[k] = {"n_deg_rt_h": float(units.arw_rad_rt_s_to_deg_rt_h(lev[0][0])),
+                  "n_deg_rt_h_sigma": float(units.arw_rad_rt_s_to_deg_rt_h(lev[1][0])),
+                  "tau_s": float(lev[2]), "edf": float(lev[3])}
     return out
 
 

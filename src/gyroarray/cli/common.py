@@ -160,6 +160,8 @@ def measurement_inputs(args) -> list:
     """The files of a command's measurement and model arguments."""
     from gyroarray.core.outputs import measurement_files  # deferred: not needed to build the parser
     files = measurement_files(args.measurement) if getattr(args, "measurement", None) else []
+    for more in getattr(args, "more", None) or ():       # fit's further records of the array
+        files += measurement_files(more)
     if getattr(args, "model", None) is not None:
         files.append(args.model)
     if getattr(args, "extrinsics", None) is not None:

@@ -181,6 +181,39 @@ def _array_fit(comp, notes: list):
         return None
 
 
+def _levels_across(comp, args, notes: list):
+    """Each gyro's white level on the record and on ``args.more`` (other records of the same array:
+    same gyros, same layout), combined (:func:`~gyroarray.chain.array_model.levels_across`)."""
+    # deferred: the chain (numpy, numba) loads only when the command runs (a fast --help)
+    import numpy as np
+    from gyroarray.chain.array_model import comparison_still, levels_across, record_levels
+    from gyroarray.core.measurement import read_measurement
+    if comp.N < 2:
+        raise InputError("fit with several records combines the gyros of one array; this record has one gyro",
+                         file=comp.name)
+    from gyroarray.core.measurement import without_gyros  # deferred: numpy, pandas
+    gyros = list(range(1, comp.N + 1))
+    left = getattr(args, "left_out", None)          # the first record's constant gyros, left out
+    levels = [record_levels(comp.m, gyros, still=comparison_still(comp))]
+    for path in args.more:
+        other = read_measurement(path, repair=args.repair, **bag_options(args))
+        if left is not None and other.n_gyros == left[1]:
+            other = without_gyros(other, [k for k in range(1, left[1] + 1) if k not in left[0]], left[2])
+        if other.n_gyros != comp.m.n_gyros or not np.allclose(other.layout.axes, comp.m.layout.axes, atol=1e-6):
+            raise InputError(f"not a record of the same array: {other.n_gyros} gyros with another layout "
+                             f"than {comp.name}'s {comp.m.n_gyros} (fit several records of one array only)",
+                             file=str(path))
+        if abs(other.dt_s - comp.m.dt_s) > 1e-9 * comp.m.dt_s:
+            raise InputError(f"sampled every {other.dt_s:g} s, the first record every {comp.m.dt_s:g} s: "
+                             "fit records of one rate together", file=str(path))
+        levels.append(record_levels(other, gyros))
+        notes.extend(n for n in other.notes if n not in notes)
+    across = levels_across(levels)
+    notes.append(f"the model's white levels (arw entries and [array]) are the random-effects mean over "
+                 f"{len(levels)} records; the other terms are fitted on {comp.name}")
+    return across
+
+
 def _validation_text(comp, a, model_path) -> str:
     """``the model fitted on X predicts Y: consistent / not, worst at …``."""
     worst = max(a.tests, key=lambda t: t.z if math.isfinite(t.z) else -math.inf, default=None)
@@ -280,13 +313,19 @@ def cmd_fit(args):
            "notes": notes}
     if comp.N >= 2:
         res["array_model"] = None if arr is None else arr.to_json_dict()
+    model = after.model if arr is None else with_array_model(after.model, arr)
+    across = _levels_across(comp, args, notes) if args.more else None
+    if across is not None:
+        from gyroarray.chain.array_model import with_levels  # deferred: the chain (numpy, numba)
+        model = with_levels(model, across)
+        res["levels_across_records"] = across.to_json_dict()
     if args.out is not None:
-        model = after.model if arr is None else with_array_model(after.model, arr)
         res["model"] = _write_model(args.out, model, args, notes)
     text = "\n".join([f"{comp.name}: discrepancy {before.discrepancy:.3g} -> {after.discrepancy:.3g} "
                       f"({'consistent' if after.consistent else 'NOT consistent'})",
                       "fitted model (beyond ARW + RRW):"] + (_model_lines(after.model) or ["  (baseline only)"])
                      + ([] if arr is None else arr.text_lines())
+                     + ([] if across is None else across.text_lines())
                      + ([f"written to {args.out}"] if args.out is not None else [])
                      + [f"note: {n}" for n in notes])
     return res, text
@@ -296,6 +335,8 @@ def cmd_ladder(args):
     # deferred: the chain and the effect registry (numpy, numba) loads only when the command runs (a fast --help)
     from gyroarray.chain.compare import LADDER_RULE, ModelComparison, split_measurement
     from gyroarray.effects.model import NoiseModel
+    if args.more and args.model_out is None:
+        raise InputError("more records give the model's white levels across records: add --model-out NEW.toml")
     comp = _comparison(args)
     held = None
     if args.holdout is not None:
@@ -325,6 +366,12 @@ def cmd_ladder(args):
             res["array_model"] = None if arr is None else arr.to_json_dict()
         arr_lines = [] if arr is None else arr.text_lines()
         model = final.model if arr is None else with_array_model(final.model, arr)
+        if args.more:
+            from gyroarray.chain.array_model import with_levels  # deferred: the chain (numpy, numba)
+            across = _levels_across(comp, args, res["notes"])
+            model = with_levels(model, across)
+            res["levels_across_records"] = across.to_json_dict()
+            arr_lines += across.text_lines()
         res["model"] = _write_model(args.model_out, model, args, res["notes"])
     held_text = []
     if held is not None:
@@ -411,6 +458,10 @@ def add_parser(sub) -> None:
 
     p = sub.add_parser("fit", help="fit the model (plus --add EFFECT[:GYRO]) to a measurement")
     _add_compare_args(p, out=False)
+    p.add_argument("more", nargs="*", type=Path, metavar="MORE.csv",
+                   help="more records of the same array (same gyros and layout): each gyro's white level "
+                        "is read on every record and the model says which gyros wander between them "
+                        "(the other terms are fitted on the first record)")
     p.add_argument("--add", action="append", metavar="EFFECT[:GYRO]",
                    help="effect to add before fitting (repeatable), e.g. scale_factor:2, burst; an effect "
                         "that acts on one gyro at a time, without a gyro (or EFFECT:all), is added to every gyro")
@@ -423,6 +474,9 @@ def add_parser(sub) -> None:
     p.add_argument("--max-steps", type=count("--max-steps"), default=8, metavar="K",
                    help="effects added at most (8)")
     p.add_argument("--model-out", type=Path, metavar="NEW.toml", help="write the final fitted model")
+    p.add_argument("more", nargs="*", type=Path, metavar="MORE.csv",
+                   help="with --model-out: more records of the same array; each gyro's white level in the "
+                        "model is read across all of them (as fit MEAS MORE...)")
     p.add_argument("--holdout", type=finite_float("--holdout"), metavar="FRACTION",
                    help="run the ladder on the first part of the record, then validate its model on the "
                         "last FRACTION (e.g. 0.3)")

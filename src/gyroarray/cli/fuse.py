@@ -88,6 +88,14 @@ def _text(out: dict, args) -> str:
         lines.append(f"{name:<5}{fused:>16}{_fmt(d.get('predicted_arw_deg_rt_h')):>11}"
                      f"{_fmt(d.get('best_single_gyro'), 'd'):>11}{_fmt(d.get('best_single_arw_deg_rt_h')):>9}"
                      f"{_fmt(d.get('gain'), '.3g'):>7}")
+    chk = out.get("model_check") or {}
+    if chk.get("predicted_interval_deg_rt_h"):
+        lines.append("model check: predicted fused ARW " + ", ".join(
+            f"{a} {p:.4g} [{lo:.4g}, {hi:.4g}]" for a, p, (lo, hi) in
+            zip("xyz", chk["predicted_arw_deg_rt_h"], chk["predicted_interval_deg_rt_h"]))
+            + f" deg/rt(h) ({100 * chk['level']:.0f} %); gyros off the model: "
+            + (", ".join(map(str, chk["off"])) or "none")
+            + "; fused / OLS " + ", ".join(f"{v:.3g}" for v in chk.get("fused_over_ols", [])))
     x = out["axes"]["x"]
     if "taus_s" in x:
         conf = 100.0 * x["confidence"]
@@ -184,6 +192,8 @@ def cmd_fuse(args) -> tuple[dict, str]:
         output(args.out, args, "--out", inputs=inputs, suffixes=OUT_SUFFIXES)
         side = sidecar_path(Path(args.out))
         output(side, args, "--out (its sidecar)", inputs=inputs)
+    if args.off_levels != "record" and args.model is None:
+        raise InputError("--off-levels says what to do with a model's gyro whose level is off: add --model")
     why = stream_reason(args)
     if why is not None:
         return _cmd_fuse_streamed(args, why, exclude, params, side)
@@ -197,11 +207,12 @@ def cmd_fuse(args) -> tuple[dict, str]:
     if args.validate:
         holdout = args.holdout if args.holdout is not None or model is not None else 0.5
         res, val = validate_fuse(meas, args.estimator, holdout=holdout, exclude=exclude, params=params,
-                                 model=model, model_name=None if args.model is None else str(args.model))
+                                 model=model, model_name=None if args.model is None else str(args.model),
+                                 off_levels=args.off_levels)
     else:
         res = fuse(meas, args.estimator, model=model,
                    model_name=None if args.model is None else str(args.model), exclude=exclude,
-                   params=params)
+                   params=params, off_levels=args.off_levels)
     out = res.to_json_dict()
     if val is not None:
         out["validation"] = val
@@ -236,6 +247,10 @@ def add_parser(sub) -> None:
     p.add_argument("--model", type=Path, metavar="MODEL.toml",
                    help="noise of the gyros (arw, rrw, correlation) the estimator is designed with "
                         "(default: ARW + RRW per gyro fitted on the record's still part)")
+    p.add_argument("--off-levels", choices=("record", "model"), default="record",
+                   help="with --model: each gyro's white level on the record is checked against the "
+                        "model's range first; a gyro outside it is designed with the record's own level "
+                        "(record, the default) or the model's (model); the check is reported either way")
     p.add_argument("--exclude", metavar="K1,K2,...",
                    help="gyros to leave out (1-based, comma separated); constant gyros are left "
                         "out anyway")

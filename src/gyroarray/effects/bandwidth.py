@@ -12,7 +12,7 @@ from scipy import optimize, signal
 from gyroarray.effects.fitting import EffectFit
 from gyroarray.analysis.psd_fit import EFFECTIVE_TESTS, filter_z, filtered_white_avar_ratio, fit_psd
 from gyroarray.analysis.gls import RWWhitener
-from gyroarray.analysis.memo import ContentMemo
+from gyroarray.analysis.memo import ContentMemo, by_content, freeze
 from gyroarray.effects import _draw
 from gyroarray.core.errors import InputError
 from gyroarray.effects.protocol import Param, RegressionEffect, Stage, explains_away, identity, with_cols
@@ -63,23 +63,62 @@ def _state_gain(cutoff_hz: float, order: int, dt_s: float) -> np.ndarray:
     return out
 
 
+#: Leading exact zeros of the sensed rate worth skipping (a table record's static start).
+_LEAD_MIN = 4096
+#: Samples of the leading zeros filtered to check that the filter sits at its zero fixed point.
+_LEAD_PROBE = 64
+
+
+def _zero_lead(sos: np.ndarray, zi0: np.ndarray, lead: int) -> np.ndarray | None:
+    """The filter's state after ``lead`` zero samples from the state ``zi0``, when the outputs there
+    are all +0.0 (their bits zero): filtered over a probe of :data:`_LEAD_PROBE` zeros, then one
+    more; when the state after the probe and after the step are both all +0.0 and so is the step's
+    output, the filter is at its fixed point (zero in, zero state: zero out, the same zero state),
+    and it stays there to the end of the zeros. Else None (filter the zeros as they are)."""
+    if lead < _LEAD_MIN:
+        return None
+    y, z = signal.sosfilt(sos, np.zeros(_LEAD_PROBE), zi=zi0)
+    y1, z1 = signal.sosfilt(sos, np.zeros(1), zi=z)
+    bits = np.concatenate([y, y1, z.reshape(-1), z1.reshape(-1)]).view(np.uint64)
+    if bits.any():
+        return None
+    return z1
+
+
 def _residual_minus_filter(e: np.ndarray, u: np.ndarray, t0: int, dt_s: float,
-                           cutoff_hz: float, order: int) -> np.ndarray:
+                           cutoff_hz: float, order: int, lead: int = 0,
+                           out: np.ndarray | None = None) -> np.ndarray:
     """``e - (_lowpassed(u, ...) - u)``, the same bits, where ``u[t0:]`` is exactly zero: filtered
     until the state has decayed below a bound under which ``e - y`` rounds to ``e`` on the rest of
     the tail (checked against the tail's smallest |e|), the rest is ``e`` itself; else in full
-    (a decaying zero-input response passes through denormal numbers, each sosfilt step 3-7x slower)."""
+    (a decaying zero-input response passes through denormal numbers, each sosfilt step 3-7x slower).
+
+    ``lead``: ``u[:lead]`` is exactly zero too (the static start): where the filter sits at its
+    zero fixed point there (:func:`_zero_lead`), its output is +0.0, ``e - (+0.0 - +0.0)`` is
+    ``e - 0.0`` bit for bit, and the filter starts again after the zeros from the same zero state.
+    ``out``: an (n,) float64 array to write the result into (a scratch buffer the caller reuses:
+    fresh arrays of this size are fresh pages, each call's page faults); each element is the same
+    two subtractions, ``y - u`` then ``e - (y - u)``, the same bits."""
     n = u.size
     sos, zi = _sos_zi(float(cutoff_hz), int(round(float(order))), float(dt_s))
-    y, z = signal.sosfilt(sos, u[:t0], zi=zi * u[0])
-    parts, m = [y], t0
+    out = np.empty(n) if out is None else out
+    z_lead = None
+    if 0 < lead < t0 and u[0] == 0.0:
+        z_lead = _zero_lead(sos, zi * u[0], lead)
+    if z_lead is not None:
+        first = lead
+        np.subtract(e[:lead], 0.0, out=out[:lead])              # e - (+0.0 - +0.0)
+        y, z = signal.sosfilt(sos, u[lead:t0], zi=z_lead)
+    else:
+        first = 0
+        y, z = signal.sosfilt(sos, u[:t0], zi=zi * u[0])
+    np.subtract(y, u[first:t0], out=out[first:t0])
+    m = t0
     while m < n and np.abs(z).max() >= _DECAYED:
         yk, z = signal.sosfilt(sos, u[m:m + 4096], zi=z)
-        parts.append(yk)
+        np.subtract(yk, u[m:m + yk.size], out=out[m:m + yk.size])
         m += yk.size
-    out = np.empty(n)
-    head = np.concatenate(parts) if len(parts) > 1 else y
-    out[:m] = e[:m] - (head - u[:m])
+    np.subtract(e[first:m], out[first:m], out=out[first:m])
     if m < n:
         gain = _state_gain(float(cutoff_hz), int(round(float(order))), float(dt_s))
         bound = float(np.abs(z).reshape(-1) @ gain) + 1e-300     # + the denormal steps' rounding
@@ -87,7 +126,8 @@ def _residual_minus_filter(e: np.ndarray, u: np.ndarray, t0: int, dt_s: float,
         small = float(np.abs(tail).min())
         if not (small > 0.0 and bound < 0.25 * float(np.spacing(small))):
             yk, _ = signal.sosfilt(sos, u[m:], zi=z)
-            out[m:] = tail - (yk - u[m:])
+            np.subtract(yk, u[m:], out=out[m:])
+            np.subtract(tail, out[m:], out=out[m:])
         else:
             out[m:] = tail          # e - (y - 0) with |y| < a quarter ulp of e: e
     return out
@@ -99,6 +139,13 @@ def _residual_minus_filter(e: np.ndarray, u: np.ndarray, t0: int, dt_s: float,
 _MOTION_MEMO = ContentMemo(maxsize=32)
 
 
+@by_content(maxsize=8)
+def _sensed_rate(ref: np.ndarray, H: np.ndarray, gyro: int) -> np.ndarray:
+    """``ref @ H[gyro - 1]``, read-only, kept by content: every bandwidth test of the gyro (on
+    every cut record) reads it, and its digest is then kept (memo.freeze)."""
+    return freeze(ref @ H[gyro - 1])
+
+
 class _MotionLR:
     """2·Δℓ(fc, order) of the residual ``e`` with the filter's effect on the sensed rate ``u``
     removed (``memo``: what was already computed on the same content)."""
@@ -107,10 +154,16 @@ class _MotionLR:
         self.e, self.u, self.dt, self.r, self.q, self.use = e, np.asarray(u, dtype=float), float(dt), r, q, use
         self.memo = _MOTION_MEMO.slot(e, self.u, self.dt, float(r), float(q), use)
         self._w = None
+        self._buf = None                  # the residual's scratch (one call at a time per instance)
         nz = np.flatnonzero(self.u)
         t0 = int(nz[-1]) + 1 if nz.size else 1
         # a zero tail of the sensed rate long enough to skip (the static end of a table record)
         self._t0 = t0 if self.u.size - t0 > 4096 and np.isfinite(self.u).all() else None
+        # and its leading zeros (the static start), skipped where the filter rests at zero there
+        # (samples whose bits are all zero: +0.0, not a -0.0, which the filter could carry on)
+        bits = self.u.view(np.uint64) if self.u.dtype == np.float64 and self.u.ndim == 1 else None
+        live = np.flatnonzero(bits) if bits is not None else np.zeros(1, int)
+        self._lead = int(live[0]) if live.size else 0
 
     def _whitener(self):
         if self._w is None:
@@ -123,7 +176,9 @@ class _MotionLR:
         w, base = self._whitener()
         if (self._t0 is not None and isinstance(self.e, np.ndarray) and self.e.dtype == np.float64
                 and self.e.shape == self.u.shape):
-            d = _residual_minus_filter(self.e, self.u, self._t0, self.dt, fc, order)
+            if self._buf is None:
+                self._buf = np.empty(self.u.size)
+            d = _residual_minus_filter(self.e, self.u, self._t0, self.dt, fc, order, self._lead, self._buf)
         else:
             d = self.e - (_lowpassed(self.u, self.dt, fc, order) - self.u)
         z = w.whiten(d)
@@ -239,7 +294,7 @@ class Bandwidth(RegressionEffect):
         """2·Δℓ(fc, order) of the residual with the filter's effect on the sensed rate removed, or None."""
         if ctx.ref is None or not ctx.moving:
             return None
-        return _MotionLR(e, ctx.ref @ ctx.H[gyro - 1], ctx.dt, r, q, ctx.use)
+        return _MotionLR(e, _sensed_rate(ctx.ref, ctx.H, int(gyro)), ctx.dt, r, q, ctx.use)
 
     def fit(self, ctx, gyro, E):
         """Order and cut-off by the joint likelihood of the spectrum and (with motion) the motion."""

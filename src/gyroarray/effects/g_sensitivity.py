@@ -71,8 +71,8 @@ class GSensitivity(RegressionEffect):
         return why
 
     def regress(self, ctx, gyro, e, r, q):
-        F = ctx.specific_force()[:, gyro - 1, :]
-        moving = [j for j in range(3) if float(np.ptp(F[:, j])) >= MIN_SPAN_M_S2]
+        moving, Fm = _moving_force(ctx.specific_force(), int(gyro))
+        moving = list(moving)
         coeff, sigma = np.zeros(3), np.full(3, math.nan)
         if not moving:
             return EffectFit(self.name, gyro, {"deg_s_per_g": (0.0, 0.0, 0.0)}, z=0.0,
@@ -80,7 +80,7 @@ class GSensitivity(RegressionEffect):
                                       "g-sensitivity cannot be told from the starting bias",
                              extra={"identifiable": False, "reason": "the specific force never changes"})
         try:
-            fit = _gls_rw(e, F[:, moving], r, q, use=ctx.use)
+            fit = _gls_rw(e, Fm, r, q, use=ctx.use)
         except NotIdentifiableError as err:
             return EffectFit(self.name, gyro, {"deg_s_per_g": (0.0, 0.0, 0.0)}, z=0.0,
                              evidence=f"gyro {gyro}: the specific force components move together; "
@@ -114,3 +114,24 @@ class GSensitivity(RegressionEffect):
 #: :func:`gls_rw` by content: the ranking tests a rival again on records cut by other gyros' fits,
 #: where this gyro's residual is as it was, bit for bit.
 _gls_rw = by_content(maxsize=16)(gls_rw)
+
+
+@by_content(maxsize=8)
+def _moving(force: np.ndarray, gyro: int) -> tuple:
+    """The components j of gyro ``gyro``'s specific force (``force`` (n, N, 3)) whose span reaches
+    :data:`MIN_SPAN_M_S2` (kept by content: the same for every test of the gyro on every cut)."""
+    F = force[:, gyro - 1, :]
+    return tuple(j for j in range(3) if float(np.ptp(F[:, j])) >= MIN_SPAN_M_S2)
+
+
+def _moving_force(force: np.ndarray, gyro: int) -> tuple:
+    """(:func:`_moving`, those components (n, len(j))): a view of ``force`` (a basic slice: any
+    sorted subset of three components is one), not a copy; read-only where ``force`` is, so that
+    :func:`_gls_rw` keeps its digest. The fit reads it column by column (its differences), the
+    same values as a copy's."""
+    moving = _moving(force, gyro)
+    if not moving:
+        return moving, force[:, gyro - 1, :0]
+    step = moving[1] - moving[0] if len(moving) > 1 else 1
+    assert all(b - a == step for a, b in zip(moving, moving[1:]))       # a progression: 0..2
+    return moving, force[:, gyro - 1, moving[0]:moving[-1] + 1:step]

@@ -334,10 +334,11 @@ def _entry_lines(text: str, n: int) -> tuple[int | None, ...]:
 
 
 #: Keys of the ``[array]`` table (:class:`ArrayNoise`).
-ARRAY_KEYS = ("gyros", "white_n_deg_rt_h", "white_correlation", "walk_tau_s", "walk_adev_deg_h",
+ARRAY_KEYS = ("gyros", "white_n_deg_rt_h", "white_tau_s", "white_correlation", "white_n_low_deg_rt_h",
+              "white_n_high_deg_rt_h", "records", "walk_tau_s", "walk_adev_deg_h",
               "walk_correlation", "shared", "notes", "sigma")
 _ARRAY_MATRICES = ("white_correlation", "walk_correlation")
-_ARRAY_VECTORS = ("white_n_deg_rt_h", "walk_adev_deg_h")
+_ARRAY_VECTORS = ("white_n_deg_rt_h", "white_n_low_deg_rt_h", "white_n_high_deg_rt_h", "walk_adev_deg_h")
 _SHARED_KEYS = ("f_hz", "band_hz", "gyros", "coherence")
 #: Largest asymmetry, and departure of a diagonal from 1, of a correlation read from a file [-].
 ARRAY_MATRIX_TOL = 1e-9
@@ -419,6 +420,15 @@ class ArrayNoise:
         White level (ARW) of each gyro [deg/√h].
     white_correlation : tuple of tuple of float, optional
         Correlation of the white part [-], symmetric, unit diagonal, positive definite.
+    white_tau_s : float, optional
+        Averaging time at which the white level and correlation were read [s] (σ(τ)·√τ and the
+        Allan covariance at τ, pooled over the still parts); absent: per sample.
+    white_n_low_deg_rt_h, white_n_high_deg_rt_h : tuple of float, optional
+        A model fitted on several records: the credible range of each gyro's white level
+        between records [deg/√h] (equal to ``white_n_deg_rt_h`` ± its 2σ for a gyro that does
+        not wander); estimators are designed with the high end (``docs/model-format.md``).
+    records : int, optional
+        Number of records the table was fitted on.
     walk_tau_s : float, optional
         Averaging time at which the slow part was estimated [s] (needed with a walk term).
     walk_adev_deg_h : tuple of float, optional
@@ -436,6 +446,10 @@ class ArrayNoise:
     gyros: tuple = ()
     white_n_deg_rt_h: tuple | None = None
     white_correlation: tuple | None = None
+    white_tau_s: float | None = None
+    white_n_low_deg_rt_h: tuple | None = None
+    white_n_high_deg_rt_h: tuple | None = None
+    records: int | None = None
     walk_tau_s: float | None = None
     walk_adev_deg_h: tuple | None = None
     walk_correlation: tuple | None = None
@@ -472,6 +486,22 @@ class ArrayNoise:
         for key in _ARRAY_MATRICES:
             if key in data:
                 out[key] = _matrix(data[key], key, n, where)
+        if "white_tau_s" in data:
+            tau = data["white_tau_s"]
+            if not (_is_number(tau) and math.isfinite(tau) and tau > 0):
+                raise _array_error(f"white_tau_s must be a number > 0 [s], got {tau!r}", "white_tau_s", where)
+            out["white_tau_s"] = float(tau)
+        if "records" in data:
+            k = data["records"]
+            if isinstance(k, bool) or not isinstance(k, int) or not 1 <= k <= 10_000:
+                raise _array_error(f"records must be a whole number from 1 to 10000, got {k!r}", "records", where)
+            out["records"] = int(k)
+        for lo_key, hi_key in (("white_n_low_deg_rt_h", "white_n_high_deg_rt_h"),):
+            if (lo_key in out) != (hi_key in out):
+                raise _array_error(f"{lo_key} and {hi_key} come together (the range of each gyro's white level)",
+                                   lo_key if lo_key not in out else hi_key, where)
+            if lo_key in out and any(not (0 <= a <= b) for a, b in zip(out[lo_key], out[hi_key])):
+                raise _array_error(f"{lo_key} must be >= 0 and at most {hi_key}, gyro by gyro", lo_key, where)
         if "walk_tau_s" in data:
             tau = data["walk_tau_s"]
             if not (_is_number(tau) and math.isfinite(tau) and tau > 0):
@@ -514,8 +544,8 @@ class ArrayNoise:
     def to_dict(self) -> dict[str, Any]:
         """Plain dict, keys in file order, absent terms left out."""
         out: dict[str, Any] = {"gyros": list(self.gyros)}
-        for key in ("white_n_deg_rt_h", "white_correlation", "walk_tau_s", "walk_adev_deg_h",
-                    "walk_correlation"):
+        for key in ("white_n_deg_rt_h", "white_tau_s", "white_correlation", "white_n_low_deg_rt_h",
+                    "white_n_high_deg_rt_h", "records", "walk_tau_s", "walk_adev_deg_h", "walk_correlation"):
             value = getattr(self, key)
             if value is not None:
                 out[key] = _plain(value)

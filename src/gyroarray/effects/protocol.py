@@ -43,6 +43,7 @@ from typing import TYPE_CHECKING, Any, Callable, ClassVar, Mapping, Sequence
 
 import numpy as np
 
+from gyroarray.analysis.memo import freeze
 from gyroarray.core.errors import InputError
 from gyroarray.core.formatting import sig
 from gyroarray.core.sensor import rigid_body_specific_force
@@ -811,6 +812,12 @@ class FitContext:
     ref_instrument: np.ndarray | None = None
     parts: tuple = ()
 
+    def __post_init__(self):
+        # the record is fixed for one comparison: read-only, so that the many tests that read it
+        # by content (analysis.memo) hash each array once, not on every call (the large arrays
+        # the tests read by content; the sidecar's own small ones are left as they are)
+        freeze(self.t, self.y, self.E0, self.ref, self.static, self.ref_raw, self.ref_instrument)
+
     @property
     def n(self) -> int:
         """Samples n."""
@@ -1082,12 +1089,26 @@ def explains_away(mine_effect: Effect, mine: "EffectFit", other: "EffectFit", ct
     kept = kept_prediction(ctx, mine_effect, mine)
     if kept is None:
         return None
-    return no_longer_seen(kept.cut(ctx), other, ctx, f"the {mine_effect.name.replace('_', ' ')} removed")
+    # the ranking asks the same winner against its rivals in a row: the last cut record is kept
+    # (one at a time: the one before is let go first) with what the tests kept on it
+    store = ctx.cache.setdefault(KEPT_PREDICTIONS, {})
+    last = store.get(_LAST_CUT)
+    if last is not None and last[0] is kept:
+        cut = last[1]
+    else:
+        store.pop(_LAST_CUT, None)
+        last = None
+        cut = kept.cut(ctx)
+        freeze(cut.E, cut.Er)                # made here, only read by the tests (digests kept)
+        store[_LAST_CUT] = (kept, cut)
+    return no_longer_seen(cut, other, ctx, f"the {mine_effect.name.replace('_', ' ')} removed")
 
 
 #: ``FitContext.cache`` key of the predictions :func:`kept_prediction` keeps, (effect, id(fit)) ->
 #: (fit, :class:`KeptPrediction` or None); the ranking drops them when done (:func:`drop_kept`).
 KEPT_PREDICTIONS = "kept_fit_predictions"
+#: Key, in that store, of the last record :func:`explains_away` cut: (KeptPrediction, FitContext).
+_LAST_CUT = "last_cut"
 
 
 class KeptPrediction:
@@ -1103,11 +1124,12 @@ class KeptPrediction:
         self.values: np.ndarray | None
         self.full: np.ndarray | None
         pred = np.asarray(pred)
-        bits = np.ascontiguousarray(pred).view(np.uint8).reshape(pred.shape[0], -1) if pred.ndim == 2 else None
-        if bits is None or pred.dtype != np.float64:
+        if pred.ndim != 2 or pred.dtype != np.float64:
             self.cols, self.values, self.full = None, None, pred
             return
-        live = np.flatnonzero(bits.reshape(pred.shape[0], pred.shape[1], 8).any(axis=(0, 2)))
+        # a column is live where any value's 64 bits are not all zero (one uint64 per value: the
+        # same test as any of its 8 bytes, 30x faster than reducing the bytes over two axes)
+        live = np.flatnonzero(np.ascontiguousarray(pred).view(np.uint64).any(axis=0))
         if live.size == pred.shape[1]:
             self.cols, self.values, self.full = None, None, pred
         else:

@@ -32,13 +32,25 @@ The chain (one stage each)
      to 4τ): Y = Σ g ε/√Σ g², a N(0, 1) under no fault;
    * drifts: the same with the ramp signature, L = 2, 4, ... up to
      ``drift_window_s``;
-   * noise faults and stuck gyros (static): the variance of ε along the
-     gyro's direction over non-overlapping blocks of L samples (L = 32 up to
-     ``variance_window_s``), the two-sided χ²_L GLR L/2(λ̂ − 1 − ln λ̂).
+   * noise faults: the variance of ε along the gyro's direction over
+     non-overlapping blocks of L samples (L = 32 up to ``variance_window_s``),
+     the one-sided χ²_L GLR L/2(λ̂ − 1 − ln λ̂) for λ̂ > 1 (0 otherwise). A
+     noise fault is an *increase* of a gyro's noise: a decrease is what a
+     real gyro does between orientations and vibration states (the MIMU4444
+     board: its z gyros' white levels move by x2–4 between still parts), and
+     no fault of the spec makes a gyro quieter but a stuck one, which has its
+     own test. Where a gyro's level changes along the record without a fault
+     (:func:`noise_spread`), λ̂ is read against the top of its band;
+   * stuck gyros (flat line): a run of exactly repeated outputs longer than
+     the gyro's own repeats make plausible (probability :data:`STUCK_RUN_P`
+     under its repeat share before the run, :func:`flat_alarm`). At rest a
+     stuck gyro's parity only loses its noise (a variance *decrease*), so
+     this, not the variance family, finds it; under motion the step family
+     does too.
 
 4. **Thresholds** from the false-alarm rate per hour (``far_per_h``, a third
    to each family), analytically: a block test's tail is an exact χ²
-   probability; a sliding window test is a stationary Gaussian sequence
+   probability (the upper tail only); a sliding window test is a stationary Gaussian sequence
    whose excursion rate above u is :func:`~gyroarray.effects.faults.scan.clump_rate`
    (Siegmund–Yakir for the window edges, Rice for the interior, from the
    exact lag-one correlation of the weights). The family's rate is the sum
@@ -62,10 +74,25 @@ The chain (one stage each)
    detection goes on with their parity (N − 1 > 3). :meth:`estimate` returns
    that fault-tolerant GLS rate, so ``fdi`` is also a fusion estimator.
 
+Levels read on the record
+-------------------------
+The tests work per sample, so R is the variance of one sample. A noise
+model's ARW (``gyroarray fit``, a fusion chain's Allan fit) is the white
+level at τ >= 1 s, below the per-sample level of a MEMS gyro with vibration
+lines (the MIMU4444 board: x2–5 in variance). With still parts in the record
+each gyro's per-sample level is therefore read there
+(:func:`per_sample_noise`; without a model :func:`estimate_noise`), the
+model keeping its correlations and, where larger, its RRW; the wander of a
+gyro's level between still parts is learned as the top of a no-fault band
+(:func:`noise_spread`), and a level that rises on every gyro at once widens
+that part's tests (:func:`gyroarray.chain.fdi_score.test_record`).
+
 Why it sits in the estimator registry: it takes the same fit (layout, noise
-model, dt), and its :meth:`estimate` is a rate estimator (GLS that drops an
-isolated gyro), so the conformance suite is meaningful for it and ``run
---estimators fdi`` scores the fused error with recovery. It is not among the
+model, dt), and its :meth:`estimate` is a rate estimator (GLS with the fit's
+weights that drops an isolated gyro; the detection itself runs as on a
+record, :meth:`FaultDetector.detect_record`), so the conformance suite is
+meaningful for it and ``run --estimators fdi`` scores the fused error with
+recovery. It is not among the
 chain's default estimators, so design sweeps are unchanged.
 
 References
@@ -98,7 +125,8 @@ from gyroarray.estimators.noise import ArrayNoise, array_noise
 
 __all__ = ["FaultDetector", "ParityDesign", "Alarm", "FdiResult", "parity_matrix",
            "design_parity", "minimum_detectable", "minimum_detectable_step", "isolability",
-           "estimate_noise", "noise_spread", "band_ratio", "model_noise", "far_range_per_h", "parity_is_zero",
+           "estimate_noise", "noise_spread", "band_ratio", "variance_glr", "flat_alarm", "stuck_run_needed",
+           "model_noise", "far_range_per_h", "parity_is_zero",
            "KIND_UNITS",
            "MIN_RECORD_SAMPLES", "MAX_WINDOW_SAMPLES"]
 
@@ -133,6 +161,10 @@ MIN_CHUNK_SAMPLES = 64
 
 #: A gyro's level changes between chunks count as real when Cochran's Q has a p-value below this.
 SPREAD_P = 1e-3
+
+#: Largest rise of a gyro's variance between neighbouring chunks that is a creeping level, not a
+#: noise fault's onset (:func:`noise_spread`) [-].
+SPREAD_JUMP = 1.5
 
 #: κ = exp(SPREAD_Z·τ), τ the between-chunk standard deviation of a gyro's ln variance [-].
 SPREAD_Z = 3.0
@@ -466,25 +498,45 @@ def _white_shares(P, R, d, K, S) -> np.ndarray:
 
 
 def band_ratio(lam: np.ndarray, band: np.ndarray | None) -> np.ndarray:
-    """A variance ratio relative to the no-fault band: 1 inside, λ/hi above, λ/lo below.
+    """A variance ratio relative to the no-fault band, one-sided: λ/hi above its top, 1 below.
 
     Parameters
     ----------
     lam : ndarray, shape (..., G)
         Block variance ratios along G directions [-].
     band : ndarray, shape (2, G) or None
-        Lowest and highest ratio that is no fault (None: the point 1).
+        Lowest and highest ratio that is no fault (None: the point 1). Only
+        the top counts: a noise fault is an increase (module docstring).
 
     Returns
     -------
     ndarray
-        The ratio the χ² GLR is evaluated at (composite null: the nearest
-        point of the band).
+        The ratio the one-sided χ² GLR is evaluated at, >= 1 (composite
+        null: every level up to the top of the band).
     """
-    if band is None:
-        return lam
-    lo, hi = band
-    return np.where(lam > hi, lam / hi, np.where(lam < lo, lam / lo, 1.0))
+    hi = 1.0 if band is None else band[1]
+    return np.maximum(lam / hi, 1.0)
+
+
+def variance_glr(lam: np.ndarray, band: np.ndarray | None, L: int) -> np.ndarray:
+    """One-sided χ²_L GLR of blocks of L samples: L/2·(λ_b − 1 − ln λ_b), λ_b = :func:`band_ratio`.
+
+    Parameters
+    ----------
+    lam : ndarray, shape (..., G)
+        Block variance ratios (mean of L squared unit-variance innovations) [-].
+    band : ndarray, shape (2, G) or None
+        No-fault band (:attr:`ParityDesign.var_band`).
+    L : int
+        Block length [samples].
+
+    Returns
+    -------
+    ndarray
+        The statistic, 0 for a block at or below the band's top.
+    """
+    lb = band_ratio(np.maximum(lam, 1e-300), band)
+    return 0.5 * L * (lb - 1.0 - np.log(lb))
 
 
 def _calibrate(design: ParityDesign, far_per_h: float, dt_s: float) -> None:
@@ -509,7 +561,8 @@ def _calibrate(design: ParityDesign, far_per_h: float, dt_s: float) -> None:
         far[fam] = rate(u) * 3600.0 / dt_s
     n_dir = len(reps)
     Ls = design.scales["variance"]
-    vrate = lambda g: n_dir * sum(ff.chi2_glr_pvalue(g, L) / L for L in Ls)   # noqa: E731
+    # one-sided: only an increase alarms (P(χ²_L/L > λ_hi(g)) per block of L samples)
+    vrate = lambda g: n_dir * sum(ff.chi2_glr_pvalue(g, L, "up") / L for L in Ls)   # noqa: E731
     g = _solve_level(vrate, target, lo=1.0, hi=400.0)
     thresholds["variance"] = g
     far["variance"] = vrate(g) * 3600.0 / dt_s
@@ -607,6 +660,92 @@ class FdiResult:
 
 
 # -- the detector --------------------------------------------------------------
+
+#: Samples within this many of a clipped output are left out as well (the outputs' filters
+#: smear the clip over a few samples) [samples].
+SATURATION_GUARD = 2
+#: A gyro clips when at least this many samples repeat its largest |output| exactly [-].
+MIN_CLIP_RUN = 3
+#: Factor on the innovations of a stretch watched by the flat-line test only (no parity statistic
+#: can reach its threshold) [-].
+FLAT_ONLY_SCALE = 1e9
+
+
+def saturated_mask(y: np.ndarray, *, guard: int = SATURATION_GUARD) -> tuple[np.ndarray, np.ndarray]:
+    """Samples at which some gyro reads its output limit.
+
+    A gyro clips when at least :data:`MIN_CLIP_RUN` samples repeat its largest
+    |output| exactly (a quantised noise value does not repeat at the extreme
+    of a record that turns).
+
+    Parameters
+    ----------
+    y : ndarray, shape (n, N)
+        Outputs [rad/s].
+    guard : int
+        Samples also marked on each side of a clipped one.
+
+    Returns
+    -------
+    mask : ndarray of bool, shape (n,)
+        True where any gyro is at (or within ``guard`` samples of) its limit.
+    clip_rad_s : ndarray, shape (N,)
+        Each gyro's limit [rad/s]; NaN for a gyro that does not clip.
+    """
+    y = np.asarray(y, dtype=float)
+    a = np.abs(y)
+    top = a.max(axis=0) if y.shape[0] else np.zeros(y.shape[1])
+    at = (a >= top[None, :]) & (top[None, :] > 0)
+    clips = at.sum(axis=0) >= MIN_CLIP_RUN
+    clip = np.where(clips, top, np.nan)
+    mask = (at & clips[None, :]).any(axis=1)
+    if guard > 0 and mask.any():
+        idx = np.flatnonzero(mask)
+        grown = np.zeros_like(mask)
+        for d in range(-guard, guard + 1):
+            j = idx + d
+            grown[j[(j >= 0) & (j < mask.size)]] = True
+        mask = grown
+    return mask, clip
+
+
+
+
+#: Moving over still variance of the whitened parity's first differences above which the parity
+#: is said to follow the motion (a calibration's business, not a fault's) [-].
+MOTION_PARITY_RATIO = 2.0
+
+
+def motion_follows_parity(z: np.ndarray, P: np.ndarray, still: np.ndarray, sat: np.ndarray) -> bool:
+    """Does the parity of the moving, unclipped samples spread more than :data:`MOTION_PARITY_RATIO`
+    times the still samples' (first differences of ``z @ Pᵀ``, the whitened parity, so the
+    biases and their walk drop out)? On the MIMU4444 board x25-90; on a simulated array ~1."""
+    p = np.asarray(z, float) @ np.asarray(P, float).T
+    d = np.diff(p, axis=0) ** 2
+    keep_s = still[1:] & still[:-1]
+    keep_m = ~still[1:] & ~still[:-1] & ~sat[1:] & ~sat[:-1]
+    if keep_s.sum() < 2 or keep_m.sum() < 2:
+        return False
+    return float(d[keep_m].mean()) > MOTION_PARITY_RATIO * float(d[keep_s].mean())
+
+
+def common_scale(z: np.ndarray, R: np.ndarray) -> float:
+    """√max(1, median over the gyros of a stretch's variance over R's diagonal) [-]: a level that
+    rises on every gyro at once is the environment, not one gyro's noise fault."""
+    v = np.var(z, axis=0, ddof=1) / np.diag(R)
+    return math.sqrt(max(1.0, float(np.median(v))))
+
+
+def clips_broken(raw: np.ndarray, z: np.ndarray, watched: np.ndarray, clip: np.ndarray) -> np.ndarray:
+    """``z`` with the samples ``watched`` by the flat line only taken from the raw outputs, each
+    gyro's repeats at its own output limit broken (every other one moved by an ulp): a clipped
+    gyro repeats its limit, it is not stuck."""
+    n = raw.shape[0]
+    at = np.abs(raw) >= np.nan_to_num(clip, nan=np.inf)[None, :]
+    odd = (np.arange(n) % 2 == 1)[:, None]
+    zr = np.where(at & odd, np.nextafter(raw, np.inf), raw)
+    return np.where(watched[:, None], zr, z)
+
 
 @register("fdi")
 class FaultDetector(Estimator):
@@ -733,7 +872,74 @@ class FaultDetector(Estimator):
 
     # -- estimate (fault-tolerant GLS) ------------------------------------------
     def _estimate(self, z):
-        return fuse(z, self.H_, self.noise_, self.dt_s_, self.detect(z).exclusions)
+        return fuse(z, self.H_, self.noise_, self.dt_s_, self.detect_record(z).exclusions)
+
+    def detect_record(self, readings_rad_s, time_s=None) -> FdiResult:
+        """:meth:`detect` as ``gyroarray fdi`` runs it on a record, with this fit's noise as a model.
+
+        The noise the detector was fitted with is read as a model (its ARW a
+        long-τ white level, as a fusion chain fits it): on a record with still
+        parts each gyro's per-sample level, its RRW where larger, and the
+        wander of its level between still parts are read there
+        (:func:`per_sample_noise`, :func:`noise_spread`), a detector with
+        those levels tests the still parts each on its own, and the motion
+        is watched for a stuck gyro only (:func:`clips_broken`). A
+        record without still parts (or none found) is :meth:`detect`-ed as
+        it is. :meth:`estimate` fuses (GLS with this fit's weights) without
+        the gyros this excludes.
+
+        Parameters
+        ----------
+        readings_rad_s : array_like, shape (n, N)
+            Gyro outputs [rad/s].
+        time_s : array_like, shape (n,), optional
+            Sample times [s] (default k·dt).
+
+        Returns
+        -------
+        FdiResult
+        """
+        from gyroarray.analysis.motion import still_mask       # deferred: analysis loads scipy.ndimage
+        self._check_fitted()
+        z = check_readings(readings_rad_s, self.n_gyros_)
+        dt = self.dt_s_
+        try:
+            still = still_mask(z, self.H_, dt)
+        except InputError:                                     # too short to tell: as it is
+            still = None
+        if still is None or not still.any() or z.shape[0] < MIN_RECORD_SAMPLES:
+            return self.detect(z, time_s)
+        noise, _ = per_sample_noise(self.noise_, z, dt, still)
+        if noise is self.noise_:
+            return self.detect(z, time_s)
+        kap, _ = noise_spread(z, dt, still, reference=np.asarray(noise.arw_rad_rt_s) ** 2 / dt)
+        det = FaultDetector(**{**self.get_params(), "variance_tolerance":
+                               kap if np.any(kap > 1.0) else None}).fit(Layout(self.H_), noise, dt)
+        # the still parts each on its own (widened by their common level), the motion watched for
+        # a stuck gyro only; gyroarray fdi (chain.fdi_score.test_record) also takes the parity
+        # self-calibration out of the motion, which a fusion estimator does not need for that
+        n = z.shape[0]
+        if still.all():
+            return det.detect(z, time_s)
+        t = np.arange(n) * dt if time_s is None else np.asarray(time_s, dtype=float)
+        R = det.noise_.R(dt)
+        sat, clip = saturated_mask(z)
+        scale = np.ones(n)
+        for a, b in true_runs(still):
+            scale[a:b] = common_scale(z[a:b], R) if b - a >= MIN_RECORD_SAMPLES else 1.0
+        watched = np.zeros(n, dtype=bool)
+        if motion_follows_parity(z, det.design_.P, still, sat):
+            # the parity follows the rate (a real board's scale-factor and axis errors): the motion
+            # is watched for a stuck gyro only
+            parts: list[tuple] = [(a, b, scale[a:b]) for a, b in true_runs(still) if b - a >= MIN_RECORD_SAMPLES]
+            for a, b in true_runs(~still):
+                if b - a >= MIN_RECORD_SAMPLES:
+                    parts.append((a, b, FLAT_ONLY_SCALE))
+                    watched[a:b] = True
+        else:                                   # tested through the motion, around clipped samples
+            parts = [(a, b, scale[a:b]) for a, b in true_runs(~sat) if b - a >= MIN_RECORD_SAMPLES]
+        parts.sort(key=lambda x: x[0])
+        return det.detect_parts(clips_broken(z, z, watched, clip), parts, t)
 
     def false_alarms(self, readings_rad_s) -> dict:
         """Every alarm a clean record raises, without isolation or exclusion.
@@ -807,7 +1013,7 @@ class FaultDetector(Estimator):
             eps = ff.rw_innovations(z[k0:, active] @ design.P.T, design.q)
             if scale is not None:
                 eps = eps / scale[k0:, None]
-            hit = _scan(eps, design, trace=trace and not alarms)
+            hit = _scan(eps, design, trace=trace and not alarms, flat=flat_alarm(z[k0:, active]))
             if trace and not alarms:
                 tr = {"ratio": hit.pop("trace"), "start": k0}
             if hit["k"] is None:
@@ -839,9 +1045,11 @@ class FaultDetector(Estimator):
         Parameters
         ----------
         readings_rad_s : array_like, shape (n, N)
-        parts : sequence of (int, int)
+        parts : sequence of (int, int) or (int, int, scale)
             [start, stop) sample ranges, increasing, each of at least
-            :data:`MIN_RECORD_SAMPLES` samples (shorter ones are skipped).
+            :data:`MIN_RECORD_SAMPLES` samples (shorter ones are skipped);
+            ``scale`` (a number or b − a numbers >= 1) is the stretch's
+            ``innovation_scale`` (:meth:`detect`).
         time_s : array_like, shape (n,), optional
         trace : bool
 
@@ -857,10 +1065,16 @@ class FaultDetector(Estimator):
         alarms, excl, notes = [], [], []
         ratio = {f: np.zeros(n) for f in _FAMILIES} if trace else None
         out_of: set[int] = set()
-        for a, b in parts:
+        for part in parts:
+            a, b = int(part[0]), int(part[1])
             if b - a < MIN_RECORD_SAMPLES or self.n_gyros_ - len(out_of) < 4:
                 continue
-            r = self.detect(z[a:b], t[a:b], trace=trace, exclude=sorted(out_of))
+            sc = None
+            if len(part) > 2 and part[2] is not None:
+                sc = np.broadcast_to(np.asarray(part[2], dtype=float), (b - a,))
+                sc = None if np.all(sc == 1.0) else sc
+            r = self.detect(z[a:b], t[a:b], trace=trace, exclude=sorted(out_of),
+                            innovation_scale=sc)
             alarms += list(r.alarms)
             excl += [(k + a, g) for k, g in r.exclusions]
             out_of.update(g for _, g in r.exclusions)
@@ -896,11 +1110,18 @@ def _window_stats(fam: str, wn, cs, design, reps, L, stop: int) -> np.ndarray:
     return per @ (design.coef[:, reps] / np.sqrt(E)[None, :])
 
 
-def _scan(eps: np.ndarray, design: ParityDesign, *, trace: bool = False) -> dict:
-    """First sample where a statistic crosses its threshold, and which one."""
+def _scan(eps: np.ndarray, design: ParityDesign, *, trace: bool = False, flat=None) -> dict:
+    """First sample where a statistic crosses its threshold, and which one.
+
+    ``flat`` is :func:`flat_alarm` of the same stretch (a stuck gyro's flat line).
+    """
     n = eps.shape[0]
     best: dict[str, Any] = {"k": None}
     k_first = n                                                # earliest crossing so far
+    if flat is not None and 1 <= flat[0] < n:
+        k_first = flat[0]
+        best = {"k": flat[0], "family": "flat", "rep": flat[1], "L": flat[2],
+                "value": float(flat[2]), "threshold": float(flat[2])}
     ratio = {f: np.zeros(n) for f in _FAMILIES} if trace else {}
     if n < 2:
         return {**best, "trace": ratio} if trace else best
@@ -933,8 +1154,7 @@ def _scan(eps: np.ndarray, design: ParityDesign, *, trace: bool = False) -> dict
             break
         blocks = (x[1:1 + nb * L] ** 2).reshape(nb, L, -1).sum(axis=1)   # skip ε₀
         lam = np.maximum(blocks / L, 1e-300)
-        lam_b = band_ratio(lam, None if design.var_band is None else design.var_band[:, reps])
-        G = 0.5 * L * (lam_b - 1.0 - np.log(lam_b))
+        G = variance_glr(lam, None if design.var_band is None else design.var_band[:, reps], L)
         if trace:                                              # known at each block's end
             r = np.repeat(G.max(axis=1) / g, L)[:max(n - L, 0)]
             np.maximum(ratio["variance"][L:L + r.size], r, out=ratio["variance"][L:L + r.size])
@@ -986,9 +1206,9 @@ def alarm_events(eps: np.ndarray, design: ParityDesign) -> dict:
         nb = (n - 1) // L
         if nb < 1:
             break
-        lam = np.maximum((x[1:1 + nb * L] ** 2).reshape(nb, L, -1).sum(axis=1) / L, 1e-300)
-        lam = band_ratio(lam, None if design.var_band is None else design.var_band[:, reps])
-        over = (0.5 * L * (lam - 1.0 - np.log(lam)) > g).any(axis=1)
+        lam = (x[1:1 + nb * L] ** 2).reshape(nb, L, -1).sum(axis=1) / L
+        over = (variance_glr(lam, None if design.var_band is None else design.var_band[:, reps], L)
+                > g).any(axis=1)
         spans += [(a, b, "variance") for a, b in _clumps((np.flatnonzero(over) + 1) * L, L)]
     per = {f: sum(1 for s in spans if s[2] == f) for f in _FAMILIES}
     spans.sort()
@@ -1058,7 +1278,12 @@ def _fit_segment(eps, design: ParityDesign, lo: int, k: int, E: int) -> dict:
     var_on = onsets[onsets <= max(seg.shape[0] - 8, 0)]
     if var_on.size == 0:
         var_on = onsets[:1]
-    dll, lam, count = ff.profile_variance(x, var_on)
+    _, lam, count = ff.profile_variance(x, var_on)
+    # one-sided, against the top of the no-fault band (as the variance family): a level at or
+    # below it explains nothing
+    top = np.ones(x.shape[1]) if design.var_band is None else design.var_band[1]
+    lb = np.maximum(lam / top[None, :], 1.0)
+    dll = 0.5 * count[:, None] * (lb - 1.0 - np.log(lb))
     out["noise"] = (lam, count, dll, var_on)
     best = []
     for grp in design.groups:
@@ -1067,6 +1292,60 @@ def _fit_segment(eps, design: ParityDesign, lo: int, k: int, E: int) -> dict:
                         float(dll[:, j].max())))
     out["best_dll"] = best
     return out
+
+
+def flat_alarm(z: np.ndarray) -> tuple[int, int, int] | None:
+    """The first sample at which a gyro's run of identical outputs becomes implausible.
+
+    Parameters
+    ----------
+    z : ndarray, shape (n, G)
+        Outputs of the active gyros from the stretch's start [rad/s].
+
+    Returns
+    -------
+    (k, column, run) or None
+        Sample k (into ``z``) at which column's run of repeats reaches ``run``
+        samples, the shortest its repeat share before the run makes as rare as
+        :data:`STUCK_RUN_P`; None when no run does.
+
+    Notes
+    -----
+    A run starting at sample s, after b = max(s, 1) samples of which r
+    repeat their predecessor, has p₀ = (r + 1)/(b + 1) (a repeat share with
+    one pseudo-count each way); under independent repeats a run of R
+    samples has probability p₀^(R − 1), so it is a stuck gyro from R =
+    1 + ⌈ln :data:`STUCK_RUN_P` / ln p₀⌉ on. The same rule isolates a stuck
+    gyro (:func:`_stuck_candidates`), so the alarm and its isolation agree.
+    Continuous (simulated) outputs never repeat: a run of 3 samples is
+    stuck after a few hundred; a quantised real gyro (MPU-9150, 0.061 deg/s
+    steps, 4–18 % repeats at rest) needs 9–14.
+    """
+    best: tuple[int, int, int] | None = None
+    log_p = math.log(STUCK_RUN_P)
+    for c in range(z.shape[1]):
+        col = z[:, c]
+        same = np.r_[False, col[1:] == col[:-1]]              # sample i repeats sample i − 1
+        if not same.any():
+            continue
+        cum = np.cumsum(same)
+        d = np.diff(np.r_[0, same.astype(np.int8), 0])
+        first = np.flatnonzero(d == 1)                        # first repeated sample of each run
+        stop = np.flatnonzero(d == -1)                        # one past its last
+        s = first - 1                                         # the run's first sample
+        b = np.maximum(s, 1)
+        r = cum[b - 1]                                        # repeats among samples 0 .. b − 1
+        p0 = (r + 1.0) / (b + 1.0)
+        with np.errstate(divide="ignore"):
+            need = np.where(p0 < 1.0, 1.0 + np.ceil(log_p / np.log(np.minimum(p0, 1.0 - 1e-16))),
+                            np.inf)
+        ok = np.flatnonzero(stop - s >= need)
+        if ok.size:
+            i = int(ok[0])
+            k = int(s[i] + need[i] - 1)
+            if best is None or k < best[0]:
+                best = (k, c, int(need[i]))
+    return best
 
 
 def _stuck_candidates(z, k0, design, lo, k, E) -> list:
@@ -1149,8 +1428,10 @@ def _alarm_stuck(z, t, k0, design, hit, cand, fits, E, dt):
     onset_k = min(start + 1, z.shape[0] - 1)
     det = k0 + hit["k"]
     value = float(rad_s_to_deg_s(z[start, g]))
-    evidence = (f"{hit['family']} test over {hit['L'] * dt:g} s: |statistic| {abs(hit['value']):.3g} > "
-                f"threshold {hit['threshold']:.3g}; gyro {g + 1} has output {value:.6g} deg/s for "
+    test = ("flat-line test: " if hit["family"] == "flat" else
+            f"{hit['family']} test over {hit['L'] * dt:g} s: |statistic| {abs(hit['value']):.3g} > "
+            f"threshold {hit['threshold']:.3g}; ")
+    evidence = (f"{test}gyro {g + 1} has output {value:.6g} deg/s for "
                 f"{k0 + E - start + 1} samples since {t[start]:.3f} s (a run its earlier outputs make "
                 f"implausible at p < {STUCK_RUN_P:g}): stuck, isolated by the flat line")
     alarm = Alarm(gyro=g + 1, kind="stuck", onset_s=float(t[onset_k]), onset_sigma_s=dt / math.sqrt(12.0),
@@ -1206,7 +1487,7 @@ def _as_noise(layout, noise, n: int) -> ArrayNoise:
 def minimum_detectable(layout: Layout, noise, far_per_h: float = 0.01, p_md: float = 0.001, *,
                        dt_s: float = 0.01, bias_memory_s: float = ff.DEFAULT_BIAS_MEMORY_S,
                        drift_window_s: float = 600.0, variance_window_s: float = 40.0,
-                       design: ParityDesign | None = None) -> dict:
+                       design: ParityDesign | None = None, repeat_share=None) -> dict:
     """Smallest fault of each kind on each gyro that the detector finds with probability 1 − p_md.
 
     Parameters
@@ -1221,6 +1502,12 @@ def minimum_detectable(layout: Layout, noise, far_per_h: float = 0.01, p_md: flo
         Sample period [s].
     bias_memory_s, drift_window_s, variance_window_s : float
         As :class:`FaultDetector`.
+    design : ParityDesign, optional
+        A design already made for these gyros (the other settings are then its own).
+    repeat_share : array_like, shape (N,), optional
+        Share of each gyro's healthy samples that repeat the previous output
+        [-] (quantised outputs); default that of a continuous output after one
+        shortest block, 1/33.
 
     Returns
     -------
@@ -1230,9 +1517,10 @@ def minimum_detectable(layout: Layout, noise, far_per_h: float = 0.01, p_md: flo
         per unit step); ``drift_rad_s2`` (N,): the same with the ramp
         signature over the longest drift window (``drift_window_s``), i.e.
         found within that time; ``noise_ratio`` (N,): the smallest ratio > 1
-        whose variance the longest block detects (exact χ²); ``stuck_static_s``
-        (N,): the shortest block that detects the variance collapse of a
-        stuck gyro at rest (ratio 0) [s]; ``isolable`` (N,) bool; ``u_step``,
+        whose variance the longest block detects (exact χ², one-sided, beyond
+        the no-fault band); ``stuck_static_s`` (N,): the run of repeated
+        outputs the flat-line test needs to call a gyro stuck
+        (:func:`stuck_run_needed`) [s]; ``isolable`` (N,) bool; ``u_step``,
         ``u_drift``, ``g_variance``. inf where a gyro has no parity (its
         faults are invisible).
 
@@ -1249,6 +1537,9 @@ def minimum_detectable(layout: Layout, noise, far_per_h: float = 0.01, p_md: flo
                                 drift_window_s=drift_window_s, variance_window_s=variance_window_s)
     zb = float(special.ndtri(1.0 - p_md))
     N = H.shape[0]
+    # without a record: continuous outputs, the repeat share the flat test reads after a block
+    share = np.broadcast_to(np.asarray(1.0 / (VARIANCE_MIN_BLOCK + 1.0) if repeat_share is None
+                                       else repeat_share, dtype=float), (N,))
     step, drift, ratio, stuck = (np.full(N, np.inf) for _ in range(4))
     iso = np.zeros(N, dtype=bool)
     for grp in d.groups:
@@ -1260,36 +1551,49 @@ def minimum_detectable(layout: Layout, noise, far_per_h: float = 0.01, p_md: flo
         Ls, Ld = d.scales["step"][-1], d.scales["drift"][-1]
         step[g] = (d.thresholds["step"] + zb) / math.sqrt(d.energies[("step", p, Ls)])
         drift[g] = (d.thresholds["drift"] + zb) / math.sqrt(d.energies[("drift", p, Ld)]) / dt_s
-        ratio[g], stuck[g] = _variance_detectable(d, p, p_md, dt_s)
+        ratio[g] = _variance_detectable(d, p, p_md)
+        # a stuck gyro at rest: the flat line (its parity only loses noise, which the one-sided
+        # variance test does not call a fault): the run its repeat share makes implausible
+        stuck[g] = float(stuck_run_needed(share[g])) * dt_s
     return {"step_rad_s": step, "drift_rad_s2": drift, "noise_ratio": ratio,
             "stuck_static_s": stuck, "isolable": iso, "u_step": d.thresholds["step"],
             "u_drift": d.thresholds["drift"], "g_variance": d.thresholds["variance"],
             "drift_window_s": d.scales["drift"][-1] * dt_s, "p_md": p_md, "far_per_h": far_per_h}
 
 
-def _variance_detectable(d: ParityDesign, p: int, p_md: float, dt_s: float) -> tuple[float, float]:
+def _variance_detectable(d: ParityDesign, p: int, p_md: float) -> float:
+    """Smallest noise amplitude ratio > 1 the longest block finds with probability 1 − p_md."""
     g = d.thresholds["variance"]
     w = d.white_share[p]
-    lo_band, hi_band = (1.0, 1.0) if d.var_band is None else (float(d.var_band[0, p]),
-                                                              float(d.var_band[1, p]))
+    hi_band = 1.0 if d.var_band is None else float(d.var_band[1, p])
     L = d.scales["variance"][-1]
-    lo, hi = ff._glr_roots(g, L)
+    _, hi = ff._glr_roots(g, L)
 
-    def power(lam, L=L, lo=lo, hi=hi):                      # P(GLR > g) when Var = λ
-        return stats.chi2.sf(L * hi / lam, L) + stats.chi2.cdf(L * lo / lam, L)
+    def power(lam, L=L, hi=hi):                              # P(GLR > g) when Var = λ (one-sided)
+        return stats.chi2.sf(L * hi / lam, L)
     lam = optimize.brentq(lambda x: power(x) - (1.0 - p_md), 1.0 + 1e-9, 1e6) \
         if power(1e6) > 1.0 - p_md else math.inf
     lam = lam * hi_band                                       # beyond the no-fault band
-    ratio = math.sqrt(1.0 + (lam - 1.0) / w) if math.isfinite(lam) else math.inf
-    stuck = math.inf
-    lam0 = min(max(1.0 - w, 1e-12) / lo_band, 1.0)            # ratio 0 at rest
-    for Lb in d.scales["variance"]:
-        lo_b, hi_b = ff._glr_roots(g, Lb)
-        pw = stats.chi2.sf(Lb * hi_b / lam0, Lb) + stats.chi2.cdf(Lb * lo_b / lam0, Lb)
-        if pw >= 1.0 - p_md:
-            stuck = 2 * Lb * dt_s                             # a block to start, one to detect
-            break
-    return ratio, stuck
+    return math.sqrt(1.0 + (lam - 1.0) / w) if math.isfinite(lam) else math.inf
+
+
+def stuck_run_needed(repeat_share) -> np.ndarray:
+    """Samples of repeated output the flat-line test needs to call a gyro stuck (:func:`flat_alarm`).
+
+    Parameters
+    ----------
+    repeat_share : array_like
+        Share of a gyro's samples that repeat the previous one when healthy [-].
+
+    Returns
+    -------
+    ndarray
+        1 + ⌈ln :data:`STUCK_RUN_P` / ln p₀⌉ [samples] (inf for p₀ >= 1).
+    """
+    p0 = np.asarray(repeat_share, dtype=float)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where((p0 > 0) & (p0 < 1), 1.0 + np.ceil(math.log(STUCK_RUN_P) / np.log(
+            np.clip(p0, 1e-300, 1.0 - 1e-16))), np.where(p0 <= 0, 2.0, np.inf))
 
 
 def minimum_detectable_step(layout: Layout, noise, far_per_h: float = 0.01, p_md: float = 0.001,
@@ -1436,7 +1740,7 @@ def _chunk_variances(z: np.ndarray, chunks: list) -> tuple[np.ndarray, np.ndarra
     return v, np.array([b - a for a, b in chunks], dtype=float)
 
 
-def noise_spread(readings_rad_s, dt_s: float, still) -> tuple[np.ndarray, list]:
+def noise_spread(readings_rad_s, dt_s: float, still, *, reference=None) -> tuple[np.ndarray, list]:
     """How much each gyro's white level changes along a record without a fault: κ per gyro.
 
     Parameters
@@ -1447,6 +1751,10 @@ def noise_spread(readings_rad_s, dt_s: float, still) -> tuple[np.ndarray, list]:
         Sample step [s].
     still : ndarray of bool, shape (n,)
         Still samples (:func:`~gyroarray.analysis.motion.still_mask`).
+    reference : array_like, shape (N,), optional
+        The per-sample white variance each gyro's tests are designed with
+        [rad²/s²]; κ is then the top of the gyro's no-fault band over it
+        (default: over the centre of its chunk levels).
 
     Returns
     -------
@@ -1468,18 +1776,81 @@ def noise_spread(readings_rad_s, dt_s: float, still) -> tuple[np.ndarray, list]:
     ln v_c minus the sampling part) is real: real MEMS gyros' noise changes
     with the orientation and the vibration lines they pick up (the MIMU4444
     record: a factor 0.4–1.5 between orientations on two of its gyros), and
-    κ = exp(:data:`SPREAD_Z`·τ). Elsewhere κ = 1 (a simulated white record
-    keeps the exact χ² test).
+    κ = exp(:data:`SPREAD_Z`·τ): the level of the gyro's worst credible
+    part, its median part level raised by SPREAD_Z of their spread (over
+    ``reference``: exp(median ln v_c + SPREAD_Z·τ)/reference, at least 1).
+    The median and the MAD make it a property of the healthy majority of
+    the parts: a noise fault that covers a minority of them neither moves
+    nor widens it. Elsewhere κ = 1 (a simulated white record keeps the exact
+    χ² test).
+
+    A fault lasts to the end of the record, so it may cover most of the
+    still parts. With ``reference`` the band is therefore read where no noise
+    fault reaches: a noise fault only raises a gyro's level, so the spread τ
+    is taken from the chunks below the healthy start (the median of the
+    reference span's chunks, :func:`estimate_noise`), mirrored, and the top
+    is that start raised by SPREAD_Z·τ, or the highest level (2σ low) the
+    gyro came back from (a later chunk back within that band) or reached
+    gradually from it (no rise above :data:`SPREAD_JUMP` between neighbouring
+    chunks: a warming board's level creeps, a noise fault has an onset). A
+    noise fault x3 in amplitude over the last 45 % of a record's still parts
+    is found (``tests/test_fdi_real_board.py``); experiment 1's gyro 22,
+    whose level creeps x1.5 over 8 min, is no fault.
     """
     z = np.asarray(readings_rad_s, dtype=float)
     N = z.shape[1]
     chunks = _reference_chunks(still, dt_s, everything=True)
+    kap, _ = _chunk_spread(z, chunks, N)
+    held = np.ones(N, dtype=bool)
+    if reference is not None and len(chunks) >= 3 and np.any(kap > 1.0):
+        ref = np.broadcast_to(np.asarray(reference, dtype=float), (N,))
+        v, nc = _chunk_variances(z, chunks)
+        rv, _ = _chunk_variances(z, _reference_chunks(still, dt_s))
+        lv = np.log(np.maximum(v, 1e-300))
+        anchor = np.median(np.log(np.maximum(rv, 1e-300)), axis=0)     # the healthy start
+        samp = float(np.mean(2.0 / (nc - 1.0)))
+        below = lv < anchor[None, :]
+        n_below = below.sum(axis=0)
+        d2 = np.where(below, (lv - anchor[None, :]) ** 2, 0.0).sum(axis=0) / np.maximum(n_below, 1)
+        tau = np.sqrt(np.maximum(d2 - samp, 0.0))
+        held = n_below >= 3
+        # a noise fault only raises a gyro's level, from its onset to the end: the wander is read
+        # below the healthy start (mirrored), where no noise fault reaches, and every level the
+        # gyro came back from (a later chunk back within that band) is credible too
+        band = anchor + SPREAD_Z * tau
+        later = np.vstack([np.minimum.accumulate(lv[::-1], axis=0)[::-1][1:],
+                           np.full((1, N), np.inf)])               # lowest level after chunk c
+        lcb = lv - 2.0 * np.sqrt(2.0 / (nc[:, None] - 1.0))        # chunk level, 2σ low
+        back = np.where(later <= band[None, :], lcb, -np.inf).max(axis=0)
+        # and every level it reached gradually from that band (no rise above SPREAD_JUMP between
+        # neighbouring chunks on the way): a noise fault starts at an onset, a warming board's
+        # level creeps (experiment 1's gyro 22: x1.5 over 8 min)
+        step = math.log(SPREAD_JUMP)
+        chain = lv[0] <= band
+        crept = np.where(chain, lcb[0], -np.inf)
+        for c in range(1, lv.shape[0]):
+            chain = (lv[c] <= band) | (chain & (lv[c] - lv[c - 1] <= step))
+            crept = np.maximum(crept, np.where(chain, lcb[c], -np.inf))
+        top = np.exp(np.maximum(band, np.maximum(back, crept))) / ref
+        kap = np.where(kap > 1.0, np.where(held, np.maximum(top, 1.0), kap), 1.0)
+    real = kap > 1.0
+    notes = []
+    if real.any():
+        notes.append("white level changes between still parts beyond chance (no fault: the "
+                     "variance test allows it): " + ", ".join(
+                         f"gyro {j + 1} x{kap[j]:.2f}" for j in np.flatnonzero(real)))
+    return kap, notes
+
+
+def _chunk_spread(z: np.ndarray, chunks: list, N: int) -> tuple[np.ndarray, np.ndarray]:
+    """(κ, centre) per gyro over chunks: exp(SPREAD_Z·τ) where Cochran's Q says the levels change
+    (else 1), and exp(median ln v_c) [rad²/s²] (:func:`noise_spread`)."""
     kap = np.ones(N)
     if len(chunks) < 3:
-        return kap, []
+        return kap, np.full(N, np.nan) if not chunks else np.median(_chunk_variances(z, chunks)[0], axis=0)
     v, nc = _chunk_variances(z, chunks)
     if not np.all(v > 0):
-        return kap, []
+        return kap, np.median(v, axis=0)
     lv = np.log(v)
     samp = 2.0 / (nc - 1.0)
     Q = np.sum((lv - lv.mean(axis=0)) ** 2 / samp[:, None], axis=0)
@@ -1487,12 +1858,7 @@ def noise_spread(readings_rad_s, dt_s: float, still) -> tuple[np.ndarray, list]:
     tau2 = (1.4826 * np.median(np.abs(lv - np.median(lv, axis=0)), axis=0)) ** 2 - float(np.mean(samp))
     real = (pv < SPREAD_P) & (tau2 > 0)
     kap[real] = np.exp(SPREAD_Z * np.sqrt(tau2[real]))
-    notes = []
-    if real.any():
-        notes.append("white level changes between still parts beyond chance (no fault: the "
-                     "variance test allows it): " + ", ".join(
-                         f"gyro {j + 1} x{kap[j]:.2f}" for j in np.flatnonzero(real)))
-    return kap, notes
+    return kap, np.exp(np.median(lv, axis=0))
 
 
 def estimate_noise(readings_rad_s, layout: Layout, dt_s: float, ref_rad_s=None, *,
@@ -1634,6 +2000,68 @@ def _still_noise(z: np.ndarray, H: np.ndarray, dt_s: float, chunks: list) -> tup
         notes.append("white level per gyro over the median: " + ", ".join(
             f"{j + 1}: {r:.2f}" for j, r in enumerate(ratio)))
     return ArrayNoise(np.sqrt(s2 * dt_s), np.sqrt(q / dt_s), eye, eye), notes
+
+
+def per_sample_noise(noise: ArrayNoise, readings_rad_s, dt_s: float, still) -> tuple[ArrayNoise, list]:
+    """A noise model's white levels read per sample on the record's still parts.
+
+    Parameters
+    ----------
+    noise : ArrayNoise
+        The model's levels: ARW N [rad/√s] (a white level at τ >= 1 s, as
+        ``gyroarray fit`` and the Allan fits give), RRW [rad/s/√s] and
+        correlations.
+    readings_rad_s : ndarray, shape (n, N)
+        Gyro outputs [rad/s].
+    dt_s : float
+        Sample step [s].
+    still : ndarray of bool, shape (n,) or None
+        Still samples (:func:`~gyroarray.analysis.motion.still_mask`).
+
+    Returns
+    -------
+    ArrayNoise, list of str (notes)
+        The model's correlations with each gyro's white level of one sample as
+        the record's still parts give it (:func:`estimate_noise` with
+        ``still``: the median chunk variance, raised by two standard errors)
+        and the larger of the model's RRW and the one the still parts show
+        (the bias trackers must follow the bias the record has: a fitted RRW
+        of 0 ± σ is a walk not seen at the model's τ, not a bias that cannot
+        move). The model unchanged without enough still samples.
+
+    Notes
+    -----
+    The parity tests work per sample: their white level is the variance of
+    one sample, σ². A model's ARW N is the white level of averages over τ
+    >= 1 s; a MEMS gyro with vibration lines (MPU-9150: 5–31 Hz at 62.5 Hz)
+    and quantisation has σ² well above N²/dt (the MIMU4444 board: x2–5), so
+    thresholds set from N²/dt read every healthy sample as a fault. The
+    level of one sample is a property of the record (its sample rate,
+    filters, mounting), so it is read there, for every gyro; the model keeps
+    what a record's still parts cannot give as well: the walk and the
+    correlations.
+    """
+    z = np.asarray(readings_rad_s, dtype=float)
+    if still is None:
+        return noise, []
+    chunks = _reference_chunks(still, dt_s)
+    if not chunks or sum(b - a for a, b in chunks) < MIN_NOISE_SAMPLES * 4:
+        return noise, []
+    try:
+        rec, _ = _still_noise(z, np.zeros((z.shape[1], 3)), dt_s, chunks)
+    except InputError:
+        return noise, []
+    model = np.asarray(noise.arw_rad_rt_s, dtype=float)
+    ratio = rec.arw_rad_rt_s / np.maximum(model, 1e-300)
+    rrw = np.maximum(np.asarray(noise.rrw_rad_s_rt_s, dtype=float), rec.rrw_rad_s_rt_s)
+    raised = np.flatnonzero(rrw > np.asarray(noise.rrw_rad_s_rt_s, dtype=float))
+    notes = [f"the model's ARW is a long-tau white level, not one sample's: every gyro's per-sample "
+             f"white level is read on the record's still parts (x{float(ratio.min()):.2f}–"
+             f"{float(ratio.max()):.2f} the model's N/sqrt(dt)); the model's correlations are kept, "
+             "and its RRW where the still parts show no larger one"
+             + (f" (raised on gyro(s) {', '.join(str(j + 1) for j in raised)})" if raised.size else "")]
+    return ArrayNoise(rec.arw_rad_rt_s, rrw, noise.corr_arw, noise.corr_rrw,
+                      noise.ignored_effects), notes
 
 
 def model_noise(model, n_gyros: int) -> ArrayNoise:

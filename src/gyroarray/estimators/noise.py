@@ -25,6 +25,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import math
+
 import numpy as np
 
 from gyroarray.core.errors import InputError
@@ -265,6 +267,16 @@ def array_noise(noise_model, n_gyros: int, require_arw: bool = True) -> ArrayNoi
         c_arw = np.eye(n_gyros) if corr[0].white is None else corr[0].white
         c_rrw = np.eye(n_gyros) if corr[0].walk is None else corr[0].walk
     table = getattr(noise_model, "array", None)          # the [array] table of a fitted array
+    high = None if table is None else getattr(table, "white_n_high_deg_rt_h", None)
+    if high is not None:
+        # a model fitted on several records: each gyro is designed with the high end of its
+        # credible white level on a new record (a gyro that wanders is weighted by its worst
+        # credible level, not its mean: docs/model-format.md)
+        from gyroarray.core.units import arw_deg_rt_h_to_rad_rt_s
+        assert table is not None
+        for g, v in zip(table.gyros, high):
+            if 1 <= g <= n_gyros and math.isfinite(v) and v > 0:
+                arw[g - 1] = max(float(arw[g - 1]), float(arw_deg_rt_h_to_rad_rt_s(v)))
     if table is not None:
         every = list(range(1, n_gyros + 1))
         c_arw = table_correlation(table, "white_correlation", every, c_arw)
