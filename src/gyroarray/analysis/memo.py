@@ -90,7 +90,7 @@ def _owner(a: np.ndarray) -> np.ndarray | None:
 def _sha256(a: np.ndarray) -> bytes:
     c = np.ascontiguousarray(a)
     # SHA-256: 2.5x BLAKE2b's speed here (the CPU's SHA extensions), the same use of a digest
-    return hashlib.sha256(c.view(np.uint8).reshape(-1)).digest()
+    return hashlib.sha256(c.view(np.uint8).reshape(-1).data).digest()
 
 
 def _digest(a: np.ndarray) -> bytes:
@@ -109,7 +109,8 @@ def _digest(a: np.ndarray) -> bytes:
     with _DIGEST_LOCK:
         hit = _DIGESTS.get(id(owner))
         if hit is None or hit[0]() is not owner:
-            hit = _DIGESTS[id(owner)] = (weakref.ref(owner), {})
+            views: dict = {}
+            hit = _DIGESTS[id(owner)] = (weakref.ref(owner), views)
             weakref.finalize(owner, _forget, id(owner))
         hit[1][key] = d
     return d
