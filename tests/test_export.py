@@ -234,3 +234,36 @@ def test_existing_output_needs_force(tmp_path):
     assert o.code == 2 and out.read_text() == "keep me"
     o = run_cli(["export", model, "--format", "kalibr", "--rate-hz", 200, "--out", out, "--force"])
     assert o.code == 0 and "gyroscope_noise_density" in out.read_text()
+
+
+def test_every_axis_is_read_and_the_worst_is_written_by_default(tmp_path):
+    """A 3-gyro model whose z gyro has 2.64x the x gyro's RRW (the ADIS16405's 200.6 against 75.9
+    deg/h/√h): by default the file gets gyro 3 and says so, listing every gyro's numbers; --axis 1
+    writes gyro 1, --axis mean the mean (hand-computed: (N1 + N2 + N3)/3)."""
+    model = _model(tmp_path, "\n".join([
+        "effects = [",
+        '  {effect = "arw", gyro = 1, n_deg_rt_h = 0.30}, {effect = "rrw", gyro = 1, k_deg_h_rt_h = 75.9},',
+        '  {effect = "arw", gyro = 2, n_deg_rt_h = 0.32}, {effect = "rrw", gyro = 2, k_deg_h_rt_h = 120.0},',
+        '  {effect = "arw", gyro = 3, n_deg_rt_h = 0.31}, {effect = "rrw", gyro = 3, k_deg_h_rt_h = 200.6},',
+        "]"]) + "\n")
+    out = tmp_path / "imu.yaml"
+    o = run_cli(["export", model, "--format", "kalibr", "--rate-hz", 100, "--out", out, "--json"])
+    assert o.code == 0, o.err
+    assert o.json["gyro"] == 3 and "worst" in o.json["axis"]
+    assert [g["gyro"] for g in o.json["gyros"]] == [1, 2, 3]
+    text = out.read_text()
+    assert "gyro 3, the worst of the model's 3 gyros" in text.splitlines()[0]
+    assert "every gyro of the model" in text
+    k3 = 200.6 * math.pi / 180 / 3600 / 60
+    assert o.json["values"]["gyroscope_random_walk"] == pytest.approx(k3, rel=1e-12)
+    one = run_cli(["export", model, "--format", "kalibr", "--rate-hz", 100, "--out", tmp_path / "one.yaml",
+                   "--axis", "1", "--json"])
+    assert one.code == 0 and one.json["gyro"] == 1
+    mean = run_cli(["export", model, "--format", "kalibr", "--rate-hz", 100, "--out", tmp_path / "mean.yaml",
+                    "--axis", "mean", "--json"])
+    assert mean.code == 0, mean.err
+    n_mean = (0.30 + 0.32 + 0.31) / 3 * math.pi / 180 / 60
+    assert mean.json["values"]["gyroscope_noise_density"] == pytest.approx(n_mean, rel=1e-12)
+    bad = run_cli(["export", model, "--format", "kalibr", "--rate-hz", 100, "--out", tmp_path / "b.yaml",
+                   "--axis", "sideways"])
+    assert bad.code == 2 and "--axis" in bad.err

@@ -75,7 +75,7 @@ from gyroarray.sim.effects import simulate_readings
 from gyroarray.sim.lab import lab_temperature
 from gyroarray.effects.names import ARW, BIAS_INSTABILITY, GAUSS_MARKOV, QUANTIZATION, RATE_RAMP, RRW, TEMPERATURE_BIAS
 
-__all__ = ["FORMATS", "SUFFIXES", "MAX_SIM_SAMPLES", "GyroNoise", "StandIn", "gyro_noise",
+__all__ = ["FORMATS", "SUFFIXES", "MAX_SIM_SAMPLES", "GyroNoise", "StandIn", "gyro_noise", "choose_axis", "model_gyros",
            "stand_in", "check_exportable", "sampled_walk_n2", "exported_values", "tool_discrete", "render",
            "simulate_model", "window_nis", "auto_inflation", "verify_export", "export_noise"]
 
@@ -202,6 +202,71 @@ def gyro_noise(model: NoiseModel, gyro: int) -> GyroNoise:
                      b_rad_s=si(BIAS_INSTABILITY, "b_rad_s"), q_rad=si(QUANTIZATION, "q_rad"),
                      r_rad_s2=si(RATE_RAMP, "r_rad_s2"), gm=gm,
                      entries=tuple(chosen.values()))
+
+
+def model_gyros(model: NoiseModel) -> list[int]:
+    """The gyros a model describes: those with an entry of their own, else [1] (all-gyros
+    entries only: every gyro alike)."""
+    own = sorted({e.gyro for e in model if e.gyro is not None})
+    return own or [1]
+
+
+#: τ grid on which :func:`choose_axis` compares the gyros' model ADEV [s] (0.01 s to 1000 s,
+#: 4 points per decade).
+AXIS_TAUS_S = np.logspace(-2, 3, 21)
+
+
+def choose_axis(model: NoiseModel, axis: str | int) -> tuple[GyroNoise, str, list[dict]]:
+    """The noise a file is written with, what it is, and every gyro's numbers.
+
+    ``axis``: ``"worst"`` (default of ``export``; what allan_variance_ros writes): the gyro whose
+    model Allan variance is largest on average over :data:`AXIS_TAUS_S` (mean of log σ², every
+    term the model has), so the file understates no axis's noise at most τ; ``"mean"`` (what
+    imu_utils writes): the gyros' mean ARW, RRW and bias instability (other terms dropped, said
+    so); an int: that gyro. Returns (noise, one line saying which, [{gyro, N, K, B} per gyro] in
+    datasheet units).
+    """
+    gyros = model_gyros(model)
+    noises = []
+    for g in gyros:
+        try:
+            noises.append(gyro_noise(model, g))
+        except InputError:
+            continue                      # a gyro without white noise (e.g. one effect of its own)
+    if isinstance(axis, int) or (isinstance(axis, str) and axis.isdigit()):
+        k = int(axis)
+        chosen = gyro_noise(model, k)
+        what = f"gyro {k} (as asked)"
+    elif not noises:
+        chosen = gyro_noise(model, gyros[0])          # raises, naming what is missing
+        what = ""
+    elif axis == "worst":
+        score = [float(np.mean(np.log(np.maximum(n.model_avar(AXIS_TAUS_S), 1e-300)))) for n in noises]
+        chosen = noises[int(np.argmax(score))]
+        what = (f"gyro {chosen.gyro}, the worst of the model's {len(noises)} gyros (the largest model ADEV "
+                f"on average over tau 0.01-1000 s)" if len(noises) > 1 else f"gyro {chosen.gyro}, the model's only one")
+    elif axis == "mean":
+        m = len(noises)
+        mean = GyroNoise(gyro=0, n_rad_rt_s=float(np.mean([n.n_rad_rt_s for n in noises])),
+                         k_rad_s_rt_s=float(np.mean([n.k_rad_s_rt_s for n in noises])),
+                         b_rad_s=float(np.mean([n.b_rad_s for n in noises])))
+        entries = [ModelEntry(ARW, None, {"n_deg_rt_h": float(units.arw_rad_rt_s_to_deg_rt_h(mean.n_rad_rt_s))})]
+        if mean.k_rad_s_rt_s > 0:
+            entries.append(ModelEntry(RRW, None, {"k_deg_h_rt_h": float(units.rrw_rad_s_rt_s_to_deg_h_rt_h(
+                mean.k_rad_s_rt_s))}))
+        if mean.b_rad_s > 0:
+            entries.append(ModelEntry(BIAS_INSTABILITY, None, {"b_deg_h": float(units.rad_s_to_deg_h(mean.b_rad_s))}))
+        dropped = sorted({e.effect for n in noises for e in n.entries} - {ARW, RRW, BIAS_INSTABILITY})
+        chosen = GyroNoise(gyro=0, n_rad_rt_s=mean.n_rad_rt_s, k_rad_s_rt_s=mean.k_rad_s_rt_s,
+                           b_rad_s=mean.b_rad_s, entries=tuple(entries))
+        what = (f"the mean of the model's {m} gyros (ARW, RRW, bias instability)"
+                + (f"; left out: {', '.join(dropped)}" if dropped else ""))
+    else:
+        raise InputError(f"--axis must be worst, mean or a gyro number, got {axis!r}")
+    table = [{"gyro": n.gyro, "n_deg_rt_h": float(units.arw_rad_rt_s_to_deg_rt_h(n.n_rad_rt_s)),
+              "k_deg_h_rt_h": float(units.rrw_rad_s_rt_s_to_deg_h_rt_h(n.k_rad_s_rt_s)),
+              "b_deg_h": float(units.rad_s_to_deg_h(n.b_rad_s))} for n in noises]
+    return chosen, what, table
 
 
 @dataclass(frozen=True)
@@ -345,13 +410,14 @@ def _num(x: float) -> str:
 
 
 def _header(noise: GyroNoise, fmt: str, rate_hz: float, inflate: float, why: str,
-            source: str, comment: str) -> list[str]:
+            source: str, comment: str, axis: tuple | None = None) -> list[str]:
     si = stand_in(noise, rate_hz, keeps_b=fmt == "matlab")
     n_dh = units.arw_rad_rt_s_to_deg_rt_h(noise.n_rad_rt_s)
     k_dh = units.rrw_rad_s_rt_s_to_deg_h_rt_h(noise.k_rad_s_rt_s)
     discrete = fmt == "vins"
     lines = [
-        f"gyroarray {__version__} export --format {fmt}: gyro {noise.gyro} of {source}",
+        f"gyroarray {__version__} export --format {fmt}: "
+        + (f"gyro {noise.gyro}" if axis is None else axis[0]) + f" of {source}",
         f"model: ARW N = {n_dh:.6g} deg/√h = {noise.n_rad_rt_s:.6e} rad/s/√Hz; "
         f"RRW K = {k_dh:.6g} deg/h/√h = {noise.k_rad_s_rt_s:.6e} rad/s²/√Hz",
         ("convention: DISCRETE-time, per sample at the rate below: gyr_n = σ_c·√rate [rad/s] "
@@ -385,6 +451,10 @@ def _header(noise: GyroNoise, fmt: str, rate_hz: float, inflate: float, why: str
                                                             TEMPERATURE_BIAS)]
     if lost:
         lines.append(f"not representable here: {', '.join(lost)} (see --inflate auto)")
+    if axis is not None and len(axis[1]) > 1:
+        lines.append("every gyro of the model (ARW deg/√h, RRW deg/h/√h, BI deg/h): " + "; ".join(
+            f"{g['gyro']}: {g['n_deg_rt_h']:.4g}, {g['k_deg_h_rt_h']:.4g}, {g['b_deg_h']:.4g}" for g in axis[1])
+            + " (--axis worst|mean|K chooses)")
     lines.append(f"inflation: ×{inflate:.4g} on both numbers ({why})")
     lines.append("accelerometer: not measured by gyroarray; fill in the accelerometer fields "
                  "from your own Allan fit")
@@ -392,11 +462,11 @@ def _header(noise: GyroNoise, fmt: str, rate_hz: float, inflate: float, why: str
 
 
 def render(noise: GyroNoise, fmt: str, rate_hz: float, *, inflate: float = 1.0,
-           why: str = "none asked", source: str = "MODEL.toml") -> str:
+           why: str = "none asked", source: str = "MODEL.toml", axis: tuple | None = None) -> str:
     """The file's text: the comment header, then the fields."""
     v = exported_values(noise, fmt, rate_hz, inflate)
     if fmt == "matlab":
-        head = _header(noise, fmt, rate_hz, inflate, why, source, "%")
+        head = _header(noise, fmt, rate_hz, inflate, why, source, "%", axis)
         body = ["gyro = gyroparams( ...",
                 f"    'NoiseDensity', {_num(v['NoiseDensity'])}, ...    % (rad/s)/sqrt(Hz)",
                 f"    'RandomWalk', {_num(v['RandomWalk'])}, ...      % (rad/s)*sqrt(Hz)",
@@ -406,7 +476,7 @@ def render(noise: GyroNoise, fmt: str, rate_hz: float, *, inflate: float = 1.0,
                 "% accel = accelparams(...);  % fill in from your accelerometer's Allan fit"]
         return "\n".join(head + body) + "\n"
     head = ["%YAML:1.0"] if fmt in ("openvins", "vins", "orbslam3") else []
-    head += _header(noise, fmt, rate_hz, inflate, why, source, "#")
+    head += _header(noise, fmt, rate_hz, inflate, why, source, "#", axis)
     if fmt == "kalibr":
         body = ["rostopic: /imu0",
                 f"update_rate: {rate_hz!r}   # Hz",
@@ -583,7 +653,7 @@ def verify_export(noise: GyroNoise, fmt: str, rate_hz: float, inflate: float,
     return out
 
 
-def export_noise(model: NoiseModel, gyro: int, fmt: str, rate_hz: float, *,
+def export_noise(model: NoiseModel, gyro: int | str, fmt: str, rate_hz: float, *,
                  inflate: float | str = 1.0, verify: bool = False, seed: int = 0,
                  source: str = "MODEL.toml") -> tuple[str, dict]:
     """The file's text and a JSON-ready summary (what ``gyroarray export`` writes and prints).
@@ -591,8 +661,8 @@ def export_noise(model: NoiseModel, gyro: int, fmt: str, rate_hz: float, *,
     Parameters
     ----------
     model : NoiseModel
-    gyro : int
-        1-based gyro.
+    gyro : int or {"worst", "mean"}
+        1-based gyro, or the axis rule of :func:`choose_axis`.
     fmt : str
         One of :data:`FORMATS`.
     rate_hz : float
@@ -610,17 +680,18 @@ def export_noise(model: NoiseModel, gyro: int, fmt: str, rate_hz: float, *,
         raise InputError(f"unknown format {fmt!r}; expected one of {', '.join(FORMATS)}")
     if not (math.isfinite(rate_hz) and MIN_RATE_HZ <= rate_hz <= MAX_RATE_HZ):
         raise InputError(f"--rate-hz must be in [{MIN_RATE_HZ:g}, {MAX_RATE_HZ:g}] Hz, got {rate_hz!r}")
-    noise = gyro_noise(model, gyro)
+    noise, what, every = choose_axis(model, gyro)
     check_exportable(noise, fmt, rate_hz)
     rng = np.random.default_rng(seed)
-    summary: dict = {"format": fmt, "gyro": gyro, "rate_hz": rate_hz}
+    summary: dict = {"format": fmt, "gyro": noise.gyro if noise.gyro else None, "axis": what,
+                     "gyros": every, "rate_hz": rate_hz}
     if inflate == "auto":
         auto = auto_inflation(noise, fmt, rate_hz, rng)
         factor, why = auto["factor"], auto["why"]
         summary["inflate_auto"] = auto
     else:
         factor, why = float(inflate), ("as asked" if float(inflate) != 1.0 else "none asked")
-    text = render(noise, fmt, rate_hz, inflate=factor, why=why, source=source)
+    text = render(noise, fmt, rate_hz, inflate=factor, why=why, source=source, axis=(what, every))
     si = stand_in(noise, rate_hz, keeps_b=fmt == "matlab")
     summary.update({
         "inflate": factor, "values": exported_values(noise, fmt, rate_hz, factor),

@@ -22,6 +22,13 @@ FORMAT_NAMES = ("kalibr", "openvins", "vins", "orbslam3", "matlab")
 _FACTOR = float_in("--inflate", 0.0, 1e6, lo_open=True)
 
 
+def _axis(text: str):
+    """``worst``, ``mean`` or a gyro number >= 1."""
+    if text in ("worst", "mean"):
+        return text
+    return positive_int("--axis")(text)
+
+
 def _inflate(text: str):
     """``auto`` or a factor > 0."""
     return "auto" if text == "auto" else _FACTOR(text)
@@ -35,7 +42,8 @@ def cmd_export(args):
     out = output(args.out, args, "--out", inputs=[args.model], suffixes=SUFFIXES[args.format])
     model = NoiseModel.from_toml(args.model)
     try:
-        text, summary = export_noise(model, args.gyro, args.format, args.rate_hz,
+        axis = args.gyro if args.gyro is not None else args.axis
+        text, summary = export_noise(model, axis, args.format, args.rate_hz,
                                      inflate=args.inflate, verify=args.verify, seed=args.seed,
                                      source=Path(args.model).name)
     except InputError as err:
@@ -43,8 +51,11 @@ def cmd_export(args):
     write_text(out, text, force=args.force)
     summary["out"] = str(out)
     v = summary["values"]
-    lines = [f"wrote {out} ({args.format}, gyro {args.gyro} of {args.model} at "
+    lines = [f"wrote {out} ({args.format}, {summary['axis']} of {args.model} at "
              f"{args.rate_hz:g} Hz, {summary['convention']}):"]
+    if len(summary["gyros"]) > 1:
+        lines.append("  every gyro (ARW deg/√h, RRW deg/h/√h): " + "; ".join(
+            f"{g['gyro']}: {g['n_deg_rt_h']:.4g}, {g['k_deg_h_rt_h']:.4g}" for g in summary["gyros"]))
     lines += [f"  {k} = {val:.6e}" for k, val in v.items() if not k.lower().endswith(("rate", "frequency"))]
     si = summary["stand_in"]
     if si["covers"]:
@@ -88,8 +99,12 @@ def add_parser(sub) -> None:
                    metavar="R", help="the IMU rate the tool runs at [Hz]")
     p.add_argument("--out", required=True, type=Path, metavar="FILE",
                    help="the file to write (.yaml/.yml; .m for matlab)")
-    p.add_argument("--gyro", type=positive_int("--gyro"), default=1, metavar="K",
-                   help="the model's gyro K (1-based; default 1)")
+    p.add_argument("--axis", type=_axis, default="worst", metavar="worst|mean|K",
+                   help="which of the model's gyros the file gets: worst (default: the largest model "
+                        "ADEV over tau 0.01-1000 s, as allan_variance_ros), mean (as imu_utils), or gyro K; "
+                        "the header says which and lists every gyro's numbers")
+    p.add_argument("--gyro", type=positive_int("--gyro"), default=None, metavar="K",
+                   help="the model's gyro K (1-based): the same as --axis K")
     p.add_argument("--inflate", type=_inflate, default=1.0, metavar="auto|X",
                    help="factor on both numbers, or auto: the one that makes a white + walk "
                         "filter consistent (NIS = 1) on a record simulated from the full model")
