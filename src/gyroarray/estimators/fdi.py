@@ -116,6 +116,7 @@ from scipy import linalg, optimize, special, stats
 from gyroarray.effects.faults import scan as ff
 from gyroarray.core.errors import InputError
 from gyroarray.core.layout import Layout
+from gyroarray.analysis.motion import still_mask
 from gyroarray.core.measurement import true_runs
 from gyroarray.core.units import rad_s_to_deg_s
 
@@ -899,7 +900,6 @@ class FaultDetector(Estimator):
         -------
         FdiResult
         """
-        from gyroarray.analysis.motion import still_mask       # deferred: analysis loads scipy.ndimage
         self._check_fitted()
         z = check_readings(readings_rad_s, self.n_gyros_)
         dt = self.dt_s_
