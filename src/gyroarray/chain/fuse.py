@@ -645,18 +645,17 @@ def fuse(meas: Measurement, estimator: str, *, model=None, model_name: str | Non
         check["action"] = off_levels if check["off"] else None
         # the prediction reads each gyro at the model's central level (the record's own for a
         # gyro found off, with --off-levels record), not at the high end the estimator is designed with
-        cen = model_levels(model, meas.n_gyros)[0][[k - 1 for k in used]]
+        cen, sig, _, _ = model_levels(model, meas.n_gyros)
+        cen, sig = cen[[k - 1 for k in used]], sig[[k - 1 for k in used]]
         n_pred = np.where(np.isfinite(cen) & (cen > 0), cen, noise.arw_rad_rt_s)
+        s_pred = np.where(np.isfinite(sig), sig, 0.0)
         if off_levels == "record":
             for k in check["off"]:
-                n_pred[used.index(k)] = noise.arw_rad_rt_s[used.index(k)]
+                i = used.index(k)
+                n_pred[i] = noise.arw_rad_rt_s[i]
+                s_pred[i] = float(np.nan_to_num(here.arw_sigma[i]))
         pred_noise = ArrayNoise(np.maximum(n_pred, 1e-30), noise.rrw_rad_s_rt_s, noise.corr_arw, noise.corr_rrw,
                                 noise.ignored_effects, zero_arw_ok=noise.zero_arw_ok)
-        s_pred = model_levels(model, meas.n_gyros)[1][[k - 1 for k in used]]
-        s_pred = np.where(np.isfinite(s_pred), s_pred, 0.0)
-        if off_levels == "record":
-            for k in check["off"]:
-                s_pred[used.index(k)] = float(np.nan_to_num(here.arw_sigma[used.index(k)]))
         lev1 = pooled_white_level(cast(np.ndarray, e_single)[:, :1], dt, joined(parts))
         pred_levels = (s_pred, 0.0 if lev1 is None else float(lev1[3]))
     if model is None and "allan_covariance" in est.get_params() and est.get_params()["allan_covariance"] is None:
@@ -1123,14 +1122,13 @@ def validate_fuse(meas: Measurement, estimator: str, *, holdout: float | None = 
         # the prediction reads each gyro at the model's central level with its 1σ on a new record
         # (a model fitted on several records: the between-record spread), not at the high end the
         # estimator is designed with; a gyro found off is read at the record's own level
-        cen, sig, _, _ = model_levels(model, meas.n_gyros)
+        cen, sig, _, hi = model_levels(model, meas.n_gyros)
         idx_u = [k - 1 for k in used]
         n_c = np.where(np.isfinite(cen[idx_u]), cen[idx_u], noise.arw_rad_rt_s)
         s_c = np.where(np.isfinite(cen[idx_u]), sig[idx_u], 0.0)
         table = getattr(model, "array", None)
         if table is not None and getattr(table, "white_n_low_deg_rt_h", None) is not None:
             # several records: 1σ of a new record's level, from the credible range (±q·σ in ln N)
-            lo, hi = model_levels(model, meas.n_gyros)[2:]
             q = float(stats.norm.ppf(0.975))                 # as levels_across's range
             s_c = np.where(np.isfinite(cen[idx_u]), n_c * np.log(np.maximum(hi[idx_u], 1e-300)
                                                                    / np.maximum(n_c, 1e-300)) / q, s_c)
