@@ -60,8 +60,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import stats
 
-from gyroarray.analysis.allan import edf_simple
-from gyroarray.analysis.white_level import pooled_allan_covariance, white_m
+from gyroarray.analysis.white_level import pooled_allan_covariance, pooled_edf, white_m
 from gyroarray.core.errors import InputError
 
 __all__ = ["MatrixEstimate", "SharedLine", "MIN_EIGENVALUE", "white_covariance", "white_at_tau", "allan_covariance",
@@ -389,7 +388,7 @@ def white_at_tau(x, dt_s: float, *, parts=None, tau_s: float = 1.0, level: float
     if total == 0:
         raise InputError(f"no still part is longer than {2 * m * dt:.3g} s: the white covariance at tau = "
                          f"{m * dt:.3g} s cannot be read", file=name)
-    edf = float(sum(float(edf_simple(b - a + 1, m, 0)) for a, b in pts if b - a + 1 - 2 * m >= 1))
+    edf = pooled_edf(pts, m)
     flat = np.flatnonzero(np.diag(A) <= 0)
     if flat.size:
         raise InputError(f"gyro(s) {', '.join(str(k + 1) for k in flat)} have no noise at tau = {m * dt:.3g} s "

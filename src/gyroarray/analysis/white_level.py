@@ -48,7 +48,7 @@ from gyroarray.analysis.avar_covariance import AvarCovariance
 from gyroarray.core import units
 
 __all__ = ["WhiteWalk", "PooledAvar", "pooled_octave_avar", "pooled_allan_covariance", "white_walk_fit",
-           "white_walk_of_avar", "white_m", "pooled_white_level", "PooledDeviation", "pooled_deviation", "nnls2", "octave_avar", "MIN_TAU_S", "FIT_SPAN", "PART_SPAN",
+           "white_walk_of_avar", "white_m", "pooled_edf", "pooled_white_level", "PooledDeviation", "pooled_deviation", "nnls2", "octave_avar", "MIN_TAU_S", "FIT_SPAN", "PART_SPAN",
            "MIN_FIT_OCTAVES", "MIN_POOLED_EDF"]
 
 #: Shortest τ of the white + walk fit [s] (IEEE Std 952: ARW read at τ = 1 s and beyond).
@@ -318,6 +318,12 @@ def white_m(dt_s: float, tau_s: float = MIN_TAU_S) -> int:
     return max(int(math.floor(float(tau_s) / float(dt_s) + 0.5)), 1)
 
 
+def pooled_edf(parts, m: int) -> float:
+    """White-FM EDF of the overlapping Allan variance at m samples pooled over ``parts``: the
+    parts' own EDFs summed, parts with no term at m left out [-]."""
+    return float(sum(float(edf_simple(b - a + 1, m, 0)) for a, b in parts if b - a + 1 - 2 * m >= 1))
+
+
 def pooled_white_level(x, dt_s: float, parts=None, tau_s: float = MIN_TAU_S):
     """Each column's white level read at τ1 ≈ ``tau_s``: N = σ(τ1)·√τ1, σ² the overlapping Allan
     variance pooled over ``parts`` (:func:`pooled_allan_covariance`'s diagonal), τ1 = m·dt with
@@ -336,7 +342,7 @@ def pooled_white_level(x, dt_s: float, parts=None, tau_s: float = MIN_TAU_S):
     A, total = pooled_allan_covariance(x, dt_s, m, pts)
     if total == 0:
         return None
-    edf = float(sum(float(edf_simple(b - a + 1, m, 0)) for a, b in pts if b - a + 1 - 2 * m >= 1))
+    edf = pooled_edf(pts, m)
     tau1 = m * float(dt_s)
     n = np.sqrt(np.maximum(np.diag(A), 0.0) * tau1)
     return n, n / math.sqrt(2.0 * max(edf, 1.0)), tau1, edf
