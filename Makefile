@@ -6,7 +6,7 @@ STAMP  := $(VENV)/.installed
 # sweep worker processes (one per core)
 WORKERS ?= $(shell nproc 2>/dev/null || echo 2)
 
-.PHONY: demo paper test lint docs fuzz bench score typecheck venv clean
+.PHONY: demo paper test lint docs docs-numbers fuzz bench score typecheck venv clean
 
 venv: $(STAMP)
 
@@ -57,6 +57,12 @@ docs: $(STAMP)
 	rm -rf docs/_api build/docs
 	PYTHONWARNINGS=ignore $(PY) -m sphinx -q -b html docs build/docs
 	@echo "docs: build/docs/index.html"
+
+# the numbers the docs quote, regenerated from the runs that produce them (the passages between
+# <!-- numbers:NAME --> and <!-- /numbers --> in docs/*.md; about 35 s). Add CHECK=1 to only
+# report stale passages (exit 1), as a docs build step
+docs-numbers: $(STAMP)
+	$(PY) scripts/docs_numbers.py $(if $(CHECK),--check,)
 
 # long fuzzing of the CLI with generated hostile inputs and arguments (issues 17, 28): FUZZ_EXAMPLES
 # generated examples in all (tests/test_fuzz.py shares them out); make test runs a small fixed sample

@@ -114,7 +114,7 @@ def test_non_white_spectrum_is_said(tmp_path):
     assert any("not white" in n and "tau >= 1 s" in n for n in o.json["notes"]), o.json["notes"]
 
 
-@pytest.mark.parametrize("kind,at_name", [("mdev", "mdev"), ("hdev", "ohdev"), ("totdev", "totdev")])
+@pytest.mark.parametrize("kind,at_name", [("mdev", "mdev"), ("hdev", "hdev"), ("ohdev", "ohdev"), ("totdev", "totdev")])
 def test_kinds_through_the_cli_equal_allantools(tmp_path, kind, at_name):
     at = pytest.importorskip("allantools")
     rng = np.random.default_rng(6)
@@ -126,7 +126,9 @@ def test_kinds_through_the_cli_equal_allantools(tmp_path, kind, at_name):
     g = o.json["gyros"]["1"]
     assert g["kind"] == at_name and "edf_method" in g and len(g["noise_id"]) == len(g["taus_s"])
     taus, dev, _, _ = getattr(at, at_name)(y[:, 0] * 3600.0, rate=RATE, data_type="freq", taus=np.array(g["taus_s"]))
-    assert np.max(np.abs(np.asarray(g["adev_deg_h"]) / dev - 1)) < 1e-9
+    k = taus.size                  # allantools leaves out an HDEV of one term (the last tau)
+    assert k >= len(g["taus_s"]) - (kind == "hdev")
+    assert np.max(np.abs(np.asarray(g["adev_deg_h"][:k]) / dev - 1)) < 1e-9
 
 
 @pytest.mark.skipif(not MIMU.is_file(), reason="../shared not beside the repo")

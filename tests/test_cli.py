@@ -103,7 +103,7 @@ def test_every_subcommand_is_listed():
     sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
     assert set(sub.choices) == {"gdop", "design", "allan", "davar", "simulate", "run", "check", "sweep", "report",
                                 "compare", "diagnose", "fit", "ladder", "fdi", "fuse", "convert",
-                                "export", "plan", "parity"}
+                                "export", "plan", "parity", "import"}
 
 
 @pytest.mark.parametrize("argv,fragment", [

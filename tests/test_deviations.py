@@ -23,7 +23,7 @@ from allantools import ci as at_ci  # noqa: E402  (after the importorskip)
 
 STABLE32 = Path(__file__).resolve().parents[1].parent / "shared" / "reference" / "stable32"
 needs_shared = pytest.mark.skipif(not STABLE32.is_dir(), reason="../shared/reference not beside the repo")
-AT_FN = {"oadev": at.oadev, "mdev": at.mdev, "ohdev": at.ohdev, "totdev": at.totdev}
+AT_FN = {"oadev": at.oadev, "mdev": at.mdev, "hdev": at.hdev, "ohdev": at.ohdev, "totdev": at.totdev}
 KINDS = tuple(AT_FN)
 
 
@@ -44,13 +44,22 @@ def test_each_kind_equals_allantools(kind):
     y, tau0 = _record(), 0.01
     r = pooled_deviation([y], tau0, kind, "octave")
     taus, dev, _, ns = AT_FN[kind](y, rate=1 / tau0, data_type="freq", taus=r.taus_s)
-    assert np.allclose(taus, r.taus_s, rtol=1e-12)
-    assert np.max(np.abs(r.dev / dev - 1)) < 1e-10
-    assert np.array_equal(r.n_terms, ns.astype(int))
+    # allantools leaves out a non-overlapping HDEV of a single term (the last octave); we keep it
+    k = taus.size
+    assert k >= r.taus_s.size - (kind == "hdev") and np.allclose(taus, r.taus_s[:k], rtol=1e-12)
+    assert np.max(np.abs(r.dev[:k] / dev - 1)) < 1e-10
+    assert np.array_equal(r.n_terms[:k], ns.astype(int))
 
 
-def test_hdev_names_the_overlapping_hadamard():
-    assert canonical_kind("hdev") == "ohdev"
+def test_hdev_is_the_non_overlapping_hadamard():
+    """``hdev`` is Stable32's HDEV (issue 42: it was the overlapping one, 23 % off HDEV)."""
+    assert canonical_kind("hdev") == "hdev" and canonical_kind("ohdev") == "ohdev"
+    y = _record()
+    h = pooled_deviation([y], 1.0, "hdev", [1, 8, 64])
+    o = pooled_deviation([y], 1.0, "ohdev", [1, 8, 64])
+    assert h.dev[0] == pytest.approx(o.dev[0], rel=1e-12)        # the same at m = 1
+    assert h.n_terms[1:].tolist() == [(y.size // m) - 2 for m in (8, 64)]
+    assert o.n_terms[1:].tolist() == [y.size + 1 - 3 * m for m in (8, 64)]
     with pytest.raises(InputError, match="unknown deviation kind"):
         canonical_kind("adev2")
 
@@ -93,7 +102,8 @@ def test_nbs14_published_values():
     for line in (STABLE32 / "nbs14" / "nbs14_reference_deviations.csv").read_text().splitlines()[1:]:
         ds, dev, tau, value, *_ = line.split(",")
         ref[(ds, dev, float(tau))] = value
-    for kind, name in (("oadev", "OADEV"), ("mdev", "MDEV"), ("ohdev", "OHDEV"), ("totdev", "TOTDEV")):
+    for kind, name in (("oadev", "OADEV"), ("mdev", "MDEV"), ("hdev", "HDEV"), ("ohdev", "OHDEV"),
+                       ("totdev", "TOTDEV")):
         r = pooled_deviation([y], 1.0, kind, [1.0, 10.0, 100.0])
         for t, v in zip(r.taus_s, r.dev):
             printed = ref[("nbs14_1000pt", name, t)]

@@ -31,6 +31,8 @@ EUROC_RATE = 200.0
 EUROC_N = 1.6968e-04           # rad/s/√Hz
 EUROC_K = 1.9393e-05           # rad/s²/√Hz
 VINS_EUROC_GYR_N = 0.01
+#: An accelerometer table (VRW m/s/√h, acc. RW m/s²/√h per axis), so that a file is complete.
+ACCEL = '\n[accelerometer]\naxes = ["x", "y", "z"]\nn_m_s_rt_h = [0.05, 0.05, 0.05]\nk_m_s2_rt_h = [0.002, 0.002, 0.002]\n'
 
 
 def _model(tmp_path, text: str, name: str = "m.toml"):
@@ -45,9 +47,9 @@ def _plain(n_deg_rt_h=0.1, k_deg_h_rt_h=2.0, extra=""):
 
 
 def _field(text: str, key: str) -> float:
-    """The number after ``key:`` (YAML) or ``'key',`` (MATLAB) in a written file."""
+    """The number after ``key:`` (YAML) or ``gyro.key =`` (MATLAB) in a written file."""
     m = re.search(rf"^\s*{re.escape(key)}:\s*([-+0-9.eE]+)", text, re.M) or \
-        re.search(rf"'{re.escape(key)}',\s*([-+0-9.eE]+)", text)
+        re.search(rf"^gyro\.{re.escape(key)}\s*=\s*([-+0-9.eE]+);", text, re.M)
     assert m, (key, text)
     return float(m.group(1))
 
@@ -55,7 +57,8 @@ def _field(text: str, key: str) -> float:
 @pytest.mark.parametrize("fmt", list(ex.FORMATS))
 def test_each_format_writes_the_hand_computed_numbers(tmp_path, fmt):
     """ARW 0.1 deg/√h and RRW 2 deg/h/√h, converted by hand: density = N·π/180/60,
-    walk = K·π/180/3600/60; VINS multiplies both by √rate (per-sample σ)."""
+    walk = K·π/180/3600/60; VINS multiplies the density by √(2·rate) (per-sample σ times the √2 of
+    integration_base.h's mid-point covariance, issue 42 item 6: was √rate) and the walk by √rate."""
     rate = 200.0
     n_c = 0.1 * math.pi / 180.0 / 60.0
     k_c = 2.0 * math.pi / 180.0 / 3600.0 / 60.0
@@ -65,13 +68,13 @@ def test_each_format_writes_the_hand_computed_numbers(tmp_path, fmt):
     assert_contract(o)
     assert o.code == 0
     text = out.read_text()
-    keys = {"kalibr": ("gyroscope_noise_density", "gyroscope_random_walk", 1.0),
-            "openvins": ("gyroscope_noise_density", "gyroscope_random_walk", 1.0),
-            "orbslam3": ("IMU.NoiseGyro", "IMU.GyroWalk", 1.0),
-            "vins": ("gyr_n", "gyr_w", math.sqrt(rate)),
-            "matlab": ("NoiseDensity", "RandomWalk", 1.0)}[fmt]
+    keys = {"kalibr": ("gyroscope_noise_density", "gyroscope_random_walk", 1.0, 1.0),
+            "openvins": ("gyroscope_noise_density", "gyroscope_random_walk", 1.0, 1.0),
+            "orbslam3": ("IMU.NoiseGyro", "IMU.GyroWalk", 1.0, 1.0),
+            "vins": ("gyr_n", "gyr_w", math.sqrt(2.0 * rate), math.sqrt(rate)),
+            "matlab": ("NoiseDensity", "RandomWalk", 1.0, 1.0)}[fmt]
     assert _field(text, keys[0]) == pytest.approx(n_c * keys[2], rel=1e-6)
-    assert _field(text, keys[1]) == pytest.approx(k_c * keys[2], rel=1e-6)
+    assert _field(text, keys[1]) == pytest.approx(k_c * keys[3], rel=1e-6)
     assert o.json["values"][keys[0]] == pytest.approx(n_c * keys[2], rel=1e-12)
     # the header states the convention, the rate and what is left for the user
     assert ("DISCRETE" if fmt == "vins" else "CONTINUOUS") in text
@@ -84,7 +87,8 @@ def test_each_format_writes_the_hand_computed_numbers(tmp_path, fmt):
 
 def test_euroc_published_pairs(tmp_path):
     """The EuRoC IMU as Kalibr/OpenVINS/ORB-SLAM3 publish it round-trips to the same digits;
-    VINS-Fusion's published gyr_n is √200 (the convention) × 4.17 (their inflation) above it."""
+    VINS-Fusion's published gyr_n is √400 = √2·√200 (the convention, √2 of the mid-point covariance)
+    × 2.95 (their inflation) above it (it was √200 × 4.17 before issue 42 item 6's √2)."""
     n_deg_rt_h = EUROC_N * 180.0 / math.pi * 60.0                # 0.5833 deg/√h
     k_deg_h_rt_h = EUROC_K * 180.0 / math.pi * 3600.0 * 60.0     # 240.0 deg/h/√h
     noise = ex.gyro_noise(NoiseModel.from_toml(_model(tmp_path, _plain(n_deg_rt_h, k_deg_h_rt_h))), 1)
@@ -95,11 +99,11 @@ def test_euroc_published_pairs(tmp_path):
     assert orb["IMU.NoiseGyro"] == pytest.approx(1.7e-4, rel=2e-3)      # their rounding
     assert orb["IMU.GyroWalk"] == pytest.approx(EUROC_K, rel=1e-9)
     vins = ex.exported_values(noise, "vins", EUROC_RATE)
-    assert vins["gyr_n"] / kal["gyroscope_noise_density"] == pytest.approx(math.sqrt(200.0))
+    assert vins["gyr_n"] / kal["gyroscope_noise_density"] == pytest.approx(math.sqrt(400.0))
     published_ratio = VINS_EUROC_GYR_N / EUROC_N                    # the issue's "59×"
     assert published_ratio == pytest.approx(58.93, abs=0.01)
-    inflation = VINS_EUROC_GYR_N / vins["gyr_n"]
-    assert inflation == pytest.approx(4.167, abs=0.01)
+    inflation = VINS_EUROC_GYR_N / vins["gyr_n"]                    # 58.93 / 20 (was / 14.14 = 4.167)
+    assert inflation == pytest.approx(2.946, abs=0.01)
     # all the tools read the same discrete process from their own numbers
     d_kal = ex.tool_discrete("kalibr", kal, EUROC_RATE)
     for fmt in ("openvins", "orbslam3", "vins", "matlab"):
@@ -141,14 +145,16 @@ def test_bias_instability_stand_in_bounds_the_floor(tmp_path):
 def test_verify_passes_on_white_plus_walk_and_flags_bias_instability(tmp_path):
     """A white + walk model round-trips through every format; a model with a strong flicker
     floor cannot be reproduced by Kalibr's two numbers and is flagged (exit 1, as check)."""
-    good = _model(tmp_path, _plain(0.5, 20.0), "good.toml")
+    # an [accelerometer] table: without one the file lacks Kalibr's required accelerometer fields
+    # and --verify fails on the re-read (issue 42 item 1; tests/test_export_consumers.py)
+    good = _model(tmp_path, _plain(0.5, 20.0) + ACCEL, "good.toml")
     o = run_cli(["export", good, "--format", "kalibr", "--rate-hz", 100, "--out",
                  tmp_path / "g.yaml", "--verify", "--json"])
     assert o.code == 0, o.err
     v = o.json["verify"]
     assert v["passed"] and v["band"]["inside_fraction"] >= 0.9
     assert abs(v["coefficients"]["arw_deg_rt_h"]["z"]) < 3
-    bad = _model(tmp_path, _plain(0.5, 0.0, ', {effect = "bias_instability", b_deg_h = 30.0}'),
+    bad = _model(tmp_path, _plain(0.5, 0.0, ', {effect = "bias_instability", b_deg_h = 30.0}') + ACCEL,
                  "bi.toml")
     o = run_cli(["export", bad, "--format", "kalibr", "--rate-hz", 100, "--out",
                  tmp_path / "b.yaml", "--verify"])

@@ -8,7 +8,7 @@ part between motions, or a segment between two dropped packets).
 Public API
 ----------
 * :data:`DEVIATION_KINDS`, :func:`canonical_kind`: ``oadev`` (overlapping Allan),
-  ``mdev`` (modified Allan), ``ohdev`` (overlapping Hadamard; ``hdev`` names it too),
+  ``mdev`` (modified Allan), ``hdev`` (Hadamard, non-overlapping), ``ohdev`` (overlapping Hadamard),
   ``totdev`` (total).
 * :func:`deviation_sums`: the squared-difference sums and their counts of one part.
 * :func:`pooled_deviation`: a deviation over several parts, each part's mean removed and
@@ -37,9 +37,10 @@ __all__ = ["DEVIATION_KINDS", "KIND_ALIASES", "GAP_FACTOR", "canonical_kind", "p
 
 #: The deviations: name -> what it is.
 DEVIATION_KINDS = {"oadev": "overlapping Allan", "mdev": "modified Allan",
+                   "hdev": "Hadamard (non-overlapping, Stable32's HDEV)",
                    "ohdev": "overlapping Hadamard", "totdev": "total (Allan, reflected ends)"}
-#: Other names accepted for a kind.
-KIND_ALIASES = {"hdev": "ohdev"}
+#: Other names accepted for a kind (none since ``hdev`` became the non-overlapping Hadamard).
+KIND_ALIASES: dict[str, str] = {}
 #: A time step longer than this many nominal steps is a gap (as the measurement reader's).
 GAP_FACTOR = 1.5
 #: Fewest block means the lag-1 noise identification reads (Riley & Greenhall: about 30).
@@ -53,17 +54,19 @@ MIN_ID_PART_BLOCKS = MIN_ID_POINTS
 EDF_METHODS = {
     "oadev": "Greenhall & Riley (2003) algorithm, sampled phase (gyroarray.analysis.allan.edf)",
     "ohdev": "Greenhall & Riley (2003) algorithm, sampled phase (gyroarray.analysis.allan.edf)",
+    "hdev": "Greenhall & Riley (2003) algorithm at m = 1 on the phase taken every m-th point "
+            "(the non-overlapping estimate is the overlapping one of the decimated phase)",
     "mdev": "Greenhall & Riley (2003) algorithm for modified variances (filter factor 1)",
     "totdev": "NIST SP 1065 Table 7 (b N/m - c) for alpha 0, -1, -2; Table 5 (simple) otherwise",
 }
 # Normalisation of each kind's sums: var = sums / (norm * m**p * count) (x in rate x samples).
-_NORM = {"oadev": (2.0, 2), "ohdev": (6.0, 2), "mdev": (2.0, 4), "totdev": (2.0, 2)}
+_NORM = {"oadev": (2.0, 2), "ohdev": (6.0, 2), "hdev": (6.0, 2), "mdev": (2.0, 4), "totdev": (2.0, 2)}
 #: The kind whose tau range :func:`averaging_factors` uses for each kind (largest m).
-RANGE_KIND = {"oadev": "oadev", "ohdev": "ohdev", "mdev": "ohdev", "totdev": "oadev"}
+RANGE_KIND = {"oadev": "oadev", "ohdev": "ohdev", "hdev": "ohdev", "mdev": "ohdev", "totdev": "oadev"}
 
 
 def canonical_kind(kind: str) -> str:
-    """The deviation name for ``kind`` (``hdev`` -> ``ohdev``); refuses an unknown one."""
+    """The deviation name for ``kind`` (:data:`KIND_ALIASES`); refuses an unknown one."""
     k = KIND_ALIASES.get(kind, kind)
     if k not in DEVIATION_KINDS:
         raise InputError(f"unknown deviation kind {kind!r}; expected one of "
@@ -99,7 +102,7 @@ def deviation_sums(x, m, kind: str) -> tuple[np.ndarray, np.ndarray]:
         Phase [rate x samples] (:func:`phase_of`).
     m : array_like of int
         Averaging factors.
-    kind : {"oadev", "mdev", "ohdev", "totdev"}
+    kind : {"oadev", "mdev", "hdev", "ohdev", "totdev"}
 
     Returns
     -------
@@ -115,6 +118,8 @@ def deviation_sums(x, m, kind: str) -> tuple[np.ndarray, np.ndarray]:
       :math:`\\Delta^2`), count :math:`N-3m+1`, variance sum/(2 m⁴ count) (eq. 14);
     * ohdev: third differences :math:`x_{i+3m}-3x_{i+2m}+3x_{i+m}-x_i`, count :math:`N-3m`,
       variance sum/(6 m² count) (eq. 20);
+    * hdev: the same third differences at :math:`i = 0, m, 2m, \\dots` only (non-overlapping,
+      Stable32's HDEV), count :math:`\\lfloor (N-1)/m \\rfloor - 2`, variance sum/(6 m² count);
     * totdev: the phase reflected at both ends, :math:`x^*_{-j} = 2x_0 - x_j`,
       :math:`x^*_{N-1+j} = 2x_{N-1} - x_{N-1-j}`, second differences centred on
       :math:`i = 1..N-2`, count :math:`N-2`, variance sum/(2 m² count) (eq. 25).
@@ -132,6 +137,9 @@ def deviation_sums(x, m, kind: str) -> tuple[np.ndarray, np.ndarray]:
             d = x[2 * mm:] - 2.0 * x[mm:n - mm] + x[:n - 2 * mm]
         elif kind == "ohdev" and n - 3 * mm >= 1:
             d = x[3 * mm:] - 3.0 * x[2 * mm:n - mm] + 3.0 * x[mm:n - 2 * mm] - x[:n - 3 * mm]
+        elif kind == "hdev" and (n - 1) // mm >= 3:
+            xs = x[::mm]
+            d = xs[3:] - 3.0 * xs[2:-1] + 3.0 * xs[1:-2] - xs[:-3]
         elif kind == "mdev" and n - 3 * mm + 1 >= 1:
             d2 = x[2 * mm:] - 2.0 * x[mm:n - mm] + x[:n - 2 * mm]
             c = np.concatenate([[0.0], np.cumsum(d2)])
@@ -155,7 +163,7 @@ def pooled_deviation(parts, tau0_s: float, kind: str = "oadev", taus="octave") -
         Rate samples of each contiguous part [rad/s] (one array: the whole record).
     tau0_s : float
         Sample step [s].
-    kind : {"oadev", "mdev", "ohdev" (or "hdev"), "totdev"}
+    kind : {"oadev", "mdev", "hdev", "ohdev", "totdev"}
     taus : "octave", int or sequence of float
         Averaging times (:func:`~gyroarray.analysis.allan.averaging_factors`, over the
         longest part).
@@ -310,7 +318,7 @@ def edf_of(kind: str, n_phase: int, m, alpha) -> np.ndarray:
 
     Parameters
     ----------
-    kind : {"oadev", "mdev", "ohdev", "totdev"}
+    kind : {"oadev", "mdev", "hdev", "ohdev", "totdev"}
     n_phase : int
         Phase points of the part (rate samples + 1).
     m, alpha : array_like of int
@@ -330,6 +338,10 @@ def edf_of(kind: str, n_phase: int, m, alpha) -> np.ndarray:
             d = 2 if kind == "oadev" else 3
             if n_phase - d * mm >= 1:
                 out[i] = float(edf(kind, n_phase, mm, a)[()])
+        elif kind == "hdev":
+            n_dec = (n_phase - 1) // mm + 1              # the phase taken every m-th point
+            if n_dec >= 4:
+                out[i] = float(edf("ohdev", n_dec, 1, a)[()])
         elif kind == "mdev":
             if n_phase - 3 * mm + 1 >= 1:
                 out[i] = float(edf_greenhall(n_phase, mm, a, 2, modified=True)[()])
@@ -354,7 +366,7 @@ def analyse_parts(parts, tau0_s: float, taus="octave", kind: str = "oadev", *,
         Sample step [s].
     taus : "octave", int or sequence of float
         Averaging times.
-    kind : {"oadev", "mdev", "ohdev" (or "hdev"), "totdev"}
+    kind : {"oadev", "mdev", "hdev", "ohdev", "totdev"}
     confidence : float
         Two-sided level of the bounds.
     fit_method : {"gls", "wls"}
@@ -370,7 +382,8 @@ def analyse_parts(parts, tau0_s: float, taus="octave", kind: str = "oadev", *,
     -----
     The IEEE terms are fitted to the overlapping Allan (or Hadamard) variance over the parts,
     whose term constants are known (:mod:`~gyroarray.analysis.noise_fit`): for ``mdev`` and
-    ``totdev`` the fit is that of the oadev of the same parts (``fit_from``), and the curve and
+    ``totdev`` the fit is that of the oadev of the same parts, for ``hdev`` that of the ohdev
+    (``fit_from``), and the curve and
     its confidence interval are the asked kind's. The EDF of pooled parts is the sum of the
     parts' EDFs (independent parts); each tau's noise type is the lag-1 identification
     (:func:`noise_id_lag1`; a tau with too few blocks takes the previous tau's type, the first
@@ -383,8 +396,10 @@ def analyse_parts(parts, tau0_s: float, taus="octave", kind: str = "oadev", *,
         i = int(np.flatnonzero(~(res.dev > 0))[0])
         raise InputError(f"the {kind} is zero at tau = {float(res.taus_s[i]):g} s: "
                          "the rate is constant (or exactly linear there)")
-    fit_kind = kind if kind in ("oadev", "ohdev") else "oadev"
-    fit_res = res if fit_kind == kind else pooled_deviation(arrays, tau0_s, "oadev", res.taus_s)
+    # the hdev's expectation is the ohdev's (the same third differences, fewer of them): fitted
+    # from the ohdev, the more efficient estimate of the same curve
+    fit_kind = kind if kind in ("oadev", "ohdev") else "ohdev" if kind == "hdev" else "oadev"
+    fit_res = res if fit_kind == kind else pooled_deviation(arrays, tau0_s, fit_kind, res.taus_s)
     sizes = [a.size + 1 for a in arrays]
 
     def pooled_edf(k, m, alpha):
@@ -394,7 +409,7 @@ def analyse_parts(parts, tau0_s: float, taus="octave", kind: str = "oadev", *,
                                                              1e-3), method=fit_method)
     ids, alpha, last = [], [], 0
     for mm in res.m.tolist():
-        nid = noise_id_lag1(arrays, mm, dmax=3 if kind == "ohdev" else 2)
+        nid = noise_id_lag1(arrays, mm, dmax=3 if kind in ("hdev", "ohdev") else 2)
         ids.append(nid)
         if nid is not None:
             last = nid["alpha"]

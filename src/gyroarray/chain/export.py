@@ -1,32 +1,48 @@
-"""Noise files for VIO/INS tools, with their convention stated and a round-trip check.
+"""Noise files for VIO/INS tools, with their convention stated, read back with the consumer's parser.
 
-``gyroarray export MODEL.toml --format F --rate-hz R`` writes one gyro's noise in the fields
-and units of a robotics tool. Every format describes the same two processes, white rate noise
-and a random-walk bias, in one of two conventions:
+``gyroarray export MODEL.toml --format F --rate-hz R`` writes the gyro's and the accelerometer's
+noise in the fields and units of a robotics tool. Every format describes the same two processes
+per sensor, white noise and a random-walk bias, in one of two conventions:
 
 * **continuous-time densities** of a two-sided white PSD (Kalibr, OpenVINS, ORB-SLAM3, MATLAB):
   the white density σ_c [rad/s/√Hz] is the IEEE Std 952 ARW coefficient N [rad/√s]
   (ADEV = N/√τ), the walk density σ_w [rad/s²/√Hz] is the RRW coefficient K [rad/s/√s]
   (ADEV = K·√(τ/3)); the tool discretises them at its rate R: one sample's white noise
-  σ_d = σ_c·√R, one step's bias increment σ_c,walk·√(1/R).
+  σ_d = σ_c·√R, one step's bias increment σ_w·√(1/R). The accelerometer's are the IEEE Std 1293
+  velocity random walk [m/s²/√Hz = m/s/√s] and acceleration random walk [m/s³/√Hz].
   - Kalibr wiki "IMU Noise Model" (github.com/ethz-asl/kalibr/wiki/IMU-Noise-Model):
     ``gyroscope_noise_density`` and ``gyroscope_random_walk`` are the continuous-time σ_g and
-    σ_bg; σ_gd = σ_g/√Δt, σ_bgd = σ_bg·√Δt.
-  - OpenVINS reads Kalibr's ``kalibr_imu_chain.yaml`` (config/euroc_mav/) and discretises in
-    its propagator: ``Qc = sigma_w_2 / dt``, ``sigma_wb_2 * dt``.
-  - ORB-SLAM3 ``IMU.NoiseGyro``/``IMU.GyroWalk`` are the same densities; Tracking.cc builds
-    ``IMU::Calib(Tbc, Ng*sf, Na*sf, Ngw/sf, Naw/sf)`` with ``sf = sqrt(IMU.Frequency)``: a
-    wrong frequency moves the noise and the walk in opposite directions.
-  - MATLAB ``gyroparams``: NoiseDensity [(rad/s)/√Hz] = N, RandomWalk [(rad/s)·√Hz] = K,
-    BiasInstability [rad/s] = B (MathWorks "Inertial Sensor Noise Analysis Using Allan
-    Variance" sets them from the Allan fit this way); the sample rate is imuSensor's.
-* **discrete-time standard deviations** per sample (VINS-Fusion ``gyr_n``/``gyr_w``):
-  integration_base.h puts ``GYR_N²`` on the gyro reading at each end of a mid-point step with
-  a weight ``0.5·dt`` and ``GYR_W²`` on the bias with weight ``dt``: ``gyr_n`` is one sample's
-  standard deviation σ_c·√R [rad/s] and ``gyr_w`` the bias rate per step σ_w·√R [rad/s²]
-  (bias increment ``gyr_w·dt = σ_w·√dt``). The EuRoC pair shows both conventions on one
-  sensor: Kalibr 1.6968e-4 / 1.9393e-5 at 200 Hz, VINS-Fusion 0.01 / 1e-4; 0.01/1.6968e-4 =
-  58.9 = √200 (14.1, the conversion) × 4.17 (an inflation the authors chose).
+    σ_bg; σ_gd = σ_g/√Δt, σ_bgd = σ_bg·√Δt (``accelerometer_*`` alike). Its reader
+    (``kalibr_common/ConfigReader.py``, ``ImuParameters``) requires the six keys of
+    :data:`REQUIRED` and refuses a density or walk <= 0.
+  - OpenVINS >= 2.7 reads ``kalibr_imu_chain.yaml`` with ``cv::FileStorage``
+    (``ov_core/src/utils/opencv_yaml_parse.h``); ``ov_msckf/src/core/VioManagerOptions.h`` requires
+    the four noise keys and the intrinsics ``Tw``, ``Ta``, ``R_IMUtoACC``, ``R_IMUtoGYRO``, ``Tg``
+    under ``imu0`` (a missing one: "unable to parse all parameters"); its propagator uses
+    ``sigma_w_2 / dt``, ``sigma_wb_2 * dt``. gyroarray does not know the IMU's intrinsics: the
+    file writes them as identity (``Tg`` zeros), which is OpenVINS' own default, and says so.
+  - ORB-SLAM3 ``IMU.NoiseGyro``/``IMU.GyroWalk``/``IMU.NoiseAcc``/``IMU.AccWalk`` are the same
+    densities; Tracking.cc builds ``IMU::Calib(Tbc, Ng*sf, Na*sf, Ngw/sf, Naw/sf)`` with
+    ``sf = sqrt(IMU.Frequency)``: a wrong frequency moves the noise and the walk in opposite
+    directions. ``Tracking::ParseIMUParamFile`` requires ``IMU.Frequency`` to be an integer
+    (``node.isInt()``) and the noises reals (``node.isReal()``).
+  - MATLAB ``gyroparams``/``accelparams``: NoiseDensity = N, RandomWalk = K, BiasInstability = B
+    (MathWorks "Inertial Sensor Noise Analysis Using Allan Variance" sets them from the Allan fit
+    this way); the sample rate is imuSensor's.
+* **discrete-time standard deviations** per sample (VINS-Fusion ``acc_n``/``gyr_n``,
+  ``acc_w``/``gyr_w``): ``integration_base.h`` (``midPointIntegration``) propagates the
+  preintegration covariance with ``V·noise·Vᵀ`` where ``noise`` holds ``GYR_N²`` for the reading
+  at each end of the step, both with the weight ``V = 0.5·dt``, and ``GYR_W²`` for the bias with
+  ``V = dt``. One step's attitude variance is therefore 2·(0.5·dt)²·GYR_N² = GYR_N²·dt²/2, while
+  continuous white noise of density σ_c puts σ_c²·dt on it: GYR_N = √2·σ_c·√R, **√2 times one
+  sample's σ** (the covariance treats the two readings of a step as independent, though each
+  reading is shared by two steps). The bias: GYR_W²·dt² per step against σ_w²·dt, so
+  GYR_W = σ_w·√R (bias increment per step ``gyr_w·dt = σ_w·√dt``). ``acc_n``/``acc_w`` alike
+  (V = 0.5·R·dt on each reading's velocity, dt on the bias). The EuRoC pair: Kalibr
+  1.6968e-4 / 1.9393e-5 at 200 Hz, VINS-Fusion 0.01 / 1e-4; the code's mapping gives 2.400e-3
+  and 2.743e-4, so the published gyr_n is 4.17× the mapping (an inflation the authors chose) and
+  the published gyr_w 0.36× it (a deflation; read as a density it would be 5.2× Kalibr's): the
+  published numbers are tuning, not a convention.
 
 None of these filters has bias instability (flicker), a Gauss-Markov bias or quantization
 (MATLAB has bias instability). Their share of the Allan variance is carried by a stand-in
@@ -35,31 +51,48 @@ terms the format cannot hold, τ₁ the averaging time where u first reaches the
 (below it the white noise dominates), K_eq² = max over τ ≥ τ₁ of 3·u(τ)/τ, so that the
 stand-in line K_eq²·τ/3 ≥ u(τ) for every τ ≥ τ₁ (for a flat bias-instability floor
 (0.664 B)² = 2 ln2/π·B², K_eq = 0.664·B·√(3/τ₁)); it is within a factor 2 of the floor in
-ADEV up to τ₂ = 4·τ₁ and above it beyond. Each file's header says so.
+ADEV up to τ₂ = 4·τ₁ and above it beyond. Each file's header says so. The accelerometer's bias
+instability is handled alike (m/s units).
 
-``--inflate auto``: the factor f on both numbers that makes a discrete Kalman filter that
+``--inflate auto``: the factor f on both gyro numbers that makes a discrete Kalman filter that
 knows only white noise + random walk (at the exported values, at the rate) consistent on a
 record simulated from the full model: the filter estimates the bias of a still gyro from the
 mean rate over update windows of 1 sample to 10 s; its normalised innovation squared
 (NIS = ν²/S, expectation 1 when the model is right) is averaged per window, and
-f = √(largest mean NIS). Scaling Q and R by f² leaves the gain unchanged and divides NIS by
-f², so f makes the worst window consistent. Unmodelled slow effects (bias instability,
-Gauss-Markov, temperature) raise NIS at the long windows; quantization at one sample.
+f = max(1, √(largest mean NIS)): never below 1 (a factor < 1, a scatter of the simulation,
+would make the file claim less noise than the model has). Scaling Q and R by f² leaves the
+gain unchanged and divides NIS by f², so f makes the worst window consistent. Unmodelled slow
+effects (bias instability, Gauss-Markov, temperature) raise NIS at the long windows;
+quantization at one sample. The accelerometer's numbers are not inflated by ``auto`` (no
+accelerometer model is simulated); an explicit ``--inflate X`` scales them too.
 
-``--verify`` simulates a record from the file's numbers as the tool reads them (its
+``--verify`` re-reads the WRITTEN file with the consumer's parser semantics (:func:`read_back`:
+``cv2.FileStorage`` for the OpenCV formats, a YAML loader for Kalibr, the pinned required keys
+and types of :data:`REQUIRED`, a ``name = value;`` parser for MATLAB), converts back to N, K
+(and the accelerometer's) and refuses a missing or misspelled key, a wrong type (a float
+``IMU.Frequency``), a density or walk <= 0, and a value that is not the model's. Then, without
+a record, it simulates a record from the numbers read back as the tool reads them (its
 convention and rate), re-identifies N and K with the Allan noise fit
 (:func:`gyroarray.analysis.allan.allan_analysis`) and checks (a) the round trip: each
 re-identified value within 3σ of the value the file means (N with the white-like term
 K²dt²/6 of a walk sampled at the rate, :func:`sampled_walk_n2`); (b) the model's Allan deviation
 (all its noise terms, times the inflation) inside the simulated record's 95 % interval at
-90 % of the averaging times or more. A file failing either is flagged.
+90 % of the averaging times or more. With a record (``--record MEAS``,
+:func:`record_check`) the file's ADEV as the tool reads it (N²/τ + K²τ/3, B's floor for MATLAB)
+is compared τ by τ with the measurement's ADEV and its 95 % interval over its still parts: where
+the file falls below the interval it fails, naming each τ and the ratio. The interval it fails
+against is family-wise (each of the n τ at 1 - 0.05/n, Bonferroni), so that a file holding the
+record's true white + walk fails on at most 5 % of records; the per-τ 95 % count is reported. A file failing any
+check is flagged.
 """
 
 from __future__ import annotations
 
+import json
 import math
+import re
 from dataclasses import dataclass, field
-from typing import cast
+from typing import Any, cast
 
 import numpy as np
 from scipy import optimize, signal
@@ -70,14 +103,17 @@ from gyroarray.analysis.noise_fit import TERM_CONSTANTS, term_basis
 from gyroarray.core import units
 from gyroarray.core.errors import InputError
 from gyroarray.core.physics import flicker_noise, gauss_markov_avar
+from gyroarray.effects import did_you_mean
 from gyroarray.effects.model import ModelEntry, NoiseModel
 from gyroarray.sim.effects import simulate_readings
 from gyroarray.sim.lab import lab_temperature
 from gyroarray.effects.names import ARW, BIAS_INSTABILITY, GAUSS_MARKOV, QUANTIZATION, RATE_RAMP, RRW, TEMPERATURE_BIAS
 
-__all__ = ["FORMATS", "SUFFIXES", "MAX_SIM_SAMPLES", "GyroNoise", "StandIn", "gyro_noise", "choose_axis", "model_gyros",
-           "stand_in", "check_exportable", "sampled_walk_n2", "exported_values", "tool_discrete", "render",
-           "simulate_model", "window_nis", "auto_inflation", "verify_export", "export_noise"]
+__all__ = ["FORMATS", "SUFFIXES", "REQUIRED", "MAX_SIM_SAMPLES", "GyroNoise", "AccelChoice", "StandIn", "ReadBack",
+           "Export", "gyro_noise", "choose_axis", "choose_accel", "model_gyros", "stand_in", "check_exportable",
+           "orbslam3_frequency", "sampled_walk_n2", "exported_values", "tool_discrete", "render", "read_back",
+           "simulate_model", "window_nis", "auto_inflation", "verify_export", "record_check", "verify_file",
+           "build_export", "export_noise"]
 
 #: The formats and what each file is.
 FORMATS = {
@@ -355,7 +391,163 @@ def check_exportable(noise: GyroNoise, fmt: str, rate_hz: float) -> None:
                              f"(export at --rate-hz >= {1.0 / tau_c:g}, or fold it into arw)")
 
 
-def exported_values(noise: GyroNoise, fmt: str, rate_hz: float, inflate: float = 1.0) -> dict:
+
+#: The fields each consumer requires, as its own reader reads them (the sources and commits are
+#: named in tests/test_export_consumers.py): Kalibr ``ImuParameters`` (a missing key: "Field ...
+#: missing"; <= 0 refused), OpenVINS ``VioManagerOptions.h`` + ``ROS1Visualizer.cpp`` under
+#: ``imu0`` (a missing key: "unable to parse all parameters"), VINS-Fusion ``parameters.cpp``
+#: (a missing key reads silently as 0.0), ORB-SLAM3 ``Tracking::ParseIMUParamFile`` (isInt /
+#: isReal), MATLAB (the snippet's properties and ``sampleRate``).
+REQUIRED = {
+    "kalibr": ("rostopic", "update_rate", "accelerometer_noise_density", "accelerometer_random_walk",
+               "gyroscope_noise_density", "gyroscope_random_walk"),
+    "openvins": ("accelerometer_noise_density", "accelerometer_random_walk", "gyroscope_noise_density",
+                 "gyroscope_random_walk", "Tw", "Ta", "R_IMUtoACC", "R_IMUtoGYRO", "Tg", "rostopic"),
+    "vins": ("acc_n", "gyr_n", "acc_w", "gyr_w"),
+    "orbslam3": ("IMU.NoiseGyro", "IMU.NoiseAcc", "IMU.GyroWalk", "IMU.AccWalk", "IMU.Frequency"),
+    "matlab": ("gyro.NoiseDensity", "gyro.RandomWalk", "accel.NoiseDensity", "accel.RandomWalk", "sampleRate"),
+}
+
+#: The field of each quantity, by format: gn/gk the gyro's white/walk, an/ak the accelerometer's,
+#: gb/ab the bias instabilities (MATLAB only), rate the rate field (None: the format has none).
+FIELDS: dict[str, dict[str, str | None]] = {
+    "kalibr": {"gn": "gyroscope_noise_density", "gk": "gyroscope_random_walk",
+               "an": "accelerometer_noise_density", "ak": "accelerometer_random_walk", "rate": "update_rate"},
+    "openvins": {"gn": "gyroscope_noise_density", "gk": "gyroscope_random_walk",
+                 "an": "accelerometer_noise_density", "ak": "accelerometer_random_walk", "rate": "update_rate"},
+    "vins": {"gn": "gyr_n", "gk": "gyr_w", "an": "acc_n", "ak": "acc_w", "rate": None},
+    "orbslam3": {"gn": "IMU.NoiseGyro", "gk": "IMU.GyroWalk", "an": "IMU.NoiseAcc", "ak": "IMU.AccWalk",
+                 "rate": "IMU.Frequency"},
+    "matlab": {"gn": "NoiseDensity", "gk": "RandomWalk", "gb": "BiasInstability", "an": "AccelNoiseDensity",
+               "ak": "AccelRandomWalk", "ab": "AccelBiasInstability", "rate": "SampleRate"},
+}
+
+#: MATLAB: the value names of :func:`exported_values` -> the snippet's ``name = value;`` names.
+MATLAB_NAMES = {"NoiseDensity": "gyro.NoiseDensity", "RandomWalk": "gyro.RandomWalk",
+                "BiasInstability": "gyro.BiasInstability", "AccelNoiseDensity": "accel.NoiseDensity",
+                "AccelRandomWalk": "accel.RandomWalk", "AccelBiasInstability": "accel.BiasInstability",
+                "SampleRate": "sampleRate"}
+
+#: Default IMU topic of Kalibr/OpenVINS files when the model names none and --topic is not given.
+DEFAULT_TOPIC = "/imu0"
+
+#: Largest relative change ORB-SLAM3's integer IMU.Frequency may make to the rate (1 %: the
+#: discretised noise moves by √(f/R), 0.5 % at most); beyond it the export is refused.
+MAX_FREQUENCY_ROUNDING = 0.01
+
+#: Relative agreement of a value read back with the value meant (6 significant digits written).
+READ_BACK_RTOL = 2e-6
+
+_FIT_HINT = ("fit it with `gyroarray fit --out` on a record with acc_x, acc_y, acc_z columns (or add an "
+             "[accelerometer] table to the model)")
+
+
+@dataclass(frozen=True)
+class AccelChoice:
+    """The accelerometer's noise a file is written with, in SI.
+
+    Parameters
+    ----------
+    n_m_s2_rt_hz : float or None
+        Velocity random walk N_a [m/s²/√Hz = m/s/√s] (None: not in the model).
+    k_m_s3_rt_hz : float or None
+        Acceleration random walk K_a [m/s³/√Hz = m/s²/√s] (None: not in the model).
+    b_m_s2 : float or None
+        Bias instability B [m/s²] (None: not in the model).
+    what : str
+        Which axis (or rule) the numbers are, or why there are none.
+    table : list of dict
+        Every axis's terms in datasheet units (m/s/√h, m/s²/√h, mg; None where absent).
+    why_missing : str
+        Why a missing term is missing ("" when none is).
+    """
+
+    n_m_s2_rt_hz: float | None
+    k_m_s3_rt_hz: float | None
+    b_m_s2: float | None
+    what: str
+    table: list = field(default_factory=list)
+    why_missing: str = ""
+
+    def as_noise(self) -> "GyroNoise":
+        """The same IEEE algebra as a gyro's (white, walk, flicker floor) in m/s units, for
+        :func:`stand_in` (0 where a term is absent)."""
+        return GyroNoise(gyro=0, n_rad_rt_s=self.n_m_s2_rt_hz or 0.0, k_rad_s_rt_s=self.k_m_s3_rt_hz or 0.0,
+                         b_rad_s=self.b_m_s2 or 0.0)
+
+
+def choose_accel(model: NoiseModel, axis: str | int) -> AccelChoice:
+    """The accelerometer's numbers for ``axis``: ``"worst"`` the largest value of each term over
+    the axes (as allan_variance_ros), ``"mean"`` the mean per term (as imu_utils); a gyro number
+    (``--axis K`` names a gyro, not an accelerometer axis): the worst, said so."""
+    acc = model.accelerometer
+    if acc is None:
+        return AccelChoice(None, None, None, "none: the model has no [accelerometer] table",
+                           why_missing=f"the model has no [accelerometer] table; {_FIT_HINT}")
+    conv = {"n_m_s_rt_h": units.vrw_m_s_rt_h_to_si, "k_m_s2_rt_h": units.accel_rw_m_s2_rt_h_to_si,
+            "b_mg": units.mg_to_m_s2}
+    table = [{"axis": a, **{key: (None if getattr(acc, key) is None else float(getattr(acc, key)[i]))
+                            for key in conv}} for i, a in enumerate(acc.axes)]
+    rule = axis if axis in ("worst", "mean") else "worst"
+    pick = max if rule == "worst" else (lambda v: sum(v) / len(v))
+    out = {}
+    for key, f in conv.items():
+        v = getattr(acc, key)
+        out[key] = None if v is None else float(f(pick(v)))
+    axes = ", ".join(acc.axes)
+    if rule == "worst":
+        what = (f"the worst of the accelerometer's axes {axes} (the largest value of each term)"
+                + ("; --axis names a gyro, so the accelerometer takes the worst" if axis not in ("worst", "mean")
+                   else ""))
+    else:
+        what = f"the mean of the accelerometer's axes {axes} (each term)"
+    missing = [key for key in ("n_m_s_rt_h", "k_m_s2_rt_h") if getattr(acc, key) is None]
+    why = ""
+    if missing:
+        notes = "; ".join(acc.notes)
+        why = (f"the model's [accelerometer] table has no {' or '.join(missing)}"
+               + (f" ({notes})" if notes else "") + f"; {_FIT_HINT}")
+    return AccelChoice(out["n_m_s_rt_h"], out["k_m_s2_rt_h"], out["b_mg"], what, table, why)
+
+
+def accel_walk(accel: AccelChoice, rate_hz: float, *, keeps_b: bool) -> tuple[float | None, StandIn]:
+    """The accelerometer's walk the file gets [m/s³/√Hz] (K_a with the stand-in for its bias
+    instability in quadrature, as the gyro's) and the stand-in; None when there is neither a
+    walk nor a bias instability, or no white noise to place the stand-in."""
+    none = StandIn(0.0, math.nan, math.nan, ())
+    if accel.n_m_s2_rt_hz is None:
+        return accel.k_m_s3_rt_hz, none
+    si = stand_in(accel.as_noise(), rate_hz, keeps_b=keeps_b) if accel.b_m_s2 else none
+    if accel.k_m_s3_rt_hz is None and not si.covers:
+        return None, si
+    return math.hypot(accel.k_m_s3_rt_hz or 0.0, si.k_eq_rad_s_rt_s), si
+
+
+def orbslam3_frequency(rate_hz: float) -> tuple[int, str]:
+    """ORB-SLAM3's ``IMU.Frequency``: an integer (``Tracking::ParseIMUParamFile`` refuses any other
+    node type), the rate rounded when within :data:`MAX_FREQUENCY_ROUNDING`; and a note ("" when
+    the rate is an integer).
+
+    Raises
+    ------
+    InputError
+        A rate below 1 Hz or further than 1 % from an integer.
+    """
+    f = int(round(rate_hz))
+    if f < 1 or abs(f - rate_hz) > MAX_FREQUENCY_ROUNDING * rate_hz:
+        raise InputError(f"ORB-SLAM3 reads IMU.Frequency as an integer (Tracking::ParseIMUParamFile: "
+                         f"node.isInt()), and --rate-hz {rate_hz:g} is {abs(f - rate_hz) / rate_hz:.2%} from "
+                         f"the nearest one, {f} (at most {MAX_FREQUENCY_ROUNDING:.0%} is rounded): give the "
+                         "rate as an integer number of Hz the tool will run at")
+    if f == rate_hz:
+        return f, ""
+    return f, (f"IMU.Frequency: --rate-hz {rate_hz:g} rounded to {f} (ORB-SLAM3 reads an integer); its "
+               f"discretised noise is then √({f}/{rate_hz:g}) = {math.sqrt(f / rate_hz):.5f} × the one at "
+               f"{rate_hz:g} Hz")
+
+
+def exported_values(noise: GyroNoise, fmt: str, rate_hz: float, inflate: float = 1.0,
+                    accel: AccelChoice | None = None, accel_inflate: float | None = None) -> dict:
     """The numbers of the file, by field name, in the format's units.
 
     Parameters
@@ -366,51 +558,95 @@ def exported_values(noise: GyroNoise, fmt: str, rate_hz: float, inflate: float =
     rate_hz : float
         The rate the tool runs the IMU at [Hz].
     inflate : float
-        Factor on the white and walk numbers (and B for MATLAB) [-].
+        Factor on the gyro's white and walk numbers (and B for MATLAB) [-].
+    accel : AccelChoice, optional
+        The accelerometer's numbers; a term it lacks is left out (never a 0).
+    accel_inflate : float, optional
+        Factor on the accelerometer's numbers [-] (default ``inflate``).
 
     Returns
     -------
     dict
-        Field -> value (e.g. ``gyroscope_noise_density`` [rad/s/√Hz]).
+        Field -> value (e.g. ``gyroscope_noise_density`` [rad/s/√Hz]); VINS-Fusion's per-sample
+        values carry the √2 of its mid-point covariance (module docstring).
     """
     keeps_b = fmt == "matlab"
     k_eq = stand_in(noise, rate_hz, keeps_b=keeps_b).k_eq_rad_s_rt_s
     n = inflate * noise.n_rad_rt_s
     k = inflate * math.sqrt(noise.k_rad_s_rt_s ** 2 + k_eq ** 2)
-    if fmt in ("kalibr", "openvins"):
-        return {"gyroscope_noise_density": n, "gyroscope_random_walk": k, "update_rate": rate_hz}
+    fa = inflate if accel_inflate is None else accel_inflate
+    an = ak = ab = None
+    if accel is not None:
+        walk, _ = accel_walk(accel, rate_hz, keeps_b=keeps_b)
+        an = None if accel.n_m_s2_rt_hz is None else fa * accel.n_m_s2_rt_hz
+        ak = None if walk is None else fa * walk
+        ab = None if accel.b_m_s2 is None else fa * accel.b_m_s2
+    names = FIELDS.get(fmt)
+    if names is None:
+        raise InputError(f"unknown format {fmt!r}; expected one of {', '.join(FORMATS)}")
+    if fmt == "vins":                                # per sample: √(2R) on the white, √R on the walk
+        white, walk_f = math.sqrt(2.0 * rate_hz), math.sqrt(rate_hz)
+    else:
+        white = walk_f = 1.0
+    out: dict = {}
+    if an is not None:
+        out[names["an"]] = an * white
+    if ak is not None:
+        out[names["ak"]] = ak * walk_f
+    out[names["gn"]] = n * white
+    out[names["gk"]] = k * walk_f
+    if fmt == "matlab":
+        out["BiasInstability"] = inflate * noise.b_rad_s
+        if ab is not None:
+            out["AccelBiasInstability"] = ab
     if fmt == "orbslam3":
-        return {"IMU.NoiseGyro": n, "IMU.GyroWalk": k, "IMU.Frequency": rate_hz}
-    if fmt == "vins":
-        root = math.sqrt(rate_hz)
-        return {"gyr_n": n * root, "gyr_w": k * root}
-    if fmt == "matlab":
-        return {"NoiseDensity": n, "RandomWalk": k, "BiasInstability": inflate * noise.b_rad_s,
-                "SampleRate": rate_hz}
-    raise InputError(f"unknown format {fmt!r}; expected one of {', '.join(FORMATS)}")
+        out["IMU.Frequency"] = orbslam3_frequency(rate_hz)[0]
+    elif names["rate"] is not None:
+        out[names["rate"]] = rate_hz
+    return out
 
 
-def tool_discrete(fmt: str, values: dict, rate_hz: float) -> tuple[float, float]:
+def tool_discrete(fmt: str, values: dict, rate_hz: float, *, sensor: str = "g") -> tuple[float, float]:
     """How the tool reads the file: one sample's white-noise σ [rad/s] and one step's bias
-    increment σ [rad/s] at ``rate_hz``."""
+    increment σ [rad/s] at ``rate_hz`` (``sensor="a"``: the accelerometer's, [m/s²])."""
+    names = FIELDS[fmt]
+    white, walk = values[names[sensor + "n"]], values[names[sensor + "k"]]
     root = math.sqrt(rate_hz)
-    if fmt in ("kalibr", "openvins"):
-        return values["gyroscope_noise_density"] * root, values["gyroscope_random_walk"] / root
+    if fmt == "vins":                               # GYR_N²·dt²/2 per step: σ_d = GYR_N/√2; GYR_W·dt
+        return white / math.sqrt(2.0), walk / rate_hz
     if fmt == "orbslam3":                           # Ng*sf, Ngw/sf (Tracking.cc)
-        return values["IMU.NoiseGyro"] * root, values["IMU.GyroWalk"] / root
-    if fmt == "vins":                               # GYR_N per sample, GYR_W·dt per step
-        return values["gyr_n"], values["gyr_w"] / rate_hz
-    if fmt == "matlab":
-        return values["NoiseDensity"] * root, values["RandomWalk"] / root
-    raise InputError(f"unknown format {fmt!r}")
+        root = math.sqrt(values.get("IMU.Frequency", rate_hz))
+    return white * root, walk / root
+
+
+def to_continuous(fmt: str, values: dict, rate_hz: float) -> dict:
+    """The file's numbers as continuous densities in SI: ``gyro_n`` [rad/s/√Hz], ``gyro_k``
+    [rad/s²/√Hz], ``acc_n`` [m/s²/√Hz], ``acc_k`` [m/s³/√Hz], ``gyro_b`` [rad/s], ``acc_b``
+    [m/s²] (MATLAB); None where the file has no such field."""
+    names = FIELDS[fmt]
+    if fmt == "vins":
+        wf, kf = 1.0 / math.sqrt(2.0 * rate_hz), 1.0 / math.sqrt(rate_hz)
+    else:
+        wf = kf = 1.0
+    out = {}
+    for key, role, f in (("gyro_n", "gn", wf), ("gyro_k", "gk", kf), ("acc_n", "an", wf), ("acc_k", "ak", kf),
+                         ("gyro_b", "gb", 1.0), ("acc_b", "ab", 1.0)):
+        name = names.get(role)
+        out[key] = None if name is None or values.get(name) is None else float(values[name]) * f
+    return out
 
 
 def _num(x: float) -> str:
     return f"{x:.6e}"
 
 
+def _topic_line(topic: str, topic_why: str) -> str:
+    return f"rostopic: {topic} ({topic_why})"
+
+
 def _header(noise: GyroNoise, fmt: str, rate_hz: float, inflate: float, why: str,
-            source: str, comment: str, axis: tuple | None = None) -> list[str]:
+            source: str, comment: str, axis: tuple | None = None, accel: AccelChoice | None = None,
+            topic: tuple | None = None, accel_inflate: float | None = None) -> list[str]:
     si = stand_in(noise, rate_hz, keeps_b=fmt == "matlab")
     n_dh = units.arw_rad_rt_s_to_deg_rt_h(noise.n_rad_rt_s)
     k_dh = units.rrw_rad_s_rt_s_to_deg_h_rt_h(noise.k_rad_s_rt_s)
@@ -420,20 +656,38 @@ def _header(noise: GyroNoise, fmt: str, rate_hz: float, inflate: float, why: str
         + (f"gyro {noise.gyro}" if axis is None else axis[0]) + f" of {source}",
         f"model: ARW N = {n_dh:.6g} deg/√h = {noise.n_rad_rt_s:.6e} rad/s/√Hz; "
         f"RRW K = {k_dh:.6g} deg/h/√h = {noise.k_rad_s_rt_s:.6e} rad/s²/√Hz",
-        ("convention: DISCRETE-time, per sample at the rate below: gyr_n = σ_c·√rate [rad/s] "
-         "(one sample's white-noise σ), gyr_w = σ_w·√rate [rad/s²] (bias increment per step "
-         "gyr_w·dt = σ_w·√dt), as VINS-Fusion's integration_base.h propagates them"
+        ("convention: DISCRETE-time, per sample at the rate below: gyr_n = √2·σ_c·√rate [rad/s] "
+         "(√2 × one sample's white-noise σ: integration_base.h's mid-point covariance puts GYR_N² "
+         "with the weight 0.5·dt on each of a step's two readings, GYR_N²·dt²/2 per step, against "
+         "σ_c²·dt of the continuous noise), gyr_w = σ_w·√rate [rad/s²] (V = dt on GYR_W: bias "
+         "increment per step gyr_w·dt = σ_w·√dt); acc_n, acc_w alike [m/s², m/s³]"
          if discrete else
          "convention: CONTINUOUS-time densities of a TWO-sided white PSD (σ_c = IEEE ARW N, "
-         "ADEV = N/√τ; σ_w = IEEE RRW K, ADEV = K·√(τ/3)); the tool discretises at its rate: "
-         "σ_d = σ_c·√rate, bias step σ_w/√rate"),
+         "ADEV = N/√τ; σ_w = IEEE RRW K, ADEV = K·√(τ/3); the accelerometer's: VRW and acceleration "
+         "random walk); the tool discretises at its rate: σ_d = σ_c·√rate, bias step σ_w/√rate"),
         f"rate assumed: {rate_hz:g} Hz" + (" (the discrete values are wrong at any other rate)"
                                           if discrete or fmt == "orbslam3" else ""),
     ]
     if fmt == "orbslam3":
-        lines.append("ORB-SLAM3 multiplies NoiseGyro by √IMU.Frequency and divides GyroWalk by it "
-                     "(Tracking.cc: IMU::Calib(Tbc, Ng*sf, Na*sf, Ngw/sf, Naw/sf)): keep "
-                     "IMU.Frequency the true rate")
+        lines.append("ORB-SLAM3 multiplies NoiseGyro/NoiseAcc by √IMU.Frequency and divides "
+                     "GyroWalk/AccWalk by it (Tracking.cc: IMU::Calib(Tbc, Ng*sf, Na*sf, Ngw/sf, "
+                     "Naw/sf)): keep IMU.Frequency the true rate; it is an integer (ParseIMUParamFile)")
+        note = orbslam3_frequency(rate_hz)[1]
+        if note:
+            lines.append(note)
+        lines.append("merge these keys into your ORB-SLAM3 settings file: IMU.T_b_c1 (camera-IMU "
+                     "extrinsics) is the camera calibration's, not gyroarray's")
+    if fmt == "vins":
+        lines.append("merge these keys into your VINS-Fusion config (imu_topic, g_norm and the "
+                     "extrinsics are not gyroarray's); a key missing there is read as 0.0 silently")
+    if topic is not None and fmt in ("kalibr", "openvins"):
+        lines.append(_topic_line(*topic))
+    if fmt == "openvins":
+        lines.append("intrinsics: Tw, Ta, R_IMUtoACC, R_IMUtoGYRO are identity and Tg zeros because "
+                     "gyroarray does not know this IMU's intrinsics (scale, misalignment, "
+                     "g-sensitivity); they are OpenVINS' defaults (VioManagerOptions.h) and required "
+                     "keys: replace them with a calibration's (e.g. Kalibr's imu model) if you have one; "
+                     "T_i_b identity: the body frame is the IMU's")
     if si.covers:
         k_eq = units.rrw_rad_s_rt_s_to_deg_h_rt_h(si.k_eq_rad_s_rt_s)
         lines.append(
@@ -455,63 +709,328 @@ def _header(noise: GyroNoise, fmt: str, rate_hz: float, inflate: float, why: str
         lines.append("every gyro of the model (ARW deg/√h, RRW deg/h/√h, BI deg/h): " + "; ".join(
             f"{g['gyro']}: {g['n_deg_rt_h']:.4g}, {g['k_deg_h_rt_h']:.4g}, {g['b_deg_h']:.4g}" for g in axis[1])
             + " (--axis worst|mean|K chooses)")
-    lines.append(f"inflation: ×{inflate:.4g} on both numbers ({why})")
-    lines.append("accelerometer: not measured by gyroarray; fill in the accelerometer fields "
-                 "from your own Allan fit")
+    lines.append(f"inflation: ×{inflate:.4g} on the gyro's numbers ({why})"
+                 + ("" if accel is None or accel.n_m_s2_rt_hz is None else
+                    f"; ×{inflate if accel_inflate is None else accel_inflate:.4g} on the accelerometer's"))
+    lines += _accel_header(accel, fmt, rate_hz)
     return [f"{comment} {line}" for line in lines]
 
 
+def _accel_header(accel: AccelChoice | None, fmt: str, rate_hz: float) -> list[str]:
+    """The header's accelerometer lines: which axis, the terms, the bias instability's mapping,
+    and each required field that is missing, with why."""
+    names = FIELDS[fmt]
+    file_name = (lambda v: MATLAB_NAMES[v]) if fmt == "matlab" else (lambda v: v)
+    if accel is None or accel.n_m_s2_rt_hz is None and accel.k_m_s3_rt_hz is None:
+        why = accel.why_missing if accel is not None else f"no accelerometer given; {_FIT_HINT}"
+        return [f"{file_name(names['an'])}: MISSING — {why}",
+                f"{file_name(names['ak'])}: MISSING — {why}",
+                "the file is incomplete: its consumer needs both (never written as 0)"]
+    out = [f"accelerometer: {accel.what}; per axis (VRW m/s/√h, acc. RW m/s²/√h, BI mg): " + "; ".join(
+        f"{r['axis']}: {_opt(r['n_m_s_rt_h'])}, {_opt(r['k_m_s2_rt_h'])}, {_opt(r['b_mg'])}" for r in accel.table)]
+    walk, si = accel_walk(accel, rate_hz, keeps_b=fmt == "matlab")
+    if si.covers:
+        out.append(f"accelerometer bias instability: not in this format; a stand-in random walk "
+                   f"K_eq = {si.k_eq_rad_s_rt_s:.6e} m/s³/√Hz is added in quadrature to the acceleration "
+                   f"random walk (bounds the floor for τ >= {si.tau1_s:.4g} s, within ×2 up to {si.tau2_s:.4g} s)")
+    elif accel.b_m_s2 and fmt == "matlab":
+        out.append("accelerometer bias instability: accel.BiasInstability = B [m/s²]")
+    elif accel.b_m_s2 and accel.n_m_s2_rt_hz is None:
+        out.append("accelerometer bias instability: dropped (no VRW to place its stand-in walk)")
+    for role, value in (("an", accel.n_m_s2_rt_hz), ("ak", walk)):
+        if value is None:
+            out.append(f"{file_name(names[role])}: MISSING — {accel.why_missing}")
+    if accel.n_m_s2_rt_hz is None or walk is None:
+        out.append("the file is incomplete: its consumer needs every accelerometer field (never written as 0)")
+    return out
+
+
+def _opt(x) -> str:
+    return "—" if x is None else f"{x:.4g}"
+
+
+def missing_fields(fmt: str, values: dict) -> list[str]:
+    """The consumer's required fields (:data:`REQUIRED`) the values leave out."""
+    have = {MATLAB_NAMES.get(k, k) for k in values} if fmt == "matlab" else set(values)
+    return [f for f in REQUIRED[fmt] if f not in have and f not in ("rostopic", "Tw", "Ta", "R_IMUtoACC",
+                                                                      "R_IMUtoGYRO", "Tg")]
+
+
+_EYE3 = ["[1.0, 0.0, 0.0]", "[0.0, 1.0, 0.0]", "[0.0, 0.0, 1.0]"]
+_ZERO3 = ["[0.0, 0.0, 0.0]"] * 3
+
+
 def render(noise: GyroNoise, fmt: str, rate_hz: float, *, inflate: float = 1.0,
-           why: str = "none asked", source: str = "MODEL.toml", axis: tuple | None = None) -> str:
-    """The file's text: the comment header, then the fields."""
-    v = exported_values(noise, fmt, rate_hz, inflate)
+           why: str = "none asked", source: str = "MODEL.toml", axis: tuple | None = None,
+           accel: AccelChoice | None = None, topic: tuple | None = None,
+           accel_inflate: float | None = None) -> str:
+    """The file's text: the comment header, then the fields.
+
+    ``topic``: (topic, why) for Kalibr/OpenVINS (default :data:`DEFAULT_TOPIC`, said so). A
+    missing accelerometer term leaves its key out; the header says which and why.
+    """
+    if topic is None:
+        topic = (DEFAULT_TOPIC, "the default: the model names no topic; --topic T sets it")
+    v = exported_values(noise, fmt, rate_hz, inflate, accel, accel_inflate)
+    names = FIELDS[fmt]
+    comment = "%" if fmt == "matlab" else "#"
+    head = _header(noise, fmt, rate_hz, inflate, why, source, comment, axis, accel, topic, accel_inflate)
+
+    def line(role, unit, indent=""):
+        key = names[role]
+        return [] if key not in v else [f"{indent}{key}: {_num(v[key])}   # {unit}"]
     if fmt == "matlab":
-        head = _header(noise, fmt, rate_hz, inflate, why, source, "%", axis)
-        body = ["gyro = gyroparams( ...",
-                f"    'NoiseDensity', {_num(v['NoiseDensity'])}, ...    % (rad/s)/sqrt(Hz)",
-                f"    'RandomWalk', {_num(v['RandomWalk'])}, ...      % (rad/s)*sqrt(Hz)",
-                f"    'BiasInstability', {_num(v['BiasInstability'])});  % rad/s",
-                f"sampleRate = {rate_hz!r};   % Hz: imu = imuSensor('SampleRate', sampleRate, "
-                "'Gyroscope', gyro);",
-                "% accel = accelparams(...);  % fill in from your accelerometer's Allan fit"]
+        body = ["gyro = gyroparams;"]
+        for key, unit in (("NoiseDensity", "(rad/s)/sqrt(Hz)"), ("RandomWalk", "(rad/s)*sqrt(Hz)"),
+                          ("BiasInstability", "rad/s"), ("AccelNoiseDensity", "(m/s^2)/sqrt(Hz)"),
+                          ("AccelRandomWalk", "(m/s^2)*sqrt(Hz)"), ("AccelBiasInstability", "m/s^2")):
+            if key == "AccelNoiseDensity":
+                body.append("accel = accelparams;")
+            if key in v:
+                body.append(f"{MATLAB_NAMES[key]} = {_num(v[key])};   % {unit}")
+        body.append(f"sampleRate = {rate_hz!r};   % Hz: imu = imuSensor('accel-gyro', 'SampleRate', "
+                    "sampleRate, 'Gyroscope', gyro, 'Accelerometer', accel);")
         return "\n".join(head + body) + "\n"
-    head = ["%YAML:1.0"] if fmt in ("openvins", "vins", "orbslam3") else []
-    head += _header(noise, fmt, rate_hz, inflate, why, source, "#", axis)
+    head = (["%YAML:1.0"] if fmt in ("openvins", "vins", "orbslam3") else []) + head
     if fmt == "kalibr":
-        body = ["rostopic: /imu0",
-                f"update_rate: {rate_hz!r}   # Hz",
-                "# accelerometer_noise_density: FILL_IN   # [ m / s^2 / sqrt(Hz) ] (continuous)",
-                "# accelerometer_random_walk: FILL_IN     # [ m / s^3 / sqrt(Hz) ]",
-                f"gyroscope_noise_density: {_num(v['gyroscope_noise_density'])}   "
-                "# [ rad / s / sqrt(Hz) ] (continuous)",
-                f"gyroscope_random_walk: {_num(v['gyroscope_random_walk'])}     "
-                "# [ rad / s^2 / sqrt(Hz) ]"]
+        body = [f"rostopic: {json.dumps(topic[0])}",
+                f"update_rate: {rate_hz!r}   # Hz"]
+        body += line("an", "[ m / s^2 / sqrt(Hz) ] (continuous)") + line("ak", "[ m / s^3 / sqrt(Hz) ]")
+        body += line("gn", "[ rad / s / sqrt(Hz) ] (continuous)") + line("gk", "[ rad / s^2 / sqrt(Hz) ]")
     elif fmt == "openvins":
-        eye4 = ["    - [1.0, 0.0, 0.0, 0.0]", "    - [0.0, 1.0, 0.0, 0.0]",
-                "    - [0.0, 0.0, 1.0, 0.0]", "    - [0.0, 0.0, 0.0, 1.0]"]
-        body = (["imu0:", "  T_i_b:"] + eye4 +
-                ["  # accelerometer_noise_density: FILL_IN  # [ m / s^2 / sqrt(Hz) ]",
-                 "  # accelerometer_random_walk: FILL_IN    # [ m / s^3 / sqrt(Hz) ]",
-                 f"  gyroscope_noise_density: {_num(v['gyroscope_noise_density'])}  "
-                 "# [ rad / s / sqrt(Hz) ]",
-                 f"  gyroscope_random_walk: {_num(v['gyroscope_random_walk'])}    "
-                 "# [ rad / s^2 / sqrt(Hz) ]",
-                 "  rostopic: /imu0", "  time_offset: 0.0", f"  update_rate: {rate_hz!r}",
-                 '  model: "kalibr"'])
+        eye4 = ["[1.0, 0.0, 0.0, 0.0]", "[0.0, 1.0, 0.0, 0.0]", "[0.0, 0.0, 1.0, 0.0]", "[0.0, 0.0, 0.0, 1.0]"]
+        body = ["imu0:", "  T_i_b:"] + [f"    - {r}" for r in eye4]
+        body += line("an", "[ m / s^2 / sqrt(Hz) ]", "  ") + line("ak", "[ m / s^3 / sqrt(Hz) ]", "  ")
+        body += line("gn", "[ rad / s / sqrt(Hz) ]", "  ") + line("gk", "[ rad / s^2 / sqrt(Hz) ]", "  ")
+        body += ['  model: "kalibr"   # the intrinsics below in Kalibr\'s convention (identity: none known)']
+        for name, rows in (("Ta", _EYE3), ("R_IMUtoACC", _EYE3), ("Tw", _EYE3), ("R_IMUtoGYRO", _EYE3),
+                           ("Tg", _ZERO3)):
+            body += [f"  {name}:"] + [f"    - {r}" for r in rows]
+        body += [f"  rostopic: {json.dumps(topic[0])}", "  time_offset: 0.0", f"  update_rate: {rate_hz!r}"]
     elif fmt == "vins":
-        body = ["# acc_n: FILL_IN   # accelerometer measurement noise standard deviation",
-                f"gyr_n: {_num(v['gyr_n'])}   # gyroscope measurement noise standard deviation "
-                "[rad/s], per sample",
-                "# acc_w: FILL_IN   # accelerometer bias random walk noise standard deviation",
-                f"gyr_w: {_num(v['gyr_w'])}   # gyroscope bias random walk noise standard "
-                "deviation [rad/s^2], per step"]
+        body = line("an", "accelerometer measurement noise σ [m/s^2], per sample (√2 inside)")
+        body += line("gn", "gyroscope measurement noise σ [rad/s], per sample (√2 inside)")
+        body += line("ak", "accelerometer bias random walk [m/s^3], per step: increment acc_w·dt")
+        body += line("gk", "gyroscope bias random walk [rad/s^2], per step: increment gyr_w·dt")
     else:                                            # orbslam3
-        body = [f"IMU.NoiseGyro: {_num(v['IMU.NoiseGyro'])}   # rad/s/sqrt(Hz) (continuous)",
-                f"IMU.GyroWalk: {_num(v['IMU.GyroWalk'])}    # rad/s^2/sqrt(Hz)",
-                "# IMU.NoiseAcc: FILL_IN   # m/s^2/sqrt(Hz)",
-                "# IMU.AccWalk: FILL_IN    # m/s^3/sqrt(Hz)",
-                f"IMU.Frequency: {rate_hz!r}   # Hz"]
+        body = line("gn", "rad/s/sqrt(Hz) (continuous)") + line("gk", "rad/s^2/sqrt(Hz)")
+        body += line("an", "m/s^2/sqrt(Hz)") + line("ak", "m/s^3/sqrt(Hz)")
+        body.append(f"IMU.Frequency: {v['IMU.Frequency']:d}   # Hz, an integer (ParseIMUParamFile: isInt)")
     return "\n".join(head + body) + "\n"
+
+
+@dataclass(frozen=True)
+class ReadBack:
+    """A written file as its consumer reads it.
+
+    Parameters
+    ----------
+    fmt : str
+    values : dict
+        Field -> number as read, named as :func:`exported_values` names them.
+    si : dict
+        The numbers as continuous densities in SI (:func:`to_continuous`).
+    rate_hz : float or None
+        The file's rate field [Hz] (VINS-Fusion has none: the rate asked).
+    problems : tuple of str
+        What the consumer would refuse or misread (missing or misspelled key, wrong type, a
+        density or walk <= 0).
+    parser : str
+        What read it.
+    """
+
+    fmt: str
+    values: dict
+    si: dict
+    rate_hz: float | None
+    problems: tuple
+    parser: str
+
+    @property
+    def passed(self) -> bool:
+        return not self.problems
+
+
+def _opencv_tree(text: str) -> tuple[Any, str]:
+    """The OpenCV YAML text as Python objects (int, float, str, list, dict), read by
+    ``cv2.FileStorage`` (OpenCV's own YAML reader, what VINS-Fusion, ORB-SLAM3 and OpenVINS use);
+    without OpenCV installed, by a YAML loader after the ``%YAML:1.0`` line (the same types)."""
+    try:
+        import cv2  # deferred: the OpenCV formats' consumer parser, a test dependency
+    except ImportError:
+        body = re.sub(r"\A%YAML:1\.0[^\n]*\n", "", text)
+        return _yaml_load(body), "a YAML loader (OpenCV not installed: pip install opencv-python-headless)"
+
+    def conv(node):
+        if node.isMap():
+            return {k: conv(node.getNode(k)) for k in node.keys()}
+        if node.isSeq():
+            return [conv(node.at(i)) for i in range(node.size())]
+        if node.isInt():
+            return int(node.real())
+        if node.isReal():
+            return float(node.real())
+        if node.isString():
+            return node.string()
+        return None
+    try:
+        fs = cv2.FileStorage(text, cv2.FILE_STORAGE_READ | cv2.FILE_STORAGE_MEMORY)
+    except cv2.error as err:
+        raise ValueError(f"OpenCV cannot parse it: {str(err).strip().splitlines()[-1]}") from None
+    if not fs.isOpened():
+        raise ValueError("OpenCV cannot open it")
+    tree = conv(fs.root())
+    fs.release()
+    return tree, f"cv2.FileStorage (OpenCV {cv2.__version__})"
+
+
+def _yaml_load(text: str):
+    """YAML as Kalibr's reader loads it (PyYAML ``safe_load``; ruamel's safe loader without it)."""
+    try:
+        # deferred: Kalibr's own loader (PyYAML), only for a re-read
+        import yaml  # type: ignore[import-untyped]
+        try:
+            return yaml.safe_load(text)
+        except yaml.YAMLError as err:
+            raise ValueError(f"not YAML: {str(err).splitlines()[0]}") from None
+    except ImportError:
+        # deferred: the fallback loader (a dependency) only where PyYAML is absent
+        from ruamel.yaml import YAML, YAMLError
+        try:
+            return YAML(typ="safe", pure=True).load(text)
+        except YAMLError as err:
+            raise ValueError(f"not YAML: {str(err).splitlines()[0]}") from None
+
+
+_MATLAB_LINE = re.compile(r"^\s*([A-Za-z]\w*(?:\.\w+)?)\s*=\s*(.*?)\s*;?\s*$")
+_MATLAB_PROPS = ("NoiseDensity", "RandomWalk", "BiasInstability", "MeasurementRange", "Resolution",
+                 "ConstantBias", "AxesMisalignment", "TemperatureBias", "TemperatureScaleFactor",
+                 "AccelerationBias", "NoiseType", "BiasInstabilityCoefficients")
+
+
+def _matlab_tree(text: str) -> dict:
+    """``name = value;`` lines of a MATLAB snippet (comments after ``%``): numbers as float, the
+    constructors (``gyroparams``) as their name."""
+    out: dict = {}
+    for line in text.splitlines():
+        m = _MATLAB_LINE.match(line.split("%", 1)[0])
+        if not m:
+            continue
+        name, value = m.group(1), m.group(2)
+        try:
+            out[name] = float(value)
+        except ValueError:
+            out[name] = value
+    return out
+
+
+def _is_number(v) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+
+
+def read_back(text: str, fmt: str, rate_hz: float | None = None) -> ReadBack:
+    """Read a written file as its consumer does (module docstring) and convert it back.
+
+    Parameters
+    ----------
+    text : str
+        The file's content.
+    fmt : str
+        One of :data:`FORMATS`.
+    rate_hz : float, optional
+        The rate the tool runs at [Hz] (VINS-Fusion's file has none; the others are checked
+        against it).
+
+    Returns
+    -------
+    ReadBack
+    """
+    problems: list[str] = []
+    names = FIELDS[fmt]
+    try:
+        if fmt == "kalibr":
+            tree, parser = _yaml_load(text), "yaml.safe_load (Kalibr's ConfigReader)"
+        elif fmt == "matlab":
+            tree, parser = _matlab_tree(text), "name = value; lines (MATLAB)"
+        else:
+            tree, parser = _opencv_tree(text)
+    except ValueError as err:
+        return ReadBack(fmt, {}, to_continuous(fmt, {}, rate_hz or 1.0), None, (str(err),), fmt)
+    if fmt == "openvins":
+        if not isinstance(tree, dict) or not isinstance(tree.get("imu0"), dict):
+            close = did_you_mean("imu0", list(tree) if isinstance(tree, dict) else [])
+            return ReadBack(fmt, {}, to_continuous(fmt, {}, rate_hz or 1.0), None,
+                            (f"no imu0 map: OpenVINS reads every IMU key under imu0{close}",), parser)
+        node = tree["imu0"]
+    else:
+        node = tree if isinstance(tree, dict) else {}
+        if not isinstance(tree, dict):
+            problems.append(f"the file is not a map of keys (read as {type(tree).__name__})")
+    present = list(node)
+    walks = {names["gk"], names["ak"]}
+    values: dict = {}
+    file_names = {MATLAB_NAMES[k]: k for k in MATLAB_NAMES} if fmt == "matlab" else {}
+    for key in REQUIRED[fmt]:
+        if key not in node:
+            problems.append(f"required field {key!r} missing{did_you_mean(key, [p for p in present if p not in REQUIRED[fmt]])}")
+            continue
+        v = node[key]
+        short = file_names.get(key, key)
+        if key in ("Tw", "Ta", "R_IMUtoACC", "R_IMUtoGYRO", "Tg"):
+            if not (isinstance(v, list) and len(v) == 3 and all(isinstance(r, list) and len(r) == 3
+                                                               and all(_is_number(x) for x in r) for r in v)):
+                problems.append(f"{key} must be a 3x3 matrix (3 rows of 3 numbers), got {v!r}")
+            continue
+        if key == "rostopic":
+            if not isinstance(v, str) or not v:
+                problems.append(f"rostopic must be a string (Kalibr: checkRosTopic), got {v!r}")
+            continue
+        if key == "IMU.Frequency":
+            if not (isinstance(v, int) and not isinstance(v, bool)):
+                problems.append(f"IMU.Frequency must be an integer (ORB-SLAM3's ParseIMUParamFile: "
+                                f"node.isInt()), got {v!r}")
+                continue
+        elif fmt == "orbslam3" and not isinstance(v, float):
+            problems.append(f"{key} must be a real number (ORB-SLAM3's ParseIMUParamFile: node.isReal()), "
+                            f"got {v!r}")
+            continue
+        if not _is_number(v):
+            problems.append(f"{key} must be a number, got {v!r}")
+            continue
+        if not v > 0:
+            what = ("walk" if short in walks else "rate" if short == names["rate"] or key == "sampleRate"
+                    else "density")
+            problems.append(f"{key} = {v!r}: a {what} <= 0 (the consumer refuses it or makes its filter "
+                            "singular)" if what != "walk" else
+                            f"{key} = {v!r}: a walk <= 0 makes the filter's bias a constant "
+                            "(Kalibr's reader refuses it)")
+            continue
+        values[short] = v
+    if fmt == "matlab":
+        for name in node:
+            base, _, prop = name.partition(".")
+            if prop and base in ("gyro", "accel") and prop not in _MATLAB_PROPS:
+                problems.append(f"{name}: gyroparams/accelparams have no property {prop!r}"
+                                f"{did_you_mean(prop, _MATLAB_PROPS)} (MATLAB: Unrecognized property)")
+        for name in ("gyro.BiasInstability", "accel.BiasInstability"):
+            if name in node:
+                v = node[name]
+                if not (_is_number(v) and v >= 0):
+                    problems.append(f"{name} must be a number >= 0, got {v!r}")
+                else:
+                    values[file_names[name]] = v
+    file_rate = None
+    if fmt == "vins":
+        file_rate = rate_hz
+    else:
+        rk = "sampleRate" if fmt == "matlab" else names["rate"]
+        file_rate = node.get(rk) if _is_number(node.get(rk)) else None
+        if file_rate is not None and rate_hz is not None and not math.isclose(file_rate, rate_hz, rel_tol=0.01):
+            problems.append(f"{rk} = {file_rate!r} Hz, but the rate asked is {rate_hz:g} Hz")
+        if fmt in ("openvins",) and file_rate is None:
+            problems.append("update_rate missing or not a number")
+    rate = float(file_rate or rate_hz or 1.0)
+    return ReadBack(fmt, values, to_continuous(fmt, values, rate), file_rate, tuple(problems), parser)
 
 
 def _sim_model(noise: GyroNoise) -> tuple[NoiseModel, list[str]]:
@@ -572,7 +1091,8 @@ def auto_inflation(noise: GyroNoise, fmt: str, rate_hz: float, rng: np.random.Ge
     Returns
     -------
     dict
-        ``factor`` [-], ``nis`` (window [s] -> mean NIS at factor 1), ``record_s`` [s],
+        ``factor`` [-] (>= 1; ``raw_factor`` unclamped, ``clamped``), ``nis`` (window [s] -> mean
+        NIS at factor 1), ``record_s`` [s],
         ``not_simulated`` (effects left out) and ``why`` (one line).
     """
     n = _record_samples(rate_hz, seconds)
@@ -583,18 +1103,26 @@ def auto_inflation(noise: GyroNoise, fmt: str, rate_hz: float, rng: np.random.Ge
         0.0, math.log10(max(1.0, min(MAX_WINDOW_S * rate_hz, n / 1000))), 5)))})
     nis = {w / rate_hz: window_nis(rate, rate_hz, n_c, k_c, w) for w in windows}
     worst_w = max(nis, key=lambda w: nis[w])
-    factor = math.sqrt(nis[worst_w])
+    raw = math.sqrt(nis[worst_w])
+    factor = max(1.0, raw)
     why = (f"√ of the largest mean NIS, {nis[worst_w]:.3g} at {worst_w:.3g} s windows, of a "
            f"bias filter at the exported values on {n / rate_hz:.0f} s simulated from the full "
-           f"model")
-    return {"factor": factor, "nis": {f"{w:.6g}": v for w, v in nis.items()},
+           f"model" + ("" if raw >= 1.0 else
+                       f"; {raw:.4g} clamped at 1: a factor below 1 would make the file claim less "
+                       "noise than the model has (it is the simulation's scatter)"))
+    return {"factor": factor, "raw_factor": raw, "clamped": raw < 1.0,
+            "nis": {f"{w:.6g}": v for w, v in nis.items()},
             "record_s": n / rate_hz, "not_simulated": dropped, "why": why}
 
 
+
 def verify_export(noise: GyroNoise, fmt: str, rate_hz: float, inflate: float,
-                  rng: np.random.Generator, seconds: float = 7200.0) -> dict:
+                  rng: np.random.Generator, seconds: float = 7200.0, values: dict | None = None) -> dict:
     """Round trip of a file: simulate what the tool's reading of it generates, re-identify
     N and K, compare (module docstring).
+
+    ``values``: the file's numbers as read back (:func:`read_back`); default what the export
+    writes (:func:`exported_values`).
 
     Returns
     -------
@@ -604,7 +1132,8 @@ def verify_export(noise: GyroNoise, fmt: str, rate_hz: float, inflate: float,
         (× inflate) lies in the simulated record's 95 % interval, the worst τ and ratio;
         ``problems`` (one line each).
     """
-    values = exported_values(noise, fmt, rate_hz, inflate)
+    if values is None:
+        values = exported_values(noise, fmt, rate_hz, inflate)
     sigma_d, sigma_b = tool_discrete(fmt, values, rate_hz)
     n = _record_samples(rate_hz, seconds)
     dt = 1.0 / rate_hz
@@ -653,54 +1182,304 @@ def verify_export(noise: GyroNoise, fmt: str, rate_hz: float, inflate: float,
     return out
 
 
-def export_noise(model: NoiseModel, gyro: int | str, fmt: str, rate_hz: float, *,
-                 inflate: float | str = 1.0, verify: bool = False, seed: int = 0,
-                 source: str = "MODEL.toml") -> tuple[str, dict]:
+
+
+#: Fewest samples of a still part the record check reads (as ``allan``'s still parts).
+MIN_STILL_PART = 256
+
+
+def record_parts(meas) -> tuple[list[tuple[int, int]], list[str]]:
+    """The still, contiguous parts of a measurement ``[start, stop)`` and what was left out: the
+    still parts :func:`gyroarray.analysis.motion.still_mask` finds in the gyro outputs (a record
+    with a reference rate: where it is below 0.2 deg/h), each cut at gaps in the time stamps; as
+    ``gyroarray allan`` reads a record."""
+    # deferred: the motion detector and the pooled deviation load only for --record
+    from gyroarray.analysis.deviations import contiguous_segments
+    from gyroarray.analysis.motion import still_mask
+    from gyroarray.core.measurement import true_runs
+    n, dt = meas.n_samples, meas.dt_s
+    notes: list[str] = []
+    parts = [(0, n)]
+    if meas.has_reference:
+        still = np.abs(np.deg2rad(meas.ref_deg_s)).max(axis=1) <= units.deg_h_to_rad_s(0.2)
+    else:
+        try:
+            still = still_mask(meas.gyro_rad_s, meas.layout.axes, dt)
+        except InputError:                    # too short to find motion in: all of it
+            still = np.ones(n, bool)
+    if not still.all():
+        parts = [(a, b) for a, b in true_runs(still) if b - a >= MIN_STILL_PART]
+        notes.append(f"read over {len(parts)} still part(s), {sum(b - a for a, b in parts) * dt:.1f} s of "
+                     f"{n * dt:.1f} s (motion is not noise)")
+    segments, missing = contiguous_segments(meas.time_s, dt)
+    if len(segments) > 1:
+        parts = [(max(a, c), min(b, e)) for a, b in parts for c, e in segments]
+        parts = [(a, b) for a, b in parts if b - a >= 4]
+        notes.append(f"{len(segments) - 1} gap(s) in the time stamps: the parts are cut there")
+    if not parts:
+        raise InputError("the record has no still, contiguous part of at least "
+                         f"{MIN_STILL_PART} samples to compare the file with", file=str(meas.source))
+    return parts, notes
+
+
+def _compare_band(series: np.ndarray, parts, dt: float, n_c: float, k_c: float, b: float, *,
+                  what: str, conv, unit: str) -> dict:
+    """The file's ADEV (white n_c, walk k_c, flicker floor of b) against one series' measured ADEV
+    and 95 % interval, τ by τ; ``conv`` turns SI into ``unit`` for the text."""
+    # deferred: the pooled deviation over parts (the analysis layer)
+    from gyroarray.analysis.deviations import analyse_parts
+    a = analyse_parts([series[p:q] for p, q in parts], dt, "octave", "oadev", confidence=0.95)
+    taus = a.taus_s
+    file_dev = np.sqrt(sampled_walk_n2(n_c, k_c, dt) * term_basis("oadev", "n", taus)
+                       + k_c ** 2 * term_basis("oadev", "k", taus) + _C_B * b ** 2)
+    ratio = file_dev / a.adev_rad_s
+    # fail against the family-wise band: each τ at 1 - 0.05/n_τ (Bonferroni), so that a file that
+    # is the truth fails on at most 5 % of records (each τ at 95 %: on ~25 % of 17-τ records,
+    # tests/test_export_consumers.py); the 95 % band per τ is reported beside
+    low_fw, _ = confidence_interval(a.adev_rad_s, a.edf, 1.0 - 0.05 / taus.size)
+    below = file_dev < low_fw
+    below95 = file_dev < a.ci_low_rad_s
+    above = file_dev > a.ci_high_rad_s
+    i_min = int(np.argmin(a.adev_rad_s))
+    return {"what": what, "taus_s": [float(t) for t in taus],
+            f"measured_{unit}": [float(conv(x)) for x in a.adev_rad_s],
+            f"ci_low_{unit}": [float(conv(x)) for x in a.ci_low_rad_s],
+            f"ci_high_{unit}": [float(conv(x)) for x in a.ci_high_rad_s],
+            f"file_{unit}": [float(conv(x)) for x in file_dev],
+            "file_over_measured": [float(r) for r in ratio],
+            f"ci_low_familywise_{unit}": [float(conv(x)) for x in low_fw],
+            "below": [{"tau_s": float(taus[i]), "file_over_measured": float(ratio[i]),
+                       "ci_low_over_measured": float(low_fw[i] / a.adev_rad_s[i])}
+                      for i in np.flatnonzero(below)],
+            "familywise_confidence": 1.0 - 0.05 / taus.size,
+            "n_below": int(below.sum()), "n_below_95": int(below95.sum()), "n_above": int(above.sum()),
+            "n_taus": int(taus.size),
+            "min_tau_s": float(taus[i_min]), "file_over_measured_at_min": float(ratio[i_min])}
+
+
+def record_check(meas, fmt: str, file_si: dict, noise: GyroNoise, gyros: list[int],
+                 accel: bool = True) -> dict:
+    """The file (as read back, ``file_si`` of :func:`read_back`) against a measurement's ADEV band.
+
+    Parameters
+    ----------
+    meas : Measurement
+        The record (:func:`gyroarray.core.measurement.read_measurement`).
+    fmt : str
+    file_si : dict
+        The file's continuous densities in SI.
+    noise : GyroNoise
+        The model's gyro noise (what the format drops is said from it).
+    gyros : list of int
+        The record's gyros (1-based) the file stands for.
+    accel : bool
+        Also compare the accelerometer fields with the record's ``acc_*`` columns (when both are
+        there): every axis, the file being the worst (or mean) of them.
+
+    Returns
+    -------
+    dict
+        ``parts_notes``, ``gyros`` (one :func:`_compare_band` dict per gyro), ``accelerometer``
+        (per axis, or None), ``drops`` (one line or None) and ``problems`` (one per series with τ
+        where the file is below the measured band).
+    """
+    parts, notes = record_parts(meas)
+    dt = meas.dt_s
+    out: dict = {"record": str(meas.source), "record_s": float(meas.n_samples * dt), "parts_notes": notes,
+                 "gyros": [], "accelerometer": None, "problems": []}
+    if file_si.get("gyro_n") is None or file_si.get("gyro_k") is None:
+        out["problems"].append("the file's gyro fields could not be read back: nothing to compare")
+        return out
+    for k in gyros:
+        if not 1 <= k <= meas.layout.n_gyros:
+            raise InputError(f"--record has {meas.layout.n_gyros} gyro(s); the file is for gyro {k}",
+                             file=str(meas.source))
+        c = _compare_band(meas.gyro_rad_s[:, k - 1], parts, dt, file_si["gyro_n"], file_si["gyro_k"],
+                          file_si.get("gyro_b") or 0.0, what=f"gyro {k}", conv=units.rad_s_to_deg_h,
+                          unit="deg_h")
+        out["gyros"].append(c)
+        if c["n_below"]:
+            out["problems"].append(
+                f"gyro {k}: the file's ADEV is below the record's family-wise 95 % interval at {c['n_below']} of "
+                f"{c['n_taus']} τ: " + ", ".join(f"τ = {b['tau_s']:.4g} s ({b['file_over_measured']:.2f}×)"
+                                               for b in c["below"]) + " (file/measured)")
+    worst = min(out["gyros"], key=lambda c: c["file_over_measured_at_min"])
+    if noise.b_rad_s > 0:
+        held = ("as BiasInstability" if fmt == "matlab" else
+                "only as a stand-in random walk (white + walk is all the format holds)")
+        taus = np.asarray(worst["taus_s"])
+        share = _C_B * noise.b_rad_s ** 2 / noise.model_avar(taus)
+        i = int(np.argmax(share))                 # where the bias instability matters most
+        without = math.sqrt(1.0 - float(share[i]))
+        out["drops"] = (f"the model's bias instability B = {units.rad_s_to_deg_h(noise.b_rad_s):.4g} deg/h "
+                        f"(ADEV floor {units.rad_s_to_deg_h(0.664 * noise.b_rad_s):.4g} deg/h) is kept {held}; "
+                        f"at τ = {taus[i]:.4g} s, where it is {share[i]:.0%} of the model's Allan variance, "
+                        f"white + walk alone give {without:.2f}× the model's ADEV, and the file's ADEV is "
+                        f"{worst['file_over_measured'][i]:.2f}× the measured")
+        out["drops_at"] = {"tau_s": float(taus[i]), "b_share": float(share[i]),
+                           "white_walk_over_model": without,
+                           "file_over_measured": float(worst["file_over_measured"][i])}
+    elif fmt != "matlab":
+        out["drops"] = (f"the format holds white + walk only; at τ = {worst['min_tau_s']:.4g} s (the record's "
+                        f"ADEV minimum, where a bias instability would show) the file's ADEV is "
+                        f"{worst['file_over_measured_at_min']:.2f}× the measured")
+    else:
+        out["drops"] = None
+    if accel and meas.has_acc and file_si.get("acc_n") is not None and file_si.get("acc_k") is not None:
+        acc = []
+        for i, axis in enumerate("xyz"):
+            c = _compare_band(meas.acc_m_s2[:, i], parts, dt, file_si["acc_n"], file_si["acc_k"],
+                              file_si.get("acc_b") or 0.0, what=f"accelerometer {axis}",
+                              conv=lambda x: x, unit="m_s2")
+            acc.append(c)
+            if c["n_below"]:
+                out["problems"].append(
+                    f"accelerometer {axis}: the file's ADEV is below the record's family-wise 95 % interval at "
+                    f"{c['n_below']} of {c['n_taus']} τ: " + ", ".join(
+                        f"τ = {b['tau_s']:.4g} s ({b['file_over_measured']:.2f}×)" for b in c["below"]))
+        out["accelerometer"] = acc
+    return out
+
+
+@dataclass(frozen=True)
+class Export:
+    """What :func:`build_export` prepared: the numbers, the file's text and the JSON summary."""
+
+    noise: GyroNoise
+    accel: AccelChoice
+    fmt: str
+    rate_hz: float
+    inflate: float
+    accel_inflate: float
+    text: str
+    summary: dict
+
+
+def build_export(model: NoiseModel, axis: int | str, fmt: str, rate_hz: float, *,
+                 inflate: float | str = 1.0, seed: int = 0, source: str = "MODEL.toml",
+                 topic: str | None = None) -> Export:
     """The file's text and a JSON-ready summary (what ``gyroarray export`` writes and prints).
 
     Parameters
     ----------
     model : NoiseModel
-    gyro : int or {"worst", "mean"}
-        1-based gyro, or the axis rule of :func:`choose_axis`.
+    axis : int or {"worst", "mean"}
+        1-based gyro, or the axis rule of :func:`choose_axis` (the accelerometer:
+        :func:`choose_accel`).
     fmt : str
         One of :data:`FORMATS`.
     rate_hz : float
         IMU rate the tool runs at [Hz].
     inflate : float or "auto"
-        Factor on both numbers, or derived (:func:`auto_inflation`).
-    verify : bool
-        Run :func:`verify_export`.
+        Factor on the numbers, or derived (:func:`auto_inflation`, never below 1, gyro only).
     seed : int
         Seed of the simulations.
     source : str
         The model file's name, for the header.
+    topic : str, optional
+        The IMU topic of Kalibr/OpenVINS files (default the model's ``topic``, else
+        :data:`DEFAULT_TOPIC`, said so).
     """
     if fmt not in FORMATS:
         raise InputError(f"unknown format {fmt!r}; expected one of {', '.join(FORMATS)}")
     if not (math.isfinite(rate_hz) and MIN_RATE_HZ <= rate_hz <= MAX_RATE_HZ):
         raise InputError(f"--rate-hz must be in [{MIN_RATE_HZ:g}, {MAX_RATE_HZ:g}] Hz, got {rate_hz!r}")
-    noise, what, every = choose_axis(model, gyro)
+    if fmt == "orbslam3":
+        orbslam3_frequency(rate_hz)
+    noise, what, every = choose_axis(model, axis)
     check_exportable(noise, fmt, rate_hz)
+    accel = choose_accel(model, axis)
+    if topic is not None:
+        topic_pair = (topic, "as given by --topic")
+    elif model.topic is not None:
+        topic_pair = (model.topic, "the topic the model was fitted on")
+    else:
+        topic_pair = (DEFAULT_TOPIC, "the default: the model names no topic; --topic T sets it")
     rng = np.random.default_rng(seed)
     summary: dict = {"format": fmt, "gyro": noise.gyro if noise.gyro else None, "axis": what,
                      "gyros": every, "rate_hz": rate_hz}
+    if fmt in ("kalibr", "openvins"):
+        summary["topic"] = {"topic": topic_pair[0], "why": topic_pair[1]}
     if inflate == "auto":
         auto = auto_inflation(noise, fmt, rate_hz, rng)
-        factor, why = auto["factor"], auto["why"]
+        factor, why, accel_factor = auto["factor"], auto["why"], 1.0
         summary["inflate_auto"] = auto
     else:
-        factor, why = float(inflate), ("as asked" if float(inflate) != 1.0 else "none asked")
-    text = render(noise, fmt, rate_hz, inflate=factor, why=why, source=source, axis=(what, every))
+        factor = float(inflate)
+        why, accel_factor = ("as asked" if factor != 1.0 else "none asked"), factor
+    text = render(noise, fmt, rate_hz, inflate=factor, why=why, source=source, axis=(what, every),
+                  accel=accel, topic=topic_pair, accel_inflate=accel_factor)
     si = stand_in(noise, rate_hz, keeps_b=fmt == "matlab")
+    values = exported_values(noise, fmt, rate_hz, factor, accel, accel_factor)
+    missing = missing_fields(fmt, values)
     summary.update({
-        "inflate": factor, "values": exported_values(noise, fmt, rate_hz, factor),
+        "inflate": factor, "accel_inflate": accel_factor, "values": values,
         "convention": "discrete per sample" if fmt == "vins" else "continuous, two-sided PSD",
         "stand_in": {"covers": list(si.covers),
                      "k_eq_deg_h_rt_h": float(units.rrw_rad_s_rt_s_to_deg_h_rt_h(si.k_eq_rad_s_rt_s)),
                      "tau1_s": si.tau1_s if si.covers else None,
                      "tau2_s": si.tau2_s if si.covers else None},
+        "accelerometer": {"axis": accel.what, "axes": accel.table,
+                          "n_m_s2_rt_hz": accel.n_m_s2_rt_hz, "k_m_s3_rt_hz": accel.k_m_s3_rt_hz,
+                          "b_m_s2": accel.b_m_s2},
+        "missing_fields": missing,
+        "warnings": ([f"the file lacks {', '.join(missing)}: "
+                      + (accel.why_missing or f"no accelerometer; {_FIT_HINT}")
+                      + "; its consumer will refuse it (or, VINS-Fusion, read 0)"] if missing else []),
     })
+    if fmt == "orbslam3" and orbslam3_frequency(rate_hz)[1]:
+        summary["warnings"].append(orbslam3_frequency(rate_hz)[1])
+    return Export(noise, accel, fmt, rate_hz, factor, accel_factor, text, summary)
+
+
+def verify_file(exp: Export, text: str, *, record=None, seed: int = 0, seconds: float = 7200.0,
+                gyros: list[int] | None = None) -> dict:
+    """``--verify``: read the written ``text`` back as its consumer does, compare with the numbers
+    meant, then the simulated round trip (no record) or the record's ADEV band (``record``, a
+    Measurement).
+
+    Returns
+    -------
+    dict
+        ``read_back`` (parser, values, problems), ``round_trip`` (:func:`verify_export`, without a
+        record) or ``record`` (:func:`record_check`), ``problems`` and ``passed``.
+    """
+    rb = read_back(text, exp.fmt, exp.rate_hz)
+    problems = list(rb.problems)
+    meant = exp.summary["values"]
+    for key, want in meant.items():
+        got = rb.values.get(key)
+        if got is not None and not math.isclose(got, want, rel_tol=READ_BACK_RTOL):
+            name = MATLAB_NAMES.get(key, key) if exp.fmt == "matlab" else key
+            problems.append(f"{name} = {got!r} in the file, but the model means {want:.6e} "
+                            f"({got / want:.4g}× it)" if want else f"{name} = {got!r}, the model means 0")
+    out: dict = {"read_back": {"parser": rb.parser, "values": rb.values, "problems": list(rb.problems),
+                               "si": rb.si}}
+    names = FIELDS[exp.fmt]
+    readable = names["gn"] in rb.values and names["gk"] in rb.values
+    if record is None and readable:
+        rt = verify_export(exp.noise, exp.fmt, exp.rate_hz, exp.inflate, np.random.default_rng(seed), seconds,
+                           values={**meant, **rb.values})
+        out.update({k: rt[k] for k in ("record_s", "coefficients", "band")})
+        out["round_trip"] = {"passed": rt["passed"], "problems": rt["problems"]}
+        problems += rt["problems"]
+    elif record is not None:
+        if gyros is None:
+            gyros = [exp.noise.gyro] if exp.noise.gyro else list(range(1, record.layout.n_gyros + 1))
+        rc = record_check(record, exp.fmt, rb.si, exp.noise, gyros)
+        out["record"] = rc
+        problems += rc["problems"]
+    out["problems"] = problems
+    out["passed"] = not problems
+    return out
+
+
+def export_noise(model: NoiseModel, gyro: int | str, fmt: str, rate_hz: float, *,
+                 inflate: float | str = 1.0, verify: bool = False, seed: int = 0,
+                 source: str = "MODEL.toml", topic: str | None = None, record=None) -> tuple[str, dict]:
+    """The file's text and a JSON-ready summary (:func:`build_export`); ``verify``: the summary's
+    ``verify`` is :func:`verify_file` on that text (``record``: a Measurement to compare with)."""
+    exp = build_export(model, gyro, fmt, rate_hz, inflate=inflate, seed=seed, source=source, topic=topic)
     if verify:
-        summary["verify"] = verify_export(noise, fmt, rate_hz, factor, rng)
-    return text, summary
+        exp.summary["verify"] = verify_file(exp, exp.text, record=record, seed=seed)
+    return exp.text, exp.summary

@@ -16,7 +16,16 @@ The half-width of a two-sided interval at confidence c is ``z·σ``, ``z = √2�
 added; the length is found by iterating ``T ← T·(σ_rel/precision)²`` and keeping the
 shortest length tried that meets the precision.
 
-SI inside (rad/s, s); datasheet units only in :meth:`Plan.to_json_dict`.
+The accelerometer (``plan --sensor acc``) is planned the same way: its velocity random walk
+N_a [m/s/√s], bias instability B [m/s²] and acceleration random walk K_a [m/s²/√s] have the
+Allan variance of the gyro's N, B and K (IEEE Std 1293 and 952 share the power laws), and
+``allan --sensor acc`` fits them with the same GLS fit (:mod:`gyroarray.analysis.accel`); only
+the names and datasheet units differ (:data:`ACC_TERM_NAMES`).
+
+The prediction is that of a fit of the planned terms only (the terms with a positive value):
+the fit of a record that also has to find terms the plan leaves out scatters more.
+
+SI inside (rad/s or m/s², s); datasheet units only in :meth:`Plan.to_json_dict`.
 """
 
 from __future__ import annotations
@@ -27,14 +36,15 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import special
 
+from gyroarray.analysis.accel import ACC_TERMS
 from gyroarray.analysis.allan import ONE_SIGMA, AllanResult, averaging_factors, edf
 from gyroarray.analysis.noise_fit import fit_noise_terms, term_basis
 from gyroarray.core import units
 from gyroarray.core.errors import InputError
 from gyroarray.effects.names import ARW, BIAS_INSTABILITY, RRW
 
-__all__ = ["PLAN_TERMS", "TERM_NAMES", "MAX_PLAN_S", "predicted_sigma", "plan_record", "Plan",
-           "model_terms"]
+__all__ = ["PLAN_TERMS", "TERM_NAMES", "ACC_TERM_NAMES", "SENSORS", "MAX_PLAN_S", "predicted_sigma",
+           "plan_record", "Plan", "model_terms", "model_accel_terms"]
 
 #: The coefficients planned for: ARW N [rad/√s], bias instability B [rad/s], RRW K [rad/s/√s].
 PLAN_TERMS = ("n", "b", "k")
@@ -45,6 +55,18 @@ TERM_NAMES = {
     "b": ("bi_deg_h", "deg/h", units.rad_s_to_deg_h),
     "k": ("rrw_deg_h_rt_h", "deg/h/√h", units.rrw_rad_s_rt_s_to_deg_h_rt_h),
 }
+
+#: The accelerometer's planned coefficients (``plan --sensor acc``), as :data:`TERM_NAMES`: velocity
+#: random walk N_a [m/s/√s], bias instability B [m/s²], acceleration random walk K_a [m/s²/√s]
+#: SI, named and converted as ``allan --sensor acc`` reports them.
+ACC_TERM_NAMES = {t: ACC_TERMS[t] for t in PLAN_TERMS}
+
+#: The sensors planned for: the gyro (:data:`TERM_NAMES`) and the accelerometer (:data:`ACC_TERM_NAMES`).
+SENSORS = ("gyro", "acc")
+
+#: The option giving each coefficient, by sensor (named in refusals).
+_OPTIONS = {"gyro": {"n": "--arw", "b": "--bi", "k": "--rrw"},
+            "acc": {"n": "--vrw", "b": "--acc-bi", "k": "--acc-rw"}}
 
 #: Longest record planned for [s] (ten years); beyond it a precision is reported unreachable.
 MAX_PLAN_S = 10 * 365.25 * 86400.0
@@ -63,9 +85,12 @@ MIN_RATE_HZ, MAX_RATE_HZ = 1e-3, 1e6
 #: representable double (the variances of the terms then differ by < 1e36).
 MIN_COEF_DATASHEET = 1e-9
 
-#: Largest coefficient planned for, datasheet unit: what a model may hold
-#: (:data:`gyroarray.effects.model.PLAUSIBLE`, rates within 1e5 deg/s).
-_MAX_COEF_DATASHEET = {"n": 6e6, "b": 3.6e8, "k": 3.6e8}
+#: Largest coefficient planned for, datasheet unit, by sensor: for the gyro what a model may hold
+#: (:data:`gyroarray.effects.model.PLAUSIBLE`, rates within 1e5 deg/s); for the accelerometer
+#: (m/s/√h, mg, m/s²/√h) far above any built (a 1e6 mg bias instability is 1000 g), the
+#: ``plan`` options' upper bounds, and like the gyro's within 1e15 of :data:`MIN_COEF_DATASHEET`.
+_MAX_COEF_DATASHEET = {"gyro": {"n": 6e6, "b": 3.6e8, "k": 3.6e8},
+                       "acc": {"n": 1e6, "b": 1e6, "k": 1e6}}
 
 #: Finest relative 1σ any coefficient reaches within :data:`MAX_PLAN_S`: the ARW's at the
 #: fastest rate (2.08e-7 for 10 years at 1 MHz, :func:`predicted_sigma`); a precision finer
@@ -87,8 +112,9 @@ def predicted_sigma(coef: dict, rate_hz: float, duration_s: float) -> dict:
     Parameters
     ----------
     coef : dict
-        ``{"n": N [rad/√s], "b": B [rad/s], "k": K [rad/s/√s]}``; terms with a zero (or
-        missing) value are neither simulated nor fitted.
+        ``{"n": N [rad/√s], "b": B [rad/s], "k": K [rad/s/√s]}``, or the accelerometer's
+        ``{"n": N_a [m/s/√s], "b": B [m/s²], "k": K_a [m/s²/√s]}`` (the same arithmetic); terms
+        with a zero (or missing) value are neither simulated nor fitted.
     rate_hz : float
         Sample rate [Hz].
     duration_s : float
@@ -107,7 +133,8 @@ def predicted_sigma(coef: dict, rate_hz: float, duration_s: float) -> dict:
     """
     terms = tuple(t for t in PLAN_TERMS if coef.get(t, 0.0) > 0.0)
     if not terms:
-        raise InputError("give at least one positive noise coefficient (--arw, --bi or --rrw)")
+        raise InputError("give at least one positive noise coefficient (--arw, --bi or --rrw; "
+                         "for the accelerometer --vrw, --acc-bi or --acc-rw)")
     dt = 1.0 / float(rate_hz)
     n = max(int(round(duration_s * rate_hz)), _MIN_SAMPLES)
     n_phase = n + 1
@@ -127,7 +154,8 @@ class Plan:
     Parameters
     ----------
     coef : dict
-        The coefficients planned for, SI (``n`` [rad/√s], ``b`` [rad/s], ``k`` [rad/s/√s]).
+        The coefficients planned for, SI (``n`` [rad/√s], ``b`` [rad/s], ``k`` [rad/s/√s]; for
+        the accelerometer ``n`` [m/s/√s], ``b`` [m/s²], ``k`` [m/s²/√s]).
     rate_hz : float
         Sample rate [Hz].
     precision : float
@@ -141,6 +169,8 @@ class Plan:
         A record length asked about [s] (``--at-h``), or None.
     at_precision : dict
         ``term -> relative half-width [-]`` a record of ``at_s`` gives (empty without it).
+    sensor : str
+        ``"gyro"`` or ``"acc"``: which names and datasheet units :meth:`to_json_dict` uses.
     """
 
     coef: dict
@@ -150,19 +180,25 @@ class Plan:
     duration_s: dict
     at_s: float | None
     at_precision: dict
+    sensor: str = "gyro"
+
+    @property
+    def names(self) -> dict:
+        """Datasheet name, unit and SI -> datasheet converter by term, for this sensor."""
+        return ACC_TERM_NAMES if self.sensor == "acc" else TERM_NAMES
 
     def to_json_dict(self) -> dict:
         """The plan in datasheet units: per coefficient its value, the record length [s] and
         [h] for the precision, and the precision a record of ``at_s`` gives."""
         terms = {}
         for t, value in self.coef.items():
-            name, unit, conv = TERM_NAMES[t]
+            name, unit, conv = self.names[t]
             d = self.duration_s.get(t)
             terms[name] = {"value": float(conv(value)), "unit": unit,
                            "record_s": d, "record_h": None if d is None else d / units.S_PER_H}
             if self.at_s is not None:
                 terms[name]["precision_at_record"] = self.at_precision.get(t)
-        return {"rate_hz": self.rate_hz, "precision": self.precision,
+        return {"sensor": self.sensor, "rate_hz": self.rate_hz, "precision": self.precision,
                 "confidence": self.confidence, "at_record_s": self.at_s, "terms": terms,
                 "method": "1σ of the Allan GLS noise fit (allan's equivalent degrees of "
                           "freedom and correlations) on the model's noise-free curve"}
@@ -195,13 +231,15 @@ def _length_for(term, coef, rate_hz, precision, z) -> float | None:
 
 
 def plan_record(coef: dict, rate_hz: float, precision: float, *,
-                confidence: float = ONE_SIGMA, at_s: float | None = None) -> Plan:
+                confidence: float = ONE_SIGMA, at_s: float | None = None,
+                sensor: str = "gyro") -> Plan:
     """Record length at which each coefficient's confidence half-width reaches ``precision``.
 
     Parameters
     ----------
     coef : dict
-        ``{"n": N [rad/√s], "b": B [rad/s], "k": K [rad/s/√s]}`` (zeros: not in the model).
+        ``{"n": N [rad/√s], "b": B [rad/s], "k": K [rad/s/√s]}`` (zeros: not in the model); for
+        ``sensor="acc"`` ``{"n": N_a [m/s/√s], "b": B [m/s²], "k": K_a [m/s²/√s]}``.
     rate_hz : float
         Sample rate [Hz].
     precision : float
@@ -210,6 +248,8 @@ def plan_record(coef: dict, rate_hz: float, precision: float, *,
         Two-sided confidence of the interval (``allan``'s bands are 1σ).
     at_s : float, optional
         Also report the precision a record of this length [s] gives.
+    sensor : {"gyro", "acc"}, default "gyro"
+        The gyro's terms or the accelerometer's (names, units and bounds; the same arithmetic).
 
     Returns
     -------
@@ -220,6 +260,9 @@ def plan_record(coef: dict, rate_hz: float, precision: float, *,
     InputError
         A precision or confidence out of range, no positive coefficient, a bad rate.
     """
+    if sensor not in SENSORS:
+        raise InputError(f"sensor must be one of {SENSORS}, got {sensor!r}")
+    names = ACC_TERM_NAMES if sensor == "acc" else TERM_NAMES
     if not (math.isfinite(rate_hz) and MIN_RATE_HZ <= rate_hz <= MAX_RATE_HZ):
         raise InputError(f"--rate-hz must be in [{MIN_RATE_HZ:g}, {MAX_RATE_HZ:g}] Hz, got {rate_hz!r}")
     if not (math.isfinite(precision) and 0.0 < precision < 1.0):
@@ -232,9 +275,9 @@ def plan_record(coef: dict, rate_hz: float, precision: float, *,
                          f"[{z * MIN_SIGMA_REL:.3g}, 1) at confidence {confidence:g}")
     for t in PLAN_TERMS:
         v = coef.get(t, 0.0)
-        name, unit, conv = TERM_NAMES[t]
-        opt = {"n": "--arw", "b": "--bi", "k": "--rrw"}[t]
-        hi = _MAX_COEF_DATASHEET[t]
+        name, unit, conv = names[t]
+        opt = _OPTIONS[sensor][t]
+        hi = _MAX_COEF_DATASHEET[sensor][t]
         if not (math.isfinite(v) and v >= 0.0) or (v > 0.0 and not MIN_COEF_DATASHEET <= conv(v) <= hi):
             raise InputError(f"{opt} ({name}) must be 0 (not in the model) or in "
                              f"[{MIN_COEF_DATASHEET:g}, {hi:g}] {unit}, got {conv(v):g} {unit}")
@@ -249,7 +292,7 @@ def plan_record(coef: dict, rate_hz: float, precision: float, *,
         at = {t: float(v) for t, v in _relative(coef, rate_hz, at_s, z).items()}
     return Plan(coef=coef, rate_hz=float(rate_hz), precision=float(precision),
                 confidence=float(confidence), duration_s=durations, at_s=at_s,
-                at_precision=at)
+                at_precision=at, sensor=sensor)
 
 
 def model_terms(model, gyro: int) -> dict:
@@ -275,4 +318,43 @@ def model_terms(model, gyro: int) -> dict:
             if e.effect in si and (e.gyro == gyro if overriding else e.gyro is None):
                 term, key = si[e.effect]
                 out[term] = float(e.si_params[key])
+    return out
+
+
+def model_accel_terms(model, axis: str) -> dict:
+    """Velocity random walk, bias instability and acceleration random walk of one accelerometer
+    axis of a noise model's ``[accelerometer]`` table, SI.
+
+    Parameters
+    ----------
+    model : NoiseModel
+        The model (:class:`gyroarray.effects.model.NoiseModel`).
+    axis : str
+        ``"x"``, ``"y"`` or ``"z"``, one of the table's ``axes``.
+
+    Returns
+    -------
+    dict
+        ``{"n": N_a [m/s/√s], "b": B [m/s²], "k": K_a [m/s²/√s]}`` (0 where the table has no
+        such term).
+
+    Raises
+    ------
+    InputError
+        The model has no ``[accelerometer]`` table, or not that axis.
+    """
+    table = model.accelerometer
+    if table is None:
+        raise InputError("the model has no [accelerometer] table (fit --out writes it from a record "
+                         "with acc_x, acc_y, acc_z columns)", file=model.source)
+    if axis not in table.axes:
+        raise InputError(f"--axis {axis}: the model's [accelerometer] table has axes "
+                         f"{', '.join(table.axes)}", file=model.source)
+    i = table.axes.index(axis)
+    si = {"n": ("n_m_s_rt_h", units.vrw_m_s_rt_h_to_si), "b": ("b_mg", units.mg_to_m_s2),
+          "k": ("k_m_s2_rt_h", units.accel_rw_m_s2_rt_h_to_si)}
+    out = {}
+    for term, (key, conv) in si.items():
+        values = getattr(table, key)
+        out[term] = 0.0 if values is None else float(conv(values[i]))
     return out

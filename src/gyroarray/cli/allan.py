@@ -13,13 +13,19 @@ from pathlib import Path
 from gyroarray.cli.common import add_bag_options, bag_options, add_force, check_plot, measurement_inputs, positive_int, stream_reason
 from gyroarray.core.errors import InputError
 
-__all__ = ["MAX_TAUS", "MIN_STILL_PART", "add_parser", "allan_signal", "cmd_allan", "cmd_davar"]
+__all__ = ["MAX_TAUS", "MIN_STILL_PART", "REF_STILL_RAD_S", "SENSORS", "accel_parts", "accel_noise",
+           "add_parser", "allan_signal", "cmd_allan", "cmd_davar"]
 
 
 #: Most taus ``allan --taus`` may ask for (an octave grid of 1e9 samples has 30).
 MAX_TAUS = 10_000
 #: Shortest still part [samples] ``allan`` analyses (as ``fuse``'s ``MIN_PART``).
 MIN_STILL_PART = 256
+#: The sensors ``allan --sensor`` analyses: the gyros, the accelerometer (``acc_x..z``), or both.
+SENSORS = ("gyro", "acc", "all")
+#: Largest reference rate [rad/s] (0.2 deg/h) at which the table counts as still for the
+#: accelerometer: while it turns, gravity's projection moves and is no noise.
+REF_STILL_RAD_S = 1e-6
 
 
 def _parse_taus(text: str):
@@ -73,14 +79,30 @@ def cmd_allan(args) -> tuple[dict, str]:
     from gyroarray.analysis.pipeline import detect_pipeline
     from gyroarray.core.measurement import read_measurement
     from gyroarray.reports.allan_plots import plot_allan
-    kind = canonical_kind(args.kind)                  # hdev: the overlapping Hadamard
+    kind = canonical_kind(args.kind)
     taus = _parse_taus(args.taus)
     check_plot(args, inputs=measurement_inputs(args))
+    sensor = getattr(args, "sensor", "gyro")
+    if sensor == "acc" and args.gyro is not None:
+        raise InputError(f"--gyro {args.gyro} picks a gyro, and --sensor acc analyses the accelerometer "
+                         "(acc_x..z, every axis): leave out --gyro, or use --sensor all")
+    if sensor == "acc" and args.plot is not None:
+        raise InputError("--plot draws the gyros' curves in deg/h; it has no accelerometer plot yet: "
+                         "leave out --plot with --sensor acc (--sensor all plots the gyros)")
     streamed = stream_reason(args)                    # a record too long for memory: in chunks
     if streamed is not None:
+        if sensor != "gyro":
+            raise InputError(f"--sensor {sensor} needs the record in memory, and this one is streamed "
+                             f"({streamed}): analyse the gyros (--sensor gyro) or a cut of the record",
+                             file=str(args.measurement))
         return _cmd_allan_streamed(args, kind, taus, streamed)
     # --gaps: dropped samples kept as gaps, never filled; _analysed_parts pools around them
     meas = read_measurement(args.measurement, repair=args.repair, gaps=bool(args.gaps), **bag_options(args))
+    if sensor != "gyro" and not meas.has_acc:
+        raise InputError(f"--sensor {sensor}: the record has no accelerometer columns (acc_x, acc_y, acc_z "
+                         "[m/s²]); --sensor gyro analyses its gyros", file=str(args.measurement))
+    if sensor == "acc":
+        return _cmd_allan_acc(args, meas, kind, taus)
     if args.gyro is not None and not 1 <= args.gyro <= meas.n_gyros:
         raise InputError(f"--gyro {args.gyro} is out of range: the measurement has "
                          f"gyros 1..{meas.n_gyros}", file=str(args.measurement))
@@ -123,11 +145,146 @@ def cmd_allan(args) -> tuple[dict, str]:
             w = white[k]
             lines.append(f"  white level: N = ADEV({w['tau_s']:.4g} s)·√τ = {w['n_deg_rt_h']:.4g} ± "
                          f"{w['n_deg_rt_h_sigma']:.2g} deg/√h (the one fit, fuse and the [array] table read)")
+    if sensor == "all":
+        acc_out, acc_text = _cmd_allan_acc(args, meas, kind, taus)
+        out["accelerometer"] = acc_out
+        lines.append(acc_text)
     if args.plot is not None:
         path = plot_allan({f"gyro {k}": a for k, a in analyses.items()}, args.plot, force=args.force)
         out["plot"] = str(path)
-        lines.append(f"wrote {path}")
+        lines.append(f"wrote {path}" + (" (the gyros' curves only, in deg/h)" if sensor == "all" else ""))
     return out, "\n".join(lines)
+
+
+def accel_parts(meas, args) -> tuple[list, list[str], dict | None]:
+    """Where the accelerometer's noise is read: ``[start, stop)`` ranges, notes, JSON.
+
+    As the gyros' (:func:`_analysed_parts`: the still parts found in the gyro outputs, the whole
+    record with ``--all``, split at gaps), except with a reference rate that moves: there the parts
+    where the table is still (every reference component within :data:`REF_STILL_RAD_S`), because
+    a turning table moves gravity's projection on the accelerometer axes, and that is no noise.
+    """
+    # deferred: numpy and the analysis load only when the command runs (a fast --help)
+    import numpy as np
+    from gyroarray.analysis.deviations import contiguous_segments
+    from gyroarray.core.measurement import true_runs
+    ref = meas.ref_rad_s
+    if ref is None or not ref.any():
+        return _analysed_parts(meas, list(range(1, meas.n_gyros + 1)), args)
+    n, dt = meas.n_samples, meas.dt_s
+    still = np.abs(ref).max(axis=1) <= REF_STILL_RAD_S
+    notes: list[str] = []
+    if args.all:
+        parts = [(0, n)]
+        notes.append(f"--all: the accelerometer analysed over the whole record, {(n - int(still.sum())) * dt:.1f} s "
+                     "of it turning (the reference rate): gravity's moving projection counts as noise")
+    else:
+        parts = [(a, b) for a, b in true_runs(still) if b - a >= MIN_STILL_PART]
+        if not parts:
+            raise InputError(f"the table turns throughout (reference rate above {REF_STILL_RAD_S:g} rad/s): no still "
+                             f"part of at least {MIN_STILL_PART} samples for the accelerometer, whose ADEV would "
+                             "be gravity's moving projection; record a still part, or rerun with --all",
+                             file=str(args.measurement))
+        notes.append(f"accelerometer: analysed only the {len(parts)} part(s) where the reference rate is still, "
+                     f"{sum(b - a for a, b in parts) * dt:.1f} s of {n * dt:.1f} s (the Allan sums pooled over them)")
+    segments, missing = contiguous_segments(meas.time_s, dt)
+    if len(segments) > 1:
+        parts = [(max(a, c), min(b, e)) for a, b in parts for c, e in segments]
+        parts = [(a, b) for a, b in parts if b - a >= 4]
+        if not parts:
+            raise InputError("the gaps in the time stamps leave no contiguous still part of at least 4 samples",
+                             file=str(args.measurement))
+        notes.append(f"{len(segments) - 1} gap(s) in the time stamps ({missing} sample(s) missing): the "
+                     "accelerometer's deviation is pooled over the contiguous parts")
+    return parts, notes, {"parts_s": [[float(meas.time_s[a] - meas.time_s[0]),
+                                       float(meas.time_s[b - 1] - meas.time_s[0] + dt)] for a, b in parts]}
+
+
+def _cmd_allan_acc(args, meas, kind: str, taus) -> tuple[dict, str]:
+    """``allan --sensor acc``: the Allan deviation of ``acc_x..z`` [m/s²] with its CIs and the
+    accelerometer's terms (:mod:`gyroarray.analysis.accel`)."""
+    # deferred: numpy and the analysis (numba) load only when the command runs (a fast --help)
+    from gyroarray.analysis.accel import accel_fit, analysis_json
+    from gyroarray.analysis.allan import fit_tau_count
+    from gyroarray.analysis.deviations import RANGE_KIND
+    parts, notes, info = accel_parts(meas, args)
+    if isinstance(taus, int):
+        try:
+            taus, tau_note = fit_tau_count(max(b - a for a, b in parts) + 1, meas.dt_s, taus, RANGE_KIND[kind])
+            notes += [tau_note] if tau_note else []
+        except InputError:
+            pass
+    if args.robust:
+        notes.append("--robust takes spikes out of the gyros only; the accelerometer is analysed as recorded")
+    try:
+        fit = accel_fit(meas.acc_m_s2, meas.dt_s, parts, taus, kind)
+    except InputError as err:
+        raise InputError(err.message, file=str(args.measurement)) from None
+    notes += list(fit.notes)
+    out = {"axes": {a: analysis_json(x) for a, x in fit.analyses.items()}, "terms": fit.to_json_dict(),
+           "signal": "specific force acc_x..z [m/s²] (a constant, gravity included, does not change the ADEV)",
+           "notes": [*([] if args.sensor == "all" else meas.notes), *notes],
+           "not_analysed": dict(fit.skipped)}
+    if info is not None:
+        out["analysed_parts"] = info
+    lines = [f"{args.measurement}: accelerometer, {meas.n_samples} samples at {1 / meas.dt_s:g} Hz; analysed: "
+             "acc_x..z [m/s²]", *[f"note: {n}" for n in out["notes"]]]
+    lines += [_format_acc(a, d) for a, d in out["axes"].items()]
+    return out, "\n".join(lines)
+
+
+def _format_acc(axis: str, d: dict) -> str:
+    fit = d["fit"]
+
+    def val(key: str) -> str:
+        v, s = fit.get(key), fit.get(key + "_sigma")
+        if v is None:
+            return "-"
+        text = f"{v:.4g} ± {s:.2g}" if s is not None else f"{v:.4g}"
+        return text + ("" if fit.get(key + "_resolved") else " (not resolved)")
+    rows = [f"acc_{axis} ({d['kind']}, {100 * d['confidence']:.1f}% CI)",
+            f"  {'tau_s':>10} {d['kind'] + '_m_s2':>12} {'ci_low':>12} {'ci_high':>12}"]
+    rows += [f"  {t:>10.4g} {a:>12.5g} {lo:>12.5g} {hi:>12.5g}"
+             for t, a, lo, hi in zip(d["taus_s"], d["adev_m_s2"], d["ci_low_m_s2"], d["ci_high_m_s2"])]
+    rows.append(f"  fit: VRW {val('vrw_m_s_rt_h')} m/s/rt(h), acc RW {val('accel_rw_m_s2_rt_h')} m/s^2/rt(h), "
+                f"BI {val('bi_mg')} mg")
+    return "\n".join(rows)
+
+
+def accel_noise(meas, args=None):
+    """The ``[accelerometer]`` table of a model fitted to ``meas`` (``fit --out``), and notes.
+
+    Returns ``(AccelNoise or None, notes)``: None, with a note saying why, when the record has no
+    ``acc_*`` columns or no axis can be analysed; a term not resolved is left out of the table
+    (never a 0) and the table's ``notes`` say which and why. Read over the still parts, as
+    ``allan --sensor acc`` reads them.
+    """
+    # deferred: numpy and the analysis (numba) load only when the command runs (a fast --help)
+    from types import SimpleNamespace
+    from gyroarray.analysis.accel import ACC_TERMS, accel_fit
+    from gyroarray.effects.model import AccelNoise
+    if not meas.has_acc:
+        return None, ["no [accelerometer] table: the record has no accelerometer columns (acc_x, acc_y, acc_z); "
+                      "its fields n_m_s_rt_h, k_m_s2_rt_h, b_mg are missing"]
+    opts = SimpleNamespace(all=False, measurement=getattr(args, "measurement", meas.source))
+    try:
+        parts, _, _ = accel_parts(meas, opts)
+        fit = accel_fit(meas.acc_m_s2, meas.dt_s, parts)
+    except InputError as err:
+        return None, [f"no [accelerometer] table: {err.message}"]
+    keys = {"n": "n_m_s_rt_h", "k": "k_m_s2_rt_h", "b": "b_mg"}
+    values = {keys[t]: (None if fit.values[t] is None else tuple(float(ACC_TERMS[t][2](v)) for v in fit.values[t]))
+              for t in keys}
+    sigma = {keys[t]: tuple(float(ACC_TERMS[t][2](v)) for v in fit.sigmas[t]) for t in keys
+             if fit.sigmas[t] is not None}
+    used_s = sum(b - a for a, b in parts) * meas.dt_s
+    notes = [f"fitted as gyroarray allan --sensor acc fits (octave oadev, generalised least squares, 1σ) "
+             f"over {used_s:.1f} s of the record"]
+    notes += [n.replace("vrw_m_s_rt_h", "n_m_s_rt_h").replace("accel_rw_m_s2_rt_h", "k_m_s2_rt_h")
+             .replace("bi_mg", "b_mg") for n in fit.notes]
+    table = AccelNoise(axes=fit.axes, sigma=sigma, notes=tuple(notes), **values)
+    return table, ([f"[accelerometer]: {', '.join(table.missing)} not resolved, left out (see its notes)"]
+                   if table.missing else [])
 
 
 def _cmd_allan_streamed(args, kind: str, taus, why: str) -> tuple[dict, str]:
@@ -436,7 +593,7 @@ def _format_allan(k: int, d: dict) -> str:
             return "-"
         return f"{v:{fmt}} ± {s:{fmt}}" if s is not None else f"{v:{fmt}}"
     rows = [f"gyro {k} ({d['kind']}, {100 * d['confidence']:.1f}% CI)",
-            f"  {'tau_s':>10} {'adev_deg_h':>12} {'ci_low':>12} {'ci_high':>12}"]
+            f"  {'tau_s':>10} {d['kind'] + '_deg_h':>12} {'ci_low':>12} {'ci_high':>12}"]
     rows += [f"  {t:>10.4g} {a:>12.5g} {lo:>12.5g} {hi:>12.5g}"
              for t, a, lo, hi in zip(d["taus_s"], d["adev_deg_h"], d["ci_low_deg_h"], d["ci_high_deg_h"])]
     rows.append(f"  fit: ARW {val('arw_deg_rt_h')} deg/rt(h), BI {val('bi_deg_h')} deg/h, "
@@ -502,11 +659,14 @@ def add_parser(sub) -> None:
     p.add_argument("measurement", type=Path, metavar="MEAS.csv")
     add_bag_options(p)
     p.add_argument("--gyro", type=int, metavar="K", help="only gyro K (1-based)")
+    p.add_argument("--sensor", choices=SENSORS, default="gyro",
+                   help="the gyros (default), the accelerometer acc_x..z (ADEV in m/s², VRW in m/s/√h, "
+                        "acc RW in m/s²/√h, BI in mg) or all of them")
     p.add_argument("--taus", default="octave", metavar="octave|N|T1,T2,...",
                    help="octave taus (default), N log-spaced taus, or a list of taus [s]")
     p.add_argument("--kind", choices=("oadev", "mdev", "hdev", "ohdev", "totdev"), default="oadev",
-                   help="overlapping Allan (default), modified Allan, overlapping Hadamard (hdev or "
-                        "ohdev) or total deviation")
+                   help="overlapping Allan (default), modified Allan, Hadamard (hdev, non-overlapping "
+                        "as Stable32's HDEV), overlapping Hadamard (ohdev) or total deviation")
     p.add_argument("--all", action="store_true",
                    help="analyse the whole record, motion included (default: only its still parts)")
     p.add_argument("--robust", action="store_true",

@@ -170,21 +170,32 @@ def measurement_inputs(args) -> list:
 
 
 def add_bag_options(p):
-    """``--topic T[,T2,...]`` and ``--extrinsics FILE.yaml``: how a ROS bag measurement is read
-    (:mod:`gyroarray.core.bags`); pass them on with :func:`bag_options`."""
+    """``--topic T[,T2,...]``, ``--extrinsics FILE.yaml``, ``--stamps header|receive`` and
+    ``--retime``: how a ROS bag measurement is read (:mod:`gyroarray.core.bags`); pass them on
+    with :func:`bag_options`."""
     p.add_argument("--topic", metavar="T[,T2,...]",
                    help="a ROS bag's sensor_msgs/msg/Imu topic (default: its only one); several, "
                         "comma separated, make an array of 3 gyros per IMU")
     p.add_argument("--extrinsics", type=Path, metavar="FILE.yaml",
                    help="a ROS bag's IMU extrinsics, Kalibr imu-chain YAML (imu0: T_i_b: 4x4, "
                         "body to IMU); default: each IMU's axes taken as the body frame's")
+    p.add_argument("--stamps", choices=("header", "receive"), default=None,
+                   help="a ROS bag's time stamps: the messages' header.stamp (default) or the bag's "
+                        "receive (log) times; the notes say which")
+    p.add_argument("--retime", action="store_true",
+                   help="a ROS bag's bunched or repeated stamps re-timed onto a uniform grid at the "
+                        "mean step from the first stamp (default: refused, naming the message)")
 
 
 def bag_options(args) -> dict:
-    """The keyword arguments of ``read_measurement`` for the ``--topic`` and ``--extrinsics`` the
-    user gave (none when neither: a CSV is read exactly as before)."""
-    return {name: getattr(args, name) for name in ("topic", "extrinsics")
-            if getattr(args, name, None) is not None}
+    """The keyword arguments of ``read_measurement`` for the ``--topic``, ``--extrinsics``,
+    ``--stamps`` and ``--retime`` the user gave (none when none: a CSV is read exactly as
+    before)."""
+    out = {name: getattr(args, name) for name in ("topic", "extrinsics", "stamps")
+           if getattr(args, name, None) is not None}
+    if getattr(args, "retime", False):
+        out["retime"] = True
+    return out
 
 
 def write_json(path: Path, obj: dict, args) -> None:

@@ -151,8 +151,10 @@ def _write_model(path: Path, model, args, notes: list | None = None) -> str:
     # deferred: numba and the effect registry load only when the command runs (a fast --help)
     from gyroarray.core.outputs import write_text
     from gyroarray.effects.model import NoiseModel
-    model = NoiseModel(model.entries, description=f"fitted to {args.measurement} by gyroarray {args.command}",
-                       array=model.array)
+    extra = getattr(args, "model_description_notes", [])
+    model = NoiseModel(model.entries, description="; ".join([f"fitted to {args.measurement} by gyroarray "
+                                                            f"{args.command}", *extra]),
+                       array=model.array, accelerometer=model.accelerometer, topic=model.topic)
     left = getattr(args, "left_out", None)
     if left is not None:
         live, n_all, why = left
@@ -319,6 +321,7 @@ def cmd_fit(args):
         from gyroarray.chain.array_model import with_levels  # deferred: the chain (numpy, numba)
         model = with_levels(model, across)
         res["levels_across_records"] = across.to_json_dict()
+    model = _with_accelerometer(model, comp.m, args, notes, res)
     if args.out is not None:
         res["model"] = _write_model(args.out, model, args, notes)
     text = "\n".join([f"{comp.name}: discrepancy {before.discrepancy:.3g} -> {after.discrepancy:.3g} "
@@ -329,6 +332,25 @@ def cmd_fit(args):
                      + ([f"written to {args.out}"] if args.out is not None else [])
                      + [f"note: {n}" for n in notes])
     return res, text
+
+
+def _with_accelerometer(model, meas, args, notes: list, res: dict):
+    """``model`` with the record's ``[accelerometer]`` table and bag ``topic`` (``fit``): the terms of
+    :func:`gyroarray.cli.allan.accel_noise`; without acc columns no table, said in the notes and in
+    the model's description."""
+    # deferred: the analysis (numpy, numba) loads only when the command runs (a fast --help)
+    from dataclasses import replace
+    from gyroarray.cli.allan import accel_noise
+    from gyroarray.effects.model import ACCEL_TERMS
+    table, acc_notes = accel_noise(meas, args)
+    notes.extend(acc_notes)
+    res["accelerometer"] = None if table is None else table.to_dict()
+    # the [accelerometer] fields the model does not hold (never written as 0): all without a table
+    res["accelerometer_missing"] = list(ACCEL_TERMS) if table is None else list(table.missing)
+    if table is None:
+        args.model_description_notes = acc_notes
+    topics = tuple(getattr(meas, "topics", ()) or ())
+    return replace(model, accelerometer=table, topic=topics[0] if len(topics) == 1 else model.topic)
 
 
 def cmd_ladder(args):

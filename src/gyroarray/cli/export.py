@@ -1,6 +1,7 @@
-"""``gyroarray export``: one gyro's noise model as a Kalibr, OpenVINS, VINS-Fusion, ORB-SLAM3 or
-MATLAB file, with its convention in a comment header, an optional derived inflation and a
-round-trip check (:mod:`gyroarray.chain.export`).
+"""``gyroarray export``: a gyro's and the accelerometer's noise model as a Kalibr, OpenVINS,
+VINS-Fusion, ORB-SLAM3 or MATLAB file, with its convention in a comment header, an optional derived
+inflation and a check that re-reads the written file with its consumer's parser and compares it
+with a simulation or a record (:mod:`gyroarray.chain.export`).
 
 The chain (numpy, the simulator) is imported inside the command, so that building the parser
 (``gyroarray --help``, every other command) does not load it.
@@ -36,19 +37,28 @@ def _inflate(text: str):
 
 def cmd_export(args):
     # deferred: the chain (numpy, the simulator) loads only when the command runs
-    from gyroarray.chain.export import SUFFIXES, export_noise
+    from gyroarray.chain.export import SUFFIXES, build_export, verify_file
     from gyroarray.core.outputs import write_text
     from gyroarray.effects.model import NoiseModel
-    out = output(args.out, args, "--out", inputs=[args.model], suffixes=SUFFIXES[args.format])
+    if args.record is not None and not args.verify:
+        raise InputError("--record compares the written file with a measurement: it needs --verify")
+    out = output(args.out, args, "--out", inputs=[args.model] + ([args.record] if args.record else []),
+                 suffixes=SUFFIXES[args.format])
     model = NoiseModel.from_toml(args.model)
     try:
         axis = args.gyro if args.gyro is not None else args.axis
-        text, summary = export_noise(model, axis, args.format, args.rate_hz,
-                                     inflate=args.inflate, verify=args.verify, seed=args.seed,
-                                     source=Path(args.model).name)
+        exp = build_export(model, axis, args.format, args.rate_hz, inflate=args.inflate, seed=args.seed,
+                           source=Path(args.model).name, topic=args.topic)
     except InputError as err:
         raise err if err.file is not None else err.with_file(args.model)
-    write_text(out, text, force=args.force)
+    record = None
+    if args.record is not None:                       # read before writing: a bad record writes nothing
+        # deferred: the measurement readers (pandas, the bag readers) load only for --record
+        from gyroarray.core.bags import is_bag
+        from gyroarray.core.measurement import read_measurement
+        record = read_measurement(args.record, topic=args.topic if is_bag(args.record) else None)
+    write_text(out, exp.text, force=args.force)
+    summary = exp.summary
     summary["out"] = str(out)
     v = summary["values"]
     lines = [f"wrote {out} ({args.format}, {summary['axis']} of {args.model} at "
@@ -57,6 +67,9 @@ def cmd_export(args):
         lines.append("  every gyro (ARW deg/√h, RRW deg/h/√h): " + "; ".join(
             f"{g['gyro']}: {g['n_deg_rt_h']:.4g}, {g['k_deg_h_rt_h']:.4g}" for g in summary["gyros"]))
     lines += [f"  {k} = {val:.6e}" for k, val in v.items() if not k.lower().endswith(("rate", "frequency"))]
+    lines.append(f"  accelerometer: {summary['accelerometer']['axis']}")
+    if "topic" in summary:
+        lines.append(f"  rostopic {summary['topic']['topic']} ({summary['topic']['why']})")
     si = summary["stand_in"]
     if si["covers"]:
         lines.append(f"  stand-in random walk for {' + '.join(si['covers'])}: K_eq = "
@@ -69,16 +82,32 @@ def cmd_export(args):
             lines.append(f"  not simulated: {', '.join(a['not_simulated'])}")
     elif summary["inflate"] != 1.0:
         lines.append(f"  inflation ×{summary['inflate']:.4g} (as asked)")
+    lines += [f"warning: {w}" for w in summary["warnings"]]
     code = EXIT_OK
-    if "verify" in summary:
-        ver = summary["verify"]
-        for name, c in ver["coefficients"].items():
+    if args.verify:
+        ver = verify_file(exp, Path(out).read_text(encoding="utf-8"), record=record, seed=args.seed)
+        summary["verify"] = ver
+        rb = ver["read_back"]
+        lines.append(f"  read back with {rb['parser']}: " + ("every required field, as meant" if not rb["problems"]
+                                                            else f"{len(rb['problems'])} problem(s)"))
+        for name, c in ver.get("coefficients", {}).items():
             lines.append(f"  round trip {name}: file {c['file']:.5g}, re-identified "
                          f"{c['reidentified']:.5g} ± {c['sigma']:.2g} (z = {c['z']:+.2f})")
-        b = ver["band"]
-        lines.append(f"  model ADEV inside the file's 95 % interval at {b['inside_fraction']:.0%} "
-                     f"of {b['n_taus']} taus (worst τ = {b['worst_tau_s']:.4g} s, model/file "
-                     f"{b['worst_model_over_file']:.3g}); {ver['record_s']:.0f} s simulated")
+        if "band" in ver:
+            b = ver["band"]
+            lines.append(f"  model ADEV inside the file's 95 % interval at {b['inside_fraction']:.0%} "
+                         f"of {b['n_taus']} taus (worst τ = {b['worst_tau_s']:.4g} s, model/file "
+                         f"{b['worst_model_over_file']:.3g}); {ver['record_s']:.0f} s simulated")
+        if "record" in ver:
+            rc = ver["record"]
+            for note in rc["parts_notes"]:
+                lines.append(f"  record: {note}")
+            for c in rc["gyros"] + (rc["accelerometer"] or []):
+                lines.append(f"  {c['what']}: the file's ADEV below the record's family-wise 95 % interval at "
+                             f"{c['n_below']} of {c['n_taus']} τ (below the per-τ 95 % interval at "
+                             f"{c['n_below_95']}), above it at {c['n_above']}")
+            if rc.get("drops"):
+                lines.append(f"  the format drops: {rc['drops']}")
         if ver["passed"]:
             lines.append("verify: passed")
         else:
@@ -106,11 +135,21 @@ def add_parser(sub) -> None:
     p.add_argument("--gyro", type=positive_int("--gyro"), default=None, metavar="K",
                    help="the model's gyro K (1-based): the same as --axis K")
     p.add_argument("--inflate", type=_inflate, default=1.0, metavar="auto|X",
-                   help="factor on both numbers, or auto: the one that makes a white + walk "
-                        "filter consistent (NIS = 1) on a record simulated from the full model")
+                   help="factor on the numbers, or auto: the one that makes a white + walk "
+                        "filter consistent (NIS = 1) on a record simulated from the full model "
+                        "(never below 1; the gyro's only)")
+    p.add_argument("--topic", default=None, metavar="T",
+                   help="the IMU topic of Kalibr/OpenVINS files (default: the model's topic, else /imu0, "
+                        "said so in the header); also the topic read from a --record bag")
     p.add_argument("--verify", action="store_true",
-                   help="simulate what the tool reads from the file, re-identify ARW/RRW and "
-                        "check the model's ADEV is reproduced; exit 1 when it is not")
+                   help="re-read the written file with its consumer's parser (missing or misspelled "
+                        "keys, types, walks <= 0), then simulate what the tool reads from it and "
+                        "re-identify ARW/RRW, or with --record compare with a measurement; exit 1 "
+                        "when it fails")
+    p.add_argument("--record", type=Path, default=None, metavar="MEAS",
+                   help="with --verify: a measurement (CSV/Parquet with sidecar, or a ROS bag); the "
+                        "file's ADEV is compared tau by tau with the record's ADEV and its 95 %% interval "
+                        "over its still parts; exit 1 where the file falls below it")
     p.add_argument("--seed", type=nonneg_int("--seed"), default=0, help="seed of the simulations")
     add_force(p)
     p.add_argument("--json", action="store_true", help="print one JSON object")

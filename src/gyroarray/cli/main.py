@@ -82,6 +82,7 @@ from gyroarray import __version__  # noqa: E402
 from gyroarray.cli import allan, compare, convert, design, fdi, fuse, simulate  # noqa: E402
 from gyroarray.cli import export as export_cmd, plan as plan_cmd  # noqa: E402
 from gyroarray.cli import parity as parity_cmd  # noqa: E402
+from gyroarray.cli import import_ as import_cmd  # noqa: E402
 from gyroarray.cli.common import EXIT_FAIL, EXIT_OK, EXIT_USAGE, json_safe  # noqa: E402
 from gyroarray.core.errors import InputError, one_line  # noqa: E402
 
@@ -131,6 +132,7 @@ def build_parser() -> argparse.ArgumentParser:
     export_cmd.add_parser(sub)
     plan_cmd.add_parser(sub)
     parity_cmd.add_parser(sub)
+    import_cmd.add_parser(sub)
     for p in sub.choices.values():
         p.add_argument("--max-memory", type=_size, metavar="SIZE",
                        help="memory gyroarray may plan to use, e.g. 8G (default: half the "

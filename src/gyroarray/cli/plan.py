@@ -1,5 +1,6 @@
 """``gyroarray plan``: how long to record for a precision on ARW, bias instability and RRW
-(:mod:`gyroarray.chain.plan`).
+(:mod:`gyroarray.chain.plan`); with ``--sensor acc`` on the accelerometer's velocity random
+walk, bias instability and acceleration random walk.
 
 The chain (numpy, scipy) is imported inside the command, so that building the parser
 (``gyroarray --help``, every other command) does not load it.
@@ -65,15 +66,84 @@ def _fitted_rel(model, gyro: int) -> dict:
     return out
 
 
+#: The coefficient options of each sensor: (option, upper bound, datasheet unit).
+_OPTION_BOUNDS = {
+    "gyro": (("--arw", 1e6, "deg/√h"), ("--bi", 1e6, "deg/h"), ("--rrw", 1e7, "deg/h/√h")),
+    "acc": (("--vrw", 1e6, "m/s/√h"), ("--acc-bi", 1e6, "mg"), ("--acc-rw", 1e6, "m/s²/√h")),
+}
+#: The same with each option's argparse dest: (option, dest, upper bound, datasheet unit).
+_SENSOR_OPTIONS = {sensor: tuple((opt, opt[2:].replace("-", "_"), hi, unit) for opt, hi, unit in opts)
+                   for sensor, opts in _OPTION_BOUNDS.items()}
+
+
+def _accel_fitted_rel(table, axis: str) -> dict:
+    """Relative 1σ the ``[accelerometer]`` table carries for each term of one axis."""
+    i = table.axes.index(axis)
+    out = {}
+    for term, key in (("n", "n_m_s_rt_h"), ("b", "b_mg"), ("k", "k_m_s2_rt_h")):
+        values, sigma = getattr(table, key), table.sigma.get(key)
+        if values is not None and sigma is not None:
+            out[term] = float(sigma[i]) / float(values[i])
+    return out
+
+
+def _accel_cases(args):
+    """``(axis, coef SI, relative 1σ of the file)`` per accelerometer axis of ``--model``."""
+    from gyroarray.chain.plan import model_accel_terms  # deferred: chain.plan loads numpy, scipy
+    from gyroarray.effects.model import NoiseModel   # deferred: the effect registry
+    model = NoiseModel.from_toml(args.model)
+    if model.accelerometer is None:
+        raise InputError("--sensor acc: the model has no [accelerometer] table (fit --out writes it from "
+                         "a record with acc_x, acc_y, acc_z columns); give --vrw, --acc-bi, --acc-rw",
+                         file=str(args.model))
+    table = model.accelerometer
+    cases = []
+    for axis in ([args.axis] if args.axis is not None else list(table.axes)):
+        coef = model_accel_terms(model, axis)
+        if not any(v > 0 for v in coef.values()):
+            raise InputError(f"the model's [accelerometer] table has no term for any axis ({', '.join(table.missing)} "
+                             "missing: see its notes)", file=str(args.model))
+        cases.append((axis, coef, _accel_fitted_rel(table, axis)))
+    return cases
+
+
 def cmd_plan(args):
     # deferred: the chain (numpy, scipy) loads only when the command runs
-    from gyroarray.chain.plan import TERM_NAMES, model_terms, plan_record
+    from gyroarray.chain.plan import ACC_TERM_NAMES, TERM_NAMES, model_terms
     from gyroarray.core import units
-    given = [o for o, v in (("--arw", args.arw), ("--bi", args.bi), ("--rrw", args.rrw)) if v is not None]
+    sensor = getattr(args, "sensor", "gyro")
+    other = "acc" if sensor == "gyro" else "gyro"
+    wrong = [o for o, dest, _, _ in _SENSOR_OPTIONS[other] if getattr(args, dest, None) is not None]
+    if wrong:
+        raise InputError(f"{'/'.join(wrong)} {'is' if len(wrong) == 1 else 'are'} for --sensor {other}; "
+                         f"with --sensor {sensor} give "
+                         f"{', '.join(o for o, *_ in _SENSOR_OPTIONS[sensor])}")
+    if sensor == "gyro" and getattr(args, "axis", None) is not None:
+        raise InputError("--axis picks an accelerometer axis of the model: use it with --sensor acc "
+                         "(the gyros: --gyro)")
+    if sensor == "acc" and args.gyro is not None:
+        raise InputError("--gyro picks a gyro of the model: with --sensor acc use --axis x|y|z")
+    given = [o for o, dest, _, _ in _SENSOR_OPTIONS[sensor] if getattr(args, dest, None) is not None]
     if args.model is not None and given:
         raise InputError(f"give either --model or {'/'.join(given)}, not both")
-    precision = parse_precision(args.precision)
-    at_s = None if args.at_h is None else args.at_h * units.S_PER_H
+    parse_precision(args.precision)                     # a bad --precision is refused before any file is read
+    if sensor == "acc" and args.model is not None:
+        return _plan_cases(args, sensor, _accel_cases(args), ACC_TERM_NAMES)
+    if sensor == "acc":
+        if not given:
+            raise InputError("--sensor acc: give the noise (--vrw, --acc-bi, --acc-rw) or a model with an "
+                             "[accelerometer] table (--model M.toml)")
+        from gyroarray.chain.plan import MIN_COEF_DATASHEET  # deferred: chain.plan loads numpy, scipy
+        for opt, dest, hi, unit in _SENSOR_OPTIONS["acc"]:
+            v = getattr(args, dest)
+            if v is not None and 0.0 < v < MIN_COEF_DATASHEET:
+                raise InputError(f"{opt} must be 0 (not in the model) or in "
+                                 f"[{MIN_COEF_DATASHEET:g}, {hi:g}] {unit}, got {v:g}")
+        coef = {"n": units.vrw_m_s_rt_h_to_si(args.vrw or 0.0), "b": units.mg_to_m_s2(args.acc_bi or 0.0),
+                "k": units.accel_rw_m_s2_rt_h_to_si(args.acc_rw or 0.0)}
+        if not any(v > 0 for v in coef.values()):
+            raise InputError("--vrw/--acc-bi/--acc-rw: at least one must be > 0")
+        return _plan_cases(args, sensor, [(None, coef, {})], ACC_TERM_NAMES)
     if args.model is not None:
         from gyroarray.effects.model import NoiseModel   # deferred: the effect registry
         model = NoiseModel.from_toml(args.model)
@@ -99,27 +169,40 @@ def cmd_plan(args):
         if not any(v > 0 for v in coef.values()):
             raise InputError("--arw/--bi/--rrw: at least one must be > 0")
         cases = [(None, coef, {})]
-    result = {"precision": precision, "confidence": args.confidence, "rate_hz": args.rate_hz,
-              "gyros": []}
+    return _plan_cases(args, sensor, cases, TERM_NAMES)
+
+
+def _plan_cases(args, sensor: str, cases, names):
+    """The plan of each ``(gyro or axis, coef SI, relative 1σ of the model)``: JSON and text."""
+    # deferred: the chain (numpy, scipy) loads only when the command runs
+    from gyroarray.chain.plan import plan_record
+    from gyroarray.core import units
+    precision = parse_precision(args.precision)
+    at_s = None if args.at_h is None else args.at_h * units.S_PER_H
+    what, label = ("axes", "axis") if sensor == "acc" else ("gyros", "gyro")
+    result = {"sensor": sensor, "precision": precision, "confidence": args.confidence,
+              "rate_hz": args.rate_hz, what: []}
     lines = [f"record length for ±{precision:.1%} relative half-width ({args.confidence:.1%} "
-             f"two-sided) at {args.rate_hz:g} Hz (Allan GLS fit, allan's EDF):"]
+             f"two-sided) at {args.rate_hz:g} Hz (Allan GLS fit, allan's EDF)"
+             + (", accelerometer:" if sensor == "acc" else ":")]
     for g, coef, fitted in cases:
         try:
-            plan = plan_record(coef, args.rate_hz, precision, confidence=args.confidence, at_s=at_s)
+            plan = plan_record(coef, args.rate_hz, precision, confidence=args.confidence, at_s=at_s,
+                               sensor=sensor)
         except InputError as err:
             if args.model is None or err.file is not None:
                 raise
             raise err.with_file(str(args.model)) from None
         d = plan.to_json_dict()
-        d["gyro"] = g
+        d[label] = g
         for t, rel in fitted.items():
-            if TERM_NAMES[t][0] in d["terms"]:
-                d["terms"][TERM_NAMES[t][0]]["model_sigma_rel"] = rel
-        result["gyros"].append(d)
+            if names[t][0] in d["terms"]:
+                d["terms"][names[t][0]]["model_sigma_rel"] = rel
+        result[what].append(d)
         if g is not None:
-            lines.append(f"gyro {g}:")
+            lines.append(f"{'acc_' if sensor == 'acc' else 'gyro '}{g}:")
         for t in plan.coef:
-            name, unit, conv = TERM_NAMES[t]
+            name, unit, conv = names[t]
             row = f"  {name} = {conv(plan.coef[t]):.5g} {unit}: {_fmt_len(plan.duration_s[t])}"
             if at_s is not None:
                 row += f"; a {args.at_h:g} h record gives ±{plan.at_precision[t]:.1%}"
@@ -132,17 +215,29 @@ def cmd_plan(args):
 def add_parser(sub) -> None:
     """The ``plan`` subcommand."""
     p = sub.add_parser("plan", help="how long to record for a precision on ARW, bias instability "
-                                    "and RRW")
+                                    "and RRW (--sensor acc: VRW, BI and acceleration RW)")
+    p.add_argument("--sensor", choices=("gyro", "acc"), default="gyro",
+                   help="plan for the gyro (default: --arw, --bi, --rrw) or the accelerometer (--vrw, "
+                        "--acc-bi, --acc-rw, or --model's [accelerometer] table)")
     p.add_argument("--arw", type=float_in("--arw", 0.0, 1e6, unit="deg/√h"), metavar="N",
                    help="angle random walk [deg/√h]")
     p.add_argument("--bi", type=float_in("--bi", 0.0, 1e6, unit="deg/h"), metavar="B",
                    help="bias instability [deg/h]")
     p.add_argument("--rrw", type=float_in("--rrw", 0.0, 1e7, unit="deg/h/√h"), metavar="K",
                    help="rate random walk [deg/h/√h]")
+    p.add_argument("--vrw", type=float_in("--vrw", 0.0, 1e6, unit="m/s/√h"), metavar="N",
+                   help="--sensor acc: velocity random walk [m/s/√h] (60 × m/s²/√Hz)")
+    p.add_argument("--acc-bi", type=float_in("--acc-bi", 0.0, 1e6, unit="mg"), metavar="B",
+                   help="--sensor acc: bias instability [mg]")
+    p.add_argument("--acc-rw", type=float_in("--acc-rw", 0.0, 1e6, unit="m/s²/√h"), metavar="K",
+                   help="--sensor acc: acceleration random walk [m/s²/√h] (60 × m/s²/√s)")
     p.add_argument("--model", type=Path, metavar="MODEL.toml",
-                   help="take ARW, bias instability and RRW from a noise model instead")
+                   help="take ARW, bias instability and RRW from a noise model instead (--sensor acc: "
+                        "its [accelerometer] table)")
     p.add_argument("--gyro", type=positive_int("--gyro"), metavar="K",
                    help="the model's gyro K (default: each gyro the model names)")
+    p.add_argument("--axis", choices=("x", "y", "z"),
+                   help="--sensor acc: the model's accelerometer axis (default: each axis of its table)")
     p.add_argument("--rate-hz", required=True, type=float_in("--rate-hz", 1e-3, 1e6, unit="Hz"),
                    metavar="R", help="sample rate [Hz]")
     p.add_argument("--precision", default="10%", metavar="P",

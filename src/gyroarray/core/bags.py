@@ -12,15 +12,31 @@ Reading rules
 * Topics: ``topic="/imu0"`` picks one ``sensor_msgs/msg/Imu`` topic; without
   it a bag with exactly one IMU topic uses that one, and a bag with several is
   refused with their list. ``topic="/imu0,/imu1"`` makes an array.
-* Time: the header stamps (``header.stamp``), in the bag's order. They must
-  increase strictly (a stamp repeating or going backwards is refused with the
-  message index). ``time_s`` counts from the first stamp, computed from the
-  integer nanoseconds (exact to the nanosecond; a Unix-epoch stamp in a
-  double would keep only 0.24 µs): t0 is in the description and the notes.
-  The sample rate is 1 / the median stamp step; a step longer than
-  ``GAP_FACTOR`` steps is a gap (refused; ``repair`` fills gaps of up to
-  ``MAX_REPAIR_SAMPLES`` samples), and a jitter above ``JITTER_TOL`` of the
-  step is noted (``repair`` resamples onto the uniform step).
+* Time: the header stamps (``header.stamp``, default) or the bag's receive (log) times
+  (``stamps="receive"``, ``--stamps receive``), in the bag's order; the notes and the
+  description say which. They must increase strictly (a stamp repeating or going backwards
+  is refused with the message index and ``--retime``). ``time_s`` counts from the first
+  stamp, computed from the integer nanoseconds (exact to the nanosecond; a Unix-epoch stamp
+  in a double would keep only 0.24 µs): t0 is in the description and the notes. The sample
+  rate is 1 / the median stamp step P.
+* Clock rule (:class:`_Clock`): message i's deficit D_i = (t_i − t_0)/P − i; its running
+  median over 2 :data:`JITTER_WINDOW` + 1 messages is the local regular grid. The grid
+  jumping up by more than ``GAP_FACTOR − 1`` steps is a gap of round(jump) dropped messages:
+  refused, kept as it is (``gaps``, ``--gaps``: never filled, counted in a note) or filled
+  when at most ``MAX_REPAIR_SAMPLES`` (``repair``). A stamp within :data:`JITTER_MAX_STEPS`
+  (one step) of the grid is jitter: accepted, with a note when a step differs from P by more
+  than ``JITTER_TOL`` (``repair`` resamples onto the uniform step). Farther, a grid jumping
+  down, or a median step below half the mean step, is bunching: refused naming the message,
+  unless ``retime`` (``--retime``): ``time_s[k] = k (t_last − t_first)/(n − 1)``, accepted
+  while every stamp is within :data:`RETIME_MAX_SHIFT_STEPS` steps of its grid time.
+* Files rosbags does not open: a ROS1-profile MCAP (``mcap convert x.bag``: schema
+  ``ros1msg``, messages ``ros1``) is read with the ``mcap`` library's records and rosbags'
+  ROS1 deserializer; a truncated ``.mcap`` or ``.bag`` is read up to the first record that
+  does not parse (chunks decompressed bounded), with a note of the messages read, the last
+  receive time and the bytes unread; holding no message it is refused with the salvage
+  command (``mcap recover``, ``rosbag reindex``; a ``.db3``: sqlite3's ``.recover``).
+* Streaming: :class:`BagStream` reads one topic in chunks of :data:`STREAM_CHUNK` messages
+  (``gyroarray convert`` in bounded memory), with the same bits as :func:`read_bag`.
 * Rates: ``angular_velocity`` [rad/s] (REP 103) becomes the measurement's
   gyro columns in deg/s (``shared/spec/measurement-format.md``), one gyro per
   axis of the IMU frame: gyros 1, 2, 3 are its x, y, z unit axes.
@@ -56,8 +72,10 @@ Reading rules
 
 from __future__ import annotations
 
+import io
 import json
 import math
+import mmap
 import re
 import shutil
 import sqlite3
@@ -78,7 +96,8 @@ from gyroarray.core.measurement import (GAP_FACTOR, JITTER_TOL, MAX_REPAIR_SAMPL
                                         Measurement)
 
 __all__ = ["BAG_SUFFIXES", "IMU_TYPE", "is_bag", "read_bag", "imu_topics", "read_extrinsics",
-           "ORTHO_TOL"]
+           "ORTHO_TOL", "STAMPS", "JITTER_MAX_STEPS", "JITTER_WINDOW", "RETIME_MAX_SHIFT_STEPS",
+           "BagStream"]
 
 #: File suffixes read as ROS bags (ROS1, ROS2 sqlite3, ROS2 MCAP).
 BAG_SUFFIXES = (".bag", ".db3", ".mcap")
@@ -113,6 +132,27 @@ _SQL_STEPS = 1000
 _SQL_TICKS_FIXED = 100_000
 #: Tables of a ROS2 .db3 that must be real tables (the first two must exist).
 _DB3_TABLES = ("topics", "messages", "schema", "message_definitions", "metadata")
+#: The time bases a bag's messages can be read on: ``header.stamp`` or the bag's receive time.
+STAMPS = ("header", "receive")
+#: Largest distance of a stamp from its slot on the local regular grid that is jitter [steps
+#: of the median period P]: one step. Within it a late or early stamp still lies between its
+#: neighbours' slots, so the message count and the uniform step agree (the AR.Drone bag's
+#: 1.65-step stamp is 0.65 step late); beyond it a stamp sits in another message's slot, which
+#: is bunching (refused unless --retime). Gaps are not jitter: a drop moves the grid itself.
+JITTER_MAX_STEPS = 1.0
+#: Half-width of the running median of the deficit D that is the local grid [messages]: a run
+#: of up to this many late or early stamps is jitter; a drop (a lasting jump of D) is seen at
+#: its message exactly, and clock drift (a slow ramp of D) is followed.
+JITTER_WINDOW = 8
+#: Largest shift of a stamp to its time on the ``--retime`` grid [steps]: bursts of up to 64
+#: messages are spread; more is a drop or a rate change, which re-timing would hide.
+RETIME_MAX_SHIFT_STEPS = 64.0
+#: Largest mean stamp step, in median steps, of a clock with drops [-]: 2, i.e. at most as
+#: many messages dropped as kept; beyond it the median step is a burst's, not the clock's.
+MAX_MEAN_TO_MEDIAN_STEP = 2.0
+#: Messages per chunk of a streamed read (``gyroarray convert``): 16384 messages of about
+#: 330 bytes are 5.4 MB of raw messages and 0.9 MB of decoded values at a time.
+STREAM_CHUNK = 16384
 
 
 def is_bag(path) -> bool:
@@ -320,7 +360,8 @@ def _check_db3(path: Path) -> None:
     try:
         con = sqlite3.connect(uri, uri=True, check_same_thread=False)
     except sqlite3.Error as err:
-        raise _refusal(path, "cannot open this ROS2 bag (sqlite3): truncated or corrupt?", err) from None
+        raise _refusal(path, "cannot open this ROS2 bag (sqlite3): truncated or corrupt? "
+                             f"(salvage it with {_salvage_command(path)})", err) from None
     ticks = [0, _SQL_TICKS_FIXED + path.stat().st_size // 4]
 
     def tick() -> int:
@@ -353,7 +394,8 @@ def _check_db3(path: Path) -> None:
         if ticks[0] > ticks[1]:
             raise InputError("a query on this .db3 ran past its allowance of steps: refused",
                              file=name) from None
-        raise _refusal(path, "cannot read this ROS2 bag (sqlite3): truncated or corrupt?", err) from None
+        raise _refusal(path, "cannot read this ROS2 bag (sqlite3): truncated or corrupt? "
+                             f"(salvage it with {_salvage_command(path)})", err) from None
     finally:
         con.close()
 
@@ -423,6 +465,283 @@ def _guard_rosbags() -> None:
     _GUARDED.append(True)
 
 
+# -- sources rosbags does not read: ROS1-profile MCAP, truncated MCAP and ROS1 bags -----------
+_MCAP_MAGIC = b"\x89MCAP0\r\n"
+_ROS1_MAGIC = b"#ROSBAG V2.0\n"
+
+
+def _mcap_profile(path: Path) -> str | None:
+    """The profile an MCAP file's header record names (``ros1``, ``ros2``, ...), or None when
+    the file does not start with an MCAP header."""
+    with open_regular(path, "a ROS bag file") as fh:
+        head = fh.read(8 + 9 + 4 + 256)
+    if not head.startswith(_MCAP_MAGIC) or len(head) < 21 or head[8] != 0x01:
+        return None
+    n = int.from_bytes(head[17:21], "little")
+    return head[21:21 + n].decode("utf-8", "replace") if len(head) >= 21 + n else None
+
+
+def _ros_type(name: str) -> str:
+    """``sensor_msgs/Imu`` (ROS1's name) -> ``sensor_msgs/msg/Imu`` (rosbags' normalised one)."""
+    parts = name.split("/")
+    return f"{parts[0]}/msg/{parts[1]}" if len(parts) == 2 else name
+
+
+class _Conn:
+    """A topic of a bag read by gyroarray itself: what rosbags' connections give."""
+
+    def __init__(self, cid: int, topic: str, msgtype: str, encoding: str):
+        self.id, self.topic, self.msgtype, self.encoding, self.msgcount = cid, topic, msgtype, encoding, 0
+
+
+class _Salvage:
+    """What a truncated bag lost: filled by the scan that stops at the first unreadable record."""
+
+    def __init__(self, size: int):
+        self.size, self.read_to, self.messages, self.why = size, 0, 0, ""
+        self.last_ns: int | None = None
+
+    def note(self, path: Path, command: str) -> str:
+        last = "none" if self.last_ns is None else f"{_stamp(self.last_ns)} s"
+        return (f"{path}: salvaged a truncated or corrupt {_kind(path)}: read {self.messages} "
+                f"messages (the last received at {last}); {format_size(self.size - self.read_to)} "
+                f"of {format_size(self.size)} unread from byte {self.read_to} on ({self.why}); "
+                f"what they held is lost ({command} may recover more)")
+
+
+def _salvage_command(path: Path) -> str:
+    """The tool that rebuilds the index of a damaged bag of this kind."""
+    low = path.name.lower()
+    if low.endswith(".mcap"):
+        return f"'mcap recover {path} -o recovered.mcap'"
+    if low.endswith(".db3"):
+        return f"'sqlite3 {path} .recover | sqlite3 recovered.db3'"
+    if low.endswith(".bag"):
+        return f"'rosbag reindex {path}' (ROS1; it keeps a .orig.bag copy)"
+    return "'ros2 bag reindex'"
+
+
+def _chunk_records(data: bytes) -> list:
+    """The schema, channel and message records of a decompressed MCAP chunk (others skipped)."""
+    # deferred: the mcap library loads only for a ROS1-profile or truncated MCAP
+    from mcap.data_stream import ReadDataStream
+    from mcap.opcode import Opcode
+    from mcap.records import Channel, Message, Schema
+    stream, out = ReadDataStream(io.BytesIO(data)), []
+    while stream.count < len(data):
+        opcode, length = stream.read1(), stream.read8()
+        _record_size(length)
+        if opcode == Opcode.CHANNEL:
+            out.append(Channel.read(stream))
+        elif opcode == Opcode.MESSAGE:
+            out.append(Message.read(stream, length))
+        elif opcode == Opcode.SCHEMA:
+            out.append(Schema.read(stream))
+        else:
+            stream.read(length)
+    return out
+
+
+class _McapSource:
+    """The messages of an MCAP file read record by record with the ``mcap`` library's stream
+    reader: a ROS1-profile MCAP (what ``mcap convert x.bag`` writes: schema encoding
+    ``ros1msg``, message encoding ``ros1``), or a truncated MCAP of either profile (``salvage``:
+    what is readable up to the first record that does not parse). Chunks are decompressed
+    bounded (:func:`_mcap_chunk`), records are at most :func:`_chunk_cap` bytes; channels and
+    message counts come from a first pass."""
+
+    def __init__(self, path: Path, salvage: bool):
+        self.path, self.salvage = path, salvage
+        self.lost = _Salvage(path.stat().st_size) if salvage else None
+        self._conns: dict[int, _Conn] = {}
+        for _ in self._walk(None):
+            pass
+        self.connections = list(self._conns.values())
+
+    def _walk(self, wanted: set | None):
+        """(channel id, log time [ns], data) of every message in file order; channels and counts
+        recorded on the first pass (``wanted`` None)."""
+        # deferred: the mcap library loads only for a ROS1-profile or truncated MCAP
+        from mcap.records import Channel, Chunk, Message, Schema
+        from mcap.stream_reader import StreamReader
+        first = wanted is None
+        schemas: dict[int, str] = {}
+        fh = open_regular(self.path, "a ROS bag file")
+        try:
+            reader = StreamReader(fh, emit_chunks=True, record_size_limit=_chunk_cap())
+            it = iter(reader.records)
+            while True:
+                try:
+                    rec = next(it, None)
+                    if rec is None:
+                        break
+                    inner = [rec]
+                    if isinstance(rec, Chunk):
+                        data = (rec.data if rec.compression in ("", "none") else
+                                _mcap_chunk(rec.data, rec.compression, rec.uncompressed_size))
+                        inner = _chunk_records(data)
+                except InputError:
+                    raise                                     # a bomb: refused, never salvaged
+                except Exception as err:  # the mcap library's errors on a cut or corrupt record
+                    if not self.salvage:
+                        raise
+                    if first:
+                        assert self.lost is not None
+                        self.lost.why = f"{type(err).__name__}: {' '.join(str(err).split())[:120]}"
+                    break
+                for r in inner:
+                    if isinstance(r, Schema):
+                        schemas[r.id] = r.name
+                    elif isinstance(r, Channel) and first and r.id not in self._conns:
+                        self._conns[r.id] = _Conn(r.id, r.topic, _ros_type(schemas.get(r.schema_id, "")),
+                                                  r.message_encoding)
+                    elif isinstance(r, Message) and r.channel_id in self._conns:
+                        if first:
+                            self._conns[r.channel_id].msgcount += 1
+                            if self.lost is not None:
+                                self.lost.messages += 1
+                                self.lost.last_ns = r.log_time
+                        elif wanted is not None and r.channel_id in wanted:
+                            yield r.channel_id, r.log_time, r.data
+                if first and self.lost is not None:
+                    self.lost.read_to = fh.tell()
+        finally:
+            fh.close()
+
+    def messages(self, connections=()):
+        """(connection, log time [ns], raw) of ``connections``' messages, in file order."""
+        wanted = {c.id for c in connections} or set(self._conns)
+        for cid, ts, raw in self._walk(wanted):
+            yield self._conns[cid], ts, raw
+
+    def close(self) -> None:
+        pass
+
+
+class _Ros1Salvage:
+    """A ROS1 ``.bag`` whose index is gone (a cut file): its records read in file order, chunk
+    by chunk (none, bz2 or lz4, each decompressed bounded to its declared size and at most
+    :func:`_chunk_cap`), up to the first record that does not parse."""
+
+    def __init__(self, path: Path):
+        self.path = path
+        self.lost = _Salvage(path.stat().st_size)
+        self._conns: dict[int, _Conn] = {}
+        for _ in self._walk(None):
+            pass
+        self.connections = list(self._conns.values())
+
+    @staticmethod
+    def _fields(head: bytes) -> dict[str, bytes]:
+        out, pos = {}, 0
+        while pos + 4 <= len(head):
+            n = int.from_bytes(head[pos:pos + 4], "little")
+            item = head[pos + 4:pos + 4 + n]
+            if n == 0 or len(item) < n or b"=" not in item:
+                raise ValueError("a header field that does not parse")
+            key, _, value = item.partition(b"=")
+            out[key.decode("latin-1")] = value
+            pos += 4 + n
+        return out
+
+    def _records(self, data, pos: int, end: int):
+        """(fields, payload, end offset) of the records in ``data[pos:end]``."""
+        while pos < end:
+            if pos + 4 > end:
+                raise ValueError("a record header cut short")
+            hlen = int.from_bytes(data[pos:pos + 4], "little")
+            _record_size(hlen)
+            head = bytes(data[pos + 4:pos + 4 + hlen])
+            dpos = pos + 4 + hlen
+            if len(head) < hlen or dpos + 4 > end:
+                raise ValueError("a record header cut short")
+            dlen = int.from_bytes(data[dpos:dpos + 4], "little")
+            _record_size(dlen)
+            if dpos + 4 + dlen > end:
+                raise ValueError("a record cut short")
+            yield self._fields(head), data[dpos + 4:dpos + 4 + dlen], dpos + 4 + dlen
+            pos = dpos + 4 + dlen
+
+    def _walk(self, wanted: set | None):
+        first = wanted is None
+        fh = open_regular(self.path, "a ROS bag file")
+        try:
+            size = self.lost.size
+            if size < len(_ROS1_MAGIC) or fh.read(len(_ROS1_MAGIC)) != _ROS1_MAGIC:
+                if first:
+                    self.lost.why = "no ROS1 bag header"
+                return
+            data = mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_READ)
+            try:
+                outer = self._records(data, len(_ROS1_MAGIC), size)
+                while True:
+                    try:
+                        item = next(outer, None)
+                        if item is None:
+                            break
+                        fields, payload, stop = item
+                        op = fields.get("op", b"\x00")[:1]
+                        if op == b"\x05":                              # a chunk
+                            comp = fields.get("compression", b"none").decode("latin-1")
+                            declared = int.from_bytes(fields.get("size", b"\0\0\0\0")[:4], "little")
+                            _record_size(declared)
+                            body = (bytes(payload) if comp == "none" else
+                                    decompress_bounded(bytes(payload), comp, declared, None,
+                                                       f"a chunk declaring {format_size(declared)}"))
+                            inner = list(self._records(body, 0, len(body)))
+                        else:
+                            inner = [(fields, payload, stop)]
+                    except InputError as err:
+                        if "decompresses to more than" in err.message:
+                            raise                              # a bomb: refused, never salvaged
+                        if first:
+                            self.lost.why = err.message[:120]
+                        break
+                    except Exception as err:  # a cut or corrupt record: the salvage ends here
+                        if first:
+                            self.lost.why = f"{type(err).__name__}: {' '.join(str(err).split())[:120]}"
+                        break
+                    for f, body, _ in inner:
+                        op = f.get("op", b"\x00")[:1]
+                        if op == b"\x07" and first:                    # a connection
+                            cid = int.from_bytes(f.get("conn", b"\0\0\0\0")[:4], "little")
+                            if cid not in self._conns:
+                                try:
+                                    info = self._fields(bytes(body))
+                                except ValueError:
+                                    info = {}
+                                self._conns[cid] = _Conn(
+                                    cid, f.get("topic", b"").decode("utf-8", "replace"),
+                                    _ros_type(info.get("type", b"").decode("utf-8", "replace")), "ros1")
+                        elif op == b"\x02":                            # a message
+                            cid = int.from_bytes(f.get("conn", b"\0\0\0\0")[:4], "little")
+                            t = f.get("time", bytes(8))
+                            ns = (int.from_bytes(t[:4], "little") * _NS_PER_S
+                                  + int.from_bytes(t[4:8], "little"))
+                            if cid not in self._conns:
+                                continue
+                            if first:
+                                self._conns[cid].msgcount += 1
+                                self.lost.messages += 1
+                                self.lost.last_ns = ns
+                            elif wanted is not None and cid in wanted:
+                                yield cid, ns, bytes(body)
+                    if first:
+                        self.lost.read_to = stop
+            finally:
+                data.close()
+        finally:
+            fh.close()
+
+    def messages(self, connections=()):
+        wanted = {c.id for c in connections} or set(self._conns)
+        for cid, ts, raw in self._walk(wanted):
+            yield self._conns[cid], ts, raw
+
+    def close(self) -> None:
+        pass
+
+
 class _Bag:
     """An open bag: its reader, the topics and the typestore that decodes its messages."""
 
@@ -436,20 +755,34 @@ class _Bag:
         self.ros1 = path.name.lower().endswith(".bag")
         self.zstd_messages = False
         self._tmp: tempfile.TemporaryDirectory | None = None
-        self.reader = None
+        self.reader: Any = None
+        #: the note on what a salvaged (truncated) bag lost, or None
+        self.salvage_note: str | None = None
+        #: what kind of file this is, for the notes (a ROS1-profile MCAP says so)
+        self.kind = _kind(path)
         try:
             src = path
             if info is not None and info["compression_mode"] == "file":
                 src = self._decompress_files(path, info)
-            try:
-                self.reader = Reader1(src) if self.ros1 else Reader2(src)
-                self.reader.open()
-            except InputError as err:
-                raise InputError(err.message, file=err.file or str(path)) from None
-            except Exception as err:  # rosbags' errors, struct/sqlite/zstd ones: a bad file
-                self.reader = None
-                raise _refusal(path, f"cannot open this {_kind(path)}: truncated or corrupt?",
-                               err) from None
+            mcap_file = info is None and path.name.lower().endswith(".mcap")
+            if mcap_file and _mcap_profile(path) == "ros1":
+                self.kind = "ROS1-profile MCAP (schema ros1msg, messages ros1)"
+                self._own(path, _McapSource(path, salvage=True), None)
+            else:
+                try:
+                    self.reader = Reader1(src) if self.ros1 else Reader2(src)
+                    self.reader.open()
+                except InputError as err:
+                    raise InputError(err.message, file=err.file or str(path)) from None
+                except Exception as err:  # rosbags' errors, struct/sqlite/zstd ones: a bad file
+                    self.reader = None
+                    if info is None and (mcap_file or self.ros1):     # read what is readable
+                        self._own(path, _McapSource(path, salvage=True) if mcap_file
+                                  else _Ros1Salvage(path), err)
+                    else:
+                        raise _refusal(path, f"cannot open this {_kind(path)}: truncated or "
+                                             f"corrupt? (salvage it with {_salvage_command(path)})",
+                                       err) from None
             storage = getattr(self.reader, "storage", None)     # ROS2 only
             if info is not None:
                 assert storage is not None                      # a ROS2 folder has its storage
@@ -466,6 +799,23 @@ class _Bag:
             raise
         store = get_typestore(Stores.ROS1_NOETIC if self.ros1 else Stores.ROS2_HUMBLE)
         self.decode = store.deserialize_ros1 if self.ros1 else store.deserialize_cdr
+
+    def _own(self, path: Path, source, err: BaseException | None) -> None:
+        """Read with gyroarray's own record reader (:class:`_McapSource`, :class:`_Ros1Salvage`);
+        a truncated file gives what it holds with a note, or, holding no message, a refusal
+        naming the salvage command."""
+        lost = source.lost
+        truncated = lost is not None and lost.read_to < lost.size
+        if truncated and lost.messages == 0:
+            why = f" ({lost.why})" if err is None and lost.why else ""
+            raise _refusal(path, f"cannot open this {self.kind}: truncated or corrupt? no message "
+                                 f"could be salvaged ({format_size(lost.size - lost.read_to)} of "
+                                 f"{format_size(lost.size)} unread{why}); rebuild it with "
+                                 f"{_salvage_command(path)}", err) from None
+        if truncated:
+            self.salvage_note = lost.note(path, _salvage_command(path))
+        self.reader = source
+        self.ros1 = self.ros1 or any(c.encoding == "ros1" for c in source.connections)
 
     def _agree(self, info: dict, folder_reader) -> None:
         """Each topic's message_count in metadata.yaml is what the storage files hold."""
@@ -544,10 +894,10 @@ class _Bag:
         return tmp
 
     def messages(self, conns):
-        """The raw messages of ``conns`` in the bag's order: bytes (refused otherwise: an sqlite
-        NULL, REAL, TEXT or INTEGER), at most :data:`MAX_MESSAGE_BYTES` (zstd messages
-        decompressed in bounded pieces)."""
-        for _, _, raw in self.reader.messages(connections=conns):
+        """(receive time [ns], raw message) of ``conns`` in the bag's order: bytes (refused
+        otherwise: an sqlite NULL, REAL, TEXT or INTEGER), at most :data:`MAX_MESSAGE_BYTES`
+        (zstd messages decompressed in bounded pieces)."""
+        for _, received, raw in self.reader.messages(connections=conns):
             if not isinstance(raw, (bytes, bytearray, memoryview)):
                 raise InputError(f"the message data is {_sql_kind(raw)}, not bytes (an sqlite "
                                  "BLOB): corrupt bag?")
@@ -556,7 +906,7 @@ class _Bag:
             elif len(raw) > MAX_MESSAGE_BYTES:
                 raise InputError(f"a message of {format_size(len(raw))}, more than the "
                                  f"{format_size(MAX_MESSAGE_BYTES)} a {IMU_TYPE} takes: corrupt?")
-            yield bytes(raw)
+            yield int(received), bytes(raw)
 
     def close(self) -> None:
         try:
@@ -657,25 +1007,24 @@ def _pick_topics(path: Path, topics: dict[str, tuple[str, int]], topic: str | No
 
 
 class _Record:
-    """One topic's samples: header stamps [ns], rates [rad/s], specific force [m/s²]."""
+    """One topic's samples: header and receive stamps [ns], rates [rad/s], specific force
+    [m/s²]."""
 
     def __init__(self, topic: str, stamps_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray | None,
-                 frame_id: str):
+                 frame_id: str, receive_ns: np.ndarray | None = None):
         self.topic, self.stamps_ns, self.gyro, self.acc, self.frame_id = (
             topic, stamps_ns, gyro, acc, frame_id)
+        self.receive_ns = stamps_ns if receive_ns is None else receive_ns
 
 
-def _read_topic(bag: _Bag, topic: str, count: int) -> _Record:
-    """Decode every message of ``topic`` (the type was checked by name), in batches."""
+def _topic_batches(bag: _Bag, topic: str, count: int, size: int = _BATCH):
+    """(header stamps [ns], receive times [ns], values) of ``topic``'s messages, ``size`` at a
+    time (values: angular velocity, linear acceleration, its covariance[0]); the type was
+    checked by name."""
     path = bag.path
-    check_memory(count * float(_BYTES_PER_MESSAGE), f"{count} messages of topic {topic}",
-                 "split the bag (e.g. 'ros2 bag convert' or 'rosbag filter') or raise --max-memory",
-                 file=str(path))
-    stamps = np.empty(count, dtype=np.int64)
-    values = np.empty((count, 7))           # angular velocity, linear acceleration, its cov[0]
     assert bag.reader is not None
     conns = [c for c in bag.reader.connections if c.topic == topic]
-    i, batch = 0, list[bytes]()
+    i, batch, received = 0, list[bytes](), list[int]()
     it = iter(bag.messages(conns))
     while True:
         try:
@@ -684,29 +1033,51 @@ def _read_topic(bag: _Bag, topic: str, count: int) -> _Record:
             raise _refusal(path, err.message, topic=topic, index=i + len(batch) + 1) from None
         except Exception as err:  # a chunk or record that does not parse: truncated or corrupt
             raise _refusal(path, f"cannot read past this message of the {_kind(path)}: truncated "
-                                 "or corrupt?", err, topic=topic, index=i + len(batch) + 1) from None
+                                 f"or corrupt? (salvage it with {_salvage_command(path)})", err,
+                           topic=topic, index=i + len(batch) + 1) from None
         if item is not None:
             if i + len(batch) >= count:
                 raise _refusal(path, f"more messages than the bag's index counts ({count}): "
                                      "corrupt index?", topic=topic, index=i + len(batch) + 1)
-            batch.append(item)
-        if batch and (item is None or len(batch) == _BATCH):
-            _decode_batch(bag, batch, i, topic, stamps, values)
-            i, batch = i + len(batch), []
+            received.append(item[0])
+            batch.append(item[1])
+        if batch and (item is None or len(batch) == size):
+            stamps = np.empty(len(batch), dtype=np.int64)
+            values = np.empty((len(batch), 7))
+            _decode_batch(bag, batch, 0, topic, stamps, values, n0=i)
+            yield stamps, np.array(received, dtype=np.int64), values
+            i, batch, received = i + len(batch), [], []
         if item is None:
             break
     if i < count:
         raise _refusal(path, f"the bag's index counts {count} messages but only {i} could be read: "
                              "truncated?", topic=topic, index=i + 1)
+
+
+def _read_topic(bag: _Bag, topic: str, count: int) -> _Record:
+    """Decode every message of ``topic`` (the type was checked by name), in batches."""
+    path = bag.path
+    check_memory(count * float(_BYTES_PER_MESSAGE), f"{count} messages of topic {topic}",
+                 "split the bag (e.g. 'ros2 bag convert' or 'rosbag filter'), raise --max-memory, "
+                 "or 'gyroarray convert' it (in bounded memory) to Parquet first", file=str(path))
+    stamps = np.empty(count, dtype=np.int64)
+    received = np.empty(count, dtype=np.int64)
+    values = np.empty((count, 7))           # angular velocity, linear acceleration, its cov[0]
+    i = 0
+    for st, rc, v in _topic_batches(bag, topic, count):
+        stamps[i:i + st.size], received[i:i + st.size], values[i:i + st.size] = st, rc, v
+        i += st.size
     gyro, acc = values[:, :3], values[:, 3:6]
-    _check_values(path, topic, stamps, gyro)
+    _check_values(path, topic, 0, gyro)
+    _enough(path, topic, count)
     keep_acc = not np.any(values[:, 6] == -1.0) and np.all(np.isfinite(acc)) and acc.any()
-    return _Record(topic, stamps, gyro, acc if keep_acc else None, _frame_id(bag, conns))
+    conns = [c for c in bag.reader.connections if c.topic == topic]
+    return _Record(topic, stamps, gyro, acc if keep_acc else None, _frame_id(bag, conns), received)
 
 
 def _frame_id(bag: _Bag, conns) -> str:
     """The first message's header.frame_id (for the notes)."""
-    for raw in bag.messages(conns):
+    for _, raw in bag.messages(conns):
         msg: Any = bag.decode(raw, IMU_TYPE)
         return str(msg.header.frame_id)
     return ""
@@ -720,10 +1091,11 @@ def _decode_one(bag: _Bag, raw: bytes) -> tuple[int, list[float]]:
 
 
 def _decode_batch(bag: _Bag, raws: list[bytes], i0: int, topic: str, stamps: np.ndarray,
-                  values: np.ndarray) -> None:
+                  values: np.ndarray, n0: int = 0) -> None:
     """Messages ``i0 ..`` into ``stamps`` [ns] and ``values``: by fixed offsets when every
     message of the batch has the same layout and three of them decode identically through the
-    typestore, else one by one through the typestore."""
+    typestore, else one by one through the typestore. ``n0``: the messages before ``stamps[0]``
+    (for the index a refusal names)."""
     fast = _fixed_layout(raws, bag.ros1)
     if fast is not None:
         n = len(raws)
@@ -744,12 +1116,12 @@ def _decode_batch(bag: _Bag, raws: list[bytes], i0: int, topic: str, stamps: np.
         if length is not None:
             raise _refusal(bag.path, f"header.frame_id declares {length} bytes, more than the "
                                      f"{len(raw)}-byte message holds: corrupt?", topic=topic,
-                           index=i0 + j + 1)
+                           index=n0 + i0 + j + 1)
         try:
             stamps[i0 + j], values[i0 + j] = _decode_one(bag, raw)
         except Exception as err:  # bytes that are no sensor_msgs/msg/Imu: a corrupt message
             raise _refusal(bag.path, f"this message does not decode as {IMU_TYPE}: corrupt?", err,
-                           topic=topic, index=i0 + j + 1) from None
+                           topic=topic, index=n0 + i0 + j + 1) from None
 
 
 def _frame_id_overrun(raw: bytes, ros1: bool) -> int | None:
@@ -788,29 +1160,25 @@ def _fixed_layout(raws: list[bytes], ros1: bool) -> tuple[np.ndarray, np.ndarray
     return sec * _NS_PER_S + nsec, values
 
 
-def _check_values(path: Path, topic: str, stamps: np.ndarray, gyro: np.ndarray) -> None:
+def _check_values(path: Path, topic: str, i0: int, gyro: np.ndarray) -> None:
+    """Refuse a non-finite rate or one beyond :data:`MAX_RATE_DEG_S` (messages from ``i0``)."""
     bad = ~np.all(np.isfinite(gyro), axis=1)
     if bad.any():
         k = int(np.flatnonzero(bad)[0])
         raise _refusal(path, f"angular_velocity is not finite ({gyro[k].tolist()}); remove or "
-                             "repair that message", topic=topic, index=k + 1)
+                             "repair that message", topic=topic, index=i0 + k + 1)
     big = np.abs(units.rad_s_to_deg_s(gyro)) > MAX_RATE_DEG_S
     if big.any():
         k = int(np.flatnonzero(big.any(axis=1))[0])
         raise _refusal(path, f"angular_velocity {gyro[k].tolist()} rad/s is beyond "
                              f"{MAX_RATE_DEG_S:g} deg/s: not a rate in rad/s (REP 103)?",
-                       topic=topic, index=k + 1)
-    if stamps.size < MIN_SAMPLES:
-        raise _refusal(path, f"{stamps.size} message: a measurement needs at least {MIN_SAMPLES}",
+                       topic=topic, index=i0 + k + 1)
+
+
+def _enough(path: Path, topic: str, n: int) -> None:
+    if n < MIN_SAMPLES:
+        raise _refusal(path, f"{n} message: a measurement needs at least {MIN_SAMPLES}",
                        topic=topic)
-    step = np.diff(stamps)
-    if np.any(step <= 0):
-        k = int(np.flatnonzero(step <= 0)[0])
-        how = "repeats" if step[k] == 0 else "goes backwards"
-        raise _refusal(path, f"the header stamp {how} ({_stamp(stamps[k + 1])} s after "
-                             f"{_stamp(stamps[k])} s); header stamps must increase (a driver that "
-                             "leaves header.stamp unset, or a merged bag?)", topic=topic,
-                       index=k + 2)
 
 
 def _stamp(ns) -> str:
@@ -819,44 +1187,253 @@ def _stamp(ns) -> str:
     return f"{s}.{n:09d}"
 
 
-def _uniform(path: Path, rec: _Record, t0_ns: int, repair: bool) -> tuple[np.ndarray, np.ndarray,
-                                                                        np.ndarray | None, list[str]]:
-    """(time_s from t0, rates, specific force, notes): gaps refused or filled, jitter noted or
-    resampled (``repair``)."""
-    t = (rec.stamps_ns - t0_ns) / 1e9
-    step_ns = np.diff(rec.stamps_ns)
-    period = float(np.median(step_ns)) / 1e9
-    steps = np.diff(t)
-    notes: list[str] = []
-    gaps = np.flatnonzero(steps > GAP_FACTOR * period)
-    for k in gaps.tolist():
-        missing = int(round(steps[k] / period)) - 1
-        if not repair or missing > MAX_REPAIR_SAMPLES:
-            way = ("re-record, or analyse the parts either side" if repair else
-                   f"rerun with --repair to fill gaps of up to {MAX_REPAIR_SAMPLES} samples by "
-                   "linear interpolation")
-            raise _refusal(path, f"a gap of {steps[k]:.6g} s ({max(missing, 1)} missing samples at "
-                                 f"the {period:.6g} s step) before this message; {way}",
-                           topic=rec.topic, index=k + 2)
-    dev = np.abs(steps - period)
-    worst = float(dev.max())
-    if gaps.size == 0 and worst <= JITTER_TOL * period:
-        return t, rec.gyro, rec.acc, notes
-    what = (f"topic {rec.topic}: the stamp steps jitter by up to {worst:.3g} s "
-            f"({100 * worst / period:.3g} % of the {period:.6g} s median step; rms "
-            f"{float(np.sqrt(np.mean(dev ** 2))):.3g} s)")
-    if not repair:
-        return t, rec.gyro, rec.acc, [f"{path}: {what}; the analyses assume the uniform step "
-                                      "(rerun with --repair to resample onto it)"]
-    grid = np.arange(int(round(t[-1] / period)) + 1) * period
-    grid = grid[grid <= t[-1]]
-    gyro = np.column_stack([np.interp(grid, t, rec.gyro[:, j]) for j in range(3)])
+class _Clock:
+    """A topic's stamps sorted into a regular clock with dropped messages, chunk by chunk (the
+    same answer read whole or streamed; the rule is in :func:`read_bag`).
+
+    For message i (0-based) the deficit is D_i = (t_i − t_0) / P − i [steps], P the period [ns].
+    A regular clock keeps D constant; a dropped message raises it by one for good; clock drift
+    ramps it slowly; jitter moves single stamps. The local grid is the running median of D
+    over 2 :data:`JITTER_WINDOW` + 1 messages (it follows drops and drift, not jitter): where
+    it jumps up by more than ``GAP_FACTOR − 1`` steps, round(jump) messages were dropped (a
+    gap); a stamp more than :data:`JITTER_MAX_STEPS` from it, or a jump down (more messages
+    than the span holds), is bunched: refused, naming the message, unless re-timed."""
+
+    def __init__(self, path: Path, topic: str, which: str, t0_ns: int, period_ns: float,
+                 mode: str):
+        self.path, self.topic, self.which, self.t0, self.P, self.mode = (
+            path, topic, which, int(t0_ns), float(period_ns), mode)   # mode: refuse|keep|repair
+        self.n = 0                                 # messages fed
+        self.done = 0                              # messages whose grid is settled
+        self.b0 = 0                                # global index of self.D[0]
+        self.D = np.empty(0)
+        self.T = np.empty(0, dtype=np.int64)
+        self.last_b: float | None = None
+        self.gaps: list[tuple[int, int, int]] = []     # (message after it, missing, step [ns])
+        self.worst_dev = (0.0, 0)                      # |stamp - grid| [steps], message
+        self.worst_step = 0.0                          # |step - (1 + missing) P| [ns]
+        self.sumsq, self.nsteps = 0.0, 0
+
+    def feed(self, stamps: np.ndarray, final: bool = False) -> None:
+        """The next stamps [ns] of the topic (``final``: the last ones)."""
+        stamps = np.asarray(stamps, dtype=np.int64)
+        prev = self.T[-1:] if self.T.size else np.empty(0, dtype=np.int64)
+        _check_increasing(self.path, self.topic, self.which, stamps, self.n, prev)
+        idx = np.arange(self.n, self.n + stamps.size, dtype=np.float64)
+        d = (stamps - self.t0) / self.P - idx
+        self.D = np.concatenate([self.D, d])
+        self.T = np.concatenate([self.T, stamps])
+        self.n += stamps.size
+        self._settle(final)
+
+    def _settle(self, final: bool) -> None:
+        h = JITTER_WINDOW
+        end = self.n if final else self.n - h
+        if end <= self.done:
+            return
+        lo_pad = max(0, h - (self.done - self.b0))
+        hi_pad = max(0, end + h - self.n)
+        x = self.D[self.done - h + lo_pad - self.b0:end + h - hi_pad - self.b0]
+        x = np.concatenate([np.full(lo_pad, self.D[0]), x, np.full(hi_pad, self.D[-1])])
+        grid = np.median(np.lib.stride_tricks.sliding_window_view(x, 2 * h + 1), axis=1)
+        a, b = self.done - self.b0, end - self.b0
+        dev = self.D[a:b] - grid
+        jump = np.diff(np.concatenate([[grid[0] if self.last_b is None else self.last_b], grid]))
+        if self.last_b is None:
+            jump[0] = 0.0
+        for k in np.flatnonzero(jump < -(GAP_FACTOR - 1.0)).tolist():
+            i = self.done + k
+            self._bunched(i, f"{-jump[k]:.3g} more messages than the time span holds at the "
+                             f"{self.P / 1e9:.6g} s step")
+        big = np.flatnonzero(np.abs(dev) > JITTER_MAX_STEPS)
+        if big.size:
+            k = int(big[0])
+            self._bunched(self.done + k, f"the {self.which} stamp is {dev[k]:+.3g} steps from its "
+                                         f"slot on the regular {self.P / 1e9:.6g} s grid, beyond the "
+                                         f"{JITTER_MAX_STEPS:g}-step jitter tolerance")
+        missing = np.zeros(b - a, dtype=np.int64)
+        for k in np.flatnonzero(jump > GAP_FACTOR - 1.0).tolist():
+            i = self.done + k
+            m = max(1, int(round(jump[k])))
+            missing[k] = m
+            step = int(self.T[i - self.b0] - self.T[i - 1 - self.b0])
+            self._gap(i, m, step)
+        if dev.size:
+            k = int(np.argmax(np.abs(dev)))
+            if abs(dev[k]) > self.worst_dev[0]:
+                self.worst_dev = (float(abs(dev[k])), self.done + k)
+        lo = max(a, 1)                  # steps into messages a..b-1 (the first has none)
+        if b > lo:
+            steps = np.diff(self.T[lo - 1:b]).astype(np.float64) - (1 + missing[lo - a:]) * self.P
+            self.worst_step = max(self.worst_step, float(np.abs(steps).max()))
+            self.sumsq += float(np.sum(steps ** 2))
+            self.nsteps += steps.size
+        self.last_b = float(grid[-1])
+        self.done = end
+        keep = max(0, self.done - h - self.b0)
+        self.D, self.T, self.b0 = self.D[keep:], self.T[keep:], self.b0 + keep
+
+    def _bunched(self, i: int, what: str) -> None:
+        raise _refusal(self.path, f"{what}: bunched or irregular stamps; rerun with --retime to "
+                                  "re-time them onto a uniform grid at the mean step (or try "
+                                  f"--stamps {'receive' if self.which == 'header' else 'header'})",
+                       topic=self.topic, index=i + 1)
+
+    def _gap(self, i: int, missing: int, step_ns: int) -> None:
+        self.gaps.append((i, missing, step_ns))
+        if self.mode == "keep" or (self.mode == "repair" and missing <= MAX_REPAIR_SAMPLES):
+            return
+        way = ("re-record, or keep it as a gap with --gaps (allan pools the contiguous parts)"
+               if self.mode == "repair" else
+               f"rerun with --gaps to keep it as a gap, nothing interpolated (allan pools the "
+               f"contiguous parts), or --repair to fill gaps of up to {MAX_REPAIR_SAMPLES} samples "
+               "by linear interpolation")
+        raise _refusal(self.path, f"a gap of {step_ns / 1e9:.6g} s ({missing} missing messages at "
+                                  f"the {self.P / 1e9:.6g} s step) before this message; {way}",
+                       topic=self.topic, index=i + 1)
+
+    def jittery(self) -> bool:
+        """True when a step differs from its nominal (1 + missing) P by more than JITTER_TOL."""
+        return self.worst_step > JITTER_TOL * self.P
+
+    def notes(self) -> list[str]:
+        """The jitter and the gaps kept, said with the rule."""
+        out = []
+        P = self.P / 1e9
+        if self.jittery():
+            rms = math.sqrt(self.sumsq / max(self.nsteps, 1)) / 1e9
+            out.append(f"{self.path}: topic {self.topic}: the {self.which} stamps jitter: steps "
+                       f"differ from the {P:.6g} s median step by up to {self.worst_step / 1e9:.3g} s "
+                       f"({100 * self.worst_step / self.P:.3g} % of it; rms {rms:.3g} s), every stamp "
+                       f"within {self.worst_dev[0]:.3g} steps of its slot on the regular grid "
+                       f"(tolerance {JITTER_MAX_STEPS:g} step, the local grid the running median "
+                       f"of {2 * JITTER_WINDOW + 1} messages): accepted as a regular "
+                       f"{1 / P:.6g} Hz clock; the analyses assume the uniform step (--repair "
+                       "resamples onto it)")
+        if self.gaps and self.mode == "keep":
+            missing = sum(m for _, m, _ in self.gaps)
+            first = ", ".join(f"before message {i + 1} ({m})" for i, m, _ in self.gaps[:5])
+            more = f", and {len(self.gaps) - 5} more" if len(self.gaps) > 5 else ""
+            out.append(f"{self.path}: topic {self.topic}: {len(self.gaps)} gap(s) in time_s kept "
+                       f"as they are ({missing} message(s) dropped at the {P:.6g} s step: "
+                       f"{first}{more}), nothing interpolated")
+        return out
+
+
+def _check_increasing(path: Path, topic: str, which: str, stamps: np.ndarray, n0: int = 0,
+                      prev: np.ndarray | None = None) -> None:
+    """Refuse a stamp that repeats or goes backwards (messages from ``n0``; ``prev``: the
+    stamp before them), naming the message and --retime."""
+    prev = np.empty(0, dtype=np.int64) if prev is None else prev
+    both = np.concatenate([prev, stamps])
+    step = np.diff(both)
+    if not np.any(step <= 0):
+        return
+    k = int(np.flatnonzero(step <= 0)[0])
+    at = n0 + k + (0 if prev.size else 1)                   # 0-based index of the message
+    before, after = int(both[k]), int(both[k + 1])
+    how = "repeats" if after == before else "goes backwards"
+    hint = ("header stamps must increase (a driver that leaves header.stamp unset, or a "
+            "merged bag?)" if which == "header" else "receive stamps must increase")
+    raise _refusal(path, f"the {which} stamp {how} ({_stamp(after)} s after {_stamp(before)} s); "
+                         f"{hint}; rerun with --retime to re-time bunched or repeated stamps onto "
+                         "a uniform grid" + ("" if which == "receive" else ", or try --stamps receive"),
+                   topic=topic, index=at + 1)
+
+
+def _check_bunching(path: Path, topic: str, which: str, stamps_ns: np.ndarray,
+                    period_ns: float) -> None:
+    """Refuse stamps whose median step is below 1 / :data:`MAX_MEAN_TO_MEDIAN_STEP` of their
+    mean step: more than half the slots of the median-step clock would be gaps, which is
+    bunching (messages stamped in bursts), not a clock with drops."""
+    if stamps_ns.size < 3:
+        return
+    mean = (int(stamps_ns[-1]) - int(stamps_ns[0])) / (stamps_ns.size - 1)
+    if mean <= MAX_MEAN_TO_MEDIAN_STEP * period_ns:
+        return
+    step = np.diff(stamps_ns)
+    k = int(np.flatnonzero(step > GAP_FACTOR * period_ns)[0])
+    raise _refusal(path, f"the {which} stamps come in bursts: the median step "
+                         f"{period_ns / 1e9:.3g} s is less than 1/{MAX_MEAN_TO_MEDIAN_STEP:g} of "
+                         f"the mean step {mean / 1e9:.3g} s (a burst ends here): bunched stamps; "
+                         "rerun with --retime to re-time them onto a uniform grid at the mean "
+                         f"step (or try --stamps {'receive' if which == 'header' else 'header'})",
+                   topic=topic, index=k + 2)
+
+
+def _period_ns(stamps_ns: np.ndarray) -> float:
+    """The median stamp step [ns] (exact for the integer steps of an odd count)."""
+    return float(np.median(np.diff(stamps_ns)))
+
+
+def _retime(path: Path, topic: str, which: str, stamps_ns: np.ndarray) -> tuple[np.ndarray, float, str]:
+    """(time_s, period [s], note) on the uniform grid: the rule of ``--retime``."""
+    n = stamps_ns.size
+    span = int(stamps_ns[-1] - stamps_ns[0])
+    if span <= 0:
+        raise _refusal(path, f"the {which} stamps span {span / 1e9:.6g} s over {n} messages: no "
+                             "time base to re-time onto; try --stamps "
+                             f"{'receive' if which == 'header' else 'header'}", topic=topic)
+    period = span / (n - 1) / 1e9
+    shift = ((stamps_ns - stamps_ns[0]) - np.arange(n) * (span / (n - 1))) / (span / (n - 1))
+    k = int(np.argmax(np.abs(shift)))
+    if abs(shift[k]) > RETIME_MAX_SHIFT_STEPS:
+        raise _refusal(path, f"--retime: the {which} stamp is {shift[k]:+.3g} steps from its time on "
+                             f"the uniform {period:.6g} s grid, beyond {RETIME_MAX_SHIFT_STEPS:g} steps: "
+                             "dropped messages or a rate change, not bunching (cut the record "
+                             "there, or read without --retime with --gaps)", topic=topic, index=k + 1)
+    time_s = np.arange(n) * period
+    note = (f"{path}: topic {topic}: re-timed (--retime): {n} messages put on a uniform grid from "
+            f"the first {which} stamp at the mean step {period:.6g} s (span / (n - 1)); the largest "
+            f"shift {abs(shift[k]):.3g} steps at message {k + 1} (at most "
+            f"{RETIME_MAX_SHIFT_STEPS:g} accepted); the rule assumes no message was dropped")
+    return time_s, period, note
+
+
+def _uniform(path: Path, rec: _Record, t0_ns: int, repair: bool, gaps: bool = False,
+             which: str = "header", retime: bool = False
+             ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, list[str], float]:
+    """(time_s from t0, rates, specific force, notes, period [s]) of one topic: gaps refused,
+    kept (``gaps``) or filled (``repair``); jitter within the tolerance noted or resampled
+    (``repair``); bunched stamps refused or re-timed (``retime``)."""
+    stamps = rec.stamps_ns if which == "header" else rec.receive_ns
+    if retime:
+        t, period, note = _retime(path, rec.topic, which, stamps)
+        return t, rec.gyro, rec.acc, [note], period
+    period_ns = _period_ns(stamps)
+    _check_increasing(path, rec.topic, which, stamps)
+    _check_bunching(path, rec.topic, which, stamps, period_ns)
+    clock = _Clock(path, rec.topic, which, int(stamps[0]), period_ns,
+                   "keep" if gaps else "repair" if repair else "refuse")
+    for a in range(0, stamps.size, _BATCH):
+        clock.feed(stamps[a:a + _BATCH], final=a + _BATCH >= stamps.size)
+    t = (stamps - t0_ns) / 1e9
+    period = period_ns / 1e9
+    notes = clock.notes()
+    if not repair or not (clock.jittery() or clock.gaps):
+        return t, rec.gyro, rec.acc, notes, period
+    if gaps and clock.gaps:
+        if not clock.jittery():
+            return t, rec.gyro, rec.acc, notes, period
+        raise _refusal(path, f"the stamps jitter by up to {clock.worst_step / 1e9:.3g} s and the "
+                             f"record has {len(clock.gaps)} gap(s): resampling onto the uniform "
+                             "step would fill them; leave out --repair to keep the stamps as they "
+                             "are (the jitter is noted), or without --gaps to have short gaps "
+                             "filled",
+                       topic=rec.topic)
+    rel = t - t[0]
+    grid = np.arange(int(round(rel[-1] / period)) + 1) * period
+    grid = grid[grid <= rel[-1]]
+    gyro = np.column_stack([np.interp(grid, rel, rec.gyro[:, j]) for j in range(3)])
     acc = (None if rec.acc is None else
-           np.column_stack([np.interp(grid, t, rec.acc[:, j]) for j in range(3)]))
-    filled = f", {gaps.size} gap(s) filled" if gaps.size else ""
-    notes.append(f"{path}: repaired: {what}{filled}; resampled {t.size} messages onto {grid.size} "
-                 f"samples at the median step from the first stamp, by linear interpolation in time")
-    return grid, gyro, acc, notes
+           np.column_stack([np.interp(grid, rel, rec.acc[:, j]) for j in range(3)]))
+    filled = f", {len(clock.gaps)} gap(s) filled" if clock.gaps else ""
+    what = (f"the {which} stamp steps jitter by up to {clock.worst_step / 1e9:.3g} s"
+            if clock.jittery() else "the stamps are regular")
+    notes = [f"{path}: repaired: topic {rec.topic}: {what}{filled}; resampled {t.size} messages "
+             f"onto {grid.size} samples at the median step from the first stamp, by linear "
+             "interpolation in time"]
+    return grid + t[0], gyro, acc, notes, period
 
 
 def _align(path: Path, parts: list, topics: list[str]) -> tuple[np.ndarray, list[np.ndarray], list[str]]:
@@ -884,13 +1461,21 @@ def _align(path: Path, parts: list, topics: list[str]) -> tuple[np.ndarray, list
     return t, rates, notes
 
 
-def read_bag(path, *, topic: str | None = None, extrinsics=None, repair: bool = False) -> Measurement:
+def _check_stamps_option(path: Path, stamps: str) -> str:
+    if stamps not in STAMPS:
+        raise InputError(f"stamps must be one of {', '.join(STAMPS)}, got {stamps!r}", file=str(path))
+    return stamps
+
+
+def read_bag(path, *, topic: str | None = None, extrinsics=None, repair: bool = False,
+             gaps: bool = False, stamps: str = "header", retime: bool = False) -> Measurement:
     """Read the IMU topic(s) of a ROS bag as a measurement.
 
     Parameters
     ----------
     path : str or os.PathLike
-        A ROS1 ``.bag``, a ROS2 ``.db3`` or ``.mcap`` file, or a ROS2 bag folder.
+        A ROS1 ``.bag``, a ROS2 ``.db3`` or ``.mcap`` file (a ROS1-profile MCAP too), or a
+        ROS2 bag folder.
     topic : str, optional
         The ``sensor_msgs/msg/Imu`` topic (``/imu0``), or several separated by commas (an
         array). Default: the bag's one IMU topic.
@@ -899,20 +1484,45 @@ def read_bag(path, *, topic: str | None = None, extrinsics=None, repair: bool = 
     repair : bool
         Fill gaps of up to ``MAX_REPAIR_SAMPLES`` samples and resample a jittering clock onto
         its median step, by linear interpolation in time (default: refuse gaps, note jitter).
+    gaps : bool
+        Keep dropped messages as gaps in ``time_s``, never filled, with a note counting them
+        (``gyroarray allan --gaps`` pools the contiguous parts); default: refuse them.
+    stamps : {"header", "receive"}
+        The time base: each message's ``header.stamp`` (default) or the bag's receive (log)
+        time of the message; the notes and the description say which.
+    retime : bool
+        Re-time bunched or repeated stamps: ``time_s[k] = k · (t_last − t_first) / (n − 1)``,
+        the uniform grid from the first stamp at the mean step, accepted while every stamp is
+        within :data:`RETIME_MAX_SHIFT_STEPS` steps of its grid time (default: such stamps are
+        refused, naming the message).
 
     Returns
     -------
     Measurement
-        ``time_s`` [s] from the first header stamp, gyro outputs [deg/s] (3 per IMU: its x, y,
-        z axes), ``sample_rate_hz`` [Hz] from the median stamp step, ``acc_m_s2`` [m/s²] for a
-        single IMU that publishes it; ``source`` is the bag.
+        ``time_s`` [s] from the first stamp, gyro outputs [deg/s] (3 per IMU: its x, y, z
+        axes), ``sample_rate_hz`` [Hz] from the median stamp step (the mean step when
+        re-timed), ``acc_m_s2`` [m/s²] for a single IMU that publishes it; ``source`` is the
+        bag, ``topics`` the topics read.
 
     Raises
     ------
     InputError
         One line naming the bag, the topic and the message index (see the module docstring).
+
+    Notes
+    -----
+    The clock rule (:class:`_Clock`): the period P is the median stamp step; message i's
+    deficit D_i = (t_i − t_0)/P − i is constant on a regular clock; its running median over
+    2·:data:`JITTER_WINDOW` + 1 messages is the local grid. A jump of the grid by more than
+    ``GAP_FACTOR − 1`` steps is round(jump) dropped messages (a gap); a stamp within
+    :data:`JITTER_MAX_STEPS` of the grid is jitter (accepted, noted when a step differs from P
+    by more than ``JITTER_TOL``); farther, or a grid jumping down, is bunching (refused
+    unless ``retime``). A truncated ``.mcap`` or ``.bag`` is read up to the first record that
+    does not parse, with a note of what was lost; holding nothing, it is refused with the
+    salvage command (``mcap recover``, ``rosbag reindex``; ``.db3``: sqlite3's ``.recover``).
     """
     p = Path(path)
+    which = _check_stamps_option(p, stamps)
     bag = _Bag(p, _check_path(p))
     try:
         all_topics = bag.topics()
@@ -921,11 +1531,13 @@ def read_bag(path, *, topic: str | None = None, extrinsics=None, repair: bool = 
         records = [_read_topic(bag, t, all_topics[t][1]) for t in chosen]
     finally:
         bag.close()
-    t0_ns = int(records[0].stamps_ns[0])
-    parts, notes = [], []
+    base = [r.stamps_ns if which == "header" else r.receive_ns for r in records]
+    t0_ns = int(base[0][0])
+    parts, notes, periods = [], [], []
     for rec in records:
-        t, g, a, n = _uniform(p, rec, t0_ns, repair)
+        t, g, a, n, period = _uniform(p, rec, t0_ns, repair, gaps, which, retime)
         parts.append((t, g, a))
+        periods.append(period)
         notes += n
     if len(records) > 1:
         time_s, rates, align_notes = _align(p, parts, chosen)
@@ -933,23 +1545,144 @@ def read_bag(path, *, topic: str | None = None, extrinsics=None, repair: bool = 
     else:
         time_s, rates = parts[0][0], [parts[0][1]]
     acc = parts[0][2] if len(records) == 1 and extrinsics is None else None
-    rate_hz = 1e9 / float(np.median(np.diff(records[0].stamps_ns)))   # exact integer steps
+    rate_hz = 1.0 / periods[0] if retime else 1e9 / _period_ns(base[0])  # exact integer steps
+    kind = bag.kind
     frames = ", ".join(f"{r.topic} in frame {r.frame_id!r}" for r in records)
     gyros = "; ".join(f"gyros {3 * k + 1}-{3 * k + 3} are {r.topic}'s x, y, z axes"
                       for k, r in enumerate(records))
-    head = [f"{p}: {_kind(p)}, {sum(r.stamps_ns.size for r in records)} {IMU_TYPE} messages "
-            f"({frames}); time_s is the header stamp minus the first, t0 = {_stamp(t0_ns)} s; "
-            f"sample rate {rate_hz:.6g} Hz from the median stamp step; angular_velocity [rad/s] "
-            f"written in deg/s; {gyros}"]
+    source = "header stamp (header.stamp)" if which == "header" else "receive stamp (the bag's log time)"
+    head = [f"{p}: {kind}, {sum(r.stamps_ns.size for r in records)} {IMU_TYPE} messages "
+            f"({frames}); time_s is the {source} minus the first, t0 = {_stamp(t0_ns)} s; "
+            f"sample rate {rate_hz:.6g} Hz from the {'mean' if retime else 'median'} stamp step; "
+            f"angular_velocity [rad/s] written in deg/s; {gyros}"]
+    if bag.salvage_note:
+        head.append(bag.salvage_note)
     if acc is None and any(r.acc is not None for r in records):
         head.append(f"{p}: linear_acceleration left out (kept only for a single IMU read without "
                     "extrinsics, whose frame is the platform frame)")
     return Measurement(
         time_s=time_s, gyro_deg_s=units.rad_s_to_deg_s(np.hstack(rates)), layout=layout,
         sample_rate_hz=rate_hz, acc_m_s2=acc, source=str(p),
-        description=f"{_kind(p)} {p.name}, topics {', '.join(chosen)}, header stamps from "
+        description=f"{kind} {p.name}, topics {', '.join(chosen)}, {which} stamps from "
                     f"t0 = {_stamp(t0_ns)} s",
-        notes=(*head, *ext_notes, *notes))
+        notes=(*head, *ext_notes, *notes), topics=tuple(chosen))
+
+
+class BagStream:
+    """One IMU topic of a bag read in chunks of :data:`STREAM_CHUNK` messages, for a conversion
+    in bounded memory (``gyroarray convert``): the same time_s and rates as :func:`read_bag`,
+    bit for bit, without holding the record.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The bag (as :func:`read_bag`).
+    topic : str, optional
+        The one ``sensor_msgs/msg/Imu`` topic (default: the bag's only one).
+    gaps : bool
+        Keep dropped messages as gaps (default: refuse them, as :func:`read_bag`).
+    stamps : {"header", "receive"}
+        The time base.
+
+    Notes
+    -----
+    Two things are decided on the first chunk, and the notes say so: the period P (the median
+    step of the first chunk's stamps, where :func:`read_bag` takes the whole record's; the
+    same for a record of one chunk) and whether ``linear_acceleration`` is kept (a message
+    after it that marks it absent, covariance[0] = -1, is refused). Memory: one chunk of raw
+    messages and its decoded values, plus the clock's window (:class:`_Clock`).
+    """
+
+    def __init__(self, path, *, topic: str | None = None, gaps: bool = False,
+                 stamps: str = "header", chunk: int = STREAM_CHUNK):
+        self.path = p = Path(path)
+        self.which = _check_stamps_option(p, stamps)
+        self.gaps, self.chunk = gaps, int(chunk)
+        self._bag = _Bag(p, _check_path(p))
+        try:
+            topics = self._bag.topics()
+            chosen = _pick_topics(p, topics, topic)
+            if len(chosen) != 1:
+                raise _refusal(p, "a streamed conversion reads one IMU topic (an array is read "
+                                  "whole: give one --topic, or convert each topic)")
+            self.topic, self.count = chosen[0], topics[chosen[0]][1]
+            self.layout, _ = _layout(p, chosen, None)
+        except BaseException:
+            self._bag.close()
+            raise
+        self.kind = self._bag.kind
+        self.rate_hz: float | None = None
+        self.t0_ns: int | None = None
+        self.has_acc: bool | None = None
+        self.frame_id = ""
+        self.n = 0
+        self.notes: list[str] = []
+
+    def chunks(self):
+        """(time_s [s], gyro [deg/s], specific force [m/s²] or None) of each chunk, in order;
+        refusals as :func:`read_bag` (raised mid-way: the caller discards what it wrote)."""
+        p, topic = self.path, self.topic
+        clock: _Clock | None = None
+        pending = None
+        try:
+            assert self._bag.reader is not None
+            conns = [c for c in self._bag.reader.connections if c.topic == topic]
+            self.frame_id = _frame_id(self._bag, conns)
+            batches = _topic_batches(self._bag, topic, self.count, self.chunk)
+            done = False
+            while not done:
+                item = next(batches, None)
+                done = item is None
+                if pending is not None:       # the previous chunk, now known whether last
+                    st, rc, v = pending
+                    base = st if self.which == "header" else rc
+                    if clock is None:
+                        _enough(p, topic, self.count)
+                        self.t0_ns = int(base[0])
+                        _check_increasing(p, topic, self.which, base)
+                        period = _period_ns(base)
+                        _check_bunching(p, topic, self.which, base, period)
+                        self.rate_hz = 1e9 / period
+                        clock = _Clock(p, topic, self.which, self.t0_ns, period,
+                                       "keep" if self.gaps else "refuse")
+                        self.has_acc = bool(not np.any(v[:, 6] == -1.0)
+                                            and np.all(np.isfinite(v[:, 3:6])) and v[:, 3:6].any())
+                    _check_values(p, topic, self.n, v[:, :3])
+                    if self.has_acc and (np.any(v[:, 6] == -1.0) or not np.all(np.isfinite(v[:, 3:6]))):
+                        k = int(np.flatnonzero((v[:, 6] == -1.0) | ~np.all(np.isfinite(v[:, 3:6]),
+                                                                           axis=1))[0])
+                        raise _refusal(p, "linear_acceleration is marked absent or not finite here "
+                                          "but present in the first chunk; convert without it "
+                                          "(read the bag whole) or cut the bag", topic=topic,
+                                       index=self.n + k + 1)
+                    clock.feed(base, final=done)
+                    t = (base - self.t0_ns) / 1e9
+                    self.n += st.size
+                    yield (t, units.rad_s_to_deg_s(v[:, :3]), v[:, 3:6] if self.has_acc else None)
+                pending = item
+            if clock is None:
+                _enough(p, topic, 0)
+            assert clock is not None
+            self.notes = [
+                f"{p}: {self.kind}, {self.n} {IMU_TYPE} messages ({topic} in frame "
+                f"{self.frame_id!r}), streamed in chunks of {self.chunk}; time_s is the {self.which} "
+                f"stamp minus the first, t0 = {_stamp(self.t0_ns)} s; sample rate "
+                f"{self.rate_hz:.6g} Hz from the median step of the first chunk's stamps; "
+                f"angular_velocity [rad/s] written in deg/s; gyros 1-3 are {topic}'s x, y, z axes",
+                *([self._bag.salvage_note] if self._bag.salvage_note else []),
+                *([] if self.has_acc else [f"{p}: linear_acceleration left out (absent or zero "
+                                            "in the first chunk)"]),
+                *clock.notes()]
+        finally:
+            self.close()
+
+    @property
+    def description(self) -> str:
+        return (f"{self.kind} {self.path.name}, topics {self.topic}, {self.which} stamps from "
+                f"t0 = {_stamp(self.t0_ns or 0)} s")
+
+    def close(self) -> None:
+        self._bag.close()
 
 
 # -- extrinsics ----------------------------------------------------------------

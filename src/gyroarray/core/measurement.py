@@ -259,6 +259,9 @@ class Measurement:
         Specific force at the platform origin, platform frame [m/s²]
         (``acc_x``, ``acc_y``, ``acc_z``; +g0 on z at rest, level, z up);
         None when the file has no ``acc_*`` columns.
+    topics : tuple of str
+        The ROS bag topics the record came from (``("/imu0",)``), in the order of the gyros;
+        ``()`` for a CSV or Parquet measurement.
 
     Notes
     -----
@@ -279,6 +282,7 @@ class Measurement:
     source: str | None = None
     notes: tuple[str, ...] = field(default_factory=tuple)
     acc_m_s2: np.ndarray | None = None
+    topics: tuple[str, ...] = ()
 
     def __post_init__(self):
         time = _frozen_array(self.time_s, "time_s", ndim=1)
@@ -312,6 +316,7 @@ class Measurement:
             raise ValueError("description must be a str")
         object.__setattr__(self, "source", None if self.source is None else str(self.source))
         object.__setattr__(self, "notes", tuple(str(s) for s in self.notes))
+        object.__setattr__(self, "topics", tuple(str(t) for t in self.topics))
 
     # -- SI views -----------------------------------------------------------
     @property
@@ -379,7 +384,8 @@ def _frozen_array(x, name: str, *, ndim: int, shape: tuple | None = None) -> np.
 # Reading
 # =========================================================================
 def read_measurement(path, *, repair: bool = False, topic: str | None = None,
-                     extrinsics=None, gaps: bool = False) -> Measurement:
+                     extrinsics=None, gaps: bool = False, stamps: str | None = None,
+                     retime: bool = False) -> Measurement:
     """Read a measurement (CSV + TOML sidecar, or a ROS bag) and check it.
 
     Parameters
@@ -401,7 +407,14 @@ def read_measurement(path, *, repair: bool = False, topic: str | None = None,
         Keep gaps in ``time_s`` (dropped samples, steps longer than :data:`GAP_FACTOR`
         periods) as they are, nothing interpolated, with a note counting them (default:
         refuse them, or fill short ones with ``repair``). For analyses that pool the
-        contiguous parts (``gyroarray allan --gaps``); measurement CSVs only.
+        contiguous parts (``gyroarray allan --gaps``); CSVs, Parquet and bags (a bag's dropped
+        messages, :func:`gyroarray.core.bags.read_bag`).
+    stamps : {"header", "receive"}, optional
+        A bag's time stamps: the messages' ``header.stamp`` (default) or the bag's receive
+        (log) times (bags only).
+    retime : bool
+        Re-time a bag's bunched or repeated stamps onto a uniform grid (bags only; the rule in
+        :func:`gyroarray.core.bags.read_bag`).
 
     Returns
     -------
@@ -417,8 +430,10 @@ def read_measurement(path, *, repair: bool = False, topic: str | None = None,
     # deferred: core.bags imports this module (Measurement), so it cannot be imported at the top
     from gyroarray.core.bags import is_bag, read_bag
     if is_bag(path):
-        return read_bag(path, topic=topic, extrinsics=extrinsics, repair=repair)
-    for option, value in (("--topic", topic), ("--extrinsics", extrinsics)):
+        return read_bag(path, topic=topic, extrinsics=extrinsics, repair=repair, gaps=gaps,
+                        stamps=stamps or "header", retime=retime)
+    for option, value in (("--topic", topic), ("--extrinsics", extrinsics), ("--stamps", stamps),
+                          ("--retime", retime or None)):
         if value is not None:
             raise InputError(f"{option} is for ROS bags (.bag, .db3, .mcap or a ROS2 bag folder); "
                              "this is a measurement CSV: leave it out", file=str(path))

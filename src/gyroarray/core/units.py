@@ -16,6 +16,9 @@ RRW  (K)               deg/h/√h         rad/s/√s
 rate ramp (R)          deg/h²           rad/s²
 quantization (Q)       deg              rad
 specific force         g                m/s²
+accel. bias instab.    mg               m/s²
+VRW  (N_a)             m/s/√h           m/s/√s = m/s²/√Hz
+accel. RW  (K_a)       m/s²/√h          m/s²/√s
 g-sensitivity          (deg/s)/g        (rad/s)/(m/s²)
 =====================  ===============  ====================
 
@@ -135,3 +138,33 @@ def deg_s_per_g_to_rad_s_per_m_s2(x):
 def rad_s_per_m_s2_to_deg_s_per_g(x):
     """g-sensitivity [(rad/s)/(m/s²)] -> [(deg/s)/g]."""
     return x / RAD_PER_DEG * G0_M_S2
+
+
+def mg_to_m_s2(x):
+    """Specific force [mg] (milli-g0) -> [m/s²]."""
+    return x * 1e-3 * G0_M_S2
+
+
+def m_s2_to_mg(x):
+    """Specific force [m/s²] -> [mg] (milli-g0)."""
+    return x / (1e-3 * G0_M_S2)
+
+
+def vrw_m_s_rt_h_to_si(x):
+    """Velocity random walk [m/s/√h] -> [m/s/√s] (= m/s²/√Hz)."""
+    return x / RT_S_PER_RT_H
+
+
+def vrw_si_to_m_s_rt_h(x):
+    """Velocity random walk [m/s/√s] (= m/s²/√Hz) -> [m/s/√h]."""
+    return x * RT_S_PER_RT_H
+
+
+def accel_rw_m_s2_rt_h_to_si(x):
+    """Acceleration random walk [m/s²/√h] -> [m/s²/√s]."""
+    return x / RT_S_PER_RT_H
+
+
+def accel_rw_si_to_m_s2_rt_h(x):
+    """Acceleration random walk [m/s²/√s] -> [m/s²/√h]."""
+    return x * RT_S_PER_RT_H

@@ -57,10 +57,10 @@ from gyroarray.effects.protocol import Effect, Param
 from gyroarray.core.limits import MAX_RATE_DEG_S
 from gyroarray.core.tomlio import load_toml
 
-__all__ = ["ModelEntry", "NoiseModel", "ArrayNoise"]
+__all__ = ["ModelEntry", "NoiseModel", "ArrayNoise", "AccelNoise"]
 
 _NUMBER = (int, float, np.integer, np.floating)
-_TOP_KEYS = ("effects", "description", "array")
+_TOP_KEYS = ("effects", "description", "topic", "array", "accelerometer")
 
 
 def _is_number(v) -> bool:
@@ -631,6 +631,174 @@ def _array_sigma(value, have: dict, n: int, where) -> dict:
     return out
 
 
+#: Keys of the ``[accelerometer]`` table (:class:`AccelNoise`).
+ACCEL_KEYS = ("axes", "n_m_s_rt_h", "k_m_s2_rt_h", "b_mg", "sigma", "notes")
+#: The noise terms of the ``[accelerometer]`` table, each with its datasheet unit.
+ACCEL_TERMS: Mapping[str, str] = MappingProxyType({
+    "n_m_s_rt_h": "m/s/√h",     # velocity random walk N_a: ADEV = N_a/√τ
+    "k_m_s2_rt_h": "m/s²/√h",   # acceleration random walk K_a: ADEV = K_a·√(τ/3)
+    "b_mg": "mg",               # bias instability B: flat ADEV floor 0.664·B
+})
+_ACCEL_AXES = ("x", "y", "z")
+
+
+def _accel_error(message: str, key: str, where) -> InputError:
+    """An error about ``accelerometer.key``, located by ``where`` = (file, TomlDoc or None)."""
+    file, doc = where
+    column = f"accelerometer.{key}" if key else "accelerometer"
+    line = doc.line_of(column) if doc is not None else None
+    return InputError(f"[accelerometer] {message}", file=file, line=line, column=column)
+
+
+def _accel_axes(value, where) -> tuple[str, ...]:
+    if isinstance(value, str) or not isinstance(value, (list, tuple)) or not value or not all(
+            isinstance(a, str) and a in _ACCEL_AXES for a in value) or len(set(value)) != len(value):
+        raise _accel_error(f"axes must be distinct names among {list(_ACCEL_AXES)}, got {value!r}",
+                           "axes", where)
+    return tuple(value)
+
+
+def _accel_values(value, key: str, n: int, where, *, positive: bool) -> tuple[float, ...]:
+    unit = ACCEL_TERMS.get(key.split(".")[-1], "")
+    what = "> 0" if positive else ">= 0"
+    if isinstance(value, (str, bytes, Mapping)) or not isinstance(value, (list, tuple, np.ndarray)) \
+            or len(value) != n:
+        raise _accel_error(f"{key} must be {n} numbers {what} [{unit}] (one per axis of 'axes'), got {value!r}",
+                           key, where)
+    for i, v in enumerate(value):
+        if not (_is_number(v) and math.isfinite(v) and (v > 0 if positive else v >= 0)):
+            raise _accel_error(f"{key}[{i}] must be a finite number {what} [{unit}], got {v!r}", key, where)
+    return tuple(float(v) for v in value)
+
+
+@dataclass(frozen=True)
+class AccelNoise:
+    """Accelerometer noise per axis (IEEE Std 1293 terms), in the file's datasheet units.
+
+    The ``[accelerometer]`` table of a noise model (``docs/model-format.md``), written by
+    ``fit --out`` from a record's ``acc_*`` columns. The simulator does not read it.
+
+    Parameters
+    ----------
+    axes : tuple of str
+        The accelerometer axes the values are for, in order (among ``x``, ``y``, ``z``).
+    n_m_s_rt_h : tuple of float, optional
+        Velocity random walk N_a per axis [m/s/√h]: ADEV(τ) = N_a/√τ (N_a/60 in m/s²/√Hz).
+    k_m_s2_rt_h : tuple of float, optional
+        Acceleration random walk K_a per axis [m/s²/√h]: ADEV(τ) = K_a·√(τ/3) (K_a/60 in m/s²/√s).
+    b_mg : tuple of float, optional
+        Bias instability B per axis [mg]: the flat ADEV floor 0.664·B.
+    sigma : Mapping[str, tuple of float]
+        1σ of the terms above, same keys, one per axis, same units.
+    notes : tuple of str
+        How the terms were fitted, or why one is missing.
+
+    Each term is present for every axis or None (not fitted, or not resolved by the record).
+
+    Raises
+    ------
+    InputError
+        A wrong length, a value <= 0 or not finite, a sigma without its term.
+    """
+
+    axes: tuple[str, ...] = ("x", "y", "z")
+    n_m_s_rt_h: tuple[float, ...] | None = None
+    k_m_s2_rt_h: tuple[float, ...] | None = None
+    b_mg: tuple[float, ...] | None = None
+    sigma: Mapping[str, tuple] = field(default_factory=dict)
+    notes: tuple[str, ...] = ()
+
+    def __post_init__(self):
+        self._check((None, None))
+
+    def _check(self, where) -> None:
+        axes = _accel_axes(list(self.axes) if isinstance(self.axes, tuple) else self.axes, where)
+        object.__setattr__(self, "axes", axes)
+        n = len(axes)
+        for key in ACCEL_TERMS:
+            value = getattr(self, key)
+            if value is not None:
+                object.__setattr__(self, key, _accel_values(value, key, n, where, positive=True))
+        sigma = self.sigma
+        if not isinstance(sigma, Mapping):
+            raise _accel_error(f"sigma must be a table of term = [1σ per axis], got {_type_name(sigma)}",
+                               "sigma", where)
+        out = {}
+        for key, value in sigma.items():
+            if key not in ACCEL_TERMS:
+                raise _accel_error(f"sigma of unknown term {key!r}{did_you_mean(str(key), tuple(ACCEL_TERMS))} "
+                                   f"(terms: {', '.join(ACCEL_TERMS)})", f"sigma.{key}", where)
+            if getattr(self, key) is None:
+                raise _accel_error(f"sigma.{key}: a 1σ needs its term {key}", f"sigma.{key}", where)
+            out[key] = _accel_values(value, f"sigma.{key}", n, where, positive=False)
+        object.__setattr__(self, "sigma", MappingProxyType(out))
+        notes = self.notes
+        if isinstance(notes, str) or not isinstance(notes, (list, tuple)) or not all(isinstance(s, str) for s in notes):
+            raise _accel_error(f"notes must be an array of strings, got {notes!r}", "notes", where)
+        object.__setattr__(self, "notes", tuple(notes))
+
+    @classmethod
+    def from_dict(cls, data, *, file: str | None = None, doc=None) -> "AccelNoise":
+        """Read and check an ``[accelerometer]`` table (parsed TOML).
+
+        Raises
+        ------
+        InputError
+            Unknown key (with the closest name), wrong length, a value <= 0 or not finite, bad
+            axes; naming the file, the line (when ``doc``, the file's
+            :class:`~gyroarray.core.tomlio.TomlDoc`, is given) and ``accelerometer.KEY``.
+        """
+        where = (file, doc)
+        if not isinstance(data, Mapping):
+            raise _accel_error(f"must be a table, got {_type_name(data)}", "", where)
+        for key in data:
+            if key not in ACCEL_KEYS:
+                raise _accel_error(f"unknown key {key!r}{did_you_mean(str(key), ACCEL_KEYS)} (the table has: "
+                                   f"{', '.join(ACCEL_KEYS)})", str(key), where)
+        obj = cls.__new__(cls)
+        values = {"axes": data.get("axes", list(_ACCEL_AXES)), "sigma": data.get("sigma", {}),
+                  "notes": data.get("notes", [])}
+        values.update({k: data.get(k) for k in ACCEL_TERMS})
+        for key, value in values.items():
+            object.__setattr__(obj, key, value)
+        obj._check(where)
+        return obj
+
+    def __hash__(self):
+        return hash((self.axes, self.n_m_s_rt_h, self.k_m_s2_rt_h, self.b_mg))
+
+    @property
+    def missing(self) -> tuple[str, ...]:
+        """The terms not in the table (not fitted or not resolved), in file order."""
+        return tuple(k for k in ACCEL_TERMS if getattr(self, k) is None)
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain dict, keys in file order, absent terms left out."""
+        out: dict[str, Any] = {"axes": list(self.axes)}
+        for key in ACCEL_TERMS:
+            value = getattr(self, key)
+            if value is not None:
+                out[key] = list(value)
+        if self.sigma:
+            out["sigma"] = {k: list(v) for k, v in self.sigma.items()}
+        if self.notes:
+            out["notes"] = list(self.notes)
+        return out
+
+    def toml_lines(self) -> list[str]:
+        """The ``[accelerometer]`` table as TOML lines."""
+        d = self.to_dict()
+        lines = ["", "[accelerometer]"]
+        for key, value in d.items():
+            if key == "notes":
+                lines.append("notes = [")
+                lines += [f"    {_toml_value(item)}," for item in value]
+                lines.append("]")
+            else:
+                lines.append(f"{key} = {_toml_value(value)}")
+        return lines
+
+
 _GYRO_LIST_RE = re.compile(r"\b(gyros?|gyro\(s\)) (\d+(?:(?:, | and )\d+)*)")
 
 
@@ -661,6 +829,11 @@ class NoiseModel:
     array : ArrayNoise, optional
         The ``[array]`` table: correlations between gyros of the white and
         slow parts, shared lines (None: the file has none).
+    accelerometer : AccelNoise, optional
+        The ``[accelerometer]`` table: velocity and acceleration random walk and bias
+        instability per axis (None: the file has none).
+    topic : str, optional
+        The bag IMU topic the model was fitted on (top-level ``topic = "/imu0"``).
     """
 
     entries: tuple[ModelEntry, ...] = ()
@@ -668,6 +841,8 @@ class NoiseModel:
     source: str | None = field(default=None, compare=False)
     lines: tuple = field(default=(), compare=False, repr=False)
     array: ArrayNoise | None = None
+    accelerometer: AccelNoise | None = None
+    topic: str | None = None
 
     def __post_init__(self):
         entries = tuple(self.entries)
@@ -685,6 +860,11 @@ class NoiseModel:
                              file=self.source, column="description")
         if self.array is not None and not isinstance(self.array, ArrayNoise):
             raise TypeError(f"array must be an ArrayNoise, got {type(self.array).__name__}")
+        if self.accelerometer is not None and not isinstance(self.accelerometer, AccelNoise):
+            raise TypeError(f"accelerometer must be an AccelNoise, got {type(self.accelerometer).__name__}")
+        if self.topic is not None and (not isinstance(self.topic, str) or not self.topic):
+            raise InputError(f"topic must be a non-empty string (the bag IMU topic, e.g. \"/imu0\"), got "
+                             f"{_type_name(self.topic)} {self.topic!r}", file=self.source, column="topic")
         object.__setattr__(self, "entries", entries)
 
     # -- reading and writing --------------------------------------------
@@ -742,8 +922,15 @@ class NoiseModel:
             except InputError as err:
                 raise _located(err, i, file, lines[i]) from None
         array = ArrayNoise.from_dict(data["array"], file=file, doc=doc) if "array" in data else None
+        accel = (AccelNoise.from_dict(data["accelerometer"], file=file, doc=doc)
+                 if "accelerometer" in data else None)
+        topic = data.get("topic")
+        if topic is not None and (not isinstance(topic, str) or not topic):
+            raise InputError(f"topic must be a non-empty string (the bag IMU topic, e.g. \"/imu0\"), got "
+                             f"{_type_name(topic)} {topic!r}", file=file,
+                             line=doc.line_of("topic") if doc is not None else None, column="topic")
         model = cls(tuple(entries), description=data.get("description", ""), source=file, lines=lines,
-                    array=array)
+                    array=array, accelerometer=accel, topic=topic)
         if n_gyros is not None:
             model.check(n_gyros)
         return model
@@ -757,6 +944,8 @@ class NoiseModel:
         lines = ["# gyroarray noise model (effects: shared/spec/effects.md)"]
         if self.description:
             lines.append(f"description = {_toml_value(self.description)}")
+        if self.topic is not None:
+            lines.append(f"topic = {_toml_value(self.topic)}")
         if not self.entries:
             lines.append("effects = []")
         else:
@@ -767,6 +956,8 @@ class NoiseModel:
             lines.append("]")
         if self.array is not None:
             lines += self.array.toml_lines()
+        if self.accelerometer is not None:
+            lines += self.accelerometer.toml_lines()
         return "\n".join(lines) + "\n"
 
     # -- new models from old ----------------------------------------------
@@ -774,15 +965,14 @@ class NoiseModel:
         """A new model with ``entry`` appended (this one is unchanged)."""
         if not isinstance(entry, ModelEntry):
             raise TypeError(f"entry must be a ModelEntry, got {type(entry).__name__}")
-        return NoiseModel(self.entries + (entry,), description=self.description, source=self.source,
-                          array=self.array)
+        return replace(self, entries=self.entries + (entry,), lines=())
 
     def without_effect(self, effect: str, gyro: int | None = None) -> "NoiseModel":
         """A new model without the entry for (effect, gyro); KeyError if there is none."""
         kept = tuple(e for e in self.entries if (e.effect, e.gyro) != (effect, gyro))
         if len(kept) == len(self.entries):
             raise KeyError((effect, gyro))
-        return NoiseModel(kept, description=self.description, source=self.source, array=self.array)
+        return replace(self, entries=kept, lines=())
 
     def renumbered(self, gyros, n_gyros: int, note: str = "") -> "NoiseModel":
         """This model, fitted on a record of ``len(gyros)`` gyros cut from one of ``n_gyros``,
@@ -832,12 +1022,12 @@ class NoiseModel:
             array = replace(array, gyros=tuple(gyros[g - 1] for g in array.gyros), shared=shared,
                             notes=tuple(_renumber_text(t, gyros) for t in array.notes) + ((note,) if note else ()))
         description = self.description + (("; " if self.description else "") + note if note else "")
-        return NoiseModel(tuple(entries), description=description, source=self.source, array=array)
+        return NoiseModel(tuple(entries), description=description, source=self.source, array=array,
+                          accelerometer=self.accelerometer, topic=self.topic)
 
     def with_array(self, array: ArrayNoise | None) -> "NoiseModel":
         """A new model with the ``[array]`` table ``array`` (None: without one)."""
-        return NoiseModel(self.entries, description=self.description, source=self.source, lines=self.lines,
-                          array=array)
+        return replace(self, array=array)
 
     # -- checks needing N -------------------------------------------------
     def check(self, n_gyros: int) -> None:
