@@ -175,7 +175,10 @@ def accel_fit(acc_m_s2, dt_s: float, parts=None, taus="octave", kind: str = "oad
     if not analyses:
         raise InputError("no accelerometer axis can be analysed: " + "; ".join(skipped.values()))
     axes = tuple(analyses)
-    values, sigmas, per_axis, notes = {}, {}, {}, list(skipped.values())
+    values: dict[str, tuple | None] = {}
+    sigmas: dict[str, tuple | None] = {}
+    per_axis: dict[str, dict] = {}
+    notes = list(skipped.values())
     for term, (key, unit, _) in ACC_TERMS.items():
         got = {a: _resolved(analyses[a], term) for a in axes}
         per_axis[term] = got
