@@ -237,6 +237,17 @@ def contiguous_segments(time_s, dt_s: float | None = None) -> tuple[list[tuple[i
     return list(zip(edges[:-1], edges[1:])), missing
 
 
+
+#: Shortest piece [samples] a still part keeps when it is cut at the gaps (:func:`cut_at_segments`).
+MIN_CUT_PART = 4
+
+
+def cut_at_segments(parts, segments) -> list[tuple[int, int]]:
+    """``[start, stop)`` parts cut where ``segments`` (:func:`contiguous_segments`) end: the pieces of
+    at least :data:`MIN_CUT_PART` samples, so that no difference spans a gap."""
+    cut = [(max(a, c), min(b, e)) for a, b in parts for c, e in segments]
+    return [(a, b) for a, b in cut if b - a >= MIN_CUT_PART]
+
 def lag1_acf(x) -> float:
     """Lag-1 autocorrelation ``Σ(x_i − x̄)(x_{i+1} − x̄) / Σ(x_i − x̄)²`` (Riley & Greenhall eq. 2)."""
     x = np.asarray(x, dtype=float)

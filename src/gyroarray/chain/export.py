@@ -1194,7 +1194,7 @@ def record_parts(meas) -> tuple[list[tuple[int, int]], list[str]]:
     with a reference rate: where it is below 0.2 deg/h), each cut at gaps in the time stamps; as
     ``gyroarray allan`` reads a record."""
     # deferred: the motion detector and the pooled deviation load only for --record
-    from gyroarray.analysis.deviations import contiguous_segments
+    from gyroarray.analysis.deviations import contiguous_segments, cut_at_segments
     from gyroarray.analysis.motion import still_mask
     from gyroarray.core.measurement import true_runs
     n, dt = meas.n_samples, meas.dt_s
@@ -1213,8 +1213,7 @@ def record_parts(meas) -> tuple[list[tuple[int, int]], list[str]]:
                      f"{n * dt:.1f} s (motion is not noise)")
     segments, missing = contiguous_segments(meas.time_s, dt)
     if len(segments) > 1:
-        parts = [(max(a, c), min(b, e)) for a, b in parts for c, e in segments]
-        parts = [(a, b) for a, b in parts if b - a >= 4]
+        parts = cut_at_segments(parts, segments)
         notes.append(f"{len(segments) - 1} gap(s) in the time stamps: the parts are cut there")
     if not parts:
         raise InputError("the record has no still, contiguous part of at least "

@@ -166,7 +166,7 @@ def accel_parts(meas, args) -> tuple[list, list[str], dict | None]:
     """
     # deferred: numpy and the analysis load only when the command runs (a fast --help)
     import numpy as np
-    from gyroarray.analysis.deviations import contiguous_segments
+    from gyroarray.analysis.deviations import contiguous_segments, cut_at_segments
     from gyroarray.core.measurement import true_runs
     ref = meas.ref_rad_s
     if ref is None or not ref.any():
@@ -189,8 +189,7 @@ def accel_parts(meas, args) -> tuple[list, list[str], dict | None]:
                      f"{sum(b - a for a, b in parts) * dt:.1f} s of {n * dt:.1f} s (the Allan sums pooled over them)")
     segments, missing = contiguous_segments(meas.time_s, dt)
     if len(segments) > 1:
-        parts = [(max(a, c), min(b, e)) for a, b in parts for c, e in segments]
-        parts = [(a, b) for a, b in parts if b - a >= 4]
+        parts = cut_at_segments(parts, segments)
         if not parts:
             raise InputError("the gaps in the time stamps leave no contiguous still part of at least 4 samples",
                              file=str(args.measurement))
@@ -221,7 +220,8 @@ def _cmd_allan_acc(args, meas, kind: str, taus) -> tuple[dict, str]:
     except InputError as err:
         raise InputError(err.message, file=str(args.measurement)) from None
     notes += list(fit.notes)
-    out = {"axes": {a: analysis_json(x) for a, x in fit.analyses.items()}, "terms": fit.to_json_dict(),
+    axes = {a: analysis_json(x) for a, x in fit.analyses.items()}
+    out = {"axes": axes, "terms": fit.to_json_dict(),
            "signal": "specific force acc_x..z [m/s²] (a constant, gravity included, does not change the ADEV)",
            "notes": [*([] if args.sensor == "all" else meas.notes), *notes],
            "not_analysed": dict(fit.skipped)}
@@ -229,7 +229,7 @@ def _cmd_allan_acc(args, meas, kind: str, taus) -> tuple[dict, str]:
         out["analysed_parts"] = info
     lines = [f"{args.measurement}: accelerometer, {meas.n_samples} samples at {1 / meas.dt_s:g} Hz; analysed: "
              "acc_x..z [m/s²]", *[f"note: {n}" for n in out["notes"]]]
-    lines += [_format_acc(a, d) for a, d in out["axes"].items()]
+    lines += [_format_acc(a, d) for a, d in axes.items()]
     return out, "\n".join(lines)
 
 
@@ -383,7 +383,7 @@ def _analysed_parts(meas, gyros: list[int], args) -> tuple[list, list[str], dict
     (dropped samples) splits the parts: no difference spans it (the sums are pooled).
     """
     # deferred: numpy and the analysis load only when the command runs (a fast --help)
-    from gyroarray.analysis.deviations import contiguous_segments
+    from gyroarray.analysis.deviations import contiguous_segments, cut_at_segments
     from gyroarray.analysis.motion import still_mask
     from gyroarray.core.measurement import true_runs
     n, dt = meas.n_samples, meas.dt_s
@@ -420,8 +420,7 @@ def _analysed_parts(meas, gyros: list[int], args) -> tuple[list, list[str], dict
             info = {"parts_s": [[float(t[a]), float(t[b - 1] + dt)] for a, b in parts],
                     "still_s": float(total), "record_s": float(n * dt)}
     if len(segments) > 1:
-        cut = [(max(a, c), min(b, e)) for a, b in parts for c, e in segments]
-        parts = [(a, b) for a, b in cut if b - a >= 4]
+        parts = cut_at_segments(parts, segments)
         if not parts:
             raise InputError(f"the {len(segments) - 1} gap(s) in the time stamps leave no contiguous "
                              "part of at least 4 samples to analyse; record without dropping samples",

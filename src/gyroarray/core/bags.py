@@ -542,7 +542,26 @@ def _chunk_records(data: bytes) -> list:
     return out
 
 
-class _McapSource:
+class _RecordSource:
+    """A bag read by gyroarray itself, record by record (:class:`_McapSource`, :class:`_Ros1Salvage`):
+    the subclass's ``_walk(wanted)`` yields (channel id, log time [ns], raw) in file order."""
+
+    _conns: dict[int, _Conn]
+
+    def _walk(self, wanted):
+        raise NotImplementedError
+
+    def messages(self, connections=()):
+        """(connection, log time [ns], raw) of ``connections``' messages, in file order."""
+        wanted = {c.id for c in connections} or set(self._conns)
+        for cid, ts, raw in self._walk(wanted):
+            yield self._conns[cid], ts, raw
+
+    def close(self) -> None:
+        pass
+
+
+class _McapSource(_RecordSource):
     """The messages of an MCAP file read record by record with the ``mcap`` library's stream
     reader: a ROS1-profile MCAP (what ``mcap convert x.bag`` writes: schema encoding
     ``ros1msg``, message encoding ``ros1``), or a truncated MCAP of either profile (``salvage``:
@@ -608,17 +627,9 @@ class _McapSource:
         finally:
             fh.close()
 
-    def messages(self, connections=()):
-        """(connection, log time [ns], raw) of ``connections``' messages, in file order."""
-        wanted = {c.id for c in connections} or set(self._conns)
-        for cid, ts, raw in self._walk(wanted):
-            yield self._conns[cid], ts, raw
-
-    def close(self) -> None:
-        pass
 
 
-class _Ros1Salvage:
+class _Ros1Salvage(_RecordSource):
     """A ROS1 ``.bag`` whose index is gone (a cut file): its records read in file order, chunk
     by chunk (none, bz2 or lz4, each decompressed bounded to its declared size and at most
     :func:`_chunk_cap`), up to the first record that does not parse."""
@@ -733,13 +744,6 @@ class _Ros1Salvage:
         finally:
             fh.close()
 
-    def messages(self, connections=()):
-        wanted = {c.id for c in connections} or set(self._conns)
-        for cid, ts, raw in self._walk(wanted):
-            yield self._conns[cid], ts, raw
-
-    def close(self) -> None:
-        pass
 
 
 class _Bag:
