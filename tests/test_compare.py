@@ -374,7 +374,8 @@ def test_ladder_keeps_only_steps_that_help(monkeypatch):
 
 
 def test_same_seed_same_bits():
-    m = lab_run(NoiseModel(BASE), S1N6, np.random.default_rng(1), static_s=300, motion_s=120, tail_s=60)
+    # a short record (the same code path: static parts, motion, tail) keeps it quick
+    m = lab_run(NoiseModel(BASE), S1N6, np.random.default_rng(1), static_s=120, motion_s=60, tail_s=30)
     a = ModelComparison(m, n_runs=5, seed=3).analyse()
     b = ModelComparison(m, n_runs=5, seed=3).analyse()
     assert a.discrepancy == b.discrepancy

@@ -266,6 +266,7 @@ def test_a_pool_worker_killed_mid_sweep_costs_nothing(sweep_file, reference, tmp
 
 # -- on a cluster ----------------------------------------------------------------------------
 
+@pytest.mark.slow   # 13 s (a local Dask cluster started): make score
 def test_dask_local_gives_the_same_bits_and_names_each_failure(sweep_file, reference, tmp_path):
     """``--dask local:2`` (a cluster started and closed by the command): the same dataset as
     ``--workers 1``, each failing scenario named with its reason, the others complete."""

@@ -202,6 +202,7 @@ def test_a_stale_model_names_the_gyro_and_is_not_worse_than_ols(records):
     assert any("levels are kept" in n for n in kept.notes)
 
 
+@pytest.mark.slow   # 7 s (fit of a real array record): make score
 def test_fit_writes_one_white_level_per_gyro(cli, records, tmp_path):
     """``fit`` on a 6-gyro cut (two triads of experiment 2), then ``fit`` of it and a second
     experiment: the arw entries equal the [array] table's white level (one ARW per gyro in the

@@ -175,6 +175,7 @@ def test_a_line_added_on_continuous_motion_lowers_the_discrepancy():
     assert any("taken out: misalignment on gyro 2" in n for n in with_line.notes)
 
 
+@pytest.mark.slow   # 7 s (two fits of the medium record): make score
 def test_the_stepper_reversal_in_the_last_samples_is_not_a_fault():
     """The record ends in a reversal of the stepper: gyro 3 goes from −152 to +181 deg/s in its
     last two samples (read plainly below), and with the ladder's eleven effects in the model the

@@ -102,6 +102,7 @@ values = [{{ axis = "x", metric = "sigma_1_deg_s", value = 0.01 }}]
     return p
 
 
+@pytest.mark.slow   # with the module's sweeps (14 s) and a full render: make score
 def test_paper_vs_model_flags_against_the_percentile_band(sweeps):
     rows = load_sweep_dir(sweeps / "paper_out").rows
     x = rows[(rows.estimator == "gls") & (rows.axis == "x")]["sigma_1_deg_s"].to_numpy()
@@ -150,6 +151,7 @@ def test_ranking_and_estimator_tables(sweeps):
     assert (k.efficiency.to_numpy() <= 1.02).all() and (k.efficiency.to_numpy() > 0.5).all()
 
 
+@pytest.mark.slow   # with the module's sweeps (14 s) and a full render: make score
 def test_report_files_are_self_contained(sweeps, tmp_path):
     values = _paper_values(sweeps, 0.01, 1.0)
     res = write_report([sweeps / "design_out", sweeps / "paper_out"], tmp_path / "r.html",

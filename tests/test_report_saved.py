@@ -206,6 +206,7 @@ def _compare_measurement():
                        ref_deg_s=rad_s_to_deg_s(w), description="saved compare figures")
 
 
+@pytest.mark.slow   # 11 s (a compare analysis and two renders): make score
 def test_the_compare_report_renders_saved_figure_data(tmp_path, monkeypatch):
     from gyroarray.chain.compare import ModelComparison
     from gyroarray.chain.compare_figures import CompareFigures, compare_figures

@@ -299,6 +299,7 @@ def test_a_late_start_is_moved_back_to_leave_six_octaves():
     assert late[0].params != sf.fit_gyro_noise(x, 0.01, 1)[0].params
 
 
+@pytest.mark.slow   # 6 s: make score
 def test_white_column_through_the_sensors_filter():
     """White noise (N = 0.25 deg/√h) through a first-order 3 Hz low-pass at 50 Hz, 40 records
     of 60 000 samples. With the filter's exact Allan-variance shape in the white column

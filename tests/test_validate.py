@@ -91,6 +91,7 @@ def _filtered(cutoff_hz, seed):
     return lab_run(model, LAYOUT, np.random.default_rng(seed), static_s=300.0, motion_s=0.0, tail_s=0.0)
 
 
+@pytest.mark.slow   # 5 s: make score
 def test_a_filter_read_from_the_spectrum_is_compared_with_the_model_not_taken_as_an_error():
     """The spectrum gives a filter's cut-off itself, whatever the model holds: validation compares
     it with the model's (same sensor: no prediction error; another cut-off: the worst test)."""

@@ -66,6 +66,12 @@ effects (bias instability, Gauss-Markov, temperature) raise NIS at the long wind
 quantization at one sample. The accelerometer's numbers are not inflated by ``auto`` (no
 accelerometer model is simulated); an explicit ``--inflate X`` scales them too.
 
+``--inflate measured``: the factor measured on a record with a reference pose topic
+(:func:`measured_inflation`, :func:`gyroarray.chain.inflation.inflation_for_export`): the
+motion-weighted white density over the model's static N of the exported axis, never below 1,
+on the gyro's numbers only; its four lines (levels, reference noise, time offset, held-out
+NIS) go into the header.
+
 ``--verify`` re-reads the WRITTEN file with the consumer's parser semantics (:func:`read_back`:
 ``cv2.FileStorage`` for the OpenCV formats, a YAML loader for Kalibr, the pinned required keys
 and types of :data:`REQUIRED`, a ``name = value;`` parser for MATLAB), converts back to N, K
@@ -113,7 +119,7 @@ __all__ = ["FORMATS", "SUFFIXES", "REQUIRED", "MAX_SIM_SAMPLES", "GyroNoise", "A
            "Export", "gyro_noise", "choose_axis", "choose_accel", "model_gyros", "stand_in", "check_exportable",
            "orbslam3_frequency", "sampled_walk_n2", "exported_values", "tool_discrete", "render", "read_back",
            "simulate_model", "window_nis", "auto_inflation", "verify_export", "record_check", "verify_file",
-           "build_export", "export_noise"]
+           "build_export", "measured_inflation", "export_noise"]
 
 #: The formats and what each file is.
 FORMATS = {
@@ -646,7 +652,8 @@ def _topic_line(topic: str, topic_why: str) -> str:
 
 def _header(noise: GyroNoise, fmt: str, rate_hz: float, inflate: float, why: str,
             source: str, comment: str, axis: tuple | None = None, accel: AccelChoice | None = None,
-            topic: tuple | None = None, accel_inflate: float | None = None) -> list[str]:
+            topic: tuple | None = None, accel_inflate: float | None = None,
+            measured_lines: list[str] | None = None) -> list[str]:
     si = stand_in(noise, rate_hz, keeps_b=fmt == "matlab")
     n_dh = units.arw_rad_rt_s_to_deg_rt_h(noise.n_rad_rt_s)
     k_dh = units.rrw_rad_s_rt_s_to_deg_h_rt_h(noise.k_rad_s_rt_s)
@@ -712,6 +719,7 @@ def _header(noise: GyroNoise, fmt: str, rate_hz: float, inflate: float, why: str
     lines.append(f"inflation: ×{inflate:.4g} on the gyro's numbers ({why})"
                  + ("" if accel is None or accel.n_m_s2_rt_hz is None else
                     f"; ×{inflate if accel_inflate is None else accel_inflate:.4g} on the accelerometer's"))
+    lines += list(measured_lines or ())
     lines += _accel_header(accel, fmt, rate_hz)
     return [f"{comment} {line}" for line in lines]
 
@@ -763,18 +771,21 @@ _ZERO3 = ["[0.0, 0.0, 0.0]"] * 3
 def render(noise: GyroNoise, fmt: str, rate_hz: float, *, inflate: float = 1.0,
            why: str = "none asked", source: str = "MODEL.toml", axis: tuple | None = None,
            accel: AccelChoice | None = None, topic: tuple | None = None,
-           accel_inflate: float | None = None) -> str:
+           accel_inflate: float | None = None, measured_lines: list[str] | None = None) -> str:
     """The file's text: the comment header, then the fields.
 
     ``topic``: (topic, why) for Kalibr/OpenVINS (default :data:`DEFAULT_TOPIC`, said so). A
     missing accelerometer term leaves its key out; the header says which and why.
+    ``measured_lines``: the lines of a measured inflation (:func:`measured_inflation`), put
+    after the inflation line as comments.
     """
     if topic is None:
         topic = (DEFAULT_TOPIC, "the default: the model names no topic; --topic T sets it")
     v = exported_values(noise, fmt, rate_hz, inflate, accel, accel_inflate)
     names = FIELDS[fmt]
     comment = "%" if fmt == "matlab" else "#"
-    head = _header(noise, fmt, rate_hz, inflate, why, source, comment, axis, accel, topic, accel_inflate)
+    head = _header(noise, fmt, rate_hz, inflate, why, source, comment, axis, accel, topic, accel_inflate,
+                   measured_lines)
 
     def line(role, unit, indent=""):
         key = names[role]
@@ -1356,7 +1367,7 @@ class Export:
 
 def build_export(model: NoiseModel, axis: int | str, fmt: str, rate_hz: float, *,
                  inflate: float | str = 1.0, seed: int = 0, source: str = "MODEL.toml",
-                 topic: str | None = None) -> Export:
+                 topic: str | None = None, measured: tuple[dict, list[str]] | None = None) -> Export:
     """The file's text and a JSON-ready summary (what ``gyroarray export`` writes and prints).
 
     Parameters
@@ -1378,6 +1389,10 @@ def build_export(model: NoiseModel, axis: int | str, fmt: str, rate_hz: float, *
     topic : str, optional
         The IMU topic of Kalibr/OpenVINS files (default the model's ``topic``, else
         :data:`DEFAULT_TOPIC`, said so).
+    measured : (dict, list of str), optional
+        A measured inflation (:func:`measured_inflation`): its summary and header lines;
+        ``inflate`` is then its factor [-] (on the gyro's numbers only: the accelerometer's
+        stay ×1). The summary goes under ``inflate_measured``, the lines into the header.
     """
     if fmt not in FORMATS:
         raise InputError(f"unknown format {fmt!r}; expected one of {', '.join(FORMATS)}")
@@ -1399,15 +1414,24 @@ def build_export(model: NoiseModel, axis: int | str, fmt: str, rate_hz: float, *
                      "gyros": every, "rate_hz": rate_hz}
     if fmt in ("kalibr", "openvins"):
         summary["topic"] = {"topic": topic_pair[0], "why": topic_pair[1]}
+    measured_lines = None
     if inflate == "auto":
         auto = auto_inflation(noise, fmt, rate_hz, rng)
         factor, why, accel_factor = auto["factor"], auto["why"], 1.0
         summary["inflate_auto"] = auto
+    elif measured is not None:
+        m_summary, measured_lines = measured
+        factor, accel_factor = float(inflate), 1.0
+        if not (math.isfinite(factor) and factor >= 1.0):
+            raise InputError(f"a measured inflation is a factor >= 1, got {factor!r}")
+        why = (f"measured from {m_summary['reference']} topic {m_summary['reference_topic']}, "
+               "the lines below")
+        summary["inflate_measured"] = m_summary
     else:
         factor = float(inflate)
         why, accel_factor = ("as asked" if factor != 1.0 else "none asked"), factor
     text = render(noise, fmt, rate_hz, inflate=factor, why=why, source=source, axis=(what, every),
-                  accel=accel, topic=topic_pair, accel_inflate=accel_factor)
+                  accel=accel, topic=topic_pair, accel_inflate=accel_factor, measured_lines=measured_lines)
     si = stand_in(noise, rate_hz, keeps_b=fmt == "matlab")
     values = exported_values(noise, fmt, rate_hz, factor, accel, accel_factor)
     missing = missing_fields(fmt, values)
@@ -1429,6 +1453,49 @@ def build_export(model: NoiseModel, axis: int | str, fmt: str, rate_hz: float, *
     if fmt == "orbslam3" and orbslam3_frequency(rate_hz)[1]:
         summary["warnings"].append(orbslam3_frequency(rate_hz)[1])
     return Export(noise, accel, fmt, rate_hz, factor, accel_factor, text, summary)
+
+
+def measured_inflation(model: NoiseModel, axis: int | str, meas_path, reference_path,
+                       reference_topic: str, *, imu_topic: str | None = None,
+                       time_offset_s: float | str = "estimate", seed: int = 0
+                       ) -> tuple[float, dict, list[str]]:
+    """``--inflate measured``: the inflation of the exported axis measured on a record with a
+    reference pose topic (:func:`gyroarray.chain.inflation.inflation_for_export`).
+
+    Parameters
+    ----------
+    model : NoiseModel
+    axis : int or {"worst", "mean"}
+        As :func:`build_export`: the axis whose N, K [SI] are the static values; ``"mean"`` pools
+        the record's three axes (gyro index 0), else the exported gyro (1-3: x, y, z).
+    meas_path : str or os.PathLike
+        The IMU record (a bag with an IMU topic, or a CSV with gyros 1-3 on x, y, z).
+    reference_path : str or os.PathLike
+        The bag with the reference topic.
+    reference_topic : str
+        Its PoseStamped or Odometry topic.
+    imu_topic : str, optional
+        The record's IMU topic (default its one IMU topic).
+    time_offset_s : float or "estimate"
+        Added to the IMU stamps [s].
+    seed : int
+        Seed of the factor's interval.
+
+    Returns
+    -------
+    factor : float
+        [-], >= 1.
+    summary : dict
+    header_lines : list of str
+        Four ASCII lines, without comment marks.
+    """
+    # deferred: the inflation measurement (and its bag readers) loads only for --inflate measured
+    from gyroarray.chain.inflation import inflation_for_export
+    noise, _, _ = choose_axis(model, axis)
+    index = 0 if axis == "mean" else noise.gyro
+    return inflation_for_export(meas_path, reference_path, reference_topic, noise.n_rad_rt_s,
+                                noise.k_rad_s_rt_s, index, imu_topic=imu_topic,
+                                time_offset_s=time_offset_s, rng=np.random.default_rng(seed))
 
 
 def verify_file(exp: Export, text: str, *, record=None, seed: int = 0, seconds: float = 7200.0,

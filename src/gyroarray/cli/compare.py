@@ -48,7 +48,9 @@ def _comparison(args, window: bool = False):
         dead = constant_gyros(meas)
         args.window_gyros = [k for k in range(1, meas.n_gyros + 1) if k not in dead]
     else:
-        meas = read_measurement(args.measurement, repair=args.repair, **bag_options(args))
+        # --gaps (fit only): dropped samples kept as gaps in the time stamps, never filled
+        meas = read_measurement(args.measurement, repair=args.repair, gaps=bool(getattr(args, "gaps", False)),
+                                **bag_options(args))
     # what reading the file said, every --repair included (the text `allan` prints): in the notes
     # of every compare-family command (the report lists them as "reading the file")
     args.read_notes = list(meas.notes)
@@ -198,7 +200,8 @@ def _levels_across(comp, args, notes: list):
     left = getattr(args, "left_out", None)          # the first record's constant gyros, left out
     levels = [record_levels(comp.m, gyros, still=comparison_still(comp))]
     for path in args.more:
-        other = read_measurement(path, repair=args.repair, **bag_options(args))
+        other = read_measurement(path, repair=args.repair, gaps=bool(getattr(args, "gaps", False)),
+                                 **bag_options(args))
         if left is not None and other.n_gyros == left[1]:
             other = without_gyros(other, [k for k in range(1, left[1] + 1) if k not in left[0]], left[2])
         if other.n_gyros != comp.m.n_gyros or not np.allclose(other.layout.axes, comp.m.layout.axes, atol=1e-6):
@@ -488,6 +491,9 @@ def add_parser(sub) -> None:
                    help="effect to add before fitting (repeatable), e.g. scale_factor:2, burst; an effect "
                         "that acts on one gyro at a time, without a gyro (or EFFECT:all), is added to every gyro")
     p.add_argument("--out", type=Path, metavar="NEW.toml", help="write the fitted model (readable by --model)")
+    p.add_argument("--gaps", action="store_true",
+                   help="accept gaps in the time stamps (dropped samples): the deviation is pooled over "
+                        "the contiguous parts, nothing interpolated (gaps and missing samples counted)")
     add_force(p)
     p.set_defaults(func=cmd_fit)
 

@@ -1,6 +1,6 @@
 """``gyroarray export``: a gyro's and the accelerometer's noise model as a Kalibr, OpenVINS,
 VINS-Fusion, ORB-SLAM3 or MATLAB file, with its convention in a comment header, an optional derived
-inflation and a check that re-reads the written file with its consumer's parser and compares it
+inflation (simulated, or measured on a bag with a reference pose topic) and a check that re-reads the written file with its consumer's parser and compares it
 with a simulation or a record (:mod:`gyroarray.chain.export`).
 
 The chain (numpy, the simulator) is imported inside the command, so that building the parser
@@ -21,6 +21,7 @@ __all__ = ["add_parser", "cmd_export"]
 FORMAT_NAMES = ("kalibr", "openvins", "vins", "orbslam3", "matlab")
 
 _FACTOR = float_in("--inflate", 0.0, 1e6, lo_open=True)
+_OFFSET = float_in("--time-offset-s", -1e6, 1e6, unit="s")
 
 
 def _axis(text: str):
@@ -31,8 +32,32 @@ def _axis(text: str):
 
 
 def _inflate(text: str):
-    """``auto`` or a factor > 0."""
-    return "auto" if text == "auto" else _FACTOR(text)
+    """``auto``, ``measured`` or a factor > 0."""
+    return text if text in ("auto", "measured") else _FACTOR(text)
+
+
+def _time_offset(text: str):
+    """``estimate`` or an offset [s] added to the IMU stamps."""
+    return "estimate" if text == "estimate" else _OFFSET(text)
+
+
+#: The options only ``--inflate measured`` reads (argparse dest, option).
+_MEASURED_ONLY = (("reference", "--reference"), ("reference_topic", "--reference-topic"),
+                  ("imu_topic", "--imu-topic"), ("time_offset_s", "--time-offset-s"))
+
+
+def _check_measured(args) -> None:
+    """Refuse ``--inflate measured`` without its reference, and its options without it."""
+    if args.inflate == "measured":
+        for dest, opt in _MEASURED_ONLY[:2]:
+            if getattr(args, dest) is None:
+                raise InputError(f"--inflate measured needs {opt} (the bag with the reference pose "
+                                 "topic and that topic: --reference BAG --reference-topic T)")
+        return
+    given = [opt for dest, opt in _MEASURED_ONLY if getattr(args, dest) is not None]
+    if given:
+        raise InputError(f"{', '.join(given)} {'is' if len(given) == 1 else 'are'} read only with "
+                         "--inflate measured (the inflation measured against a reference pose topic)")
 
 
 def cmd_export(args):
@@ -40,23 +65,39 @@ def cmd_export(args):
     from gyroarray.chain.export import SUFFIXES, build_export, verify_file
     from gyroarray.core.outputs import write_text
     from gyroarray.effects.model import NoiseModel
-    if args.record is not None and not args.verify:
-        raise InputError("--record compares the written file with a measurement: it needs --verify")
-    out = output(args.out, args, "--out", inputs=[args.model] + ([args.record] if args.record else []),
-                 suffixes=SUFFIXES[args.format])
+    _check_measured(args)
+    measured = args.inflate == "measured"
+    if args.record is not None and not args.verify and not measured:
+        raise InputError("--record compares the written file with a measurement: it needs --verify "
+                         "(or, with --inflate measured, is the IMU record the inflation is measured on)")
+    inputs = [args.model] + [p for p in (args.record, args.reference) if p is not None]
+    out = output(args.out, args, "--out", inputs=inputs, suffixes=SUFFIXES[args.format])
     model = NoiseModel.from_toml(args.model)
+    axis = args.gyro if args.gyro is not None else args.axis
+    inflate, measured_parts = args.inflate, None
+    if measured:                                   # before writing: a bad bag writes nothing
+        from gyroarray.chain.export import measured_inflation  # deferred: the chain, the bag readers
+        imu_record = args.record if args.record is not None else args.reference
+        try:
+            factor, m_summary, m_lines = measured_inflation(
+                model, axis, imu_record, args.reference, args.reference_topic, imu_topic=args.imu_topic,
+                time_offset_s="estimate" if args.time_offset_s is None else args.time_offset_s,
+                seed=args.seed)
+        except InputError as err:
+            raise err if err.file is not None else err.with_file(args.model)
+        inflate, measured_parts = factor, (m_summary, m_lines)
     try:
-        axis = args.gyro if args.gyro is not None else args.axis
-        exp = build_export(model, axis, args.format, args.rate_hz, inflate=args.inflate, seed=args.seed,
-                           source=Path(args.model).name, topic=args.topic)
+        exp = build_export(model, axis, args.format, args.rate_hz, inflate=inflate, seed=args.seed,
+                           source=Path(args.model).name, topic=args.topic, measured=measured_parts)
     except InputError as err:
         raise err if err.file is not None else err.with_file(args.model)
     record = None
-    if args.record is not None:                       # read before writing: a bad record writes nothing
+    if args.record is not None and args.verify:       # read before writing: a bad record writes nothing
         # deferred: the measurement readers (pandas, the bag readers) load only for --record
         from gyroarray.core.bags import is_bag
         from gyroarray.core.measurement import read_measurement
-        record = read_measurement(args.record, topic=args.topic if is_bag(args.record) else None)
+        bag_topic = args.topic if args.topic is not None else args.imu_topic
+        record = read_measurement(args.record, topic=bag_topic if is_bag(args.record) else None)
     write_text(out, exp.text, force=args.force)
     summary = exp.summary
     summary["out"] = str(out)
@@ -75,7 +116,17 @@ def cmd_export(args):
         lines.append(f"  stand-in random walk for {' + '.join(si['covers'])}: K_eq = "
                      f"{si['k_eq_deg_h_rt_h']:.4g} deg/h/√h, bounds their ADEV for τ >= "
                      f"{si['tau1_s']:.4g} s (within ×2 up to {si['tau2_s']:.4g} s)")
-    if "inflate_auto" in summary:
+    if "inflate_measured" in summary:
+        m = summary["inflate_measured"]
+        nis = {c["label"]: c for c in m["nis"]}
+        held = ", ".join(f"{what} values {nis[label]['mean_nis']:.3g}"
+                         f" ({'inside' if nis[label]['inside'] else 'outside'} "
+                         f"{nis[label]['interval'][0]:.3g}-{nis[label]['interval'][1]:.3g})"
+                         for label, what in (("measured", "measured"), ("static", "static"),
+                                             ("export", "exported")))
+        lines.append(f"  inflation ×{m['factor']:.4g} measured from {m['reference']} topic "
+                     f"{m['reference_topic']} ({m['axis']}; held-out NIS, 1 when consistent: {held})")
+    elif "inflate_auto" in summary:
         a = summary["inflate_auto"]
         lines.append(f"  inflation ×{a['factor']:.4g}: {a['why']}")
         if a["not_simulated"]:
@@ -134,10 +185,23 @@ def add_parser(sub) -> None:
                         "the header says which and lists every gyro's numbers")
     p.add_argument("--gyro", type=positive_int("--gyro"), default=None, metavar="K",
                    help="the model's gyro K (1-based): the same as --axis K")
-    p.add_argument("--inflate", type=_inflate, default=1.0, metavar="auto|X",
+    p.add_argument("--inflate", type=_inflate, default=1.0, metavar="auto|measured|X",
                    help="factor on the numbers, or auto: the one that makes a white + walk "
                         "filter consistent (NIS = 1) on a record simulated from the full model "
-                        "(never below 1; the gyro's only)")
+                        "(never below 1; the gyro's only), or measured: the white density in "
+                        "motion over the model's, measured against --reference's pose topic "
+                        "(never below 1; the gyro's only; held-out NIS in the header)")
+    p.add_argument("--reference", type=Path, default=None, metavar="BAG",
+                   help="with --inflate measured: the ROS bag with the reference pose topic (also "
+                        "the IMU record unless --record names one)")
+    p.add_argument("--reference-topic", default=None, metavar="T",
+                   help="with --inflate measured: the reference's geometry_msgs/PoseStamped or "
+                        "nav_msgs/Odometry topic")
+    p.add_argument("--imu-topic", default=None, metavar="T",
+                   help="with --inflate measured: the IMU topic of the record (default: its one IMU topic)")
+    p.add_argument("--time-offset-s", type=_time_offset, default=None, metavar="X|estimate",
+                   help="with --inflate measured: offset added to the IMU stamps [s], or estimate "
+                        "(default; the header states it)")
     p.add_argument("--topic", default=None, metavar="T",
                    help="the IMU topic of Kalibr/OpenVINS files (default: the model's topic, else /imu0, "
                         "said so in the header); also the topic read from a --record bag")
@@ -149,7 +213,8 @@ def add_parser(sub) -> None:
     p.add_argument("--record", type=Path, default=None, metavar="MEAS",
                    help="with --verify: a measurement (CSV/Parquet with sidecar, or a ROS bag); the "
                         "file's ADEV is compared tau by tau with the record's ADEV and its 95 %% interval "
-                        "over its still parts; exit 1 where the file falls below it")
+                        "over its still parts; exit 1 where the file falls below it; with --inflate "
+                        "measured also the IMU record the inflation is measured on (default --reference)")
     p.add_argument("--seed", type=nonneg_int("--seed"), default=0, help="seed of the simulations")
     add_force(p)
     p.add_argument("--json", action="store_true", help="print one JSON object")

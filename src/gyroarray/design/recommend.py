@@ -122,6 +122,11 @@ class GyroNoise:
         Where each value came from ("user", "default", "model FILE").
     ignored : tuple of str
         Effects of a source model that the predictor does not model.
+    open_from : int or None
+        A per-gyro model that is valid for any N >= this many gyros (an all-gyros entry plus
+        per-gyro entries, docs/model-format.md: the gyros it does not name take the all-gyros
+        entries); ``per_gyro`` then holds its first gyros until :meth:`sized` lengthens it.
+        None: alike gyros, or a per-gyro model whose gyro count fixes N.
     """
 
     arw_deg_rt_h: float
@@ -137,11 +142,40 @@ class GyroNoise:
     corr_arw: np.ndarray | None = field(default=None, compare=False, repr=False)
     corr_rrw: np.ndarray | None = field(default=None, compare=False, repr=False)
     model: Any = field(default=None, compare=False, repr=False)
+    open_from: int | None = field(default=None, compare=False)
 
     @property
     def n_gyros(self) -> int | None:
-        """The gyro count a per-gyro model fixes (None: alike gyros, any N)."""
+        """The gyro count a per-gyro model fixes (None: alike gyros, or an open per-gyro model
+        (:attr:`open_from`): any N)."""
+        return None if self.per_gyro is None or self.open_from is not None else self.n_levels
+
+    @property
+    def n_levels(self) -> int | None:
+        """How many gyros' own levels ``per_gyro`` holds (None: alike gyros)."""
         return None if self.per_gyro is None else int(len(self.per_gyro[ARW]))
+
+    def sized(self, n_gyros: int) -> "GyroNoise":
+        """An open per-gyro model (:attr:`open_from`) with the levels of gyros 1..``n_gyros``
+        (at least): the named gyros their own, every other gyro the all-gyros entries'. The
+        correlation state (a ρ set by :meth:`with_rho`, or the model's) is kept. Anything else:
+        itself.
+
+        Raises
+        ------
+        InputError
+            ``n_gyros`` below :attr:`open_from`: the model names a gyro the array lacks.
+        """
+        if self.open_from is None or cast(int, self.n_levels) >= n_gyros:
+            return self
+        if n_gyros < self.open_from:
+            raise model_gyro_refusal(self.model, n_gyros)
+        base = replace(self, per_gyro=None, corr_arw=None, corr_rrw=None, open_from=None)
+        full = per_gyro_noise(self.model, base, self.sources.get("per_gyro", "model"), n_gyros=n_gyros)
+        return replace(full, rho_arw=self.rho_arw, rho_rrw=self.rho_rrw, sources=self.sources,
+                       corr_arw=None if self.corr_arw is None else full.corr_arw,
+                       corr_rrw=None if self.corr_rrw is None else full.corr_rrw,
+                       open_from=self.open_from)
 
     def __post_init__(self):
         if not (math.isfinite(self.arw_deg_rt_h) and MIN_ARW_DEG_RT_H <= self.arw_deg_rt_h):
@@ -232,8 +266,8 @@ class GyroNoise:
 
     def _per_gyro_model(self, n_gyros: int, keep):
         idx = list(range(n_gyros)) if keep is None else [int(k) for k in keep]
-        if len(idx) != n_gyros or max(idx) >= cast(int, self.n_gyros):       # set with per_gyro
-            raise ValueError(f"keep {idx} does not give {n_gyros} of the model's {self.n_gyros} gyros")
+        if len(idx) != n_gyros or max(idx) >= cast(int, self.n_levels):      # set with per_gyro
+            raise ValueError(f"keep {idx} does not give {n_gyros} of the model's {self.n_levels} gyros")
         p = cast(dict, self.per_gyro)                   # called only when per_gyro is set
         entries = []
         for j, i in enumerate(idx):
@@ -282,6 +316,37 @@ def model_gyro_count(model) -> int:
     return int(n)
 
 
+def model_open_from(model) -> int | None:
+    """The least N of a model valid for any N >= it (None: not such a model).
+
+    docs/model-format.md: "a heterogeneous array is one all-gyros entry plus one entry for each
+    gyro that differs". Such a model (an all-gyros ``arw`` entry, per-gyro entries naming gyros
+    up to k, no ``[array]`` table, no N×N matrix) describes any array of N >= k gyros: gyro j
+    > k takes the all-gyros entries. Its N is then the design's choice, not the model's.
+    """
+    n = max([e.gyro or 0 for e in model.entries] + [0])
+    if n == 0 or getattr(model, "array", None) is not None:
+        return None
+    if not any(e.effect == ARW and e.gyro is None for e in model.entries):
+        return None                     # the gyros it does not name would have no white level
+    try:
+        model.check(n + 1)              # a matrix-valued parameter fixes N: not open
+    except InputError:
+        return None
+    return int(n)
+
+
+def model_gyro_refusal(model, n_gyros: int) -> InputError:
+    """The one-line refusal of an N below the highest gyro an open model names (its file and
+    the entry's line)."""
+    idx, top = max(((i, e.gyro) for i, e in enumerate(model.entries) if e.gyro is not None),
+                   key=lambda t: t[1])
+    return model.located(idx, InputError(
+        f"{model.entries[idx].label}: N = {n_gyros} is refused: the model names gyro {top}, which an "
+        f"array of {n_gyros} gyros lacks; give N >= {top} (--n), or --alike to reduce the model to "
+        "one typical gyro", column="gyro"))
+
+
 def _table_matrix(table, key: str, n: int, default: np.ndarray | None) -> np.ndarray | None:
     """An ``[array]`` correlation for gyros 1..n: its rows and columns of the gyros it names,
     0 between a named and an unnamed gyro, ``default`` (or the identity) between unnamed ones."""
@@ -296,17 +361,25 @@ def _table_matrix(table, key: str, n: int, default: np.ndarray | None) -> np.nda
     return out
 
 
-def per_gyro_noise(model, typical: GyroNoise, source: str = "model") -> GyroNoise:
-    """The gyros of a model each with its own parameters (the model's gyro count fixes N).
+def per_gyro_noise(model, typical: GyroNoise, source: str = "model", *,
+                   n_gyros: int | None = None) -> GyroNoise:
+    """The gyros of a model each with its own parameters (the model's gyro count fixes N, or,
+    for a model valid for any N >= k (:func:`model_open_from`), ``open_from`` = k).
 
     The levels come from the terms the model's effects declare
     (:func:`gyroarray.estimators.noise.model_terms`): white, walk, flicker and Gauss–Markov
     per gyro; the correlation matrices from its correlation term, overridden by the
     ``[array]`` table's ``white_correlation`` / ``walk_correlation`` for the gyros it names.
-    A model that names fewer than 3 gyros (no array) gives ``typical`` back (alike gyros).
+    A model that names fewer than 3 gyros (no array, not open) gives ``typical`` back (alike
+    gyros). ``n_gyros``: the levels of that many gyros (an open model only, :meth:`GyroNoise.sized`).
     """
+    open_from = model_open_from(model)
     n = model_gyro_count(model)
-    if n < 3:                     # names no array (0) or fewer gyros than a 3-axis rate needs
+    if n_gyros is not None:
+        n = int(n_gyros)
+    elif open_from is not None:
+        n = max(n, 3)             # the named gyros (3 at least, a 3-axis rate) until sized
+    elif n < 3:                   # names no array (0) or fewer gyros than a 3-axis rate needs
         return typical
     try:
         model.check(n)
@@ -343,7 +416,29 @@ def per_gyro_noise(model, typical: GyroNoise, source: str = "model") -> GyroNois
         return fallback if c is None else float((c.sum() - np.trace(c)) / (c.size - n))
     return replace(typical, per_gyro=per, corr_arw=c_w, corr_rrw=c_q, model=model,
                    rho_arw=off_mean(c_w, typical.rho_arw), rho_rrw=off_mean(c_q, typical.rho_rrw),
-                   sources={**typical.sources, "per_gyro": source})
+                   sources={**typical.sources, "per_gyro": source}, open_from=open_from)
+
+
+def sized_for(g: GyroNoise, space: "DesignSpace", notes: list | None = None
+              ) -> tuple[GyroNoise, "DesignSpace"]:
+    """``g`` with the levels of the space's largest N (an open per-gyro model,
+    :attr:`GyroNoise.open_from`; anything else as it is) and the space.
+
+    An N below the highest gyro the model names is refused (:func:`model_gyro_refusal`), unless
+    the N list is the default one and ``notes`` is given: then it is left out, with a note.
+    """
+    if g.open_from is None:
+        return g, space
+    short = [n for n in space.ns if n < g.open_from]
+    if short:
+        srcs = space.__dict__.get("_sources", {})
+        keep = tuple(n for n in space.ns if n >= g.open_from)
+        if notes is None or srcs.get("ns") != "default" or not keep:
+            raise model_gyro_refusal(g.model, short[0])
+        notes.append(f"N = {', '.join(map(str, short))}: the model names gyro {g.open_from}; left out")
+        space = replace(space, ns=keep)
+        object.__setattr__(space, "_sources", srcs)
+    return g.sized(max(space.ns)), space
 
 
 def _levels(g: GyroNoise, n: int, keep, dt: float):
@@ -898,6 +993,7 @@ def search(g: GyroNoise, space: DesignSpace, rho: float) -> tuple[list[dict], li
 
     Returns the designs (best first) and notes (what was left out and why).
     """
+    g, space = sized_for(g, space)
     bank = _bank(space, g)
     designs, notes = [], []
     for scheme in space.schemes:
@@ -1146,6 +1242,7 @@ def recommend(g: GyroNoise, space: DesignSpace, *, rhos=None) -> dict:
     single = rhos is None
     rho_list = [g.rho_arw] if single else [float(r) for r in rhos]
     notes: list[str] = []
+    g, space = sized_for(g, space, notes)
     lo, hi = (g.rho_arw, g.rho_arw) if single else (min(rho_list), max(rho_list))
     designs, nt = decide(g, space, lo, hi, rhos_shown=None if single else rho_list)
     notes += nt
@@ -1412,10 +1509,17 @@ def assumptions(g: GyroNoise, space: DesignSpace, rhos, single: bool) -> dict:
         "gyros": (item("alike: every gyro has the noise above (a model's gyros reduced to their "
                        "quadratic mean)", "assumption") if g.per_gyro is None else
                   item({"per_gyro": {k: [float(x) for x in v] for k, v in g.per_gyro.items()},
-                        "statement": f"each of the model's {g.n_gyros} gyros keeps its own parameters "
-                                     f"(gyro k of the model at position k of the layout); the search is "
-                                     f"over the layouts with N = {g.n_gyros}; the values above are "
-                                     "quadratic means, shown for reference (--alike uses them instead)",
+                        "statement": (f"each of the model's {g.n_gyros} gyros keeps its own parameters "
+                                      f"(gyro k of the model at position k of the layout); the search is "
+                                      f"over the layouts with N = {g.n_gyros}; the values above are "
+                                      "quadratic means, shown for reference (--alike uses them instead)"
+                                      if g.open_from is None else
+                                      f"gyros 1–{g.open_from} of the model keep their own parameters "
+                                      "(gyro k at position k of the layout), every other gyro the "
+                                      "all-gyros entries (docs/model-format.md), listed above for "
+                                      f"gyros 1–{g.n_levels}; the search is over N = "
+                                      f"{', '.join(map(str, space.ns))}; the values above are quadratic "
+                                      "means, shown for reference (--alike uses them instead)"),
                         CORRELATION: ("the model's matrices" if g.corr_arw is not None
                                         or g.corr_rrw is not None else "common ρ")},
                        src.get("per_gyro", "model"))),
@@ -1489,6 +1593,8 @@ def monte_carlo_check(designs: list[dict], g: GyroNoise, space: DesignSpace, *,
         difference of the runs' 3-axis mean square with its 95 % CI
         (``resolved``: the interval excludes 0).
     """
+    if g.open_from is not None:         # the designs' N only: a left-out N is not simulated
+        g = g.sized(max(max(space.ns), g.open_from))
     if designs and "worst_case" in designs[0]:
         return check_decision(designs, g, space, replicates=replicates, seed=seed)
     picked = _pick_for_check(designs, top)
@@ -2083,7 +2189,7 @@ def _budget_model(g: GyroNoise, keep):
     if g.model is None or g.per_gyro is None:
         return g.noise_model(len(keep), keep)
     from gyroarray.effects.terms import CorrelationTerm  # lazy: with the registry
-    corr = {eff.name for eff, t in model_terms(g.model, cast(int, g.n_gyros)) if isinstance(t, CorrelationTerm)}
+    corr = {eff.name for eff, t in model_terms(g.model, cast(int, g.n_levels)) if isinstance(t, CorrelationTerm)}
     own = g.noise_model(len(keep), keep)
     own_corr = [e for e in own.entries if e.gyro is None]               # the condition's correlation
     pos = {k + 1: j + 1 for j, k in enumerate(keep)}
@@ -2253,6 +2359,7 @@ def decide(g: GyroNoise, space: DesignSpace, rho_lo: float, rho_hi: float, *,
     objective = resolve_objective(space)
     if objective not in OBJECTIVES:
         raise InputError(f"the objective must be one of {', '.join(OBJECTIVES)}, got {objective!r}")
+    g, space = sized_for(g, space)
     dec = _Decider(g, space, rho_lo, rho_hi, objective)
     notes = []
     cands = []
@@ -2311,7 +2418,11 @@ def decide(g: GyroNoise, space: DesignSpace, rho_lo: float, rho_hi: float, *,
         if space.failures:
             d["mdb_deg_s"] = None
         d["error_budget"] = None
-    if g.per_gyro is not None:
+    if g.per_gyro is not None and g.open_from is not None:
+        notes.append(f"the model's gyros 1–{g.open_from} keep their own noise (gyro k at position k), "
+                     "every other gyro the model's all-gyros entries; the search is over the layouts "
+                     f"with N = {', '.join(map(str, space.ns))} (--alike: one typical gyro)")
+    elif g.per_gyro is not None:
         notes.append(f"the model's {g.n_gyros} gyros keep their own noise (gyro k at position k); the "
                      f"search is over the layouts with N = {g.n_gyros} (--alike: one typical gyro, any N)")
         if {"kf_array", "kf_single"} & set(space.estimators):
