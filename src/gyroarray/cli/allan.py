@@ -78,7 +78,7 @@ def cmd_allan(args) -> tuple[dict, str]:
     from gyroarray.analysis.deviations import RANGE_KIND, canonical_kind
     from gyroarray.analysis.pipeline import detect_pipeline
     from gyroarray.core.measurement import read_measurement
-    from gyroarray.reports.allan_plots import plot_allan
+    from gyroarray.reports.allan_plots import gyro_panel, plot_allan_panels
     kind = canonical_kind(args.kind)
     taus = _parse_taus(args.taus)
     check_plot(args, inputs=measurement_inputs(args))
@@ -86,9 +86,6 @@ def cmd_allan(args) -> tuple[dict, str]:
     if sensor == "acc" and args.gyro is not None:
         raise InputError(f"--gyro {args.gyro} picks a gyro, and --sensor acc analyses the accelerometer "
                          "(acc_x..z, every axis): leave out --gyro, or use --sensor all")
-    if sensor == "acc" and args.plot is not None:
-        raise InputError("--plot draws the gyros' curves in deg/h; it has no accelerometer plot yet: "
-                         "leave out --plot with --sensor acc (--sensor all plots the gyros)")
     streamed = stream_reason(args)                    # a record too long for memory: in chunks
     if streamed is not None:
         if sensor != "gyro":
@@ -102,7 +99,12 @@ def cmd_allan(args) -> tuple[dict, str]:
         raise InputError(f"--sensor {sensor}: the record has no accelerometer columns (acc_x, acc_y, acc_z "
                          "[m/s²]); --sensor gyro analyses its gyros", file=str(args.measurement))
     if sensor == "acc":
-        return _cmd_allan_acc(args, meas, kind, taus)
+        out, text, acc_analyses = _cmd_allan_acc(args, meas, kind, taus)
+        if args.plot is not None:       # the accelerometer's panel alone, in m/s²
+            path, _ = plot_allan_panels([_accel_panel(out, acc_analyses)], args.plot, force=args.force)
+            out["plot"] = str(path)
+            text += f"\nwrote {path} (the accelerometer's curves, in m/s²)"
+        return out, text
     if args.gyro is not None and not 1 <= args.gyro <= meas.n_gyros:
         raise InputError(f"--gyro {args.gyro} is out of range: the measurement has "
                          f"gyros 1..{meas.n_gyros}", file=str(args.measurement))
@@ -146,14 +148,32 @@ def cmd_allan(args) -> tuple[dict, str]:
             lines.append(f"  white level: N = ADEV({w['tau_s']:.4g} s)·√τ = {w['n_deg_rt_h']:.4g} ± "
                          f"{w['n_deg_rt_h_sigma']:.2g} deg/√h (the one fit, fuse and the [array] table read)")
     if sensor == "all":
-        acc_out, acc_text = _cmd_allan_acc(args, meas, kind, taus)
+        acc_out, acc_text, acc_analyses = _cmd_allan_acc(args, meas, kind, taus)
         out["accelerometer"] = acc_out
         lines.append(acc_text)
     if args.plot is not None:
-        path = plot_allan({f"gyro {k}": a for k, a in analyses.items()}, args.plot, force=args.force)
+        panels = [gyro_panel({f"gyro {k}": a for k, a in analyses.items()}, "gyros")]
+        if sensor == "all":             # a panel of its own: m/s², not deg/h
+            panels.append(_accel_panel(acc_out, acc_analyses))
+        path, _ = plot_allan_panels(panels, args.plot, force=args.force)
         out["plot"] = str(path)
-        lines.append(f"wrote {path}" + (" (the gyros' curves only, in deg/h)" if sensor == "all" else ""))
+        lines.append(f"wrote {path}" + (" (the gyros in deg/h, the accelerometer in m/s², side by side)"
+                                        if sensor == "all" else ""))
     return out, "\n".join(lines)
+
+
+def _accel_panel(acc_out: dict, analyses: dict):
+    """The accelerometer's panel of the ``--plot`` figure (m/s²), each axis's fit labelled with the
+    terms ``allan --sensor acc`` resolved (datasheet units, as its JSON)."""
+    from gyroarray.reports.allan_plots import accel_panel  # deferred: matplotlib only to draw
+    names = (("vrw_m_s_rt_h", "VRW", "m/s/√h"), ("accel_rw_m_s2_rt_h", "acc RW", "m/s²/√h"), ("bi_mg", "BI", "mg"))
+    labels = {}
+    for axis in analyses:
+        fit = acc_out["axes"][axis]["fit"]
+        terms = [f"{name} {fit[key]:.3g} {unit}" for key, name, unit in names
+                 if fit.get(key) is not None and fit.get(key + "_resolved")]
+        labels[f"acc_{axis}"] = f"acc_{axis} fit" + (f": {', '.join(terms)}" if terms else "")
+    return accel_panel({f"acc_{a}": x for a, x in analyses.items()}, "accelerometer acc_x..z", labels)
 
 
 def accel_parts(meas, args) -> tuple[list, list[str], dict | None]:
@@ -199,9 +219,10 @@ def accel_parts(meas, args) -> tuple[list, list[str], dict | None]:
                                        float(meas.time_s[b - 1] - meas.time_s[0] + dt)] for a, b in parts]}
 
 
-def _cmd_allan_acc(args, meas, kind: str, taus) -> tuple[dict, str]:
+def _cmd_allan_acc(args, meas, kind: str, taus) -> tuple[dict, str, dict]:
     """``allan --sensor acc``: the Allan deviation of ``acc_x..z`` [m/s²] with its CIs and the
-    accelerometer's terms (:mod:`gyroarray.analysis.accel`)."""
+    accelerometer's terms (:mod:`gyroarray.analysis.accel`); also the analyses by axis (for
+    ``--plot``)."""
     # deferred: numpy and the analysis (numba) load only when the command runs (a fast --help)
     from gyroarray.analysis.accel import accel_fit, analysis_json
     from gyroarray.analysis.allan import fit_tau_count
@@ -230,7 +251,7 @@ def _cmd_allan_acc(args, meas, kind: str, taus) -> tuple[dict, str]:
     lines = [f"{args.measurement}: accelerometer, {meas.n_samples} samples at {1 / meas.dt_s:g} Hz; analysed: "
              "acc_x..z [m/s²]", *[f"note: {n}" for n in out["notes"]]]
     lines += [_format_acc(a, d) for a, d in axes.items()]
-    return out, "\n".join(lines)
+    return out, "\n".join(lines), dict(fit.analyses)
 
 
 def _format_acc(axis: str, d: dict) -> str:
@@ -681,7 +702,9 @@ def add_parser(sub) -> None:
                    help="read the record in chunks, never whole (automatic for a record estimated "
                         "beyond 2 GiB or --max-memory; Parquet recommended): the overlapping ADEV of "
                         "the whole record, --kind oadev")
-    p.add_argument("--plot", type=Path, metavar="OUT.png", help="write the ADEV plot")
+    p.add_argument("--plot", type=Path, metavar="OUT.png",
+                   help="write the ADEV plot: the gyros in deg/h, with --sensor acc the accelerometer "
+                        "in m/s², with --sensor all both side by side")
     add_force(p)
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=cmd_allan)
