@@ -210,10 +210,15 @@ def run_plugin_file(path) -> tuple[ModuleType, bool]:
 
 def unregister(name: str) -> None:
     """Take an effect a plugin registered out of the registry again (a failed conformance
-    check); built-ins and unknown names are left alone."""
+    check); built-ins and unknown names are left alone. The registry is then as if the plugin had
+    never been loaded: its order is the rest's, and :func:`load_plugin` of its file registers it
+    again (the file's entry in the loaded plugins is dropped, not left naming an effect that is
+    gone)."""
     if name in _EFFECTS and not _SOURCE.get(name, "").startswith("gyroarray.effects."):
         del _EFFECTS[name]
         _SOURCE.pop(name, None)
+        for key in [k for k, names in _PLUGINS.items() if name in names]:
+            del _PLUGINS[key]
 
 
 def load_plugin(path) -> list[str]:
