@@ -16,13 +16,19 @@ from gyroarray.core.errors import InputError
 
 __all__ = ["add_parser", "cmd_compare", "cmd_diagnose", "cmd_fit", "cmd_ladder"]
 
+def _read(path, args):
+    """One record of a compare-family command, read with the command's options."""
+    from gyroarray.core.measurement import read_measurement  # deferred: numpy, pandas (a fast --help)
+    # --gaps (fit only): dropped samples kept as gaps in the time stamps, never filled
+    return read_measurement(path, repair=args.repair, gaps=getattr(args, "gaps", False), **bag_options(args))
+
+
 def _comparison(args, window: bool = False):
     """Check the outputs, read the measurement (and model) of a compare-family
     command; build the chain. ``window`` (diagnose): a record over the memory budget is read
     as its longest window that fits (:mod:`gyroarray.chain.long_record`), ``args.window_plan``."""
     # deferred: the chain (numpy, numba) loads only when the command runs (a fast --help)
     from gyroarray.chain.compare import ModelComparison, check_record_needs
-    from gyroarray.core.measurement import read_measurement
     from gyroarray.core.outputs import markdown_figures
     from gyroarray.effects.model import NoiseModel
     inputs = measurement_inputs(args)
@@ -48,9 +54,7 @@ def _comparison(args, window: bool = False):
         dead = constant_gyros(meas)
         args.window_gyros = [k for k in range(1, meas.n_gyros + 1) if k not in dead]
     else:
-        # --gaps (fit only): dropped samples kept as gaps in the time stamps, never filled
-        meas = read_measurement(args.measurement, repair=args.repair, gaps=bool(getattr(args, "gaps", False)),
-                                **bag_options(args))
+        meas = _read(args.measurement, args)
     # what reading the file said, every --repair included (the text `allan` prints): in the notes
     # of every compare-family command (the report lists them as "reading the file")
     args.read_notes = list(meas.notes)
@@ -191,7 +195,6 @@ def _levels_across(comp, args, notes: list):
     # deferred: the chain (numpy, numba) loads only when the command runs (a fast --help)
     import numpy as np
     from gyroarray.chain.array_model import comparison_still, levels_across, record_levels
-    from gyroarray.core.measurement import read_measurement
     if comp.N < 2:
         raise InputError("fit with several records combines the gyros of one array; this record has one gyro",
                          file=comp.name)
@@ -200,8 +203,7 @@ def _levels_across(comp, args, notes: list):
     left = getattr(args, "left_out", None)          # the first record's constant gyros, left out
     levels = [record_levels(comp.m, gyros, still=comparison_still(comp))]
     for path in args.more:
-        other = read_measurement(path, repair=args.repair, gaps=bool(getattr(args, "gaps", False)),
-                                 **bag_options(args))
+        other = _read(path, args)
         if left is not None and other.n_gyros == left[1]:
             other = without_gyros(other, [k for k in range(1, left[1] + 1) if k not in left[0]], left[2])
         if other.n_gyros != comp.m.n_gyros or not np.allclose(other.layout.axes, comp.m.layout.axes, atol=1e-6):
