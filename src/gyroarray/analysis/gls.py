@@ -137,6 +137,76 @@ def _rw_forward(il, cv, b):  # pragma: no cover - compiled
             prev[j] = z
 
 
+@njit(cache=True, inline="always")
+def _rw_delta(x, idx, dense, i):  # pragma: no cover - compiled
+    """Δ_i of :meth:`RWWhitener.diff`: x[i+1] − x[i] when ``dense``, else x[idx_i] − x[idx_i − 1]."""
+    if dense:
+        return x[i + 1] - x[i]
+    j = idx[i]
+    return x[j] - x[j - 1]
+
+
+@njit(cache=True)
+def _rw_whiten1(il, cv, x, idx, dense, scale):  # pragma: no cover - compiled
+    """:meth:`RWWhitener.whiten` of one column x (n,) in one pass, the same bits: Δ_i (x[i+1] − x[i]
+    when ``dense``, else x[idx_i] − x[idx_i − 1]), z_i = (Δ_i + c_i z_{i−1}) / l_i, times ``scale``
+    (the gathers of :meth:`~RWWhitener.diff` cost 5x the recursion on a record with gaps)."""
+    m = il.size
+    out = np.empty(m)
+    prev = 0.0
+    for i in range(m):
+        z = (_rw_delta(x, idx, dense, i) + cv[i] * prev) * il[i]
+        prev = z
+        out[i] = z * scale
+    return out
+
+
+@njit(cache=True)
+def _rw_whiten_at(link, rho, x, idx, dense, scale):  # pragma: no cover - compiled
+    """:func:`_rw_pivots` of (``link``, ``rho``) and :func:`_rw_whiten1` of x with them, in one
+    pass, the same bits as the two: (z, log det Σ̃). For a likelihood scanned over q (r fixed):
+    the pivots change with ρ, the differences and their links do not."""
+    m = link.size
+    out = np.empty(m)
+    logdet = 0.0
+    prod = 1.0
+    lprev = 1.0
+    cprev = 0.0
+    fixed = False
+    prev = 0.0
+    for i in range(m):
+        if i > 0 and link[i]:
+            if fixed:
+                ci = cprev
+                l2 = lprev * lprev
+                li = lprev
+            else:
+                ci = rho / lprev
+                l2 = 1.0 - ci * ci
+                li = math.sqrt(l2)
+                fixed = li == lprev
+        else:
+            fixed = False
+            ci = 0.0
+            l2 = 1.0
+            li = 1.0
+        il = 1.0 / li
+        cprev = ci
+        lprev = li
+        prod *= l2
+        if (i & 255) == 255:
+            logdet += math.log(prod)
+            prod = 1.0
+        z = (_rw_delta(x, idx, dense, i) + ci * prev) * il
+        prev = z
+        out[i] = z * scale
+    return out, logdet + math.log(prod)
+
+
+#: The ``idx`` :func:`_rw_whiten1` is passed when the differences are dense (not read).
+_NO_IDX = np.zeros(0, dtype=np.int64)
+
+
 @njit(cache=True)
 def _gram(za, zy):  # pragma: no cover - compiled
     """One pass: G = AᵀA, Aᵀy and yᵀy for A = za (m, p), y = zy (m,)."""
@@ -227,6 +297,7 @@ class RWWhitener:
         self.n_segments = int(m - link.sum()) if m else 0
         self.s = q + 2.0 * r
         rho = r / self.s
+        self.link = link
         self.il, self.cv, self.logdet_norm = _rw_pivots(link, rho)
         self.logdet = m * math.log(self.s) + self.logdet_norm   # log det Σ
 
@@ -252,10 +323,31 @@ class RWWhitener:
 
     def whiten(self, *cols) -> np.ndarray:
         """z = L̃⁻¹Δx/√s of the columns of ``cols``: (m,) for one 1-D x, else (m, K) (Fortran)."""
+        if len(cols) == 1 and np.ndim(cols[0]) == 1:
+            x = np.asarray(cols[0], dtype=float)
+            if x.shape == (self.n,):            # one column, one pass (:func:`_rw_whiten1`)
+                idx = _NO_IDX if self.idx is None else self.idx
+                return _rw_whiten1(self.il, self.cv, x, idx, self.idx is None, 1.0 / math.sqrt(self.s))
         b = self.diff(*cols)
         _rw_forward(self.il, self.cv, b)
         b *= 1.0 / math.sqrt(self.s)
         return b[:, 0] if (len(cols) == 1 and np.ndim(cols[0]) == 1) else b
+
+    def whiten_at(self, x, r: float, q: float) -> tuple[np.ndarray, float]:
+        """(z, log det Σ) of one column x (n,) under other variances (r, q) [x's unit squared] on
+        the same samples (n, use, breaks): the same bits as ``RWWhitener(n, r, q, use,
+        breaks)``'s :meth:`whiten` of x and its ``logdet``, without building that whitener (a
+        likelihood scanned over q)."""
+        r, q = float(r), float(q)
+        if not (math.isfinite(r) and math.isfinite(q) and r >= 0.0 and q >= 0.0 and r + q > 0.0):
+            raise ValueError(f"r and q must be finite, >= 0 and not both 0, got r={r!r}, q={q!r}")
+        x = np.asarray(x, dtype=float)
+        if x.shape != (self.n,):
+            raise ValueError(f"x must have shape ({self.n},), got {x.shape}")
+        s = q + 2.0 * r
+        idx = _NO_IDX if self.idx is None else self.idx
+        z, logdet_norm = _rw_whiten_at(self.link, r / s, x, idx, self.idx is None, 1.0 / math.sqrt(s))
+        return z, self.m * math.log(s) + logdet_norm
 
     def fit_whitened(self, zy: np.ndarray, za: np.ndarray, zi: np.ndarray | None = None) -> GLSFit:
         """GLS from whitened data zy (m,) and regressors za (m, p); with whitened instruments

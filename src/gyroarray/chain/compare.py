@@ -2129,10 +2129,12 @@ def _ml_q(e: np.ndarray, r: float, use: np.ndarray, breaks: np.ndarray | None = 
 
     Cached by content: a ladder step leaves most gyros' residuals as they were (0.14 s per call
     on 1e6 samples, six calls per analysis of the ADIS16405)."""
+    w = RWWhitener(e.size, r, r, use, breaks)       # the differences and their links, built once
+
     def nll(lq):
-        w = RWWhitener(e.size, r, math.exp(lq), use, breaks)
-        z = w.whiten(e)
-        return 0.5 * (w.logdet + float(z @ z))
+        # RWWhitener(e.size, r, exp(lq), use, breaks): its whitened e and log det, the same bits
+        z, logdet = w.whiten_at(e, r, math.exp(lq))
+        return 0.5 * (logdet + float(z @ z))
     lo, hi = math.log(1e-12 * r), math.log(r) + 3.0
     res = optimize.minimize_scalar(nll, bounds=(lo, hi), method="bounded", options={"xatol": 0.05})
     return float(math.exp(res.x))

@@ -41,6 +41,7 @@ class GSensitivity(RegressionEffect):
     """
 
     name = "g_sensitivity"
+    own_column = True                  # its test reads its gyro's column of the residual only
     order = 19
     stage = Stage.ADD
     needs = frozenset({"acc"})

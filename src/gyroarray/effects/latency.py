@@ -23,6 +23,7 @@ class Latency(RegressionEffect):
     sample is held; a delay as long as the record is refused."""
 
     name = "latency"
+    own_column = True                  # its test reads its gyro's column of the residual only
     order = 13
     stage = Stage.DELAY
     needs = frozenset({"ref", "motion"})

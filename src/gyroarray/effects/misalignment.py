@@ -38,6 +38,7 @@ class Misalignment(RegressionEffect):
     """
 
     name = "misalignment"
+    own_column = True                  # its test reads its gyro's column of the residual only
     order = 11
     stage = Stage.SENSE
     needs = frozenset({"ref", "motion"})

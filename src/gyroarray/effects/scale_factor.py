@@ -22,6 +22,7 @@ class ScaleFactor(RegressionEffect):
     """s·u added to the output, u the gyro's sensed input (after latency), s = ppm·1e-6."""
 
     name = "scale_factor"
+    own_column = True                  # its test reads its gyro's column of the residual only
     order = 9
     stage = Stage.SCALE
     needs = frozenset({"ref", "motion"})

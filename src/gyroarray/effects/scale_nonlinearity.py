@@ -22,6 +22,7 @@ class ScaleNonlinearity(RegressionEffect):
     """
 
     name = "scale_nonlinearity"
+    own_column = True                  # its test reads its gyro's column of the residual only
     order = 10
     stage = Stage.SCALE
     needs = frozenset({"ref", "motion"})

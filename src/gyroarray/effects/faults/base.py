@@ -182,6 +182,7 @@ class MeanFault(FaultEffect):
     effects that move it too by explaining away both ways (:func:`rank_against`)."""
 
     predicts = True
+    own_column = True          # its test reads its gyro's column of the residual only
 
     def prefer(self, mine, other, ctx):
         return rank_against(self, mine, other, ctx)
