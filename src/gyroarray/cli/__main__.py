@@ -2,4 +2,5 @@
 
 from gyroarray.cli.main import main
 
-raise SystemExit(main())
+if __name__ == "__main__":          # imported (the API docs' autosummary), it runs nothing
+    raise SystemExit(main())

@@ -148,18 +148,17 @@ def _write_report(comp, steps, args) -> dict:
     return write_compare_report(comp, steps, args.out, args.md, title=title, force=args.force)
 
 
-def _write_model(path: Path, model, args, notes: list | None = None) -> str:
+def _write_model(path: Path, model, args, notes: list | None = None, described: tuple = ()) -> str:
     """The fitted model as TOML at ``path`` (checked by :func:`_comparison`); returns the path.
 
     Fitted on a record with constant gyros left out (``args.left_out``), the model takes the
     record's gyro numbers back, the left-out gyros without entries of their own, said in its
-    description and in ``notes``."""
+    description and in ``notes``. ``described``: further notes for the model's description."""
     # deferred: numba and the effect registry load only when the command runs (a fast --help)
     from gyroarray.core.outputs import write_text
     from gyroarray.effects.model import NoiseModel
-    extra = getattr(args, "model_description_notes", [])
     model = NoiseModel(model.entries, description="; ".join([f"fitted to {args.measurement} by gyroarray "
-                                                            f"{args.command}", *extra]),
+                                                            f"{args.command}", *described]),
                        array=model.array, accelerometer=model.accelerometer, topic=model.topic)
     left = getattr(args, "left_out", None)
     if left is not None:
@@ -326,9 +325,9 @@ def cmd_fit(args):
         from gyroarray.chain.array_model import with_levels  # deferred: the chain (numpy, numba)
         model = with_levels(model, across)
         res["levels_across_records"] = across.to_json_dict()
-    model = _with_accelerometer(model, comp.m, args, notes, res)
+    model, described = _with_accelerometer(model, comp.m, args, notes, res)
     if args.out is not None:
-        res["model"] = _write_model(args.out, model, args, notes)
+        res["model"] = _write_model(args.out, model, args, notes, described)
     text = "\n".join([f"{comp.name}: discrepancy {before.discrepancy:.3g} -> {after.discrepancy:.3g} "
                       f"({'consistent' if after.consistent else 'NOT consistent'})",
                       "fitted model (beyond ARW + RRW):"] + (_model_lines(after.model) or ["  (baseline only)"])
@@ -342,7 +341,7 @@ def cmd_fit(args):
 def _with_accelerometer(model, meas, args, notes: list, res: dict):
     """``model`` with the record's ``[accelerometer]`` table and bag ``topic`` (``fit``): the terms of
     :func:`gyroarray.cli.allan.accel_noise`; without acc columns no table, said in the notes and in
-    the model's description."""
+    the model's description. Returns (model, the notes for its description)."""
     # deferred: the analysis (numpy, numba) loads only when the command runs (a fast --help)
     from dataclasses import replace
     from gyroarray.cli.allan import accel_noise
@@ -352,10 +351,9 @@ def _with_accelerometer(model, meas, args, notes: list, res: dict):
     res["accelerometer"] = None if table is None else table.to_dict()
     # the [accelerometer] fields the model does not hold (never written as 0): all without a table
     res["accelerometer_missing"] = list(ACCEL_TERMS) if table is None else list(table.missing)
-    if table is None:
-        args.model_description_notes = acc_notes
     topics = tuple(getattr(meas, "topics", ()) or ())
-    return replace(model, accelerometer=table, topic=topics[0] if len(topics) == 1 else model.topic)
+    return (replace(model, accelerometer=table, topic=topics[0] if len(topics) == 1 else model.topic),
+            tuple(acc_notes) if table is None else ())
 
 
 def cmd_ladder(args):
