@@ -363,9 +363,12 @@ def comparison_still(comp) -> np.ndarray | None:
     """
     m = comp.m
     n = int(m.n_samples)
-    if comp.ref is not None:
+    gaps = getattr(comp, "segments", [(0, n)])[1:]
+    if comp.ref is not None and not gaps:
         static = np.asarray(comp.static, bool)
         return static if static.shape == (n,) else None
+    if comp.ref is not None:
+        return None        # with gaps the static mask is of the stitched record: not mapped back
     if not comp.parts_s:
         return np.ones(n, bool)
     t = np.asarray(m.time_s, float) - float(m.time_s[0])
@@ -373,6 +376,10 @@ def comparison_still(comp) -> np.ndarray | None:
     still = np.zeros(n, bool)
     for a, b in comp.parts_s:
         still |= (t >= a - half) & (t < b - half)
+    # a record read with --gaps: the first sample after each gap is left out, so that no run of
+    # the mask (and no difference of the array model) spans a gap
+    for a, _ in gaps:
+        still[a] = False
     return still
 
 

@@ -62,6 +62,7 @@ from gyroarray.effects.fitting import EffectFit, chi2_to_z, z_from_log_p
 from gyroarray.chain.localise import Localisation, plain_json, default_nperseg, residual_psd
 from gyroarray.chain.localise import localise as localise_residual
 from gyroarray.analysis.motion import still_mask
+from gyroarray.analysis.deviations import MIN_CUT_PART, contiguous_segments, cut_at_segments
 from gyroarray.analysis.pipeline import PipelineReport, detect_pipeline, held_samples, passband_change
 from gyroarray.effects.outliers import MOTION_RAW, Outliers, clean_spikes
 from gyroarray.analysis.reference_noise import describe as describe_own_noise
@@ -773,7 +774,7 @@ class ModelComparison:
         self._check_usable()
         self.parts: list[tuple[int, int]] = []      # stitched still parts, [start, stop) of the new record
         self.parts_s: list[tuple[float, float]] = []  # ... and where they were in the measurement [s]
-        if self.ref is None:
+        if self.ref is None or len(self.segments) > 1:
             self._keep_still_parts()
         self.E0 = self.y - (self.ref @ self.H.T if self.ref is not None else 0.0)
         if self.ref is not None:
@@ -817,7 +818,8 @@ class ModelComparison:
 
     # -- set-up -----------------------------------------------------------
     def _keep_still_parts(self) -> None:
-        """No reference: keep the parts the outputs show still (:func:`~gyroarray.analysis.motion.still_mask`).
+        """Keep the parts the fits can read, stitched: the still ones of a record without a
+        reference, cut at the gaps of ``time_s`` of a record read with ``--gaps``.
 
         A record without ``ref_*`` that moves (a hand-turned board, a table
         run without its log) would read its motion as noise. Its still parts
@@ -829,12 +831,34 @@ class ModelComparison:
         offset is a free parameter of their regressions (``FitContext.parts``,
         ``breaks`` of :func:`~gyroarray.analysis.gls.gls_rw`), else the
         equalised means would absorb part of a temperature signal.
+
+        A record with gaps (:attr:`segments`, steps over
+        :data:`~gyroarray.analysis.deviations.GAP_FACTOR` periods) is cut at them
+        (:func:`~gyroarray.analysis.deviations.cut_at_segments`: pieces of at least
+        :data:`~gyroarray.analysis.deviations.MIN_CUT_PART` samples) and stitched the same way,
+        so that no difference, Allan average or random walk of the fits runs across a gap (what
+        ``allan --gaps`` pools); with a reference rate each part's mean *residual* is set to
+        the first part's (the outputs keep their motion), and the reference is cut with them.
         """
-        still = still_mask(self.y, self.H, self.dt)
-        if still.all():
-            return
-        runs = [(a, b) for a, b in true_runs(still) if b - a >= MIN_STILL_PART]
+        gapped = len(self.segments) > 1
+        if self.ref is None:
+            still = still_mask(self.y, self.H, self.dt)
+            if still.all() and not gapped:
+                return
+            runs = ([(0, self.n)] if still.all() else
+                    [(a, b) for a, b in true_runs(still) if b - a >= MIN_STILL_PART])
+        else:
+            still, runs = None, [(0, self.n)]
+        self.cut_for_motion = still is not None and not bool(still.all())
+        if gapped:
+            runs = cut_at_segments(runs, self.segments)
         total = sum(b - a for a, b in runs)
+        if total < MIN_STATIC and (still is None or still.all()):
+            raise InputError(
+                f"the record has {len(self.segments) - 1} gap(s) in time_s and its contiguous parts "
+                f"(at least {MIN_CUT_PART} samples each) add up to {total} samples ({total * self.dt:.1f} s), at least "
+                f"{MIN_STATIC} samples ({MIN_STATIC * self.dt:.1f} s) are needed to calibrate the noise",
+                file=self.name)
         if total < MIN_STATIC:
             longest = max((b - a for a, b in true_runs(still)), default=0)
             raise InputError(
@@ -844,17 +868,27 @@ class ModelComparison:
                 f"{MIN_STILL_PART * self.dt:.1f} s not counted), at least {MIN_STATIC * self.dt:.1f} s are "
                 f"needed to calibrate the noise; record a longer static part or add the reference rate",
                 file=self.name)
-        first = self.y[runs[0][0]:runs[0][1]].mean(axis=0)
-        pieces, start = [], 0
+        if self.ref is None:
+            first = self.y[runs[0][0]:runs[0][1]].mean(axis=0)
+            pieces = [self.y[a:b] - self.y[a:b].mean(axis=0) + first for a, b in runs]
+        else:
+            e0 = self.y - self.ref @ self.H.T
+            first = e0[runs[0][0]:runs[0][1]].mean(axis=0)
+            pieces = [self.y[a:b] + (first - e0[a:b].mean(axis=0)) for a, b in runs]
+        start = 0
         for a, b in runs:
-            pieces.append(self.y[a:b] - self.y[a:b].mean(axis=0) + first)
             self.parts.append((start, start + b - a))
+            # where the part was in the measurement [s] (its own clock: the gaps included)
             self.parts_s.append((float(self.t[a]), float(self.t[b - 1] + self.dt)))
             start += b - a
         idx = np.concatenate([np.arange(a, b) for a, b in runs])
         self.y = np.concatenate(pieces)
         self.temp = None if self.temp is None else self.temp[idx]
         self.acc = None if self.acc is None else self.acc[idx]
+        if self.ref is not None:
+            self.ref = self.ref[idx]
+            self.ref_raw = None if self.ref_raw is None else self.ref_raw[idx]
+            self.ref_instrument = None if self.ref_instrument is None else self.ref_instrument[idx]
         self.n = idx.size
         self.t = self.t_sim = self.t[0] + np.arange(self.n) * self.dt
 
@@ -902,15 +936,33 @@ class ModelComparison:
         return NoiseModel(tuple(entries), description=model.description, source=model.source)
 
     def _check_usable(self):
+        """Refuse a record too short to calibrate the noise, or whose clock jitters by more than a
+        quarter step; find its gaps (:attr:`segments`: the contiguous runs of samples between steps
+        over :data:`~gyroarray.analysis.deviations.GAP_FACTOR` periods, one run without gaps, and
+        :attr:`missing`: the samples they lack), which :meth:`_keep_still_parts` cuts the record at."""
         if self.n < MIN_STATIC:
             raise InputError(f"too short for a diagnosis: {self.n} samples ({self.n * self.dt:.1f} s); "
                              f"at least {MIN_STATIC} samples of a static part are needed to "
                              f"calibrate the noise", file=self.name)
+        self.segments, self.missing = contiguous_segments(self.t, self.dt)
         steps = np.diff(self.t)
-        if np.max(np.abs(steps - self.dt)) > 0.25 * self.dt:
+        across = np.array([b - 1 for _, b in self.segments[:-1]], dtype=int)   # the steps over a gap
+        within = np.delete(steps, across)
+        if within.size and np.max(np.abs(within - self.dt)) > 0.25 * self.dt:
             raise InputError("the sample times are not uniform (the Allan and regression fits need "
-                             "a uniform step); resample or repair the record first", file=self.name)
-        self.t = self.t_sim          # jitter below a quarter step: the fits use the uniform clock
+                             "a uniform step between gaps); resample or repair the record first", file=self.name)
+        self.cut_for_motion = False  # set by _keep_still_parts when still parts are kept
+        if len(self.segments) == 1:
+            self.t = self.t_sim      # jitter below a quarter step: the fits use the uniform clock
+        # with gaps the measured clock stays until the record is cut at them (_keep_still_parts)
+
+    def gap_summary(self) -> dict | None:
+        """The gaps the record was cut at (None without gaps): ``gaps``, ``missing_samples``,
+        ``parts`` (the contiguous parts the fits read) and ``samples`` (theirs, in all)."""
+        if len(self.segments) < 2:
+            return None
+        return {"gaps": len(self.segments) - 1, "missing_samples": int(self.missing),
+                "parts": len(self.parts), "samples": int(self.n)}
 
     # -- services of the fit context ----------------------------------------
     def attitude(self):
@@ -1542,10 +1594,22 @@ class ModelComparison:
         return out
 
     def _record_notes(self) -> list[str]:
-        """What a record without a reference rate cannot show."""
+        """What a record without a reference rate, or with gaps, cannot show."""
+        gaps = self.gap_summary()
+        out = [] if gaps is None else [
+            f"{gaps['gaps']} gap(s) in time_s ({gaps['missing_samples']} sample(s) missing): fitted on "
+            f"its {gaps['parts']} contiguous part(s) ({gaps['samples']} samples), stitched with each part's "
+            f"mean {'residual ' if self.ref is not None else ''}set to the first's for the noise (the "
+            f"deterministic fits keep one free offset per part); no Allan average or random walk is read "
+            f"across a gap, and times are on the stitched record"]
         if self.ref is not None:
-            return []
+            return out
         needing = ", ".join(e.name for e in REGISTRY.values() if "ref" in e.needs)
+        if gaps is not None and not self.cut_for_motion:
+            return out + [f"no reference rate: {needing} need ref_x, ref_y, ref_z"]
+        if gaps is not None:
+            return out + [f"no reference rate: the outputs show motion, so only their still parts, cut at "
+                          f"the gaps, are diagnosed; {needing} need ref_x, ref_y, ref_z"]
         if self.parts:
             span = self.parts_s[-1][1] - self.parts_s[0][0]
             whole = self.m.time_s[-1] - self.m.time_s[0] + self.dt

@@ -181,6 +181,10 @@ def _array_fit(comp, notes: list):
     from gyroarray.chain.array_model import array_model, comparison_still
     if comp.N < 2:
         return None
+    if comp.ref is not None and comp.gap_summary() is not None:
+        notes.append("no array model ([array] table): a record with gaps and a reference rate is stitched "
+                     "for the fits, and its static samples are not mapped back to the record's clock")
+        return None
     try:
         return array_model(comp.m, still=comparison_still(comp))
     except InputError as err:
@@ -317,6 +321,12 @@ def cmd_fit(args):
     res = {"discrepancy_before": before.discrepancy, "discrepancy_after": after.discrepancy,
            "consistent": after.consistent, "effects": after.effects_json(),
            "notes": notes}
+    gaps = comp.gap_summary()               # with --gaps: the contiguous parts the fits read
+    if gaps is not None:
+        res["gaps"] = gaps
+        notes.append(f"{gaps['gaps']} gap(s) in time_s ({gaps['missing_samples']} sample(s) missing): fitted "
+                     f"on its {gaps['parts']} contiguous part(s), {gaps['samples']} samples; no difference "
+                     "or Allan average is read across a gap")
     if comp.N >= 2:
         res["array_model"] = None if arr is None else arr.to_json_dict()
     model = after.model if arr is None else with_array_model(after.model, arr)

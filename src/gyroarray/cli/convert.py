@@ -177,7 +177,7 @@ def _convert_streamed(args, out: Path, opts: dict) -> tuple[dict, str]:
     rate = float(stream.rate_hz or 1.0)
     stub = ms.Measurement(time_s=np.array([0.0, 1.0]), gyro_deg_s=np.zeros((2, 3)),
                           layout=stream.layout, sample_rate_hz=rate,
-                          description=stream.description)
+                          description=stream.description, topics=(stream.topic,))
     sidecar = tomli_w.dumps(ms._sidecar_dict(stub)).encode("utf-8")
     write_many([(out, staged), (toml_path, sidecar)], force=args.force)
     notes = list(stream.notes)

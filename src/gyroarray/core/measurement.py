@@ -5,7 +5,8 @@ A measurement is a CSV of samples plus a TOML sidecar with the same stem
 
     run42.csv      (or run42.csv.gz)   time_s, gyro1..gyroN, [ref_x, ref_y, ref_z], [temp_c],
                                        [acc_x, acc_y, acc_z]
-    run42.toml                         sample_rate_hz, description, [layout], [site], [units]
+    run42.toml                         sample_rate_hz, description, [topics], [layout], [site],
+                                       [units]
 
 :func:`read_measurement` turns such a pair into a :class:`Measurement`, the
 one in-memory type used everywhere; :func:`write_measurement` writes one back
@@ -50,6 +51,8 @@ Reading rules (where the spec leaves a choice, the choice made here)
   ``time``, ``gyro``, ``ref``, ``temp``, ``acc``, see :data:`ACCEPTED_UNITS`);
   values are converted to the canonical file units (s, deg/s, degC, m/s²)
   with a note.
+  Optional ``topics``: the ROS bag topics the record was converted from (``gyroarray
+  convert`` writes them), an array of non-empty strings, at most one per gyro.
   Unknown top-level keys are noted; unknown keys inside ``[layout]``,
   ``[site]`` and ``[units]`` are refused, since every key there changes how
   the samples are interpreted (a misspelt ``gyro`` unit must not pass).
@@ -260,8 +263,8 @@ class Measurement:
         (``acc_x``, ``acc_y``, ``acc_z``; +g0 on z at rest, level, z up);
         None when the file has no ``acc_*`` columns.
     topics : tuple of str
-        The ROS bag topics the record came from (``("/imu0",)``), in the order of the gyros;
-        ``()`` for a CSV or Parquet measurement.
+        The ROS bag topics the record came from (``("/imu0",)``), in the order of the gyros:
+        read from a bag, or from a converted record's sidecar (``topics``); ``()`` when unknown.
 
     Notes
     -----
@@ -551,6 +554,35 @@ class _Sidecar:
     site: Site | None
     units: dict
     notes: tuple[str, ...]
+    topics: tuple[str, ...] = ()
+
+
+#: Longest topic name a sidecar's ``topics`` may hold [characters] (a sanity bound: ROS names are
+#: short; a longer string is not a topic).
+MAX_TOPIC_CHARS = 1024
+
+
+def _parse_topics(doc: TomlDoc, n_gyros: int) -> tuple[str, ...]:
+    """The sidecar's ``topics`` (the bag topics a converted record came from), checked: an array of
+    at most ``n_gyros`` non-empty strings of at most :data:`MAX_TOPIC_CHARS` characters, without
+    control characters; ``()`` when the key is absent."""
+    if "topics" not in doc.data:
+        return ()
+    topics = doc.data["topics"]
+    if not isinstance(topics, list):
+        raise doc.error(f"topics must be an array of strings (the ROS bag topics, e.g. [\"/imu0\"]), "
+                        f"got {toml_type(topics)}", "topics")
+    if len(topics) > n_gyros:
+        raise doc.error(f"topics names {len(topics)} topics for {n_gyros} gyro(s); each topic gives at "
+                        "least one gyro", "topics")
+    for k, t in enumerate(topics):
+        key = f"topics[{k}]"
+        if not isinstance(t, str):
+            raise doc.error(f"{key} must be a string (a ROS topic name), got {toml_type(t)}", key)
+        if not t or len(t) > MAX_TOPIC_CHARS or any(ord(c) < 32 or ord(c) == 127 for c in t):
+            raise doc.error(f"{key} must be a non-empty topic name of at most {MAX_TOPIC_CHARS} "
+                            f"characters without control characters, got {short_repr(t)}", key)
+    return tuple(topics)
 
 
 def _load_toml(path: Path, what: str = "sidecar") -> TomlDoc:
@@ -563,7 +595,7 @@ def _load_toml(path: Path, what: str = "sidecar") -> TomlDoc:
 def _read_sidecar(path: Path) -> _Sidecar:
     doc = _load_toml(path)
     d = doc.data
-    known = {"sample_rate_hz", "description", "layout", "site", "units", "fused"}   # fused: gyroarray fuse's provenance
+    known = {"sample_rate_hz", "description", "layout", "site", "units", "fused", "topics"}   # fused: gyroarray fuse's provenance
     unknown = sorted(set(d) - known)
     notes = [f"{doc.name}: ignored unknown key(s) {', '.join(unknown)}"] if unknown else []
     if "sample_rate_hz" not in d:
@@ -579,7 +611,7 @@ def _read_sidecar(path: Path) -> _Sidecar:
     layout, layout_notes = parse_layout(doc)
     return _Sidecar(name=doc.name, sample_rate_hz=rate, description=description,
                     layout=layout, site=parse_site(doc), units=_parse_units(doc),
-                    notes=tuple(notes + layout_notes))
+                    notes=tuple(notes + layout_notes), topics=_parse_topics(doc, layout.n_gyros))
 
 
 _CONE_KEYS = ("scheme", "n_gyros", "alpha_deg")
@@ -1390,7 +1422,7 @@ def _build(values: np.ndarray, cols: _Columns, side: _Sidecar, name: str,
         ref_deg_s=values[:, g["ref"]] if "ref" in g else None,
         temp_c=values[:, g["temp"].start] if "temp" in g else None,
         site=side.site, description=side.description, source=name, notes=notes,
-        acc_m_s2=values[:, g["acc"]] if "acc" in g else None)
+        acc_m_s2=values[:, g["acc"]] if "acc" in g else None, topics=side.topics)
 
 
 def _rate_note(time_s: np.ndarray, side: _Sidecar) -> list[str]:
@@ -2253,6 +2285,7 @@ def _positions_entry(layout: Layout) -> dict:
 
 def _sidecar_dict(m: Measurement) -> dict:
     doc = {"sample_rate_hz": m.sample_rate_hz, "description": m.description,
+           **({"topics": list(m.topics)} if m.topics else {}),
            "layout": _layout_table(m.layout)}
     if m.site is not None:
         doc["site"] = {"latitude_deg": _exact_deg(m.site.latitude_rad),
