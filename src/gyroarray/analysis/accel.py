@@ -126,9 +126,13 @@ class AccelFit:
         The Allan analysis by axis (``*_rad_s`` fields in m/s²).
     values, sigmas : dict
         By term (``n`` [m/s/√s], ``k`` [m/s²/√s], ``b`` [m/s²]): one value (1σ) per analysed axis,
-        or None for all of the term when it is not resolved on every analysed axis.
+        None on an axis that does not resolve it (as the gyros: each axis keeps what it
+        resolves), or None for the term when no analysed axis resolves it.
     per_axis : dict
         By term, by axis: ``(value, sigma, why)`` (value None where not resolved, and why).
+    estimates : dict
+        By term, by axis: ``(value, sigma, z)``, the fit's estimate whether resolved or not
+        (SI; value 0 when not fitted or held at 0, sigma and z None when there is none).
     skipped : dict
         Why an axis was not analysed, by axis.
     notes : tuple of str
@@ -142,16 +146,17 @@ class AccelFit:
     per_axis: dict = field(repr=False)
     skipped: dict
     notes: tuple
+    estimates: dict = field(default_factory=dict, repr=False)
 
     def to_json_dict(self) -> dict:
         """JSON-ready terms in datasheet units: by term key (``vrw_m_s_rt_h``,
-        ``accel_rw_m_s2_rt_h``, ``bi_mg``) a list per axis or None, the same with ``_sigma``, and
-        ``axes``, ``notes``, ``not_analysed``."""
+        ``accel_rw_m_s2_rt_h``, ``bi_mg``) a list per axis (null on an axis that does not resolve
+        it) or None, the same with ``_sigma``, and ``axes``, ``notes``, ``not_analysed``."""
         out: dict = {"axes": list(self.axes)}
         for term, (key, _, conv) in ACC_TERMS.items():
             v, s = self.values[term], self.sigmas[term]
-            out[key] = None if v is None else [float(conv(x)) for x in v]
-            out[key + "_sigma"] = None if s is None else [float(conv(x)) for x in s]
+            out[key] = None if v is None else [None if x is None else float(conv(x)) for x in v]
+            out[key + "_sigma"] = None if s is None else [None if x is None else float(conv(x)) for x in s]
         out["notes"] = list(self.notes)
         out["not_analysed"] = dict(self.skipped)
         return out
@@ -163,8 +168,8 @@ def accel_fit(acc_m_s2, dt_s: float, parts=None, taus="octave", kind: str = "oad
     Returns
     -------
     AccelFit
-        A term is given for every analysed axis or for none (``notes`` say on which axis it
-        is not resolved, and why).
+        A term is given on each analysed axis that resolves it, None on the others (``notes``
+        say on which axis it is not resolved, and why), as the gyros' terms are kept per gyro.
 
     Raises
     ------
@@ -179,18 +184,36 @@ def accel_fit(acc_m_s2, dt_s: float, parts=None, taus="octave", kind: str = "oad
     sigmas: dict[str, tuple | None] = {}
     per_axis: dict[str, dict] = {}
     notes = list(skipped.values())
+    estimates: dict[str, dict] = {}
     for term, (key, unit, _) in ACC_TERMS.items():
         got = {a: _resolved(analyses[a], term) for a in axes}
         per_axis[term] = got
-        if all(g[0] is not None for g in got.values()):
+        estimates[term] = {a: _estimate(analyses[a], term) for a in axes}
+        if all(g[0] is None for g in got.values()):
+            values[term] = sigmas[term] = None
+        else:
             values[term] = tuple(g[0] for g in got.values())
             sigmas[term] = tuple(g[1] for g in got.values())
-        else:
-            values[term] = sigmas[term] = None
-            why = "; ".join(f"acc_{a}: {g[2]}" for a, g in got.items() if g[0] is None)
-            notes.append(f"{key} [{unit}] not resolved on every axis, so not given: {why}")
+        lacking = [a for a, g in got.items() if g[0] is None]
+        if lacking:
+            why = "; ".join(f"acc_{a}: {got[a][2]}" for a in lacking)
+            held = [a for a in axes if a not in lacking]
+            notes.append(f"{key} [{unit}] not resolved on {', '.join('acc_' + a for a in lacking)}, so not "
+                         f"given there" + (f" (given for {', '.join('acc_' + a for a in held)})" if held else "")
+                         + f": {why}")
     return AccelFit(axes=axes, analyses=analyses, values=values, sigmas=sigmas, per_axis=per_axis,
-                    skipped=skipped, notes=tuple(notes))
+                    skipped=skipped, notes=tuple(notes), estimates=estimates)
+
+
+def _estimate(analysis: AllanAnalysis, term: str) -> tuple[float, float | None, float | None]:
+    """``(value, sigma, z)`` of one term as fitted [SI], resolved or not: value 0 when the term is
+    not fitted or held at 0; sigma None without a finite 1σ; z = value/sigma."""
+    fit = analysis.fit
+    value, sigma = fit.coefficient(term)
+    if term not in fit.terms or value is None or term in fit.clamped or not value > 0:
+        value = 0.0
+    sigma = None if sigma is None or not math.isfinite(sigma) or not sigma > 0 else float(sigma)
+    return float(value), sigma, (None if sigma is None else float(value) / sigma)
 
 
 def analysis_json(analysis: AllanAnalysis) -> dict:

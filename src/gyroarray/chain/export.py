@@ -444,6 +444,14 @@ MAX_FREQUENCY_ROUNDING = 0.01
 #: Relative agreement of a value read back with the value meant (6 significant digits written).
 READ_BACK_RTOL = 2e-6
 
+#: The MATLAB snippet's comment where the model has no bias instability: the property is left
+#: unset rather than written 0. gyroparams/accelparams default BiasInstability to 0, so an
+#: imuSensor built from the snippet simulates none either way; writing ``= 0`` would state that
+#: the sensor has none, which the model does not know (the fit did not resolve one).
+MATLAB_NO_BI = ("the model has no bias-instability term (not fitted or not resolved by its record: "
+                "`gyroarray fit --add bias_instability`); gyroparams' default (0) then applies, so "
+                "imuSensor simulates none: that is the model's lack of a B, not a measured B = 0")
+
 _FIT_HINT = ("fit it with `gyroarray fit --out` on a record with acc_x, acc_y, acc_z columns (or add an "
              "[accelerometer] table to the model)")
 
@@ -466,6 +474,9 @@ class AccelChoice:
         Every axis's terms in datasheet units (m/s/√h, m/s²/√h, mg; None where absent).
     why_missing : str
         Why a missing term is missing ("" when none is).
+    partial : dict
+        By model key (``n_m_s_rt_h``, ``k_m_s2_rt_h``, ``b_mg``) of a term some axes lack: which
+        axes the number is from and why the others lack it (one line).
     """
 
     n_m_s2_rt_hz: float | None
@@ -474,6 +485,7 @@ class AccelChoice:
     what: str
     table: list = field(default_factory=list)
     why_missing: str = ""
+    partial: dict = field(default_factory=dict)
 
     def as_noise(self) -> "GyroNoise":
         """The same IEEE algebra as a gyro's (white, walk, flicker floor) in m/s units, for
@@ -482,24 +494,72 @@ class AccelChoice:
                          b_rad_s=self.b_m_s2 or 0.0)
 
 
+#: The accelerometer terms of the model's ``[accelerometer]`` table: (name in text, datasheet unit).
+_ACC_TEXT = {"n_m_s_rt_h": ("velocity random walk", "m/s/√h"),
+             "k_m_s2_rt_h": ("acceleration random walk", "m/s²/√h"), "b_mg": ("bias instability", "mg")}
+
+
+def _hours(seconds: float) -> str:
+    return f"{seconds / units.S_PER_H:.3g} h"
+
+
+def accel_axis_cause(acc, key: str, axis: str) -> str:
+    """Why the model's ``[accelerometer]`` table has no ``key`` on ``axis``: the fit's estimate,
+    its z and the record length it was fitted on, and how long a record ``plan --sensor acc``
+    predicts would resolve it; for a table without that record (written before), its notes."""
+    name, unit = _ACC_TEXT[key]
+    entry = (acc.unresolved.get(key) or {}).get(axis)
+    if entry is None:
+        notes = "; ".join(acc.notes)
+        return (f"{name} not resolved on acc_{axis} by the record the model was fitted on"
+                + (f" ({notes})" if notes else "") + ": a longer record would resolve it "
+                "(refit, then `gyroarray plan --sensor acc --model M.toml`)")
+    est, sig = entry.get("estimate", 0.0), entry.get("sigma")
+    on = f" over {_hours(acc.record_s)} of record" if acc.record_s else ""
+    if est > 0 and sig:
+        found = f"{name} on acc_{axis} is {est:.3g} ± {sig:.2g} {unit} (z = {est / sig:.2f} < 2){on}"
+    else:
+        found = f"{entry.get('why') or name + ' held at 0 by the fit'}{on}"
+    need = entry.get("resolve_s")
+    if need is None:
+        plan = ("; no record length can be planned from a zero estimate (a record several times "
+                "longer would show whether the term is there)" if not est > 0 else "")
+    elif acc.record_s and need <= acc.record_s:
+        plan = (f"; plan --sensor acc predicts {_hours(need)} would resolve it, no more than the record "
+                "had: the record scatters more than white + walk + floor predict (more record, or a "
+                "quieter one)")
+    else:
+        plan = f"; a record of about {_hours(need)} would resolve it (plan --sensor acc, z >= 2)"
+    return "not resolved, so left out: " + found + plan
+
+
 def choose_accel(model: NoiseModel, axis: str | int) -> AccelChoice:
     """The accelerometer's numbers for ``axis``: ``"worst"`` the largest value of each term over
     the axes (as allan_variance_ros), ``"mean"`` the mean per term (as imu_utils); a gyro number
-    (``--axis K`` names a gyro, not an accelerometer axis): the worst, said so."""
+    (``--axis K`` names a gyro, not an accelerometer axis): the worst, said so. A term some axes
+    lack (not resolved there) is taken from the axes that have it, and ``partial`` says which
+    and why; a term no axis has is missing, and ``why_missing`` gives the cause (no table: no
+    acc columns; a term not resolved: its z, the record length, the length that would resolve it)."""
     acc = model.accelerometer
     if acc is None:
         return AccelChoice(None, None, None, "none: the model has no [accelerometer] table",
                            why_missing=f"the model has no [accelerometer] table; {_FIT_HINT}")
     conv = {"n_m_s_rt_h": units.vrw_m_s_rt_h_to_si, "k_m_s2_rt_h": units.accel_rw_m_s2_rt_h_to_si,
             "b_mg": units.mg_to_m_s2}
-    table = [{"axis": a, **{key: (None if getattr(acc, key) is None else float(getattr(acc, key)[i]))
-                            for key in conv}} for i, a in enumerate(acc.axes)]
+    table = [{"axis": a, **{key: (None if getattr(acc, key) is None or getattr(acc, key)[i] is None
+                                  else float(getattr(acc, key)[i])) for key in conv}}
+             for i, a in enumerate(acc.axes)]
     rule = axis if axis in ("worst", "mean") else "worst"
     pick = max if rule == "worst" else (lambda v: sum(v) / len(v))
-    out = {}
+    out, partial = {}, {}
+    lack = acc.missing_axes
     for key, f in conv.items():
-        v = getattr(acc, key)
-        out[key] = None if v is None else float(f(pick(v)))
+        v = [x for x in (getattr(acc, key) or ()) if x is not None]
+        out[key] = float(f(pick(v))) if v else None
+        if v and key in lack:
+            have = [a for a in acc.axes if a not in lack[key]]
+            partial[key] = (f"{_ACC_TEXT[key][0]} from acc_{', acc_'.join(have)} only ({rule}); "
+                            + "; ".join(f"acc_{a}: {accel_axis_cause(acc, key, a)}" for a in lack[key]))
     axes = ", ".join(acc.axes)
     if rule == "worst":
         what = (f"the worst of the accelerometer's axes {axes} (the largest value of each term)"
@@ -507,13 +567,18 @@ def choose_accel(model: NoiseModel, axis: str | int) -> AccelChoice:
                    else ""))
     else:
         what = f"the mean of the accelerometer's axes {axes} (each term)"
-    missing = [key for key in ("n_m_s_rt_h", "k_m_s2_rt_h") if getattr(acc, key) is None]
+    missing = [key for key in ("n_m_s_rt_h", "k_m_s2_rt_h") if out[key] is None]
     why = ""
     if missing:
-        notes = "; ".join(acc.notes)
-        why = (f"the model's [accelerometer] table has no {' or '.join(missing)}"
-               + (f" ({notes})" if notes else "") + f"; {_FIT_HINT}")
-    return AccelChoice(out["n_m_s_rt_h"], out["k_m_s2_rt_h"], out["b_mg"], what, table, why)
+        causes = []
+        for key in missing:
+            if key in acc.unresolved:
+                causes += [f"acc_{a}: {accel_axis_cause(acc, key, a)}" for a in acc.axes]
+            else:                       # a table written before it said why per axis: its notes
+                causes.append(accel_axis_cause(acc, key, ", acc_".join(acc.axes)))
+        why = ("the model's [accelerometer] table has no " + " or ".join(missing) + " on any axis: "
+               + "; ".join(causes))
+    return AccelChoice(out["n_m_s_rt_h"], out["k_m_s2_rt_h"], out["b_mg"], what, table, why, partial)
 
 
 def accel_walk(accel: AccelChoice, rate_hz: float, *, keeps_b: bool) -> tuple[float | None, StandIn]:
@@ -602,7 +667,8 @@ def exported_values(noise: GyroNoise, fmt: str, rate_hz: float, inflate: float =
     out[names["gn"]] = n * white
     out[names["gk"]] = k * walk_f
     if fmt == "matlab":
-        out["BiasInstability"] = inflate * noise.b_rad_s
+        if noise.b_rad_s > 0:        # else left out: gyroparams' default 0 would claim "no BI"
+            out["BiasInstability"] = inflate * noise.b_rad_s
         if ab is not None:
             out["AccelBiasInstability"] = ab
     if fmt == "orbslam3":
@@ -745,6 +811,11 @@ def _accel_header(accel: AccelChoice | None, fmt: str, rate_hz: float) -> list[s
         out.append("accelerometer bias instability: accel.BiasInstability = B [m/s²]")
     elif accel.b_m_s2 and accel.n_m_s2_rt_hz is None:
         out.append("accelerometer bias instability: dropped (no VRW to place its stand-in walk)")
+    for key, line in accel.partial.items():
+        out.append(f"accelerometer {line}")
+    if accel.k_m_s3_rt_hz is None and walk is not None and accel.why_missing:
+        out.append(f"{file_name(names['ak'])}: the bias-instability stand-in only, no acceleration random "
+                   f"walk — {accel.why_missing}")
     for role, value in (("an", accel.n_m_s2_rt_hz), ("ak", walk)):
         if value is None:
             out.append(f"{file_name(names[role])}: MISSING — {accel.why_missing}")
@@ -799,6 +870,12 @@ def render(noise: GyroNoise, fmt: str, rate_hz: float, *, inflate: float = 1.0,
                 body.append("accel = accelparams;")
             if key in v:
                 body.append(f"{MATLAB_NAMES[key]} = {_num(v[key])};   % {unit}")
+            elif key == "BiasInstability":
+                body.append(f"% {MATLAB_NAMES[key]} not set: {MATLAB_NO_BI}")
+            elif key == "AccelBiasInstability" and accel is not None and accel.n_m_s2_rt_hz is not None:
+                body.append(f"% {MATLAB_NAMES[key]} not set: the model's [accelerometer] table has no "
+                            "bias instability on any axis (not resolved by its record); accelparams' "
+                            "default (0) then applies: the model's lack of a B, not a measured B = 0")
         body.append(f"sampleRate = {rate_hz!r};   % Hz: imu = imuSensor('accel-gyro', 'SampleRate', "
                     "sampleRate, 'Gyroscope', gyro, 'Accelerometer', accel);")
         return "\n".join(head + body) + "\n"
@@ -1268,7 +1345,7 @@ def _compare_band(series: np.ndarray, parts, dt: float, n_c: float, k_c: float, 
 
 
 def record_check(meas, fmt: str, file_si: dict, noise: GyroNoise, gyros: list[int],
-                 accel: bool = True) -> dict:
+                 accel: bool = True, accel_why: str = "") -> dict:
     """The file (as read back, ``file_si`` of :func:`read_back`) against a measurement's ADEV band.
 
     Parameters
@@ -1285,18 +1362,23 @@ def record_check(meas, fmt: str, file_si: dict, noise: GyroNoise, gyros: list[in
     accel : bool
         Also compare the accelerometer fields with the record's ``acc_*`` columns (when both are
         there): every axis, the file being the worst (or mean) of them.
+    accel_why : str
+        Why the file lacks an accelerometer field (the export's cause), said when it is not
+        checked.
 
     Returns
     -------
     dict
         ``parts_notes``, ``gyros`` (one :func:`_compare_band` dict per gyro), ``accelerometer``
-        (per axis, or None), ``drops`` (one line or None) and ``problems`` (one per series with τ
-        where the file is below the measured band).
+        (per axis, or None), ``accelerometer_not_checked`` (``{"field", "why"}`` per
+        accelerometer field not compared: the record has no acc columns, or the file lacks it),
+        ``drops`` (one line or None) and ``problems`` (one per series with τ where the file is
+        below the measured band).
     """
     parts, notes = record_parts(meas)
     dt = meas.dt_s
     out: dict = {"record": str(meas.source), "record_s": float(meas.n_samples * dt), "parts_notes": notes,
-                 "gyros": [], "accelerometer": None, "problems": []}
+                 "gyros": [], "accelerometer": None, "accelerometer_not_checked": [], "problems": []}
     if file_si.get("gyro_n") is None or file_si.get("gyro_k") is None:
         out["problems"].append("the file's gyro fields could not be read back: nothing to compare")
         return out
@@ -1335,6 +1417,18 @@ def record_check(meas, fmt: str, file_si: dict, noise: GyroNoise, gyros: list[in
                         f"{worst['file_over_measured_at_min']:.2f}× the measured")
     else:
         out["drops"] = None
+    if accel:
+        names = FIELDS[fmt]
+        field_of = (lambda r: MATLAB_NAMES[names[r]]) if fmt == "matlab" else (lambda r: names[r])
+        for role, key in (("an", "acc_n"), ("ak", "acc_k")):
+            why = None
+            if not meas.has_acc:
+                why = "the record has no acc_x, acc_y, acc_z columns"
+            elif file_si.get(key) is None:
+                why = ("the file has no readable " + field_of(role)
+                       + (f" ({accel_why})" if accel_why else ""))
+            if why is not None:
+                out["accelerometer_not_checked"].append({"field": field_of(role), "why": why})
     if accel and meas.has_acc and file_si.get("acc_n") is not None and file_si.get("acc_k") is not None:
         acc = []
         for i, axis in enumerate("xyz"):
@@ -1444,7 +1538,8 @@ def build_export(model: NoiseModel, axis: int | str, fmt: str, rate_hz: float, *
                      "tau2_s": si.tau2_s if si.covers else None},
         "accelerometer": {"axis": accel.what, "axes": accel.table,
                           "n_m_s2_rt_hz": accel.n_m_s2_rt_hz, "k_m_s3_rt_hz": accel.k_m_s3_rt_hz,
-                          "b_m_s2": accel.b_m_s2},
+                          "b_m_s2": accel.b_m_s2, "why_missing": accel.why_missing or None,
+                          "partial": dict(accel.partial)},
         "missing_fields": missing,
         "warnings": ([f"the file lacks {', '.join(missing)}: "
                       + (accel.why_missing or f"no accelerometer; {_FIT_HINT}")
@@ -1532,7 +1627,7 @@ def verify_file(exp: Export, text: str, *, record=None, seed: int = 0, seconds: 
     elif record is not None:
         if gyros is None:
             gyros = [exp.noise.gyro] if exp.noise.gyro else list(range(1, record.layout.n_gyros + 1))
-        rc = record_check(record, exp.fmt, rb.si, exp.noise, gyros)
+        rc = record_check(record, exp.fmt, rb.si, exp.noise, gyros, accel_why=exp.accel.why_missing)
         out["record"] = rc
         problems += rc["problems"]
     out["problems"] = problems

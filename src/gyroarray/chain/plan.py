@@ -336,7 +336,7 @@ def model_accel_terms(model, axis: str) -> dict:
     -------
     dict
         ``{"n": N_a [m/s/√s], "b": B [m/s²], "k": K_a [m/s²/√s]}`` (0 where the table has no
-        such term).
+        such term for that axis).
 
     Raises
     ------
@@ -356,5 +356,5 @@ def model_accel_terms(model, axis: str) -> dict:
     out = {}
     for term, (key, conv) in si.items():
         values = getattr(table, key)
-        out[term] = 0.0 if values is None else float(conv(values[i]))
+        out[term] = 0.0 if values is None or values[i] is None else float(conv(values[i]))
     return out

@@ -294,18 +294,55 @@ def accel_noise(meas, args=None):
     except InputError as err:
         return None, [f"no [accelerometer] table: {err.message}"]
     keys = {"n": "n_m_s_rt_h", "k": "k_m_s2_rt_h", "b": "b_mg"}
-    values = {keys[t]: (None if fit.values[t] is None else tuple(float(ACC_TERMS[t][2](v)) for v in fit.values[t]))
-              for t in keys}
-    sigma = {keys[t]: tuple(float(ACC_TERMS[t][2](v)) for v in fit.sigmas[t]) for t in keys
-             if fit.sigmas[t] is not None}
+
+    def conv(t, values):          # per axis, None where the axis does not resolve the term
+        return None if values is None else tuple(None if v is None else float(ACC_TERMS[t][2](v)) for v in values)
+    values = {keys[t]: conv(t, fit.values[t]) for t in keys}
+    sigma = {keys[t]: conv(t, fit.sigmas[t]) for t in keys if fit.sigmas[t] is not None}
     used_s = sum(b - a for a, b in parts) * meas.dt_s
+    unresolved = _accel_unresolved(fit, keys, meas.dt_s)
     notes = [f"fitted as gyroarray allan --sensor acc fits (octave oadev, generalised least squares, 1σ) "
              f"over {used_s:.1f} s of the record"]
     notes += [n.replace("vrw_m_s_rt_h", "n_m_s_rt_h").replace("accel_rw_m_s2_rt_h", "k_m_s2_rt_h")
              .replace("bi_mg", "b_mg") for n in fit.notes]
-    table = AccelNoise(axes=fit.axes, sigma=sigma, notes=tuple(notes), **values)
-    return table, ([f"[accelerometer]: {', '.join(table.missing)} not resolved, left out (see its notes)"]
-                   if table.missing else [])
+    table = AccelNoise(axes=fit.axes, sigma=sigma, notes=tuple(notes), unresolved=unresolved,
+                       record_s=float(used_s), **values)
+    lack = table.missing_axes
+    return table, ([f"[accelerometer]: {key} not resolved on acc_{', acc_'.join(axes)}, left out there "
+                    "(see its notes and unresolved)" for key, axes in lack.items()])
+
+
+def _accel_unresolved(fit, keys: dict, dt_s: float) -> dict:
+    """The ``unresolved`` entries of an ``[accelerometer]`` table: by term, by axis that does not
+    resolve it, the fit's estimate and 1σ [datasheet unit], why, and ``resolve_s``, the record
+    length [s] at which ``plan --sensor acc`` predicts the estimate (with the axis's other
+    estimates) would stand at RESOLVED_Z σ (absent when the estimate is 0 or cannot be planned)."""
+    # deferred: numpy, scipy and the plan's GLS fit load only when fit --out writes the table
+    from gyroarray.analysis.accel import ACC_TERMS, RESOLVED_Z
+    from gyroarray.analysis.allan import ONE_SIGMA
+    from gyroarray.chain.plan import plan_record
+    out: dict = {}
+    for t, key in keys.items():
+        for axis, (value, sigma, why) in fit.per_axis[t].items():
+            if value is not None:
+                continue
+            est, sig, _ = fit.estimates[t][axis]
+            conv = ACC_TERMS[t][2]
+            entry = {"estimate": float(conv(est))}
+            if sig is not None:
+                entry["sigma"] = float(conv(sig))
+            if est > 0:
+                coef = {u: fit.estimates[u][axis][0] for u in keys}
+                try:
+                    plan = plan_record(coef, 1.0 / dt_s, 1.0 / RESOLVED_Z, confidence=ONE_SIGMA, sensor="acc")
+                    need = plan.duration_s.get(t)
+                except InputError:
+                    need = None
+                if need is not None:
+                    entry["resolve_s"] = float(need)
+            entry["why"] = why
+            out.setdefault(key, {})[axis] = entry
+    return out
 
 
 def _cmd_allan_streamed(args, kind: str, taus, why: str) -> tuple[dict, str]:

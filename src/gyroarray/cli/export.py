@@ -109,6 +109,9 @@ def cmd_export(args):
             f"{g['gyro']}: {g['n_deg_rt_h']:.4g}, {g['k_deg_h_rt_h']:.4g}" for g in summary["gyros"]))
     lines += [f"  {k} = {val:.6e}" for k, val in v.items() if not k.lower().endswith(("rate", "frequency"))]
     lines.append(f"  accelerometer: {summary['accelerometer']['axis']}")
+    lines += [f"  accelerometer {line}" for line in summary["accelerometer"].get("partial", {}).values()]
+    if summary["accelerometer"].get("why_missing") and not summary["missing_fields"]:
+        lines.append(f"  accelerometer: {summary['accelerometer']['why_missing']}")
     if "topic" in summary:
         lines.append(f"  rostopic {summary['topic']['topic']} ({summary['topic']['why']})")
     si = summary["stand_in"]
@@ -157,6 +160,8 @@ def cmd_export(args):
                 lines.append(f"  {c['what']}: the file's ADEV below the record's family-wise 95 % interval at "
                              f"{c['n_below']} of {c['n_taus']} τ (below the per-τ 95 % interval at "
                              f"{c['n_below_95']}), above it at {c['n_above']}")
+            for nc in rc.get("accelerometer_not_checked", []):
+                lines.append(f"  accelerometer field {nc['field']} NOT CHECKED against the record: {nc['why']}")
             if rc.get("drops"):
                 lines.append(f"  the format drops: {rc['drops']}")
         if ver["passed"]:

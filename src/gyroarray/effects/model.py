@@ -632,13 +632,16 @@ def _array_sigma(value, have: dict, n: int, where) -> dict:
 
 
 #: Keys of the ``[accelerometer]`` table (:class:`AccelNoise`).
-ACCEL_KEYS = ("axes", "n_m_s_rt_h", "k_m_s2_rt_h", "b_mg", "sigma", "notes")
+ACCEL_KEYS = ("axes", "n_m_s_rt_h", "k_m_s2_rt_h", "b_mg", "sigma", "unresolved", "record_s", "notes")
 #: The noise terms of the ``[accelerometer]`` table, each with its datasheet unit.
 ACCEL_TERMS: Mapping[str, str] = MappingProxyType({
     "n_m_s_rt_h": "m/s/√h",     # velocity random walk N_a: ADEV = N_a/√τ
     "k_m_s2_rt_h": "m/s²/√h",   # acceleration random walk K_a: ADEV = K_a·√(τ/3)
     "b_mg": "mg",               # bias instability B: flat ADEV floor 0.664·B
 })
+#: Keys of one ``unresolved.TERM.AXIS`` entry: the fit's estimate and 1σ [the term's unit], the
+#: record length that would resolve it [s] (``plan --sensor acc``), and why it is not resolved.
+ACCEL_UNRESOLVED_KEYS = ("estimate", "sigma", "resolve_s", "why")
 _ACCEL_AXES = ("x", "y", "z")
 
 
@@ -658,17 +661,80 @@ def _accel_axes(value, where) -> tuple[str, ...]:
     return tuple(value)
 
 
-def _accel_values(value, key: str, n: int, where, *, positive: bool) -> tuple[float, ...]:
+def _accel_values(value, key: str, axes: tuple, where, *, positive: bool) -> tuple[float | None, ...] | None:
+    """One term (or its 1σ) per axis of ``axes``: a list of one number per axis, or a table
+    ``{axis = number}`` holding only the axes that resolve it (the others None); None when no
+    axis has it."""
     unit = ACCEL_TERMS.get(key.split(".")[-1], "")
     what = "> 0" if positive else ">= 0"
-    if isinstance(value, (str, bytes, Mapping)) or not isinstance(value, (list, tuple, np.ndarray)) \
-            or len(value) != n:
-        raise _accel_error(f"{key} must be {n} numbers {what} [{unit}] (one per axis of 'axes'), got {value!r}",
-                           key, where)
-    for i, v in enumerate(value):
-        if not (_is_number(v) and math.isfinite(v) and (v > 0 if positive else v >= 0)):
-            raise _accel_error(f"{key}[{i}] must be a finite number {what} [{unit}], got {v!r}", key, where)
-    return tuple(float(v) for v in value)
+    n = len(axes)
+    if isinstance(value, Mapping):
+        for a in value:
+            if a not in axes:
+                raise _accel_error(f"{key}: axis {a!r} is not among axes {list(axes)} (a table gives the "
+                                   "axes that resolve the term, by name)", key, where)
+        items = [value.get(a) for a in axes]
+        if not value:
+            raise _accel_error(f"{key} must name at least one axis (leave the term out when no axis "
+                               "resolves it)", key, where)
+    elif isinstance(value, (str, bytes)) or not isinstance(value, (list, tuple, np.ndarray)) or len(value) != n:
+        raise _accel_error(f"{key} must be {n} numbers {what} [{unit}] (one per axis of 'axes'), or a table "
+                           f"{{axis = number}} of the axes that resolve it, got {value!r}", key, where)
+    else:
+        items = list(value)
+        if isinstance(value, list) and any(v is None for v in items):   # a TOML list has no None
+            raise _accel_error(f"{key} must be {n} numbers {what} [{unit}], got {value!r}", key, where)
+    for i, v in enumerate(items):
+        if v is not None and not (_is_number(v) and math.isfinite(v) and (v > 0 if positive else v >= 0)):
+            raise _accel_error(f"{key}[{axes[i] if isinstance(value, Mapping) else i}] must be a finite number "
+                               f"{what} [{unit}], got {v!r}", key, where)
+    out = tuple(None if v is None else float(v) for v in items)
+    return None if all(v is None for v in out) else out
+
+
+def _accel_unresolved(value, terms_present: dict, axes: tuple, where) -> Mapping:
+    """The ``unresolved`` table: by term, by axis without that term, what the fit found."""
+    if not isinstance(value, Mapping):
+        raise _accel_error(f"unresolved must be a table of term = {{axis = {{...}}}}, got {_type_name(value)}",
+                           "unresolved", where)
+    out = {}
+    for term, by_axis in value.items():
+        key = f"unresolved.{term}"
+        if term not in ACCEL_TERMS:
+            raise _accel_error(f"unresolved of unknown term {term!r}{did_you_mean(str(term), tuple(ACCEL_TERMS))}",
+                               key, where)
+        if not isinstance(by_axis, Mapping):
+            raise _accel_error(f"{key} must be a table by axis, got {_type_name(by_axis)}", key, where)
+        have = terms_present.get(term)
+        entries = {}
+        for axis, entry in by_axis.items():
+            k2 = f"{key}.{axis}"
+            if axis not in axes:
+                raise _accel_error(f"{k2}: axis {axis!r} is not among axes {list(axes)}", k2, where)
+            if have is not None and have[axes.index(axis)] is not None:
+                raise _accel_error(f"{k2}: the table holds {term} for axis {axis}, so it is not unresolved",
+                                   k2, where)
+            if not isinstance(entry, Mapping):
+                raise _accel_error(f"{k2} must be a table ({', '.join(ACCEL_UNRESOLVED_KEYS)}), got "
+                                   f"{_type_name(entry)}", k2, where)
+            clean: dict = {}
+            for name, v in entry.items():
+                if name not in ACCEL_UNRESOLVED_KEYS:
+                    raise _accel_error(f"{k2}: unknown key {name!r}{did_you_mean(str(name), ACCEL_UNRESOLVED_KEYS)}",
+                                       f"{k2}.{name}", where)
+                if name == "why":
+                    if not isinstance(v, str):
+                        raise _accel_error(f"{k2}.why must be a string, got {v!r}", f"{k2}.why", where)
+                    clean[name] = v
+                    continue
+                ok = _is_number(v) and math.isfinite(v) and (v > 0 if name == "resolve_s" else v >= 0)
+                if not ok:
+                    raise _accel_error(f"{k2}.{name} must be a finite number {'> 0' if name == 'resolve_s' else '>= 0'}"
+                                       f", got {v!r}", f"{k2}.{name}", where)
+                clean[name] = float(v)
+            entries[axis] = MappingProxyType(clean)
+        out[term] = MappingProxyType(entries)
+    return MappingProxyType(out)
 
 
 @dataclass(frozen=True)
@@ -682,18 +748,26 @@ class AccelNoise:
     ----------
     axes : tuple of str
         The accelerometer axes the values are for, in order (among ``x``, ``y``, ``z``).
-    n_m_s_rt_h : tuple of float, optional
+    n_m_s_rt_h : tuple of float or None, optional
         Velocity random walk N_a per axis [m/s/√h]: ADEV(τ) = N_a/√τ (N_a/60 in m/s²/√Hz).
-    k_m_s2_rt_h : tuple of float, optional
+    k_m_s2_rt_h : tuple of float or None, optional
         Acceleration random walk K_a per axis [m/s²/√h]: ADEV(τ) = K_a·√(τ/3) (K_a/60 in m/s²/√s).
-    b_mg : tuple of float, optional
+    b_mg : tuple of float or None, optional
         Bias instability B per axis [mg]: the flat ADEV floor 0.664·B.
-    sigma : Mapping[str, tuple of float]
-        1σ of the terms above, same keys, one per axis, same units.
+    sigma : Mapping[str, tuple]
+        1σ of the terms above, same keys, one per axis (None where the term is), same units.
+    unresolved : Mapping[str, Mapping[str, Mapping]]
+        By term, by axis that lacks it: ``estimate`` and ``sigma`` (the fit's value and 1σ, the
+        term's unit), ``resolve_s`` (the record length [s] that would resolve it, when planned)
+        and ``why``.
+    record_s : float, optional
+        Length of record the terms were fitted on [s].
     notes : tuple of str
         How the terms were fitted, or why one is missing.
 
-    Each term is present for every axis or None (not fitted, or not resolved by the record).
+    Each term is a tuple with one entry per axis, None on an axis that does not resolve it, or
+    None for the term (no axis resolves it, or not fitted). In the file a term resolved on every
+    axis is a list; one resolved on some is a table ``{axis = value}``.
 
     Raises
     ------
@@ -702,11 +776,13 @@ class AccelNoise:
     """
 
     axes: tuple[str, ...] = ("x", "y", "z")
-    n_m_s_rt_h: tuple[float, ...] | None = None
-    k_m_s2_rt_h: tuple[float, ...] | None = None
-    b_mg: tuple[float, ...] | None = None
+    n_m_s_rt_h: tuple[float | None, ...] | None = None
+    k_m_s2_rt_h: tuple[float | None, ...] | None = None
+    b_mg: tuple[float | None, ...] | None = None
     sigma: Mapping[str, tuple] = field(default_factory=dict)
     notes: tuple[str, ...] = ()
+    unresolved: Mapping[str, Mapping] = field(default_factory=dict)
+    record_s: float | None = None
 
     def __post_init__(self):
         self._check((None, None))
@@ -714,11 +790,12 @@ class AccelNoise:
     def _check(self, where) -> None:
         axes = _accel_axes(list(self.axes) if isinstance(self.axes, tuple) else self.axes, where)
         object.__setattr__(self, "axes", axes)
-        n = len(axes)
+        present = {}
         for key in ACCEL_TERMS:
             value = getattr(self, key)
             if value is not None:
-                object.__setattr__(self, key, _accel_values(value, key, n, where, positive=True))
+                object.__setattr__(self, key, _accel_values(value, key, axes, where, positive=True))
+            present[key] = getattr(self, key)
         sigma = self.sigma
         if not isinstance(sigma, Mapping):
             raise _accel_error(f"sigma must be a table of term = [1σ per axis], got {_type_name(sigma)}",
@@ -730,8 +807,22 @@ class AccelNoise:
                                    f"(terms: {', '.join(ACCEL_TERMS)})", f"sigma.{key}", where)
             if getattr(self, key) is None:
                 raise _accel_error(f"sigma.{key}: a 1σ needs its term {key}", f"sigma.{key}", where)
-            out[key] = _accel_values(value, f"sigma.{key}", n, where, positive=False)
+            got = _accel_values(value, f"sigma.{key}", axes, where, positive=False)
+            if got is None:
+                continue
+            term = getattr(self, key)
+            extra = [a for a, s, v in zip(axes, got, term) if s is not None and v is None]
+            if extra:
+                raise _accel_error(f"sigma.{key}: a 1σ on axis {', '.join(extra)}, where the table has no {key}",
+                                   f"sigma.{key}", where)
+            out[key] = got
         object.__setattr__(self, "sigma", MappingProxyType(out))
+        object.__setattr__(self, "unresolved", _accel_unresolved(self.unresolved, present, axes, where))
+        if self.record_s is not None and not (_is_number(self.record_s) and math.isfinite(self.record_s)
+                                              and self.record_s > 0):
+            raise _accel_error(f"record_s must be a record length > 0 [s], got {self.record_s!r}", "record_s", where)
+        if self.record_s is not None:
+            object.__setattr__(self, "record_s", float(self.record_s))
         notes = self.notes
         if isinstance(notes, str) or not isinstance(notes, (list, tuple)) or not all(isinstance(s, str) for s in notes):
             raise _accel_error(f"notes must be an array of strings, got {notes!r}", "notes", where)
@@ -757,7 +848,8 @@ class AccelNoise:
                                    f"{', '.join(ACCEL_KEYS)})", str(key), where)
         obj = cls.__new__(cls)
         values = {"axes": data.get("axes", list(_ACCEL_AXES)), "sigma": data.get("sigma", {}),
-                  "notes": data.get("notes", [])}
+                  "notes": data.get("notes", []), "unresolved": data.get("unresolved", {}),
+                  "record_s": data.get("record_s")}
         values.update({k: data.get(k) for k in ACCEL_TERMS})
         for key, value in values.items():
             object.__setattr__(obj, key, value)
@@ -769,18 +861,41 @@ class AccelNoise:
 
     @property
     def missing(self) -> tuple[str, ...]:
-        """The terms not in the table (not fitted or not resolved), in file order."""
+        """The terms not in the table on any axis (not fitted or not resolved), in file order."""
         return tuple(k for k in ACCEL_TERMS if getattr(self, k) is None)
 
+    @property
+    def missing_axes(self) -> dict[str, tuple[str, ...]]:
+        """By term, the axes that lack it (every axis for a term in :attr:`missing`); terms held
+        on every axis are not listed."""
+        out = {}
+        for key in ACCEL_TERMS:
+            value = getattr(self, key)
+            lack = self.axes if value is None else tuple(a for a, v in zip(self.axes, value) if v is None)
+            if lack:
+                out[key] = lack
+        return out
+
+    def _file_value(self, value):
+        """A per-axis tuple as the file writes it: a list when every axis has it, else a table."""
+        if all(v is not None for v in value):
+            return list(value)
+        return {a: v for a, v in zip(self.axes, value) if v is not None}
+
     def to_dict(self) -> dict[str, Any]:
-        """Plain dict, keys in file order, absent terms left out."""
+        """Plain dict, keys in file order, absent terms left out (a term some axes lack: a
+        dict ``{axis: value}`` of the axes that have it)."""
         out: dict[str, Any] = {"axes": list(self.axes)}
         for key in ACCEL_TERMS:
             value = getattr(self, key)
             if value is not None:
-                out[key] = list(value)
+                out[key] = self._file_value(value)
         if self.sigma:
-            out["sigma"] = {k: list(v) for k, v in self.sigma.items()}
+            out["sigma"] = {k: self._file_value(v) for k, v in self.sigma.items()}
+        if self.unresolved:
+            out["unresolved"] = {t: {a: dict(e) for a, e in by.items()} for t, by in self.unresolved.items()}
+        if self.record_s is not None:
+            out["record_s"] = self.record_s
         if self.notes:
             out["notes"] = list(self.notes)
         return out
