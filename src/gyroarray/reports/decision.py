@@ -23,6 +23,7 @@ from __future__ import annotations
 import json
 import math
 import re
+import textwrap
 from typing import Any
 
 import numpy as np
@@ -30,13 +31,15 @@ import numpy as np
 from gyroarray.analysis.adev_curves import AdevFigure
 from gyroarray.core import units
 from gyroarray.design.evidence import (GdopRobustnessRow, fused_single_ratio, mirror_comparison,
-                                       record_rho, what_would_change)
+                                       noise_and_space, record_rho, what_would_change)
 from gyroarray.design.recommend import design_label as _recommend_label
+from gyroarray.design.recommend import estimator_kwargs
 from gyroarray.reports.design_plots import agg_figure, array_fig, figure_png, accuracy_vs_n_fig
 from gyroarray.effects.names import G_SENSITIVITY
 
-__all__ = ["write_sections", "decision_summary", "decision_block", "adev_section",
-           "equivalence_rows", "pct"]
+__all__ = ["write_sections", "decision_summary", "decision_block", "adev_section", "adev_fig",
+           "equivalence_rows", "pct", "rho_candidates", "best_at_rho", "robustness_rows",
+           "motion_words"]
 
 AXES = ("x", "y", "z")
 
@@ -368,14 +371,182 @@ def decision_summary(res: dict) -> list[str]:
     return lines
 
 
+# -- the designs scored at each ρ (the per-ρ and robustness tables) -----------------
+
+#: Relative agreement the predictor, set up from a result's assumptions, must reach with the
+#: decision's own per-ρ score of the recommendation before its mounting mirrors are scored the
+#: same way (the two are one computation: they agree to ~1e-15 on the demo).
+REPRODUCE_RTOL = 1e-6
+
+
+def _key(d: dict) -> tuple:
+    return (d["scheme"], d["n"], d["estimator"], d.get("bandwidth_hz"), round(float(d["alpha_deg"]), 6),
+            tuple(int(v) for v in (d.get("mounting_signs") or ())),
+            None if d.get("design_rho") is None else round(float(d["design_rho"]), 9))
+
+
+def _intact_ms(d: dict, g, space, rho_t: float, rho_fit: float) -> float:
+    """Mean square [(rad/s)²] of the 3-axis rate error of design ``d`` (its cone, mounting
+    signs, estimator and bandwidth), intact, its estimator built for ``rho_fit`` and run on
+    gyros of correlation ``rho_t`` [-] (:func:`gyroarray.design.predict.predict`)."""
+    # deferred: the predictor and the estimators load only when the per-ρ tables are drawn
+    from gyroarray.core.layout import Layout
+    from gyroarray.design.predict import predict
+    from gyroarray.design.robust import mounted_axes
+    from gyroarray.estimators import get_estimator
+    signs = np.asarray(d.get("mounting_signs") or [1] * d["n"], dtype=float)
+    H = mounted_axes(d["scheme"], d["n"], np.array([math.radians(d["alpha_deg"])]), signs)[0]
+    est = get_estimator(d["estimator"])(**estimator_kwargs(d["estimator"], d.get("bandwidth_hz"), g))
+    est.fit(Layout(H), g.with_rho(rho_fit).noise_model(d["n"]), space.dt_s)
+    p = predict(est, g.with_rho(rho_t).noise_model(d["n"]), n_samples=space.n_samples,
+                settle_s=space.settle_s, swing=space.swing)
+    return float(sum(units.deg_s_to_rad_s(v["rms_deg_s"]) ** 2 for v in p.axes.values()))
+
+
+def _scores_by_rho(d: dict, g, space, rhos: list[str], lo: float, hi: float) -> dict:
+    """3-axis RMS [deg/s] of design ``d`` intact at each ρ of ``rhos``: the estimator is built
+    once (for its design ρ; a ρ-free estimator at the range's low end, as the decision builds
+    it) and fixed, so its error variance is linear in the true ρ and two predictions (the
+    range's ends) give every ρ exactly."""
+    rd = d.get("design_rho")
+    fit = lo if rd is None else float(rd)
+    ms_lo = _intact_ms(d, g, space, lo, fit)
+    ms_hi = ms_lo if hi <= lo else _intact_ms(d, g, space, hi, fit)
+    out = {}
+    for r in rhos:
+        t = 0.0 if hi <= lo else (float(r) - lo) / (hi - lo)
+        out[r] = float(units.rad_s_to_deg_s(math.sqrt(max(ms_lo + t * (ms_hi - ms_lo), 0.0))))
+    return out
+
+
+def rho_candidates(res: dict) -> dict | None:
+    """Every candidate of a ranged decision scored at each ρ of its grid (intact array).
+
+    The candidates are the designs of the result (each at the mounting sense, cone angle,
+    bandwidth and design ρ the decision chose for the range, with the decision's own
+    ``rms_by_rho``) and, for each, its mounting mirror
+    (:func:`gyroarray.design.robust.mirror_pattern`: the same cone, estimator, bandwidth and
+    design ρ with the other mounting sense, a pattern the decision's search scored too),
+    predicted here by :func:`gyroarray.design.predict.predict`. Without the mirrors the
+    best design at ρ < 0 is missed: reversing gyros pays only at ρ > 0.
+
+    The mirrors are scored only when the predictor, set up from the result's assumptions,
+    reproduces the decision's own per-ρ scores of the recommendation to
+    :data:`REPRODUCE_RTOL` (else ``mirror_note`` says why they are left out).
+
+    Parameters
+    ----------
+    res : dict
+        A ``design --recommend`` result with ``per_rho``.
+
+    Returns
+    -------
+    dict or None
+        ``rhos`` (the grid, as the result's keys), ``candidates`` (design dicts with
+        ``rms_by_rho`` {ρ: 3-axis RMS [deg/s]} and ``source``), ``mirror_note`` (None when
+        the mirrors were scored); None without a per-ρ grid.
+    """
+    rhos = [r for r, ds in (res.get("per_rho") or {}).items()]
+    if not rhos:
+        return None
+    cands, seen = [], set()
+    for d in res.get("designs", []):
+        by = d.get("rms_by_rho") or {}
+        if not all(by.get(r) is not None for r in rhos) or _key(d) in seen:
+            continue
+        seen.add(_key(d))
+        cands.append({**d, "rms_by_rho": {r: float(by[r]) for r in rhos},
+                      "source": f"rank {d.get('rank', '?')} of the decision"})
+    note = None
+    lo, hi = min(float(r) for r in rhos), max(float(r) for r in rhos)
+    rec = res["recommended"]
+    try:
+        g, space = noise_and_space(res["assumptions"])
+        own = _scores_by_rho(rec, g, space, rhos, lo, hi)
+        ref = rec.get("rms_by_rho") or {}
+        bad = max((abs(own[r] / ref[r] - 1.0) for r in rhos if ref.get(r)), default=math.inf)
+    except (KeyError, TypeError, ValueError) as e:      # a result of another version
+        g = space = None
+        bad, note = math.inf, f"the result's assumptions do not rebuild its predictor ({e})"
+    if note is None and not bad <= REPRODUCE_RTOL:
+        note = ("the predictor set up from the result's assumptions does not reproduce the "
+                f"decision's own scores of the recommendation (relative difference {bad:.3g}; a "
+                "per-gyro model, a motion profile or a sensor filter the assumptions do not carry)")
+    if note is None:
+        # deferred: the design layer's geometry loads only when the per-ρ tables are drawn
+        from gyroarray.design.robust import mirror_pattern
+        for c in list(cands):
+            m_alpha, m_signs = mirror_pattern(c["scheme"], c["alpha_deg"],
+                                              np.asarray(c.get("mounting_signs") or [1] * c["n"], float))
+            m = {k: c[k] for k in ("scheme", "n", "estimator", "bandwidth_hz", "design_rho") if k in c}
+            m.update(alpha_deg=float(m_alpha), mounting_signs=[int(v) for v in m_signs])
+            if _key(m) in seen:
+                continue
+            seen.add(_key(m))
+            m["rms_by_rho"] = _scores_by_rho(m, g, space, rhos, lo, hi)
+            m["source"] = f"mounting mirror of {c['source']} (predictor)"
+            cands.append(m)
+    return {"rhos": rhos, "candidates": cands, "mirror_note": note}
+
+
+def best_at_rho(rc: dict, rho: str) -> dict:
+    """The candidate of :func:`rho_candidates` with the smallest 3-axis RMS at ``rho``."""
+    return min(rc["candidates"], key=lambda c: c["rms_by_rho"][rho])
+
+
+def robustness_rows(rc: dict, rec: dict) -> list[dict]:
+    """The design best at each assumed ρ̂ (and the recommendation, min-max over the range),
+    evaluated at every ρ of the grid.
+
+    Returns
+    -------
+    list of dict
+        ``chosen_for`` (the ρ̂ keys, or ``"min-max (the recommendation)"``), ``design`` (the
+        candidate), ``at`` {ρ: (3-axis RMS [deg/s], excess over that ρ's best [-])}.
+    """
+    best = {r: best_at_rho(rc, r)["rms_by_rho"][r] for r in rc["rhos"]}
+    rows: list[dict] = []
+    for r in rc["rhos"]:
+        c = best_at_rho(rc, r)
+        row = next((x for x in rows if _key(x["design"]) == _key(c)), None)
+        if row is None:
+            rows.append({"chosen_for": [r], "design": c})
+        else:
+            row["chosen_for"].append(r)
+    own = next((c for c in rc["candidates"] if _key(c) == _key(rec)), None)
+    if own is not None:
+        rows.append({"chosen_for": "min-max (the recommendation)", "design": own})
+    for row in rows:
+        row["at"] = {r: (row["design"]["rms_by_rho"][r], row["design"]["rms_by_rho"][r] / best[r] - 1.0)
+                     for r in rc["rhos"]}
+    return rows
+
+
+def motion_words(m) -> str:
+    """The motion a result's check and ADEV record simulate, in words (``assumptions.motion.value``).
+
+    A swing is A·sin(2π f t) on every body axis at once (:func:`gyroarray.design.predict.swing_truth`:
+    the same rate about x, y and z, i.e. a rotation about the (1, 1, 1) diagonal at √3·A), not
+    about each axis in turn."""
+    if not isinstance(m, dict):
+        return "at rest" if m in (None, "none", "static") else str(m)
+    a, f = m.get("swing_amplitude_deg_s"), m.get("swing_frequency_hz")
+    return (f"swing A·sin(2π f t), A = {a:g} deg/s, f = {f:g} Hz, about x, y and z at once (the same "
+            f"rate on every body axis: a rotation about the (1, 1, 1) diagonal at √3·A = "
+            f"{math.sqrt(3.0) * a:.4g} deg/s)")
+
+
 # -- sections ---------------------------------------------------------------------
 
 def write_sections(doc, res: dict, top: int = 15,
-                   gdop_rows: list[GdopRobustnessRow] | None = None) -> dict:
+                   gdop_rows: list[GdopRobustnessRow] | None = None, *,
+                   rho_candidates: dict | None = None) -> dict:
     """Add the decision, assumptions and evidence sections to a report document.
 
     ``gdop_rows``: :func:`gyroarray.design.evidence.gdop_robustness_table` over the
     result's ρ range (drawn with the ρ robustness; none: that table is left out).
+    ``rho_candidates``: :func:`rho_candidates` of ``res`` when already computed (saved
+    beside the result by the report); None: computed here.
     """
     doc.h2("Decision")
     decision_block(doc, res)
@@ -436,11 +607,16 @@ def write_sections(doc, res: dict, top: int = 15,
                   [[", ".join(map(str, g["members"])), pct(g["spread"])[:-2], g["reason"]]
                    for g in eqs[:8]])
     doc.figure("accuracy_vs_n", figure_png(accuracy_vs_n_fig(res)),
-               "Predicted 3-axis RMS about the truth vs N (best cone angle and bandwidth per "
-               "scheme and estimator); simulated check with its 95 % interval as error bars")
+               ("Predicted 3-axis RMS about the truth vs N at one condition: each design's worst "
+                "case over the ρ range × failures (the ranking's condition), the best design per N, "
+                "scheme and estimator; the simulated check with its 95 % interval as error bars, "
+                "each at its design's worst case (ρ and failed gyros in the legend)"
+                if worst else
+                "Predicted 3-axis RMS about the truth vs N (best cone angle and bandwidth per "
+                "scheme and estimator); simulated check with its 95 % interval as error bars"))
     _fault_tolerance(doc, res)
     if res.get("per_rho"):
-        _rho(doc, res, gdop_rows or [])
+        _rho(doc, res, gdop_rows or [], rho_candidates)
     return {"recommended": res["recommended"], "summary": decision_summary(res)}
 
 
@@ -456,6 +632,8 @@ def _assumptions(doc, a: dict):
         v = item.get("value")
         if isinstance(v, (list, dict)):
             v = json.dumps(v)
+        if key == "motion":                      # the motion the check and the ADEV record simulate
+            v = motion_words(item.get("value"))
         rows.append([key, v, item.get("unit", ""), item.get("source", "")])
     doc.table(["input", "value", "unit / meaning", "from"], rows, cls="assumptions")
     user = [k for k, i in a.items() if i.get("source") == "user"]
@@ -530,7 +708,7 @@ def _fault_tolerance(doc, res: dict):
                "3 axes", "detectable", "isolable", "how an axis is lost (2 failures)"], rows)
 
 
-def _rho(doc, res: dict, gdop_rows: list[GdopRobustnessRow]):
+def _rho(doc, res: dict, gdop_rows: list[GdopRobustnessRow], rc: dict | None = None):
     doc.h3("The correlation ρ is a condition, not a choice")
     rho = res["assumptions"]["rho"]["value"]
     continuous = res["recommended"].get("worst_case") is not None
@@ -540,18 +718,39 @@ def _rho(doc, res: dict, gdop_rows: list[GdopRobustnessRow]):
              "failures is smallest (min-max); the tables below are at the grid points named in "
              "their columns." if continuous else
              "predicted 3-axis RMS over that range is smallest (min-max)."))
-    doc.table(["assumed ρ", "best design at that ρ", "3-axis RMS [deg/s]"],
-              [[r, _label(ds[0]), ds[0]["rms_3axis_deg_s"]] for r, ds in res["per_rho"].items() if ds])
+    rc = rc if rc is not None else rho_candidates(res)
+    if rc is None or not rc["candidates"]:
+        doc.p("The result carries no per-ρ scores of its designs: no per-ρ table.", "note")
+        _gdop_robustness(doc, gdop_rows)
+        return
+    rec = res["recommended"]
+    own = next((c for c in rc["candidates"] if _key(c) == _key(rec)), None)
+    doc.p(f"Candidates: the {sum(not c['source'].startswith('mounting') for c in rc['candidates'])} "
+          "designs of the decision (each as chosen for the range: mounting sense, cone angle, "
+          "bandwidth and design ρ, scored by the decision)"
+          + (f" and their {sum(c['source'].startswith('mounting') for c in rc['candidates'])} mounting "
+             "mirrors (the same cone, estimator, bandwidth and design ρ with the other mounting "
+             "sense, scored by the predictor the same way)" if rc["mirror_note"] is None else
+             f"; their mounting mirrors are left out: {rc['mirror_note']}")
+          + ". Each is the intact array, its estimator built once and fixed, at the true ρ of the "
+          "row; the best design at a ρ is the smallest 3-axis RMS over these candidates.", "note")
     rows = []
-    rhos = list(res["per_rho"])
-    for row in res.get("robustness", []):
-        rows.append([row["chosen_for_rho"], row["design"]] + [
-            "–" if row["at_rho"].get(r) is None else
-            f"{row['at_rho'][r]['rms_3axis_deg_s']:.4g} (+{100 * row['at_rho'][r]['vs_best_at_rho']:.1f} %)"
-            for r in rhos])
-    doc.p("Robustness: the design chosen for each assumed ρ̂, evaluated at every ρ of the range "
-          "(in brackets: how much worse than that ρ's own best):")
-    doc.table(["chosen for ρ̂", "design"] + [f"at ρ = {r}" for r in rhos], rows)
+    for r in rc["rhos"]:
+        b = best_at_rho(rc, r)
+        v = b["rms_by_rho"][r]
+        ref = "–" if own is None else f"{own['rms_by_rho'][r]:.4g} (+{100 * (own['rms_by_rho'][r] / v - 1):.1f} %)"
+        rows.append([r, _label(b), b["source"], v, ref])
+    doc.table(["assumed ρ", "best design at that ρ", "from", "3-axis RMS [deg/s]",
+               "the recommendation there [deg/s]"], rows)
+    rob = robustness_rows(rc, rec)
+    doc.p("Robustness: the design best at each assumed ρ̂, and the min-max recommendation, "
+          "evaluated at every ρ of the range (intact array; in brackets: how much worse than that "
+          "ρ's own best):")
+    doc.table(["chosen for ρ̂", "design"] + [f"at ρ = {r}" for r in rc["rhos"]],
+              [[x["chosen_for"] if isinstance(x["chosen_for"], str) else ", ".join(x["chosen_for"]),
+                _label(x["design"])]
+               + [f"{x['at'][r][0]:.4g} (+{100 * x['at'][r][1]:.1f} %)" for r in rc["rhos"]]
+               for x in rob])
     _gdop_robustness(doc, gdop_rows)
 
 
@@ -571,6 +770,13 @@ def adev_section(doc, res: dict, a: AdevFigure):
     One run of the design's horizon (at least 600 s); dashed: gyro 1's ADEV × √(3/N)
     (what averaging N alike gyros gives per axis at long τ).
     """
+    fig, note = adev_fig(res, a)
+    doc.h3("Allan deviation of the recommended design")
+    doc.figure("adev_recommended", figure_png(fig), note)
+
+
+def adev_fig(res: dict, a: AdevFigure):
+    """The figure and the note of :func:`adev_section` (a matplotlib Figure on an Agg canvas, str)."""
     d = res["recommended"]
     fig, axs = agg_figure(8.5, 5.2)
     ax = axs[0]
@@ -589,8 +795,10 @@ def adev_section(doc, res: dict, a: AdevFigure):
                   label=f"fused {axis} ({a.estimator})")
     rho = a.rho if a.rho is not None else record_rho(d)
     dt = a.dt_s
-    ax.set(title=f"{_label(d)}, ρ = {rho:.3g}: one {a.record_s:g} s record", xlabel="averaging time τ [s]",
-           ylabel="Allan deviation [deg/h]")
+    # the label is long (mounting and bandwidth): wrapped, so the title stays inside the figure
+    title = textwrap.fill(f"{_label(d)}; ρ = {rho:.3g}, one {a.record_s:g} s record", width=64)
+    ax.set(xlabel="averaging time τ [s]", ylabel="Allan deviation [deg/h]")
+    ax.set_title(title, fontsize=9)
     ax.grid(alpha=0.3, which="both")
     ax.legend(fontsize=8)
     m = res["assumptions"].get("motion", {}).get("value")
@@ -616,5 +824,4 @@ def adev_section(doc, res: dict, a: AdevFigure):
             + gap + " Predicted long-τ fused ARW x/y/z "
             + " / ".join(f"{v:.4g}" for v in a.predicted_arw_long_deg_rt_h)
             + " deg/√h.")
-    doc.h3("Allan deviation of the recommended design")
-    doc.figure("adev_recommended", figure_png(fig), note)
+    return fig, note

@@ -61,10 +61,40 @@ def design_figure(path, *, force: bool = True) -> Path:
     return save_figure(design_fig(), path, force=force, dpi=110)
 
 
-def design_fig():
+def recommended_gdop_line(rec: dict, count: int = 200) -> tuple[np.ndarray, np.ndarray, str]:
+    """GDOP vs ρ of a recommended array as mounted (its ``axes``, reversed gyros included).
+
+    Parameters
+    ----------
+    rec : dict
+        A design of a ``design --recommend`` result (``n``, ``alpha_deg``, ``axes``,
+        ``mounting_signs``).
+    count : int
+        Points on the ρ grid (strictly inside (−1/(N−1), 1)).
+
+    Returns
+    -------
+    (rho [-], GDOP [-], legend label)
+    """
+    n = int(rec["n"])
+    layout = Layout(np.asarray(rec["axes"], dtype=float))
+    rhos = _rho_grid(n, count)
+    g = np.array([gdop(layout, correlation_matrix(n, r)) for r in rhos])
+    rev = [k + 1 for k, v in enumerate(rec.get("mounting_signs") or []) if v < 0]
+    sense = ("gyro" + ("s " if len(rev) > 1 else " ") + ", ".join(map(str, rev)) + " reversed"
+             if rev else "every gyro +")
+    return rhos, g, f"recommended, as mounted: N = {n}, α = {rec['alpha_deg']:.2f}°, {sense}"
+
+
+def design_fig(rec: dict | None = None):
     """The figure: GDOP vs α (both schemes, N = 4, 5, 6, 8, ρ = 0), GDOP vs α
     for several ρ (Scheme 1, N = 6), GDOP vs ρ at the ρ = 0 optimal α and the
     optimal α vs ρ (a matplotlib Figure on an Agg canvas; no pyplot state).
+
+    ``rec``: a recommended design with ``axes`` (a ``design --recommend`` result's
+    ``recommended``); its GDOP vs ρ as mounted (reversed gyros included,
+    :func:`recommended_gdop_line`) is drawn bold on its scheme's GDOP-vs-ρ panel, beside
+    the paper's arrays with every gyro +.
     """
     # deferred: matplotlib loads only when a figure is drawn
     from matplotlib.backends.backend_agg import FigureCanvasAgg
@@ -103,10 +133,13 @@ def design_fig():
             rhos = _rho_grid(n)
             layout = Layout.conical(scheme, n, alpha)
             ax.plot(rhos, [gdop(layout, correlation_matrix(n, r)) for r in rhos],
-                    label=f"N = {n}, α = {rad_to_deg(alpha):.2f}°")
+                    label=f"N = {n}, α = {rad_to_deg(alpha):.2f}°, every gyro +")
+        if rec is not None and rec.get("axes") is not None and rec.get("scheme") == scheme:
+            r_line, g_line, label = recommended_gdop_line(rec)
+            ax.plot(r_line, g_line, "k-", lw=2.2, label=label)
         ax.set(title=f"Scheme {scheme}: GDOP vs ρ, α of ρ = 0 [Fig. 10{'ab'[col]}]",
                xlabel="ARW correlation ρ [-]", ylabel="GDOP [-]")
-        ax.legend()
+        ax.legend(fontsize=7)
         ax.grid(alpha=0.3)
 
     ax = axs[1, 2]
@@ -231,9 +264,25 @@ def plot_series(ax, series: dict, *, rtol: float) -> list:
     return ests
 
 
+def _accuracy_value(d: dict) -> float:
+    """The one condition the accuracy-vs-N figure draws: the design's worst case (over the ρ
+    range × every set of failed gyros, the ranking's condition) when it has one, else its
+    3-axis RMS at the result's one ρ [deg/s]."""
+    wc = d.get("worst_case")
+    return float(wc["rms_3axis_deg_s"] if wc else d["rms_3axis_deg_s"])
+
+
+def _failed_words(gyros) -> str:
+    g = list(gyros or [])
+    return "intact" if not g else ("gyro " if len(g) == 1 else "gyros ") + ", ".join(map(str, g)) + " failed"
+
+
 def accuracy_vs_n_fig(res: dict):
-    """Predicted 3-axis RMS vs N per scheme and estimator (identical series merged), with the
-    simulated check's 95 % interval as error bars at the checked designs."""
+    """Predicted 3-axis RMS vs N per scheme and estimator (identical series merged), every
+    point at one condition: each design's worst case over the ρ range × failures (the
+    ranking's), or the result's one ρ without a range; the simulated check's 95 % interval
+    as error bars at the checked designs, each simulated at its own worst case (the ρ and
+    failed gyros in its legend entry, one entry per checked design)."""
     # deferred: matplotlib loads only when a figure is drawn
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
@@ -244,25 +293,41 @@ def accuracy_vs_n_fig(res: dict):
     for d in res["designs"]:
         key = (d["scheme"], d["estimator"])
         cur = best.setdefault(key, {})
-        if d["n"] not in cur or d["rms_3axis_deg_s"] < cur[d["n"]]["rms_3axis_deg_s"]:
+        if d["n"] not in cur or _accuracy_value(d) < _accuracy_value(cur[d["n"]]):
             cur[d["n"]] = d
     series = {}
     for key, per_n in best.items():
         ns = sorted(per_n)
-        series[key] = (np.array(ns), np.array([per_n[n]["rms_3axis_deg_s"] for n in ns]), None)
+        series[key] = (np.array(ns), np.array([_accuracy_value(per_n[n]) for n in ns]), None)
     ests = plot_series(ax, series, rtol=1e-6)
     chk = (res.get("check") or {}).get("designs", [])
+    labels: set = set()
     for i, c in enumerate(chk):
         mc = c["rms_3axis_deg_s"]["monte_carlo"]
         if mc["ci_low"] is None:
             continue
         color = f"C{ests.index(c['estimator'])}" if c["estimator"] in ests else "k"
+        at = c.get("at") or {}
+        where = (f" at ρ = {at['rho']:.3g}, {_failed_words(at.get('failed_gyros'))}"
+                 if at.get("rho") is not None else "")
+        label = f"simulated {c['role']}: {c['label']}" if c.get("role") else f"simulated: {c['label']}"
+        label += where + " (95 % CI)"
+        k = 2
+        base = label
+        while label in labels:
+            label = f"{base} #{k}"
+            k += 1
+        labels.add(label)
         ax.errorbar([c["n"] + 0.12 + 0.06 * i], [mc["value"]],
                     yerr=[[mc["value"] - mc["ci_low"]], [mc["ci_high"] - mc["value"]]],
                     fmt="o" if c["scheme"] == 1 else "s", mfc="none", color=color, ms=6, capsize=3,
-                    label=f"simulated: scheme {c['scheme']}, α {c['alpha_deg']:.1f}°, {c['estimator']} (95 % CI)")
+                    label=label)
+    ranged = any(d.get("worst_case") for d in res["designs"])
     ax.set(xlabel="gyros N [-]", ylabel="3-axis RMS about the truth [deg/s]",
-           title="Predicted accuracy per N (best cone angle and bandwidth)")
+           title=("Predicted worst case per N (over the ρ range × failures; best design per "
+                  "scheme and estimator)" if ranged else
+                  "Predicted accuracy per N (best cone angle and bandwidth)"))
+    ax.title.set_fontsize(10)
     ax.grid(alpha=0.3, which="both")
-    ax.legend(fontsize=7)
+    ax.legend(fontsize=6)
     return fig

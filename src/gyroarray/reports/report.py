@@ -24,9 +24,12 @@
   (mean, sd, min–max) and its 95 % band, the 2.5–97.5 percentiles of ≥ 20
   runs (where one more run falls 95 % of the time; positive like the runs),
   a flag outside it, and for a disagreement only explanations that a named
-  simulation tests (:mod:`gyroarray.chain.hypotheses`).
+  simulation tests (:mod:`gyroarray.chain.hypotheses`); a check that can only
+  reject is withdrawn with its reason (:data:`WITHDRAWN_CHECKS`).
 
-Nothing is computed here: :func:`render_report` draws a
+Nothing is simulated here (the per-ρ tables of a design result add the predictor's
+scores of its designs' mounting mirrors, :func:`gyroarray.reports.decision.rho_candidates`,
+a few seconds): :func:`render_report` draws a
 :class:`gyroarray.sweep.report_results.ReportResults`, which
 :func:`~gyroarray.sweep.report_results.collect_report_results` gathers from the
 sweeps' rows and the saved results (``hypotheses.json`` and ``adev.json`` in the
@@ -55,6 +58,7 @@ from gyroarray.analysis.adev_curves import AdevFigure
 from gyroarray.core import units
 from gyroarray.core import outputs
 from gyroarray.core.errors import InputError
+from gyroarray.core.result_cache import ResultCache, input_key
 from gyroarray.reports import decision as dec
 from gyroarray.reports.design_plots import agg_figure, figure_png, design_fig, plot_series
 from gyroarray.sweep.report_results import (AGREEMENT_LEVEL, MIN_BAND_RUNS, ReportResults,
@@ -312,11 +316,18 @@ table.assumptions {{ background: #f7f7fb; }}
 """
 
 
-def _section_design(doc: Doc):
+def _section_design(doc: Doc, rec: dict | None = None):
     doc.h2("Cone geometry: GDOP vs α and ρ (paper 003 Figs. 8–10)")
+    drawn = rec is not None and rec.get("axes") is not None
     doc.p("GDOP = √trace((Hᵀ C⁻¹ H)⁻¹): the fused rate error of a unit-noise gyro array, per "
-          "layout (H) and ARW correlation (C). Dots mark each N's optimal cone angle.")
-    doc.figure("gdop", figure_png(design_fig(), dpi=80), "GDOP vs cone angle α and vs correlation ρ")
+          "layout (H) and ARW correlation (C). Dots mark each N's optimal cone angle. The paper's "
+          "arrays have every gyro mounted +"
+          + ("; the bold black line on its scheme's GDOP-vs-ρ panel is the recommended array as "
+             "mounted, its reversed gyros included (the correlation in the gyros' output frame)."
+             if drawn else "."))
+    doc.figure("gdop", figure_png(design_fig(rec if drawn else None), dpi=80),
+               "GDOP vs cone angle α and vs correlation ρ"
+               + ("; bold: the recommended array as mounted (reversed gyros included)" if drawn else ""))
 
 
 def _section_ranking(doc: Doc, res: ReportResults, top: int) -> pd.DataFrame | None:
@@ -388,6 +399,29 @@ def _section_estimators(doc: Doc, rows: pd.DataFrame, comp: pd.DataFrame):
     return comp
 
 
+_GAIN_WHY = ("withdrawn: this check can only reject. Its value is paper 002's filtered / original "
+             "amplitude (Table 4), and the paper's original (raw) gyro reads the 20 deg/s swing as "
+             "22.45–23.11 deg/s, a scale factor of about +12 % (to +16 %), while its filtered output "
+             "reads 20.10–20.78 deg/s: the ratio of about 0.9 is that raw scale factor (1/1.12 = "
+             "0.89). The model simulates no scale-factor error on the raw gyro, so the simulated "
+             "ratio is the filter's own gain at the swing, about 1 at every bandwidth, and no "
+             "filter setting can reach 0.9: the hypothesis is never supported whatever the filter "
+             "does, so the check tests nothing (it comes back when the +12 % scale factor is "
+             "simulated)")
+
+#: Paper checks the report withdraws, with the reason it prints ({check name: reason}). A
+#: check of the paper values file may also say ``withdrawn = "reason"`` itself (read the same way).
+WITHDRAWN_CHECKS = {"p002_t4_0p1_constant_gain": _GAIN_WHY, "p002_t4_0p5_constant_gain": _GAIN_WHY}
+
+
+def withdrawn_reason(check: dict) -> str | None:
+    """Why a paper check is withdrawn from the report (None: it is shown)."""
+    why = check.get("withdrawn") or WITHDRAWN_CHECKS.get(check.get("name", ""))
+    if not why:
+        return None
+    return why if str(why).startswith("withdrawn") else f"withdrawn: {why}"
+
+
 def _section_paper(doc: Doc, res: ReportResults) -> list[dict]:
     doc.h2("Paper vs model")
     if not res.paper:
@@ -418,9 +452,15 @@ def _section_paper(doc: Doc, res: ReportResults) -> list[dict]:
                     "undetermined (< 20 runs)" if v["flag"] is None else ("no" if v["flag"] else "yes")]
                    for v in e["values"]],
                   flags=[bool(v["flag"]) for v in e["values"]])
-        if e["flagged"] and not e["checks"]:
-            doc.p("Unexplained: no explanation of this disagreement has been tested.", "reason")
+        live = [c for c in e["checks"] if withdrawn_reason(c) is None]
+        if e["flagged"] and not live:
+            doc.p("Unexplained: no explanation of this disagreement has been tested"
+                  + (" (its check is withdrawn, below)" if e["checks"] else "") + ".", "reason")
         for c, r in zip(e["checks"], e.get("check_results", [])):
+            why = withdrawn_reason(c)
+            if why is not None:
+                doc.p(f"Check {c['name']}: {why}.", "reason")
+                continue
             if isinstance(r, str):
                 doc.p(f"Check {c['name']}: could not run ({r}).", "reason")
                 continue
@@ -473,9 +513,36 @@ def write_report(dirs, out_html, out_md=None, *, design=None, paper_values=None,
         raise InputError("gyroarray report: give at least one sweep folder or --design FILE.json")
     _check_suffixes(out_html, out_md)
     results = collect_report_results(dirs, design=design, paper_values=paper_values)
-    out = render_report(results, out_html, out_md, top=top, force=force)
+    rc = cached_rho_candidates(results.design, design if isinstance(design, (str, Path)) else None)
+    out = render_report(results, out_html, out_md, top=top, force=force, rho_candidates=rc)
     out["seconds"] = time.perf_counter() - t0
     return out
+
+
+def per_rho_file(design_path) -> Path:
+    """Where a design result's per-ρ candidates are saved: ``<design stem>.per_rho.json`` beside it."""
+    p = Path(design_path)
+    return p.with_name(p.stem + ".per_rho.json")
+
+
+def cached_rho_candidates(res: dict | None, design_path=None) -> dict | None:
+    """:func:`gyroarray.reports.decision.rho_candidates` of a design result, read from
+    ``<design stem>.per_rho.json`` when saved under the same inputs, else computed (the
+    predictor on the mounting mirrors, a few seconds) and saved there, so that a second
+    report of the same result computes nothing. None without a result or a per-ρ grid."""
+    if res is None or not res.get("per_rho"):
+        return None
+    cache = ResultCache(per_rho_file(design_path) if design_path is not None else None, "per_rho")
+    key = input_key("design_per_rho", res.get("designs"), res.get("recommended"), res.get("assumptions"),
+                    list(res["per_rho"]), dec.REPRODUCE_RTOL)
+    hit = cache.get(key)
+    if hit is not None and isinstance(hit.get("candidates"), list) and isinstance(hit.get("rhos"), list):
+        return hit
+    rc = dec.rho_candidates(res)
+    if rc is not None:
+        cache.put(key, rc)
+        cache.save()
+    return rc
 
 
 def _check_suffixes(out_html, out_md) -> None:
@@ -486,10 +553,12 @@ def _check_suffixes(out_html, out_md) -> None:
 
 
 def render_report(results: ReportResults, out_html, out_md=None, *, top: int = 15,
-                  force: bool = True) -> dict:
-    """Draw a :class:`~gyroarray.sweep.report_results.ReportResults`: nothing is computed here.
+                  force: bool = True, rho_candidates: dict | None = None) -> dict:
+    """Draw a :class:`~gyroarray.sweep.report_results.ReportResults`: nothing is simulated here.
 
-    Parameters and returns as :func:`write_report` (which collects the results and calls this).
+    Parameters and returns as :func:`write_report` (which collects the results and calls this);
+    ``rho_candidates``: :func:`cached_rho_candidates` of the design result (None: computed
+    here when the result has a per-ρ grid).
     """
     t0 = time.perf_counter()
     _check_suffixes(out_html, out_md)
@@ -500,8 +569,9 @@ def render_report(results: ReportResults, out_html, out_md=None, *, top: int = 1
     notes = list(results.notes)
     for n in notes:
         doc.p("Note: " + n, "note")
-    decision = dec.write_sections(doc, res, top, results.gdop_robustness) if res is not None else None
-    _section_design(doc)
+    decision = (dec.write_sections(doc, res, top, results.gdop_robustness, rho_candidates=rho_candidates)
+                if res is not None else None)
+    _section_design(doc, None if res is None else res.get("recommended"))
     if res is not None and results.design_adev is not None:
         doc.h2("Allan deviation: single gyros vs fused output")
         dec.adev_section(doc, res, results.design_adev)
@@ -513,8 +583,10 @@ def render_report(results: ReportResults, out_html, out_md=None, *, top: int = 1
         assert results.estimators is not None                  # collected with the sweeps
         _section_estimators(doc, all_rows, results.estimators)
     pvm = _section_paper(doc, results) if data else []
-    pvm = [{**e, "check_results": [r.to_dict() for r in e.get("check_results", [])
-                                   if not isinstance(r, str)]} for e in pvm]
+    pvm = [{**e, "check_results": [r.to_dict() for c, r in zip(e["checks"], e.get("check_results", []))
+                                   if not isinstance(r, str) and withdrawn_reason(c) is None],
+            "withdrawn_checks": {c["name"]: withdrawn_reason(c) for c in e["checks"]
+                                 if withdrawn_reason(c) is not None}} for e in pvm]
 
     stamp = time.strftime("%Y-%m-%d %H:%M", time.localtime())
     subtitle = f"{stamp}" + ("" if not data else " · sweeps: " + ", ".join(
