@@ -82,7 +82,7 @@ def _accel_fitted_rel(table, axis: str) -> dict:
     out = {}
     for term, key in (("n", "n_m_s_rt_h"), ("b", "b_mg"), ("k", "k_m_s2_rt_h")):
         values, sigma = getattr(table, key), table.sigma.get(key)
-        if values is not None and sigma is not None:
+        if values is not None and sigma is not None and values[i] is not None and sigma[i] is not None:
             out[term] = float(sigma[i]) / float(values[i])
     return out
 
@@ -172,6 +172,23 @@ def cmd_plan(args):
     return _plan_cases(args, sensor, cases, TERM_NAMES)
 
 
+#: How ``t_crb_s`` is computed (``plan --json``'s ``t_crb_method``).
+_CRB_METHOD = ("shortest one-part record whose Cramér–Rao bound (Whittle Fisher information of the "
+               "first differences, the planned terms jointly: analysis.crb) gives a relative 1σ of "
+               "precision/z, z the two-sided normal quantile of the confidence; at least 64 samples")
+
+
+def _crb_lengths(plan, precision: float, confidence: float) -> dict:
+    """term -> T_CRB [s] (None: not within ten years) for the plan's terms jointly."""
+    # deferred: numpy, scipy load only when the command runs
+    from gyroarray.analysis.crb import crb_length
+    from gyroarray.chain.plan import MAX_PLAN_S
+    from scipy import special
+    z = float(2.0 ** 0.5 * special.erfinv(confidence))
+    values = {t: float(v) for t, v in plan.coef.items()}
+    return {t: crb_length(values, plan.rate_hz, t, precision / z, max_s=MAX_PLAN_S) for t in values}
+
+
 def _plan_cases(args, sensor: str, cases, names):
     """The plan of each ``(gyro or axis, coef SI, relative 1σ of the model)``: JSON and text."""
     # deferred: the chain (numpy, scipy) loads only when the command runs
@@ -183,7 +200,8 @@ def _plan_cases(args, sensor: str, cases, names):
     result = {"sensor": sensor, "precision": precision, "confidence": args.confidence,
               "rate_hz": args.rate_hz, what: []}
     lines = [f"record length for ±{precision:.1%} relative half-width ({args.confidence:.1%} "
-             f"two-sided) at {args.rate_hz:g} Hz (Allan GLS fit, allan's EDF)"
+             f"two-sided) at {args.rate_hz:g} Hz (Allan GLS fit, allan's EDF; T_CRB: the "
+             f"Cramér–Rao bound, any unbiased estimator)"
              + (", accelerometer:" if sensor == "acc" else ":")]
     for g, coef, fitted in cases:
         try:
@@ -195,6 +213,15 @@ def _plan_cases(args, sensor: str, cases, names):
             raise err.with_file(str(args.model)) from None
         d = plan.to_json_dict()
         d[label] = g
+        bound_s = _crb_lengths(plan, precision, args.confidence)
+        for t, t_crb in bound_s.items():
+            row = d["terms"][names[t][0]]
+            row["t_crb_s"] = t_crb
+            row["t_crb_h"] = None if t_crb is None else t_crb / units.S_PER_H
+            gls_s = plan.duration_s.get(t)
+            row["allan_efficiency_vs_crb"] = (None if t_crb is None or gls_s is None
+                                              else t_crb / gls_s)
+        d["t_crb_method"] = _CRB_METHOD
         for t, rel in fitted.items():
             if names[t][0] in d["terms"]:
                 d["terms"][names[t][0]]["model_sigma_rel"] = rel
@@ -203,7 +230,8 @@ def _plan_cases(args, sensor: str, cases, names):
             lines.append(f"{'acc_' if sensor == 'acc' else 'gyro '}{g}:")
         for t in plan.coef:
             name, unit, conv = names[t]
-            row = f"  {name} = {conv(plan.coef[t]):.5g} {unit}: {_fmt_len(plan.duration_s[t])}"
+            row = (f"  {name} = {conv(plan.coef[t]):.5g} {unit}: {_fmt_len(plan.duration_s[t])}; "
+                   f"the bound (T_CRB): {_fmt_len(bound_s[t])}")
             if at_s is not None:
                 row += f"; a {args.at_h:g} h record gives ±{plan.at_precision[t]:.1%}"
             if t in fitted:
