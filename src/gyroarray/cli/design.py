@@ -76,7 +76,7 @@ def cmd_design(args) -> tuple[dict, str]:
                                 ("--g-sensitivity", args.g_sensitivity),
                                 ("--objective", args.objective), ("--design-rho", args.design_rho),
                                 ("--far-per-h", args.far_per_h), ("--p-md", args.p_md),
-                                ("--mdb-max", args.mdb_max),
+                                ("--mdb-max", args.mdb_max), ("--common-mode", args.common_mode),
                                 ("--horizon-s", args.horizon_s),
                                 ("--alike", args.alike or None)) if v is not None]
     if rec_only:
@@ -166,6 +166,8 @@ def _design_noise(args):
                          "gyroarray fit --out) or --arw N_DEG_RT_H [--rrw K] [--bi B]")
     if args.rho is not None and args.rho_range is not None:
         raise InputError("gyroarray design: --rho and --rho-range exclude each other")
+    g = GyroNoise(**{**g.in_frame(args.common_mode or "output").__dict__,
+                     "sources": {**g.sources, "common_mode": "user" if args.common_mode else "default"}})
     rhos = None
     if args.rho is not None:
         g = g.with_rho(args.rho)
@@ -277,10 +279,11 @@ def _design_space(args):
     ests = ESTIMATORS
     if args.estimators is not None:
         ests = tuple(e.strip() for e in args.estimators.split(",") if e.strip())
-        unknown = [e for e in ests if e not in ESTIMATORS]
-        if unknown or not ests:
-            raise InputError(f"--estimators: {unknown[0] if unknown else '(none)'} is not one the "
-                             f"design search predicts ({', '.join(ESTIMATORS)})")
+        from gyroarray.design.search_space import design_refusal   # by the estimators' design tags
+        why = next(((e, r) for e in ests if (r := design_refusal(e)) is not None), None)
+        if why is not None or not ests:
+            raise InputError(f"--estimators: {why[1] if why else '(none) given'} (the built-ins the "
+                             f"design search predicts: {', '.join(ESTIMATORS)})")
     swing, motion, motion_name, force = _design_motion(args, rate, horizon)
     bw = _design_bandwidth(args, rate, swing is None and motion is None, src)
     sensor_bw, src["sensor_bandwidth"] = _sensor_bandwidth_arg(args, rate)
@@ -294,7 +297,8 @@ def _design_space(args):
         src[G_SENSITIVITY] = "user"
     for key, v in (("rate_hz", args.rate_hz), ("horizon_s", args.horizon_s), ("ns", args.n),
                    ("estimators", args.estimators), ("failures", args.failures),
-                   ("motion", args.swing or args.motion)):
+                   ("motion", args.swing or args.motion), ("far_per_h", args.far_per_h),
+                   ("p_md", args.p_md)):
         src.setdefault(key, "user" if v is not None else "default")
     space = DesignSpace(rate_hz=rate, horizon_s=horizon, ns=ns, estimators=ests, failures=failures,
                         bandwidth_hz=(float(bw[0]), float(bw[1])), swing=swing, motion=motion,
@@ -405,6 +409,12 @@ def _design_recommend(args) -> tuple[dict, str]:
             raise
         raise InputError(f"{err.message} (the search's conditions: --n, --failures, --rho-range, "
                          "--bandwidth-hz)", file=err.file) from None
+    # deferred: numpy and the design chain (a fast --help)
+    from gyroarray.design.details import frame_comparison
+    from gyroarray.design.statements import detection_assumption
+    res["common_mode"] = frame_comparison(res, g, space, rhos)
+    if space.failures:
+        res["assumptions"]["detection"]["value"] = detection_assumption(space, res["recommended"])
     if args.check:
         res["check"] = monte_carlo_check(res["designs"], g, space, replicates=args.check,
                                          seed=20260412 if args.seed is None else args.seed)
@@ -436,6 +446,7 @@ def _design_as_built(args) -> tuple[dict, str]:
                             ("--g-sensitivity", args.g_sensitivity), ("--objective", args.objective),
                             ("--design-rho", args.design_rho), ("--far-per-h", args.far_per_h),
                             ("--p-md", args.p_md), ("--mdb-max", args.mdb_max), ("--check", args.check),
+                            ("--common-mode", args.common_mode),
                             ("--seed", args.seed), ("--paper-tables", args.paper_tables or None),
                             ("--plot", args.plot)) if v is not None]
     if extra:
@@ -542,12 +553,31 @@ def _recommend_text(res: dict) -> str:
         lines.append(res[G_SENSITIVITY]["statement"])
     lines += [f"what would change the choice: {w}" for w in res["what_changes_the_choice"]]
     lines += [f"note: {n}" for n in res["notes"]]
+    a = res["assumptions"]
+    if "common_mode" in res:
+        cm = res["common_mode"]
+        lines.append(f"common mode: chosen the {cm['chosen']} frame ({a['common_mode']['source']}): "
+                     + a["common_mode"]["unit"])
+        lines += [f"  {cm['frames'][f]['statement']}" for f in cm["frames"]]
+    if "flicker_model" in a:
+        lines.append(f"flicker model: {a['flicker_model']['unit']}")
+    if r.get("mdb_statement"):
+        lines.append(f"detection: {r['mdb_statement']}")
     w, t, ru = r["worst_case"], r["typical"], res.get("runner_up")
     failed = ("no failure" if not w["failed_gyros"] else
               "gyro " + ", ".join(map(str, w["failed_gyros"])) + " failed")
     rd = ("built without rho" if r["design_rho"] is None else f"weights built for rho = {r['design_rho']:.4g}")
-    mdb = f"; MDB {r['mdb_deg_s']:.3g} deg/s (gyro {r['mdb_worst_gyro']})" if r.get("mdb_deg_s") else ""
-    lines += ["", f"RECOMMENDED ({r['objective']} objective): {design_label(r)}; {r['mounting']}; {rd}",
+    mdb = ""
+    if r.get("mdb_deg_s"):
+        tied = r.get("mdb_worst_gyros") or [r["mdb_worst_gyro"]]
+        who = f"gyro {tied[0]}" if len(tied) == 1 else f"gyros {','.join(map(str, tied))} tied"
+        where = (f" at rho {r['mdb_rho']:.3g}, {r['mdb_window_s']:.3g} s window"
+                 if r.get("mdb_rho") is not None else "")
+        mdb = f"; MDB {r['mdb_deg_s']:.3g} deg/s ({who}{where})"
+    frame = (f"; common mode in the {a['common_mode']['value']} frame" if "common_mode" in a else "")
+    flick = (f"; flicker: the {a['flicker_model']['value']} model" if "flicker_model" in a else "")
+    lines += ["", f"RECOMMENDED ({r['objective']} objective{frame}{flick}): {design_label(r)}; "
+                  f"{r['mounting']}; {rd}",
               f"  worst case rho = {w['rho']:.4g}, {failed}: {w['rms_3axis_deg_s']:.4g} deg/s 3-axis RMS, "
               f"{w['angle_deg']:.4g} deg at the horizon; typical (design rho, intact): "
               f"{t['rms_3axis_deg_s']:.4g} deg/s, {t['angle_deg']:.4g} deg{mdb}"
@@ -648,6 +678,11 @@ def add_parser(sub) -> None:
     p.add_argument("--mdb-max", type=float_in("--mdb-max", 0.0, lo_open=True, unit="deg/s"),
                    metavar="DEG_S", help="--recommend --failures: exclude designs whose minimum "
                                          "detectable bias (worst gyro) is above DEG_S")
+    p.add_argument("--common-mode", choices=("output", "axis"),
+                   help="--recommend: the frame the gyros' correlated noise lives in: output (default; "
+                        "it adds to every output with the same sign, so reversed gyros move it into the "
+                        "parity space) or axis (it follows each gyro's sensing axis, so reversing buys "
+                        "nothing); the decision is shown under both")
     p.add_argument("--estimators", metavar="A,B,...",
                    help="--recommend: estimators compared (default kf_array,kf_single,gls,ols,naive)")
     p.add_argument("--check", type=count("--check"), metavar="K",

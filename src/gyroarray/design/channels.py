@@ -19,10 +19,9 @@ from gyroarray.core.gdop import correlation_matrix
 from gyroarray.design.predict import (AXES, channel_filter,
                                       channel_response, g_sensitivity_error, settle_start, swing_truth)
 from gyroarray.effects.model import NoiseModel
-from gyroarray.design.robust import fixed_weights
-from gyroarray.effects.names import G_SENSITIVITY
-from gyroarray.design.gyro_noise import (GyroNoise, equicorrelation, kept_covariances, kept_levels)
-from gyroarray.design.search_space import weight_kind, DesignSpace
+from gyroarray.effects.names import ARW, G_SENSITIVITY, RRW
+from gyroarray.design.gyro_noise import (GyroNoise, kept_covariances, kept_levels)
+from gyroarray.design.search_space import weight_kind, DesignSpace, design_tags, design_weights
 
 
 def channel_weights(kind: str, H: np.ndarray, R: np.ndarray) -> np.ndarray:
@@ -112,7 +111,8 @@ class _FilterBank:
 
 
 def _filter_kind(est: str) -> str:
-    return {"kf_array": "kf", "kf_single": "kf", "gls": "lowpass", "ols": "lowpass"}.get(est, "none")
+    """The filter on the fused channel of ``est`` (its design tags' ``channel_filter``)."""
+    return design_tags(est).channel_filter
 
 
 @dataclass
@@ -218,11 +218,12 @@ def with_sensor(model, space: DesignSpace, *, g_sensitivity: bool = True):
                                               description=model.description)
 
 
-def white_covariance(n: int, g: GyroNoise, dt: float) -> np.ndarray:
-    """Covariance of one white sample of the N gyros [rad²/s²]."""
+def white_covariance(n: int, g: GyroNoise, dt: float, signs=None) -> np.ndarray:
+    """Covariance of one white sample of the N gyros [rad²/s²] (``signs``: the mounting signs,
+    for the axis frame of the common mode: :meth:`GyroNoise.correlation`)."""
     if g.per_gyro is not None:
-        return kept_covariances(g, n, None, dt)[0]
-    return units.arw_deg_rt_h_to_rad_rt_s(g.arw_deg_rt_h) ** 2 / dt * correlation_matrix(n, g.rho_arw)
+        return kept_covariances(g, n, None, dt, signs)[0]
+    return units.arw_deg_rt_h_to_rad_rt_s(g.arw_deg_rt_h) ** 2 / dt * g.correlation(n, ARW, None, signs)
 
 
 def _space_specific_force(space: DesignSpace) -> np.ndarray:
@@ -283,12 +284,11 @@ def estimator_kwargs(est: str, bw, g: GyroNoise) -> dict:
     [Hz], and for the array KF no bias states when the gyros have no rate random walk (the
     fast path's walk/white ratio 0: the bias states would have no process noise and the gain
     no steady state)."""
-    if est in ("kf_array", "kf_single"):
-        kw: dict = {"bandwidth_hz": bw}
-        if est == "kf_array" and not g.rrw_deg_h_rt_h > 0:
-            kw["bias_states"] = False
-        return kw
-    return {"lowpass_hz": bw} if est in ("gls", "ols") else {}
+    tags = design_tags(est)                     # what the estimator declares (its design tags)
+    kw: dict = {} if tags.bandwidth_param is None else {tags.bandwidth_param: bw}
+    if tags.needs_rrw_for_bias_states and not g.rrw_deg_h_rt_h > 0:
+        kw["bias_states"] = False
+    return kw
 
 
 def filter_bank(space: DesignSpace, g: GyroNoise) -> "_FilterBank":
@@ -307,26 +307,28 @@ def single_ratio(g: GyroNoise, space: DesignSpace) -> float:
 
 
 def fixed_channels(est: str, H: np.ndarray, g_design: GyroNoise, g_true: GyroNoise,
-                   dt: float, keep=None) -> Channels:
+                   dt: float, keep=None, signs=None) -> Channels:
     """Per α and axis the channel noise of an estimator built for ``g_design`` and run on
     ``g_true`` (weights fixed at design; variances MᵀC_true M) [SI, per sample].
 
-    Per-gyro noise: ``keep`` names the model's gyros in H's columns (0-based; None: all)."""
+    Per-gyro noise: ``keep`` names the model's gyros in H's columns (0-based; None: all).
+    ``signs``: the mounting sign (±1) of every gyro of the array, in H's row order (H's rows are already
+    mounted); each noise's correlation is formed in its own common-mode frame
+    (:meth:`GyroNoise.correlation`: the axis frame multiplies it by s sᵀ of the kept gyros)."""
     N = H.shape[1]
     if g_true.per_gyro is not None:
-        return _fixed_channels_per_gyro(est, H, g_design, g_true, dt, keep)
+        return _fixed_channels_per_gyro(est, H, g_design, g_true, dt, keep, signs)
     s2 = units.arw_deg_rt_h_to_rad_rt_s(g_true.arw_deg_rt_h) ** 2 / dt
     q = units.rrw_deg_h_rt_h_to_rad_s_rt_s(g_true.rrw_deg_h_rt_h) ** 2 * dt
-    Rd = s2 * equicorrelation(N, g_design.rho_arw)
-    kind = weight_kind(est)
-    M = fixed_weights(kind, H, Rd)
-    Rt, Qt = s2 * equicorrelation(N, g_true.rho_arw), q * equicorrelation(N, g_true.rho_rrw)
+    Rd = s2 * g_design.correlation(N, ARW, keep, signs)
+    M = design_weights(est, H, Rd, dt, q * g_design.correlation(N, RRW, keep, signs))
+    Rt, Qt = s2 * g_true.correlation(N, ARW, keep, signs), q * g_true.correlation(N, RRW, keep, signs)
     white = np.einsum("gai,ij,gaj->ga", M, Rt, M)
     walk = np.einsum("gai,ij,gaj->ga", M, Qt, M)
     m2 = np.sum(M * M, axis=2)
     ratio = None
     if est == "kf_array":
-        Qd = q * equicorrelation(N, g_design.rho_rrw)
+        Qd = q * g_design.correlation(N, RRW, keep, signs)
         ratio = np.einsum("gai,ij,gaj->ga", M, Qd, M) / np.einsum("gai,ij,gaj->ga", M, Rd, M)
     ch = Channels(white, walk, m2 * units.deg_h_to_rad_s(g_true.bi_deg_h) ** 2,
                    m2 * units.deg_h_to_rad_s(g_true.gm_sigma_deg_h) ** 2, ratio, True,
@@ -336,14 +338,13 @@ def fixed_channels(est: str, H: np.ndarray, g_design: GyroNoise, g_true: GyroNoi
 
 
 def _fixed_channels_per_gyro(est: str, H: np.ndarray, g_design: GyroNoise, g_true: GyroNoise,
-                             dt: float, keep) -> Channels:
+                             dt: float, keep, signs=None) -> Channels:
     """:func:`fixed_channels` with every gyro its own level (and the model's correlation)."""
     N = H.shape[1]
-    Rd, Qd = kept_covariances(g_design, N, keep, dt)
-    Rt, Qt = kept_covariances(g_true, N, keep, dt)
+    Rd, Qd = kept_covariances(g_design, N, keep, dt, signs)
+    Rt, Qt = kept_covariances(g_true, N, keep, dt, signs)
     _, _, b2, gm2 = kept_levels(g_true, N, keep, dt)
-    kind = weight_kind(est)
-    M = fixed_weights(kind, H, Rd)
+    M = design_weights(est, H, Rd, dt, Qd)
     white = np.einsum("gai,ij,gaj->ga", M, Rt, M)
     walk = np.einsum("gai,ij,gaj->ga", M, Qt, M)
     ratio = None

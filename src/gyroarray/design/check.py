@@ -137,8 +137,10 @@ def _mirror_design(rec: dict, g: GyroNoise, space: DesignSpace) -> dict:
     lo, hi = rec["rho_range"]
     dec = Decider(g, space, lo, hi, rec["objective"])
     alpha, signs = mirror_pattern(rec["scheme"], rec["alpha_deg"], np.asarray(rec["mounting_signs"], float))
+    slot_of_gyro = (rec.get("placement") or {}).get("slot_of_gyro")     # 1-based slots, per gyro
+    slots = None if slot_of_gyro is None else tuple(int(k) - 1 for k in slot_of_gyro)
     c = Candidate(rec["scheme"], rec["n"], rec["estimator"], signs, math.radians(alpha), rec["bandwidth_hz"],
-              rec["design_rho"], math.nan)
+                  rec["design_rho"], math.nan, slots)     # the same placement, mirrored
     d = decision_dict(dec, c, None)
     rescore_exact(d, dec)
     d.pop("_cand", None)
@@ -163,6 +165,13 @@ def honest_rms_ci(values, *, gaussian: bool = False) -> dict:
         return a
     return {**a, "ci_low": min(a["ci_low"], b["ci_low"]), "ci_high": max(a["ci_high"], b["ci_high"]),
             "interval": "the wider of Satterthwaite and nu = n runs (at least one degree of freedom per run)"}
+
+
+def _row_signs(d: dict):
+    """The mounting sign of each row of a design's ``axes`` (gyro j: the sign of its slot)."""
+    s = d.get("mounting_signs")
+    slots = (d.get("placement") or {}).get("slot_of_gyro")
+    return s if s is None or slots is None else [s[int(k) - 1] for k in slots]
 
 
 def check_decision(designs: list[dict], g: GyroNoise, space: DesignSpace, *, replicates: int = 20,
@@ -207,9 +216,10 @@ def check_decision(designs: list[dict], g: GyroNoise, space: DesignSpace, *, rep
         rd = d["design_rho"] if d["design_rho"] is not None else wc["rho"]
         g_design = g.with_rho(rd) if ranged else g
         g_true = g.with_rho(wc["rho"]) if ranged else g
+        sg = _row_signs(d)                           # the axis frame's correlation reads them
         est = get_estimator(d["estimator"])(**estimator_kwargs(d["estimator"], d["bandwidth_hz"], g)).fit(
-            layout, with_sensor(g_design.noise_model(len(keep), keep), space, g_sensitivity=False), dt)
-        model = with_sensor(g_true.noise_model(len(keep), keep), space, g_sensitivity=False)
+            layout, with_sensor(g_design.noise_model(len(keep), keep, sg), space, g_sensitivity=False), dt)
+        model = with_sensor(g_true.noise_model(len(keep), keep, sg), space, g_sensitivity=False)
         setups.append((role, d, layout, model, est))
     per: list[list[np.ndarray]] = [[] for _ in setups]
     for r in range(int(replicates)):

@@ -13,17 +13,17 @@ import numpy as np
 from gyroarray.core.gdop import fault_tolerance, worst_gdop_over_rho
 from gyroarray.core.errors import InputError
 from gyroarray.core.layout import Layout
-from gyroarray.design.robust import (fixed_weights, mounted_axes,
-                                     mounting_words, worst_over_interval)
+from gyroarray.design.robust import (mounting_words, worst_over_interval)
 from gyroarray.design.channels import (predicted_axes, g_sensitivity_terms, white_covariance)
 from gyroarray.design.details import add_details
 from gyroarray.design.gyro_noise import GyroNoise
 from gyroarray.design.scoring import (EXACT_TOP, rescore_exact, screening_is_exact)
-from gyroarray.design.screening import (RHO_WEIGHTED, Candidate, Decider, score_case, grid_best, nominal_rho,
-                                        predicted_at, refine_candidate, public_fields, worst_case_of)
+from gyroarray.design.screening import (Candidate, Decider, score_case, grid_best, nominal_rho,
+                                        predicted_at, refine_candidate, public_fields, worst_case_of,
+                                        candidate_axes, rho_weighted, gyro_classes, row_signs)
 from gyroarray.design.search import REFINE_TOP
-from gyroarray.design.search_space import (weight_kind, DesignSpace, EQUIVALENT_SHARE, OBJECTIVES,
-                                           resolve_objective, sized_for)
+from gyroarray.design.search_space import (DesignSpace, EQUIVALENT_SHARE, OBJECTIVES,
+                                           resolve_objective, sized_for, design_tags, design_weights)
 
 
 #: Designs at the top of the decision whose detection (MDB) and error budget are computed
@@ -34,7 +34,7 @@ DETAIL_TOP = 12
 def decision_dict(dec: Decider, c: Candidate, rhos_shown) -> dict:
     """Every field of one design of the decision (JSON units)."""
     space, g = dec.space, dec.g
-    H = mounted_axes(c.scheme, c.n, np.array([c.alpha_rad]), c.signs)
+    H = candidate_axes(c)
     wc = worst_case_of(dec, c, H)
     rho_typ = nominal_rho(dec, c)
     typ = score_case(dec, c, H, tuple(range(c.n)), rho_typ, c.rho_d)
@@ -47,16 +47,20 @@ def decision_dict(dec: Decider, c: Candidate, rhos_shown) -> dict:
     dt = space.dt_s
     pred = predicted_axes(ms, sumw2, sumf2, ch, resp, space)
     Hm = H[0]
-    gd_rho, gd_r = worst_gdop_over_rho(Hm, dec.lo, dec.hi, 0)
-    ft = fault_tolerance(Layout(Hm), rho_typ if dec.ranged else g.rho_arw)
+    sg = row_signs(c.signs, c.slots)
+    # the GDOP's correlation in the common-mode frame: the axis frame's (1 − ρ)I + ρssᵀ on the
+    # mounted axes S H is the output frame's (1 − ρ)I + ρ11ᵀ on the unreversed axes H
+    Hg = Hm * sg[:, None] if g.common_mode == "axis" else Hm
+    gd_rho, gd_r = worst_gdop_over_rho(Hg, dec.lo, dec.hi, 0)
+    ft = fault_tolerance(Layout(Hg), rho_typ if dec.ranged else g.rho_arw)
     if space.failures:
-        wg, _ = worst_gdop_over_rho(Hm, dec.lo, dec.hi, space.failures)
+        wg, _ = worst_gdop_over_rho(Hg, dec.lo, dec.hi, space.failures)
     else:
         wg = gd_rho
-    kind = weight_kind(c.est)
     gdes = dec.cond(c.rho_d if c.rho_d is not None else rho_typ)
     dcg = np.array([r.dc_gain for r in resp])
-    gs = g_sensitivity_terms(space, dcg[:, None] * fixed_weights(kind, H, white_covariance(c.n, gdes, dt))[0])
+    gs = (g_sensitivity_terms(space, dcg[:, None] * design_weights(c.est, H, white_covariance(c.n, gdes, dt, sg), dt)[0])
+          if space.g_sensitivity_deg_s_per_g is not None else {})
     d: dict[str, Any] = {
         "scheme": c.scheme, "n": c.n, "alpha_deg": float(np.degrees(c.alpha_rad)),
         "estimator": c.est, "bandwidth_hz": c.bw, "rho": r_int,
@@ -72,13 +76,16 @@ def decision_dict(dec: Decider, c: Candidate, rhos_shown) -> dict:
         "worst_case": public_fields(wc), "typical": {**public_fields(typ), "failed_gyros": []},
         "worst_rms_3axis_deg_s": wc["rms_3axis_deg_s"],
     }
-    if c.rho_d is None and not dec.ranged and c.est in RHO_WEIGHTED:
+    if c.slots is not None or g.per_gyro is not None:
+        d["placement"] = placement_fields(c, gyro_classes(g, c.n))
+        d["mounting"] += "; " + d["placement"]["statement"]
+    if c.rho_d is None and not dec.ranged and rho_weighted(c.est):
         d["design_rho_note"] = (f"{c.est} is built for the model's own correlation matrices (no ρ range "
                                 "given)")
     elif c.rho_d is None:
         d["design_rho_note"] = (f"{c.est} is built without ρ (its weights do not use the correlation); "
                                 f"typical case at ρ = {rho_typ:g}")
-    if c.est in RHO_WEIGHTED and dec.hi > dec.lo:
+    if rho_weighted(c.est) and dec.hi > dec.lo:
         d["oracle_worst_case"] = {**public_fields(worst_case_of(dec, c, H, oracle=True)),
                                   "note": "oracle: weights built for the true ρ (no real array knows it)"}
     if rhos_shown:
@@ -86,6 +93,32 @@ def decision_dict(dec: Decider, c: Candidate, rhos_shown) -> dict:
                            for r in rhos_shown if dec.lo <= r <= dec.hi}
     d["_cand"] = c
     return d
+
+
+def placement_fields(c: Candidate, classes: list[int]) -> dict:
+    """Where each of the model's gyros sits (a per-gyro model): ``slot_of_gyro`` and
+    ``gyro_in_slot`` (1-based), and a statement naming the unlike gyros' slots (the slot
+    numbers are those of ``mounting`` and ``mounting_signs``)."""
+    n = c.n
+    slots = list(range(n)) if c.slots is None else list(c.slots)
+    inv = [0] * n
+    for j, k in enumerate(slots):
+        inv[k] = j
+    common = max(set(classes), key=classes.count)
+    odd = [j for j in range(n) if classes[j] != common]
+
+    def where(k):
+        if c.scheme == 2 and k == 0:
+            return "slot 1, the axial slot on " + ("+z" if c.signs[0] > 0 else "−z")
+        first = 0 if c.scheme == 1 else 1
+        az = 360.0 * (k - first) / (n - first)
+        return f"slot {k + 1}, on the cone at azimuth {az:.4g}°"
+    said = "; ".join(f"gyro {j + 1} in {where(slots[j])}" for j in odd) or "every gyro alike"
+    moved = c.slots is not None
+    return {"slot_of_gyro": [k + 1 for k in slots], "gyro_in_slot": [j + 1 for j in inv],
+            "statement": (f"placement searched (the gyros are not alike): {said}"
+                          + ("" if moved else " (each gyro in its own numbered slot)")
+                          + "; the mounting words and signs number the slots")}
 
 
 def _rank_decision(designs: list[dict], objective: str, mdb_max: float | None) -> list[dict]:
@@ -124,7 +157,7 @@ def _rank_decision(designs: list[dict], objective: str, mdb_max: float | None) -
 
 
 def decide(g: GyroNoise, space: DesignSpace, rho_lo: float, rho_hi: float, *,
-           rhos_shown=None) -> tuple[list[dict], list[str]]:
+           rhos_shown=None, details: bool = True) -> tuple[list[dict], list[str]]:
     """Every scheme × N × estimator at its best mounting sense, cone angle, bandwidth and design
     ρ, scored by its worst case over ρ ∈ [lo, hi] × every set of k failed gyros with weights
     fixed at the design ρ; ranked (best worst case first).
@@ -139,6 +172,9 @@ def decide(g: GyroNoise, space: DesignSpace, rho_lo: float, rho_hi: float, *,
         The range of the gyros' common correlation [-] (lo == hi: one ρ).
     rhos_shown : sequence of float, optional
         ρ values at which ``rms_by_rho`` is reported.
+    details : bool
+        False: no MDB and error budget unless ``mdb_max`` ranks by the MDB (a decision asked for
+        its ranking only: the other common-mode frame's, :func:`~gyroarray.design.details.frame_comparison`).
 
     Returns
     -------
@@ -196,13 +232,14 @@ def decide(g: GyroNoise, space: DesignSpace, rho_lo: float, rho_hi: float, *,
                            if screening_is_exact(d["estimator"], g) else
                            f"screening only (below the first {EXACT_TOP}): the single-input filter on "
                            "the fixed-weight least-squares channel")
-    top = designs if space.mdb_max is not None else designs[:DETAIL_TOP]
+    top = designs if space.mdb_max is not None else designs[:DETAIL_TOP] if details else []
     for d in top:
         add_details(d, dec)
     for d in designs[len(top):]:
         d.pop("_cand")
         d["details_note"] = (f"detection (MDB) and error budget computed for the first {DETAIL_TOP} "
-                             "designs only")
+                             "designs only" if details else "detection (MDB) and error budget not computed "
+                             "(a decision asked for its ranking only)")
         if space.failures:
             d["mdb_deg_s"] = None
         d["error_budget"] = None
@@ -213,13 +250,14 @@ def decide(g: GyroNoise, space: DesignSpace, rho_lo: float, rho_hi: float, *,
     elif g.per_gyro is not None:
         notes.append(f"the model's {g.n_gyros} gyros keep their own noise (gyro k at position k); the "
                      f"search is over the layouts with N = {g.n_gyros} (--alike: one typical gyro, any N)")
-        if {"kf_array", "kf_single"} & set(space.estimators):
+        if any(design_tags(e).bias_states != "none" for e in space.estimators):
             notes.append("kf_array and kf_single on gyros with unequal noise are screened as the single-input "
                          "filter on the fixed-weight least-squares channel, designed for the typical "
                          f"gyro's q_b/r (each gyro's own filter differs); the first {EXACT_TOP} designs, the "
                          "recommendation and the runner-up are re-scored exactly")
-    if "kf_array" in space.estimators and (space.failures or any(
-            np.any(np.asarray(d["mounting_signs"]) < 0) for d in designs if d["estimator"] == "kf_array")):
+    coupled = [e for e in space.estimators if design_tags(e).bias_states == "array"]
+    if coupled and (space.failures or any(
+            np.any(np.asarray(d["mounting_signs"]) < 0) for d in designs if d["estimator"] in coupled)):
         notes.append("kf_array after a failed gyro or with reversed gyros is screened as the single-input "
                      "KF on the fixed-weight GLS channel (exact on an intact symmetric cone, where the "
                      f"array KF decouples); the first {EXACT_TOP} designs, the recommendation and the "

@@ -29,6 +29,24 @@ from gyroarray.estimators.noise import model_terms, per_gyro
 #: underflows (cli.design.MIN_ARW_DEG_RT_H, the --arw floor, is the same).
 MIN_ARW_DEG_RT_H = 1e-9
 
+#: The frames the gyros' correlated (common-mode) noise may live in (``design --common-mode``):
+#: ``output`` — it adds to every gyro's output with the same sign, whatever the gyro's mounting
+#: sense (correlation (1 − ρ)I + ρ11ᵀ); ``axis`` — it follows each gyro's sensing axis, so a
+#: gyro mounted reversed sees it reversed ((1 − ρ)I + ρssᵀ, s the mounting signs ±1): then
+#: reversing gyros buys nothing.
+COMMON_MODES = ("output", "axis")
+
+#: The common-mode frames in words (the decision's assumptions).
+COMMON_MODE_WORDS = {
+    "output": ("output frame: the correlated noise adds to every gyro's output with the same sign, "
+               "whatever its mounting sense (a common electrical or digital path after the sensing "
+               "element); correlation (1 − ρ)I + ρ11ᵀ, so reversed gyros move it into the parity space"),
+    "axis": ("axis frame: the correlated noise follows each gyro's sensing axis (a shared vibration, "
+             "or a supply seen through the sensing element), so a gyro mounted reversed sees it "
+             "reversed; correlation (1 − ρ)I + ρssᵀ with s the mounting signs, so reversing gyros "
+             "buys nothing"),
+}
+
 
 @dataclass(frozen=True)
 class GyroNoise:
@@ -46,6 +64,10 @@ class GyroNoise:
         First-order Gauss–Markov σ [deg/h] and τc [s] (σ = 0: none).
     rho_arw, rho_rrw : float
         Common correlation of the gyros' ARW and of their RRW increments [-].
+    common_mode : {"output", "axis"}
+        The frame the correlated noise lives in (:data:`COMMON_MODES`): ``output`` (the
+        correlation as given, whatever the mounting senses) or ``axis`` (the correlation
+        between gyros j and k multiplied by s_j·s_k, s the mounting signs: :meth:`correlation`).
     sources : dict
         Where each value came from ("user", "default", "model FILE").
     ignored : tuple of str
@@ -64,6 +86,7 @@ class GyroNoise:
     gm_tau_s: float = 0.0
     rho_arw: float = 0.0
     rho_rrw: float = 0.0
+    common_mode: str = "output"
     sources: dict = field(default_factory=dict)
     ignored: tuple[str, ...] = ()
     per_gyro: dict | None = field(default=None, compare=False)
@@ -118,6 +141,45 @@ class GyroNoise:
             v = getattr(self, k)
             if not (math.isfinite(v) and -1.0 < v < 1.0):
                 raise InputError(f"{k} must be in (-1, 1), got {v!r}")
+        if self.common_mode not in COMMON_MODES:
+            raise InputError(f"the common-mode frame must be one of {', '.join(COMMON_MODES)}, "
+                             f"got {self.common_mode!r}")
+
+    def in_frame(self, common_mode: str) -> "GyroNoise":
+        """The same gyros with their correlated noise in the frame ``common_mode``
+        (:data:`COMMON_MODES`)."""
+        return replace(self, common_mode=str(common_mode))
+
+    def correlation(self, n: int, which: str = ARW, keep=None, signs=None) -> np.ndarray:
+        """The correlation of the kept gyros' noise on an array mounted with ``signs`` [-].
+
+        Parameters
+        ----------
+        n : int
+            Gyros kept.
+        which : {ARW, RRW}
+            The white noise (ARW) or the walk increments (RRW).
+        keep : sequence of int, optional
+            0-based gyros (rows of the array) kept (None: the first ``n``); a per-gyro model's matrix
+            and ``signs`` are indexed by them.
+        signs : sequence of float, optional
+            The mounting sign (±1) of every gyro of the array, in its row order (None: every gyro +).
+
+        Returns
+        -------
+        ndarray (n, n)
+            The model's matrix (per-gyro noise) or the equicorrelated one; in the axis frame
+            multiplied element-wise by s sᵀ of the kept gyros' signs (the output frame ignores
+            the signs).
+        """
+        c = _corr_of(self, n, keep, which)
+        if self.common_mode != "axis" or signs is None:
+            return c
+        s = np.asarray(signs, dtype=float)
+        s = s[:n] if keep is None else s[list(keep)]
+        if np.all(s > 0):
+            return c
+        return c * np.outer(s, s)
 
     @classmethod
     def from_model(cls, model, source: str = "model", *, alike: bool = True) -> "GyroNoise":
@@ -170,11 +232,15 @@ class GyroNoise:
         a model's correlation matrices give way to it, the per-gyro levels stay)."""
         return replace(self, rho_arw=float(rho), rho_rrw=float(rho), corr_arw=None, corr_rrw=None)
 
-    def noise_model(self, n_gyros: int, keep=None):
+    def noise_model(self, n_gyros: int, keep=None, signs=None):
         """This noise on every gyro of an N-gyro array, as a NoiseModel (for the simulator).
 
         Per-gyro noise: gyro k of the model on gyro k of the array; ``keep`` (0-based indices
-        of the model's gyros, len ``n_gyros``): the gyros left after a failure, renumbered."""
+        of the model's gyros, len ``n_gyros``): the gyros left after a failure, renumbered.
+        ``signs``: the mounting sign (±1) of every gyro of the array (row order); in the axis frame
+        (:attr:`common_mode`) the correlation becomes the matrix of :meth:`correlation`."""
+        if self._frame_flips(n_gyros, keep, signs):
+            return self._per_gyro_model(n_gyros, keep, signs)
         if self.per_gyro is not None:
             return self._per_gyro_model(n_gyros, keep)
         entries = [ModelEntry(ARW, None, {"n_deg_rt_h": self.arw_deg_rt_h})]
@@ -192,11 +258,30 @@ class GyroNoise:
         model.check(n_gyros)
         return model
 
-    def _per_gyro_model(self, n_gyros: int, keep):
+    def _frame_flips(self, n_gyros: int, keep, signs) -> bool:
+        """Whether the axis frame turns the correlation of the kept gyros into a matrix."""
+        if self.common_mode != "axis" or signs is None or not (self.rho_arw or self.rho_rrw
+                                                               or self.corr_arw is not None
+                                                               or self.corr_rrw is not None):
+            return False
+        s = np.asarray(signs, dtype=float)
+        s = s[:n_gyros] if keep is None else s[[int(k) for k in keep]]
+        return bool(np.any(s < 0))
+
+    def _levels(self, n_levels: int) -> dict:
+        """Per gyro the levels (:data:`PER_GYRO_KEYS`): its own, or the alike gyro's on each."""
+        if self.per_gyro is not None:
+            return cast(dict, self.per_gyro)
+        return {ARW: np.full(n_levels, self.arw_deg_rt_h), RRW: np.full(n_levels, self.rrw_deg_h_rt_h),
+                "bi": np.full(n_levels, self.bi_deg_h), "gm_sigma": np.full(n_levels, self.gm_sigma_deg_h),
+                "gm_tau": np.full(n_levels, self.gm_tau_s)}
+
+    def _per_gyro_model(self, n_gyros: int, keep, signs=None):
         idx = list(range(n_gyros)) if keep is None else [int(k) for k in keep]
-        if len(idx) != n_gyros or max(idx) >= cast(int, self.n_levels):      # set with per_gyro
-            raise ValueError(f"keep {idx} does not give {n_gyros} of the model's {self.n_levels} gyros")
-        p = cast(dict, self.per_gyro)                   # called only when per_gyro is set
+        n_levels = self.n_levels if self.per_gyro is not None else max(idx) + 1
+        if len(idx) != n_gyros or max(idx) >= cast(int, n_levels):      # set with per_gyro
+            raise ValueError(f"keep {idx} does not give {n_gyros} of the model's {n_levels} gyros")
+        p = self._levels(cast(int, n_levels))
         entries = []
         for j, i in enumerate(idx):
             entries.append(ModelEntry(ARW, j + 1, {"n_deg_rt_h": float(p[ARW][i])}))
@@ -209,7 +294,11 @@ class GyroNoise:
                                                                   "tau_s": float(p["gm_tau"][i])}))
         corr: dict[str, Any] = {}
         for key, mat, rho in (("rho_arw", self.corr_arw, self.rho_arw), ("rho_rrw", self.corr_rrw, self.rho_rrw)):
-            if mat is not None:
+            if signs is not None:                       # the axis frame: (1 − ρ)I + ρssᵀ (or S C S)
+                sub = self.correlation(n_gyros, ARW if key == "rho_arw" else RRW, idx, signs)
+                if np.any(sub != np.eye(len(idx))):
+                    corr[key] = [[float(v) for v in row] for row in sub]
+            elif mat is not None:
                 sub = np.asarray(mat, dtype=float)[np.ix_(idx, idx)]
                 if np.any(sub != np.eye(len(idx))):
                     corr[key] = [[float(v) for v in row] for row in sub]
@@ -217,7 +306,9 @@ class GyroNoise:
                 corr[key] = float(rho)
         if corr:
             entries.append(ModelEntry(CORRELATION, None, corr))
-        model = NoiseModel(tuple(entries), description="the model's gyros, each its own noise")
+        model = NoiseModel(tuple(entries), description="the model's gyros, each its own noise"
+                           if self.per_gyro is not None else "typical gyro of the design search, "
+                           "its correlated noise in the gyros' axis frame")
         model.check(n_gyros)
         return model
 
@@ -366,11 +457,13 @@ def _corr_of(g: GyroNoise, n: int, keep, which: str) -> np.ndarray:
     return np.asarray(mat, dtype=float)[np.ix_(idx, idx)]
 
 
-def kept_covariances(g: GyroNoise, n: int, keep, dt: float) -> tuple[np.ndarray, np.ndarray]:
-    """Per-sample white covariance R and walk increment covariance Q of the kept gyros [rad²/s²]."""
+def kept_covariances(g: GyroNoise, n: int, keep, dt: float, signs=None) -> tuple[np.ndarray, np.ndarray]:
+    """Per-sample white covariance R and walk increment covariance Q of the kept gyros [rad²/s²]
+    (``signs``: the array's mounting signs, per gyro in row order, for the axis frame: :meth:`GyroNoise.correlation`)."""
     s2, q, _, _ = kept_levels(g, n, keep, dt)
     s, qs = np.sqrt(s2), np.sqrt(q)
-    return np.outer(s, s) * _corr_of(g, n, keep, ARW), np.outer(qs, qs) * _corr_of(g, n, keep, RRW)
+    return (np.outer(s, s) * g.correlation(n, ARW, keep, signs),
+            np.outer(qs, qs) * g.correlation(n, RRW, keep, signs))
 
 
 @lru_cache(maxsize=512)

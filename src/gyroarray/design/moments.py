@@ -14,6 +14,21 @@ from gyroarray.core.errors import InputError
 from gyroarray.design.noise_sources import NoiseSources
 
 
+#: The flicker (bias instability) model of :func:`flicker_moments`, which the decision states.
+FLICKER_MODEL = "circular"
+
+#: The flicker model in words, and what another model would give (the decision's assumptions).
+FLICKER_MODEL_WORDS = (
+    "circular (stationary) 1/f noise: sinusoids at the frequencies j/(M·dt), j = 1..M/2, M ≈ 2 × "
+    "the run's samples, each of variance B²/(π j) (one-sided S(f) = B²/(π f), the simulator's "
+    "core.physics.flicker_noise), as if the gyro had been running forever before switch-on; "
+    "no power below 1/(M·dt), so the angle it predicts is the most optimistic of the flicker "
+    "models: Kasdin's 1/f noise from switch-on (a fractional integration started at t = 0) "
+    "gives about twice the bias-instability angle at the horizon for the same Allan floor "
+    "(issue 43: 1.17 against 2.60 deg on the demo's array), sums of Gauss–Markov processes "
+    "1.5–3.6 times")
+
+
 def _mat_power(T: np.ndarray, m: int) -> np.ndarray:
     """T^m for a stack of square matrices (E, s, s), by repeated squaring."""
     out = np.broadcast_to(np.eye(T.shape[-1]), T.shape).copy()

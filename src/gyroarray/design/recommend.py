@@ -98,7 +98,7 @@ from gyroarray.design.as_built import (AS_BUILT_ESTIMATORS, MAX_IMPULSE, impulse
 __all__ = ["GyroNoise", "DesignSpace", "recommend", "design_label", "ESTIMATORS", "DEFAULT_BANDWIDTH_HZ"]
 
 
-def recommend(g: GyroNoise, space: DesignSpace, *, rhos=None) -> dict:
+def recommend(g: GyroNoise, space: DesignSpace, *, rhos=None, details: bool = True) -> dict:
     """Rank the designs and recommend one (the ``--recommend`` JSON object).
 
     Parameters
@@ -109,6 +109,8 @@ def recommend(g: GyroNoise, space: DesignSpace, *, rhos=None) -> dict:
         Correlations the gyros may have (ρ is a condition, not a choice): every
         design is scored continuously over [min, max] of them (and at each of
         them in ``rms_by_rho``). None: the ρ of ``g``.
+    details : bool
+        False: the ranking only, no MDB and error budget (:func:`decide`).
 
     Returns
     -------
@@ -128,7 +130,7 @@ def recommend(g: GyroNoise, space: DesignSpace, *, rhos=None) -> dict:
     notes: list[str] = []
     g, space = sized_for(g, space, notes)
     lo, hi = (g.rho_arw, g.rho_arw) if single else (min(rho_list), max(rho_list))
-    designs, nt = decide(g, space, lo, hi, rhos_shown=None if single else rho_list)
+    designs, nt = decide(g, space, lo, hi, rhos_shown=None if single else rho_list, details=details)
     notes += nt
     if not designs:
         why = "; ".join(sorted(set(notes))[:3]) or "failures, rho or bandwidth"

@@ -11,11 +11,13 @@ import numpy as np
 
 from gyroarray.core.layout import Layout
 from gyroarray.design.predict import (AXES, predict)
-from gyroarray.design.robust import (kept_sets, mounted_axes)
+from gyroarray.design.robust import kept_sets
 from gyroarray.estimators import get_estimator
 from gyroarray.design.channels import (prediction_axes, estimator_kwargs, with_sensor)
 from gyroarray.design.gyro_noise import GyroNoise
-from gyroarray.design.screening import (Candidate, Decider, nominal_rho, predicted_at)
+from gyroarray.design.screening import (Candidate, Decider, nominal_rho, predicted_at, candidate_axes,
+                                        row_signs)
+from gyroarray.design.search_space import design_tags, CLOSED_FORM_WEIGHTS
 
 
 #: Designs at the top of the screening re-scored exactly (the estimator as built, the full
@@ -28,9 +30,10 @@ def screening_is_exact(est: str, g: GyroNoise) -> bool:
     nothing): per-sample weights with their low-pass always; ``kf_single`` on alike gyros (the
     same filter on every gyro commutes with the least-squares combination); never ``kf_array``
     (after a failure or with reversed gyros its bias states couple the axes)."""
-    if est == "kf_array":
-        return False
-    return not (est == "kf_single" and g.per_gyro is not None)
+    tags = design_tags(est)
+    if tags.bias_states == "array" or tags.weights not in CLOSED_FORM_WEIGHTS:
+        return False                    # a plugin's weights are read from its DC gain: re-scored
+    return not (tags.bias_states == "per_gyro" and g.per_gyro is not None)
 
 
 def _prediction_case(p, keep, n: int, rho_t: float) -> dict:
@@ -70,16 +73,17 @@ def exact_predictions(dec: Decider, c: Candidate, H: np.ndarray, extra_rhos=()) 
     space = dec.space
     motion = None if space.motion is None else np.asarray(space.motion, dtype=float)[:space.n_samples]
     gd = dec.cond(dec.lo if c.rho_d is None else c.rho_d)
+    sg = row_signs(c.signs, c.slots)                 # the axis frame's correlation reads them
     out = {}
     for keep in kept_sets(c.n, space.failures):
         Hk = H[0, list(keep)]
         est = get_estimator(c.est)(**estimator_kwargs(c.est, c.bw, dec.g)).fit(
-            Layout(Hk), with_sensor(gd.noise_model(len(keep), keep), space, g_sensitivity=False), dec.dt)
+            Layout(Hk), with_sensor(gd.noise_model(len(keep), keep, sg), space, g_sensitivity=False), dec.dt)
         rts = list(dec.ends()) + (list(extra_rhos) if len(keep) == c.n else [])
         for rt in rts:
             if (keep, float(rt)) in out:
                 continue
-            model = with_sensor(dec.cond(rt).noise_model(len(keep), keep), space, g_sensitivity=False)
+            model = with_sensor(dec.cond(rt).noise_model(len(keep), keep, sg), space, g_sensitivity=False)
             out[(keep, float(rt))] = predict(est, model, n_samples=space.n_samples, settle_s=space.settle_s,
                                              truth_rad_s=motion, swing=None if motion is not None else space.swing)
     return out
@@ -98,7 +102,7 @@ def rescore_exact(d: dict, dec: Decider) -> None:
     if screening_is_exact(c.est, dec.g):
         d["scored"] = "exact (the screening's channel model is this estimator)"
         return
-    H = mounted_axes(c.scheme, c.n, np.array([c.alpha_rad]), c.signs)
+    H = candidate_axes(c)
     rho_typ = nominal_rho(dec, c)
     preds = exact_predictions(dec, c, H, extra_rhos=(rho_typ,))
     key = "rms_3axis_deg_s" if dec.objective == "rate" else "angle_deg"

@@ -6,6 +6,7 @@ cone angle, bandwidth and design ρ, then their bounded refinement.
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass, replace
 from typing import Callable, cast
@@ -16,16 +17,22 @@ from scipy.optimize import minimize_scalar
 from gyroarray.core import units
 from gyroarray.core.gdop import gdop_batch
 from gyroarray.design.predict import (AXES, settle_start)
-from gyroarray.design.robust import (kept_sets, mounted_axes,
+from gyroarray.design.robust import (ALL_PATTERNS_UP_TO, kept_sets, mounted_axes,
                                      mounting_patterns, worst_over_interval)
 from gyroarray.design.channels import (Channels, add_motion, filter_bank, combine_moments, channel_responses,
                                        both_objectives, fixed_channels)
 from gyroarray.design.gyro_noise import GyroNoise
-from gyroarray.design.search_space import (DesignSpace, alpha_grid, bandwidth_grid)
+from gyroarray.design.search_space import (DesignSpace, alpha_grid, bandwidth_grid, design_tags)
 
 
-#: Estimators whose weights depend on the design ρ (the others are built without it).
+#: The built-ins whose weights depend on the design ρ (the others are built without it); the
+#: search reads it from each estimator's design tags (``DesignTags.rho_weighted``).
 RHO_WEIGHTED = ("gls", "kf_array")
+
+
+def rho_weighted(est: str) -> bool:
+    """Whether the weights of ``est`` depend on the design ρ (its design tags)."""
+    return design_tags(est).rho_weighted
 
 #: Largest |M H − I| of fixed weights taken as unbiased [-].
 BIAS_TOL = 1e-9
@@ -51,6 +58,113 @@ class Candidate:
     bw: float | None
     rho_d: float | None
     J: float
+    #: The placement: ``slots[j]`` is the cone slot (0-based) model gyro j takes (None: gyro j
+    #: in slot j). ``signs`` are per slot.
+    slots: tuple[int, ...] | None = None
+
+
+def candidate_axes(c: Candidate, alphas_rad=None) -> np.ndarray:
+    """The axes (G, N, 3) [-] of a candidate as the model's gyros see them (row j: gyro j + 1,
+    in its slot ``c.slots[j]``), at its cone angle or at ``alphas_rad`` [rad]."""
+    al = np.array([c.alpha_rad]) if alphas_rad is None else np.asarray(alphas_rad, dtype=float)
+    return placed_axes(c.scheme, c.n, al, c.signs, c.slots)
+
+
+def row_signs(signs, slots) -> np.ndarray:
+    """The mounting sign of each row of :func:`placed_axes` (gyro j: the sign of its slot),
+    what the axis frame of the common mode reads (:meth:`GyroNoise.correlation`)."""
+    s = np.asarray(signs, dtype=float)
+    return s if slots is None else s[list(slots)]
+
+
+def placed_axes(scheme: int, n: int, alphas_rad, signs, slots) -> np.ndarray:
+    """:func:`gyroarray.design.robust.mounted_axes` (slot order, signs per slot) with the rows
+    taken in the model's gyro order: row j is slot ``slots[j]`` (None: slot j)."""
+    H = mounted_axes(scheme, n, alphas_rad, signs)
+    return H if slots is None else H[:, list(slots)]
+
+
+#: Above this many placements × sign patterns per scheme the per-gyro search keeps the
+#: structured sign patterns only.
+MAX_ARRANGEMENTS = 512
+
+
+def gyro_classes(g: GyroNoise, n: int) -> list[int]:
+    """A class label per gyro (0-based, first seen first): gyros with the same noise levels
+    are in one class (alike gyros: all in class 0). A model with its own correlation matrix
+    that is not equicorrelated makes every gyro its own class."""
+    if g.per_gyro is None:
+        return [0] * n
+    for corr in (g.corr_arw, g.corr_rrw):
+        if corr is not None:
+            c = np.asarray(corr, dtype=float)[:n, :n]
+            off = c[~np.eye(n, dtype=bool)]
+            if off.size and np.ptp(off) > 1e-12:
+                return list(range(n))
+    rows = [tuple(float(np.asarray(v, dtype=float)[j]) for _, v in sorted(g.per_gyro.items()))
+            for j in range(n)]
+    seen: dict[tuple, int] = {}
+    return [seen.setdefault(r, len(seen)) for r in rows]
+
+
+def placements(classes: list[int]) -> list[tuple[int, ...] | None]:
+    """Every distinct placement of the gyros in the slots (one per multiset permutation of the
+    classes: gyros of one class are interchangeable); ``slots[j]`` the slot of gyro j. Alike
+    gyros: [None] (gyro j in slot j)."""
+    n = len(classes)
+    if len(set(classes)) == 1:
+        return [None]
+    out, seen = [], set()
+    for perm in itertools.permutations(range(n)):                   # perm[k]: the gyro in slot k
+        key = tuple(classes[j] for j in perm)
+        if key in seen:
+            continue
+        seen.add(key)
+        slots = [0] * n
+        for k, j in enumerate(perm):
+            slots[j] = k
+        out.append(None if slots == list(range(n)) else tuple(slots))
+        if len(out) > MAX_ARRANGEMENTS:
+            break
+    return sorted(out, key=lambda t: () if t is None else t)
+
+
+def all_sign_patterns(scheme: int, n: int) -> list[np.ndarray]:
+    """Every sign pattern of the cone gyros without the alike-gyro reduction (no rotation or
+    mirror classes): Scheme 1 up to a global sign (slot 1 +), Scheme 2 with the axial gyro +
+    (reversing it is the cone at 180° − α, a rigid rotation of the whole array, which the
+    cone-angle search covers). All + first."""
+    m = n if scheme == 1 else n - 1
+    head = [] if scheme == 1 else [1]
+    cones = [c for c in itertools.product((1, -1), repeat=m) if scheme == 2 or c[0] == 1]
+    cones.sort(key=lambda t: (sum(v < 0 for v in t), tuple(-v for v in t)))
+    return [np.array(head + list(c), dtype=float) for c in cones]
+
+
+def arrangements(g: GyroNoise, scheme: int, n: int) -> list[tuple[np.ndarray, tuple[int, ...] | None]]:
+    """The (sign pattern per slot, placement) pairs the search tries for one scheme and N.
+
+    In the axis frame of the common mode (``g.common_mode``) the all-+ pattern only. Alike
+    gyros: :func:`gyroarray.design.robust.mounting_patterns` (one pattern per class of
+    patterns a rotation, a mirror or a global sign make equal), gyro j in slot j. Gyros that
+    are not alike (a per-gyro model): every placement of the unlike gyros (:func:`placements`)
+    × every sign pattern (:func:`all_sign_patterns`), since a rotation that maps one pattern
+    onto another also moves the gyros; above :data:`MAX_ARRANGEMENTS` (or N above
+    :data:`gyroarray.design.robust.ALL_PATTERNS_UP_TO`) the structured patterns of
+    :func:`mounting_patterns` at every placement.
+    """
+    places = placements(gyro_classes(g, n))
+    if getattr(g, "common_mode", "output") == "axis":
+        # the common mode follows each sensing axis: a reversed gyro reverses its signal and its
+        # noise alike, a sign the estimator undoes, so every mounting equals the one with no gyro
+        # reversed (the same worst case, exactly): that one pattern is searched
+        return [(np.ones(n), p) for p in places]
+    if places == [None]:
+        return [(s, None) for s in mounting_patterns(scheme, n)]
+    pats = all_sign_patterns(scheme, n) if n <= ALL_PATTERNS_UP_TO else mounting_patterns(scheme, n)
+    if len(pats) * len(places) > MAX_ARRANGEMENTS:
+        pats = mounting_patterns(scheme, n)
+    return [(s, p) for p in places for s in pats]
 
 
 class Decider:
@@ -73,27 +187,30 @@ class Decider:
     def ends(self):
         return [self.lo] if self.hi <= self.lo else [self.lo, self.hi]
 
-    def channels(self, est, H, keep, rho_d, rho_t):
+    def channels(self, est, H, keep, rho_d, rho_t, signs=None):
         gd = self.cond(self.lo if rho_d is None else rho_d)
-        return fixed_channels(est, H[:, list(keep)], gd, self.cond(rho_t), self.dt, keep=list(keep))
+        return fixed_channels(est, H[:, list(keep)], gd, self.cond(rho_t), self.dt, keep=list(keep),
+                              signs=signs)
 
     def resp(self, est, bw, ch):
         return channel_responses(self.bank, est, bw, ch, idx=0)
 
-    def conditions(self, est, H, rho_d, *, with_combos: bool = False):
+    def conditions(self, est, H, rho_d, *, with_combos: bool = False, signs=None):
         """The filter's design channels (intact array at the design ρ) and the channels of every
         (kept set, end of the range) stacked on a leading axis (fixed weights: each variance is
-        linear in ρ, so the worst ρ is an end); ``with_combos``: also the (kept set, ρ) of each."""
+        linear in ρ, so the worst ρ is an end); ``with_combos``: also the (kept set, ρ) of each.
+        ``signs``: the mounting signs of H's rows (the axis frame's correlation depends on them)."""
         G, n = H.shape[:2]
         keeps = kept_sets(n, self.space.failures)
-        design = self.channels(est, H, keeps[0], rho_d, rho_d if rho_d is not None else self.lo)
+        design = self.channels(est, H, keeps[0], rho_d, rho_d if rho_d is not None else self.lo, signs)
         gd = self.cond(self.lo if rho_d is None else rho_d)
-        if self.g.per_gyro is not None:          # each kept set has its own gyros' noise
+        axis = self.g.common_mode == "axis" and signs is not None and bool(np.any(np.asarray(signs) < 0))
+        if self.g.per_gyro is not None or axis:  # each kept set its own gyros' noise (or signs)
             chs, combos = [], []
             for keep in keeps:
                 for rt in self.ends():
                     chs.append(fixed_channels(est, H[:, list(keep)], gd, self.cond(rt), self.dt,
-                                              keep=list(keep)))
+                                              keep=list(keep), signs=signs))
                     combos.append((keep, rt))
             s_white, s_walk, s_flicker, s_gm = (np.stack([getattr(c, f) for c in chs])
                                                 for f in ("white", "walk", "flicker", "gm"))
@@ -151,7 +268,7 @@ def _alive(H: np.ndarray, failures: int) -> np.ndarray:
 
 
 def _rho_grid(dec: Decider, est: str) -> list:
-    if est not in RHO_WEIGHTED or not dec.ranged:
+    if not rho_weighted(est) or not dec.ranged:
         return [None]
     if dec.space.design_rho is not None:
         return [float(dec.space.design_rho)]
@@ -165,14 +282,14 @@ def grid_best(dec: Decider, scheme: int, n: int, est: str) -> tuple[Candidate | 
     space = dec.space
     alphas = alpha_grid(scheme, space.alpha_points)
     best = None
-    for signs in mounting_patterns(scheme, n):
-        H = mounted_axes(scheme, n, alphas, signs)
+    for signs, slots in arrangements(dec.g, scheme, n):
+        H = placed_axes(scheme, n, alphas, signs, slots)
         alive = _alive(H, space.failures)
         if not alive.any():
             continue
         Ha, al = H[alive], alphas[alive]
         for rd in _rho_grid(dec, est):
-            design, stacked = dec.conditions(est, Ha, rd)
+            design, stacked = dec.conditions(est, Ha, rd, signs=row_signs(signs, slots))
             # per α: the bandwidth that minimises the rate objective (a unit-DC-gain filter's
             # bandwidth barely moves the angle: ranked on angle alone the narrowest filter would
             # win and give up tracking the motion); the objective at that bandwidth
@@ -191,7 +308,7 @@ def grid_best(dec: Decider, scheme: int, n: int, est: str) -> tuple[Candidate | 
                 continue
             k = int(np.flatnonzero(bobj <= bobj[k] * (1.0 + 1e-9))[0])     # ties: the smaller α
             if best is None or bobj[k] < best.J * (1.0 - 1e-9):            # ties: the first pattern
-                best = Candidate(scheme, n, est, signs, float(al[k]), bbw[k], rd, float(bobj[k]))
+                best = Candidate(scheme, n, est, signs, float(al[k]), bbw[k], rd, float(bobj[k]), slots)
     return best, alphas
 
 
@@ -199,10 +316,10 @@ def refine_candidate(dec: Decider, c: Candidate, alphas: np.ndarray, bandwidth: 
     """Bounded Brent in α between the grid neighbours, then in the design ρ over the range,
     then (``bandwidth``) in log bandwidth between the grid neighbours."""
     def J(alpha, rd, bw, which=None):
-        H = mounted_axes(c.scheme, c.n, np.array([alpha]), c.signs)
+        H = candidate_axes(c, np.array([alpha]))
         if not _alive(H, dec.space.failures)[0]:
             return math.inf
-        jr, ja = dec.worst_pair(c.est, bw, *dec.conditions(c.est, H, rd))
+        jr, ja = dec.worst_pair(c.est, bw, *dec.conditions(c.est, H, rd, signs=row_signs(c.signs, c.slots)))
         return float((jr if (which or dec.objective) == "rate" else ja)[0])
     k = int(np.argmin(np.abs(alphas - c.alpha_rad)))
     lo = alphas[k - 1] if k > 0 else alphas[k] * 0.5
@@ -233,9 +350,10 @@ def refine_candidate(dec: Decider, c: Candidate, alphas: np.ndarray, bandwidth: 
 
 def score_case(dec: Decider, c: Candidate, H: np.ndarray, keep, rho_t: float, rho_d) -> dict:
     """Per axis and 3-axis: RMS rate error and angle error of one (kept set, true ρ)."""
-    ch = dec.channels(c.est, H, keep, rho_d, rho_t)
+    ch = dec.channels(c.est, H, keep, rho_d, rho_t, row_signs(c.signs, c.slots))
     resp = dec.resp(c.est, c.bw, dec.channels(c.est, H, tuple(range(c.n)), rho_d,
-                                               rho_d if rho_d is not None else dec.lo))
+                                               rho_d if rho_d is not None else dec.lo,
+                                               row_signs(c.signs, c.slots)))
     m = combine_moments(ch, slice(None), resp)
     ms, sumw2, sumf2 = add_motion(m, resp)
     to = units.rad_s_to_deg_s

@@ -269,6 +269,8 @@ def _evaluate_design(d: dict, g: GyroNoise, space: DesignSpace, rho: float) -> d
 def generic_or_fast(scheme, n, est, alpha, bw, rho, g, space) -> dict:
     gr = g.with_rho(rho) if g.rho_arw == g.rho_rrw else g
     H = conical_axes(scheme, n, np.array([alpha]))
+    if weight_kind(est) is None:                 # weights read from the fitted filter: full predictor
+        return generic_design(scheme, n, est, alpha, bw, rho, space, g, space.failures)
     ch = channel_levels(est, H, gr, space.dt_s)
     ch.kf_single_ratio = single_ratio(g, space)
     if not ch.decoupled:

@@ -15,14 +15,98 @@ from gyroarray.core.sensor import bandwidth_sos
 from gyroarray.effects.model import ModelEntry
 from gyroarray.effects.names import BANDWIDTH, G_SENSITIVITY
 from gyroarray.design.gyro_noise import (GyroNoise, model_gyro_refusal)
+from gyroarray.design.robust import fixed_weights
+from gyroarray.core.errors import InputError
+from gyroarray.estimators import get_estimator
+from gyroarray.estimators.base import DesignTags
+from gyroarray.estimators.noise import ArrayNoise
+from gyroarray.core.layout import Layout
 
 
-#: The estimators the search compares (the registry's linear ones).
+#: The estimators the search compares by default (the registry's linear built-ins); any
+#: estimator whose :meth:`~gyroarray.estimators.base.Estimator.design_tags` say it has a linear
+#: system can be searched (:func:`design_tags`).
 ESTIMATORS = ("kf_array", "kf_single", "gls", "ols", "naive")
 
-#: The per-sample weights each estimator's fused channel is built on (the array KF filters the
-#: GLS channel, the single-gyro KF the OLS channel; any other estimator is its own weights).
+#: The per-sample weights the built-ins' fused channels are built on, as their design tags
+#: declare them (``DesignTags.weights``; kept for importers, :func:`weight_kind` reads the tags).
 WEIGHT_KIND = {"kf_array": "gls", "kf_single": "ols"}
+
+#: The closed-form per-sample weights the fast channel model knows (:func:`gyroarray.design.robust.fixed_weights`).
+CLOSED_FORM_WEIGHTS = ("gls", "ols", "naive")
+
+_TAGS: dict[type, DesignTags] = {}
+
+
+def design_tags(est: str) -> DesignTags:
+    """The design tags of the estimator registered as ``est`` (a plugin's as well)."""
+    cls = get_estimator(est)
+    if cls not in _TAGS:
+        _TAGS[cls] = cls.design_tags()
+    return _TAGS[cls]
+
+
+def design_refusal(est: str) -> str | None:
+    """Why estimator ``est`` cannot take part in the design search (None: it can)."""
+    try:
+        t = design_tags(est)
+    except InputError as err:
+        return str(err)
+    if not t.linear_system:
+        return (f"estimator {est!r} declares no linear system (design tags: linear_system False): "
+                "the design search predicts only fixed linear filters")
+    return None
+
+
+#: Fitted weights by (estimator, layout, design covariances) (a plugin's weights are read from
+#: its fitted linear system; the screening asks for the same ones at both ends of the ρ range).
+_FITTED: dict = {}
+_FITTED_MAX = 4096
+
+
+def fitted_weights(est: str, H: np.ndarray, R: np.ndarray, dt: float,
+                   Q: np.ndarray | None = None) -> np.ndarray:
+    """Per-sample weights (G, 3, N) of estimator ``est`` read from its fitted linear system.
+
+    The estimator (default hyperparameters) is fitted on each layout of ``H`` (G, N, 3) [-] for
+    the white-noise covariance ``R`` (N, N) of one sample [rad²/s²] and the random-walk
+    covariance ``Q`` (N, N) of one sample's increment [rad²/s²] (None: none), and sample period
+    ``dt`` [s]; the weights are the DC gain (3, N) of its linear system (the per-sample weights
+    of a static estimator, exactly).
+    """
+    H = np.asarray(H, dtype=float)
+    R = np.asarray(R, dtype=float)
+    n = H.shape[1]
+    sd = np.sqrt(np.diag(R))
+    Qm = np.zeros((n, n)) if Q is None else np.asarray(Q, dtype=float)
+    qd = np.sqrt(np.maximum(np.diag(Qm), 0.0))
+    corr_q = np.eye(n) if not np.all(qd > 0) else Qm / np.outer(qd, qd)
+    noise = ArrayNoise(arw_rad_rt_s=sd * math.sqrt(dt), rrw_rad_s_rt_s=qd / math.sqrt(dt),
+                       corr_arw=R / np.outer(sd, sd), corr_rrw=corr_q)
+    cls = get_estimator(est)
+    key0 = (est, R.tobytes(), Qm.tobytes(), float(dt))
+    out = np.empty((H.shape[0], 3, n))
+    for i, h in enumerate(H):
+        key = key0 + (h.tobytes(),)
+        if key not in _FITTED:
+            if len(_FITTED) >= _FITTED_MAX:
+                _FITTED.clear()
+            e = cls().fit(Layout(h), noise, dt)
+            _FITTED[key] = np.asarray(e.linear_system().dc_gain(), dtype=float)
+        out[i] = _FITTED[key]
+    return out
+
+
+def design_weights(est: str, H: np.ndarray, R: np.ndarray, dt: float,
+                   Q: np.ndarray | None = None) -> np.ndarray:
+    """Per-sample weights (G, 3, N) the fused channel of ``est`` is built on, for the design
+    covariances ``R``, ``Q`` [rad²/s²] of one sample: closed form where its tags name the weights
+    (:func:`gyroarray.design.robust.fixed_weights`), else read from the fitted estimator
+    (:func:`fitted_weights`)."""
+    kind = weight_kind(est)
+    if kind in CLOSED_FORM_WEIGHTS:
+        return fixed_weights(kind, H, R)
+    return fitted_weights(est, H, R, dt, Q)
 #: The bandwidth a filter is held at when no motion is given to trade it against [Hz].
 DEFAULT_BANDWIDTH_HZ = 10.0
 
@@ -165,8 +249,10 @@ class DesignSpace:
 
 
 def bandwidth_grid(space: DesignSpace, est: str) -> list[float | None]:
-    """The bandwidths an estimator is tried at (None: its unfiltered form)."""
-    if est == "naive":
+    """The bandwidths an estimator is tried at (None: its unfiltered form), by its design tags:
+    none without a bandwidth hyperparameter; the unfiltered form as well where it is optional."""
+    tags = design_tags(est)
+    if tags.bandwidth_param is None:
         return [None]
     lo, hi = space.bandwidth_hz
     nyq = 0.5 * space.rate_hz
@@ -175,7 +261,7 @@ def bandwidth_grid(space: DesignSpace, est: str) -> list[float | None]:
     grid = [lo] if lo == hi else list(np.geomspace(lo, hi, max(2, int(round(
         BW_PER_DECADE * math.log10(hi / lo))) + 1)))
     out: list[float | None] = [float(f) for f in grid if 0 < f < nyq]
-    if est in ("gls", "ols") and lo != hi:
+    if tags.bandwidth_optional and lo != hi:
         out.append(None)                                             # no low-pass
     return out
 
@@ -201,7 +287,8 @@ OBJECTIVE_WORDS = {"rate": "3-axis RMS of the rate error about the truth over th
                    "angle": "3-axis angle error at the horizon (root-sum-square over the axes) [deg]"}
 
 
-def weight_kind(est: str) -> str:
+def weight_kind(est: str) -> str | None:
     """The per-sample weights (``gls``, ``ols``, ``naive``) the fused channel of estimator ``est``
-    is built on (:data:`WEIGHT_KIND`, the one place of this mapping)."""
-    return WEIGHT_KIND.get(est, est)
+    is built on, as its design tags declare them (``DesignTags.weights``); None: read from the
+    fitted estimator (:func:`fitted_weights`)."""
+    return design_tags(est).weights

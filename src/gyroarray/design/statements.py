@@ -13,7 +13,8 @@ import numpy as np
 from gyroarray.core import units
 from gyroarray.design.predict import AXES
 from gyroarray.effects.names import ARW, BANDWIDTH, BIAS_INSTABILITY, CONSTANT_BIAS, CORRELATION, GAUSS_MARKOV, G_SENSITIVITY, MISALIGNMENT, QUANTIZATION, RRW, SCALE_FACTOR, SCALE_NONLINEARITY, TEMPERATURE_BIAS
-from gyroarray.design.gyro_noise import GyroNoise
+from gyroarray.design.gyro_noise import COMMON_MODE_WORDS, GyroNoise
+from gyroarray.design.moments import FLICKER_MODEL, FLICKER_MODEL_WORDS
 from gyroarray.design.search import generic_or_fast
 from gyroarray.design.search_space import (DesignSpace, EQUIVALENT_SHARE, OBJECTIVE_WORDS)
 
@@ -215,9 +216,10 @@ def short_fields(d: dict) -> dict:
     keys = ("rank", "scheme", "n", "alpha_deg", "estimator", "bandwidth_hz", "predicted",
             "worst_gdop_after_failures", "rms_3axis_deg_s", "gdop", "fault_tolerance", "rho",
             "worst_rms_3axis_deg_s", "rms_by_rho", G_SENSITIVITY, "path", "axes", "mounting",
-            "mounting_signs", "design_rho", "design_rho_note", "objective", "rho_range", "worst_case",
+            "mounting_signs", "placement", "design_rho", "design_rho_note", "objective", "rho_range", "worst_case",
             "typical", "oracle_worst_case", "error_budget", "mdb_deg_s", "mdb_per_gyro_deg_s",
-            "mdb_worst_gyro", "far_per_h", "p_md", "tie", "excluded", "predicted_at", "scored")
+            "mdb_worst_gyro", "mdb_worst_gyros", "mdb_rho", "mdb_window_s", "mdb_threshold",
+            "mdb_rho_grid", "mdb_statement", "far_per_h", "p_md", "tie", "excluded", "predicted_at", "scored")
     return {k: d[k] for k in keys if k in d}
 
 
@@ -325,6 +327,21 @@ def ignored_effects(g: GyroNoise, space: DesignSpace, budget_ignored=()) -> list
     return out
 
 
+def detection_assumption(space: DesignSpace, rec: dict | None = None) -> dict:
+    """The minimum detectable bias's detector: its false-alarm rate [1/h], missed-detection
+    probability [-] and (from a decided design ``rec``) its step window [s] and threshold."""
+    out = {"far_per_h": space.far_per_h, "p_md": space.p_md,
+           "statement": (f"minimum detectable bias: the parity detector's step test, thresholds set for "
+                         f"{space.far_per_h:g} false alarms per hour over its three test families, "
+                         f"detection with probability 1 − {space.p_md:g}; worst over a "
+                         "grid of the ρ range")}
+    if rec is not None and rec.get("mdb_window_s") is not None:
+        out.update({"window_s": rec["mdb_window_s"], "threshold": rec["mdb_threshold"]})
+        out["statement"] += (f"; the recommendation's step window {rec['mdb_window_s']:.3g} s "
+                             f"(threshold {rec['mdb_threshold']:.4g} σ of the whitened parity)")
+    return out
+
+
 def assumptions(g: GyroNoise, space: DesignSpace, rhos, single: bool) -> dict:
     """Every input of the search and where it came from (user / default / model)."""
     src = g.sources
@@ -377,6 +394,10 @@ def assumptions(g: GyroNoise, space: DesignSpace, rhos, single: bool) -> dict:
                           "(random-walk drift included), from the analytic predictor", "definition"),
         "biases": item("start at zero (calibrated at switch-on), as the simulator draws them",
                        "assumption"),
+        "common_mode": item(g.common_mode, src.get("common_mode", "default"), COMMON_MODE_WORDS[g.common_mode]),
+        "flicker_model": item(FLICKER_MODEL, "assumption", FLICKER_MODEL_WORDS),
+        "detection": item(detection_assumption(space), "user" if "user" in (s.get("far_per_h"), s.get("p_md"))
+                          else "default"),
         "ignored_effects": item(ignored_effects(g, space), "model"),
         "sensor_bandwidth": item(None if space.sensor_bandwidth is None else
                                  {"cutoff_hz": space.sensor_bandwidth[0], "order": space.sensor_bandwidth[1]},

@@ -44,8 +44,8 @@ from gyroarray.estimators.noise import ArrayNoise, array_noise
 from gyroarray.core.layout import Layout
 from gyroarray.core.plugins import ESTIMATORS_GROUP
 
-__all__ = ["Estimator", "NotFittedError", "LinearSystem", "register", "get_estimator", "available",
-           "make", "ENTRY_POINT_GROUP", "unobservable_reason"]
+__all__ = ["Estimator", "NotFittedError", "LinearSystem", "DesignTags", "register", "get_estimator",
+           "available", "make", "ENTRY_POINT_GROUP", "unobservable_reason"]
 
 #: Entry-point group of third-party estimators.
 ENTRY_POINT_GROUP = ESTIMATORS_GROUP
@@ -116,6 +116,52 @@ class LinearSystem:
 
 
 
+@dataclass(frozen=True)
+class DesignTags:
+    """What the design search (``gyroarray design --recommend``) needs to know of an estimator
+    class, in the manner of scikit-learn's estimator tags (:meth:`Estimator.design_tags`).
+
+    Attributes
+    ----------
+    linear_system : bool
+        :meth:`Estimator.linear_system` gives the fitted estimator as a fixed linear filter:
+        the accuracy predictor, hence the design search, can model it.
+    weights : {"gls", "ols", "naive"} or None
+        The closed-form per-sample weights its fused channel is built on (the array KF
+        filters the GLS channel, the single-gyro KF the OLS channel); None: the weights are
+        read from the fitted estimator, the DC gain (3, N) of its linear system, fitted on each
+        layout the search tries (exact for a per-sample estimator).
+    rho_weighted : bool
+        Its weights depend on the gyros' correlation (the search then chooses a design ρ).
+    bandwidth_param : str or None
+        The hyperparameter that sets its bandwidth [Hz] (None: it has none; the search tries
+        it unfiltered only).
+    bandwidth_optional : bool
+        The bandwidth hyperparameter may also be None (no filter): tried as well.
+    channel_filter : {"none", "lowpass", "kf"}
+        The filter on its fused channel in the design's fast channel model.
+    bias_states : {"none", "array", "per_gyro"}
+        Gyro-bias states: none; the array's N biases in one filter (they couple the axes after a
+        failure or with reversed gyros, so the channel model only screens it); one filter per
+        gyro (exact on alike gyros only).
+    needs_rrw_for_bias_states : bool
+        Its bias states need a rate random walk (without one it is built with
+        ``bias_states=False``).
+    rebuild : {"refit"}
+        How it is rebuilt after a failed gyro: fitted again, for the design ρ, on the gyros left.
+    """
+
+    linear_system: bool = False
+    weights: str | None = None
+    rho_weighted: bool = True
+    bandwidth_param: str | None = None
+    bandwidth_optional: bool = False
+    channel_filter: str = "none"
+    bias_states: str = "none"
+    needs_rrw_for_bias_states: bool = False
+    rebuild: str = "refit"
+
+
 #: An Estimator subclass (``fit`` returns the instance it was called on).
 _E = TypeVar("_E", bound="Estimator")
 
@@ -136,6 +182,25 @@ class Estimator:
     #: False for estimators that only use the layout (``ols``, ``naive``), which then also run
     #: on a model without ARW (e.g. RRW only), with a zero white-noise covariance.
     needs_arw: bool = True
+    #: Overrides of the :class:`DesignTags` this class declares (merged along the MRO by
+    #: :meth:`design_tags`); a subclass states only what differs from its base.
+    _design_tags: dict[str, Any] = {}
+
+    @classmethod
+    def design_tags(cls) -> DesignTags:
+        """What the design search needs to know of this estimator (:class:`DesignTags`).
+
+        The defaults: ``linear_system`` True when the class overrides
+        :meth:`linear_system`; ``rho_weighted`` = :attr:`needs_arw` (an estimator that uses
+        no noise model has weights without ρ); no bandwidth, no bias states, its weights
+        read from the fitted linear system. Each class in the MRO may override them with a
+        ``_design_tags`` dict.
+        """
+        kw: dict[str, Any] = {"linear_system": cls.linear_system is not Estimator.linear_system,
+                              "rho_weighted": bool(cls.needs_arw)}
+        for klass in reversed(cls.__mro__):
+            kw.update(klass.__dict__.get("_design_tags", {}))
+        return DesignTags(**kw)
 
     # -- hyperparameters (scikit-learn) ------------------------------------
     @classmethod

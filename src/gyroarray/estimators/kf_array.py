@@ -192,6 +192,8 @@ class ArrayKF(Estimator):
     """
 
     description = "paper 003 steady-state Kalman fusion, state [body rate; gyro biases]"
+    _design_tags = {"weights": "gls", "bandwidth_param": "bandwidth_hz", "channel_filter": "kf",
+                    "bias_states": "array", "needs_rrw_for_bias_states": True}
 
     def __init__(self, *, bandwidth_hz=None, q_omega=None, bias_states=True):
         self.bandwidth_hz = bandwidth_hz

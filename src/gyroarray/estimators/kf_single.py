@@ -118,6 +118,8 @@ class SingleGyroKF(Estimator):
     """
 
     description = "paper 002 single-gyro KF [rate, bias] on each gyro, then OLS"
+    _design_tags = {"weights": "ols", "rho_weighted": False, "bandwidth_param": "bandwidth_hz",
+                    "channel_filter": "kf", "bias_states": "per_gyro"}
 
     def __init__(self, *, bandwidth_hz=None, q_omega=None):
         self.bandwidth_hz = bandwidth_hz

@@ -92,6 +92,8 @@ class OLS(_PerSample):
 
     description = "ordinary least squares per sample (pseudo-inverse of H)"
     needs_arw = False                    # M = pinv(H): no noise model needed
+    _design_tags = {"weights": "ols", "bandwidth_param": "lowpass_hz", "bandwidth_optional": True,
+                    "channel_filter": "lowpass"}
 
     def __init__(self, *, lowpass_hz=None):
         self.lowpass_hz = lowpass_hz
@@ -124,6 +126,8 @@ class GLS(_PerSample):
     """
 
     description = "generalized least squares per sample, weighted by the ARW covariance"
+    _design_tags = {"weights": "gls", "bandwidth_param": "lowpass_hz", "bandwidth_optional": True,
+                    "channel_filter": "lowpass"}
 
     def __init__(self, *, lowpass_hz=None):
         self.lowpass_hz = lowpass_hz
@@ -153,6 +157,7 @@ class Naive(_PerSample):
 
     description = "mean of the back-projected readings per axis (no model)"
     needs_arw = False
+    _design_tags = {"weights": "naive"}
 
     def __init__(self):
         pass

@@ -81,6 +81,7 @@ class SVO(GLS):
     """
 
     description = "variance-optimal static weights for one averaging time tau_s (GLS on the Allan covariance)"
+    _design_tags = {"weights": None}            # its own weights: read from the fitted filter
 
     def __init__(self, *, tau_s=1.0, allan_covariance=None, lowpass_hz=None):
         self.tau_s = tau_s
