@@ -13,8 +13,9 @@ from pathlib import Path
 from gyroarray.cli.common import add_bag_options, bag_options, add_force, check_plot, measurement_inputs, positive_int, stream_reason
 from gyroarray.core.errors import InputError
 
-__all__ = ["MAX_TAUS", "MIN_STILL_PART", "REF_STILL_RAD_S", "SENSORS", "accel_parts", "accel_noise",
-           "add_parser", "allan_signal", "cmd_allan", "cmd_davar"]
+__all__ = ["MAX_TAUS", "MIN_STILL_PART", "REF_STILL_RAD_S", "SENSORS", "CRB_TERMS", "DISAGREE_Z",
+           "OPTIMISTIC_EFFICIENCY", "UNRESOLVABLE_CRB", "accel_parts", "accel_noise", "add_parser",
+           "allan_signal", "cmd_allan", "cmd_davar", "datasheet_converters", "noise_bounds"]
 
 
 #: Most taus ``allan --taus`` may ask for (an octave grid of 1e9 samples has 30).
@@ -133,6 +134,8 @@ def cmd_allan(args) -> tuple[dict, str]:
     white = _white_levels(signal, meas.dt_s, parts, analyses)
     for k, w in white.items():
         out["gyros"][str(k)]["white_level"] = w
+    bound_lines = noise_bounds(None if getattr(args, "no_whittle", False) else signal, meas.dt_s, parts, analyses,
+                               out["gyros"], notes)
     if pipe.processed:
         out["pipeline"] = pipe.to_json_dict()
     if part_info is not None:
@@ -147,6 +150,7 @@ def cmd_allan(args) -> tuple[dict, str]:
             w = white[k]
             lines.append(f"  white level: N = ADEV({w['tau_s']:.4g} s)·√τ = {w['n_deg_rt_h']:.4g} ± "
                          f"{w['n_deg_rt_h_sigma']:.2g} deg/√h (the one fit, fuse and the [array] table read)")
+        lines += bound_lines.get(k, [])
     if sensor == "all":
         acc_out, acc_text, acc_analyses = _cmd_allan_acc(args, meas, kind, taus)
         out["accelerometer"] = acc_out
@@ -375,7 +379,11 @@ def _cmd_allan_streamed(args, kind: str, taus, why: str) -> tuple[dict, str]:
         taus = MAX_FIT_TAUS
     res = streamed_allan(head, gyros, taus=taus, raw=args.raw, whole=args.all)
     notes = [*head.notes, f"streamed ({why})", *res.notes, *tau_note, *res.skipped.values()]
-    out = {"gyros": {str(k): a.to_json_dict() for k, a in res.analyses.items()},
+    gyros_json = {str(k): a.to_json_dict() for k, a in res.analyses.items()}
+    # the bound needs only the fitted values, the rate and the length (the whole record, streamed);
+    # the Whittle fit would need the record's periodogram in memory
+    bound_lines = noise_bounds(None, res.dt_s, [(0, res.n_samples)], res.analyses, gyros_json, notes)
+    out = {"gyros": gyros_json,
            "signal": res.signal, "notes": notes,
            "not_analysed": {str(k): why_not for k, why_not in res.skipped.items()},
            "streamed": {"chunk_rows": res.chunk_rows, "work_bytes": res.work_bytes,
@@ -384,6 +392,7 @@ def _cmd_allan_streamed(args, kind: str, taus, why: str) -> tuple[dict, str]:
              f"{head.n_gyros} gyros; analysed: {res.signal}", *[f"note: {n}" for n in notes]]
     for k, a in res.analyses.items():
         lines.append(_format_allan(k, a.to_json_dict()))
+        lines += bound_lines.get(k, [])
     if args.plot is not None:
         path = plot_allan({f"gyro {k}": a for k, a in res.analyses.items()}, args.plot,
                           force=args.force)
@@ -429,6 +438,184 @@ def _white_levels(signal, dt_s: float, parts, analyses) -> dict:
                   "n_deg_rt_h_sigma": float(units.arw_rad_rt_s_to_deg_rt_h(lev[1][0])),
                   "tau_s": float(lev[2]), "edf": float(lev[3])}
     return out
+
+
+#: The Allan fit's terms the Cramér–Rao bound knows: (key of the ``fit`` dict, term of
+#: :mod:`gyroarray.analysis.crb`, name in the text). The rate ramp ``r_deg_h2`` has no bound: a
+#: drift, not a stationary noise of the first differences (its ``_crb`` is None).
+CRB_TERMS = (("arw_deg_rt_h", "n", "ARW"), ("bi_deg_h", "b", "BI"), ("rrw_deg_h_rt_h", "k", "RRW"),
+             ("q_deg", "q", "Q"))
+#: A term is not resolvable by a record when its CRB (1σ) is at least this fraction of its value:
+#: no unbiased estimator could then tell it from 0 at 2σ.
+UNRESOLVABLE_CRB = 0.5
+#: An efficiency above this says the fit's own σ is too small (no unbiased estimator beats the
+#: bound; the Allan σ is itself an estimate, ~10-20 % off on a record the fit reads well).
+OPTIMISTIC_EFFICIENCY = 1.2
+#: The Allan and the Whittle estimates of a term disagree when they lie more than this many
+#: combined σ apart (√(σ_Allan² + σ_Whittle²)).
+DISAGREE_Z = 3.0
+
+
+def datasheet_converters():
+    """SI -> datasheet converter of each term of :data:`CRB_TERMS` (and the Gauss–Markov ones)."""
+    from gyroarray.core import units  # deferred: numpy (a fast --help)
+    return {"n": units.arw_rad_rt_s_to_deg_rt_h, "b": units.rad_s_to_deg_h,
+            "k": units.rrw_rad_s_rt_s_to_deg_h_rt_h, "q": units.rad_to_deg,
+            "gm_sigma": units.rad_s_to_deg_h, "gm_tau": float}
+
+
+def noise_bounds(signal, dt_s: float, parts, analyses: dict, gyros_json: dict, notes: list) -> dict:
+    """The Cramér–Rao bound of each fitted noise term, its efficiency, and a Whittle fit beside.
+
+    For each gyro the fitted model is the Allan fit's terms of :data:`CRB_TERMS` with a value > 0
+    (a term fitted to 0 is not in it: its ``_crb`` is None); the bound is
+    :func:`gyroarray.analysis.crb.crb` of that model at the fitted values, for this record's step
+    and still parts (each its own periodogram, none across a join). Adds to each gyro's ``fit``
+    ``<term>_crb`` (1σ, the term's datasheet unit) and ``<term>_efficiency`` (CRB² over the Allan
+    fit's σ², dimensionless; None without a σ), to the gyro a ``crb`` block (the model, its SI
+    values, the terms the record cannot resolve: CRB >= :data:`UNRESOLVABLE_CRB` × value) and a
+    ``whittle`` block (the tapered Whittle maximum-likelihood fit of the same model,
+    :func:`gyroarray.analysis.whittle.fit_whittle`, in datasheet units; not computed when
+    ``signal`` is None, a streamed record), and to ``notes`` the terms a record cannot resolve.
+
+    Parameters
+    ----------
+    signal : ndarray, shape (n, N), or None
+        The analysed rates [rad/s] (None: no Whittle fit).
+    dt_s : float
+        Sample step [s].
+    parts : list of (int, int)
+        The analysed still parts, [start, stop) samples.
+    analyses : dict
+        Gyro (1-based) -> :class:`~gyroarray.analysis.allan.AllanAnalysis`.
+    gyros_json : dict
+        ``str(gyro)`` -> that gyro's JSON (``to_json_dict``), extended in place.
+    notes : list of str
+        Extended in place.
+
+    Returns
+    -------
+    dict
+        Gyro -> text lines.
+    """
+    # deferred: numpy and the analysis load only when the command runs (a fast --help)
+    import numpy as np
+    from gyroarray.analysis import crb as crb_mod
+    conv = datasheet_converters()
+    lines: dict = {}
+    short: dict = {}
+    duration = sum(b - a for a, b in parts) * dt_s
+    for k, a in analyses.items():
+        fit = gyros_json[str(k)]["fit"]
+        gyros_json[str(k)]["crb"] = gyros_json[str(k)]["whittle"] = None     # set below when they can be
+        values, sigmas = {}, {}
+        for key, term, _ in CRB_TERMS:
+            v, s = a.fit.coefficient(term)
+            fit[key + "_crb"] = None
+            fit[key + "_efficiency"] = None
+            if v is not None and math.isfinite(v) and v > 0.0:
+                values[term], sigmas[term] = float(v), s
+        fit["r_deg_h2_crb"] = fit["r_deg_h2_efficiency"] = None
+        if not values:
+            continue
+        try:
+            with np.errstate(all="ignore"):
+                bound = crb_mod.crb(values, dt_s, parts=parts)
+        except (InputError, np.linalg.LinAlgError, ValueError, ArithmeticError) as err:
+            why = err.message if isinstance(err, InputError) else f"it failed on these numbers ({err})"
+            notes.append(f"gyro {k}: no Cramér–Rao bound: {why}")
+            continue
+        unresolved, text = [], []
+        for key, term, name in CRB_TERMS:
+            if term not in values:
+                continue
+            sd, sig = bound.sd[term], sigmas[term]
+            sd = None if sd is None or not math.isfinite(sd) else sd
+            if sd is not None:
+                fit[key + "_crb"] = float(conv[term](sd))
+                if sig is not None and math.isfinite(sig) and sig > 0.0 and math.isfinite((sd / sig) ** 2):
+                    fit[key + "_efficiency"] = float((sd / sig) ** 2)
+            if sd is None or sd >= UNRESOLVABLE_CRB * values[term]:
+                unresolved.append(key)
+                short.setdefault(name, []).append(k)
+            eff = fit[key + "_efficiency"]
+            if eff is not None and eff > OPTIMISTIC_EFFICIENCY:
+                notes.append(f"gyro {k}: the Allan fit's σ of {name} ({conv[term](sig):.3g}) is below the "
+                             f"Cramér–Rao bound ({fit[key + '_crb']:.3g}; efficiency {eff:.2f} > 1): that σ "
+                             "understates the uncertainty on this record (the fit's σ is a local, long-record "
+                             "one), read the bound as the least 1σ any estimator has")
+            text.append(f"{name} {'-' if sd is None else format(fit[key + '_crb'], '.2g')}"
+                        + ("" if eff is None else f" (eff {eff:.2f})"))
+        r_value = a.fit.coefficient("r")[0]
+        block = {"model": [key for key, term, _ in CRB_TERMS if term in values],
+                 "not_in_model": [key for key, term, _ in CRB_TERMS if term not in values],
+                 "values_si": dict(values), "duration_s": float(duration), "parts": len(parts),
+                 "dt_s": float(dt_s), "unresolvable": unresolved,
+                 "unresolvable_rule": f"CRB >= {UNRESOLVABLE_CRB:g} x the fitted value",
+                 "method": bound.method}
+        if r_value is not None and r_value > 0.0:
+            block["left_out"] = ["r_deg_h2 (a rate ramp is a drift, not a stationary noise: no bound)"]
+        gyros_json[str(k)]["crb"] = block
+        lines[k] = ["  CRB 1σ (the fitted model at its values, this record): " + ", ".join(text)]
+        if signal is None:
+            continue
+        wb, wline = _whittle_block(np.asarray(signal, float)[:, k - 1], dt_s, parts, tuple(values), conv)
+        gyros_json[str(k)]["whittle"] = wb
+        lines[k].append(wline)
+        if wb is None:
+            notes.append(f"gyro {k}: {wline.strip()}")
+            continue
+        apart = []
+        for key, term, name in CRB_TERMS:
+            sa, sw = fit.get(key + "_sigma"), wb["sigma"].get(key)
+            if term in values and sa is not None and sw is not None and \
+                    abs(wb["values"][key] - fit[key]) > DISAGREE_Z * math.hypot(sa, sw):
+                apart.append(f"{name} {fit[key]:.3g} vs {wb['values'][key]:.3g}")
+        if apart:
+            notes.append(f"gyro {k}: the Allan fit and the Whittle fit of the same model disagree beyond "
+                         f"{DISAGREE_Z:g} σ ({'; '.join(apart)}): the record does not follow that model at "
+                         "every frequency (a filter, lines, a missing term), and its Cramér–Rao bound holds "
+                         "only for the model the record follows")
+    by_gyros: dict = {}
+    for name, ks in short.items():
+        by_gyros.setdefault(tuple(ks), []).append(name)
+    for ks, names in by_gyros.items():
+        who = f"gyro {ks[0]}" if len(ks) == 1 else f"gyros {', '.join(map(str, ks))}"
+        notes.append(f"{who}: the record ({duration:.4g} s in {len(parts)} part(s) at {1.0 / dt_s:g} Hz) "
+                     f"is too short to resolve {', '.join(names)} at the fitted value: the Cramér–Rao "
+                     f"bound (1σ) is at least half of it, so no estimator could tell it from 0; a "
+                     "longer record (plan) resolves it, if the model holds")
+    return lines
+
+
+def _whittle_block(x, dt_s: float, parts, terms: tuple, conv: dict) -> tuple:
+    """The Whittle fit of one gyro's rate ``x`` [rad/s] over ``parts``: (JSON in datasheet units
+    or None, its text line)."""
+    # deferred: numpy, scipy and the analysis load only when the command runs (a fast --help)
+    import numpy as np
+    from gyroarray.analysis.whittle import fit_whittle
+    keys = {term: key for key, term, _ in CRB_TERMS}
+    try:
+        with np.errstate(all="ignore"):
+            w = fit_whittle(x, dt_s, terms, parts=parts)
+    except (InputError, np.linalg.LinAlgError, ValueError, ArithmeticError) as err:
+        why = err.message if isinstance(err, InputError) else f"the fit failed on these numbers: {err}"
+        return None, f"  Whittle ML fit: not computed ({why})"
+
+    def ds(d):
+        return {keys[p]: None if v is None or not math.isfinite(v) else float(conv[p](v)) for p, v in d.items()}
+    block = {"method": "tapered Whittle maximum likelihood on the first differences of each still part "
+                       "(analysis.whittle)",
+             "model": [keys[t] for t in terms], "values": ds(w.values), "sigma": ds(w.sigma),
+             "crb": ds(w.crb), "efficiency": {keys[p]: None if v is None or not math.isfinite(v) else float(v)
+                                              for p, v in w.efficiency.items()},
+             "taper": f"Tukey, cosine ramps over {w.taper:g} of each part",
+             "taper_fraction": w.taper, "band": w.band, "n_freq": w.n_freq,
+             "converged": w.converged, "notes": list(w.notes)}
+    vals = block["values"]
+    text = [f"{name} {vals[key]:.4g}" + ("" if block["sigma"][key] is None else f" ± {block['sigma'][key]:.2g}")
+            for key, term, name in CRB_TERMS if term in terms]
+    return block, "  Whittle ML fit (second estimate): " + ", ".join(text)
 
 
 def _analysed_parts(meas, gyros: list[int], args) -> tuple[list, list[str], dict | None]:
@@ -735,6 +922,10 @@ def add_parser(sub) -> None:
                         "the contiguous parts, nothing interpolated (gaps and missing samples counted)")
     p.add_argument("--raw", action="store_true",
                    help="analyse the raw gyro output even when a moving reference is present")
+    p.add_argument("--no-whittle", action="store_true",
+                   help="leave out the second estimate, the tapered Whittle maximum-likelihood fit of each "
+                        "gyro's noise terms (its cost grows with the samples: ~4 s per gyro and million "
+                        "samples per minor term); the Cramér–Rao bounds stay")
     p.add_argument("--stream", action="store_true",
                    help="read the record in chunks, never whole (automatic for a record estimated "
                         "beyond 2 GiB or --max-memory; Parquet recommended): the overlapping ADEV of "

@@ -321,6 +321,7 @@ def cmd_fit(args):
     res = {"discrepancy_before": before.discrepancy, "discrepancy_after": after.discrepancy,
            "consistent": after.consistent, "effects": after.effects_json(),
            "notes": notes}
+    bound_lines = _noise_bounds(comp, after, res, notes)
     gaps = comp.gap_summary()               # with --gaps: the contiguous parts the fits read
     if gaps is not None:
         res["gaps"] = gaps
@@ -341,12 +342,121 @@ def cmd_fit(args):
     text = "\n".join([f"{comp.name}: discrepancy {before.discrepancy:.3g} -> {after.discrepancy:.3g} "
                       f"({'consistent' if after.consistent else 'NOT consistent'})",
                       "fitted model (beyond ARW + RRW):"] + (_model_lines(after.model) or ["  (baseline only)"])
+                     + bound_lines
                      + ([] if arr is None else arr.text_lines())
                      + ([] if across is None else across.text_lines())
                      + ([f"written to {args.out}"] if args.out is not None else [])
                      + [f"note: {n}" for n in notes])
     return res, text
 
+
+def _bound_parts(comp, after) -> list:
+    """The parts [start, stop) of a comparison's (stitched) record its noise terms are fitted on:
+    the samples its stochastic fits read (``after.record``: the whole record, or its longest static
+    part), cut at the joins of its stitched still parts (none across a join)."""
+    lo, hi, _ = after.record.indices(int(comp.n))
+    out = []
+    for a, b in list(comp.parts) or [(0, int(comp.n))]:
+        a, b = max(a, lo), min(b, hi)
+        if b - a >= 3:
+            out.append((a, b))
+    return out or [(lo, hi)]
+
+
+def _noise_bounds(comp, after, res: dict, notes: list) -> list[str]:
+    """The Cramér–Rao bound and the efficiency of each stochastic term of each gyro's fitted
+    entries (``fit --json``).
+
+    Beside ``params`` and ``sigma`` of the ``arw``, ``rrw``, ``bias_instability``,
+    ``quantization`` and ``gauss_markov`` entries: ``crb`` (1σ, the parameter's unit) and
+    ``efficiency`` (CRB² over the fit's σ², dimensionless), from the bound of the gyro's fitted
+    stochastic model at the fitted values (:func:`gyroarray.analysis.crb.crb`; the entries with
+    a value > 0) over the parts the noise fits read (:func:`_bound_parts`); ``res["crb"]``
+    says how. The terms a record cannot resolve (CRB >= half the value) and a σ below the bound
+    go to ``notes``. Returns the text lines.
+    """
+    # deferred: numpy and the analysis load only when the command runs (a fast --help)
+    import numpy as np
+    from gyroarray.analysis import crb as crb_mod
+    from gyroarray.cli.allan import OPTIMISTIC_EFFICIENCY, UNRESOLVABLE_CRB, datasheet_converters
+    from gyroarray.core import units
+    from gyroarray.effects import names
+    # effect -> (parameter, crb term, datasheet -> SI)
+    terms = {names.ARW: (("n_deg_rt_h", "n", units.arw_deg_rt_h_to_rad_rt_s),),
+             names.RRW: (("k_deg_h_rt_h", "k", units.rrw_deg_h_rt_h_to_rad_s_rt_s),),
+             names.BIAS_INSTABILITY: (("b_deg_h", "b", units.deg_h_to_rad_s),),
+             names.QUANTIZATION: (("q_deg", "q", units.deg_to_rad),),
+             names.GAUSS_MARKOV: (("sigma_deg_h", "gm_sigma", units.deg_h_to_rad_s), ("tau_s", "gm_tau", float))}
+    conv = datasheet_converters()
+    parts = _bound_parts(comp, after)
+    duration = sum(b - a for a, b in parts) * comp.dt
+    res["crb"] = {"parts": len(parts), "duration_s": float(duration), "dt_s": float(comp.dt),
+                  "method": crb_mod.Bound.method,
+                  "model": "each gyro's fitted arw, rrw, bias_instability, quantization and gauss_markov "
+                           "entries with a value > 0, at the fitted values",
+                  "unresolvable_rule": f"CRB >= {UNRESOLVABLE_CRB:g} x the fitted value"}
+    by_gyro: dict = {}
+    for d in res["effects"]:
+        if d["effect"] in terms and d["gyro"] is not None:
+            d["crb"] = {p: None for p, _, _ in terms[d["effect"]]}
+            d["efficiency"] = {p: None for p, _, _ in terms[d["effect"]]}
+            by_gyro.setdefault(int(d["gyro"]), []).append(d)
+    lines, short = [], {}
+    for g, entries in sorted(by_gyro.items()):
+        values, where = {}, {}
+        for d in entries:
+            got = {t: to_si(d["params"][p]) for p, t, to_si in terms[d["effect"]]
+                   if isinstance(d["params"].get(p), (int, float)) and d["params"][p] > 0}
+            if len(got) == len(terms[d["effect"]]):      # Gauss–Markov: σ and τc, or not at all
+                values.update({t: float(v) for t, v in got.items()})
+                where.update({t: (d, p) for p, t, _ in terms[d["effect"]]})
+        if not values:
+            continue
+        try:
+            with np.errstate(all="ignore"):
+                bound = crb_mod.crb(values, comp.dt, parts=parts)
+        except (InputError, np.linalg.LinAlgError, ValueError, ArithmeticError) as err:
+            why = err.message if isinstance(err, InputError) else f"it failed on these numbers ({err})"
+            notes.append(f"gyro {g}: no Cramér–Rao bound: {why}")
+            continue
+        text = []
+        for t, (d, p) in where.items():
+            sd = bound.sd[t]
+            sd = None if sd is None or not math.isfinite(sd) else sd
+            if sd is None or sd >= UNRESOLVABLE_CRB * values[t]:
+                short.setdefault(f"{d['effect']} {p}", []).append(g)
+            if sd is None:
+                continue
+            d["crb"][p] = float(conv[t](sd))
+            sig = d["sigma"].get(p)
+            fitted = after.fits.get((d["effect"], d["gyro"]))
+            if fitted is not None and fitted.extra.get("grid"):
+                d["crb_note"] = ("read from the output's step grid, not from the noise: the bound of a noise "
+                                 "estimate does not apply to it (no efficiency)")
+            elif isinstance(sig, (int, float)) and sig > 0 and math.isfinite((d["crb"][p] / sig) ** 2):
+                d["efficiency"][p] = float((d["crb"][p] / sig) ** 2)
+                if d["efficiency"][p] > OPTIMISTIC_EFFICIENCY:
+                    notes.append(f"gyro {g}: the fit's σ of {d['effect']} {p} ({sig:.3g}) is below the "
+                                 f"Cramér–Rao bound ({d['crb'][p]:.3g}; efficiency {d['efficiency'][p]:.2f} > 1): "
+                                 "that σ understates the uncertainty on this record (the fit's σ is a local, "
+                                 "long-record one), read the bound as the least 1σ any estimator has")
+            eff = d["efficiency"][p]
+            text.append(f"{d['effect']} {p} {d['params'][p]:.4g} (CRB {d['crb'][p]:.2g}"
+                        + ("" if eff is None else f", eff {eff:.2f}") + ")")
+        if text:
+            lines.append(f"  gyro {g}: " + ", ".join(text))
+    by_gyros: dict = {}
+    for name, gs in short.items():
+        by_gyros.setdefault(tuple(gs), []).append(name)
+    for gs, which in by_gyros.items():
+        who = f"gyro {gs[0]}" if len(gs) == 1 else f"gyros {', '.join(map(str, gs))}"
+        notes.append(f"{who}: the record ({duration:.4g} s in {len(parts)} part(s) at {1.0 / comp.dt:g} Hz) is "
+                     f"too short to resolve {', '.join(which)} at the fitted value: the Cramér–Rao bound "
+                     "(1σ) is at least half of it, so no estimator could tell it from 0; a longer record "
+                     "(plan) resolves it, if the model holds")
+    return (["noise terms with their Cramér–Rao bound (1σ, the fitted model at its values, this "
+             f"record's {duration:.4g} s in {len(parts)} part(s)) and efficiency (CRB² / σ²):"] + lines
+            if lines else [])
 
 def _with_accelerometer(model, meas, args, notes: list, res: dict):
     """``model`` with the record's ``[accelerometer]`` table and bag ``topic`` (``fit``): the terms of
