@@ -134,7 +134,7 @@ def cmd_allan(args) -> tuple[dict, str]:
     white = _white_levels(signal, meas.dt_s, parts, analyses)
     for k, w in white.items():
         out["gyros"][str(k)]["white_level"] = w
-    bound_lines = noise_bounds(None if getattr(args, "no_whittle", False) else signal, meas.dt_s, parts, analyses,
+    bound_lines = noise_bounds(signal if getattr(args, "whittle", False) else None, meas.dt_s, parts, analyses,
                                out["gyros"], notes)
     if pipe.processed:
         out["pipeline"] = pipe.to_json_dict()
@@ -922,10 +922,10 @@ def add_parser(sub) -> None:
                         "the contiguous parts, nothing interpolated (gaps and missing samples counted)")
     p.add_argument("--raw", action="store_true",
                    help="analyse the raw gyro output even when a moving reference is present")
-    p.add_argument("--no-whittle", action="store_true",
-                   help="leave out the second estimate, the tapered Whittle maximum-likelihood fit of each "
-                        "gyro's noise terms (its cost grows with the samples: ~4 s per gyro and million "
-                        "samples per minor term); the Cramér–Rao bounds stay")
+    p.add_argument("--whittle", action="store_true",
+                   help="add a second estimate, the tapered Whittle maximum-likelihood fit of each gyro's "
+                        "noise terms (its cost grows with the samples: ~4 s per gyro and million samples "
+                        "per minor term); the Cramér–Rao bounds are given either way")
     p.add_argument("--stream", action="store_true",
                    help="read the record in chunks, never whole (automatic for a record estimated "
                         "beyond 2 GiB or --max-memory; Parquet recommended): the overlapping ADEV of "
