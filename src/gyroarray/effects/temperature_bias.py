@@ -6,16 +6,17 @@ import math
 from dataclasses import replace
 
 import numpy as np
-from scipy import signal
+from scipy import optimize, signal
 
-from gyroarray.analysis.gls import gls_rw, GLSFit, NotIdentifiableError
-from gyroarray.effects.fitting import (as_vector, EffectFit, fit_extra, not_identifiable, pm, Z_EVIDENT,
+from gyroarray.analysis.gls import gls_rw, GLSFit, NotIdentifiableError, RWWhitener
+from gyroarray.analysis.memo import by_content
+from gyroarray.effects.fitting import (as_vector, chi2_to_z, EffectFit, fit_extra, not_identifiable, pm, Z_EVIDENT,
                                        z_two_sided)
 from gyroarray.effects import _draw
 from gyroarray.core.errors import InputError
 from gyroarray.effects.protocol import Param, RegressionEffect, Stage, identity, same_noise_preference, with_term
 from gyroarray.effects.terms import TemperatureTerm, spread
-from gyroarray.core.units import deg_h_to_rad_s, rad_s_to_deg_h
+from gyroarray.core.units import deg_h_to_rad_s, rad_s_to_deg_h, rrw_rad_s_rt_s_to_deg_h_rt_h
 
 #: Each half of a record must span this much temperature [°C], and this share of the whole
 #: record's span, for the cross-half test (a warm-up that is over by mid-record is not two periods).
@@ -28,19 +29,23 @@ class TemperatureBias(RegressionEffect):
 
     Fit: the regression of the residual on the temperature under ARW + a
     random-walk bias (:func:`gyroarray.effects.temperature_bias.fit_temperature_bias`),
-    with a thermal-lag column (dT/dt of the smoothed reading) when the data ask
-    for it; the levels' coefficient (an ordinary regression with an intercept,
-    no random walk) is reported beside it. The CATS tag's gyro 2: 92 ± 8 with a
+    the walk profiled with the temperature in the model (``profile``: the
+    calibration's q, read with the drift in it, is only its upper end; a smooth
+    warm-up under a small walk otherwise hides in it), with a thermal-lag column
+    (dT/dt of the smoothed reading) when the data ask for it; the levels'
+    coefficient (an ordinary regression with an intercept, no random walk) is
+    reported beside it. The CATS tag's gyro 2: 92 ± 8 with a
     lag of about 246 s; without the lag column 60 ± 3, the levels 96.
     ``t0_c`` and a constant bias are one parameter: the fit returns the
     coefficient relative to the first temperature.
 
     Test: a cross-half prediction when each half of the record spans at least
     0.5 °C and 30 % of the whole record's span: the coefficient fitted on one half, its sign and size carried to
-    the other, where the score of the regression in that direction is ≈ N(0, 1)
+    the other (under the walk profiled without it), where the score of the regression in that direction is ≈ N(0, 1)
     without a temperature effect (the two directions averaged); a coefficient
     that does not transfer between the halves is not significant. Otherwise
-    the whole record's Wald z, and the evidence says why.
+    the whole record's likelihood ratio with the walk profiled under both, over
+    its simulated null mean (:func:`blocked_walk_profile`), and the evidence says why.
     """
 
     name = "temperature_bias"
@@ -81,7 +86,7 @@ class TemperatureBias(RegressionEffect):
 
     def regress(self, ctx, gyro, e, r, q):
         f = fit_temperature_bias(e, ctx.temp, ctx.t, ctx.dt, r, q, gyro, use=ctx.use, rates=self._rates(ctx),
-                                 parts=ctx.parts)
+                                 parts=ctx.parts, profile=True)
         if not f.extra.get("identifiable", True):
             return f
         # the levels' coefficient beside it: an ordinary regression with an intercept (one per
@@ -107,7 +112,10 @@ class TemperatureBias(RegressionEffect):
         if min(float(np.ptp(temp[h])) for h in halves) < need:
             return replace(whole, evidence=whole.evidence + f" (one half of the record spans less than "
                                                                f"{need:.2g} °C: no cross-half check)")
-        r, q = float(ctx.r[g]), float(ctx.q[g])
+        # the walk profiled without the temperature (the test's null: its maximum likelihood
+        # there, where the profile with the temperature can fall to nothing when the walk looks
+        # like the reading); the calibration's q, read with the drift in it, when it did not run
+        r, q = float(ctx.r[g]), float(whole.extra.get("q_without", ctx.q[g]))
         sm = whole.extra.get("lag_smoothing_s")         # the whole fit's thermal-lag column, if any
         X = temperature_columns(temp, None if sm is None else self._rates(ctx)[sm])
         betas, scores = [], []
@@ -188,6 +196,211 @@ def breaks_within(parts, piece: slice) -> np.ndarray | None:
     lo, hi = piece.start or 0, piece.stop
     b = np.array([a - lo for a, _ in parts[1:] if lo < a and (hi is None or a < hi)], dtype=int)
     return b if b.size else None
+
+
+#: Smallest random-walk increment variance the walk profile scans, per unit of the white
+#: variance r [-] (a walk of 1e-12·r per sample: none over any record this package reads).
+PROFILE_Q_FLOOR = 1e-12
+
+#: Tolerance of the walk profile's bounded search, in ln q [-] (5 % in q: the likelihood is
+#: flat to far less than 0.1 in log-likelihood over it).
+PROFILE_XATOL = 0.05
+
+
+def profile_walk(e, X, r: float, q_max: float, *, use=None, breaks=None,
+                 xatol: float = PROFILE_XATOL) -> tuple[float, float, float, float]:
+    """The random walk profiled with and without the regressors: the likelihood-ratio test of ``X``.
+
+    Parameters
+    ----------
+    e : array_like, shape (n,)
+        Residual [rad/s].
+    X : array_like, shape (n, p)
+        Regressors [rad/s per unit of their coefficient].
+    r : float
+        White variance per sample N²/dt [rad²/s²], held fixed (short τ pin it down).
+    q_max : float
+        Largest random-walk increment variance scanned [rad²/s²]: the calibration's q,
+        read from a residual with the drift still in it (an upper bound of the walk).
+    use, breaks
+        As :func:`~gyroarray.analysis.gls.gls_rw`.
+    xatol : float
+        Tolerance of the search in ln q [-] (default :data:`PROFILE_XATOL`).
+
+    Returns
+    -------
+    (q1, q0, lr, loglik1) : tuple of float
+        The maximum-likelihood q [rad²/s²] with ``X`` (β profiled) and without it, in
+        [1e-12·r, q_max]; lr = 2·(ℓ₁ − ℓ₀) >= 0, the likelihood ratio of β ≠ 0 with the walk
+        profiled under both (≈ χ²(p) without the regressors); ℓ₁ [-] the log-likelihood
+        with them.
+
+    Notes
+    -----
+    The calibration's q is the larger of the walk's maximum likelihood and the Allan fit's
+    K + 2σ on the residual, with the drift in it: a smooth warm-up of 24 deg/h reads as a random
+    walk (K 9.8 deg/h/√h where the record's own is 3) and hides itself, σ of the coefficient
+    four times its value under the true walk. Profiled, the walk is what the record leaves once
+    the regressors are fitted with it; the ratio of the two maxima is the test, as the rate
+    ramp's (K profiled under both, :mod:`gyroarray.effects.stochastic`).
+    """
+    e = np.asarray(e, dtype=float)
+    X = np.asarray(X, dtype=float)
+    X = X[:, None] if X.ndim == 1 else X
+    n = e.size
+    lo = math.log(PROFILE_Q_FLOOR * r)
+    hi = max(math.log(max(float(q_max), PROFILE_Q_FLOOR * r)), lo)
+    w = RWWhitener(n, r, math.exp(hi), use, breaks)        # the differences and their links, built once
+
+    def nll(lq: float, cols: bool) -> float:
+        q = math.exp(lq)
+        zy, logdet = w.whiten_at(e, r, q)
+        rss = _dot(zy, zy)
+        if cols:
+            za = np.column_stack([w.whiten_at(X[:, j], r, q)[0] for j in range(X.shape[1])])
+            beta = np.linalg.lstsq(za, zy, rcond=None)[0]
+            res = zy - za @ beta
+            rss = _dot(res, res)
+        return 0.5 * (logdet + rss)
+
+    out = []
+    for cols in (True, False):
+        if hi - lo < xatol:
+            lq = hi
+        else:
+            sol = optimize.minimize_scalar(lambda u: nll(u, cols), bounds=(lo, hi), method="bounded",
+                                           options={"xatol": xatol})
+            lq = float(sol.x) if nll(float(sol.x), cols) <= nll(hi, cols) else hi   # the bound itself
+        out.append((math.exp(lq), nll(lq, cols)))
+    (q1, l1), (q0, l0) = out
+    const = 0.5 * w.m * math.log(2.0 * math.pi)
+    return q1, q0, max(2.0 * (l0 - l1), 0.0), -(l1 + const)
+
+
+#: Blocks the null calibration of the walk profile reads the record in (about; block means of
+#: at least one sample each): the temperature is smooth, so block means keep its information.
+NULL_BLOCKS = 1000
+
+#: Records simulated for the null calibration of the walk profile's likelihood ratio.
+NULL_DRAWS = 128
+
+#: Walks of the null calibration, as fractions of the top of the profile's range [-] (K at
+#: 1, 1/2 and 1/4 of it): the factor is the largest null mean among them. The ratio's null mean
+#: is not monotone in the walk (the 1-hour warm-up of :func:`blocked_walk_profile`, range up to
+#: K 10 deg/h/√h, 300 records each: 0.81 / 1.10 / 1.44 / 1.58 / 1.61 / 1.52 / 1.40 at K 0.3 / 1 /
+#: 2 / 3 / 4.5 / 6 / 10), so the top alone would not bound it for every walk the range allows.
+NULL_WALKS = (1.0, 0.25, 0.0625)
+
+#: Likelihood ratio below which the null calibration is not simulated (factor 1): z <= 1.75
+#: before it, below the z of 2 at which a slow effect is refitted and far below any test's.
+NULL_SKIP_LR = 4.0
+
+#: Tolerance in ln q of the null calibration's profiles [-] (25 % in q: the ratio's error is
+#: second order in it, far below the spread of its mean over :data:`NULL_DRAWS` records).
+NULL_XATOL = 0.25
+
+#: Seed of the null calibration's generator (fixed: the bits never depend on what ran before).
+NULL_SEED = 20261203
+
+
+def _block_index(n: int, size: int, use=None, breaks=None) -> tuple[np.ndarray, np.ndarray | None]:
+    """Sample indices (m, size) of whole blocks of ``size`` consecutive used samples, none across a
+    break or an unused sample, and the first block of each new piece after the first (or None)."""
+    keep = np.ones(n, bool) if use is None else np.asarray(use, bool)
+    cut = np.zeros(n, bool)
+    if breaks is not None:
+        cut[np.asarray(breaks, dtype=int)] = True
+    prev = np.r_[False, keep[:-1]]
+    run_a = np.flatnonzero(keep & (~prev | cut))            # a run of used samples starts
+    nxt = np.r_[keep[1:], False] & ~np.r_[cut[1:], False]
+    run_b = np.flatnonzero(keep & ~nxt) + 1                  # ... and ends
+    starts, firsts = [], []
+    for i, j in zip(run_a, run_b):
+        nb = (int(j) - int(i)) // size
+        if nb:
+            firsts.append(len(starts))
+            starts.extend(range(int(i), int(i) + nb * size, size))
+    idx = np.asarray(starts, dtype=int)[:, None] + np.arange(size)[None, :]
+    b = np.asarray(firsts[1:], dtype=int)
+    return idx, (b if b.size else None)
+
+
+def block_size(n: int, r: float, q_max: float) -> int:
+    """Samples per block of the walk profile's block means: n/:data:`NULL_BLOCKS` (at least 1),
+    halved until the walk within a block moves the means' white part by at most 1 % for any q
+    up to ``q_max`` [rad²/s²] (r the white variance per sample [rad²/s²])."""
+    size = max(1, n // NULL_BLOCKS)
+    while size > 1 and q_max * (size * size - 1) / 6.0 > 0.01 * r:
+        size //= 2
+    return size
+
+
+def blocked_walk_profile(e, X, r: float, q_max: float, *, use=None,
+                         breaks=None) -> tuple[float, float, float, float]:
+    """:func:`profile_walk` of ``e`` on ``X`` read on block means, and its null mean.
+
+    Parameters
+    ----------
+    e : array_like, shape (n,)
+        Residual [rad/s].
+    X : array_like, shape (n,)
+        The regressor [rad/s per unit of its coefficient].
+    r, q_max : float
+        White variance per sample and the walk's upper end [rad²/s²] (:func:`profile_walk`).
+    use, breaks
+        As :func:`~gyroarray.analysis.gls.gls_rw`.
+
+    Returns
+    -------
+    (q1, q0, lr, factor) : tuple of float
+        The profiled walk per sample with and without ``X`` [rad²/s²], the likelihood ratio
+        and its mean on :data:`NULL_DRAWS` records simulated without ``X`` (fixed seed
+        :data:`NULL_SEED`; never below 1; :func:`_null_mean`), the largest over the walks of
+        :data:`NULL_WALKS`: lr/factor is at most ≈ χ²(1) without the regressor, for the walks
+        up to q_max.
+
+    Notes
+    -----
+    Block means of ``size`` samples (:func:`block_size`; whole blocks within each run of used
+    samples and each piece) have differences that are exactly the MA(1) of white noise
+    r/size − q(size² − 1)/(6·size) and a walk of q·size per block: white + walk again, the
+    first term within 1 % of r/size by the choice of size. A smooth regressor loses nothing
+    to them, and the profile and its null simulation cost O(n/size).
+
+    The walk of an hour-long record is read from a few of its longest τ only, and a smooth
+    regressor lives there too: without it, the ratio with the walk profiled under both has a
+    mean of 1.5–1.8, not 1 (an exponential warm-up, τ 900 s, 1 h, ARW 0.3 deg/√h, RRW
+    3–10 deg/h/√h, 150 records), and χ²(1) would call about 1 % of such records significant
+    at z 3.47 instead of 0.03 %. The ratio over its simulated mean (a Bartlett factor) is
+    what the test reads.
+    """
+    e = np.asarray(e, dtype=float)
+    n = e.size
+    size = block_size(n, r, q_max)
+    idx, bb = _block_index(n, size, use, breaks)
+    if idx.shape[0] < 16:                                   # too few blocks: the samples themselves
+        idx, bb, size = _block_index(n, 1, use, breaks) + (1,)
+    eb = e[idx].mean(axis=1)
+    xb = np.asarray(X, dtype=float)[idx].mean(axis=1)
+    rb, qb_max = r / size, q_max * size
+    q1, q0, lr, _ = profile_walk(eb, xb, rb, qb_max, breaks=bb)
+    # the factor (>= 1) only lowers z: below NULL_SKIP_LR it decides nothing and is not simulated
+    factor = 1.0 if lr < NULL_SKIP_LR else max(_null_mean(xb, rb, qb_max, qb_max * f, bb) for f in NULL_WALKS)
+    return q1 / size, q0 / size, lr, factor
+
+
+@by_content(maxsize=96)
+def _null_mean(xb: np.ndarray, rb: float, qb_max: float, qb: float, bb) -> float:
+    """Mean of :func:`profile_walk`'s ratio (walk up to ``qb_max``) on :data:`NULL_DRAWS` records
+    of white ``rb`` + walk ``qb`` without the regressor ``xb`` (block means, pieces from ``bb``),
+    never below 1. Cached by content: a ladder step leaves most gyros as they were."""
+    m = xb.size
+    rng = np.random.default_rng(NULL_SEED)
+    total = 0.0
+    for _ in range(NULL_DRAWS):
+        y = math.sqrt(rb) * rng.standard_normal(m) + np.cumsum(math.sqrt(qb) * rng.standard_normal(m))
+        total += profile_walk(y, xb, rb, qb_max, breaks=bb, xatol=NULL_XATOL)[2]
+    return max(total / NULL_DRAWS, 1.0)
 
 
 def _lag_columns(e, temp, r: float, q: float, use, base: GLSFit,
@@ -324,7 +537,7 @@ def thermal_lag_scan(e, temp_c, dt_s: float, max_shift_s: float, *, parts=(), us
 
 
 def fit_temperature_bias(e, temp_c, time_s, dt_s: float, r: float, q: float, gyro: int,
-                         *, use=None, rates: dict | None = None, parts=()) -> EffectFit:
+                         *, use=None, rates: dict | None = None, parts=(), profile: bool = False) -> EffectFit:
     """Temperature-dependent bias: residual following the temperature.
 
     Parameters
@@ -352,6 +565,14 @@ def fit_temperature_bias(e, temp_c, time_s, dt_s: float, r: float, q: float, gyr
         free offset per part in every regression (``breaks`` of
         :func:`~gyroarray.analysis.gls.gls_rw`, one intercept per part in the lag
         scan). Default: one record.
+    profile : bool
+        Profile the random walk with the temperature in the model (:func:`profile_walk`, q in
+        [1e-12·r, q]): the coefficient and the lag column are fitted at the profiled q, z is
+        the likelihood ratio with the walk profiled under both (χ²(1) without a temperature
+        effect) and σ the larger of the GLS σ at the profiled q and |k|/√LR (the walk's own
+        uncertainty widens it, as the rate ramp's). ``extra``'s ``chi2``, ``dof`` and
+        ``loglik`` stay those at the given q, comparable with the rival regressions under the
+        same noise. Default: at the given q (z the Wald ratio).
 
     Returns
     -------
@@ -410,12 +631,34 @@ def fit_temperature_bias(e, temp_c, time_s, dt_s: float, r: float, q: float, gyr
     except NotIdentifiableError as err:
         return not_identifiable("temperature_bias", gyro, {"deg_h_per_c": 0.0, "t0_c": t0},
                                  "the temperature does not change", err)
-    fit, sm, cand, cand_sm = _lag_columns(e, temp, r, q, use, fit,
-                                          temperature_rates(temp, dt_s) if rates is None else rates, breaks)
+    given = fit                          # at the given (r, q): the χ² the rival regressions are compared on
+    q_fit, lr, walk = q, None, {}
+    if profile:
+        q_fit, q_none, lr_raw, factor = blocked_walk_profile(e, temp - t0, r, q, use=use, breaks=breaks)
+        lr = lr_raw / factor
+        fit = gls_rw(e, temp - t0, r, q_fit, use=use, breaks=breaks)
+        walk = {"q_profiled": q_fit, "q_without": q_none, "walk_lr": lr_raw, "walk_lr_factor": factor,
+                "chi2_profiled": fit.chi2}
+    rates = temperature_rates(temp, dt_s) if rates is None else rates
+    fit, sm, cand, cand_sm = _lag_columns(e, temp, r, q_fit, use, fit, rates, breaks)
+    if profile and sm is not None:       # the same columns at the given q
+        given = gls_rw(e, temperature_columns(temp, rates[sm]), r, q, use=use, breaks=breaks)
     b, s = float(fit.beta[0]), float(fit.sigma[0])
+    if lr is not None:                   # the walk's own uncertainty: σ at least |k|/√LR
+        if lr > 0.0:
+            s = max(s, abs(b) / math.sqrt(lr))
+        walk["chi2_profiled"] = fit.chi2
     k, ks = rad_s_to_deg_h(b), rad_s_to_deg_h(s)
     t = b / s
-    z = z_two_sided(t)
+    z = z_two_sided(t) if lr is None else chi2_to_z(lr, 1)
+    if lr is not None:
+        k_walk = [rrw_rad_s_rt_s_to_deg_h_rt_h(math.sqrt(v / dt_s)) for v in (q_fit, walk["q_without"])]
+        walk_txt = (f"; the random walk profiled: K = {k_walk[0]:.3g} deg/h/√h with the temperature, "
+                    f"{k_walk[1]:.3g} without (the calibration's {rrw_rad_s_rt_s_to_deg_h_rt_h(math.sqrt(q / dt_s)):.3g}"
+                    f", read with the drift in it), likelihood ratio {lr_raw:.3g} over its mean {factor:.3g} "
+                    f"on records without a temperature effect")
+    else:
+        walk_txt = ""
     lag = lag_s = scan = scan_s = None
     resolved = False
     reach = 0.0                          # the lag scan's range each way [s], when it runs
@@ -454,10 +697,13 @@ def fit_temperature_bias(e, temp_c, time_s, dt_s: float, r: float, q: float, gyr
                        f"{pm(scan, scan_s)} s)")
     if z >= Z_EVIDENT:
         ev = (f"gyro {gyro} residual follows the temperature: {pm(k, ks)} deg/h per °C "
-              f"relative to {t0:.2f} °C{lag_txt}; the model has no temperature term")
+              f"relative to {t0:.2f} °C{lag_txt}{walk_txt}; the model has no temperature term")
     else:
         ev = (f"gyro {gyro} residual shows no significant temperature dependence "
-              f"({pm(k, ks)} deg/h per °C, z = {z:.1f}{lag_txt})")
+              f"({pm(k, ks)} deg/h per °C, z = {z:.1f}{lag_txt}{walk_txt})")
+    extra = fit_extra(fit, t=t, thermal_lag_s=lag, thermal_lag_sigma_s=lag_s, lag_smoothing_s=sm,
+                      thermal_lag_resolved=resolved, lag_scan_s=scan, lag_scan_sigma_s=scan_s, **walk)
+    if profile:                          # the rivals' comparison reads the χ² at the noise they share
+        extra.update(chi2=given.chi2, dof=given.dof, loglik=given.loglik)
     return EffectFit("temperature_bias", gyro, {"deg_h_per_c": k, "t0_c": t0}, {"deg_h_per_c": ks},
-                     z, ev, fit_extra(fit, t=t, thermal_lag_s=lag, thermal_lag_sigma_s=lag_s, lag_smoothing_s=sm,
-                                      thermal_lag_resolved=resolved, lag_scan_s=scan, lag_scan_sigma_s=scan_s))
+                     z, ev, extra)

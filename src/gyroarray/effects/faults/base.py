@@ -67,6 +67,8 @@ class FaultEffect(Effect):
     """Base of the four faults: one gyro, from ``start_s`` on; fit by :func:`fit_fault`."""
 
     fault_kind: ClassVar[str] = ""
+    #: The scan restarts at the joins of stitched parts (``breaks`` of :func:`fit_fault`).
+    reads_joins: ClassVar[bool] = False
     per_gyro = True
     stage = Stage.FAULT
     kind = Kind.TIME
@@ -97,7 +99,8 @@ class FaultEffect(Effect):
             if m is not None:
                 quiet |= m[:n, g]
         f = _fit_fault(self.fault_kind, e, ctx.dt, float(ctx.r[g]), float(ctx.q[g]),
-                       time_s=ctx.t[:n], output_rad_s=out, skip=quiet if quiet.any() else None)
+                       time_s=ctx.t[:n], output_rad_s=out, skip=quiet if quiet.any() else None,
+                       breaks=ctx.breaks if self.reads_joins else None)
         size = [k for k in f.params if k != "start_s"]
         what = "" if not size else f", {size[0]} {f.params[size[0]]:.4g} ± {f.params_sigma[size[0]]:.2g}"
         evidence = (f"gyro {gyro} {self.fault_kind} from {f.onset_s:.3f} ± {f.onset_sigma_s:.3f} s{what}"

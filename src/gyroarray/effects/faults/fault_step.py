@@ -15,11 +15,17 @@ class FaultStep(MeanFault):
     Fit: the GLR of a step over the onset on the gyro's residual, its
     bias tracked as a random walk (:func:`gyroarray.effects.faults.scan.fit_fault`).
     In a model it is a deterministic part (:meth:`predict`).
+
+    On a record stitched from still parts (``FitContext.parts``) a join is a known
+    break whose offset the stitched fit already has free: the tracker starts again
+    at each join and no onset within :data:`~gyroarray.effects.faults.scan.JOIN_GUARD`
+    samples of one is a candidate (``reads_joins``).
     """
 
     name = "fault_step"
     order = 21
     fault_kind = "step"
+    reads_joins = True
     rivals = MEAN_RIVALS + ("fault_drift",)
     params = (START, Param("size_deg_s", "deg/s", "size_rad_s", deg_s_to_rad_s,
                            doc="step added to the output"))

@@ -89,6 +89,13 @@ DEFAULT_BIAS_MEMORY_S = 600.0
 #: Fewest samples after the onset for a variance fit (its Gaussian tail approximation).
 MIN_VARIANCE_SAMPLES = 20
 
+#: Samples on each side of a join of stitched parts (``breaks`` of :func:`fit_fault`) within
+#: which no step or drift onset is scanned: a join is a known break whose offset the stitched
+#: fit already has free, and a step there is that offset (the CATS tag's full record: g1 and g3
+#: "steps" at 183 603–183 606 s, its join). As many as a fault needs on each side of its onset at
+#: the record's ends (:data:`gyroarray.effects.faults.base.MIN_RUN`).
+JOIN_GUARD = 32
+
 
 # -- the bias tracker -------------------------------------------------------
 
@@ -820,9 +827,22 @@ def _check_series(residual, dt_s, r, q, time_s):
     return y, dt, t
 
 
+def _pieces(n: int, breaks) -> list[tuple[int, int]] | None:
+    """The stitched pieces [start, stop) of an n-sample series cut at ``breaks`` (first samples of
+    the parts after the first; those outside [1, n − 1] ignored), or None (one piece)."""
+    if breaks is None:
+        return None
+    b = np.unique(np.asarray(breaks, dtype=int).ravel())
+    b = b[(b >= 1) & (b < n)]
+    if b.size == 0:
+        return None
+    edges = [0, *(int(v) for v in b), n]
+    return list(zip(edges[:-1], edges[1:]))
+
+
 def fit_fault(kind: str, residual_rad_s, dt_s: float, r: float, q: float, *, time_s=None,
               output_rad_s=None, bias_memory_s: float = DEFAULT_BIAS_MEMORY_S,
-              skip=None) -> FaultFit:
+              skip=None, breaks=None) -> FaultFit:
     """Fit one fault (onset and size with 1σ, and z) to one gyro's residual.
 
     Parameters
@@ -850,6 +870,13 @@ def fit_fault(kind: str, residual_rad_s, dt_s: float, r: float, q: float, *, tim
         Samples without the gyro's noise (a clip's plateau, where a model
         already explains the output): the noise scan leaves them out (their
         innovations and the differences that touch them).
+    breaks : array_like of int, optional
+        First sample of each stitched part after the first (a record joined from still
+        parts, each with its own free offset): the bias tracker starts again, diffuse,
+        :data:`JOIN_GUARD` samples after each (the join's step is that offset, not a fault),
+        the samples within :data:`JOIN_GUARD` of a join carry no innovation, a step or drift
+        is scanned within its own part (its signature ends at the next join) and no onset
+        within :data:`JOIN_GUARD` samples of a join is a candidate.
 
     Returns
     -------
@@ -866,11 +893,25 @@ def fit_fault(kind: str, residual_rad_s, dt_s: float, r: float, q: float, *, tim
         raise InputError(f"unknown fault kind {kind!r} (known: {', '.join(KINDS)})")
     y, dt, t = _check_series(residual_rad_s, dt_s, float(r), float(q), time_s)
     qn = max(q / r, (dt / float(bias_memory_s)) ** 2)
-    eps = rw_innovations(y / math.sqrt(r), qn)
+    pieces = _pieces(y.size, breaks)
+    if pieces is None:
+        eps = rw_innovations(y / math.sqrt(r), qn)
+    else:
+        # the tracker starts again, diffuse, JOIN_GUARD samples after each join, and the samples
+        # within JOIN_GUARD of a join carry no innovation: the settling of a part's edge (a still
+        # mask's last samples of motion) is the join's offset too, not a fault
+        eps = np.zeros(y.size)
+        for j, (a_, b_) in enumerate(pieces):
+            lo = a_ + (JOIN_GUARD if j > 0 else 0)
+            hi = b_ - (JOIN_GUARD if j < len(pieces) - 1 else 0)
+            if hi - lo >= 2:
+                eps[lo:hi] = rw_innovations(y[lo:hi] / math.sqrt(r), qn)
     K, S = (float(v) for v in steady_gain(qn))
     a = 1.0 - K
     if kind in ("step", "drift"):
-        return _fit_mean(kind, eps[1:], a, K, S, qn, t[1:], dt, r)
+        if pieces is None:
+            return _fit_mean(kind, eps[1:], a, K, S, qn, t[1:], dt, r)
+        return _fit_mean_pieces(kind, eps[1:], a, K, S, qn, t[1:], dt, r, pieces)
     if kind == "noise":
         if skip is None:
             return _difference_ratio(_fit_noise(eps[1:], K, S, t[1:], dt), y, t)
@@ -928,6 +969,58 @@ def _fit_mean(kind, eps, a, K, S, qn, t, dt, r) -> FaultFit:
     psig = {"start_s": onset_sig, "rate_deg_s2": float(rad_s_to_deg_s(rate_sig))}
     return FaultFit("drift", onset, onset_sig, float(rate), float(rate_sig), z, float(dll[best]),
                     params, psig)
+
+
+def _fit_mean_pieces(kind, eps, a, K, S, qn, t, dt, r, pieces) -> FaultFit:
+    """:func:`_fit_mean` on a stitched series: each part scanned on its own innovations (a fault's
+    signature ends at the next join, where the tracker starts again), no onset within
+    :data:`JOIN_GUARD` samples of a join; the onset and its 1σ over every part's onsets, the null
+    that of one record of the same length (the scan has fewer onsets: conservative).
+
+    ``eps``, ``t``: from the second sample on (as :func:`_fit_mean`); ``pieces``: [start, stop)
+    of the parts in samples of the whole series."""
+    nums, dens, mrs, mss, pos = [], [], [], [], []
+    for j, (a_, b_) in enumerate(pieces):
+        lo, hi = max(a_ - 1, 0), b_ - 1                      # the part's rows of eps
+        first = lo + (JOIN_GUARD if j > 0 else 0)            # onset rows θ: the fault from sample θ + 1
+        last = hi - 1 - (JOIN_GUARD if j < len(pieces) - 1 else 0)
+        if last - first < 2:
+            continue
+        onsets = np.arange(first, last + 1) - lo
+        num, den, mr, ms = profile_means(eps[lo:hi, None], [a], [K], [S], np.ones((1, 1)), kind, onsets)
+        nums.append(num[:, 0])
+        dens.append(den[:, 0])
+        mrs.append(mr[:, 0])
+        mss.append(ms[:, 0])
+        pos.append(onsets + lo)
+    if not pos:                                              # every part within its joins' guard
+        return FaultFit(kind, float(t[0]), math.inf, 0.0, math.inf, -math.inf, 0.0,
+                        {"start_s": float(t[0]), ("size_deg_s" if kind == "step" else "rate_deg_s2"): 0.0},
+                        {"start_s": math.inf, ("size_deg_s" if kind == "step" else "rate_deg_s2"): math.inf},
+                        (f"stitched parts too short for a {kind} scan {JOIN_GUARD} samples from each join",))
+    num, den, mr, ms = (np.concatenate(v) for v in (nums, dens, mrs, mss))
+    onset_rows = np.concatenate(pos)
+    dll = num * num / (2.0 * den)
+    best, sig_k = onset_sigma(dll, onset_rows)
+    size = num[best] / den[best] * math.sqrt(r)               # rad/s (step) or rad/s per sample
+    sigma = math.sqrt(r / den[best])
+    null = _null_maxima(kind, eps.size, _null_q(eps.size, K), NULL_DRAWS)
+    key = (kind, eps.size, float(qn))
+    anchors = _anchors(key)
+    z = _z_of_scan(math.sqrt(2.0 * dll[best]),
+                   lambda y: _null_pvalue(y, null, lambda u: _analytic_max_p(u, mr, ms), anchors), key=key)
+    onset, onset_sig = float(t[onset_rows[best]]), sig_k * dt
+    note = (f"{len(pieces)} stitched parts: the bias tracker starts again after each join, and nothing within "
+            f"{JOIN_GUARD} samples of one is scanned (a join's step is its part's own offset)",)
+    if kind == "step":
+        params = {"start_s": onset, "size_deg_s": float(rad_s_to_deg_s(size))}
+        psig = {"start_s": onset_sig, "size_deg_s": float(rad_s_to_deg_s(sigma))}
+        return FaultFit("step", onset, onset_sig, float(size), sigma, z, float(dll[best]), params, psig, note)
+    rate, rate_sig = size / dt, sigma / dt
+    params = {"start_s": onset, "rate_deg_s2": float(rad_s_to_deg_s(rate))}
+    psig = {"start_s": onset_sig, "rate_deg_s2": float(rad_s_to_deg_s(rate_sig))}
+    return FaultFit("drift", onset, onset_sig, float(rate), float(rate_sig), z, float(dll[best]),
+                    params, psig, note)
 
 
 def _difference_ratio(fit: FaultFit, y: np.ndarray, t: np.ndarray, keep=None) -> FaultFit:
