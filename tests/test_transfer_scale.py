@@ -132,6 +132,16 @@ def test_two_estimates_that_disagree_are_both_shown_and_the_model_keeps_the_cros
     assert "agree" in near.extra["reconciled"] and "keeps the time-domain one" in near.extra["reconciled"]
     joint = reconcile_scale(_fit(ppm_x - 3000.0, 700.0), xs, joint_with_nonlinearity=True)
     assert joint.extra["kept"] == "time_domain" and "curvature" in joint.evidence
+    # a cross-spectral value far less precise than the slope, 1.09 combined σ away (our bench: 3002.7
+    # ± 5.0 against 36935 ± 31024 ppm): its own spread, not a bias of the slope; the slope is kept.
+    # Beyond 3 combined σ (KEEP_CROSS_Z) even a less precise cross-spectral value is kept.
+    from dataclasses import replace as _replace
+    loose = _replace(xs, sigma=31024e-6)
+    spread = reconcile_scale(_fit(ppm_x - 33932.0, 5.0), loose)
+    assert spread.extra["kept"] == "time_domain" and spread.params["ppm"] == ppm_x - 33932.0
+    assert "less precise" in spread.extra["reconciled"] and "keeps the time-domain one" in spread.extra["reconciled"]
+    beyond = reconcile_scale(_fit(ppm_x - 3.5 * 31024.0, 5.0), loose)
+    assert beyond.extra["kept"] == "cross_spectral"
     none = reconcile_scale(_fit(4000.0, 700.0), "the motion has no spectral line")
     assert none.params["ppm"] == 4000.0 and none.evidence == "gyro 3 residual rises"
     assert none.extra["cross_spectral"] is None
