@@ -78,7 +78,7 @@ GRID = 4096
 
 def params_of(terms) -> tuple:
     """The parameter names of ``terms`` in order (``gm`` gives ``gm_sigma``, ``gm_tau``)."""
-    out = []
+    out: list = []
     for t in terms:
         if t not in PARAMS:
             raise InputError(f"unknown noise term {t!r}: the bound knows {', '.join(TERMS)}")
@@ -330,7 +330,7 @@ def crb(values: dict, dt_s: float, *, n_samples: int | None = None, parts=None) 
         except np.linalg.LinAlgError:
             ok = False
     for i, p in enumerate(names):
-        r = math.sqrt(cov_corr[i, i]) * d[i] if ok and cov_corr[i, i] > 0.0 else None
+        r = math.sqrt(cov_corr[i, i]) * d[i] if ok and cov_corr is not None and cov_corr[i, i] > 0.0 else None
         rel[p] = r                                       # sd of log θ = relative sd of θ
         sd[p] = None if r is None else r * values[p]
     total = sum(part_lengths(n_samples, parts)) * dt_s

@@ -276,6 +276,7 @@ def fit_whittle(x, dt_s: float, terms=("n", "k"), *, parts=None, taper: float = 
                                   options={"maxiter": 500, "ftol": 1e-13, "gtol": 1e-9})
             if res is None or r.fun < res.fun:
                 res = r
+    assert res is not None                          # starts holds theta0 at least
     values = dict(zip(names, np.exp(res.x).tolist()))
     notes = []
     # the information of the fitted model over the ordinates used (band and parts)

@@ -860,6 +860,7 @@ class ModelComparison:
                 f"{MIN_STATIC} samples ({MIN_STATIC * self.dt:.1f} s) are needed to calibrate the noise",
                 file=self.name)
         if total < MIN_STATIC:
+            assert still is not None                 # the case of a record with gaps is refused above
             longest = max((b - a for a, b in true_runs(still)), default=0)
             raise InputError(
                 f"no reference rate (ref_x, ref_y, ref_z) and the outputs show motion for "

@@ -1419,7 +1419,7 @@ def record_check(meas, fmt: str, file_si: dict, noise: GyroNoise, gyros: list[in
         out["drops"] = None
     if accel:
         names = FIELDS[fmt]
-        field_of = (lambda r: MATLAB_NAMES[names[r]]) if fmt == "matlab" else (lambda r: names[r])
+        field_of = (lambda r: MATLAB_NAMES[str(names[r])]) if fmt == "matlab" else (lambda r: str(names[r]))
         for role, key in (("an", "acc_n"), ("ak", "acc_k")):
             why = None
             if not meas.has_acc:

@@ -401,7 +401,8 @@ def _noise_bounds(comp, after, res: dict, notes: list) -> list[str]:
             d["crb"] = {p: None for p, _, _ in terms[d["effect"]]}
             d["efficiency"] = {p: None for p, _, _ in terms[d["effect"]]}
             by_gyro.setdefault(int(d["gyro"]), []).append(d)
-    lines, short = [], {}
+    lines: list[str] = []
+    short: dict = {}
     for g, entries in sorted(by_gyro.items()):
         values, where = {}, {}
         for d in entries:

@@ -24,8 +24,9 @@ from gyroarray.design.gyro_noise import (GyroNoise, kept_covariances, kept_level
 from gyroarray.design.search_space import weight_kind, DesignSpace, design_tags, design_weights
 
 
-def channel_weights(kind: str, H: np.ndarray, R: np.ndarray) -> np.ndarray:
-    """Per-sample weights M (G, 3, N) of a stack of layouts H (G, N, 3)."""
+def channel_weights(kind: str | None, H: np.ndarray, R: np.ndarray) -> np.ndarray:
+    """Per-sample weights M (G, 3, N) of a stack of layouts H (G, N, 3); ``kind`` one of
+    gls, ols, naive (None, a plugin's weights read from its fitted system, is not built here)."""
     if kind == "gls":
         rih = np.linalg.solve(R[None], H)                            # R⁻¹ H
         return np.linalg.solve(np.einsum("gni,gnj->gij", H, rih), np.swapaxes(rih, 1, 2))
@@ -33,7 +34,7 @@ def channel_weights(kind: str, H: np.ndarray, R: np.ndarray) -> np.ndarray:
         return np.linalg.solve(np.einsum("gni,gnj->gij", H, H), np.swapaxes(H, 1, 2))
     if kind == "naive":
         return np.swapaxes(H, 1, 2) / np.sum(H * H, axis=1)[:, :, None]
-    raise ValueError(kind)
+    raise ValueError(f"no per-sample weights of kind {kind!r} (a plugin's are read from its fitted system)")
 
 
 @dataclass

@@ -4,7 +4,7 @@ and its error budget at the worst case (:func:`gyroarray.design.budget.error_bud
 
 from __future__ import annotations
 
-from typing import cast
+from typing import Any, cast
 
 import numpy as np
 
@@ -76,13 +76,13 @@ def _mdb(H: np.ndarray, dec: Decider, signs=None) -> dict:
                 at[i] = _mdb_at(H, dec, float(grid[i]), sg)
             return float(np.max(at[i]["step"]))
         coarse = sorted(set(range(0, grid.size, MDB_COARSE_STRIDE)) | {grid.size - 1})
-        top = max(coarse, key=value)
+        peak = max(coarse, key=value)
         step = MDB_COARSE_STRIDE // 2
         while step >= 1:                # halve the step about the largest value found so far
-            for i in (top - step, top + step):
+            for i in (peak - step, peak + step):
                 if 0 <= i < grid.size:
                     value(i)
-            top = max(sorted(at), key=value)
+            peak = max(sorted(at), key=value)
             step //= 2
         worst = max(sorted(at), key=value)
         per = np.max(np.stack([at[i]["step"] for i in sorted(at)]), axis=0)
@@ -207,7 +207,7 @@ def worst_as_built(d: dict, g_design: GyroNoise, g_true: GyroNoise, space, lo: f
             model = with_sensor(at(g_true, rt).noise_model(len(keep), keep, sg), space, g_sensitivity=False)
             p = predict(est, model, n_samples=space.n_samples, settle_s=space.settle_s, truth_rad_s=motion,
                         swing=None if motion is not None else space.swing)
-            case = {"rho": float(rt), "failed_gyros": [k + 1 for k in range(n) if k not in keep],
+            case: dict[str, Any] = {"rho": float(rt), "failed_gyros": [k + 1 for k in range(n) if k not in keep],
                     "rms_3axis_deg_s": float(np.sqrt(sum(p.axes[a]["rms_deg_s"] ** 2 for a in AXES))),
                     "angle_deg": float(np.sqrt(sum(p.axes[a]["angle_deg"] ** 2 for a in AXES)))}
             if worst is None or case[key] > worst[key]:
@@ -280,7 +280,7 @@ def frame_comparison(res: dict, g: GyroNoise, space, rhos, *, other: dict | None
             f"(ρ = {wc['rho']:.4g}, " + (f"gyro(s) {', '.join(map(str, wc['failed_gyros']))} failed"
                                          if wc["failed_gyros"] else "no failure")
             + f"); the best design decided in this frame {best['worst_case'][key]:.4g}"
-            + ("" if buys is None else
+            + ("" if buys is None or pos_d is None else
                f"; the best array with no gyro reversed {pos_d['worst_case'][key]:.4g}, so reversing "
                f"gyros buys {100 * buys:.3g} %"))
         frames[f] = entry

@@ -271,7 +271,7 @@ class GyroNoise:
     def _levels(self, n_levels: int) -> dict:
         """Per gyro the levels (:data:`PER_GYRO_KEYS`): its own, or the alike gyro's on each."""
         if self.per_gyro is not None:
-            return cast(dict, self.per_gyro)
+            return self.per_gyro
         return {ARW: np.full(n_levels, self.arw_deg_rt_h), RRW: np.full(n_levels, self.rrw_deg_h_rt_h),
                 "bi": np.full(n_levels, self.bi_deg_h), "gm_sigma": np.full(n_levels, self.gm_sigma_deg_h),
                 "gm_tau": np.full(n_levels, self.gm_tau_s)}

@@ -42,7 +42,7 @@ def design_tags(est: str) -> DesignTags:
     """The design tags of the estimator registered as ``est`` (a plugin's as well)."""
     cls = get_estimator(est)
     if cls not in _TAGS:
-        _TAGS[cls] = cls.design_tags()
+        _TAGS[cls] = cls.design_tags()  # type: ignore[attr-defined]
     return _TAGS[cls]
 
 

@@ -5,6 +5,8 @@ source), the tracking limit and the g-sensitivity beside the noise, the decision
 
 from __future__ import annotations
 
+from typing import Any
+
 import math
 from dataclasses import replace
 
@@ -330,7 +332,7 @@ def ignored_effects(g: GyroNoise, space: DesignSpace, budget_ignored=()) -> list
 def detection_assumption(space: DesignSpace, rec: dict | None = None) -> dict:
     """The minimum detectable bias's detector: its false-alarm rate [1/h], missed-detection
     probability [-] and (from a decided design ``rec``) its step window [s] and threshold."""
-    out = {"far_per_h": space.far_per_h, "p_md": space.p_md,
+    out: dict[str, Any] = {"far_per_h": space.far_per_h, "p_md": space.p_md,
            "statement": (f"minimum detectable bias: the parity detector's step test, thresholds set for "
                          f"{space.far_per_h:g} false alarms per hour over its three test families, "
                          f"detection with probability 1 − {space.p_md:g}; worst over a "

@@ -774,8 +774,8 @@ def heavy_floor(x, d, local, c: float, flags, skip=None, alpha: float = 0.01):
     k_c, lam_c = int(flags.size), n_j * tail(c)
     # the count's interval: Poisson 99.9 % about the floor's expectation at ν's 95 % bounds
     # (a ν of 3.02 ± 0.035 moves it by ±3 %: 1307 flags against 1433 ± 38 would otherwise fail)
-    w = 1.96 * lsig if math.isfinite(lsig) else math.nan
-    nu_lo, nu_hi = (nu * math.exp(-w), nu * math.exp(w)) if math.isfinite(w) else (nu, nu)
+    wl = 1.96 * lsig if math.isfinite(lsig) else math.nan
+    nu_lo, nu_hi = (nu * math.exp(-wl), nu * math.exp(wl)) if math.isfinite(wl) else (nu, nu)
     lam_lo = n_j * floor_tail(nu_hi)(c) if nu_hi != nu else lam_c
     lam_hi = n_j * floor_tail(nu_lo)(c) if nu_lo != nu else lam_c
     lo_c = float(stats.poisson.ppf(0.5 * FLOOR_P, min(lam_lo, lam_c)))

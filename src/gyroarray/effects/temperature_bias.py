@@ -314,13 +314,14 @@ def _block_index(n: int, size: int, use=None, breaks=None) -> tuple[np.ndarray, 
     run_a = np.flatnonzero(keep & (~prev | cut))            # a run of used samples starts
     nxt = np.r_[keep[1:], False] & ~np.r_[cut[1:], False]
     run_b = np.flatnonzero(keep & ~nxt) + 1                  # ... and ends
-    starts, firsts = [], []
+    starts: list[int] = []
+    firsts: list[int] = []
     for i, j in zip(run_a, run_b):
         nb = (int(j) - int(i)) // size
         if nb:
             firsts.append(len(starts))
             starts.extend(range(int(i), int(i) + nb * size, size))
-    idx = np.asarray(starts, dtype=int)[:, None] + np.arange(size)[None, :]
+    idx = np.asarray(starts, dtype=np.int64)[:, None] + np.arange(size, dtype=np.int64)[None, :]
     b = np.asarray(firsts[1:], dtype=int)
     return idx, (b if b.size else None)
 

@@ -466,7 +466,7 @@ def rho_candidates(res: dict) -> dict | None:
         ref = rec.get("rms_by_rho") or {}
         bad = max((abs(own[r] / ref[r] - 1.0) for r in rhos if ref.get(r)), default=math.inf)
     except (KeyError, TypeError, ValueError) as e:      # a result of another version
-        g = space = None
+        g, space = None, None
         bad, note = math.inf, f"the result's assumptions do not rebuild its predictor ({e})"
     if note is None and not bad <= REPRODUCE_RTOL:
         note = ("the predictor set up from the result's assumptions does not reproduce the "
@@ -530,7 +530,7 @@ def motion_words(m) -> str:
     about each axis in turn."""
     if not isinstance(m, dict):
         return "at rest" if m in (None, "none", "static") else str(m)
-    a, f = m.get("swing_amplitude_deg_s"), m.get("swing_frequency_hz")
+    a, f = float(m.get("swing_amplitude_deg_s") or 0.0), float(m.get("swing_frequency_hz") or 0.0)
     return (f"swing A·sin(2π f t), A = {a:g} deg/s, f = {f:g} Hz, about x, y and z at once (the same "
             f"rate on every body axis: a rotation about the (1, 1, 1) diagonal at √3·A = "
             f"{math.sqrt(3.0) * a:.4g} deg/s)")
