@@ -168,6 +168,19 @@ def test_export_takes_the_term_from_z_and_says_x_and_y_lack_it(tmp_path):
     assert "acc_y: not resolved" in partial and "no record length can be planned" in partial
     header = [ln for ln in exp.text.splitlines() if ln.startswith("#")]
     assert any("accelerometer acceleration random walk from acc_z only" in ln for ln in header)
+    # the consumers' own parsers read the file with z's walk: Kalibr (YAML), OpenVINS (OpenCV
+    # FileStorage, imu0)
+    yaml = pytest.importorskip("yaml")
+    kal = tmp_path / "kalibr.yaml"
+    kal.write_text(exp.text, encoding="utf-8")
+    assert yaml.safe_load(kal.read_text())["accelerometer_random_walk"] == pytest.approx(0.12 / 60.0, rel=1e-6)
+    cv2 = pytest.importorskip("cv2")
+    ov = ex.build_export(model, "worst", "openvins", 100.0, source=path.name)
+    ovp = tmp_path / "openvins.yaml"
+    ovp.write_text(ov.text, encoding="utf-8")
+    fs = cv2.FileStorage(str(ovp), cv2.FILE_STORAGE_READ)
+    assert fs.isOpened()
+    assert fs.getNode("imu0").getNode("accelerometer_random_walk").real() == pytest.approx(0.12 / 60.0, rel=1e-6)
 
 
 def test_the_hint_names_the_real_cause(tmp_path):
