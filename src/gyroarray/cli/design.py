@@ -196,7 +196,7 @@ def _design_motion(args, rate: float, horizon: float):
             raise InputError(f"--swing must be AMP_DPS,FREQ_HZ with AMP > 0 and 0 < FREQ < Nyquist, "
                              f"got {args.swing!r}")
         swing = Swing(deg_s_to_rad_s(vals[0]), vals[1])
-        motion_name = f"swing {vals[0]:g} deg/s at {vals[1]:g} Hz about each axis"
+        motion_name = f"swing {vals[0]:g} deg/s at {vals[1]:g} Hz about x, y and z at once"
     if args.motion is not None:
         # deferred: numba and the simulator, only for --motion
         from gyroarray.sim.profiles import load_profile

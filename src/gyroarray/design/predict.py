@@ -124,7 +124,7 @@ def __getattr__(name: str):
 
 @dataclass(frozen=True)
 class Swing:
-    """A sinusoidal body rate A·sin(2π f t) about each body axis in turn.
+    """A sinusoidal body rate A·sin(2π f t) on every body axis at once (about x, y and z together).
 
     Attributes
     ----------

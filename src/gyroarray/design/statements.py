@@ -387,7 +387,7 @@ def assumptions(g: GyroNoise, space: DesignSpace, rhos, single: bool) -> dict:
         "motion": item(space.motion_name if space.swing is None else
                        {"swing_amplitude_deg_s": units.rad_s_to_deg_s(space.swing.amplitude_rad_s),
                         "swing_frequency_hz": space.swing.frequency_hz,
-                        "about": "each body axis in turn"}, s.get("motion", "default")),
+                        "about": "x, y and z at once (the same rate on every body axis)"}, s.get("motion", "default")),
         "bandwidth_hz": item(list(space.bandwidth_hz), s.get("bandwidth_hz", "default"),
                              "searched range (lo = hi: fixed)"),
         "alpha_search": item(f"{space.alpha_points} cone angles per scheme (Scheme 1 in (0, 90], "
