@@ -183,10 +183,13 @@ def _crb_lengths(plan, precision: float, confidence: float) -> dict:
     # deferred: numpy, scipy load only when the command runs
     from gyroarray.analysis.crb import crb_length
     from gyroarray.chain.plan import MAX_PLAN_S
+    import math
     from scipy import special
     z = float(2.0 ** 0.5 * special.erfinv(confidence))
+    # a confidence near 0 (z -> 0) asks for almost nothing: the shortest record (a finite target)
+    rel = precision / z if z > 0.0 and math.isfinite(precision / z) else 1e300
     values = {t: float(v) for t, v in plan.coef.items()}
-    return {t: crb_length(values, plan.rate_hz, t, precision / z, max_s=MAX_PLAN_S) for t in values}
+    return {t: crb_length(values, plan.rate_hz, t, min(rel, 1e300), max_s=MAX_PLAN_S) for t in values}
 
 
 def _plan_cases(args, sensor: str, cases, names):
