@@ -204,6 +204,7 @@ def test_accel_noise_round_trips_through_toml_exactly(tmp_path):
     assert NoiseModel.from_toml(path).accelerometer == partial
 
 
+@pytest.mark.slow   # two fits with the per-axis accelerometer plans and the noise bounds (17 s): make score
 def test_fit_out_writes_the_accelerometer_table_and_says_what_is_missing(tmp_path):
     """A record with acc columns: ``fit --out`` writes ``[accelerometer]``, read back equal to
     the JSON's table; its VRW within 2.97σ of the 0.06 m/s/√h drawn; the acc RW and BI a 200 s

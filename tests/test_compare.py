@@ -503,6 +503,7 @@ def test_too_short_is_refused_clearly(tmp_path, cli):
     assert p.returncode == 2 and "too short for a diagnosis" in p.stderr and "m.csv" in p.stderr
 
 
+@pytest.mark.slow   # a record diagnosed with and without its reference, the temperature test calibrated on its nulls (40 s): make score
 def test_no_static_part_is_calibrated_on_what_the_reference_leaves(tmp_path, cli):
     """A table that never stands still: the noise from the residual's high-pass, said in the notes."""
     p = cli("diagnose", _short(tmp_path, 200.0, static=False), "--runs", "10", "--json")

@@ -153,6 +153,7 @@ def test_monte_carlo_confirms_the_per_gyro_prediction(m6, runs, t_crit):
     assert abs(ms.mean() - alike) > half
 
 
+@pytest.mark.slow   # several --recommend runs, each with the other common-mode frame ranked (33 s): make score
 def test_array_table_correlation_enters_the_weights(tmp_path):
     C = np.eye(6)
     C[0, 1] = C[1, 0] = 0.4

@@ -174,6 +174,7 @@ def test_design_rho_outside_the_range_is_one_line():
     assert o.code == 2
 
 
+@pytest.mark.slow   # every design gets its rho-gridded MDB under --mdb-max (18 s): make score
 def test_mdb_max_excludes_the_designs_above_it_and_says_so():
     base = ["design", "--recommend", "--arw", "0.1", "--rrw", "60", "--n", "5,6", "--horizon-s", "20",
             "--rho-range=-0.1,0.5", "--estimators", "gls", "--failures", "1", "--objective", "rate",

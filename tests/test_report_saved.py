@@ -127,6 +127,7 @@ def _md(path) -> str:
     return path.read_text().split("\n", 1)[1]       # without the subtitle (the time stamp)
 
 
+@pytest.mark.slow   # the saved design report: its fixture simulates and renders a report (18 s): make score
 def test_the_first_report_saves_what_it_simulated(saved):
     root, first = saved
     checks = json.loads((root / "paper_out" / CHECKS_FILE).read_text())
@@ -145,6 +146,7 @@ def test_the_first_report_saves_what_it_simulated(saved):
     assert first["figures"] >= 6                    # decision figures + adev_recommended + adev_best
 
 
+@pytest.mark.slow   # the saved design report: its fixture simulates and renders a report (18 s): make score
 def test_a_saved_result_renders_without_simulating(saved, tmp_path, monkeypatch):
     root, first = saved
     patched = no_simulation(monkeypatch)
@@ -165,6 +167,7 @@ def test_a_saved_result_renders_without_simulating(saved, tmp_path, monkeypatch)
     assert out["paper_vs_model"][0]["check_results"] == first["paper_vs_model"][0]["check_results"]
 
 
+@pytest.mark.slow   # the saved design report: its fixture simulates and renders a report (18 s): make score
 def test_a_changed_input_is_recomputed_not_read_stale(saved, tmp_path, monkeypatch):
     root, _ = saved
     values = root / "changed_values.toml"           # beside the scenario file it names
