@@ -68,6 +68,7 @@ def test_datasheet_conversions_by_hand():
     assert units.m_s2_to_mg(9.80665) == pytest.approx(1000.0, rel=1e-15)
 
 
+@pytest.mark.slow   # allantools on three long axes (12 s): make score
 def test_acc_adev_equals_allantools_and_gravity_changes_nothing():
     """Our OADEV of each axis equals allantools.oadev (frequency data, the same taus) to 1e-12
     relative (measured 2.7e-15; both are sums of the same second differences, rounding apart);

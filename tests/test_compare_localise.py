@@ -99,6 +99,7 @@ def test_zero_phase_decimation_filter_is_a_lowpass_that_does_not_lag(samsung):
     assert out["localisation"][0]["kind"] == "lowpass"
 
 
+@pytest.mark.slow   # a ladder on a filtered record (12 s): make score
 def test_ladder_does_not_mimic_the_filter_with_noise_effects(samsung):
     # without the localisation the ladder added gauss_markov, outliers and quantization on
     # gyros 2 and 3 (D 152 -> 99.5): effects that only mimic a filter the library does not have
