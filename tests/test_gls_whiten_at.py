@@ -1,7 +1,7 @@
 """The one-column whitening kernels of :class:`RWWhitener` equal the general path bit for bit.
 
 ``whiten(x)`` of one column runs one fused pass (:func:`_rw_whiten1`) and ``whiten_at(x, r, q)``
-builds the pivots of other variances on the same samples inline (:func:`_rw_whiten_at`); the
+builds the pivots of other variances on the same samples from the kept links (:func:`_rw_pivots`); the
 diagnosis's ML scan of q (chain/compare.py ``_ml_q``) relies on both giving the bits of a
 whitener built from scratch. Exact equality is the claim (the same floating-point operations in
 the same order), so the tolerance is zero.

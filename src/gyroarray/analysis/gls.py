@@ -161,48 +161,6 @@ def _rw_whiten1(il, cv, x, idx, dense, scale):  # pragma: no cover - compiled
     return out
 
 
-@njit(cache=True)
-def _rw_whiten_at(link, rho, x, idx, dense, scale):  # pragma: no cover - compiled
-    """:func:`_rw_pivots` of (``link``, ``rho``) and :func:`_rw_whiten1` of x with them, in one
-    pass, the same bits as the two: (z, log det Σ̃). For a likelihood scanned over q (r fixed):
-    the pivots change with ρ, the differences and their links do not."""
-    m = link.size
-    out = np.empty(m)
-    logdet = 0.0
-    prod = 1.0
-    lprev = 1.0
-    cprev = 0.0
-    fixed = False
-    prev = 0.0
-    for i in range(m):
-        if i > 0 and link[i]:
-            if fixed:
-                ci = cprev
-                l2 = lprev * lprev
-                li = lprev
-            else:
-                ci = rho / lprev
-                l2 = 1.0 - ci * ci
-                li = math.sqrt(l2)
-                fixed = li == lprev
-        else:
-            fixed = False
-            ci = 0.0
-            l2 = 1.0
-            li = 1.0
-        il = 1.0 / li
-        cprev = ci
-        lprev = li
-        prod *= l2
-        if (i & 255) == 255:
-            logdet += math.log(prod)
-            prod = 1.0
-        z = (_rw_delta(x, idx, dense, i) + ci * prev) * il
-        prev = z
-        out[i] = z * scale
-    return out, logdet + math.log(prod)
-
-
 #: The ``idx`` :func:`_rw_whiten1` is passed when the differences are dense (not read).
 _NO_IDX = np.zeros(0, dtype=np.int64)
 
@@ -346,7 +304,8 @@ class RWWhitener:
             raise ValueError(f"x must have shape ({self.n},), got {x.shape}")
         s = q + 2.0 * r
         idx = _NO_IDX if self.idx is None else self.idx
-        z, logdet_norm = _rw_whiten_at(self.link, r / s, x, idx, self.idx is None, 1.0 / math.sqrt(s))
+        il, cv, logdet_norm = _rw_pivots(self.link, r / s)      # the pivots of ρ = r/s, links kept
+        z = _rw_whiten1(il, cv, x, idx, self.idx is None, 1.0 / math.sqrt(s))
         return z, self.m * math.log(s) + logdet_norm
 
     def fit_whitened(self, zy: np.ndarray, za: np.ndarray, zi: np.ndarray | None = None) -> GLSFit:

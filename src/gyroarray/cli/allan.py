@@ -15,7 +15,7 @@ from gyroarray.core.errors import InputError
 
 __all__ = ["MAX_TAUS", "MIN_STILL_PART", "REF_STILL_RAD_S", "SENSORS", "CRB_TERMS", "DISAGREE_Z",
            "OPTIMISTIC_EFFICIENCY", "UNRESOLVABLE_CRB", "accel_parts", "accel_noise", "add_parser",
-           "allan_signal", "cmd_allan", "cmd_davar", "datasheet_converters", "noise_bounds"]
+           "allan_signal", "cmd_allan", "cmd_davar", "datasheet_converters", "noise_bounds", "too_short_notes"]
 
 
 #: Most taus ``allan --taus`` may ask for (an octave grid of 1e9 samples has 30).
@@ -576,16 +576,26 @@ def noise_bounds(signal, dt_s: float, parts, analyses: dict, gyros_json: dict, n
                          f"{DISAGREE_Z:g} σ ({'; '.join(apart)}): the record does not follow that model at "
                          "every frequency (a filter, lines, a missing term), and its Cramér–Rao bound holds "
                          "only for the model the record follows")
+    notes += too_short_notes(short, duration, len(parts), 1.0 / dt_s)
+    return lines
+
+
+def too_short_notes(short: dict, duration_s: float, n_parts: int, rate_hz: float) -> list[str]:
+    """The notes of the terms a record is too short to resolve (``allan`` and ``fit``): ``short``
+    maps a term's name to the gyros whose Cramér–Rao bound (1σ) is at least half the fitted
+    value; one note per set of gyros, for a record of ``duration_s`` [s] in ``n_parts`` still
+    parts at ``rate_hz`` [Hz]."""
     by_gyros: dict = {}
     for name, ks in short.items():
         by_gyros.setdefault(tuple(ks), []).append(name)
+    out = []
     for ks, names in by_gyros.items():
         who = f"gyro {ks[0]}" if len(ks) == 1 else f"gyros {', '.join(map(str, ks))}"
-        notes.append(f"{who}: the record ({duration:.4g} s in {len(parts)} part(s) at {1.0 / dt_s:g} Hz) "
-                     f"is too short to resolve {', '.join(names)} at the fitted value: the Cramér–Rao "
-                     f"bound (1σ) is at least half of it, so no estimator could tell it from 0; a "
-                     "longer record (plan) resolves it, if the model holds")
-    return lines
+        out.append(f"{who}: the record ({duration_s:.4g} s in {n_parts} part(s) at {rate_hz:g} Hz) "
+                   f"is too short to resolve {', '.join(names)} at the fitted value: the Cramér–Rao "
+                   f"bound (1σ) is at least half of it, so no estimator could tell it from 0; a "
+                   "longer record (plan) resolves it, if the model holds")
+    return out
 
 
 def _whittle_block(x, dt_s: float, parts, terms: tuple, conv: dict) -> tuple:

@@ -378,7 +378,7 @@ def _noise_bounds(comp, after, res: dict, notes: list) -> list[str]:
     # deferred: numpy and the analysis load only when the command runs (a fast --help)
     import numpy as np
     from gyroarray.analysis import crb as crb_mod
-    from gyroarray.cli.allan import OPTIMISTIC_EFFICIENCY, UNRESOLVABLE_CRB, datasheet_converters
+    from gyroarray.cli.allan import OPTIMISTIC_EFFICIENCY, UNRESOLVABLE_CRB, datasheet_converters, too_short_notes
     from gyroarray.core import units
     from gyroarray.effects import names
     # effect -> (parameter, crb term, datasheet -> SI)
@@ -446,15 +446,7 @@ def _noise_bounds(comp, after, res: dict, notes: list) -> list[str]:
                         + ("" if eff is None else f", eff {eff:.2f}") + ")")
         if text:
             lines.append(f"  gyro {g}: " + ", ".join(text))
-    by_gyros: dict = {}
-    for name, gs in short.items():
-        by_gyros.setdefault(tuple(gs), []).append(name)
-    for gs, which in by_gyros.items():
-        who = f"gyro {gs[0]}" if len(gs) == 1 else f"gyros {', '.join(map(str, gs))}"
-        notes.append(f"{who}: the record ({duration:.4g} s in {len(parts)} part(s) at {1.0 / comp.dt:g} Hz) is "
-                     f"too short to resolve {', '.join(which)} at the fitted value: the Cramér–Rao bound "
-                     "(1σ) is at least half of it, so no estimator could tell it from 0; a longer record "
-                     "(plan) resolves it, if the model holds")
+    notes += too_short_notes(short, duration, len(parts), 1.0 / comp.dt)
     return (["noise terms with their Cramér–Rao bound (1σ, the fitted model at its values, this "
              f"record's {duration:.4g} s in {len(parts)} part(s)) and efficiency (CRB² / σ²):"] + lines
             if lines else [])

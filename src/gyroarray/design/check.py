@@ -69,15 +69,8 @@ def monte_carlo_check(designs: list[dict], g: GyroNoise, space: DesignSpace, *,
     if designs and "worst_case" in designs[0]:
         return check_decision(designs, g, space, replicates=replicates, seed=seed)
     picked = _pick_for_check(designs, top)
-    n, dt = space.n_samples, space.dt_s
-    k0 = settle_start(n, dt, space.settle_s)
-    t = np.arange(n) * dt
-    if space.motion is not None:
-        truth = np.asarray(space.motion, dtype=float)[:n]
-    elif space.swing is not None:
-        truth = swing_truth(space.swing, n, dt)
-    else:
-        truth = np.zeros((n, 3))
+    dt = space.dt_s
+    k0, t, truth = _check_run(space)
     setups = []
     for d in picked:
         rho = d.get("rho", g.rho_arw)
@@ -147,6 +140,19 @@ def _mirror_design(rec: dict, g: GyroNoise, space: DesignSpace) -> dict:
     return d
 
 
+def _check_run(space: DesignSpace) -> tuple[int, np.ndarray, np.ndarray]:
+    """What every simulated run of a check shares: the first sample after the settling time, the
+    sample times [s] and the true body rate (n, 3) [rad/s] of the design's motion."""
+    n, dt = space.n_samples, space.dt_s
+    if space.motion is not None:
+        truth = np.asarray(space.motion, dtype=float)[:n]
+    elif space.swing is not None:
+        truth = swing_truth(space.swing, n, dt)
+    else:
+        truth = np.zeros((n, 3))
+    return settle_start(n, dt, space.settle_s), np.arange(n) * dt, truth
+
+
 def honest_rms_ci(values, *, gaussian: bool = False) -> dict:
     """:func:`gyroarray.analysis.replicates.rms_ci` that never claims more than the runs show.
 
@@ -197,15 +203,8 @@ def check_decision(designs: list[dict], g: GyroNoise, space: DesignSpace, *, rep
     other = [d for d in designs[1:] if (d["scheme"], d["n"]) != (rec["scheme"], rec["n"])] or designs[1:2]
     picked = [("recommended", rec)] + [("runner-up", d) for d in other[:1]]
     picked.append(("mounting mirror", _mirror_design(rec, g, space)))
-    n, dt = space.n_samples, space.dt_s
-    k0 = settle_start(n, dt, space.settle_s)
-    t = np.arange(n) * dt
-    if space.motion is not None:
-        truth = np.asarray(space.motion, dtype=float)[:n]
-    elif space.swing is not None:
-        truth = swing_truth(space.swing, n, dt)
-    else:
-        truth = np.zeros((n, 3))
+    dt = space.dt_s
+    k0, t, truth = _check_run(space)
     ranged = ((g.rho_arw == g.rho_rrw and g.corr_arw is None and g.corr_rrw is None)
               or rec["rho_range"][1] > rec["rho_range"][0])
     setups = []

@@ -949,26 +949,32 @@ def _null_q(n: int, K: float) -> float:
 def _fit_mean(kind, eps, a, K, S, qn, t, dt, r) -> FaultFit:
     onsets = np.arange(eps.size - 1)
     num, den, mr, ms = profile_means(eps[:, None], [a], [K], [S], np.ones((1, 1)), kind, onsets)
-    num, den, mr, ms = num[:, 0], den[:, 0], mr[:, 0], ms[:, 0]
+    return _scan_fault(kind, eps.size, K, qn, t, dt, r, num[:, 0], den[:, 0], mr[:, 0], ms[:, 0])
+
+
+def _scan_fault(kind, n_eps, K, qn, onset_t, dt, r, num, den, mr, ms, rows=None, notes=()) -> FaultFit:
+    """The fault of a profile scan (:func:`profile_means`'s ``num, den, mr, ms`` per onset): the
+    best onset (its time in ``onset_t`` [s]; ``rows``: the onsets' sample rows, for its 1σ), its
+    size or rate and their 1σ, and z against the null of a record of ``n_eps`` innovations."""
     dll = num * num / (2.0 * den)
-    best, sig_k = onset_sigma(dll)
+    best, sig_k = onset_sigma(dll, rows)
     size = num[best] / den[best] * math.sqrt(r)               # rad/s (step) or rad/s per sample
     sigma = math.sqrt(r / den[best])
-    null = _null_maxima(kind, eps.size, _null_q(eps.size, K), NULL_DRAWS)
-    key = (kind, eps.size, float(qn))
+    null = _null_maxima(kind, n_eps, _null_q(n_eps, K), NULL_DRAWS)
+    key = (kind, n_eps, float(qn))
     anchors = _anchors(key)
     z = _z_of_scan(math.sqrt(2.0 * dll[best]),
                    lambda y: _null_pvalue(y, null, lambda u: _analytic_max_p(u, mr, ms), anchors), key=key)
-    onset, onset_sig = float(t[best]), sig_k * dt
+    onset, onset_sig = float(onset_t[best]), sig_k * dt
     if kind == "step":
         params = {"start_s": onset, "size_deg_s": float(rad_s_to_deg_s(size))}
         psig = {"start_s": onset_sig, "size_deg_s": float(rad_s_to_deg_s(sigma))}
-        return FaultFit("step", onset, onset_sig, float(size), sigma, z, float(dll[best]), params, psig)
+        return FaultFit("step", onset, onset_sig, float(size), sigma, z, float(dll[best]), params, psig, notes)
     rate, rate_sig = size / dt, sigma / dt
     params = {"start_s": onset, "rate_deg_s2": float(rad_s_to_deg_s(rate))}
     psig = {"start_s": onset_sig, "rate_deg_s2": float(rad_s_to_deg_s(rate_sig))}
     return FaultFit("drift", onset, onset_sig, float(rate), float(rate_sig), z, float(dll[best]),
-                    params, psig)
+                    params, psig, notes)
 
 
 def _fit_mean_pieces(kind, eps, a, K, S, qn, t, dt, r, pieces) -> FaultFit:
@@ -1000,27 +1006,9 @@ def _fit_mean_pieces(kind, eps, a, K, S, qn, t, dt, r, pieces) -> FaultFit:
                         (f"stitched parts too short for a {kind} scan {JOIN_GUARD} samples from each join",))
     num, den, mr, ms = (np.concatenate(v) for v in (nums, dens, mrs, mss))
     onset_rows = np.concatenate(pos)
-    dll = num * num / (2.0 * den)
-    best, sig_k = onset_sigma(dll, onset_rows)
-    size = num[best] / den[best] * math.sqrt(r)               # rad/s (step) or rad/s per sample
-    sigma = math.sqrt(r / den[best])
-    null = _null_maxima(kind, eps.size, _null_q(eps.size, K), NULL_DRAWS)
-    key = (kind, eps.size, float(qn))
-    anchors = _anchors(key)
-    z = _z_of_scan(math.sqrt(2.0 * dll[best]),
-                   lambda y: _null_pvalue(y, null, lambda u: _analytic_max_p(u, mr, ms), anchors), key=key)
-    onset, onset_sig = float(t[onset_rows[best]]), sig_k * dt
     note = (f"{len(pieces)} stitched parts: the bias tracker starts again after each join, and nothing within "
             f"{JOIN_GUARD} samples of one is scanned (a join's step is its part's own offset)",)
-    if kind == "step":
-        params = {"start_s": onset, "size_deg_s": float(rad_s_to_deg_s(size))}
-        psig = {"start_s": onset_sig, "size_deg_s": float(rad_s_to_deg_s(sigma))}
-        return FaultFit("step", onset, onset_sig, float(size), sigma, z, float(dll[best]), params, psig, note)
-    rate, rate_sig = size / dt, sigma / dt
-    params = {"start_s": onset, "rate_deg_s2": float(rad_s_to_deg_s(rate))}
-    psig = {"start_s": onset_sig, "rate_deg_s2": float(rad_s_to_deg_s(rate_sig))}
-    return FaultFit("drift", onset, onset_sig, float(rate), float(rate_sig), z, float(dll[best]),
-                    params, psig, note)
+    return _scan_fault(kind, eps.size, K, qn, t[onset_rows], dt, r, num, den, mr, ms, onset_rows, note)
 
 
 def _difference_ratio(fit: FaultFit, y: np.ndarray, t: np.ndarray, keep=None) -> FaultFit:
