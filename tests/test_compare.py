@@ -118,7 +118,9 @@ XFAIL = {"sinusoid": "fitted phase 26.8 ± 1.2° against 30° set (2.7σ, outsid
 #: The cases make test runs (one per kind of fit: Allan term, regression on the rate, on the
 #: temperature, clipping, array-wide); the others run in make score (`pytest -m slow`)
 # saturation and burst (5-6 s each on 2 cores) moved to make score this stop: make test at 6 min
-CASES_FAST = {"bias_instability", "scale_factor", "temperature_bias", "quantization"}
+# temperature_bias and quantization (10 s and 7 s) to make score: the temperature regression is
+# held by test_temperature_gls and test_real_cats, the quantizer by test_filter_quantization
+CASES_FAST = {"bias_instability", "scale_factor"}
 
 
 def _case_marks(e):
@@ -537,7 +539,7 @@ def test_a_ramp_in_the_model_tells_the_noise_fit_it_was_taken_out(monkeypatch):
         return real(e, dt_s, gyro, **kw)
 
     monkeypatch.setattr(compare_mod, "fit_gyro_noise", spy)
-    n, dt = 30000, 0.01
+    n, dt = 12000, 0.01                                    # 2 min: the spy needs no more
     rng = np.random.default_rng(5)
     y = 1e-3 * rng.standard_normal((n, 3)) + np.cumsum(1e-6 * rng.standard_normal((n, 3)), axis=0)
     y[:, 0] += 1e-6 * np.arange(n)
