@@ -224,6 +224,8 @@ def test_fit_out_writes_the_accelerometer_table_and_says_what_is_missing(tmp_pat
     for v, s in zip(table.n_m_s_rt_h, table.sigma["n_m_s_rt_h"]):
         assert abs(v - 0.06) <= Z997 * s, (v, s)
     assert res["accelerometer_missing"] == list(table.missing)
+    assert res["accelerometer_missing_axes"] == {k: list(v) for k, v in table.missing_axes.items()}
+    assert all(res["accelerometer_missing_axes"][k] == list(table.axes) for k in table.missing)
     for key in table.missing:
         assert any(n.startswith(key) for n in table.notes)
 
@@ -235,6 +237,7 @@ def test_fit_out_writes_the_accelerometer_table_and_says_what_is_missing(tmp_pat
     model = NoiseModel.from_toml(out2)
     assert model.accelerometer is None and res["accelerometer"] is None
     assert res["accelerometer_missing"] == ["n_m_s_rt_h", "k_m_s2_rt_h", "b_mg"]
+    assert res["accelerometer_missing_axes"] == {k: ["x", "y", "z"] for k in res["accelerometer_missing"]}
     said = [n for n in res["notes"] if "no [accelerometer] table" in n]
     assert said and all(k in said[0] for k in res["accelerometer_missing"])
     assert "no [accelerometer] table" in model.description

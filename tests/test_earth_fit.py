@@ -154,3 +154,46 @@ def test_turns_about_vertical_only_not_identifiable():
     f = fit_earth_rate(y - w @ H.T, H, w, t, DT, r, q, HEADING_DEG)
     assert f.extra["identifiable"] is False
     assert f.z == 0.0
+
+
+def _gapped_turn(n=12000, dt=0.01, cut=(8000, 8100)):
+    """A rate 0 for 60 s, then 10 deg/s about a tilted axis; the samples of ``cut`` dropped."""
+    w = np.zeros((n, 3))
+    w[6000:] = np.radians(10.0) * np.array([0.6, 0.0, 0.8])
+    keep = np.r_[0:cut[0], cut[1]:n]
+    return w, dt, keep
+
+
+def test_attitude_across_a_gap_keeps_the_turn_made_during_it():
+    """The 1 s gap of a 10 deg/s turn: the attitude after it equals the uncut record's (a constant
+    rate: exact, 1e-12), where the stitched reference would read it 10° behind; without gaps the
+    same bits as :func:`attitude_from_rates`."""
+    from gyroarray.effects.earth_rate import attitude_across_gaps
+    w, dt, keep = _gapped_turn()
+    full = attitude_from_rates(w, dt)
+    i = 8000 - 1                                           # the step over the gap
+    got = attitude_across_gaps(w[keep], dt, {i: 101 * dt})
+    np.testing.assert_allclose(got, full[keep], atol=1e-12)
+    stitched = attitude_from_rates(w[keep], dt)
+    turned = Rotation.from_matrix(stitched[-1].T @ full[-1]).magnitude()
+    assert math.degrees(turned) == pytest.approx(10.0, abs=1e-6)   # what stitching dropped
+    np.testing.assert_array_equal(attitude_across_gaps(w, dt, {}), full)
+    with pytest.raises(ValueError, match="outside the record"):
+        attitude_across_gaps(w[keep], dt, {keep.size - 1: 1.0})
+
+
+def test_a_comparison_cut_at_gaps_reads_the_attitude_on_the_records_clock():
+    """``fit --gaps`` with a reference: the comparison's attitude (Earth rate, gravity) at the kept
+    samples is the uncut record's, the turn made during the gap included."""
+    from gyroarray.chain.compare import ModelComparison
+    from gyroarray.core.layout import Layout
+    from gyroarray.core.measurement import Measurement
+    w, dt, keep = _gapped_turn()
+    rng = np.random.default_rng(3)
+    y = np.degrees(w + 1e-4 * rng.standard_normal(w.shape))
+    m = Measurement(time_s=dt * np.arange(w.shape[0])[keep], gyro_deg_s=y[keep], layout=Layout.triad(),
+                    sample_rate_hz=1 / dt, ref_deg_s=np.degrees(w[keep]))
+    comp = ModelComparison(m, n_runs=2)
+    assert comp.gap_summary()["missing_samples"] == 100
+    full = attitude_from_rates(w, dt)
+    np.testing.assert_allclose(comp.attitude(), full[keep], atol=1e-9)

@@ -115,3 +115,22 @@ def test_acc_columns_must_be_a_boolean(tmp_path):
     with pytest.raises(InputError, match="acc_columns must be true or false") as info:
         load_scenario(path)
     assert info.value.line == 6 and info.value.column == "acc_columns"
+
+
+def test_dropping_a_gyro_keeps_the_accelerometer_and_the_topics():
+    """``without_gyros`` (``--exclude``, fdi's exclusions) keeps the record's accelerometer and
+    topics: one topic per gyro follows its gyro, one IMU topic for the triad stays whole."""
+    from gyroarray.core.layout import Layout
+    from gyroarray.core.measurement import Measurement, without_gyros
+
+    n = 50
+    rng = np.random.default_rng(0)
+    acc = rng.standard_normal((n, 3)) + [0.0, 0.0, 9.81]
+    kw = dict(time_s=0.01 * np.arange(n), gyro_deg_s=rng.standard_normal((n, 3)), layout=Layout.triad(),
+              sample_rate_hz=100.0, acc_m_s2=acc)
+    one = without_gyros(Measurement(**kw, topics=("/imu0",)), [2])
+    assert one.n_gyros == 2 and one.topics == ("/imu0",)
+    np.testing.assert_array_equal(one.acc_m_s2, acc)
+    per = without_gyros(Measurement(**kw, topics=("/a", "/b", "/c")), [2])
+    assert per.topics == ("/a", "/c")
+    np.testing.assert_array_equal(per.gyro_deg_s, kw["gyro_deg_s"][:, [0, 2]])

@@ -57,7 +57,7 @@ from scipy import optimize, special, stats
 
 from gyroarray.analysis.memo import by_content, clear_all, content_key
 from gyroarray.analysis.allan import averaging_factors, oadev
-from gyroarray.effects.earth_rate import attitude_from_rates
+from gyroarray.effects.earth_rate import attitude_across_gaps, attitude_from_rates
 from gyroarray.effects.fitting import EffectFit, chi2_to_z, z_from_log_p
 from gyroarray.chain.localise import Localisation, plain_json, default_nperseg, residual_psd
 from gyroarray.chain.localise import localise as localise_residual
@@ -774,6 +774,7 @@ class ModelComparison:
         self._check_usable()
         self.parts: list[tuple[int, int]] = []      # stitched still parts, [start, stop) of the new record
         self.parts_s: list[tuple[float, float]] = []  # ... and where they were in the measurement [s]
+        self._attitude = None                        # platform -> level (attitude()); set by a cut at gaps
         if self.ref is None or len(self.segments) > 1:
             self._keep_still_parts()
         self.E0 = self.y - (self.ref @ self.H.T if self.ref is not None else 0.0)
@@ -810,7 +811,6 @@ class ModelComparison:
                 self.ref_raw = self.ref
                 self.ref_instrument = _smoothed_and_instrument(self.ref, k)[1]
                 self.setup_notes += [_own_noise_note(d, k * self.dt) for d in own]
-        self._attitude = None
         self._force: np.ndarray | None = None
         self._sim_inputs: dict = {}                 # site -> checked simulator inputs (simulate_entry)
         self._entry_sims = _KeptSims()              # entry -> what it adds (simulate_entry), by live columns
@@ -883,6 +883,14 @@ class ModelComparison:
             self.parts_s.append((float(self.t[a]), float(self.t[b - 1] + self.dt)))
             start += b - a
         idx = np.concatenate([np.arange(a, b) for a, b in runs])
+        if self.ref is not None and gapped:
+            # the attitude on the record's own clock, the rotation over each gap integrated
+            # (attitude_across_gaps), then cut with the samples: stitching the reference first
+            # would drop what the platform turned during the gaps
+            across = [b - 1 for _, b in self.segments[:-1]]
+            gaps = {i: round((self.t[i + 1] - self.t[i]) / self.dt) * self.dt for i in across}
+            self._attitude = np.array(attitude_across_gaps(self.ref, self.dt, gaps)[idx])
+            self._attitude.flags.writeable = False
         self.y = np.concatenate(pieces)
         self.temp = None if self.temp is None else self.temp[idx]
         self.acc = None if self.acc is None else self.acc[idx]

@@ -464,6 +464,9 @@ def _with_accelerometer(model, meas, args, notes: list, res: dict):
     res["accelerometer"] = None if table is None else table.to_dict()
     # the [accelerometer] fields the model does not hold (never written as 0): all without a table
     res["accelerometer_missing"] = list(ACCEL_TERMS) if table is None else list(table.missing)
+    # and by term the axes that lack it (a term held on z alone is missing on x and y)
+    res["accelerometer_missing_axes"] = ({k: ["x", "y", "z"] for k in ACCEL_TERMS} if table is None
+                                         else {k: list(v) for k, v in table.missing_axes.items()})
     topics = tuple(getattr(meas, "topics", ()) or ())
     return (replace(model, accelerometer=table, topic=topics[0] if len(topics) == 1 else model.topic),
             tuple(acc_notes) if table is None else ())

@@ -492,10 +492,13 @@ def without_gyros(m: Measurement, gyros: list[int], note: str = "") -> Measureme
     if not keep:
         raise InputError("no gyro left to analyse", file=m.source)
     layout = Layout.from_axes(m.layout.axes[keep], source=m.source)
+    # one topic per gyro follows its gyro; fewer topics (one IMU topic for a triad) stay whole
+    topics = tuple(m.topics[k] for k in keep) if len(m.topics) == m.n_gyros else m.topics
     return Measurement(time_s=m.time_s, gyro_deg_s=m.gyro_deg_s[:, keep], layout=layout,
                        sample_rate_hz=m.sample_rate_hz, ref_deg_s=m.ref_deg_s, temp_c=m.temp_c,
                        site=m.site, description=m.description, source=m.source,
-                       notes=(*m.notes, *([note] if note else [])))
+                       notes=(*m.notes, *([note] if note else [])), acc_m_s2=m.acc_m_s2,
+                       topics=topics)
 
 
 def relative_time_s(m: Measurement) -> np.ndarray:
