@@ -75,3 +75,20 @@ def test_allan_missing_file_exit_2(capsys, tmp_path):
     code = main(["allan", str(tmp_path / "nope.csv"), "--json"])
     out, err = capsys.readouterr()
     assert code == 2 and out == "" and "nope" in err and "Traceback" not in err
+
+
+def test_a_walk_read_as_bias_instability_is_explained_against_fit():
+    """allan's five-term fit at K = 0 with a bias instability while the +1/2 slope reads a walk
+    (the ADIS16405's gyro 1: K 0 ± 64, B 33.4 deg/h, slope K 41.8): one note per such gyro that
+    names both readings and `fit --add bias_instability`; none where the fit reads a walk."""
+    from gyroarray.cli.allan import walk_in_bias_notes
+    fits = {"1": {"fit": {"rrw_deg_h_rt_h": 0.0, "rrw_deg_h_rt_h_sigma": 64.0, "bi_deg_h": 33.4,
+                          "slope_rrw_deg_h_rt_h": 41.8}},
+            "2": {"fit": {"rrw_deg_h_rt_h": 120.0, "rrw_deg_h_rt_h_sigma": 40.0, "bi_deg_h": 20.0,
+                          "slope_rrw_deg_h_rt_h": 110.0}},
+            "3": {"fit": {"rrw_deg_h_rt_h": 0.0, "rrw_deg_h_rt_h_sigma": 5.0, "bi_deg_h": 0.0,
+                          "slope_rrw_deg_h_rt_h": float("nan")}}}
+    notes = walk_in_bias_notes(fits)
+    assert len(notes) == 1 and notes[0].startswith("gyro 1:")
+    assert "K 0 ± 64" in notes[0] and "33.4 deg/h" in notes[0] and "K ≈ 41.8" in notes[0]
+    assert "fit --add bias_instability" in notes[0]

@@ -577,7 +577,33 @@ def noise_bounds(signal, dt_s: float, parts, analyses: dict, gyros_json: dict, n
                          "every frequency (a filter, lines, a missing term), and its Cramér–Rao bound holds "
                          "only for the model the record follows")
     notes += too_short_notes(short, duration, len(parts), 1.0 / dt_s)
+    notes += walk_in_bias_notes(gyros_json)
     return lines
+
+
+def walk_in_bias_notes(gyros_json: dict) -> list[str]:
+    """Why ``allan``'s K is not ``fit``'s: where the five-term fit puts the long-τ rise into the
+    bias instability and reads no walk (K at its bound 0), while the ADEV's +½ slope reads one.
+
+    ``fit``'s default model is white + walk (no bias instability), so on such a record it reads
+    the rise as a walk: the two K differ by model, not by data. The note names both readings and
+    the command that fits allan's terms (``fit --add bias_instability``)."""
+    out = []
+    for k, g in gyros_json.items():
+        fit = g.get("fit") or {}
+        k_fit, b_fit = fit.get("rrw_deg_h_rt_h"), fit.get("bi_deg_h")
+        k_slope = fit.get("slope_rrw_deg_h_rt_h")
+        if (k_fit == 0.0 and b_fit is not None and b_fit > 0.0 and k_slope is not None
+                and math.isfinite(k_slope) and k_slope > 0.0):
+            sig = fit.get("rrw_deg_h_rt_h_sigma")
+            out.append(f"gyro {k}: the five-term fit reads no rate random walk (K 0"
+                       + (f" ± {sig:.3g}" if sig is not None and math.isfinite(sig) else "")
+                       + f" deg/h/√h) and a bias instability of {b_fit:.3g} deg/h: on this record the "
+                       f"rise at long τ is not told apart between the two (the +½ slope at the longest τ "
+                       f"reads K ≈ {k_slope:.3g}). `fit` (white + walk by default) reads that rise as "
+                       "the walk, so its K is not this one: the models differ, not the data; "
+                       "`fit --add bias_instability` fits this command's terms")
+    return out
 
 
 def too_short_notes(short: dict, duration_s: float, n_parts: int, rate_hz: float) -> list[str]:
