@@ -602,7 +602,7 @@ def walk_in_bias_notes(gyros_json: dict) -> list[str]:
                        f"rise at long τ is not told apart between the two (the +½ slope at the longest τ "
                        f"reads K ≈ {k_slope:.3g}). `fit` (white + walk by default) reads that rise as "
                        "the walk, so its K is not this one: the models differ, not the data; "
-                       "`fit --add bias_instability` fits this command's terms")
+                       "`fit --add bias_instability` fits the bias instability beside the walk")
     return out
 
 
