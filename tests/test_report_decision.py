@@ -165,3 +165,29 @@ def test_paper_checks_withdrawn_and_replaced():
     assert {round(c["values"][0]["value"], 4) for c in gain} == {0.8953, 0.8992}
     for j, c in enumerate(gain):
         check_entry(c, f"check[{j}]", str(f))
+
+
+def test_the_report_states_the_frame_the_flicker_model_and_the_mdb_window(res):
+    """Issue 43: what the design rests on is in the report as in the text output: the
+    common-mode frame with the other frame's decision, the flicker model, and the MDB as stated
+    (window, threshold, rho grid, tied gyros)."""
+    r = copy.deepcopy(res)
+    rec = r["recommended"]
+    rec["mdb_statement"] = ("minimum detectable bias step 0.03686 deg/s, worst over ρ in [-0.1, 0.5] "
+                            "(largest at ρ = 0.035, 41-point grid), a tie of gyros 1, 2 (equal within "
+                            "0.001): the parity detector's step test over a 0.2 s window")
+    r["assumptions"]["common_mode"] = {"value": "output", "source": "default",
+                                       "unit": "the correlation is between the gyros' outputs"}
+    r["assumptions"]["flicker_model"] = {"value": "circular", "unit": "circular flicker: stated"}
+    r["common_mode"] = {"chosen": "output", "frames": {
+        "output": {"statement": "output frame: 27.92 deg worst"},
+        "axis": {"statement": "axis frame: 34.96 deg as built, 30.78 deg at its best"}}}
+    md = _md(r)
+    assert "Detection: minimum detectable bias step 0.03686 deg/s" in md and "0.2 s window" in md
+    assert "a tie of gyros 1, 2" in md
+    assert "Common mode: the output frame (default): the correlation is between the gyros' outputs." in md
+    assert "axis frame: 34.96 deg as built, 30.78 deg at its best" in md
+    assert "Flicker model: circular flicker: stated." in md
+    del rec["mdb_statement"]
+    rec.update(mdb_deg_s=0.05, mdb_worst_gyros=[3, 4])
+    assert "worst gyros (tied): 3, 4" in _md(r)

@@ -183,10 +183,24 @@ def decision_block(doc, res: dict):
         s += (f" Oracle (weights that know the true ρ, not buildable; for comparison only): worst "
               f"{o['rms_3axis_deg_s']:.4g} deg/s, {o['angle_deg']:.4g} deg.")
     doc.p(s, "decision")
-    if r.get("mdb_deg_s") is not None:
-        doc.p(f"Minimum detectable bias {r['mdb_deg_s']:.3g} deg/s (worst gyro: "
-              f"{r.get('mdb_worst_gyro', '?')}; false alarms {r.get('far_per_h', '?')} per hour, "
-              f"missed detection {r.get('p_md', '?')}).", "decision")
+    if r.get("mdb_statement"):
+        # the window, threshold, rho grid and tied gyros the MDB was computed with, as stated
+        doc.p(f"Detection: {r['mdb_statement']}.", "decision")
+    elif r.get("mdb_deg_s") is not None:
+        tied = r.get("mdb_worst_gyros") or [r.get("mdb_worst_gyro", "?")]
+        doc.p(f"Minimum detectable bias {r['mdb_deg_s']:.3g} deg/s (worst gyro"
+              f"{'s (tied)' if len(tied) > 1 else ''}: {', '.join(map(str, tied))}; false alarms "
+              f"{r.get('far_per_h', '?')} per hour, missed detection {r.get('p_md', '?')}).", "decision")
+    cm = res.get("common_mode")
+    if cm and a.get("common_mode"):
+        # the common-mode frame the design rests on, and the decision under the other frame
+        doc.p(f"Common mode: the {cm['chosen']} frame ({a['common_mode'].get('source', 'default')}): "
+              f"{a['common_mode'].get('unit', '')}.", "decision")
+        for f in cm.get("frames", {}).values():
+            if f.get("statement"):
+                doc.p(f["statement"], "note")
+    if a.get("flicker_model"):
+        doc.p(f"Flicker model: {a['flicker_model'].get('unit', '')}.", "note")
     if res.get("tie") or r.get("tie"):
         doc.p("Tie: " + (res.get("tie") or r.get("tie")) + ".", "note")
     ru = res.get("runner_up")
