@@ -20,11 +20,17 @@ class FaultNoise(FaultEffect):
     (:func:`gyroarray.effects.faults.scan.fit_fault`). In a model it is
     simulated in the Monte-Carlo band, and the stochastic record is brought
     back to the gyro's level before the onset (:meth:`whiten`).
+
+    Join-aware (``reads_joins``): on a stitched record the tracker starts again at each join,
+    the samples within :data:`~gyroarray.effects.faults.scan.JOIN_GUARD` of a join carry no
+    innovation and are left out of the variance scan (and the differences across a join out of
+    the ratio), and no onset within ``JOIN_GUARD`` scanned samples of a join is a candidate.
     """
 
     name = "fault_noise"
     order = 24
     fault_kind = "noise"
+    reads_joins = True
     stage = Stage.SHAPE
     stochastic = True
     rivals = ("burst",)

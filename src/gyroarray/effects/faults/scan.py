@@ -64,7 +64,7 @@ from __future__ import annotations
 import functools
 import math
 import zlib
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy import optimize, signal, special, stats
@@ -913,6 +913,8 @@ def fit_fault(kind: str, residual_rad_s, dt_s: float, r: float, q: float, *, tim
             return _fit_mean(kind, eps[1:], a, K, S, qn, t[1:], dt, r)
         return _fit_mean_pieces(kind, eps[1:], a, K, S, qn, t[1:], dt, r, pieces)
     if kind == "noise":
+        if pieces is not None:
+            return _fit_noise_pieces(eps, y, K, S, t, dt, pieces, skip)
         if skip is None:
             return _difference_ratio(_fit_noise(eps[1:], K, S, t[1:], dt), y, t)
         keep = ~np.asarray(skip, bool)
@@ -1115,8 +1117,54 @@ def _variance_null_pvalue(sides: str, n: int, rr: np.ndarray, anchors: dict):
     return p
 
 
-def _fit_noise(eps, K, S, t, dt, sides: str = "both") -> FaultFit:
-    onsets = _variance_onsets(eps.size)
+def _fit_noise_pieces(eps, y, K, S, t, dt, pieces, skip=None) -> FaultFit:
+    """The noise fault on a stitched series (``eps``: :func:`fit_fault`'s per-part innovations,
+    the whole series' rows; ``pieces``: the parts [start, stop) in samples).
+
+    Read are the samples that carry an innovation: not within :data:`JOIN_GUARD` of a join, not a
+    part's first scanned sample (where its tracker starts, ε = 0), not ``skip``. An onset is a
+    candidate only with :data:`JOIN_GUARD` read samples between it and every join (a noise change
+    at a join is the next part's own level); the ratio reads the differences between read
+    samples only (none across a join)."""
+    n = y.size
+    keep = np.zeros(n, bool)
+    for j, (a_, b_) in enumerate(pieces):
+        lo = a_ + (JOIN_GUARD if j > 0 else 0)
+        hi = b_ - (JOIN_GUARD if j < len(pieces) - 1 else 0)
+        if hi - lo >= 2:
+            keep[lo + 1:hi] = True                           # lo: the tracker's start, ε = 0
+    if skip is not None:
+        keep &= ~np.asarray(skip, bool)
+    rows = np.flatnonzero(keep)
+    if rows.size < 3 * MIN_VARIANCE_SAMPLES:
+        return FaultFit("noise", float(t[0]), math.inf, 1.0, math.inf, -math.inf, 0.0,
+                        {"start_s": float(t[0]), "ratio": 1.0}, {"start_s": math.inf, "ratio": math.inf},
+                        (f"stitched parts too short for a noise scan {JOIN_GUARD} samples from each join",))
+    onsets = _variance_onsets(rows.size)
+    joins = np.array([a_ for a_, _ in pieces[1:]], dtype=int)
+    # read samples between each onset and each join: JOIN_GUARD at least on the onset's side
+    k_join = np.searchsorted(rows, joins)                    # read rows before each join
+    near = np.zeros(onsets.size, bool)
+    for kj in k_join:
+        near |= np.abs(onsets - kj) < JOIN_GUARD
+    if near.all():
+        return FaultFit("noise", float(t[0]), math.inf, 1.0, math.inf, -math.inf, 0.0,
+                        {"start_s": float(t[0]), "ratio": 1.0}, {"start_s": math.inf, "ratio": math.inf},
+                        (f"stitched parts too short for a noise scan {JOIN_GUARD} samples from each join",))
+    note = (f"{len(pieces)} stitched parts: the bias tracker starts again after each join, the samples "
+            f"within {JOIN_GUARD} of one are not read and no onset within {JOIN_GUARD} read samples of one "
+            "is scanned (a join's noise is its part's own)",)
+    fit = _fit_noise(eps[rows], K, S, t[rows], dt, onsets=onsets[~near])
+    fit = replace(fit, notes=fit.notes + note)
+    return _difference_ratio(fit, y, t, keep)
+
+
+def _fit_noise(eps, K, S, t, dt, sides: str = "both", onsets=None) -> FaultFit:
+    """The variance scan of ``eps`` over ``onsets`` (default :func:`_variance_onsets`: every onset
+    with MIN_VARIANCE_SAMPLES on each side); the null that of every onset (conservative when
+    fewer are scanned)."""
+    all_onsets = _variance_onsets(eps.size)
+    onsets = all_onsets if onsets is None else np.asarray(onsets)
     dll, lam, count = profile_variance_change(eps, onsets)
     dll = dll / _variance_dof_factor(eps)
     if sides == "down":
@@ -1127,7 +1175,8 @@ def _fit_noise(eps, K, S, t, dt, sides: str = "both") -> FaultFit:
     before = float(onsets[best])
     lam_sig = lam[best] * math.sqrt(2.0 / count[best] + 2.0 / before)   # ratio of two χ² means
     ratio_sig = lam_sig / (2.0 * w * max(ratio, 1e-12))
-    rr = 1.0 - np.sqrt(count[1:] / count[:-1])                # 1 − corr of running sums of x²
+    count_all = (eps.size - all_onsets).astype(float)         # the null's: every onset (conservative)
+    rr = 1.0 - np.sqrt(count_all[1:] / count_all[:-1])        # 1 − corr of running sums of x²
     key = (sides, eps.size)
     anchors = _anchors(key)
     z = _z_of_scan(math.sqrt(2.0 * dll[best]), _variance_null_pvalue(sides, eps.size, rr, anchors), key=key)
