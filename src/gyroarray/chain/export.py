@@ -1518,8 +1518,11 @@ def build_export(model: NoiseModel, axis: int | str, fmt: str, rate_hz: float, *
         factor, accel_factor = float(inflate), 1.0
         if not (math.isfinite(factor) and factor >= 1.0):
             raise InputError(f"a measured inflation is a factor >= 1, got {factor!r}")
-        why = (f"measured from {m_summary['reference']} topic {m_summary['reference_topic']}, "
-               "the lines below")
+        if m_summary.get("method") == "parity":
+            why = f"measured {m_summary['from']}, the lines below"
+        else:
+            why = (f"measured from {m_summary['reference']} topic {m_summary['reference_topic']}, "
+                   "the lines below")
         summary["inflate_measured"] = m_summary
     else:
         factor = float(inflate)
@@ -1551,7 +1554,7 @@ def build_export(model: NoiseModel, axis: int | str, fmt: str, rate_hz: float, *
 
 
 def measured_inflation(model: NoiseModel, axis: int | str, meas_path, reference_path,
-                       reference_topic: str, *, imu_topic: str | None = None,
+                       reference_topic: str | None, *, imu_topic: str | None = None,
                        time_offset_s: float | str = "estimate", seed: int = 0
                        ) -> tuple[float, dict, list[str]]:
     """``--inflate measured``: the inflation of the exported axis measured on a record with a
@@ -1565,14 +1568,17 @@ def measured_inflation(model: NoiseModel, axis: int | str, meas_path, reference_
         the record's three axes (gyro index 0), else the exported gyro (1-3: x, y, z).
     meas_path : str or os.PathLike
         The IMU record (a bag with an IMU topic, or a CSV with gyros 1-3 on x, y, z).
-    reference_path : str or os.PathLike
-        The bag with the reference topic.
-    reference_topic : str
-        Its PoseStamped or Odometry topic.
+    reference_path : str or os.PathLike or None
+        The bag with the reference topic; None: the inflation is measured from the parity
+        residual of ``meas_path``, a record of more than 3 gyros
+        (:func:`gyroarray.chain.inflation_parity.parity_inflation_for_export`; the model's
+        per-gyro white levels give the static parity density).
+    reference_topic : str or None
+        Its PoseStamped or Odometry topic (None with the parity).
     imu_topic : str, optional
         The record's IMU topic (default its one IMU topic).
     time_offset_s : float or "estimate"
-        Added to the IMU stamps [s].
+        Added to the IMU stamps [s] (not read by the parity).
     seed : int
         Seed of the factor's interval.
 
@@ -1588,6 +1594,11 @@ def measured_inflation(model: NoiseModel, axis: int | str, meas_path, reference_
     from gyroarray.chain.inflation import inflation_for_export
     noise, _, _ = choose_axis(model, axis)
     index = 0 if axis == "mean" else noise.gyro
+    if reference_path is None:
+        from gyroarray.chain.inflation_parity import parity_inflation_for_export  # deferred
+        return parity_inflation_for_export(
+            meas_path, model, noise.n_rad_rt_s, "the axes pooled" if index == 0 else f"gyro {index}",
+            imu_topic=imu_topic, rng=np.random.default_rng(seed))
     return inflation_for_export(meas_path, reference_path, reference_topic, noise.n_rad_rt_s,
                                 noise.k_rad_s_rt_s, index, imu_topic=imu_topic,
                                 time_offset_s=time_offset_s, rng=np.random.default_rng(seed))

@@ -260,7 +260,7 @@ def _overlap(imu_t: np.ndarray, ref: Reference) -> tuple[int, int]:
     return i0, i1
 
 
-def _moving_mean(x: np.ndarray, half: int) -> np.ndarray:
+def moving_mean(x: np.ndarray, half: int) -> np.ndarray:
     """Centred moving mean over ±half rows (shorter at the ends), along axis 0."""
     c = np.concatenate([np.zeros((1,) + x.shape[1:]), np.cumsum(x, axis=0)])
     i = np.arange(x.shape[0])
@@ -284,7 +284,7 @@ class _Steps:
 def _ref_rate_smoothed(st: _Steps, span_s: float) -> np.ndarray:
     med = float(np.median(st.dt))
     half = max(1, int(round(0.5 * span_s / med)))
-    return _moving_mean(st.phi, half) / med
+    return moving_mean(st.phi, half) / med
 
 
 def _windows(st: _Steps, w: int, ref: Reference) -> dict:
@@ -407,8 +407,8 @@ def _xcorr_offset(t: np.ndarray, gyro: np.ndarray, ref: Reference, max_offset_s:
     smooth = max(1, int(round(LEVEL_SMOOTH_S / dt)))
     a = np.interp(grid, t, np.linalg.norm(gyro, axis=1))
     b = np.interp(grid, ref.rate_time_s, np.linalg.norm(ref.rate_rad_s, axis=1))
-    a = _moving_mean(a, smooth // 2)
-    b = _moving_mean(b, smooth // 2)
+    a = moving_mean(a, smooth // 2)
+    b = moving_mean(b, smooth // 2)
     a, b = a - a.mean(), b - b.mean()
     n = 1 << int(math.ceil(math.log2(2 * grid.size)))
     cc = np.fft.irfft(np.fft.rfft(b, n) * np.conj(np.fft.rfft(a, n)), n)
@@ -448,7 +448,7 @@ def _ls_offset(st: _Steps, w: int, ref: Reference) -> float:
 # ---------------------------------------------------------------------------------------------
 # densities
 # ---------------------------------------------------------------------------------------------
-def _walk_share(h: int) -> float:
+def walk_share(h: int) -> float:
     """Var of (b_k − mean of b_k+s, 2 ≤ |s| ≤ h) for a walk of unit increment variance per
     window: (1/m²)·2·Σ_{s,s'∈[2,h]} min(s, s')."""
     s = np.arange(2, h + 1)
@@ -456,7 +456,7 @@ def _walk_share(h: int) -> float:
     return float(2.0 * np.minimum.outer(s, s).sum() / m ** 2) if m else 0.0
 
 
-class _Fit:
+class NeighbourFit:
     """Residuals of the long windows of one set (fitted or held out), bias removed."""
 
     def __init__(self, e: np.ndarray, T: np.ndarray, refv: np.ndarray, members: np.ndarray,
@@ -464,7 +464,7 @@ class _Fit:
         self.k = members                          # window indices (into all windows), sorted
         n = members.size
         self.nbr: list[np.ndarray] = []
-        b = np.zeros((n, 3))
+        b = np.zeros((n, e.shape[1]))              # 3 axes, or the parity's N − 3 components
         ref_b = np.zeros(n)
         for j in range(n):
             pos = members[j]
@@ -482,7 +482,7 @@ class _Fit:
         self.ref_share = refv[members] + ref_b     # [rad²/s² per σ_ref²-scaled, see caller]
 
 
-def _solve_levels(y: np.ndarray, T: np.ndarray, extra: np.ndarray, fit: _Fit, lev: np.ndarray,
+def _solve_levels(y: np.ndarray, T: np.ndarray, extra: np.ndarray, fit: NeighbourFit, lev: np.ndarray,
                   n_levels: int, iters: int = 20) -> np.ndarray:
     """N_L² [rad²/s] of each level from E[y_k] = N_L(k)² + T_k/m_k²·Σ_nbr N_L(j)²/T_j + extra_k."""
     x = np.full(n_levels, np.nan)
@@ -516,7 +516,7 @@ def _chi2_ci(total_y: float, count: int, nu: float, shift: float, widen: float,
     return (math.sqrt(max(lo, 0.0)), math.sqrt(max(hi, 0.0)))
 
 
-def _level_table(fit: _Fit, T: np.ndarray, lev_all: np.ndarray, level_value: np.ndarray,
+def level_table(fit: NeighbourFit, T: np.ndarray, lev_all: np.ndarray, level_value: np.ndarray,
                  edges, sigma2: float, sigma2_sd: float, walk: float, static_n: float,
                  conf: float) -> tuple[list, np.ndarray, np.ndarray]:
     """Per level: LevelDensity list, pooled N² per level, per-axis N² per level."""
@@ -526,9 +526,10 @@ def _level_table(fit: _Fit, T: np.ndarray, lev_all: np.ndarray, level_value: np.
     lev = lev_all[fit.k]
     extra = Tm * fit.ref_share * sigma2 + Tm * walk
     y_axes = fit.r ** 2 * Tm[:, None]
+    d = y_axes.shape[1]                                 # 3 axes, or the parity's N − 3 components
     pooled = _solve_levels(y_axes.mean(axis=1), Tm, extra, fit, lev, n_levels)
     per_axis = np.stack([_solve_levels(y_axes[:, a], Tm, extra, fit, lev, n_levels)
-                         for a in range(3)], axis=1)
+                         for a in range(d)], axis=1)
     z = float(stats.norm.ppf(0.5 + conf / 2))
     out = []
     for L in range(n_levels):
@@ -542,13 +543,13 @@ def _level_table(fit: _Fit, T: np.ndarray, lev_all: np.ndarray, level_value: np.
         shift = float((y_axes.mean(axis=1)[sel].mean() - pooled[L])) if n else 0.0
         widen = z * float(np.mean(Tm[sel] * fit.ref_share[sel])) * sigma2_sd if n else 0.0
         if n >= MIN_LEVEL_WINDOWS:
-            ci = _chi2_ci(float(y_axes[sel].sum()), 3 * n, 3 * n / red, shift, widen, conf)
+            ci = _chi2_ci(float(y_axes[sel].sum()), d * n, d * n / red, shift, widen, conf)
             axis_ci = tuple(_chi2_ci(float(y_axes[sel, a].sum()), n, n / red,
                                      float(y_axes[sel, a].mean() - per_axis[L, a]), widen, conf)
-                            for a in range(3))
+                            for a in range(d))
         else:
             ci = (math.nan, math.nan)
-            axis_ci = ((math.nan, math.nan),) * 3
+            axis_ci = ((math.nan, math.nan),) * d
         dens = math.sqrt(pooled[L]) if np.isfinite(pooled[L]) and pooled[L] > 0 else (
             0.0 if np.isfinite(pooled[L]) else math.nan)
         out.append(LevelDensity(
@@ -563,18 +564,18 @@ def _level_table(fit: _Fit, T: np.ndarray, lev_all: np.ndarray, level_value: np.
     return out, pooled, per_axis
 
 
-def _assign(value: np.ndarray, edges) -> np.ndarray:
+def assign_levels(value: np.ndarray, edges) -> np.ndarray:
     e = np.asarray(edges, dtype=float)
     return np.clip(np.searchsorted(e, value, side="right") - 1, 0, e.size - 2)
 
 
-def _source_level(L: int, ok: np.ndarray) -> int:
+def source_level(L: int, ok: np.ndarray) -> int:
     """Level L, or the nearest level with a density when L has none."""
     filled = np.flatnonzero(ok)
     return L if ok[L] else int(filled[np.argmin(np.abs(filled - L))])
 
 
-def _nearest_filled(x: np.ndarray) -> np.ndarray:
+def nearest_filled(x: np.ndarray) -> np.ndarray:
     """Levels without a density take the nearest level's that has one."""
     ok = np.flatnonzero(np.isfinite(x))
     if ok.size == 0:
@@ -587,16 +588,16 @@ def _nearest_filled(x: np.ndarray) -> np.ndarray:
 # ---------------------------------------------------------------------------------------------
 # filter
 # ---------------------------------------------------------------------------------------------
-def _kf_nis(e: np.ndarray, t0: np.ndarray, T: np.ndarray, R: np.ndarray, q_rate: float,
+def kf_nis(e: np.ndarray, t0: np.ndarray, T: np.ndarray, R: np.ndarray, q_rate: float,
             valid: np.ndarray) -> np.ndarray:
     """NIS per window of a scalar Kalman filter of the bias per axis: bias walk of
     ``q_rate`` [rad²/s³] (Q = q_rate·Δt), measurement e_k with variance R_k [rad²/s²].
     Windows not valid are skipped (the walk propagates over them)."""
     n = e.shape[0]
-    nis = np.full((n, 3), np.nan)
+    nis = np.full(e.shape, np.nan)                      # 3 axes, or the parity's components
     first = int(np.flatnonzero(valid)[0])
     b = e[first].copy()
-    P = R[first].copy() if R.ndim == 2 else np.full(3, R[first])
+    P = R[first].copy() if R.ndim == 2 else np.full(e.shape[1], R[first])
     t_last = t0[first] + 0.5 * T[first]
     for k in range(first + 1, n):
         if not valid[k]:
@@ -745,7 +746,7 @@ def measure_inflation(imu_time_s, gyro_rad_s, ref: Reference, *,
     rate_s = np.linalg.norm(_ref_rate_smoothed(st, LEVEL_SMOOTH_S), axis=1)
     c = np.concatenate([[0.0], np.cumsum(rate_s)])
     level_value = (c[win["end"]] - c[win["start"]]) / w
-    lev = _assign(level_value, levels)
+    lev = assign_levels(level_value, levels)
     valid = win["valid"]
     n_levels = len(levels) - 1
 
@@ -767,9 +768,9 @@ def measure_inflation(imu_time_s, gyro_rad_s, ref: Reference, *,
                  f"{int((~valid).sum())} windows dropped across gaps")
 
     K = float(static_k_rad_s_rt_s)
-    walk = K ** 2 * float(np.mean(T)) * _walk_share(bias_span)
-    fit = _Fit(e, T, refv, fit_members, bias_span)
-    table, pooled, per_axis = _level_table(fit, T, lev, level_value, levels, sigma2, sigma2_sd,
+    walk = K ** 2 * float(np.mean(T)) * walk_share(bias_span)
+    fit = NeighbourFit(e, T, refv, fit_members, bias_span)
+    table, pooled, per_axis = level_table(fit, T, lev, level_value, levels, sigma2, sigma2_sd,
                                            walk, static_n_rad_rt_s or 0.0, confidence)
     if static_n_rad_rt_s is None:
         lowest = next((lv for lv in table if np.isfinite(lv.density_rad_rt_s)), None)
@@ -785,7 +786,7 @@ def measure_inflation(imu_time_s, gyro_rad_s, ref: Reference, *,
         dev = np.abs(np.linalg.norm(acc[i0:i1][:-1], axis=1) - G0_M_S2)
         cd = np.concatenate([[0.0], np.cumsum(dev)])
         acc_value = (cd[win["end"]] - cd[win["start"]]) / w
-        acc_table, _, _ = _level_table(fit, T, _assign(acc_value, acc_levels), acc_value,
+        acc_table, _, _ = level_table(fit, T, assign_levels(acc_value, acc_levels), acc_value,
                                        acc_levels, sigma2, sigma2_sd, walk, static_n, confidence)
         notes.append("acceleration levels: mean |‖f‖ − g0| over each window (reported beside; "
                      "the export and the NIS check use the rate levels)")
@@ -795,7 +796,7 @@ def measure_inflation(imu_time_s, gyro_rad_s, ref: Reference, *,
                          f"{w * med_dt:.3g} s (a longer record, fewer levels or a shorter "
                          "window)", file=where)
     # export factor: motion-weighted measured density over the static one
-    filled = _nearest_filled(pooled)
+    filled = nearest_filled(pooled)
     motion_fit = fit_members[fit_members >= m0]
     wts = np.bincount(lev[motion_fit], minlength=n_levels) / max(motion_fit.size, 1)
     nu_l = np.array([3.0 * lv.n_windows for lv in table])
@@ -803,7 +804,7 @@ def measure_inflation(imu_time_s, gyro_rad_s, ref: Reference, *,
     raw_factor = math.sqrt(max(float(np.sum(wts * filled)), 0.0)) / static_n
     draws = np.zeros(2000)
     for L in (int(j) for j in np.flatnonzero(wts > 0)):
-        src = _source_level(L, ok)
+        src = source_level(L, ok)
         draws += wts[L] * filled[L] * rng.chisquare(nu_l[src], draws.size) / nu_l[src]
     a = 1.0 - confidence
     f_ci = (float(np.sqrt(np.quantile(draws, a / 2))) / static_n,
@@ -812,13 +813,13 @@ def measure_inflation(imu_time_s, gyro_rad_s, ref: Reference, *,
     if raw_factor < 1.0:
         notes.append(f"the motion-weighted measured density is {raw_factor:.3g}× the static one, "
                      "below 1: the export keeps the static values (factor 1)")
-    axis_factor = tuple(max(1.0, math.sqrt(max(float(np.sum(wts * _nearest_filled(per_axis[:, a]))),
+    axis_factor = tuple(max(1.0, math.sqrt(max(float(np.sum(wts * nearest_filled(per_axis[:, a]))),
                                                0.0)) / static_n) for a in range(3))
 
     # the held-out NIS check
     z = float(stats.norm.ppf(0.5 + confidence / 2))
     ref_R = refv * sigma2
-    R_meas_axes = np.stack([_nearest_filled(per_axis[:, a])[lev] for a in range(3)], axis=1)
+    R_meas_axes = np.stack([nearest_filled(per_axis[:, a])[lev] for a in range(3)], axis=1)
     R_meas = np.where(np.isfinite(R_meas_axes), R_meas_axes,
                       filled[lev][:, None]) / T[:, None] + ref_R[:, None]
     hold_valid = np.zeros(nk, bool)
@@ -829,7 +830,7 @@ def measure_inflation(imu_time_s, gyro_rad_s, ref: Reference, *,
             ("static", np.repeat((static_n ** 2 / T + ref_R)[:, None], 3, axis=1), K ** 2),
             ("export", np.repeat(((factor * static_n) ** 2 / T + ref_R)[:, None], 3, axis=1),
              (factor * K) ** 2)):
-        nis = _kf_nis(e, win["t0"], T, R, q, valid)
+        nis = kf_nis(e, win["t0"], T, R, q, valid)
         hv = nis[hold_valid]
         hv = hv[np.all(np.isfinite(hv), axis=1)]
         n_eff = int(hv.size)
@@ -842,7 +843,7 @@ def measure_inflation(imu_time_s, gyro_rad_s, ref: Reference, *,
                 sel = lev[hold_valid] == L
                 if sel.any():
                     cL = float(share[sel].sum()) / max(hv.size, 1)
-                    src = _source_level(L, ok)
+                    src = source_level(L, ok)
                     var_param += cL ** 2 * 2.0 / (nu_l[src] / (1.0 + 2.0 / max(bias_span, 1)))
         half = z * math.sqrt(2.0 / max(n_eff, 1) + var_param)
         interval = (1.0 - half, 1.0 + half)
@@ -874,7 +875,7 @@ def measure_inflation(imu_time_s, gyro_rad_s, ref: Reference, *,
 EPOCH_TIME_S = 2e8
 
 
-def _g(x: float) -> str:
+def fmt_g(x: float) -> str:
     return "nan" if not np.isfinite(x) else f"{x:.4g}"
 
 
@@ -976,25 +977,25 @@ def inflation_for_export(meas_path, reference_path, reference_topic: str,
         ci = lv.ci_rad_rt_s if a is None else lv.axis_ci_rad_rt_s[a]
         if np.isfinite(d):
             hi = "inf" if not np.isfinite(lv.hi) else f"{lv.hi:g}"
-            levels.append(f"|w| {lv.lo:g}-{hi} rad/s ({lv.n_windows} windows): {_g(d)} "
-                          f"[{_g(ci[0])}, {_g(ci[1])}] rad/sqrt(s) = x{_g(d / n_s)}")
+            levels.append(f"|w| {lv.lo:g}-{hi} rad/s ({lv.n_windows} windows): {fmt_g(d)} "
+                          f"[{fmt_g(ci[0])}, {fmt_g(ci[1])}] rad/sqrt(s) = x{fmt_g(d / n_s)}")
     nis = {c.label: c for c in m.nis}
     meas_c, st_c, ex_c = nis["measured"], nis["static"], nis["export"]
     header = [
         f"inflation: measured x{factor:.4g} on both numbers ({axis}), from {reference_path} topic "
         f"{reference_topic} ({ref.msgtype}) against {meas_path}: the motion-weighted white "
-        f"density over the static N = {_g(n_s)} rad/sqrt(s) (interval x{_g(m.factor_ci[0])}-"
-        f"x{_g(m.factor_ci[1])}, before the floor at 1)",
+        f"density over the static N = {fmt_g(n_s)} rad/sqrt(s) (interval x{fmt_g(m.factor_ci[0])}-"
+        f"x{fmt_g(m.factor_ci[1])}, before the floor at 1)",
         "measured white density per motion level, windows of "
         f"{m.window_s:.3g} s: " + "; ".join(levels),
-        f"reference attitude noise {_g(m.sigma_ref_rad)} rad per pose (subtracted); time offset "
+        f"reference attitude noise {fmt_g(m.sigma_ref_rad)} rad per pose (subtracted); time offset "
         f"{m.time_offset_s * 1e3:.4g} ms added to the IMU stamps",
         f"held-out check (last {holdout:.0%} of the motion, {meas_c.n_eff} innovations), mean NIS "
-        f"of a bias filter (1 when consistent): measured values {_g(meas_c.mean_nis)} "
-        f"(interval {_g(meas_c.interval[0])}-{_g(meas_c.interval[1])}, "
-        f"{'inside' if meas_c.inside else 'OUTSIDE'}); static values {_g(st_c.mean_nis)} "
-        f"({'inside' if st_c.inside else 'outside'}, off x{_g(math.sqrt(max(st_c.mean_nis, 0)))} "
-        f"in density); exported values {_g(ex_c.mean_nis)} "
-        f"({'inside' if ex_c.inside else 'outside'} {_g(ex_c.interval[0])}-{_g(ex_c.interval[1])})",
+        f"of a bias filter (1 when consistent): measured values {fmt_g(meas_c.mean_nis)} "
+        f"(interval {fmt_g(meas_c.interval[0])}-{fmt_g(meas_c.interval[1])}, "
+        f"{'inside' if meas_c.inside else 'OUTSIDE'}); static values {fmt_g(st_c.mean_nis)} "
+        f"({'inside' if st_c.inside else 'outside'}, off x{fmt_g(math.sqrt(max(st_c.mean_nis, 0)))} "
+        f"in density); exported values {fmt_g(ex_c.mean_nis)} "
+        f"({'inside' if ex_c.inside else 'outside'} {fmt_g(ex_c.interval[0])}-{fmt_g(ex_c.interval[1])})",
     ]
     return float(factor), summary, header

@@ -49,10 +49,20 @@ _MEASURED_ONLY = (("reference", "--reference"), ("reference_topic", "--reference
 def _check_measured(args) -> None:
     """Refuse ``--inflate measured`` without its reference, and its options without it."""
     if args.inflate == "measured":
+        if args.reference is None and args.record is not None:     # the parity residual
+            given = [opt for dest, opt in _MEASURED_ONLY if dest != "imu_topic"
+                     and getattr(args, dest) is not None]
+            if given:
+                raise InputError(f"{', '.join(given)} {'is' if len(given) == 1 else 'are'} read only "
+                                 "with --reference (without it, --inflate measured reads the parity "
+                                 "residual of the --record array)")
+            return
         for dest, opt in _MEASURED_ONLY[:2]:
             if getattr(args, dest) is None:
                 raise InputError(f"--inflate measured needs {opt} (the bag with the reference pose "
-                                 "topic and that topic: --reference BAG --reference-topic T)")
+                                 "topic and that topic: --reference BAG --reference-topic T), or "
+                                 "--record ARRAY alone: a record of more than 3 gyros, measured "
+                                 "from its parity residual")
         return
     given = [opt for dest, opt in _MEASURED_ONLY if getattr(args, dest) is not None]
     if given:
@@ -127,8 +137,15 @@ def cmd_export(args):
                          f"{nis[label]['interval'][0]:.3g}-{nis[label]['interval'][1]:.3g})"
                          for label, what in (("measured", "measured"), ("static", "static"),
                                              ("export", "exported")))
-        lines.append(f"  inflation ×{m['factor']:.4g} measured from {m['reference']} topic "
-                     f"{m['reference_topic']} ({m['axis']}; held-out NIS, 1 when consistent: {held})")
+        frm = m["from"] if m.get("method") == "parity" else f"from {m['reference']} topic {m['reference_topic']}"
+        lines.append(f"  inflation ×{m['factor']:.4g} measured {frm} ({m['axis']}; held-out NIS, "
+                     f"1 when consistent: {held})")
+        if m.get("method") == "parity":
+            lines.append("  per motion level (density over the static one, interval): " + "; ".join(
+                f"|w| {lv['lo']:g}-{lv['hi']:g} rad/s ×{lv['factor']:.3g} "
+                f"[{lv['ci_rad_rt_s'][0] / m['static_n_rad_rt_s']:.3g}, "
+                f"{lv['ci_rad_rt_s'][1] / m['static_n_rad_rt_s']:.3g}]"
+                for lv in m["levels"] if lv["n_windows"] and lv["density_rad_rt_s"] == lv["density_rad_rt_s"]))
     elif "inflate_auto" in summary:
         a = summary["inflate_auto"]
         lines.append(f"  inflation ×{a['factor']:.4g}: {a['why']}")
@@ -195,7 +212,8 @@ def add_parser(sub) -> None:
                         "filter consistent (NIS = 1) on a record simulated from the full model "
                         "(never below 1; the gyro's only), or measured: the white density in "
                         "motion over the model's, measured against --reference's pose topic "
-                        "(never below 1; the gyro's only; held-out NIS in the header)")
+                        "(never below 1; the gyro's only; held-out NIS in the header); without "
+                        "--reference, from the parity residual of a --record of more than 3 gyros")
     p.add_argument("--reference", type=Path, default=None, metavar="BAG",
                    help="with --inflate measured: the ROS bag with the reference pose topic (also "
                         "the IMU record unless --record names one)")
@@ -219,7 +237,9 @@ def add_parser(sub) -> None:
                    help="with --verify: a measurement (CSV/Parquet with sidecar, or a ROS bag); the "
                         "file's ADEV is compared tau by tau with the record's ADEV and its 95 %% interval "
                         "over its still parts; exit 1 where the file falls below it; with --inflate "
-                        "measured also the IMU record the inflation is measured on (default --reference)")
+                        "measured also the IMU record the inflation is measured on (default --reference), or, "
+                        "without --reference, an array of more than 3 gyros whose parity residual "
+                        "gives it")
     p.add_argument("--seed", type=nonneg_int("--seed"), default=0, help="seed of the simulations")
     add_force(p)
     p.add_argument("--json", action="store_true", help="print one JSON object")
