@@ -77,7 +77,7 @@ def cmd_design(args) -> tuple[dict, str]:
                                 ("--objective", args.objective), ("--design-rho", args.design_rho),
                                 ("--far-per-h", args.far_per_h), ("--p-md", args.p_md),
                                 ("--mdb-max", args.mdb_max), ("--common-mode", args.common_mode),
-                                ("--horizon-s", args.horizon_s),
+                                ("--horizon-s", args.horizon_s), ("--family", args.family),
                                 ("--alike", args.alike or None)) if v is not None]
     if rec_only:
         raise InputError(f"gyroarray design: {rec_only[0]} goes with --recommend")
@@ -301,6 +301,7 @@ def _design_space(args):
                    ("p_md", args.p_md)):
         src.setdefault(key, "user" if v is not None else "default")
     space = DesignSpace(rate_hz=rate, horizon_s=horizon, ns=ns, estimators=ests, failures=failures,
+                        schemes=_cone_schemes(_families(args)),
                         bandwidth_hz=(float(bw[0]), float(bw[1])), swing=swing, motion=motion,
                         motion_name=motion_name, sensor_bandwidth=sensor_bw,
                         g_sensitivity_deg_s_per_g=None if gsens is None else tuple(gsens),
@@ -415,13 +416,135 @@ def _design_recommend(args) -> tuple[dict, str]:
     res["common_mode"] = frame_comparison(res, g, space, rhos)
     if space.failures:
         res["assumptions"]["detection"]["value"] = detection_assumption(space, res["recommended"])
+    _add_bounds(res, args, space, rhos, g)
     if args.check:
         res["check"] = monte_carlo_check(res["designs"], g, space, replicates=args.check,
                                          seed=20260412 if args.seed is None else args.seed)
     if args.out is not None:
         write_json(args.out, res, args)
         res["written"] = str(args.out)
-    return res, _recommend_text(res)
+    return res, _recommend_text(res) + _layouts_text(res)
+
+
+#: The mounting families of ``design --recommend --family`` (gyroarray.design.sphere.FAMILIES).
+FAMILY_NAMES = ("cone1", "cone2", "free", "triads", "faces")
+
+
+def _families(args) -> tuple:
+    """The ``--family`` list (default: the cones, today's search)."""
+    if args.family is None:
+        return ("cone1", "cone2")
+    fams = tuple(f.strip() for f in args.family.split(",") if f.strip())
+    bad = [f for f in fams if f not in FAMILY_NAMES]
+    if bad or not fams:
+        raise InputError(f"--family must be a comma list of {', '.join(FAMILY_NAMES)}, got {args.family!r}")
+    if len(set(fams)) != len(fams):
+        raise InputError(f"--family {args.family}: a family is listed more than once")
+    return fams
+
+
+def _cone_schemes(fams) -> tuple:
+    """The cone schemes the noise-based ranking searches: those named, else both (the cones
+    the other families are compared with)."""
+    return tuple(s for s, f in ((1, "cone1"), (2, "cone2")) if f in fams) or (1, 2)
+
+
+def _add_bounds(res: dict, args, space, rhos, g) -> None:
+    """``bound_ratio`` on every ranked design (its axes against the GDOP floor over the ρ range),
+    and with ``--family`` the designed layouts of each family and N (``layouts``), ranked by
+    their worst GDOP (fixed GLS weights, worst over ρ x failed gyros)."""
+    import numpy as np  # deferred: numpy and the design chain
+    from gyroarray.design.sphere import evaluate_layout, search_layout  # deferred: numpy, scipy
+    lo, hi = (min(rhos), max(rhos)) if rhos else (g.rho_arw, g.rho_arw)
+    if lo < 0 or hi >= 1:
+        res.setdefault("notes", []).append(
+            f"bound_ratio: the GDOP floor 3·√((1 − ρ)/N) holds for ρ >= 0; the range [{lo:g}, {hi:g}] "
+            "reaches below 0, so no design is scored against it")
+        return
+    seen: dict = {}
+
+    def bound(d):
+        key = np.asarray(d["axes"], dtype=float).round(12).tobytes()
+        if key not in seen:
+            seen[key] = evaluate_layout(np.asarray(d["axes"], dtype=float), family=f"cone{d['scheme']}",
+                                        rho_range=(lo, hi), failures=space.failures)
+        e = seen[key]
+        return {"bound_ratio": e.bound_ratio, "bound_ratio_rho": e.bound_ratio_rho,
+                "worst_gdop": e.worst_gdop, "floor": e.worst_gdop / e.failed_bound_ratio,
+                "worst_over_floor": e.failed_bound_ratio, "min_parity_angle_deg": e.min_parity_angle_deg}
+    for d in res["designs"]:
+        if "axes" in d:
+            d.update(bound(d))
+    for k in ("recommended", "runner_up"):
+        if res.get(k) and "axes" in res[k]:
+            res[k].update(bound(res[k]))
+    if args.family is None:
+        return
+    rng = np.random.default_rng(20260412 if args.seed is None else args.seed)
+    layouts, notes = [], []
+    for fam in _families(args):
+        for n in space.ns:
+            if fam == "triads" and n % 3:
+                notes.append(f"triads, N = {n}: not a multiple of 3 (M orthogonal triads); left out")
+                continue
+            if n < 4:
+                notes.append(f"{fam}, N = {n}: the sphere search designs N >= 4; left out")
+                continue
+            d = search_layout(n, family=fam, rho_range=(lo, hi), failures=space.failures, rng=rng,
+                              starts=4)
+            if d is None:
+                notes.append(f"{fam}, N = {n}: no layout of the family meets the minimum pairwise angle "
+                             "and parity angle (isolability); left out")
+                continue
+            layouts.append(d.to_dict())
+    layouts.sort(key=lambda x: (x["worst_gdop"], x["bound_ratio"]))
+    for k, x in enumerate(layouts):
+        x["rank"] = k + 1
+    res["layouts"] = layouts
+    res["layout_notes"] = notes
+    res["layout_objective"] = (f"worst GDOP (GLS weights fixed at the design rho) over rho in [{lo:g}, {hi:g}] "
+                               f"x every set of {space.failures} failed gyro(s); floor 3·sqrt((1 − rho)/N); "
+                               "these layouts are ranked by geometry alone, beside (not inside) the "
+                               "noise-model ranking of the cones above")
+
+
+def _layouts_text(res: dict) -> str:
+    r = res["recommended"]
+    lines = []
+    if "bound_ratio" in r:
+        lines.append(f"  bound: worst case GDOP {r['worst_gdop']:.4f}, floor {r['floor']:.4f} "
+                     f"(ratio {r['worst_over_floor']:.4f}); largest GDOP/floor over the rho range "
+                     f"{r['bound_ratio']:.4f} at rho {r['bound_ratio_rho']:.3g}")
+    if "layouts" not in res:
+        return ("\n" + "\n".join(lines)) if lines else ""
+    lines += ["", "Layouts by family (" + res["layout_objective"] + "):",
+              f"{'rank':>4} {'family':<7} {'N':>3} {'worst GDOP':>10} {'floor':>7} {'ratio':>7} "
+              f"{'bound_ratio':>11} {'min angle':>9} {'parity':>7} {'isolable':>8} {'MDB/floor':>9}"]
+    for x in res["layouts"]:
+        fl = x["worst_gdop"] / x["failed_bound_ratio"]
+        lines.append(f"{x['rank']:>4} {x['family']:<7} {x['n']:>3} {x['worst_gdop']:>10.4f} {fl:>7.4f} "
+                     f"{x['failed_bound_ratio']:>7.4f} {x['bound_ratio']:>11.4f} {x['min_angle_deg']:>8.1f}° "
+                     f"{x['min_parity_angle_deg']:>6.1f}° {'yes' if x['isolable'] else 'no':>8} "
+                     f"{x['mdb_ratio']:>9.4f}")
+    for x in res["layouts"]:
+        lines.append(f"  {x['family']}, N = {x['n']}: worst case {x['worst_gdop']:.4f}, floor "
+                     f"{x['worst_gdop'] / x['failed_bound_ratio']:.4f} (ratio {x['failed_bound_ratio']:.4f})")
+        gain = x["detail"].get("gain")
+        if gain:
+            lines.append(f"    {x['n'] // 3} IMUs (triads), each rotated: at rho = {gain['rho']:g} the fused rate's "
+                         f"standard deviation per axis is {gain['gain_over_coaligned']:.3f}x smaller than with "
+                         f"the triads mounted alike ({gain['gain_over_one_gyro_rotated']:.2f}x against one gyro, "
+                         f"co-aligned {gain['gain_over_one_gyro_coaligned']:.2f}x)")
+        lines += [f"    note: {t}" for t in x["notes"]]
+    if res["layouts"]:
+        best = res["layouts"][0]
+        cones = [x for x in res["layouts"] if x["family"].startswith("cone")]
+        cone = (f"; the best cone: {cones[0]['family']}, N = {cones[0]['n']}, worst GDOP "
+                f"{cones[0]['worst_gdop']:.4f} (bound_ratio {cones[0]['bound_ratio']:.4f})") if cones else ""
+        lines.append(f"best layout by GDOP: {best['family']}, N = {best['n']}, worst GDOP {best['worst_gdop']:.4f} "
+                     f"(bound_ratio {best['bound_ratio']:.4f}){cone}")
+    lines += [f"note: {t}" for t in res["layout_notes"]]
+    return "\n" + "\n".join(lines)
 
 
 def _design_as_built(args) -> tuple[dict, str]:
@@ -683,6 +806,10 @@ def add_parser(sub) -> None:
                         "it adds to every output with the same sign, so reversed gyros move it into the "
                         "parity space) or axis (it follows each gyro's sensing axis, so reversing buys "
                         "nothing); the decision is shown under both")
+    p.add_argument("--family", metavar="F,G,...",
+                   help="--recommend: mounting families, a comma list of cone1, cone2, free, triads, faces "
+                        "(default cone1,cone2: the cones); free/triads/faces are designed on the sphere "
+                        "and listed against the GDOP floor beside the cones' ranking")
     p.add_argument("--estimators", metavar="A,B,...",
                    help="--recommend: estimators compared (default kf_array,kf_single,gls,ols,naive)")
     p.add_argument("--check", type=count("--check"), metavar="K",
