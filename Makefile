@@ -74,6 +74,7 @@ fuzz: $(STAMP)
 
 bench: $(STAMP)
 	OPENBLAS_NUM_THREADS=1 $(PY) benchmarks/run.py
+	$(if $(CONVERT_SIZES),OPENBLAS_NUM_THREADS=1 $(PY) benchmarks/bench_convert_memory.py --sizes $(CONVERT_SIZES),)
 
 # the slow test cases (every practice-shaped effect and practice file, ~10 min), how often
 # diagnose names a hidden effect right (not a speed benchmark; ~15 min), the

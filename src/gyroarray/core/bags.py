@@ -36,7 +36,10 @@ Reading rules
   receive time and the bytes unread; holding no message it is refused with the salvage
   command (``mcap recover``, ``rosbag reindex``; a ``.db3``: sqlite3's ``.recover``).
 * Streaming: :class:`BagStream` reads one topic in chunks of :data:`STREAM_CHUNK` messages
-  (``gyroarray convert`` in bounded memory), with the same bits as :func:`read_bag`.
+  (``gyroarray convert`` in bounded memory), with the same bits as :func:`read_bag`. A ROS1
+  bag is read without rosbags' per-message index (>= 100 B a message, 3.5 GB for 24 h at
+  400 Hz): its index records chunk by chunk (:func:`_ros1_chunked_reader`), in rosbags' order
+  while the chunks' time ranges do not overlap (otherwise with rosbags' whole index).
 * Rates: ``angular_velocity`` [rad/s] (REP 103) becomes the measurement's
   gyro columns in deg/s (``shared/spec/measurement-format.md``), one gyro per
   axis of the IMU frame: gyros 1, 2, 3 are its x, y, z unit axes.
@@ -746,10 +749,124 @@ class _Ros1Salvage(_RecordSource):
 
 
 
+def _ros1_chunked_reader(path: Path):
+    """A rosbags ROS1 reader that keeps no per-message index (for :class:`BagStream`): its
+    ``open`` counts each connection's messages from the index data records and notes where
+    each chunk's records lie, and ``messages`` reads one chunk at a time, its index records
+    then, sorted by (time, offset) as rosbags sorts the whole bag's. That is rosbags' order
+    (time, chunk position, offset) when the chunks' time ranges do not overlap in file order
+    (``in_order``, checked on open; otherwise the caller reads with rosbags' own reader)."""
+    # deferred: with rosbags below (the reader is built only when a ROS1 bag is streamed)
+    import os
+    from collections import defaultdict
+    from io import BytesIO
+
+    # deferred: rosbags loads only when a bag is read
+    from rosbags.interfaces import Connection
+    from rosbags.rosbag1 import Reader as Reader1
+    from rosbags.rosbag1 import reader as ros1_reader
+
+    class ChunkedReader(Reader1):
+        def open(self) -> None:
+            self._counts: dict[int, int] = defaultdict(int)
+            #: chunk position -> [(connection id, file offset of its index entries, count)]
+            self._index_at: dict[int, list[tuple[int, int, int]]] = defaultdict(list)
+            super().open()
+            self.indexes = {}
+            self.connections = [Connection(*x[0:5], self._counts[x.id], *x[6:])
+                                for x in self.connections]
+            infos = sorted(getattr(self, "chunk_infos", []), key=lambda c: c.pos)
+            self.in_order = all(a.end_time <= b.start_time for a, b in zip(infos, infos[1:]))
+            self._chunk_order = [c.pos for c in infos]
+
+        def read_index_data(self, pos, indexes) -> None:
+            """As rosbags' (the same checks of the record's header), keeping no entry: the
+            connection's count and where its entries lie."""
+            assert self.bio
+            start = self.bio.tell()
+            size = self._index_header()
+            self._counts[self._last_conn] += size // 12
+            self._index_at[pos].append((self._last_conn, start + 55, size // 12))
+            self.bio.seek(start + 55 + size)
+
+        def _index_header(self) -> int:
+            """The IDXDATA record header at the position (55 bytes): its data size [bytes]."""
+            assert self.bio
+            buf = self.bio.read(55)
+            if not self.index_data_header_offsets:
+                (size,) = ros1_reader.deserialize_uint32(buf, 0)
+                if size != 47:
+                    raise ros1_reader.ReaderError("IDXDATA header of an unexpected size")
+                idx, connpos, countpos = 4, -1, -1
+                while idx < size:
+                    char = buf[idx + 6]
+                    if char == 61:        # op=
+                        idx += 8
+                    elif char == 114:     # ver=
+                        if buf[idx + 8] != 1:
+                            raise ros1_reader.ReaderError(f"IDXDATA version {buf[idx + 8]} is not supported.")
+                        idx += 12
+                    elif char == 110:     # conn=
+                        connpos = idx + 9
+                        idx += 13
+                    else:                 # count=
+                        countpos = idx + 10
+                        idx += 14
+                self.index_data_header_offsets = (connpos, countpos)
+            connpos, countpos = self.index_data_header_offsets
+            (self._last_conn,) = ros1_reader.deserialize_uint32(buf, connpos)
+            (count,) = ros1_reader.deserialize_uint32(buf, countpos)
+            (size,) = ros1_reader.deserialize_uint32(buf, 51)
+            if size != count * 12:
+                raise ros1_reader.ReaderError("IDXDATA size and count disagree")
+            return size
+
+        def messages(self, connections=(), start=None, stop=None):
+            self._check_open()
+            assert self.bio and start is None and stop is None
+            connmap = {x.id: x for x in self.connections}
+            wanted = {x.id for x in (connections or self.connections)}
+            for pos in self._chunk_order:
+                entries = []
+                for conn, at, count in self._index_at.get(pos, ()):
+                    if conn not in wanted:
+                        continue
+                    self.bio.seek(at)
+                    buf = self.bio.read(count * 12)
+                    if len(buf) != count * 12:
+                        raise ros1_reader.ReaderError("IDXDATA entries cut short")
+                    e = np.frombuffer(buf, "<u4").reshape(count, 3).astype(np.int64)
+                    entries.append(np.column_stack([e[:, 0] * _NS_PER_S + e[:, 1], e[:, 2]]))
+                if not entries:
+                    continue
+                table = np.vstack(entries)
+                table = table[np.lexsort((table[:, 1], table[:, 0]))]   # by time, then offset
+                head = self.chunks[pos]
+                self.bio.seek(head.datapos)
+                chunk = BytesIO(head.decompressor(ros1_reader.read_bytes(self.bio, head.datasize)))
+                for t, offset in table.tolist():
+                    chunk.seek(offset)
+                    while True:
+                        header = ros1_reader.Header.read(chunk)
+                        have = header.get_uint8("op")
+                        if have != ros1_reader.RecordType.CONNECTION:
+                            break
+                        chunk.seek(ros1_reader.read_uint32(chunk), os.SEEK_CUR)
+                    if have != ros1_reader.RecordType.MSGDATA:
+                        raise ros1_reader.ReaderError("Expected to find message data.")
+                    data = ros1_reader.read_bytes(chunk, ros1_reader.read_uint32(chunk))
+                    if header.get_time("time") != t:
+                        raise ros1_reader.ReaderError("a message's time is not its index entry's")
+                    yield connmap[header.get_uint32("conn")], t, data
+                chunk.close()
+
+    return ChunkedReader(path)
+
+
 class _Bag:
     """An open bag: its reader, the topics and the typestore that decodes its messages."""
 
-    def __init__(self, path: Path, info: dict | None = None):
+    def __init__(self, path: Path, info: dict | None = None, stream: bool = False):
         # deferred: rosbags (its readers and typestores) loads only when a bag is read
         from rosbags.rosbag1 import Reader as Reader1
         from rosbags.rosbag2 import Reader as Reader2
@@ -774,8 +891,13 @@ class _Bag:
                 self._own(path, _McapSource(path, salvage=True), None)
             else:
                 try:
-                    self.reader = Reader1(src) if self.ros1 else Reader2(src)
+                    self.reader = (_ros1_chunked_reader(src) if self.ros1 and stream else
+                                   Reader1(src) if self.ros1 else Reader2(src))
                     self.reader.open()
+                    if not getattr(self.reader, "in_order", True):   # chunks overlap in time:
+                        self.reader.close()                          # rosbags' whole index
+                        self.reader = Reader1(src)
+                        self.reader.open()
                 except InputError as err:
                     raise InputError(err.message, file=err.file or str(path)) from None
                 except Exception as err:  # rosbags' errors, struct/sqlite/zstd ones: a bad file
@@ -1602,7 +1724,7 @@ class BagStream:
         self.path = p = Path(path)
         self.which = _check_stamps_option(p, stamps)
         self.gaps, self.chunk = gaps, int(chunk)
-        self._bag = _Bag(p, _check_path(p))
+        self._bag = _Bag(p, _check_path(p), stream=True)
         try:
             topics = self._bag.topics()
             chosen = _pick_topics(p, topics, topic)
