@@ -27,7 +27,7 @@ reference, both in the same unit.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy import stats
@@ -52,6 +52,11 @@ MAX_HARMONICS = 12
 #: The f² line over the harmonics is refitted without the highest line while its χ² has a
 #: tail probability below this (the response is no longer quadratic there).
 P_CURVED = 0.01
+#: A line of the reference is read only when the gyro shows it: |h| > GYRO_LINE_Z σ (issue 44
+#: item 2: an encoder's 2nd-harmonic error is a line of the reference that the rate does not have,
+#: |h| ≈ 0 there, and it pulled the f² extrapolation: on the shared MPU record with its reference
+#: corrected for its stamps, +32 % instead of the +0.6 % of the fundamental's whole-cycle DFT).
+GYRO_LINE_Z = 3.0
 
 #: Smallest |Σ X_j·conj(X_j+1)| / Σ |X_j|·|X_j+1| of a harmonic: below it the line's phase
 #: wanders from segment to segment (the motion is not periodic at that line) [-].
@@ -135,6 +140,10 @@ class ZeroFrequencyGain:
         f0 [Hz].
     cycles_per_segment : int
         Whole cycles of f0 in one segment.
+    not_shown : tuple of LineResponse
+        Lines of the reference that the gyro does not show (|h| within
+        :data:`GYRO_LINE_Z` σ of 0): the reference's own error (an encoder's
+        harmonic), left out (:func:`cross_spectral_gain`).
     """
 
     gain: float
@@ -147,6 +156,7 @@ class ZeroFrequencyGain:
     dof: int
     fundamental_hz: float
     cycles_per_segment: int
+    not_shown: tuple = ()
 
     @property
     def n_segments(self) -> int:
@@ -159,7 +169,11 @@ class ZeroFrequencyGain:
         what = (f"the motion's {self.fundamental_hz:.4g} Hz fundamental" if k == [1] else
                 f"{len(k)} lines of the motion (harmonics {', '.join(map(str, k))} of {self.fundamental_hz:.4g} Hz)")
         how = ("|H| at the line" if len(k) == 1 else "|H| fitted as a line in f² and read at f → 0")
-        return f"{what}, {self.n_segments} segments of {self.cycles_per_segment} cycles; {how}"
+        out = f"{what}, {self.n_segments} segments of {self.cycles_per_segment} cycles; {how}"
+        if self.not_shown:
+            out += (f"; harmonic(s) {', '.join(str(ln.harmonic) for ln in self.not_shown)} of the reference "
+                    f"left out: the gyro does not show them (|h| within {GYRO_LINE_Z:g} σ of 0, the reference's own error)")
+        return out
 
 
 def fundamental_hz(x, dt_s: float, *, min_snr: float = 100.0) -> float:
@@ -432,4 +446,9 @@ def cross_spectral_gain(y, x, dt_s: float, *, use=None, f0_hz: float | None = No
     c, _, _ = _segments(x.size, dt_s, f0, target_segments, min_cycles)
     lines = line_responses(y, x, dt_s, f0, use=use, max_harmonics=max_harmonics, f_max_hz=f_max_hz,
                            min_snr=min_snr, target_segments=target_segments, min_cycles=min_cycles)
-    return zero_frequency_gain(lines, f0, c)
+    shown = [ln for ln in lines if ln.gain > GYRO_LINE_Z * ln.sigma]
+    not_shown = tuple(ln for ln in lines if ln.gain <= GYRO_LINE_Z * ln.sigma)
+    if lines and not shown:
+        raise NoSpectralLines(f"the gyro shows none of the reference's {len(lines)} line(s) (|h| within "
+                              f"{GYRO_LINE_Z:g} σ of 0 at each)")
+    return replace(zero_frequency_gain(shown, f0, c), not_shown=not_shown)
