@@ -774,7 +774,7 @@ class ModelComparison:
         self._check_usable()
         self.parts: list[tuple[int, int]] = []      # stitched still parts, [start, stop) of the new record
         self.parts_s: list[tuple[float, float]] = []  # ... and where they were in the measurement [s]
-        self._attitude = None                        # platform -> level (attitude()); set by a cut at gaps
+        self._attitude: np.ndarray | None = None     # platform -> level (attitude()); set by a cut at gaps
         if self.ref is None or len(self.segments) > 1:
             self._keep_still_parts()
         self.E0 = self.y - (self.ref @ self.H.T if self.ref is not None else 0.0)
@@ -889,8 +889,9 @@ class ModelComparison:
             # would drop what the platform turned during the gaps
             across = [b - 1 for _, b in self.segments[:-1]]
             gaps = {i: round((self.t[i + 1] - self.t[i]) / self.dt) * self.dt for i in across}
-            self._attitude = np.array(attitude_across_gaps(self.ref, self.dt, gaps)[idx])
-            self._attitude.flags.writeable = False
+            att = np.array(attitude_across_gaps(self.ref, self.dt, gaps)[idx])
+            att.flags.writeable = False
+            self._attitude = att
         self.y = np.concatenate(pieces)
         self.temp = None if self.temp is None else self.temp[idx]
         self.acc = None if self.acc is None else self.acc[idx]

@@ -1599,6 +1599,8 @@ def measured_inflation(model: NoiseModel, axis: int | str, meas_path, reference_
         return parity_inflation_for_export(
             meas_path, model, noise.n_rad_rt_s, "the axes pooled" if index == 0 else f"gyro {index}",
             imu_topic=imu_topic, rng=np.random.default_rng(seed))
+    if reference_topic is None:
+        raise InputError("--inflate measured with --reference needs --reference-topic (the pose or odometry topic)")
     return inflation_for_export(meas_path, reference_path, reference_topic, noise.n_rad_rt_s,
                                 noise.k_rad_s_rt_s, index, imu_topic=imu_topic,
                                 time_offset_s=time_offset_s, rng=np.random.default_rng(seed))

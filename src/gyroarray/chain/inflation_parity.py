@@ -317,7 +317,7 @@ def measure_parity_inflation(meas, *, levels=DEFAULT_LEVELS_RAD_S, window_s: flo
                             ("static", np.full(nk, static_n ** 2), K ** 2),
                             ("export", np.full(nk, (factor * static_n) ** 2), (factor * K) ** 2)):
         R = np.repeat((dens2 / T)[:, None], d, axis=1)
-        nis = kf_nis(e, t0, T, R, q, valid)
+        nis = kf_nis(e, t0, T, R, q, np.asarray(valid))
         hv = nis[hv_mask]
         hv = hv[np.all(np.isfinite(hv), axis=1)]
         n_eff = int(hv.size)

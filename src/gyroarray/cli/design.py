@@ -481,7 +481,8 @@ def _add_bounds(res: dict, args, space, rhos, g) -> None:
     if args.family is None:
         return
     rng = np.random.default_rng(20260412 if args.seed is None else args.seed)
-    layouts, notes = [], []
+    layouts: list[dict] = []
+    notes: list[str] = []
     for fam in _families(args):
         for n in space.ns:
             if fam == "triads" and n % 3:
@@ -498,8 +499,8 @@ def _add_bounds(res: dict, args, space, rhos, g) -> None:
                 continue
             layouts.append(d.to_dict())
     layouts.sort(key=lambda x: (x["worst_gdop"], x["bound_ratio"]))
-    for k, x in enumerate(layouts):
-        x["rank"] = k + 1
+    for i, x in enumerate(layouts):
+        x["rank"] = i + 1
     res["layouts"] = layouts
     res["layout_notes"] = notes
     res["layout_objective"] = (f"worst GDOP (GLS weights fixed at the design rho) over rho in [{lo:g}, {hi:g}] "

@@ -145,7 +145,7 @@ def _robust_worst(H: np.ndarray, lo: float, hi: float, failures: int, rho_d: flo
     """(worst GDOP, ρ where, failed gyros 1-based) of one layout, continuously over [lo, hi]
     (:func:`worst_over_interval`) and over every kept set."""
     n = H.shape[0]
-    best = (-1.0, lo, ())
+    best: tuple[float, float, tuple[int, ...]] = (-1.0, lo, ())
     for keep in kept_sets(n, failures):
         Hk = H[list(keep)]
         m = len(keep)
