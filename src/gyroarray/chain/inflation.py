@@ -618,6 +618,47 @@ def kf_nis(e: np.ndarray, t0: np.ndarray, T: np.ndarray, R: np.ndarray, q_rate: 
 # ---------------------------------------------------------------------------------------------
 # the measurement
 # ---------------------------------------------------------------------------------------------
+def export_factor(pooled: np.ndarray, motion_levels: np.ndarray, n_levels: int, nu_l: np.ndarray,
+                  static_n: float, rng: np.random.Generator, confidence: float) -> tuple:
+    """The export factor: the motion-weighted density over the static one, with its interval.
+
+    Parameters
+    ----------
+    pooled : ndarray, shape (L,)
+        N_L² per level [rad²/s] (NaN where a level has too few windows).
+    motion_levels : ndarray of int
+        The level of each fitted window of the motion segment (pauses included) [-].
+    n_levels : int
+        L.
+    nu_l : ndarray, shape (L,)
+        Degrees of freedom of each level's N_L² [-].
+    static_n : float
+        The static density [rad/√s].
+    rng : numpy.random.Generator
+        For the interval's χ² draws (2000).
+    confidence : float
+        Two-sided level of the interval [-].
+
+    Returns
+    -------
+    tuple
+        (N_L² with empty levels filled from the nearest, the levels' weights, levels with a
+        density, the raw factor, its interval (lo, hi), the factor kept: at least 1) [-].
+    """
+    filled = nearest_filled(pooled)
+    wts = np.bincount(motion_levels, minlength=n_levels) / max(motion_levels.size, 1)
+    ok = np.isfinite(pooled) & (nu_l > 0)
+    raw = math.sqrt(max(float(np.sum(wts * filled)), 0.0)) / static_n
+    draws = np.zeros(2000)
+    for L in (int(j) for j in np.flatnonzero(wts > 0)):
+        src = source_level(L, ok)
+        draws += wts[L] * filled[L] * rng.chisquare(nu_l[src], draws.size) / nu_l[src]
+    a = 1.0 - confidence
+    f_ci = (float(np.sqrt(np.quantile(draws, a / 2))) / static_n,
+            float(np.sqrt(np.quantile(draws, 1 - a / 2))) / static_n)
+    return filled, wts, ok, raw, f_ci, max(1.0, raw)
+
+
 def measure_inflation(imu_time_s, gyro_rad_s, ref: Reference, *,
                       levels=DEFAULT_LEVELS_RAD_S, holdout: float = 0.3,
                       rng: np.random.Generator | None = None,
@@ -796,20 +837,10 @@ def measure_inflation(imu_time_s, gyro_rad_s, ref: Reference, *,
                          f"{w * med_dt:.3g} s (a longer record, fewer levels or a shorter "
                          "window)", file=where)
     # export factor: motion-weighted measured density over the static one
-    filled = nearest_filled(pooled)
-    motion_fit = fit_members[fit_members >= m0]
-    wts = np.bincount(lev[motion_fit], minlength=n_levels) / max(motion_fit.size, 1)
     nu_l = np.array([3.0 * lv.n_windows for lv in table])
-    ok = np.isfinite(pooled) & (nu_l > 0)
-    raw_factor = math.sqrt(max(float(np.sum(wts * filled)), 0.0)) / static_n
-    draws = np.zeros(2000)
-    for L in (int(j) for j in np.flatnonzero(wts > 0)):
-        src = source_level(L, ok)
-        draws += wts[L] * filled[L] * rng.chisquare(nu_l[src], draws.size) / nu_l[src]
-    a = 1.0 - confidence
-    f_ci = (float(np.sqrt(np.quantile(draws, a / 2))) / static_n,
-            float(np.sqrt(np.quantile(draws, 1 - a / 2))) / static_n)
-    factor = max(1.0, raw_factor)
+    ef = export_factor(pooled, lev[fit_members[fit_members >= m0]], n_levels, nu_l, static_n, rng,
+                       confidence)
+    filled, wts, ok, raw_factor, f_ci, factor = ef
     if raw_factor < 1.0:
         notes.append(f"the motion-weighted measured density is {raw_factor:.3g}× the static one, "
                      "below 1: the export keeps the static values (factor 1)")

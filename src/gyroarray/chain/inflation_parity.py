@@ -54,7 +54,7 @@ import numpy as np
 
 from gyroarray.chain.inflation import (
     DEFAULT_LEVELS_RAD_S, GAP_FACTOR, LEVEL_SMOOTH_S, MIN_LEVEL_WINDOWS, MIN_WINDOWS, LevelDensity,
-    NeighbourFit, NisCheck, assign_levels, fmt_g, kf_nis, level_table, moving_mean, nearest_filled,
+    NeighbourFit, NisCheck, assign_levels, export_factor, fmt_g, kf_nis, level_table, moving_mean,
     source_level, walk_share)
 from gyroarray.core.errors import InputError
 
@@ -289,20 +289,10 @@ def measure_parity_inflation(meas, *, levels=DEFAULT_LEVELS_RAD_S, window_s: flo
                          file=where)
 
     # export factor: the motion-weighted density over the static one
-    filled = nearest_filled(pooled)
-    motion_fit = fit_members[fit_members >= m0]     # as inflation.py: the pauses in motion count
-    wts = np.bincount(lev[motion_fit], minlength=n_levels) / max(motion_fit.size, 1)
     nu_l = np.array([float(d * lv.n_windows) for lv in table])
-    ok = np.isfinite(pooled) & (nu_l > 0)
-    raw = math.sqrt(max(float(np.sum(wts * filled)), 0.0)) / static_n
-    draws = np.zeros(2000)
-    for L in (int(j) for j in np.flatnonzero(wts > 0)):
-        src = source_level(L, ok)
-        draws += wts[L] * filled[L] * rng.chisquare(nu_l[src], draws.size) / nu_l[src]
-    a = 1.0 - confidence
-    f_ci = (float(np.sqrt(np.quantile(draws, a / 2))) / static_n,
-            float(np.sqrt(np.quantile(draws, 1 - a / 2))) / static_n)
-    factor = max(1.0, raw)
+    # as inflation.py: the pauses in motion count
+    filled, wts, ok, raw, f_ci, factor = export_factor(
+        pooled, lev[fit_members[fit_members >= m0]], n_levels, nu_l, static_n, rng, confidence)
     if raw < 1.0:
         notes.append(f"the motion-weighted density is {raw:.3g}× the static one, below 1: the "
                      "export keeps the static values (factor 1)")
