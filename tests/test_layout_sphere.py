@@ -192,3 +192,29 @@ def test_cli_family_free_and_cones(cli, tmp_path):
     p = cli("design", "--recommend", "--arw", "0.2", "--n", "6", "--rho-range=0,0.5",
             "--family", "cone2,free", "--estimators", "gls")
     assert "floor" in p.stdout and "ratio" in p.stdout
+
+
+def test_a_range_below_zero_is_scored_over_its_part_at_or_above_zero():
+    """The demo's ρ range [-0.1, 0.5]: the floor holds for ρ >= 0 only, so each design is scored
+    against it over [0, 0.5] (said in a note), not left unscored. The scheme-1 N = 4 cone at the
+    magic angle with alternating senses is a tetrahedron: bound_ratio 1 (numpy: its GDOP at ρ 0
+    and 0.5 equals 3·√((1 − ρ)/4))."""
+    import argparse
+    import math
+
+    from gyroarray.cli.design import _add_bounds
+    from gyroarray.core.layout import Layout
+
+    alpha = math.degrees(math.acos(1 / math.sqrt(3)))
+    axes = Layout.conical(1, 4, math.radians(alpha)).axes * np.array([1, -1, 1, -1])[:, None]
+    H = np.asarray(axes, float)
+    for rho in (0.0, 0.5):
+        C = (1 - rho) * np.eye(4) + rho * np.ones((4, 4))
+        gdop = math.sqrt(np.trace(np.linalg.inv(H.T @ np.linalg.solve(C, H))))
+        assert gdop == pytest.approx(3 * math.sqrt((1 - rho) / 4), rel=1e-9)
+    res = {"designs": [{"scheme": 1, "axes": H.tolist()}], "notes": []}
+    space = argparse.Namespace(failures=0)
+    _add_bounds(res, argparse.Namespace(family=None), space, [-0.1, 0.2, 0.5], None)
+    d = res["designs"][0]
+    assert d["bound_ratio"] == pytest.approx(1.0, abs=1e-6)
+    assert any("over [0, 0.5]" in n for n in res["notes"]), res["notes"]

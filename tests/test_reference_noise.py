@@ -63,7 +63,9 @@ def test_an_encoder_reference_is_flagged_and_an_exact_one_is_not():
 def test_the_mpu_encoder_is_flagged_and_the_note_names_the_flag():
     m = read_measurement(MPU, repair=True)
     found = reference_own_noise(m.ref_rad_s, m.gyro_rad_s, m.layout.axes, m.dt_s)
-    assert [d["axis"] for d in found] == [2] and found[0]["fraction"] > 0.1      # 18 % of the bins
+    # 4.9 % of the bins with the reference re-derived over its proven grid (--repair, core/stamps.py;
+    # 18 % before: the stamps' bias was read as the encoder's noise too), above MIN_FRACTION
+    assert [d["axis"] for d in found] == [2] and found[0]["fraction"] > 0.03
     notes = ModelComparison(m, n_runs=1).setup_notes
     assert any("noise of its own" in n and "--ref-smooth" in n for n in notes)
     smoothed = ModelComparison(m, n_runs=1, ref_smooth_s=0.2).setup_notes

@@ -456,11 +456,19 @@ def _add_bounds(res: dict, args, space, rhos, g) -> None:
     import numpy as np  # deferred: numpy and the design chain
     from gyroarray.design.sphere import evaluate_layout, search_layout  # deferred: numpy, scipy
     lo, hi = (min(rhos), max(rhos)) if rhos else (g.rho_arw, g.rho_arw)
-    if lo < 0 or hi >= 1:
+    if hi < 0 or hi >= 1:
         res.setdefault("notes", []).append(
-            f"bound_ratio: the GDOP floor 3·√((1 − ρ)/N) holds for ρ >= 0; the range [{lo:g}, {hi:g}] "
-            "reaches below 0, so no design is scored against it")
+            f"bound_ratio: the GDOP floor 3·√((1 − ρ)/N) holds for 0 <= ρ < 1; the range [{lo:g}, {hi:g}] "
+            "has no part there, so no design is scored against it")
         return
+    if lo < 0:
+        # the floor is a floor only for ρ >= 0 (anti-correlated gyros gain from axes that do not
+        # sum to zero): the designs are scored against it over the range's part at or above 0
+        res.setdefault("notes", []).append(
+            f"bound_ratio: the GDOP floor 3·√((1 − ρ)/N) holds for ρ >= 0; the designs are scored "
+            f"against it over [0, {hi:g}], the part of the range [{lo:g}, {hi:g}] where it holds"
+            + (" (and --family designs its layouts for that part)" if args.family is not None else ""))
+        lo = 0.0
     seen: dict = {}
 
     def bound(d):
