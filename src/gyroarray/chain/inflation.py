@@ -618,6 +618,27 @@ def kf_nis(e: np.ndarray, t0: np.ndarray, T: np.ndarray, R: np.ndarray, q_rate: 
 # ---------------------------------------------------------------------------------------------
 # the measurement
 # ---------------------------------------------------------------------------------------------
+def held_out_nis(nis: np.ndarray, hold: np.ndarray) -> np.ndarray:
+    """The NIS of the held-out windows ``hold`` (bool, per window), rows with a non-finite
+    component dropped: shape (n, components) [-]."""
+    hv = nis[hold]
+    return hv[np.all(np.isfinite(hv), axis=1)]
+
+
+def nis_check(label: str, hv: np.ndarray, var_param: float, z: float) -> NisCheck:
+    """The held-out check of one set of values: the mean NIS of ``hv`` (:func:`held_out_nis`)
+    against 1 ± z·√(2/n_eff + var_param) (χ²₁ mean of n_eff innovations; ``var_param`` the
+    variance the estimated densities add, 0 for given values)."""
+    n_eff = int(hv.size)
+    mean = float(hv.mean()) if n_eff else math.nan
+    half = z * math.sqrt(2.0 / max(n_eff, 1) + var_param)
+    interval = (1.0 - half, 1.0 + half)
+    return NisCheck(label=label, mean_nis=mean, interval=interval, n_eff=n_eff,
+                    inside=bool(interval[0] <= mean <= interval[1]),
+                    axis_mean_nis=tuple(float(v) for v in hv.mean(axis=0))
+                    if n_eff else (math.nan,) * hv.shape[1])  # type: ignore[arg-type]
+
+
 def export_factor(pooled: np.ndarray, motion_levels: np.ndarray, n_levels: int, nu_l: np.ndarray,
                   static_n: float, rng: np.random.Generator, confidence: float) -> tuple:
     """The export factor: the motion-weighted density over the static one, with its interval.
@@ -861,13 +882,9 @@ def measure_inflation(imu_time_s, gyro_rad_s, ref: Reference, *,
             ("static", np.repeat((static_n ** 2 / T + ref_R)[:, None], 3, axis=1), K ** 2),
             ("export", np.repeat(((factor * static_n) ** 2 / T + ref_R)[:, None], 3, axis=1),
              (factor * K) ** 2)):
-        nis = kf_nis(e, win["t0"], T, R, q, valid)
-        hv = nis[hold_valid]
-        hv = hv[np.all(np.isfinite(hv), axis=1)]
-        n_eff = int(hv.size)
-        mean = float(hv.mean()) if n_eff else math.nan
+        hv = held_out_nis(kf_nis(e, win["t0"], T, R, q, valid), hold_valid)
         var_param = 0.0
-        if label == "measured" and n_eff:
+        if label == "measured" and hv.size:
             # a density estimated with ν dof moves the mean NIS by its R share × δ ln N²
             share = (R - ref_R[:, None])[hold_valid] / (R[hold_valid])
             for L in range(n_levels):
@@ -876,12 +893,7 @@ def measure_inflation(imu_time_s, gyro_rad_s, ref: Reference, *,
                     cL = float(share[sel].sum()) / max(hv.size, 1)
                     src = source_level(L, ok)
                     var_param += cL ** 2 * 2.0 / (nu_l[src] / (1.0 + 2.0 / max(bias_span, 1)))
-        half = z * math.sqrt(2.0 / max(n_eff, 1) + var_param)
-        interval = (1.0 - half, 1.0 + half)
-        checks.append(NisCheck(label=label, mean_nis=mean, interval=interval, n_eff=n_eff,
-                               inside=bool(interval[0] <= mean <= interval[1]),
-                               axis_mean_nis=tuple(float(v) for v in hv.mean(axis=0))
-                               if n_eff else (math.nan,) * 3))  # type: ignore[arg-type]
+        checks.append(nis_check(label, hv, var_param, z))
     st_chk = checks[1]
     notes.append(f"held-out NIS: measured {checks[0].mean_nis:.3g} (interval "
                  f"{checks[0].interval[0]:.3g}–{checks[0].interval[1]:.3g}), static "

@@ -54,7 +54,8 @@ import numpy as np
 
 from gyroarray.chain.inflation import (
     DEFAULT_LEVELS_RAD_S, GAP_FACTOR, LEVEL_SMOOTH_S, MIN_LEVEL_WINDOWS, MIN_WINDOWS, LevelDensity,
-    NeighbourFit, NisCheck, assign_levels, export_factor, fmt_g, kf_nis, level_table, moving_mean,
+    NeighbourFit, NisCheck, assign_levels, export_factor, fmt_g, held_out_nis, kf_nis, level_table,
+    moving_mean, nis_check,
     source_level, walk_share)
 from gyroarray.core.errors import InputError
 
@@ -307,24 +308,15 @@ def measure_parity_inflation(meas, *, levels=DEFAULT_LEVELS_RAD_S, window_s: flo
                             ("static", np.full(nk, static_n ** 2), K ** 2),
                             ("export", np.full(nk, (factor * static_n) ** 2), (factor * K) ** 2)):
         R = np.repeat((dens2 / T)[:, None], d, axis=1)
-        nis = kf_nis(e, t0, T, R, q, np.asarray(valid))
-        hv = nis[hv_mask]
-        hv = hv[np.all(np.isfinite(hv), axis=1)]
-        n_eff = int(hv.size)
-        mean = float(hv.mean()) if n_eff else math.nan
+        hv = held_out_nis(kf_nis(e, t0, T, R, q, np.asarray(valid)), hv_mask)
         var_param = 0.0
-        if label == "measured" and n_eff:
+        if label == "measured" and hv.size:
             # a density estimated with ν dof moves the mean NIS by its share × δ ln N²
             lh = lev[hv_mask]
             for L in np.unique(lh):
                 cL = float(np.mean(lh == L))
                 var_param += cL ** 2 * 2.0 / (nu_l[source_level(int(L), ok)] / red)
-        half = z * math.sqrt(2.0 / max(n_eff, 1) + var_param)
-        interval = (1.0 - half, 1.0 + half)
-        checks.append(NisCheck(label=label, mean_nis=mean, interval=interval, n_eff=n_eff,
-                               inside=bool(interval[0] <= mean <= interval[1]),
-                               axis_mean_nis=tuple(float(v) for v in hv.mean(axis=0))
-                               if n_eff else (math.nan,) * d))  # type: ignore[arg-type]
+        checks.append(nis_check(label, hv, var_param, z))
     st = checks[1]
     notes.append(f"held-out NIS: measured {checks[0].mean_nis:.3g} (interval "
                  f"{checks[0].interval[0]:.3g}–{checks[0].interval[1]:.3g}), static "
