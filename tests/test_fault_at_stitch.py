@@ -29,17 +29,19 @@ DRIFT_DEG_S = 0.02              # a warm-up drift over each part's length [deg/s
 OFFSET_DEG_S = 0.05             # the bias step the new orientation brings [deg/s]
 
 
-def _record(seed: int, step_deg_s: float = 0.0, step_at_s: float = 1300.0) -> Measurement:
+def _record(seed: int, step_deg_s: float = 0.0, step_at_s: float = 1300.0,
+            drift_deg_s: float = DRIFT_DEG_S) -> Measurement:
     """One gyro: still, a 20 s turn of 30 deg/s peak about its axis, still again; a bias drifting
-    steadily through both parts, an offset with the new orientation, white noise; a real step of
-    ``step_deg_s`` from ``step_at_s`` (measurement time) when asked."""
+    steadily through both parts (``drift_deg_s`` over each part's length), an offset with the new
+    orientation, white noise; a real step of ``step_deg_s`` from ``step_at_s`` (measurement time)
+    when asked."""
     rng = np.random.default_rng(seed)
     n_p, n_m = int(PART_S * FS), int(MOVE_S * FS)
     n = 2 * n_p + n_m
     t = np.arange(n) * DT
     rate = np.zeros(n)
     rate[n_p:n_p + n_m] = 30.0 * np.sin(np.pi * np.linspace(0.0, 1.0, n_m)) ** 2
-    bias = DRIFT_DEG_S * t / PART_S + np.where(t >= PART_S + MOVE_S / 2, OFFSET_DEG_S, 0.0)
+    bias = drift_deg_s * t / PART_S + np.where(t >= PART_S + MOVE_S / 2, OFFSET_DEG_S, 0.0)
     y = rate + bias + SIGMA_DEG_S * rng.standard_normal(n) + np.where(t >= step_at_s, step_deg_s, 0.0)
     return Measurement(time_s=t, gyro_deg_s=y[:, None], layout=Layout(np.array([[0.0, 0.0, 1.0]])),
                        sample_rate_hz=FS)

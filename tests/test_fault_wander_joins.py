@@ -20,6 +20,7 @@ from gyroarray.effects.faults.fault_step import against_wander
 from gyroarray.effects.faults.scan import JOIN_GUARD, fit_fault
 from gyroarray.effects.faults.wander import wander_quantile
 from gyroarray.effects.fitting import EffectFit
+from test_fault_at_stitch import _record as stitch_record
 
 FS = 10.0                                   # Hz
 DT = 1.0 / FS                               # s
@@ -177,23 +178,11 @@ def test_drift_and_noise_scans_restart_at_a_break():
         assert abs(g.onset_s - b * DT) >= JOIN_GUARD * DT or g.z < 3.0
 
 
-PART_S, MOVE_S = 800.0, 20.0    # two still parts and the turn between them [s]
-
-
-def _stitched(seed: int, DRIFT: float = 0.02) -> Measurement:
-    """One gyro: still, a 20 s turn, still again (test_fault_at_stitch's record): a bias drifting
-    0.02 deg/s over each part, an offset of 0.05 deg/s with the new orientation, white noise of
-    0.005 deg/s; stitched, the join carries a step of the drift's share."""
-    rng = np.random.default_rng(seed)
-    n_p, n_m = int(PART_S * FS), int(MOVE_S * FS)
-    n = 2 * n_p + n_m
-    t = np.arange(n) * DT
-    rate = np.zeros(n)
-    rate[n_p:n_p + n_m] = 30.0 * np.sin(np.pi * np.linspace(0.0, 1.0, n_m)) ** 2
-    bias = DRIFT * t / PART_S + np.where(t >= PART_S + MOVE_S / 2, 0.05, 0.0)
-    y = rate + bias + 0.005 * rng.standard_normal(n)
-    return Measurement(time_s=t, gyro_deg_s=y[:, None], layout=Layout(np.array([[0.0, 0.0, 1.0]])),
-                       sample_rate_hz=FS)
+def _stitched(seed: int, drift: float = 0.02) -> Measurement:
+    """One gyro: still, a 20 s turn, still again: test_fault_at_stitch's record (a bias drifting
+    ``drift`` deg/s over each part, an offset of 0.05 deg/s with the new orientation, white noise
+    of 0.005 deg/s); stitched, the join carries a step of the drift's share."""
+    return stitch_record(seed, drift_deg_s=drift)
 
 
 @pytest.mark.parametrize("drift", [0.0, 0.02])
