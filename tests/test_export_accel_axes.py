@@ -189,19 +189,35 @@ def test_the_hint_names_the_real_cause(tmp_path):
     exp = ex.build_export(model, "worst", "kalibr", 100.0)
     assert exp.summary["missing_fields"] == ["accelerometer_noise_density", "accelerometer_random_walk"]
     assert "acc_x, acc_y, acc_z columns" in exp.summary["warnings"][0]
-    # (b) a table whose K_a no axis resolves: not a missing-columns problem; the z, the record
-    #     length and the planned length are named, and the columns hint is not given
+    # (b) a table whose K_a no axis resolves, a 1σ on every axis: not a missing-columns problem;
+    #     the file holds the axes' one-sided 95 % upper bound (the worst: x's 0.0052 + 1.645 ×
+    #     0.0031 = 0.0103 m/s²/√h) and says so, with the z, the record length and the planned length
+    #     (test_export_unresolved_walk: every consumer needs a walk > 0)
     table = AccelNoise(axes=("x", "z"), n_m_s_rt_h=(0.06, 0.06),
                        unresolved={"k_m_s2_rt_h": {"x": {"estimate": 0.0052, "sigma": 0.0031, "resolve_s": 7200.0},
                                                    "z": {"estimate": 0.0, "sigma": 0.004}}},
                        record_s=200.0)
     model, _ = _model(table, tmp_path, "short.toml")
     exp = ex.build_export(model, "worst", "kalibr", 100.0)
+    assert exp.summary["missing_fields"] == [] and exp.summary["warnings"] == []
+    assert math.isclose(exp.accel.k_m_s3_rt_hz, units.accel_rw_m_s2_rt_h_to_si(0.0052 + 1.6448536269514722 * 0.0031),
+                        rel_tol=1e-12)
+    w = exp.accel.partial["k_m_s2_rt_h"]
+    assert "NOT RESOLVED on any axis" in w and "acc_x 0.0103, acc_z 0.006579 m/s²/√h" in w and "columns" not in w
+    assert "acc_x: not resolved, so left out: acceleration random walk on acc_x is 0.0052 ± 0.0031 m/s²/√h " \
+           "(z = 1.68 < 2) over 0.0556 h of record; a record of about 2 h would resolve it" in w
+    assert "acc_z: not resolved" in w
+    assert "accelerometer_random_walk: MISSING" not in exp.text
+    # (b') the same table without the 1σ (a table written by hand): nothing to bound, the field missing
+    table = AccelNoise(axes=("x", "z"), n_m_s_rt_h=(0.06, 0.06),
+                       unresolved={"k_m_s2_rt_h": {"x": {"estimate": 0.0052, "resolve_s": 7200.0},
+                                                   "z": {"estimate": 0.0}}},
+                       record_s=200.0)
+    model, _ = _model(table, tmp_path, "short2.toml")
+    exp = ex.build_export(model, "worst", "kalibr", 100.0)
     w = exp.summary["warnings"][0]
     assert exp.summary["missing_fields"] == ["accelerometer_random_walk"]
     assert "columns" not in w and "has no k_m_s2_rt_h on any axis" in w
-    assert "acc_x: not resolved, so left out: acceleration random walk on acc_x is 0.0052 ± 0.0031 m/s²/√h " \
-           "(z = 1.68 < 2) over 0.0556 h of record; a record of about 2 h would resolve it" in w
     assert "acc_z: not resolved" in w
     assert "accelerometer_random_walk: MISSING — the model's [accelerometer] table has no k_m_s2_rt_h" in exp.text
     assert "accelerometer_random_walk:" not in exp.text.split("\n# ")[-1].split("\n", 1)[-1]   # key left out

@@ -151,6 +151,12 @@ MAX_WINDOW_S = 10.0
 
 _C_B = cast(float, TERM_CONSTANTS["oadev"]["b"])            # 2 ln2/π: flicker Allan variance per B²
 
+#: z of the one-sided 95 % upper bound a file gets for a walk the record did not resolve (the
+#: fit held it at 0 with a 1σ beside it): K_up = 1.645 σ. Every consumer needs a walk > 0 (Kalibr's
+#: reader refuses 0; the others freeze the bias at its first value), and the bound is the largest
+#: walk the record allows at 95 %: a filter tuned with it is conservative, never overconfident.
+WALK_BOUND_Z = 1.6448536269514722
+
 
 @dataclass(frozen=True)
 class GyroNoise:
@@ -174,6 +180,9 @@ class GyroNoise:
         Gauss-Markov terms (σ [rad/s], τc [s]).
     entries : tuple of ModelEntry
         The model's entries for this gyro (an all-gyros entry unless the gyro has its own).
+    k_sigma_rad_s_rt_s : float
+        The fit's 1σ of a walk it held at 0 [rad/s/√s], when ``k_rad_s_rt_s`` is its upper bound
+        (:func:`gyro_noise`); 0 when K is an estimate (or no σ is known).
     """
 
     gyro: int
@@ -184,6 +193,13 @@ class GyroNoise:
     r_rad_s2: float = 0.0
     gm: tuple = ()
     entries: tuple = field(default=(), repr=False)
+    k_sigma_rad_s_rt_s: float = 0.0
+
+    @property
+    def walk_is_bound(self) -> bool:
+        """True when ``k_rad_s_rt_s`` is the upper bound :data:`WALK_BOUND_Z` σ of a walk the
+        fit did not resolve (σ [rad/s/√s] in ``k_sigma_rad_s_rt_s``), not an estimate."""
+        return self.k_sigma_rad_s_rt_s > 0
 
     def model_avar(self, taus_s, *, with_b: bool = True, dt_s: float = 0.0) -> np.ndarray:
         """Allan variance of every term of the model [(rad/s)²] at ``taus_s`` [s] (flicker as
@@ -239,11 +255,18 @@ def gyro_noise(model: NoiseModel, gyro: int) -> GyroNoise:
     if GAUSS_MARKOV in chosen:
         p = chosen[GAUSS_MARKOV].si_params
         gm = ((float(p["sigma_rad_s"]), float(p["tau_s"])),)
-    return GyroNoise(gyro=gyro, n_rad_rt_s=si(ARW, "n_rad_rt_s"),
-                     k_rad_s_rt_s=si(RRW, "k_rad_s_rt_s"),
-                     b_rad_s=si(BIAS_INSTABILITY, "b_rad_s"), q_rad=si(QUANTIZATION, "q_rad"),
+    k, b = si(RRW, "k_rad_s_rt_s"), si(BIAS_INSTABILITY, "b_rad_s")
+    k_sigma = 0.0
+    if RRW in chosen and not k > 0 and not b > 0 and not gm:
+        sig = chosen[RRW].sigma.get("k_deg_h_rt_h")
+        if isinstance(sig, (int, float)) and math.isfinite(sig) and sig > 0:
+            # a walk the fit held at 0 (not resolved by its record): its upper bound, said so
+            k_sigma = float(units.rrw_deg_h_rt_h_to_rad_s_rt_s(sig))
+            k = WALK_BOUND_Z * k_sigma
+    return GyroNoise(gyro=gyro, n_rad_rt_s=si(ARW, "n_rad_rt_s"), k_rad_s_rt_s=k,
+                     b_rad_s=b, q_rad=si(QUANTIZATION, "q_rad"),
                      r_rad_s2=si(RATE_RAMP, "r_rad_s2"), gm=gm,
-                     entries=tuple(chosen.values()))
+                     entries=tuple(chosen.values()), k_sigma_rad_s_rt_s=k_sigma)
 
 
 def model_gyros(model: NoiseModel) -> list[int]:
@@ -301,12 +324,16 @@ def choose_axis(model: NoiseModel, axis: str | int) -> tuple[GyroNoise, str, lis
         dropped = sorted({e.effect for n in noises for e in n.entries} - {ARW, RRW, BIAS_INSTABILITY})
         chosen = GyroNoise(gyro=0, n_rad_rt_s=mean.n_rad_rt_s, k_rad_s_rt_s=mean.k_rad_s_rt_s,
                            b_rad_s=mean.b_rad_s, entries=tuple(entries))
+        bound = [str(n.gyro) for n in noises if n.walk_is_bound]
         what = (f"the mean of the model's {m} gyros (ARW, RRW, bias instability)"
-                + (f"; left out: {', '.join(dropped)}" if dropped else ""))
+                + (f"; left out: {', '.join(dropped)}" if dropped else "")
+                + (f"; the RRW of gyro(s) {', '.join(bound)} is its 95 % upper bound (not resolved)"
+                   if bound else ""))
     else:
         raise InputError(f"--axis must be worst, mean or a gyro number, got {axis!r}")
     table = [{"gyro": n.gyro, "n_deg_rt_h": float(units.arw_rad_rt_s_to_deg_rt_h(n.n_rad_rt_s)),
               "k_deg_h_rt_h": float(units.rrw_rad_s_rt_s_to_deg_h_rt_h(n.k_rad_s_rt_s)),
+              "k_is_upper_bound": n.walk_is_bound,
               "b_deg_h": float(units.rad_s_to_deg_h(n.b_rad_s))} for n in noises]
     return chosen, what, table
 
@@ -567,6 +594,23 @@ def choose_accel(model: NoiseModel, axis: str | int) -> AccelChoice:
                    else ""))
     else:
         what = f"the mean of the accelerometer's axes {axes} (each term)"
+    for key in ("n_m_s_rt_h", "k_m_s2_rt_h"):
+        # a term no axis resolved, held at 0 by the fit with a 1σ on every axis: each axis's one-
+        # sided 95 % upper bound (estimate + WALK_BOUND_Z σ), the rule's pick of them, said so
+        entries = [(acc.unresolved.get(key) or {}).get(a) or {} for a in acc.axes]
+        sig = [e.get("sigma") for e in entries]
+        if out[key] is not None or not all(isinstance(x, (int, float)) and math.isfinite(x) and x > 0
+                                           for x in sig):
+            continue
+        up = [max(float(e.get("estimate") or 0.0), 0.0) + WALK_BOUND_Z * float(cast(float, x))
+              for e, x in zip(entries, sig)]
+        out[key] = float(conv[key](pick(up)))
+        name, unit = _ACC_TEXT[key]
+        partial[key] = (f"{name}: NOT RESOLVED on any axis by the record the model was fitted on; the file "
+                        f"holds the one-sided 95 % upper bound (estimate + {WALK_BOUND_Z:.4g}σ, {rule} of "
+                        + ", ".join(f"acc_{a} {u:.4g}" for a, u in zip(acc.axes, up))
+                        + f" {unit}), the largest the record allows: conservative, never a 0; "
+                        + "; ".join(f"acc_{a}: {accel_axis_cause(acc, key, a)}" for a in acc.axes))
     missing = [key for key in ("n_m_s_rt_h", "k_m_s2_rt_h") if out[key] is None]
     why = ""
     if missing:
@@ -772,6 +816,14 @@ def _header(noise: GyroNoise, fmt: str, rate_hz: float, inflate: float, why: str
     elif noise.b_rad_s > 0 and fmt == "matlab":
         lines.append("bias instability: BiasInstability = B (IEEE coefficient, ADEV floor "
                      "0.664·B)")
+    elif noise.walk_is_bound:
+        sig_dh = units.rrw_rad_s_rt_s_to_deg_h_rt_h(noise.k_sigma_rad_s_rt_s)
+        lines.append(f"walk: NOT RESOLVED by the record the model was fitted on (RRW K = 0 ± {sig_dh:.4g} "
+                     f"deg/h/√h, 1σ): the file holds its one-sided 95 % upper bound K = "
+                     f"{WALK_BOUND_Z:.4g}σ = {k_dh:.4g} deg/h/√h, the largest walk that record allows, so "
+                     f"a filter tuned with it is conservative (a walk of 0 is refused by Kalibr's reader "
+                     f"and freezes the bias in the others); a longer still record resolves it "
+                     f"(`gyroarray plan`)")
     else:
         lines.append("bias instability: none in the model; the walk is the fitted RRW")
     lost = [e.effect for e in noise.entries if e.effect in (QUANTIZATION, RATE_RAMP,
@@ -780,7 +832,8 @@ def _header(noise: GyroNoise, fmt: str, rate_hz: float, inflate: float, why: str
         lines.append(f"not representable here: {', '.join(lost)} (see --inflate auto)")
     if axis is not None and len(axis[1]) > 1:
         lines.append("every gyro of the model (ARW deg/√h, RRW deg/h/√h, BI deg/h): " + "; ".join(
-            f"{g['gyro']}: {g['n_deg_rt_h']:.4g}, {g['k_deg_h_rt_h']:.4g}, {g['b_deg_h']:.4g}" for g in axis[1])
+            f"{g['gyro']}: {g['n_deg_rt_h']:.4g}, {'≤ ' if g.get('k_is_upper_bound') else ''}"
+            f"{g['k_deg_h_rt_h']:.4g}, {g['b_deg_h']:.4g}" for g in axis[1])
             + " (--axis worst|mean|K chooses)")
     lines.append(f"inflation: ×{inflate:.4g} on the gyro's numbers ({why})"
                  + ("" if accel is None or accel.n_m_s2_rt_hz is None else
@@ -1442,6 +1495,10 @@ def record_check(meas, fmt: str, file_si: dict, noise: GyroNoise, gyros: list[in
                     f"{c['n_below']} of {c['n_taus']} τ: " + ", ".join(
                         f"τ = {b['tau_s']:.4g} s ({b['file_over_measured']:.2f}×)" for b in c["below"]))
         out["accelerometer"] = acc
+    below = [b["file_over_measured"] for c in out["gyros"] + (out["accelerometer"] or []) for b in c["below"]]
+    # the smallest factor on the file's numbers (--inflate X: densities, so ADEV, times X) that lifts
+    # it above the band at every τ where it fails; None when it fails nowhere
+    out["inflate_needed"] = float(1.0 / min(below)) if below else None
     return out
 
 
@@ -1543,6 +1600,11 @@ def build_export(model: NoiseModel, axis: int | str, fmt: str, rate_hz: float, *
                           "n_m_s2_rt_hz": accel.n_m_s2_rt_hz, "k_m_s3_rt_hz": accel.k_m_s3_rt_hz,
                           "b_m_s2": accel.b_m_s2, "why_missing": accel.why_missing or None,
                           "partial": dict(accel.partial)},
+        "walk": {"upper_bound": noise.walk_is_bound,
+                 "k_deg_h_rt_h": float(units.rrw_rad_s_rt_s_to_deg_h_rt_h(noise.k_rad_s_rt_s)),
+                 "fit_sigma_deg_h_rt_h": (float(units.rrw_rad_s_rt_s_to_deg_h_rt_h(noise.k_sigma_rad_s_rt_s))
+                                          if noise.walk_is_bound else None),
+                 "bound_z": WALK_BOUND_Z if noise.walk_is_bound else None},
         "missing_fields": missing,
         "warnings": ([f"the file lacks {', '.join(missing)}: "
                       + (accel.why_missing or f"no accelerometer; {_FIT_HINT}")

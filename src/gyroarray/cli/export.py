@@ -116,8 +116,14 @@ def cmd_export(args):
              f"{args.rate_hz:g} Hz, {summary['convention']}):"]
     if len(summary["gyros"]) > 1:
         lines.append("  every gyro (ARW deg/√h, RRW deg/h/√h): " + "; ".join(
-            f"{g['gyro']}: {g['n_deg_rt_h']:.4g}, {g['k_deg_h_rt_h']:.4g}" for g in summary["gyros"]))
+            f"{g['gyro']}: {g['n_deg_rt_h']:.4g}, {'≤ ' if g.get('k_is_upper_bound') else ''}"
+            f"{g['k_deg_h_rt_h']:.4g}" for g in summary["gyros"]))
     lines += [f"  {k} = {val:.6e}" for k, val in v.items() if not k.lower().endswith(("rate", "frequency"))]
+    if summary["walk"]["upper_bound"]:
+        w = summary["walk"]
+        lines.append(f"  gyro walk: not resolved by the model's record (K = 0 ± {w['fit_sigma_deg_h_rt_h']:.4g} "
+                     f"deg/h/√h): the file holds its 95 % upper bound {w['k_deg_h_rt_h']:.4g} deg/h/√h "
+                     "(conservative; a longer still record resolves it)")
     lines.append(f"  accelerometer: {summary['accelerometer']['axis']}")
     lines += [f"  accelerometer {line}" for line in summary["accelerometer"].get("partial", {}).values()]
     if summary["accelerometer"].get("why_missing") and not summary["missing_fields"]:
@@ -185,6 +191,11 @@ def cmd_export(args):
             lines.append("verify: passed")
         else:
             lines += ["verify: FAILED"] + [f"  {p}" for p in ver["problems"]]
+            need = ver.get("record", {}).get("inflate_needed")
+            if need is not None:
+                lines.append(f"  an --inflate that lifts the file to the record's ADEV at every failing "
+                             f"τ: {need:.3g} (the file's numbers × {need:.3g}; conservative at the other τ), "
+                             "or refit on a longer or quieter still record")
             code = EXIT_FAIL
     return summary, "\n".join(lines), code
 
