@@ -344,3 +344,21 @@ def test_levels_too_fine_refused(small):
     with pytest.raises(InputError, match="no rate level has 20 fitted windows"):
         measure_inflation(small["t"], small["gyro"], ref, static_n_rad_rt_s=N0,
                           levels=tuple(np.linspace(0.0, 3.0, 301)) + (math.inf,))
+
+
+def test_a_3d_reference_observes_every_axis(measured):
+    assert measured[1].unobserved_axes == ()
+    assert measured[1].as_dict()["unobserved_axes"] == []
+
+
+def test_a_planar_reference_is_said_not_to_observe_x_and_y(small):
+    # robot_localization's Husky and Jackal bags: nav_msgs/Odometry from the wheels, roll and pitch
+    # held at 0, while the IMU rocks. The same record, its reference flattened to its yaw: the
+    # rates about x and y (the record's own motion, 0.3-2 rad/s) are then not observed
+    q = small["quat"]
+    yaw = np.arctan2(2 * (q[:, 0] * q[:, 3] + q[:, 1] * q[:, 2]), 1 - 2 * (q[:, 2] ** 2 + q[:, 3] ** 2))
+    flat = np.stack([np.cos(yaw / 2), 0 * yaw, 0 * yaw, np.sin(yaw / 2)], axis=1)
+    ref = Reference.from_quaternions(small["tau"], flat, source="odom.bag")
+    m = measure_inflation(small["t"], small["gyro"], ref, static_n_rad_rt_s=N0)
+    assert m.unobserved_axes == ("x", "y")
+    assert any("never turns about the body's x and y axes" in n for n in m.notes)

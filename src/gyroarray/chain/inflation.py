@@ -195,6 +195,10 @@ class MeasuredInflation:
         Held out (True) or fitted.
     notes : tuple of str
         How it was done, what was assumed.
+    unobserved_axes : tuple of str
+        Body axes about which the reference never turns over the common span ("x", "y" for a
+        planar reference: a ground robot's wheel odometry holds roll and pitch at 0) while the
+        gyro does: there the "motion noise" is the body's own motion, not the gyro's noise.
     """
 
     levels: tuple[LevelDensity, ...]
@@ -213,6 +217,7 @@ class MeasuredInflation:
     windows_level: np.ndarray
     windows_holdout: np.ndarray
     notes: tuple[str, ...] = field(default_factory=tuple)
+    unobserved_axes: tuple[str, ...] = ()
 
     def nis_check(self, label: str) -> NisCheck:
         """The NIS result of ``label`` (measured, static, export)."""
@@ -228,7 +233,8 @@ class MeasuredInflation:
                 "time_offset_s": self.time_offset_s, "window_s": self.window_s,
                 "nis": [c.as_dict() for c in self.nis],
                 "factor_for_export": self.factor_for_export, "factor_ci": list(self.factor_ci),
-                "axis_factor": list(self.axis_factor), "notes": list(self.notes)}
+                "axis_factor": list(self.axis_factor), "notes": list(self.notes),
+                "unobserved_axes": list(self.unobserved_axes)}
 
 
 # ---------------------------------------------------------------------------------------------
@@ -680,6 +686,25 @@ def export_factor(pooled: np.ndarray, motion_levels: np.ndarray, n_levels: int, 
     return filled, wts, ok, raw, f_ci, max(1.0, raw)
 
 
+#: Largest reference increment about a body axis [rad] over the whole common span for that
+#: axis to count as not observed by the reference (a planar pose holds roll and pitch at exactly
+#: 0; a real 3-D reference turns by far more than this on any record).
+UNOBSERVED_RAD = 1e-9
+
+#: The gyro's own increment over the same span [rad] above which that matters (below it the
+#: body did not turn about the axis either, and a zero reference is the truth).
+UNOBSERVED_GYRO_RAD = 1e-3
+
+
+def unobserved_axes(st: "_Steps", ref: Reference) -> tuple[str, ...]:
+    """The body axes the reference never turns about over the common span while the gyro does
+    (:data:`UNOBSERVED_RAD`, :data:`UNOBSERVED_GYRO_RAD`): the largest |increment| per step of
+    the reference, and the gyro's total absolute angle."""
+    ref_inc = np.max(np.abs(st.phi), axis=0)
+    gyro_angle = np.sum(np.abs(st.gamma), axis=0)
+    return tuple(a for i, a in enumerate("xyz") if ref_inc[i] < UNOBSERVED_RAD and gyro_angle[i] > UNOBSERVED_GYRO_RAD)
+
+
 def measure_inflation(imu_time_s, gyro_rad_s, ref: Reference, *,
                       levels=DEFAULT_LEVELS_RAD_S, holdout: float = 0.3,
                       rng: np.random.Generator | None = None,
@@ -799,6 +824,16 @@ def measure_inflation(imu_time_s, gyro_rad_s, ref: Reference, *,
                  f"{w * med_dt:.4g} s ({w} steps)")
 
     sigma2, sigma2_sd, static_step = _sigma_ref(st, ref, static_rate_rad_s, notes)
+    unobserved = unobserved_axes(st, ref)
+    if unobserved:
+        notes.append(
+            f"the reference never turns about the body's {' and '.join(unobserved)} "
+            f"{'axes' if len(unobserved) > 1 else 'axis'} over the common "
+            f"span (its increments there are below {UNOBSERVED_RAD:g} rad: "
+            + ("a planar pose, as a ground robot's wheel odometry gives" if len(unobserved) == 2 else "held")
+            + ") while the gyro does: on " + ", ".join(unobserved) + " the measured excess is the body's own "
+            "motion (rocking, vibration), not the gyro's noise, so those densities and the NIS there "
+            "do not measure the gyro; a 3-D reference (motion capture, a VIO or SLAM pose) does")
 
     win = _windows(st, w, ref)
     nk = win["sums"].shape[0]
@@ -908,7 +943,7 @@ def measure_inflation(imu_time_s, gyro_rad_s, ref: Reference, *,
         factor_for_export=float(factor), factor_ci=f_ci,
         axis_factor=axis_factor,  # type: ignore[arg-type]
         windows_t0_s=win["t0"], windows_level=lev, windows_holdout=hold,
-        notes=(*ref.notes, *notes))
+        notes=(*ref.notes, *notes), unobserved_axes=unobserved)
 
 
 # ---------------------------------------------------------------------------------------------

@@ -146,6 +146,11 @@ def cmd_export(args):
         frm = m["from"] if m.get("method") == "parity" else f"from {m['reference']} topic {m['reference_topic']}"
         lines.append(f"  inflation ×{m['factor']:.4g} measured {frm} ({m['axis']}; held-out NIS, "
                      f"1 when consistent: {held})")
+        if m.get("unobserved_axes"):
+            ax = ", ".join(m["unobserved_axes"])
+            lines.append(f"  the reference never turns about {ax} (a planar pose, as wheel odometry gives) while the "
+                         f"gyro does: on {ax} the excess is the body's motion, not the gyro's noise; a 3-D reference "
+                         "(motion capture, VIO/SLAM pose) measures it")
         if m.get("method") == "parity":
             lines.append("  per motion level (density over the static one, interval): " + "; ".join(
                 f"|w| {lv['lo']:g}-{lv['hi']:g} rad/s ×{lv['factor']:.3g} "
