@@ -54,10 +54,13 @@ import numpy as np
 
 from gyroarray.chain.inflation import (
     DEFAULT_LEVELS_RAD_S, GAP_FACTOR, LEVEL_SMOOTH_S, MIN_LEVEL_WINDOWS, MIN_WINDOWS, LevelDensity,
-    NeighbourFit, NisCheck, assign_levels, export_factor, fmt_g, held_out_nis, kf_nis, level_table,
+    NeighbourFit, NisCheck, assign_levels, export_factor, fmt_g, held_out_nis, holdout_by_level, kf_nis, level_table,
     moving_mean, nis_check,
     source_level, walk_share)
+from gyroarray.analysis.motion import still_mask
+from gyroarray.chain.parity import MIN_SAMPLES_PER_UNKNOWN, self_calibrate
 from gyroarray.core.errors import InputError
+from gyroarray.estimators.fdi import saturated_mask
 
 __all__ = ["ParityInflation", "parity_basis", "measure_parity_inflation",
            "parity_inflation_for_export", "DEFAULT_STATIC_RATE_RAD_S"]
@@ -171,7 +174,8 @@ def measure_parity_inflation(meas, *, levels=DEFAULT_LEVELS_RAD_S, window_s: flo
                              holdout: float = 0.3, model=None, bias_span: int = 15,
                              static_rate_rad_s: float = DEFAULT_STATIC_RATE_RAD_S,
                              confidence: float = 0.95,
-                             rng: np.random.Generator | None = None) -> ParityInflation:
+                             rng: np.random.Generator | None = None,
+                             calibrate: bool = True) -> ParityInflation:
     """The white density an N > 3 gyro array shows per motion level, from its parity residual.
 
     Parameters
@@ -196,6 +200,14 @@ def measure_parity_inflation(meas, *, levels=DEFAULT_LEVELS_RAD_S, window_s: flo
         Level of the intervals [-].
     rng : numpy.random.Generator, optional
         For the factor's interval (default ``default_rng(0)``).
+    calibrate : bool
+        Take the array's scale-factor and axis errors out first (default): the parity
+        self-calibration (:func:`gyroarray.chain.parity.self_calibrate`) fitted on the moving,
+        unsaturated samples of the FITTED part only (never the held-out one), its correction
+        y − E ω̂ applied to the whole record. Those errors put V ᵀE ω into the parity, a
+        deterministic term that follows the rate history, which the densities would otherwise
+        read as noise growing with the rate. When the record cannot be calibrated (too little
+        motion), nothing is corrected and a note says why.
 
     Returns
     -------
@@ -250,15 +262,21 @@ def measure_parity_inflation(meas, *, levels=DEFAULT_LEVELS_RAD_S, window_s: flo
                          f"{static_rate_rad_s:g} rad/s); the parity inflation needs {MIN_WINDOWS}",
                          file=where)
     m0 = int(moving[0])
-    h0 = m0 + int(round((1.0 - holdout) * (nk - m0)))
-    hold = np.zeros(nk, bool)
-    hold[h0:] = True
+    hold = holdout_by_level(np.asarray(valid, dtype=bool), lev, m0, holdout)
     fit_members = np.flatnonzero(valid & ~hold)
     hold_members = np.flatnonzero(valid & hold)
-    notes.append(f"{nk} windows of {w * med:.4g} s ({w} samples); motion from {t0[m0]:.3f} s; "
-                 f"{fit_members.size} windows fitted, the last {holdout:.0%} of the motion held out "
-                 f"({hold_members.size}); {int((~valid).sum())} dropped across gaps")
+    notes.append(f"{nk} windows of {w * med:.4g} s ({w} samples); motion from {t0[m0]:.3f} s; per "
+                 f"rate level the last {holdout:.0%} of its windows from there held out "
+                 f"({hold_members.size}), the rest fitted ({fit_members.size}); "
+                 f"{int((~valid).sum())} dropped across gaps")
 
+    if calibrate:
+        fitted = np.zeros(t.size, bool)
+        fitted[: nk * w] = np.repeat(~hold, w)            # the samples of windows not held out
+        y, cal_note = _calibrated(y, H, med, fitted=fitted, where=where)
+        notes.append(cal_note)
+        p = y @ V
+        e = np.add.reduceat(p[: nk * w], idx, axis=0) / w
     if model is not None:
         static_n, K = _model_parity(model, V, where)
         static_source = "model"
@@ -323,13 +341,44 @@ def measure_parity_inflation(meas, *, levels=DEFAULT_LEVELS_RAD_S, window_s: flo
                  f"{st.mean_nis:.3g} ({'inside' if st.inside else 'outside'}; off by "
                  f"×{math.sqrt(max(st.mean_nis, 0.0)):.3g} in density), export ×{factor:.3g}: "
                  f"{checks[2].mean_nis:.3g}")
-    notes.append("scale-factor and axis errors reach the parity in motion too (Vᵀ E ω): counted "
-                 "here as noise that grows with the rate (gyroarray parity estimates them apart)")
+    if not calibrate:
+        notes.append("scale-factor and axis errors reach the parity in motion too (Vᵀ E ω): counted "
+                     "here as noise that grows with the rate (calibrate=True takes them out first)")
     return ParityInflation(
         n_gyros=N, n_parity=d, levels=tuple(table), static_n_rad_rt_s=float(static_n),
         static_source=static_source, static_k_rad_s_rt_s=float(K), window_s=float(w * med),
         nis=tuple(checks), factor_for_export=float(factor), factor_ci=f_ci,
         windows_t0_s=t0, windows_level=lev, windows_holdout=hold, notes=tuple(notes))
+
+
+def _calibrated(y: np.ndarray, H: np.ndarray, dt_s: float, *, fitted: np.ndarray, where) -> tuple[np.ndarray, str]:
+    """The readings less the array's scale-factor and axis errors fitted on the moving,
+    unsaturated samples among ``fitted`` (bool, per sample: the windows not held out) (:func:`gyroarray.chain.parity.self_calibrate`), and a note; the
+    readings unchanged and the reason when they cannot be fitted."""
+    try:
+        still = still_mask(y, H, dt_s)
+    except InputError:
+        still = np.zeros(y.shape[0], dtype=bool)
+    sat, _ = saturated_mask(y)
+    use = ~still & ~sat & fitted
+    need = MIN_SAMPLES_PER_UNKNOWN * 3 * H.shape[0]
+    if use.sum() < need:
+        return y, (f"scale-factor and axis errors NOT taken out: the fitted part has {int(use.sum())} moving "
+                   f"samples, the parity self-calibration needs {need}; they reach the parity in motion "
+                   "(Vᵀ E ω) and are counted here as noise that grows with the rate")
+    try:
+        cal = self_calibrate(y, H, dt_s, use=use)
+    except InputError as err:
+        return y, (f"scale-factor and axis errors NOT taken out ({err.message}); "
+                   "they are counted here as noise that grows with the rate")
+    s_ppm = np.abs(np.asarray(cal.scale_ppm, dtype=float))
+    t_mrad = np.abs(np.asarray(cal.tilt_mrad, dtype=float))
+    return cal.correct(y, H), (
+        f"scale-factor and axis errors taken out first: the parity self-calibration fitted on the "
+        f"{int(use.sum())} moving samples of the fitted part (not the held-out windows), |scale| up to "
+        f"{np.nanmax(s_ppm):.4g} ppm, |tilt| up to {np.nanmax(t_mrad):.4g} mrad (gauge {cal.gauge}), "
+        "its correction y − E ω̂ applied to the whole record; what is left in motion is noise or "
+        "what the calibration's model lacks")
 
 
 def parity_inflation_for_export(meas_path, model, static_n_rad_rt_s: float, axis: str, *,
