@@ -194,3 +194,32 @@ def test_cli_export_inflate_measured_from_the_parity(rec, tmp_path, cli):
                 "measured", *extra, check=False)
         assert q.returncode == 2 and fragment in q.stderr and len(q.stderr.strip().splitlines()) == 1, q.stderr
         assert not bad.exists()
+
+
+def test_cli_inflate_window_levels_and_holdout_reach_the_measurement(rec, tmp_path, cli):
+    """``--inflate-window``, ``--inflate-levels`` and ``--inflate-holdout`` are the library's
+    ``window_s``, ``levels`` and ``holdout`` (the same factor to 1e-12); refused in one line
+    without ``--inflate measured`` or with edges that do not increase, nothing written."""
+    import json
+    t, y = rec
+    csv = write_measurement(tmp_path, "array", t, units.rad_s_to_deg_s(y), sidecar=SIDECAR)
+    mpath = tmp_path / "m.toml"
+    mpath.write_text(f'effects = [{{effect = "arw", n_deg_rt_h = {units.arw_rad_rt_s_to_deg_rt_h(N0)!r}}}, '
+                     f'{{effect = "rrw", k_deg_h_rt_h = {units.rrw_rad_s_rt_s_to_deg_h_rt_h(K)!r}}}]\n')
+    p = cli("export", mpath, "--format", "kalibr", "--rate-hz", FS_HZ, "--out", tmp_path / "w.yaml",
+            "--inflate", "measured", "--record", csv, "--inflate-window", "0.5", "--inflate-levels",
+            "0,0.05,0.6", "--inflate-holdout", "0.4", "--json")
+    m = json.loads(p.stdout)["inflate_measured"]
+    assert m["window_s"] == pytest.approx(0.5, rel=1e-9)
+    assert [(lv["lo"], lv["hi"]) for lv in m["levels"]] == [(0.0, 0.05), (0.05, 0.6), (0.6, None)]
+    want, _, _ = parity_inflation_for_export(csv, NoiseModel.from_toml(mpath), N0 * 1.0, "gyro 1",
+                                             rng=np.random.default_rng(0), window_s=0.5, holdout=0.4,
+                                             levels=(0.0, 0.05, 0.6, math.inf))
+    assert m["factor"] == pytest.approx(want, rel=1e-12)
+    for extra, fragment in ((["--inflate", "2", "--inflate-window", "0.5"], "read only with --inflate measured"),
+                            (["--inflate", "measured", "--record", csv, "--inflate-levels", "0,0.5,0.2"],
+                             "increasing finite rates")):
+        bad = tmp_path / "bad.yaml"
+        q = cli("export", mpath, "--format", "kalibr", "--rate-hz", FS_HZ, "--out", bad, *extra, check=False)
+        assert q.returncode == 2 and fragment in q.stderr and len(q.stderr.strip().splitlines()) == 1, q.stderr
+        assert not bad.exists()

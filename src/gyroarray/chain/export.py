@@ -1617,7 +1617,8 @@ def build_export(model: NoiseModel, axis: int | str, fmt: str, rate_hz: float, *
 
 def measured_inflation(model: NoiseModel, axis: int | str, meas_path, reference_path,
                        reference_topic: str | None, *, imu_topic: str | None = None,
-                       time_offset_s: float | str = "estimate", seed: int = 0
+                       time_offset_s: float | str = "estimate", seed: int = 0,
+                       window_s: float = 1.0, levels=None, holdout: float = 0.3
                        ) -> tuple[float, dict, list[str]]:
     """``--inflate measured``: the inflation of the exported axis measured on a record with a
     reference pose topic (:func:`gyroarray.chain.inflation.inflation_for_export`).
@@ -1643,6 +1644,12 @@ def measured_inflation(model: NoiseModel, axis: int | str, meas_path, reference_
         Added to the IMU stamps [s] (not read by the parity).
     seed : int
         Seed of the factor's interval.
+    window_s : float
+        The measurement's window [s].
+    levels : sequence of float, optional
+        Bin edges of the rate level [rad/s] (default the measurement's own).
+    holdout : float
+        Fraction of each motion level held out for the NIS check [-].
 
     Returns
     -------
@@ -1653,19 +1660,22 @@ def measured_inflation(model: NoiseModel, axis: int | str, meas_path, reference_
         Four ASCII lines, without comment marks.
     """
     # deferred: the inflation measurement (and its bag readers) loads only for --inflate measured
-    from gyroarray.chain.inflation import inflation_for_export
+    from gyroarray.chain.inflation import DEFAULT_LEVELS_RAD_S, inflation_for_export
     noise, _, _ = choose_axis(model, axis)
+    edges = DEFAULT_LEVELS_RAD_S if levels is None else tuple(levels)
     index = 0 if axis == "mean" else noise.gyro
     if reference_path is None:
         from gyroarray.chain.inflation_parity import parity_inflation_for_export  # deferred
         return parity_inflation_for_export(
             meas_path, model, noise.n_rad_rt_s, "the axes pooled" if index == 0 else f"gyro {index}",
-            imu_topic=imu_topic, rng=np.random.default_rng(seed))
+            imu_topic=imu_topic, rng=np.random.default_rng(seed), window_s=window_s, holdout=holdout,
+            levels=edges)
     if reference_topic is None:
         raise InputError("--inflate measured with --reference needs --reference-topic (the pose or odometry topic)")
     return inflation_for_export(meas_path, reference_path, reference_topic, noise.n_rad_rt_s,
                                 noise.k_rad_s_rt_s, index, imu_topic=imu_topic,
-                                time_offset_s=time_offset_s, rng=np.random.default_rng(seed))
+                                time_offset_s=time_offset_s, rng=np.random.default_rng(seed),
+                                window_s=window_s, holdout=holdout, levels=edges)
 
 
 def verify_file(exp: Export, text: str, *, record=None, seed: int = 0, seconds: float = 7200.0,

@@ -983,7 +983,7 @@ def inflation_for_export(meas_path, reference_path, reference_topic: str,
                          static_n_rad_rt_s: float, static_k_rad_s_rt_s: float, gyro_index: int,
                          *, imu_topic: str | None = None, time_offset_s: float | str = "estimate",
                          window_s: float = 1.0, holdout: float = 0.3,
-                         rng: np.random.Generator | None = None
+                         rng: np.random.Generator | None = None, levels=DEFAULT_LEVELS_RAD_S,
                          ) -> tuple[float, dict, list[str]]:
     """The measured inflation the export applies, from a bag with a reference pose topic.
 
@@ -1008,6 +1008,8 @@ def inflation_for_export(meas_path, reference_path, reference_topic: str,
         Offset added to the IMU stamps [s] (default: estimated, stated in the header).
     window_s : float
         Long window [s].
+    levels : sequence of float
+        Bin edges of the rate magnitude [rad/s] (:func:`measure_inflation`).
     holdout : float
         Held-out fraction of the motion segment [-].
     rng : numpy.random.Generator, optional
@@ -1061,7 +1063,7 @@ def inflation_for_export(meas_path, reference_path, reference_topic: str,
         else:
             imu_t = tm
             notes.append("the CSV's time_s taken as seconds from the reference's first stamp")
-    m = measure_inflation(imu_t, np.asarray(meas.gyro_rad_s), ref, holdout=holdout, rng=rng,
+    m = measure_inflation(imu_t, np.asarray(meas.gyro_rad_s), ref, holdout=holdout, rng=rng, levels=levels,
                           static_n_rad_rt_s=n_s, static_k_rad_s_rt_s=k_s, acc_m_s2=meas.acc_m_s2,
                           window_s=window_s, time_offset_s=time_offset_s,
                           source=str(reference_path))
@@ -1090,7 +1092,7 @@ def inflation_for_export(meas_path, reference_path, reference_topic: str,
         f"{m.window_s:.3g} s: " + "; ".join(levels),
         f"reference attitude noise {fmt_g(m.sigma_ref_rad)} rad per pose (subtracted); time offset "
         f"{m.time_offset_s * 1e3:.4g} ms added to the IMU stamps",
-        f"held-out check (last {holdout:.0%} of the motion, {meas_c.n_eff} innovations), mean NIS "
+        f"held-out check (last {holdout:.0%} of each motion level, {meas_c.n_eff} innovations), mean NIS "
         f"of a bias filter (1 when consistent): measured values {fmt_g(meas_c.mean_nis)} "
         f"(interval {fmt_g(meas_c.interval[0])}-{fmt_g(meas_c.interval[1])}, "
         f"{'inside' if meas_c.inside else 'OUTSIDE'}); static values {fmt_g(st_c.mean_nis)} "

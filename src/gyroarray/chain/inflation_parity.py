@@ -383,8 +383,8 @@ def _calibrated(y: np.ndarray, H: np.ndarray, dt_s: float, *, fitted: np.ndarray
 
 def parity_inflation_for_export(meas_path, model, static_n_rad_rt_s: float, axis: str, *,
                                 imu_topic: str | None = None, window_s: float = 1.0,
-                                holdout: float = 0.3, rng: np.random.Generator | None = None
-                                ) -> tuple[float, dict, list[str]]:
+                                holdout: float = 0.3, rng: np.random.Generator | None = None,
+                                levels=DEFAULT_LEVELS_RAD_S) -> tuple[float, dict, list[str]]:
     """The measured inflation the export applies, from an N > 3 array record's parity residual.
 
     Parameters
@@ -401,6 +401,8 @@ def parity_inflation_for_export(meas_path, model, static_n_rad_rt_s: float, axis
         A bag record's IMU topic.
     window_s : float
         Window [s].
+    levels : sequence of float
+        Bin edges of the smoothed |fused rate| [rad/s] (:func:`measure_parity_inflation`).
     holdout : float
         Held-out fraction of the motion [-].
     rng : numpy.random.Generator, optional
@@ -427,7 +429,7 @@ def parity_inflation_for_export(meas_path, model, static_n_rad_rt_s: float, axis
                          f"array (more than 3 gyros: its parity residual); {meas_path} has "
                          f"{meas.n_gyros} gyros: give --reference BAG --reference-topic T (a "
                          "reference pose topic) instead", file=str(meas_path))
-    m = measure_parity_inflation(meas, window_s=window_s, holdout=holdout, model=model, rng=rng)
+    m = measure_parity_inflation(meas, window_s=window_s, holdout=holdout, model=model, rng=rng, levels=levels)
     frm = f"from the parity residual of {m.n_gyros} gyros during motion"
     factor = m.factor_for_export
     summary = {**m.as_dict(), "factor": factor, "axis": axis, "measurement": str(meas_path),
@@ -449,7 +451,7 @@ def parity_inflation_for_export(meas_path, model, static_n_rad_rt_s: float, axis
         "before the floor at 1); equal-noise assumption: the factor is common to every gyro",
         f"measured density per motion level (|fused rate|), windows of {m.window_s:.3g} s: "
         + "; ".join(levels),
-        f"held-out check (last {holdout:.0%} of the motion, {mc.n_eff} innovations), mean NIS of a "
+        f"held-out check (last {holdout:.0%} of each motion level, {mc.n_eff} innovations), mean NIS of a "
         f"bias filter on the parity (1 when consistent): measured values {fmt_g(mc.mean_nis)} "
         f"(interval {fmt_g(mc.interval[0])}-{fmt_g(mc.interval[1])}, "
         f"{'inside' if mc.inside else 'OUTSIDE'}); static values {fmt_g(sc.mean_nis)} "

@@ -9,6 +9,8 @@ The chain (numpy, the simulator) is imported inside the command, so that buildin
 
 from __future__ import annotations
 
+import argparse
+import math
 from pathlib import Path
 
 from gyroarray.cli.common import EXIT_FAIL, EXIT_OK, add_force, float_in, nonneg_int, output, positive_int
@@ -46,8 +48,32 @@ _MEASURED_ONLY = (("reference", "--reference"), ("reference_topic", "--reference
                   ("imu_topic", "--imu-topic"), ("time_offset_s", "--time-offset-s"))
 
 
+def _levels(text: str) -> tuple:
+    """``--inflate-levels``: increasing bin edges of the rate level [rad/s], the first >= 0; the
+    last bin is open (an infinite edge is appended)."""
+    try:
+        edges = [float(v) for v in text.split(",")]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--inflate-levels must be comma-separated rates [rad/s], got {text[:60]!r}") from None
+    if len(edges) < 2 or not all(math.isfinite(e) for e in edges) or edges[0] < 0 or any(
+            b <= a for a, b in zip(edges, edges[1:])):
+        raise argparse.ArgumentTypeError(f"--inflate-levels {text[:60]}: give at least two increasing finite rates >= 0 "
+                         "[rad/s] (the last bin is open above the last edge)")
+    return (*edges, math.inf)
+
+
+#: The options every ``--inflate measured`` reads, refused without it (argparse dest, option).
+_MEASURED_TUNING = (("inflate_window", "--inflate-window"), ("inflate_levels", "--inflate-levels"),
+                    ("inflate_holdout", "--inflate-holdout"))
+
+
 def _check_measured(args) -> None:
     """Refuse ``--inflate measured`` without its reference, and its options without it."""
+    if args.inflate != "measured":
+        tuning = [opt for dest, opt in _MEASURED_TUNING if getattr(args, dest, None) is not None]
+        if tuning:
+            raise InputError(f"{', '.join(tuning)} {'is' if len(tuning) == 1 else 'are'} read only with "
+                             "--inflate measured")
     if args.inflate == "measured":
         if args.reference is None and args.record is not None:     # the parity residual
             given = [opt for dest, opt in _MEASURED_ONLY if dest != "imu_topic"
@@ -92,7 +118,8 @@ def cmd_export(args):
             factor, m_summary, m_lines = measured_inflation(
                 model, axis, imu_record, args.reference, args.reference_topic, imu_topic=args.imu_topic,
                 time_offset_s="estimate" if args.time_offset_s is None else args.time_offset_s,
-                seed=args.seed)
+                seed=args.seed, window_s=1.0 if args.inflate_window is None else args.inflate_window,
+                levels=args.inflate_levels, holdout=0.3 if args.inflate_holdout is None else args.inflate_holdout)
         except InputError as err:
             raise err if err.file is not None else err.with_file(args.model)
         inflate, measured_parts = factor, (m_summary, m_lines)
@@ -241,6 +268,17 @@ def add_parser(sub) -> None:
     p.add_argument("--time-offset-s", type=_time_offset, default=None, metavar="X|estimate",
                    help="with --inflate measured: offset added to the IMU stamps [s], or estimate "
                         "(default; the header states it)")
+    p.add_argument("--inflate-window", type=float_in("--inflate-window", 0.0, 600.0, lo_open=True, unit="s"),
+                   default=None, metavar="S",
+                   help="with --inflate measured: the window the density is measured over [s] (default 1; "
+                        "whole samples, at least two reference pose intervals)")
+    p.add_argument("--inflate-levels", type=_levels, default=None, metavar="E0,E1,...",
+                   help="with --inflate measured: bin edges of the motion level, |rate| [rad/s] (default "
+                        "0,0.05,0.2,0.5,1,1.5,2.5,4; the last bin is open); each level needs 20 fitted windows")
+    p.add_argument("--inflate-holdout", type=float_in("--inflate-holdout", 0.0, 0.9, lo_open=True),
+                   default=None, metavar="F",
+                   help="with --inflate measured: the fraction of each motion level's windows held out, the "
+                        "latest ones, for the NIS check (default 0.3)")
     p.add_argument("--topic", default=None, metavar="T",
                    help="the IMU topic of Kalibr/OpenVINS files (default: the model's topic, else /imu0, "
                         "said so in the header); also the topic read from a --record bag")
