@@ -210,27 +210,37 @@ def part_lengths(n_samples: int | None = None, parts=None) -> list[int]:
     return out
 
 
-def _part_fisher(m: int, values: dict, dt_s: float, names: tuple) -> np.ndarray:
-    """Whittle information of one part of ``m`` first differences (positive frequencies)."""
+def _part_fisher(m: int, values: dict, dt_s: float, names: tuple, band=None) -> np.ndarray:
+    """Whittle information of one part of ``m`` first differences (positive frequencies), over
+    the Fourier frequencies λ_j = j/m inside ``band`` ((lo, hi) in cycles/sample; default all
+    but 0)."""
     half = m // 2
-    if half <= EXACT_FREQ:
-        j = np.arange(1, half + 1)
-        w = np.ones(half)
-        if m % 2 == 0:
+    j_lo, j_hi = 1, half
+    if band is not None:
+        j_lo = max(1, int(math.ceil(band[0] * m - 1e-9)))
+        j_hi = min(half, int(math.floor(band[1] * m + 1e-9)))
+    count = j_hi - j_lo + 1
+    if count <= 0:
+        return np.zeros((len(names), len(names)))
+    if count <= EXACT_FREQ:
+        j = np.arange(j_lo, j_hi + 1)
+        w = np.ones(count)
+        if m % 2 == 0 and j_hi == half:
             w[-1] = 0.5                                   # Nyquist: one real ordinate
         _, g = log_psd_grad(j / m, values, dt_s, names)
         return (g * w) @ g.T
-    j = np.arange(1, EXACT_FREQ + 1)
+    j = np.arange(j_lo, j_lo + EXACT_FREQ)
     _, g = log_psd_grad(j / m, values, dt_s, names)
     info = g @ g.T
-    lo, hi = (EXACT_FREQ + 0.5) / m, 0.5                  # the rest: m·∫ over [lo, ½]
-    edges = np.geomspace(lo, hi, GRID + 1)
+    lo, hi = (j_lo + EXACT_FREQ - 0.5) / m, (j_hi + 0.5) / m if j_hi < half else 0.5
+    edges = np.geomspace(lo, hi, GRID + 1)                # the rest: m·∫ over [lo, hi]
     mid = np.sqrt(edges[:-1] * edges[1:])
     _, g = log_psd_grad(mid, values, dt_s, names)
     return info + m * (g * np.diff(edges)) @ g.T
 
 
-def fisher(values: dict, dt_s: float, *, n_samples: int | None = None, parts=None) -> tuple:
+def fisher(values: dict, dt_s: float, *, n_samples: int | None = None, parts=None,
+           band_hz=None) -> tuple:
     """Whittle Fisher information of the noise parameters for a record and its still parts.
 
     Parameters
@@ -244,6 +254,10 @@ def fisher(values: dict, dt_s: float, *, n_samples: int | None = None, parts=Non
         Samples of the record (one part) when ``parts`` is not given.
     parts : sequence of (int, int), optional
         Still parts as sample ranges [start, stop); each is its own periodogram.
+    band_hz : (float, float), optional
+        Only the Fourier frequencies inside [lo, hi] Hz (the information of a band-limited
+        likelihood, :func:`gyroarray.analysis.whittle.fit_whittle` with ``band_hz``); default
+        all but 0.
 
     Returns
     -------
@@ -254,9 +268,15 @@ def fisher(values: dict, dt_s: float, *, n_samples: int | None = None, parts=Non
     _check_values(values, dt_s)
     names = tuple(values)
     lengths = part_lengths(n_samples, parts)
+    band = None
+    if band_hz is not None:
+        lo, hi = (float(v) for v in band_hz)
+        if not (math.isfinite(lo) and math.isfinite(hi) and 0.0 <= lo < hi):
+            raise InputError(f"the frequency band must be 0 <= lo < hi Hz, got {band_hz!r}")
+        band = (lo * dt_s, hi * dt_s)                      # cycles/sample
     info = np.zeros((len(names), len(names)))
     for n_part in lengths:
-        info += _part_fisher(n_part - 1, values, dt_s, names)
+        info += _part_fisher(n_part - 1, values, dt_s, names, band)
     return names, info
 
 
@@ -297,7 +317,8 @@ class Bound:
                 "duration_s": self.duration_s, "method": self.method}
 
 
-def crb(values: dict, dt_s: float, *, n_samples: int | None = None, parts=None) -> Bound:
+def crb(values: dict, dt_s: float, *, n_samples: int | None = None, parts=None,
+        band_hz=None) -> Bound:
     """Cramér–Rao bound of each noise parameter for a record of this length, rate and gaps.
 
     Parameters
@@ -310,12 +331,15 @@ def crb(values: dict, dt_s: float, *, n_samples: int | None = None, parts=None) 
         Samples of the record when ``parts`` is not given.
     parts : sequence of (int, int), optional
         Still parts as sample ranges [start, stop).
+    band_hz : (float, float), optional
+        The bound of the likelihood over the Fourier frequencies inside [lo, hi] Hz only
+        (default all but 0: the record's bound).
 
     Returns
     -------
     Bound
     """
-    names, info = fisher(values, dt_s, n_samples=n_samples, parts=parts)
+    names, info = fisher(values, dt_s, n_samples=n_samples, parts=parts, band_hz=band_hz)
     sd, rel = {}, {}
     diag = np.diag(info).copy()
     ok = bool(np.all(np.isfinite(info)) and np.all(diag > 0.0))
@@ -334,7 +358,12 @@ def crb(values: dict, dt_s: float, *, n_samples: int | None = None, parts=None) 
         rel[p] = r                                       # sd of log θ = relative sd of θ
         sd[p] = None if r is None else r * values[p]
     total = sum(part_lengths(n_samples, parts)) * dt_s
-    return Bound(values=dict(values), sd=sd, rel=rel, info=info, duration_s=float(total))
+    if band_hz is None:
+        return Bound(values=dict(values), sd=sd, rel=rel, info=info, duration_s=float(total))
+    return Bound(values=dict(values), sd=sd, rel=rel, info=info, duration_s=float(total),
+                 method=(f"Whittle Fisher information of the first differences of each still part over "
+                         f"the Fourier frequencies in [{band_hz[0]:g}, {band_hz[1]:g}] Hz, exact "
+                         "discrete-time spectra (analysis.crb)"))
 
 
 def closed_form_k_rel(n_rad_rt_s: float, k_rad_s_rt_s: float, duration_s: float) -> float:
