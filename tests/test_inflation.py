@@ -362,3 +362,12 @@ def test_a_planar_reference_is_said_not_to_observe_x_and_y(small):
     m = measure_inflation(small["t"], small["gyro"], ref, static_n_rad_rt_s=N0)
     assert m.unobserved_axes == ("x", "y")
     assert any("never turns about the body's x and y axes" in n for n in m.notes)
+    # the pooled densities, the factor and the held-out NIS are z's alone: the pooled level
+    # density is z's per-axis one (one axis pooled), x and y get no factor, one innovation a window
+    assert math.isnan(m.axis_factor[0]) and math.isnan(m.axis_factor[1]) and m.axis_factor[2] >= 1.0
+    for lv in m.levels:
+        if np.isfinite(lv.density_rad_rt_s):
+            assert lv.density_rad_rt_s == pytest.approx(lv.axis_density_rad_rt_s[2], rel=1e-9)
+    meas = m.nis_check("measured")
+    assert meas.n_eff == int(np.sum(m.windows_holdout)) and len(meas.axis_mean_nis) == 3
+    assert meas.mean_nis == pytest.approx(meas.axis_mean_nis[2], rel=1e-12)

@@ -52,7 +52,7 @@ Method
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -849,6 +849,10 @@ def measure_inflation(imu_time_s, gyro_rad_s, ref: Reference, *,
 
     sigma2, sigma2_sd, static_step = _sigma_ref(st, ref, static_rate_rad_s, notes)
     unobserved = unobserved_axes(st, ref)
+    obs = [i for i, a in enumerate("xyz") if a not in unobserved]
+    if not obs:
+        raise InputError("the reference never turns about any body axis over the common span while the "
+                         "gyro does: it observes no axis, so no density in motion can be measured", file=where)
     if unobserved:
         notes.append(
             f"the reference never turns about the body's {' and '.join(unobserved)} "
@@ -891,6 +895,17 @@ def measure_inflation(imu_time_s, gyro_rad_s, ref: Reference, *,
     fit = NeighbourFit(e, T, refv, fit_members, bias_span)
     table, pooled, per_axis = level_table(fit, T, lev, level_value, levels, sigma2, sigma2_sd,
                                            walk, static_n_rad_rt_s or 0.0, confidence)
+    if unobserved:
+        # the pooled density, its interval and the export factor from the observed axes only
+        fit_o = NeighbourFit(e[:, obs], T, refv, fit_members, bias_span)
+        table_o, pooled, _ = level_table(fit_o, T, lev, level_value, levels, sigma2, sigma2_sd,
+                                         walk, static_n_rad_rt_s or 0.0, confidence)
+        table = [LevelDensity(**{**lv.__dict__, "density_rad_rt_s": lo.density_rad_rt_s,
+                                 "ci_rad_rt_s": lo.ci_rad_rt_s, "factor": lo.factor})
+                 for lv, lo in zip(table, table_o)]
+        notes.append(f"pooled densities, the export factor and the held-out NIS from the observed "
+                     f"{'axes' if len(obs) > 1 else 'axis'} {', '.join('xyz'[i] for i in obs)} only; the "
+                     f"per-axis values of {', '.join(unobserved)} are given but not measured against the truth")
     if static_n_rad_rt_s is None:
         lowest = next((lv for lv in table if np.isfinite(lv.density_rad_rt_s)), None)
         static_n = lowest.density_rad_rt_s if lowest else math.nan
@@ -915,7 +930,7 @@ def measure_inflation(imu_time_s, gyro_rad_s, ref: Reference, *,
                          f"{w * med_dt:.3g} s (a longer record, fewer levels or a shorter "
                          "window)", file=where)
     # export factor: motion-weighted measured density over the static one
-    nu_l = np.array([3.0 * lv.n_windows for lv in table])
+    nu_l = np.array([float(len(obs)) * lv.n_windows for lv in table])
     ef = export_factor(pooled, lev[fit_members[fit_members >= m0]], n_levels, nu_l, static_n, rng,
                        confidence)
     filled, wts, ok, raw_factor, f_ci, factor = ef
@@ -923,7 +938,7 @@ def measure_inflation(imu_time_s, gyro_rad_s, ref: Reference, *,
         notes.append(f"the motion-weighted measured density is {raw_factor:.3g}× the static one, "
                      "below 1: the export keeps the static values (factor 1)")
     axis_factor = tuple(max(1.0, math.sqrt(max(float(np.sum(wts * nearest_filled(per_axis[:, a]))),
-                                               0.0)) / static_n) for a in range(3))
+                                               0.0)) / static_n) if a in obs else math.nan for a in range(3))
 
     # the held-out NIS check
     z = float(stats.norm.ppf(0.5 + confidence / 2))
@@ -939,18 +954,23 @@ def measure_inflation(imu_time_s, gyro_rad_s, ref: Reference, *,
             ("static", np.repeat((static_n ** 2 / T + ref_R)[:, None], 3, axis=1), K ** 2),
             ("export", np.repeat(((factor * static_n) ** 2 / T + ref_R)[:, None], 3, axis=1),
              (factor * K) ** 2)):
-        hv = held_out_nis(kf_nis(e, win["t0"], T, R, q, valid), hold_valid)
+        nis_all = kf_nis(e, win["t0"], T, R, q, valid)
+        hv_all = held_out_nis(nis_all, hold_valid)
+        hv = held_out_nis(nis_all[:, obs], hold_valid)              # the observed axes
         var_param = 0.0
         if label == "measured" and hv.size:
             # a density estimated with ν dof moves the mean NIS by its R share × δ ln N²
-            share = (R - ref_R[:, None])[hold_valid] / (R[hold_valid])
+            share = (R - ref_R[:, None])[hold_valid][:, obs] / (R[hold_valid][:, obs])
             for L in range(n_levels):
                 sel = lev[hold_valid] == L
                 if sel.any():
                     cL = float(share[sel].sum()) / max(hv.size, 1)
                     src = source_level(L, ok)
                     var_param += cL ** 2 * 2.0 / (nu_l[src] / (1.0 + 2.0 / max(bias_span, 1)))
-        checks.append(nis_check(label, hv, var_param, z))
+        chk = nis_check(label, hv, var_param, z)
+        if unobserved and hv_all.size:                  # every axis's mean, the unobserved too
+            chk = replace(chk, axis_mean_nis=tuple(float(v) for v in hv_all.mean(axis=0)))  # type: ignore[arg-type]
+        checks.append(chk)
     st_chk = checks[1]
     notes.append(f"held-out NIS: measured {checks[0].mean_nis:.3g} (interval "
                  f"{checks[0].interval[0]:.3g}–{checks[0].interval[1]:.3g}), static "
@@ -1067,8 +1087,16 @@ def inflation_for_export(meas_path, reference_path, reference_topic: str,
                           static_n_rad_rt_s=n_s, static_k_rad_s_rt_s=k_s, acc_m_s2=meas.acc_m_s2,
                           window_s=window_s, time_offset_s=time_offset_s,
                           source=str(reference_path))
+    if gyro_index and "xyz"[gyro_index - 1] in m.unobserved_axes:
+        seen = [i + 1 for i, a in enumerate("xyz") if a not in m.unobserved_axes]
+        raise InputError(f"the reference {reference_topic} never turns about {'xyz'[gyro_index - 1]} (gyro "
+                         f"{gyro_index}, the axis exported) while the gyro does: its inflation cannot be "
+                         f"measured there; export an observed axis (--axis {', --axis '.join(map(str, seen))}, "
+                         "or --axis mean: the observed axes pooled) or use a 3-D reference", file=str(reference_path))
     factor = m.factor_for_export if gyro_index == 0 else m.axis_factor[gyro_index - 1]
-    axis = "the axes pooled" if gyro_index == 0 else f"gyro {gyro_index} ({'xyz'[gyro_index - 1]})"
+    axis = ("the axes pooled" + (f" (the observed ones, {', '.join(a for a in 'xyz' if a not in m.unobserved_axes)})"
+                                 if m.unobserved_axes else "")
+            if gyro_index == 0 else f"gyro {gyro_index} ({'xyz'[gyro_index - 1]})")
     summary = {**m.as_dict(), "factor": factor, "axis": axis, "measurement": str(meas_path),
                "reference": str(reference_path), "reference_topic": reference_topic,
                "notes": [*notes, *m.notes]}
