@@ -39,6 +39,9 @@ __all__ = [
     "term_basis",
     "term_from_curve",
     "fit_noise_terms",
+    "RRWBound",
+    "rrw_adev_bound",
+    "RRW_BOUND_TAIL",
 ]
 
 #: The five IEEE Std 952 terms, in order of the exponent of tau in the
@@ -799,3 +802,76 @@ def fit_noise_terms(result, edf_of_alpha: Callable[[np.ndarray], np.ndarray],
         tau_bi_s=float(taus[int(np.argmin(dev))]),
         **values,
     )
+
+
+#: One-sided tail of the ADEV's upper confidence bound that caps a random walk's K (95 %: on the ADIS
+#: record's first half 212 / 325 / 351 deg/h/√h; at 3σ the last octaves' few degrees of freedom
+#: leave 411 / 445 / 486, no bound at all on a fitted 248 / 167 / 337) [-].
+RRW_BOUND_TAIL = 0.05
+
+
+class RRWBound(NamedTuple):
+    """The largest rate random walk a record's own ADEV allows (:func:`rrw_adev_bound`).
+
+    Attributes
+    ----------
+    k_max : float
+        K_max [rad/s/√s].
+    tau_s : float
+        The τ whose bound sets it [s].
+    adev : float
+        The measured ADEV there [rad/s].
+    adev_upper : float
+        Its upper confidence bound [rad/s].
+    edf : float
+        Its equivalent degrees of freedom [-].
+    """
+
+    k_max: float
+    tau_s: float
+    adev: float
+    adev_upper: float
+    edf: float
+
+
+def rrw_adev_bound(rate_rad_s, dt_s: float, *, tail: float = RRW_BOUND_TAIL) -> RRWBound:
+    """The +1/2-slope line through the lowest ADEV upper bound: K <= K_max.
+
+    Parameters
+    ----------
+    rate_rad_s : array_like, shape (n,)
+        The stochastic record [rad/s], uniform step ``dt_s``.
+    dt_s : float
+        Sample step [s].
+    tail : float
+        One-sided tail of each τ's upper bound [-].
+
+    Returns
+    -------
+    RRWBound
+
+    Notes
+    -----
+    A rate random walk K alone has ADEV K·√(τ/3); no other term of the record can make the
+    ADEV smaller than that, so at every octave τ the truth satisfies K·√(τ/3) <= σ_up(τ), the
+    measured ADEV's upper bound from its χ² distribution (ν from Greenhall's sampled EDF for a
+    random walk, α = −2, the fewest degrees of freedom of the five terms at long τ: the widest,
+    safest bound), and
+
+        K_max = min over τ of σ_up(τ)·√(3/τ).
+
+    The minimum is where the ADEV bends up least, normally the last octaves. Issue 44: on the ADIS
+    record's first half (raw outputs) the ADEV points alone give 74 / 211 / 234 deg/h/√h, their 95 %
+    upper bounds 212 / 325 / 351, where the ladder fitted 248 / 167 / 337.
+    """
+    from gyroarray.analysis.allan import confidence_interval, edf, oadev       # deferred: allan imports this module
+    res = oadev(np.asarray(rate_rad_s, dtype=float), float(dt_s), "octave")
+    ok = np.isfinite(res.dev) & (res.dev > 0)
+    if not ok.any():
+        raise InputError("the record has no Allan deviation to bound its random walk")
+    nu = np.asarray(edf("oadev", res.n_phase, res.m, np.full(res.m.size, -2)), dtype=float)
+    nu = np.where(np.isfinite(nu) & (nu > 0), nu, 1.0)
+    _, hi = confidence_interval(res.dev, nu, confidence=1.0 - 2.0 * tail)
+    kmax = np.where(ok, hi * np.sqrt(3.0 / res.taus_s), np.inf)
+    j = int(np.argmin(kmax))
+    return RRWBound(float(kmax[j]), float(res.taus_s[j]), float(res.dev[j]), float(hi[j]), float(nu[j]))

@@ -30,9 +30,10 @@ import math
 from dataclasses import dataclass, replace
 
 import numpy as np
-from scipy import stats
+from scipy import optimize, stats
 
-__all__ = ["NoSpectralLines", "LineResponse", "ZeroFrequencyGain", "fundamental_hz", "line_responses",
+__all__ = ["NoSpectralLines", "LineResponse", "ZeroFrequencyGain", "TransferCheck", "fundamental_hz", "line_responses",
+           "shown_lines", "transfer_check", "line_cap", "P_RULED_OUT",
            "zero_frequency_gain", "cross_spectral_gain"]
 
 #: Line power of the reference over its floor (the mean power halfway between harmonics) that a
@@ -52,6 +53,10 @@ MAX_HARMONICS = 12
 #: The f² line over the harmonics is refitted without the highest line while its χ² has a
 #: tail probability below this (the response is no longer quadratic there).
 P_CURVED = 0.01
+#: Fewest lines through which |H| is extrapolated to f → 0 (a + c·f², one degree of freedom left
+#: for its χ²); with fewer the gain is |H| at the fundamental, as read (issue 44 item 2).
+MIN_LINES_EXTRAPOLATED = 3
+
 #: A line of the reference is read only when the gyro shows it: |h| > GYRO_LINE_Z σ (issue 44
 #: item 2: an encoder's 2nd-harmonic error is a line of the reference that the rate does not have,
 #: |h| ≈ 0 there, and it pulled the f² extrapolation: on the shared MPU record with its reference
@@ -168,7 +173,11 @@ class ZeroFrequencyGain:
         k = [ln.harmonic for ln in self.lines]
         what = (f"the motion's {self.fundamental_hz:.4g} Hz fundamental" if k == [1] else
                 f"{len(k)} lines of the motion (harmonics {', '.join(map(str, k))} of {self.fundamental_hz:.4g} Hz)")
-        how = ("|H| at the line" if len(k) == 1 else "|H| fitted as a line in f² and read at f → 0")
+        how = ("|H| at the line" if len(k) == 1 else
+               f"|H| fitted as a + c·f² and read at f → 0 (χ² = {self.chi2:.3g} for {self.dof} dof)")
+        if len(k) == 1 and self.dropped:
+            how += (f" (no extrapolation to f → 0: fewer than {MIN_LINES_EXTRAPOLATED} lines fit a + c·f² "
+                    "with a χ² to check it)")
         out = f"{what}, {self.n_segments} segments of {self.cycles_per_segment} cycles; {how}"
         if self.not_shown:
             out += (f"; harmonic(s) {', '.join(str(ln.harmonic) for ln in self.not_shown)} of the reference "
@@ -384,7 +393,9 @@ def zero_frequency_gain(lines, fundamental: float, cycles_per_segment: int, *,
         Whole cycles per segment (for the description).
     p_curved : float
         With three lines or more, the highest is left out while the f² fit's χ²
-        has a tail probability below this (|H| curves there).
+        has a tail probability below this (|H| curves there). Fewer than
+        :data:`MIN_LINES_EXTRAPOLATED` lines left: |H| at the fundamental, not
+        extrapolated (two lines fix a + c·f² with no χ² to check the model).
 
     Returns
     -------
@@ -396,16 +407,23 @@ def zero_frequency_gain(lines, fundamental: float, cycles_per_segment: int, *,
 
         |H(f_k)| = a + c·f_k²,   |H(0)| = a
 
-    weighted by 1/σ_k²; σ_a scaled by √(χ²/dof) when that exceeds 1. With one
-    line, |H(0)| = |H(f0)| (no gradient correction).
+    weighted by 1/σ_k²; σ_a scaled by √(χ²/dof) when that exceeds 1; χ² and its
+    dof (K − 2) are reported. With fewer than three lines, |H(0)| = |H(f0)| (no
+    gradient correction).
     """
     used = list(lines)
     if not used:
         raise NoSpectralLines("no harmonic of the motion stands above the reference's noise")
     dropped = []
     a, sa, c, sc, chi2, dof = _fit_f2(used)
-    while len(used) >= 3 and dof > 0 and stats.chi2.sf(chi2, dof) < p_curved:
+    while len(used) >= MIN_LINES_EXTRAPOLATED and dof > 0 and stats.chi2.sf(chi2, dof) < p_curved:
         dropped.append(used.pop())
+        a, sa, c, sc, chi2, dof = _fit_f2(used)
+    if len(used) < MIN_LINES_EXTRAPOLATED:
+        # two lines fix a + c·f² exactly, with no check of the model: (4|H1| − |H2|)/3 of the
+        # fundamental and 2nd harmonic read 1.33 on the MPU record. The fundamental alone, as read
+        dropped.extend(reversed(used[1:]))
+        used = used[:1]
         a, sa, c, sc, chi2, dof = _fit_f2(used)
     return ZeroFrequencyGain(a, sa, c, sc, tuple(used), tuple(dropped), chi2, dof, float(fundamental),
                              int(cycles_per_segment))
@@ -452,3 +470,273 @@ def cross_spectral_gain(y, x, dt_s: float, *, use=None, f0_hz: float | None = No
         raise NoSpectralLines(f"the gyro shows none of the reference's {len(lines)} line(s) (|h| within "
                               f"{GYRO_LINE_Z:g} σ of 0 at each)")
     return replace(zero_frequency_gain(shown, f0, c), not_shown=not_shown)
+
+
+# -- the record's own limits on a candidate's transfer function (issue 44 item 1) ---------------
+
+#: Tail probability of the lines' χ² below which a candidate's transfer function is ruled out by the
+#: lines it would have to match [-] (z ≈ 3.1 one-sided: 1 chance in 1000 for a right candidate).
+P_RULED_OUT = 1e-3
+
+
+@dataclass(frozen=True)
+class TransferCheck:
+    """A candidate's H(f) against the lines the gyro shows (:func:`transfer_check`).
+
+    Attributes
+    ----------
+    chi2 : float
+        Σ_k |h_k − g·H(f_k)|²/σ_k², both parts of each complex line, at the best real gain g
+        (and the best nuisance, when there is one) [-].
+    dof : int
+        2·(lines) − 1 − (nuisance parameters).
+    p : float
+        Tail probability of χ²(dof) ≥ chi2 [-].
+    gain : float
+        The best g [-] (the scale factor's part: a gain H does not set).
+    nuisance : float
+        The best nuisance value (``nan`` without one) [its unit].
+    lines : tuple of LineResponse
+        The lines used (the gyro shows each: |h| > GYRO_LINE_Z σ).
+    amp_ratio : tuple of (float, float, float)
+        Per line k > 1: (measured |h_k|/|h_1|, its σ, the candidate's |H(f_k)|/|H(f_1)|) [-].
+    phase_delay_s : tuple of (float, float, float)
+        Per line: (measured −arg h_k/(2π f_k), its σ, the candidate's) [s].
+    param : float
+        The candidate's parameter where the χ² is least [its unit].
+    scale : float
+        The factor the lines' σ were scaled by: √(χ²/dof) of a smooth fit of no model, at
+        least 1 (:func:`_smooth_scale2`) [-].
+    """
+
+    chi2: float
+    dof: int
+    p: float
+    gain: float
+    nuisance: float
+    lines: tuple
+    amp_ratio: tuple
+    phase_delay_s: tuple
+    param: float = math.nan
+    scale: float = 1.0
+
+    @property
+    def ruled_out(self) -> bool:
+        """The lines rule the candidate out (p < :data:`P_RULED_OUT`)."""
+        return bool(self.p < P_RULED_OUT)
+
+    def describe(self, what: str) -> str:
+        """One sentence: the candidate ``what`` against the lines (the worst line named)."""
+        k = [ln.harmonic for ln in self.lines]
+        f0 = self.lines[0].freq_hz / self.lines[0].harmonic
+        out = (f"{what} against the gyro's transfer function at {len(k)} line(s) of the motion "
+               f"(harmonics {', '.join(map(str, k))} of {f0:.4g} Hz): χ² = {self.chi2:.4g} for {self.dof} dof "
+               f"(p = {self.p:.2g}"
+               + (f", the lines' σ scaled by {self.scale:.3g}, their roughness about a smooth H" if self.scale > 1 else "")
+               + ")")
+        if self.amp_ratio:
+            j = int(np.argmax([abs(m - c) / s if s > 0 else 0.0 for m, s, c in self.amp_ratio]))
+            m, s, c = self.amp_ratio[j]
+            out += (f"; |H(h{k[j + 1]})|/|H(h{k[0]})| would be {c:.4f}, measured {m:.4f} ± {s:.2g}")
+        d = self.phase_delay_s
+        out += (f"; its phase delay would be {d[0][2] * 1e3:.4g}–{d[-1][2] * 1e3:.4g} ms from h{k[0]} to h{k[-1]}, "
+                f"measured {d[0][0] * 1e3:.4g} ± {d[0][1] * 1e3:.2g} to {d[-1][0] * 1e3:.4g} ± {d[-1][1] * 1e3:.2g} ms")
+        return out
+
+
+def shown_lines(y, x, dt_s: float, *, use=None) -> tuple[float, list] | str:
+    """The motion's fundamental and the lines of the reference that the gyro shows.
+
+    Parameters
+    ----------
+    y, x : array_like, shape (n,)
+        Output and reference [same unit], uniform step ``dt_s``.
+    dt_s : float
+        Sample step [s].
+    use : array_like of bool, shape (n,), optional
+        Samples that may be read (:func:`line_responses`).
+
+    Returns
+    -------
+    (float, list of LineResponse) or str
+        f0 [Hz] and the lines with |h| > :data:`GYRO_LINE_Z` σ (lowest first), or a phrase saying
+        why there are none (no periodic motion, too short).
+    """
+    try:
+        f0 = fundamental_hz(np.asarray(x, dtype=float), dt_s)
+        lines = line_responses(y, x, dt_s, f0, use=use)
+    except NoSpectralLines as err:
+        return str(err)
+    shown = [ln for ln in lines if ln.gain > GYRO_LINE_Z * ln.sigma]
+    if not shown:
+        return "the gyro shows none of the motion's lines"
+    return f0, shown
+
+
+def transfer_check(lines, model, p_hat: float, sigma_p: float = math.nan, *, free_delay: bool = False,
+                   free_curvature: bool = True, lower: float = -math.inf) -> TransferCheck:
+    """A candidate's transfer function H(f; p) against measured lines, a real gain left free.
+
+    Parameters
+    ----------
+    lines : sequence of LineResponse
+        The lines the gyro shows (:func:`shown_lines`), lowest first; at least one.
+    model : callable
+        ``model(f_hz, p) -> complex ndarray``: the candidate's H at the lines' frequencies [Hz]
+        for its parameter p [its unit].
+    p_hat, sigma_p : float
+        The candidate's fitted parameter and its 1σ [its unit]: p is profiled with the penalty
+        ((p − p_hat)/σ_p)² (the lines and the fit must agree on one value); fixed at p_hat when
+        σ_p is not a positive number.
+    free_delay : bool
+        A pure delay exp(−i 2π f τ) left free too (a rival delay the model does not have yet,
+        which a low-pass must not be refused for).
+    free_curvature : bool
+        The gain's own f² curvature left free, (g + b·f²)·H: a reference differentiated by
+        centred differences reads sin(x)/x of the rate (x = 2π f dt: +1.2 % at 4 Hz and 100 Hz
+        on the MPU record, whose |h| rises from 1.0060 at h1 to 1.0126 at h9), which no
+        candidate of the gyro's own models; a low-pass then has its phase dispersion and its
+        amplitude beyond f² to match, a delay its flat phase delay.
+    lower : float
+        Smallest p the model takes (a cut-off above 0).
+
+    Returns
+    -------
+    TransferCheck
+        ``nuisance``: the free delay [s] (nan without); the lines' χ² and the penalty together.
+
+    Notes
+    -----
+    With h_k the measured lines and σ_k the σ of |h_k| (taken as the σ of each part of the
+    complex ratio: a circular error), H_k = model(f_k, p)·exp(−i 2π f_k τ)::
+
+        g = Σ Re(conj(H_k)·h_k)/σ_k² / Σ |H_k|²/σ_k²
+        χ² = min over p (and τ) of Σ |h_k − g·H_k|²/σ_k² + ((p − p̂)/σ_p)²
+
+    (with ``free_curvature``, g·H_k becomes (g + b·f_k²)·H_k, b real and free) with 2K − 1
+    degrees of freedom, one fewer for each of the free delay and the curvature. The gain g is
+    free because a scale factor (not the candidate's) sets it; what the candidate must match
+    are the amplitude ratios |h_k|/|h_1| and the phase delays −arg h_k/(2π f_k), together.
+    """
+    lines = list(lines)
+    f = np.array([ln.freq_hz for ln in lines])
+    h = np.array([ln.h for ln in lines])
+    s = np.array([max(ln.sigma, 1e-300) for ln in lines])
+    w = 1.0 / s ** 2
+    profiled = math.isfinite(sigma_p) and sigma_p > 0.0
+
+    sw = np.sqrt(w)
+    target = np.concatenate([(h * sw).real, (h * sw).imag])
+
+    def chi2_g(H):
+        """(χ², g, b/g) of h ≈ (g + b·f²)·H, g and b real, by weighted least squares."""
+        cols = [H * sw] + ([H * f ** 2 * sw] if free_curvature else [])
+        A = np.column_stack([np.concatenate([c.real, c.imag]) for c in cols])
+        coef, *_ = np.linalg.lstsq(A, target, rcond=None)
+        bg = float(coef[1] / coef[0]) if free_curvature and coef[0] != 0 else 0.0
+        return float(np.sum((A @ coef - target) ** 2)), float(coef[0]), bg
+
+    scale2 = _smooth_scale2(f, h, s)
+
+    def at(p):
+        """(χ², g, τ, b/g) at p, the delay profiled; the lines' χ² over the smooth fit's scale²."""
+        H = np.asarray(model(f, p), dtype=complex)
+        pen = ((p - p_hat) / sigma_p) ** 2 if profiled else 0.0
+        if not free_delay:
+            c, g, bg = chi2_g(H)
+            return c / scale2 + pen, g, math.nan, bg
+        tau0 = float(-np.angle(h[0] / H[0]) / (2 * math.pi * f[0]))
+        half = 0.5 / float(f.max())
+
+        def c_of(tau):
+            return chi2_g(H * np.exp(-2j * math.pi * f * tau))[0]
+        taus = tau0 + np.linspace(-half, half, 21)
+        j = int(np.argmin([c_of(x) for x in taus]))
+        res = optimize.minimize_scalar(c_of, bounds=(taus[max(j - 1, 0)], taus[min(j + 1, 20)]),
+                                       method="bounded", options={"xatol": 1e-9})
+        tau = float(res.x)
+        c, g, bg = chi2_g(H * np.exp(-2j * math.pi * f * tau))
+        return c / scale2 + pen, g, tau, bg
+
+    p = float(p_hat)
+    if profiled:
+        grid = p_hat + sigma_p * np.linspace(-8.0, 8.0, 33)
+        grid = grid[grid > lower] if np.any(grid > lower) else np.array([p_hat])
+        vals = [at(x)[0] for x in grid]
+        j = int(np.argmin(vals))
+        lo, hi = grid[max(j - 1, 0)], grid[min(j + 1, grid.size - 1)]
+        if hi > lo:
+            res = optimize.minimize_scalar(lambda x: at(x)[0], bounds=(lo, hi), method="bounded")
+            p = float(res.x) if res.fun < vals[j] else float(grid[j])
+        else:
+            p = float(grid[j])
+    chi2, g, tau, bg = at(p)
+    H = np.asarray(model(f, p), dtype=complex) * (1.0 + bg * f ** 2)
+    if free_delay:
+        H = H * np.exp(-2j * math.pi * f * tau)
+    dof = max(2 * len(lines) - 1 - (1 if free_delay else 0) - (1 if free_curvature else 0), 1)
+    amp = tuple((float(abs(h[k]) / abs(h[0])),
+                 float(abs(h[k]) / abs(h[0]) * math.hypot(s[k] / abs(h[k]), s[0] / abs(h[0]))),
+                 float(abs(H[k]) / abs(H[0]))) for k in range(1, len(lines)))
+    delay = tuple((float(-np.angle(h[k]) / (2 * math.pi * f[k])), float(s[k] / abs(h[k]) / (2 * math.pi * f[k])),
+                   float(-np.angle(H[k]) / (2 * math.pi * f[k]))) for k in range(len(lines)))
+    return TransferCheck(chi2, int(dof), float(stats.chi2.sf(chi2, dof)), g, tau, tuple(lines), amp, delay,
+                         float(p), float(math.sqrt(scale2)))
+
+
+def _smooth_scale2(f: np.ndarray, h: np.ndarray, s: np.ndarray) -> float:
+    """χ²/dof (at least 1) of the lines about a smooth transfer function of no particular model:
+    ln|h| on (1, f², f⁴) and arg h on (f, f³), each weighted by (|h|/σ)² [-].
+
+    The lines' own σ (coherence, jackknife) leave out what varies from harmonic to harmonic
+    without a model's shape (an encoder's line errors): on the MPU record the best pure delay
+    has χ² 153 for 20 dof, and this smooth fit about as much. The candidate's χ² is read over
+    this scale, so that it is refused for its shape or its value, not for the lines' roughness.
+    1 with fewer than 4 lines (2K − 5 < 3 degrees of freedom)."""
+    k = f.size
+    if 2 * k - 5 < 3:
+        return 1.0
+    wt = (np.abs(h) / s) ** 2
+    sw = np.sqrt(wt)
+    amp = np.log(np.abs(h))
+    ph = np.unwrap(np.angle(h))
+    chi2 = 0.0
+    for y, cols in ((amp, [np.ones_like(f), f ** 2, f ** 4]), (ph, [f, f ** 3])):
+        A = np.column_stack(cols) * sw[:, None]
+        coef, *_ = np.linalg.lstsq(A, y * sw, rcond=None)
+        chi2 += float(np.sum((A @ coef - y * sw) ** 2))
+    return max(1.0, chi2 / (2 * k - 5))
+
+
+def line_cap(y, x2, dt_s: float, f0_hz: float, harmonic: int = 2, *, use=None) -> tuple[float, float] | str:
+    """The gyro's line at ``harmonic``·f0 over a regressor's line there: a cap on its coefficient.
+
+    Parameters
+    ----------
+    y : array_like, shape (n,)
+        The gyro's output [rad/s] (the residual plus the sensed reference).
+    x2 : array_like, shape (n,)
+        The regressor (u² for a rate-squared term) [its unit].
+    dt_s : float
+        Sample step [s].
+    f0_hz : float
+        The motion's fundamental [Hz].
+    harmonic : int
+        The line read (2: a rate² term of a periodic motion puts its first line at 2 f0).
+    use : array_like of bool, shape (n,), optional
+        Samples that may be read.
+
+    Returns
+    -------
+    (float, float) or str
+        |Y/X2| at the line and its σ [unit of y over unit of x2] (the instrumental-variable
+        ratio of :func:`line_responses`), or why not (the regressor has no line there).
+    """
+    try:
+        lines = line_responses(y, x2, dt_s, f0_hz, use=use, max_harmonics=harmonic)
+    except NoSpectralLines as err:
+        return str(err)
+    at = [ln for ln in lines if ln.harmonic == harmonic]
+    if not at:
+        return f"the regressor has no line at {harmonic} f0 = {harmonic * f0_hz:.4g} Hz"
+    return at[0].gain, at[0].sigma

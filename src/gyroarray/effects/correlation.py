@@ -6,10 +6,11 @@ import math
 from dataclasses import replace
 
 import numpy as np
-from scipy import special
+from scipy import special, stats
 
+from gyroarray.analysis.allan import edf
 from gyroarray.analysis.allan_gls import columns, cov_model, cross_avar, Curve, factors, gls, solve, whitener
-from gyroarray.effects.fitting import as_dt, as_rate, chi2_to_z, EffectFit, z_from_log_p
+from gyroarray.effects.fitting import as_dt, as_rate, chi2_to_z, EffectFit, ruled_out, unchecked, z_from_log_p
 from gyroarray.core.gdop import correlation_matrix
 from gyroarray.effects import _draw
 from gyroarray.core.errors import InputError
@@ -167,13 +168,16 @@ def _merge(name: str, fits: list[EffectFit]) -> EffectFit:
         z = z_from_log_p(log_p)
     else:
         z = math.nan
-    params = {"rho_arw": float(fa.params["rho_arw"]) if fa else 0.0,
+    params = {"rho_arw": float(fa.params["rho_arw"]) if fa and "ruled_out" not in fa.extra else 0.0,
               "rho_rrw": float(fr.params["rho_rrw"]) if fr else 0.0}
     sigma = {}
     for f in fits:
         sigma.update(f.sigma)
     best = max(fits, key=lambda f: f.z if f.z is not None and np.isfinite(f.z) else -math.inf)
-    return EffectFit(name, None, params, sigma, z, best.evidence,
+    evidence = best.evidence
+    if fa is not None and "ruled_out" in fa.extra and best is not fa:
+        evidence += f"; the ARW correlation is refused: {fa.extra['ruled_out']}"
+    return EffectFit(name, None, params, sigma, z, evidence,
                      extra={"rho_arw_fit": fa.extra if fa else None,
                             "rho_rrw_fit": fr.extra if fr else None})
 
@@ -336,5 +340,61 @@ def fit_correlation(E, dt_s: float) -> list[EffectFit]:
     G = columns(curves[0], ("n", "k"))
     pairs = [(i, k) for i in range(big_n) for k in range(i + 1, big_n)]
     rho, s0 = _pair_correlations(cav, cov, coefs, G, pairs)
-    return [_family_correlation(fam, key, what, rho[fam], s0[fam], seen, pairs, big_n)
-            for fam, key, what in ((0, "rho_arw", "ARW (short τ)"), (1, "rho_rrw", "RRW (long τ)"))]
+    out = [_family_correlation(fam, key, what, rho[fam], s0[fam], seen, pairs, big_n)
+           for fam, key, what in ((0, "rho_arw", "ARW (short τ)"), (1, "rho_rrw", "RRW (long τ)"))]
+    out[0] = _held_in_band(out[0], cav, coefs, m, taus, n, pairs, rho[0])
+    return out
+
+
+#: Tail probability below which the per-τ correlations of the white band rule a single ρ_arw out [-].
+P_BAND = 1e-3
+
+
+def _held_in_band(fit: EffectFit, cav: np.ndarray, coefs: list, m: np.ndarray, taus: np.ndarray, n: int,
+                  pairs: list, r: np.ndarray) -> EffectFit:
+    """The ARW correlation refused when it does not hold across the band where it is read.
+
+    ρ_arw is read from the cross Allan covariance at every octave through its N²/τ column: it is
+    the white noise's correlation only where white noise makes the Allan variance. The check: per
+    pair (i, k), at each octave τ where N²/τ is at least half of both gyros' ARW + RRW model, the
+    correlation of that octave alone, ρ_τ = σ²_ik(τ)/√(σ²_ii(τ)·σ²_kk(τ)), against the pair's ρ̂
+    with σ_τ = (1 − ρ̂²)/√ν_τ (Fisher; ν_τ the overlapping ADEV's equivalent degrees of freedom
+    for white noise, Greenhall's sampled EDF): χ² = Σ ((ρ_τ − ρ̂)/σ_τ)² over pairs and τ, with
+    Σ (T_pair − 1) degrees of freedom. A line common to the gyros (the MPU record's 46.8 Hz in
+    all three residuals) makes ρ_τ near 1 at the τ it sits in and lower elsewhere: p < P_BAND
+    refuses ρ_arw, naming the τ where it differs most. Octaves are taken as independent (they
+    nearly are for white noise); with fewer than 2 octaves in a pair's band it is not checked.
+    """
+    if not fit.extra.get("estimable", False):
+        return fit
+    nu = np.asarray(edf("oadev", n + 1, m, np.zeros(m.size, dtype=int)), dtype=float)
+    chi2, dof, worst = 0.0, 0, None
+    for p_, (i, k) in enumerate(pairs):
+        if not (np.isfinite(r[p_]) and abs(r[p_]) < 1.0):
+            continue
+        wi = [coefs[j]["n"] / taus / np.maximum(coefs[j]["n"] / taus + coefs[j]["k"] * taus / 3.0, 1e-300)
+              for j in (i, k)]
+        band = (wi[0] >= 0.5) & (wi[1] >= 0.5) & (cav[:, i, i] > 0) & (cav[:, k, k] > 0)
+        if np.count_nonzero(band) < 2:
+            continue
+        rt = cav[band, i, k] / np.sqrt(cav[band, i, i] * cav[band, k, k])
+        st = (1.0 - r[p_] ** 2) / np.sqrt(np.maximum(nu[band], 1.0))
+        zt = (rt - r[p_]) / st
+        chi2 += float(zt @ zt)
+        dof += int(band.sum()) - 1
+        j = int(np.argmax(np.abs(zt)))
+        if worst is None or abs(zt[j]) > worst[0]:
+            worst = (abs(zt[j]), i + 1, k + 1, float(taus[band][j]), float(rt[j]), float(r[p_]),
+                     float(taus[band][0]), float(taus[band][-1]))
+    if dof <= 0 or worst is None:
+        return unchecked(fit, "fewer than 2 octaves where white noise makes both gyros' Allan variance")
+    p = float(stats.chi2.sf(chi2, dof))
+    numbers = {"band_chi2": chi2, "band_dof": dof, "band_p": p}
+    fit = replace(fit, extra={**fit.extra, **numbers})
+    if p >= P_BAND:
+        return fit
+    _, gi, gk, tau, rt, rp, lo, hi = worst
+    return ruled_out(fit, f"ρ_arw does not hold across the white band where it is read: octave by octave "
+                          f"(τ {lo:.3g}–{hi:.3g} s) the gyros' correlation differs from one value by χ² = "
+                          f"{chi2:.4g} for {dof} dof (p = {p:.2g}); gyros {gi} and {gk}: {rt:.3g} at "
+                          f"τ = {tau:.3g} s against {rp:.3g} over the band", **numbers)

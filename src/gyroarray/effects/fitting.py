@@ -71,7 +71,7 @@ named converters of :mod:`gyroarray.core.units`.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -79,11 +79,13 @@ from scipy import special, stats
 
 from gyroarray.analysis.allan_gls import Gls, root_sigma
 from gyroarray.analysis.gls import GLSFit
+from gyroarray.analysis.transfer import shown_lines, transfer_check
 from gyroarray.core import units
 from gyroarray.core.errors import InputError
 
 __all__ = ["EffectFit", "chi2_to_z", "z_from_log_p", "Z_EVIDENT", "z_two_sided", "num", "pm", "as_vector",
-           "projected_rate", "not_identifiable", "fit_extra", "logp_to_z", "as_rate", "as_dt", "nk_extra"]
+           "projected_rate", "not_identifiable", "fit_extra", "logp_to_z", "as_rate", "as_dt", "nk_extra",
+           "ruled_out", "unchecked", "transfer_limit"]
 
 
 @dataclass(frozen=True)
@@ -213,6 +215,82 @@ def not_identifiable(effect: str, gyro: int, params: dict, why: str, err: Except
                      evidence=f"gyro {gyro}: {why}, so {effect.replace('_', ' ')} cannot be seen "
                               "in these samples",
                      extra={"identifiable": False, "reason": str(err)})
+
+
+def ruled_out(fit: EffectFit, why: str, **numbers) -> EffectFit:
+    """``fit`` refused as a candidate: the record's own measurement ``why`` rules it out (issue 44).
+
+    Parameters
+    ----------
+    fit : EffectFit
+        The candidate's fit (its parameters are kept, for a report and for an entry the user adds).
+    why : str
+        One phrase naming the measurement that rules it out and its numbers.
+    **numbers
+        What the check measured (spec or SI units named in each key), kept in
+        ``extra["limit"]``.
+
+    Returns
+    -------
+    EffectFit
+        z set to 0 when it was positive (not a candidate: the ladder does not add it and the discrepancy does
+        not count it), the fitted z kept in ``extra["z_fitted"]``, ``extra["ruled_out"]`` = why,
+        and the evidence ending "but the record rules it out: why".
+    """
+    return replace(fit, z=min(float(fit.z), 0.0) if np.isfinite(fit.z) else 0.0, evidence=f"{fit.evidence}; but the record rules it out: {why}",
+                   extra=dict(fit.extra, ruled_out=why, z_fitted=float(fit.z), limit=numbers))
+
+
+def unchecked(fit: EffectFit, why: str) -> EffectFit:
+    """``fit`` with ``extra["limit_unchecked"]`` = why its limit could not be read on this record."""
+    return replace(fit, extra=dict(fit.extra, limit_unchecked=why))
+
+
+def transfer_limit(fit: EffectFit, y, u, dt_s: float, model, param: str, what: str, *, use=None,
+                   free_delay: bool = False, lower: float = -math.inf) -> EffectFit:
+    """``fit`` refused when its transfer function does not match the lines the gyro shows.
+
+    Parameters
+    ----------
+    fit : EffectFit
+        The candidate (a delay, a low-pass).
+    y, u : array_like, shape (n,)
+        The gyro's output less the model's deterministic part (residual + sensed rate) and the
+        sensed reference rate [rad/s].
+    dt_s : float
+        Sample step [s].
+    model : callable
+        ``model(f_hz, p) -> complex ndarray``: the candidate's H(f) for parameter value p
+        (``fit.params[param]``, in its spec unit) [-].
+    param : str
+        The parameter profiled (its σ from ``fit.sigma``).
+    what : str
+        The candidate as a phrase ("a 12.8 Hz first-order low-pass").
+    use : array_like of bool, shape (n,), optional
+        Samples that may be read.
+    free_delay, lower
+        As :func:`~gyroarray.analysis.transfer.transfer_check`.
+
+    Returns
+    -------
+    EffectFit
+        With ``extra["transfer_check"]`` (χ², dof, p and one sentence); refused
+        (:func:`ruled_out`) when p < :data:`~gyroarray.analysis.transfer.P_RULED_OUT`; with
+        ``extra["limit_unchecked"]`` when the motion has no line the gyro shows.
+    """
+    got = shown_lines(y, u, dt_s, use=use)
+    if isinstance(got, str):
+        return unchecked(fit, f"no line of the motion to check {what} against: {got}")
+    _, lines = got
+    chk = transfer_check(lines, model, float(fit.params[param]), float(fit.sigma.get(param, math.nan)),
+                         free_delay=free_delay, lower=lower)
+    said = chk.describe(what)
+    numbers = {"chi2": chk.chi2, "dof": chk.dof, "p": chk.p, "harmonics": [ln.harmonic for ln in chk.lines],
+               "param_at_least_chi2": chk.param, "sentence": said}
+    out = replace(fit, extra=dict(fit.extra, transfer_check=numbers))
+    if not chk.ruled_out:
+        return out
+    return ruled_out(out, said, **{k: v for k, v in numbers.items() if k != "sentence"})
 
 
 def fit_extra(fit: GLSFit, **kw) -> dict:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 from scipy import optimize, special
@@ -15,7 +16,7 @@ from gyroarray.core.units import deg_h_to_rad_s
 from gyroarray.analysis.allan_gls import (avar_normal_score, band, band_text, columns, Curve, deg_h, Gls,
                                           gls, root_sigma, solve, split)
 from gyroarray.core.physics import gauss_markov_avar
-from gyroarray.effects.fitting import EffectFit, nk_extra, z_from_log_p
+from gyroarray.effects.fitting import EffectFit, nk_extra, ruled_out, z_from_log_p
 
 #: Longest correlation time a model may give [s] (about 30 years): over any record the process is
 #: then a random walk (the hump sits at 1.89·τc), and beyond it τc² overflows the Allan model.
@@ -232,10 +233,101 @@ def fit_gauss_markov(cv: Curve, base: Gls, label: str, gyro, common: dict,
     else:
         evidence = (f"{label} ADEV shows no Gauss–Markov hump: best τc = {tc:.3g} s gives {fitted} "
                     f"(z = {z:.1f} after the scan over {grid.size} correlation times)")
-    return EffectFit(effect="gauss_markov", gyro=gyro, params=params, sigma=sigma, z=float(z),
-                     evidence=evidence,
-                     extra={"chi2": f.chi2, "dof": f.dof, **nk_extra(f), "scan_max": float(stats[i]),
-                            "n_eff_tests": float(m_eff),
-                            "tau_grid_s": [float(grid[0]), float(grid[-1])],
-                            "band_s": [float(cv.taus[idx[0]]), float(cv.taus[idx[-1]])],
-                            "adev_deg_h": meas, "baseline_adev_deg_h": pred, **peak, **common})
+    out = EffectFit(effect="gauss_markov", gyro=gyro, params=params, sigma=sigma, z=float(z),
+                    evidence=evidence,
+                    extra={"chi2": f.chi2, "dof": f.dof, **nk_extra(f), "scan_max": float(stats[i]),
+                           "n_eff_tests": float(m_eff),
+                           "tau_grid_s": [float(grid[0]), float(grid[-1])],
+                           "band_s": [float(cv.taus[idx[0]]), float(cv.taus[idx[-1]])],
+                           "adev_deg_h": meas, "baseline_adev_deg_h": pred, **peak, **common})
+    return cap_by_adev(out, cv, f, names, tc)
+
+
+#: Peak of a first-order Gauss–Markov ADEV over its stationary σ, and where it is (τ/τc) [-]:
+#: the maximum of g(x) = (2/x)·[1 − (3 − 4e^{−x} + e^{−2x})/(2x)], σ²_A(τ) = σ²·g(τ/τc).
+GM_PEAK_ADEV_OVER_SIGMA, GM_PEAK_X = 0.61736, 1.8926
+
+#: One-sided tail of the measured Allan variance's upper bound in :func:`cap_by_adev` [-] (3σ).
+ADEV_BOUND_TAIL = 0.00135
+
+
+def gm_sigma_bound(cv: Curve, nu, tau_c: float) -> tuple[float, float]:
+    """The largest σ of a Gauss–Markov process of correlation time ``tau_c`` that the measured
+    Allan variance allows, and the τ that sets it.
+
+    Parameters
+    ----------
+    cv : Curve
+        The measured Allan variance at octave τ [(rad/s)²].
+    nu : array_like, shape (T,)
+        Equivalent degrees of freedom of each estimate [-].
+    tau_c : float
+        Correlation time [s].
+
+    Returns
+    -------
+    (float, float)
+        σ_max [rad/s] and the τ where it is set [s].
+
+    Notes
+    -----
+    A GM's Allan variance is σ²·g(τ/τc) with g the sampled form of
+    (2/x)·[1 − (3 − 4e^{−x} + e^{−2x})/(2x)] (:func:`~gyroarray.core.physics.gauss_markov_avar`),
+    largest at x = 1.8926, where √g = 0.6174: the hump's ADEV peak is 0.617·σ (0.437·√(q_c·τc) in
+    terms of the driving density q_c = 2σ²/τc). No other term of the record can make its ADEV
+    smaller than the GM's own, so at every τ
+
+        σ²·g(τ/τc) <= σ²_A,up(τ) = σ̂²_A(τ)·ν/χ²_ν(ADEV_BOUND_TAIL)
+
+    and σ_max = min over τ of √(σ²_A,up/g).
+    """
+    g1 = gauss_markov_avar(cv.taus, 1.0, tau_c, cv.dt_s)
+    nu = np.maximum(np.asarray(nu, dtype=float), 1.0)
+    up = cv.y * nu / special.chdtri(nu, 1.0 - ADEV_BOUND_TAIL)
+    ratio = np.where(g1 > 0, up / np.maximum(g1, 1e-300), np.inf)
+    k = int(np.argmin(ratio))
+    return float(math.sqrt(max(ratio[k], 0.0))), float(cv.taus[k])
+
+
+def cap_by_adev(fit: EffectFit, cv: Curve, f: Gls, names: tuple, tau_c: float) -> EffectFit:
+    """``fit`` refused when its σ is beyond what the record's own ADEV allows (issue 44: the MPU
+    record's gyro 3 σ of 6.1e5 deg/h).
+
+    Parameters
+    ----------
+    fit : EffectFit
+        The Gauss–Markov fit.
+    cv : Curve
+        The Allan variance it was fitted on.
+    f : Gls
+        The fit (its model gives each estimate's degrees of freedom, ν = 2μ²/var).
+    names : tuple
+        The fit's columns.
+    tau_c : float
+        Its correlation time [s].
+
+    Returns
+    -------
+    EffectFit
+        With ``extra["sigma_max_deg_h"]``; refused when σ − 3σ_σ > σ_max (:func:`gm_sigma_bound`).
+    """
+    coef, gm = split(names, f.a, tau_c)
+    try:
+        var = np.diag(cv.cov.covariance(coef, gm))
+    except (ValueError, FloatingPointError):
+        return fit
+    mu = np.maximum(np.asarray(f.model, dtype=float), 1e-300)
+    nu = 2.0 * mu ** 2 / np.maximum(var, 1e-300)
+    s_max, at_tau = gm_sigma_bound(cv, nu, tau_c)
+    smax_deg_h = float(deg_h(s_max))
+    s, ss = float(fit.params["sigma_deg_h"]), float(fit.sigma.get("sigma_deg_h", 0.0))
+    numbers = {"sigma_max_deg_h": smax_deg_h, "sigma_max_at_tau_s": at_tau}
+    fit = replace(fit, extra=dict(fit.extra, **numbers))
+    if s - 3.0 * ss <= smax_deg_h:
+        return fit
+    k = int(np.argmin(np.abs(cv.taus - at_tau)))
+    return ruled_out(fit, f"a Gauss–Markov σ of {s:.3g} deg/h (τc = {tau_c:.3g} s) would put "
+                          f"{s * math.sqrt(float(gauss_markov_avar(np.array([at_tau]), 1.0, tau_c, cv.dt_s)[0])):.3g} "
+                          f"deg/h into the ADEV at τ = {at_tau:.3g} s, where the record's own ADEV is "
+                          f"{float(deg_h(math.sqrt(cv.y[k]))):.3g} deg/h (its 3σ upper bound caps σ at "
+                          f"{smax_deg_h:.3g} deg/h)", **numbers)

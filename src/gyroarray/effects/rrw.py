@@ -6,10 +6,15 @@ import math
 
 import numpy as np
 
+from dataclasses import replace
+
+from gyroarray.analysis.noise_fit import rrw_adev_bound
+from gyroarray.core.errors import InputError
 from gyroarray.effects import _draw
+from gyroarray.effects.fitting import EffectFit
 from gyroarray.effects.protocol import NoiseTermEffect, Param, Stage, unit_draws, with_term
 from gyroarray.effects.terms import WalkTerm, spread
-from gyroarray.core.units import rrw_deg_h_rt_h_to_rad_s_rt_s
+from gyroarray.core.units import rad_s_to_deg_h, rrw_deg_h_rt_h_to_rad_s_rt_s, rrw_rad_s_rt_s_to_deg_h_rt_h
 
 
 class RateRandomWalk(NoiseTermEffect):
@@ -35,8 +40,56 @@ class RateRandomWalk(NoiseTermEffect):
         """A rate random walk of coefficient K [rad/s/√s] (increments K²·dt)."""
         return WalkTerm(spread(act, "k_rad_s_rt_s", n_gyros))
 
+    def fit(self, ctx, gyro, E):
+        """The Allan fit's K, kept within the bound the stochastic record's own ADEV puts on it
+        (issue 44 item 5a: :func:`~gyroarray.analysis.noise_fit.rrw_adev_bound`, the +1/2-slope
+        line through the lowest 95 % upper bound of the ADEV). A K beyond it is kept at the bound,
+        and the evidence says so with both numbers; ``extra["k_bound_deg_h_rt_h"]`` is the bound,
+        ``extra["k_bound_why"]`` why there is none."""
+        f = super().fit(ctx, gyro, E)
+        if ctx.Er is None:
+            return replace(f, extra={**f.extra, "k_bound_why": "no stochastic record to read the ADEV on"})
+        return cap_by_adev(f, ctx.Er[:, int(gyro) - 1], ctx.dt)
+
     def simulate(self, state, act, streams):
         ctx = state.ctx
         e = unit_draws("rrw", state.white.rrw, act.cols, ctx.n, ctx.n_gyros, streams)
         inc = e * (act.p["k_rad_s_rt_s"] * math.sqrt(ctx.dt_s))   # increments σ = K√dt
         return with_term(state, act.cols, np.cumsum(inc, axis=0))
+
+
+def cap_by_adev(fit: EffectFit, x, dt_s: float) -> EffectFit:
+    """``fit`` (an ``rrw`` fit) with its K kept at most at the bound of the ADEV of ``x``.
+
+    Parameters
+    ----------
+    fit : EffectFit
+        The Allan fit's ``rrw`` (``k_deg_h_rt_h``).
+    x : array_like, shape (n,)
+        The stochastic record it was fitted on [rad/s].
+    dt_s : float
+        Sample step [s].
+
+    Returns
+    -------
+    EffectFit
+        As given with ``extra["k_bound_deg_h_rt_h"]`` and ``extra["k_bound_tau_s"]`` when K is
+        within the bound; else K set to the bound, ``extra["k_fitted_deg_h_rt_h"]`` the fitted
+        value and the evidence saying why. ``extra["k_bound_why"]`` when no bound can be read.
+    """
+    try:
+        b = rrw_adev_bound(x, dt_s)
+    except InputError as err:
+        return replace(fit, extra={**fit.extra, "k_bound_why": err.message})
+    kmax = float(rrw_rad_s_rt_s_to_deg_h_rt_h(b.k_max))
+    k = float(fit.params["k_deg_h_rt_h"])
+    extra = {**fit.extra, "k_bound_deg_h_rt_h": kmax, "k_bound_tau_s": b.tau_s}
+    if k <= kmax:
+        return replace(fit, extra=extra)
+    adev, up = float(rad_s_to_deg_h(b.adev)), float(rad_s_to_deg_h(b.adev_upper))
+    said = (f"K fitted {k:.3g} deg/h/√h is beyond what the record's own ADEV allows: at τ = {b.tau_s:.4g} s the "
+            f"ADEV is {adev:.3g} deg/h (95 % upper bound {up:.3g} with {b.edf:.3g} degrees of freedom), and a "
+            f"random walk alone would give K·√(τ/3): K <= {kmax:.3g}; the model keeps K = {kmax:.3g}")
+    extra.update(k_fitted_deg_h_rt_h=k, k_capped=True)
+    return replace(fit, params={**fit.params, "k_deg_h_rt_h": kmax}, evidence=f"{fit.evidence}; {said}",
+                   extra=extra)

@@ -53,7 +53,8 @@ class ScaleFactor(RegressionEffect):
 
         On a moving rig the slope is set beside the gain at the motion's spectral lines
         (:func:`cross_spectral_scale`, :func:`reconcile_scale`): the evidence shows both, and
-        when they differ by more than their combined σ the model keeps the cross-spectral one.
+        the model keeps the cross-spectral one only where it agrees with the slope within their
+        combined σ and lowers the residual's χ² (issue 44 item 2).
         """
         held = ctx.cache.get(MOTION_RAW)        # the residual before the motion-locked spikes were cleaned
         raw = held[1][:, gyro - 1] if held is not None and np.shares_memory(e, held[0]) else e
@@ -167,24 +168,43 @@ def cross_spectral_scale(e, omega_ref_rad_s, h, dt_s: float, *, use=None) -> Zer
         return str(err)
 
 
-#: Why the model keeps the cross-spectral scale factor when the two estimates disagree.
-KEEP_CROSS_SPECTRAL = ("on a moving rig the time-domain residual also holds what the model misses of the lag, "
-                       "the bandwidth and the reversal jerks, which bias a slope on the rate; |H| at the "
-                       "motion's lines, read at f → 0, sees none of them")
+#: Why the model keeps the cross-spectral scale factor when it is kept.
+KEEP_CROSS_SPECTRAL = ("it agrees with the time-domain fit within their combined σ and keeping it lowers the "
+                       "residual's χ² against no scale factor: |H| at the motion's lines, read at f → 0, does not "
+                       "see the lag, the bandwidth and the reversal jerks that a slope on the rate also reads")
 
+#: Why a cross-spectral value that disagrees with the time-domain fit is not kept (issue 44 item 2).
+NOT_CROSS_SPECTRAL = ("the reference's own errors bend the lines (an encoder's 2nd harmonic read +30 % on 3 of "
+                      "5 MPU variants, raising D 97.3 -> 114.1): a cross-spectral value is kept only where it "
+                      "agrees with the time-domain fit")
 
-#: Combined σ beyond which a less precise cross-spectral value still replaces the time-domain one
-#: (:func:`reconcile_scale`): below it the difference is read as the cross-spectral estimate's own
-#: spread (a 0.3 % two-sided chance for two unbiased estimates) [-]. On our bench (a 3000 ppm
-#: scale factor) the time domain read 3002.7 ± 5.0, the lines 36935 ± 31024 ppm: 1.09σ apart,
-#: and keeping the lines saturated the gyro (D 157 -> 1262); the MPU record's lines, +5240 ± 130
-#: against the slope's +3900 ± 740, are the more precise and are kept at 1.8σ.
+#: Combined σ within which the two scale factors count as consistent (:func:`reconcile_scale`):
+#: two unbiased estimates differ by more on 5 % of records (a two-sided 95 % test). The MPU
+#: record's lines, +5949 ± 54 ppm, against the slope's +4682 ± 736 are 1.7σ apart and the more
+#: precise: kept (the settled +0.59-0.60 %); our bench's lines, 36935 ± 31024 against 3002.7 ±
+#: 5.0, are the less precise: not kept (keeping them saturated the gyro, D 157 -> 1262).
+CONSISTENT_Z = 1.959963984540054
+
+#: Retired by issue 44 item 2 (a disagreeing cross-spectral value is no longer kept, however
+#: many σ away); kept for callers of the old rule.
 KEEP_CROSS_Z = 3.0
 
 
 def _ppm(x: float) -> str:
     """A difference in ppm as read: whole ppm from 10 on."""
     return f"{x:.0f}" if abs(x) >= 10.0 else num(x, 2)
+
+
+def chi2_change(ppm: float, ppm_t: float, sig_t: float) -> float:
+    """The residual's GLS χ² with ``ppm`` taken out, less its χ² with no scale factor [-].
+
+    The discrepancy D of the model is not known inside one effect's fit; this is what stands
+    for it here: the regression's own quadratic form under the fitted ARW + walk,
+    χ²(s) = χ²(ŝ) + ((s − ŝ)/σ̂)², so χ²(s) − χ²(0) = ((s − ŝ)² − ŝ²)/σ̂² (ŝ, σ̂ = ``ppm_t``,
+    ``sig_t`` the time-domain fit, ppm). Negative: keeping s explains part of the residual;
+    positive: it leaves more than no scale factor at all (the slope test's z rises after it).
+    """
+    return float(((ppm - ppm_t) ** 2 - ppm_t ** 2) / sig_t ** 2) if sig_t > 0 else 0.0
 
 
 def reconcile_scale(fit: EffectFit, xs: ZeroFrequencyGain | str, *, joint_with_nonlinearity: bool = False) -> EffectFit:
@@ -204,45 +224,58 @@ def reconcile_scale(fit: EffectFit, xs: ZeroFrequencyGain | str, *, joint_with_n
     -------
     EffectFit
         With ``extra["cross_spectral"]`` (``ppm``, ``sigma_ppm``, ``lines_hz``,
-        ``slope_per_hz2``, ``method``; None when unavailable, with
+        ``slope_per_hz2``, ``chi2``, ``dof``, ``method``; None when unavailable, with
         ``extra["cross_spectral_why"]``), ``extra["time_domain"]`` (``ppm``,
-        ``sigma_ppm``), ``extra["kept"]`` (``"time_domain"`` or
-        ``"cross_spectral"``) and ``extra["reconciled"]`` (one sentence). When the
-        two differ by more than their combined σ (more than :data:`KEEP_CROSS_Z`
-        times it when the cross-spectral one is the less precise), the model keeps the
-        cross-spectral value (``params``/``sigma`` carry it; ``z`` stays the
-        time-domain test of a slope in the residual) and the evidence says so
-        and why; otherwise the time-domain fit is kept and the evidence shows
-        both.
+        ``sigma_ppm``), ``extra["kept"]`` (``"time_domain"`` or ``"cross_spectral"``),
+        ``extra["chi2_change"]`` (:func:`chi2_change` of the kept value) and
+        ``extra["reconciled"]`` (one sentence).
+
+    Notes
+    -----
+    Issue 44 item 2: the time-domain value is kept unless the cross-spectral one is consistent
+    with it (within :data:`CONSISTENT_Z` times their combined σ), the more precise, and lowers
+    the discrepancy, read here as the
+    residual's χ² against no scale factor (:func:`chi2_change` < 0: D itself is the whole
+    model's, not known inside one fit). A value whose keeping raises that χ² is never kept:
+    the time-domain value's change is −(ŝ/σ̂)² <= 0.
     """
     ppm_t, sig_t = float(fit.params["ppm"]), float(fit.sigma["ppm"])
-    extra = dict(fit.extra, time_domain={"ppm": ppm_t, "sigma_ppm": sig_t}, kept="time_domain")
+    extra = dict(fit.extra, time_domain={"ppm": ppm_t, "sigma_ppm": sig_t}, kept="time_domain",
+                 chi2_change=chi2_change(ppm_t, ppm_t, sig_t))
     if isinstance(xs, str):
         extra.update(cross_spectral=None, cross_spectral_why=xs)
         return replace(fit, extra=extra)
     ppm_x, sig_x = ratio_to_ppm(xs.gain - 1.0), ratio_to_ppm(xs.sigma)
     extra["cross_spectral"] = {"ppm": ppm_x, "sigma_ppm": sig_x, "lines_hz": [ln.freq_hz for ln in xs.lines],
-                               "slope_per_hz2": xs.slope_per_hz2, "method": xs.describe()}
+                               "slope_per_hz2": xs.slope_per_hz2, "chi2": xs.chi2, "dof": xs.dof,
+                               "method": xs.describe()}
     diff, comb = ppm_x - ppm_t, float(np.hypot(sig_t, sig_x))
+    dchi = chi2_change(ppm_x, ppm_t, sig_t)
     both = (f"scale factor on gyro {fit.gyro}: time domain {pm(ppm_t, sig_t)} ppm, cross-spectral "
             f"{pm(ppm_x, sig_x)} ppm (from {xs.describe()})")
     params, sigma = fit.params, fit.sigma
-    if abs(diff) <= comb:
-        said = f"{both}: they agree within their combined σ ({_ppm(comb)} ppm); the model keeps the time-domain one"
-    elif sig_x > sig_t and abs(diff) <= KEEP_CROSS_Z * comb:
-        said = (f"{both}: they differ by {_ppm(diff)} ppm, more than their combined σ ({_ppm(comb)} ppm) but "
-                f"less than {KEEP_CROSS_Z:g} times it, and the cross-spectral one is the less precise: the "
-                "model keeps the time-domain one (a difference that size is what the cross-spectral one's "
-                "own spread gives, not evidence of a bias of the time-domain fit)")
-    elif joint_with_nonlinearity:
-        said = (f"{both}: they differ by {_ppm(diff)} ppm, more than their combined σ ({_ppm(comb)} ppm); "
-                "the model keeps the time-domain one, fitted jointly with the curvature, which the lines' "
-                "gain does not separate")
+    if joint_with_nonlinearity:
+        said = (f"{both}: the model keeps the time-domain one, fitted jointly with the curvature, which the "
+                "lines' gain does not separate")
+    elif abs(diff) > CONSISTENT_Z * comb:
+        said = (f"{both}: they differ by {_ppm(diff)} ppm, {abs(diff) / comb:.3g} times their combined σ "
+                f"({_ppm(comb)} ppm), so one of them is biased (the reference's own lines bend the gain, or "
+                f"its noise attenuates the slope): the model keeps the time-domain one: {NOT_CROSS_SPECTRAL}; "
+                "check the reference")
+    elif sig_x >= sig_t:
+        said = (f"{both}: they agree within {CONSISTENT_Z:.3g} times their combined σ ({_ppm(comb)} ppm) and the "
+                "cross-spectral one is not the more precise: the model keeps the time-domain one")
+    elif dchi >= 0.0:
+        said = (f"{both}: they agree within {CONSISTENT_Z:.3g} times their combined σ ({_ppm(comb)} ppm), but keeping the cross-spectral "
+                f"one would raise the residual's χ² by {dchi:.3g} against no scale factor: the model keeps the "
+                "time-domain one")
     else:
-        said = (f"{both}: they differ by {_ppm(diff)} ppm, more than their combined σ ({_ppm(comb)} ppm); "
-                f"the model keeps the cross-spectral one: {KEEP_CROSS_SPECTRAL}")
+        said = (f"{both}: they agree within {CONSISTENT_Z:.3g} times their combined σ ({_ppm(comb)} ppm), the "
+                "cross-spectral one is the more precise, and keeping it "
+                f"changes the residual's χ² by {dchi:.3g} against no scale factor: the model keeps the "
+                f"cross-spectral one: {KEEP_CROSS_SPECTRAL}")
         params, sigma = dict(fit.params, ppm=ppm_x), dict(fit.sigma, ppm=sig_x)
-        extra["kept"] = "cross_spectral"
+        extra.update(kept="cross_spectral", chi2_change=dchi)
     extra["reconciled"] = said
     return replace(fit, params=params, sigma=sigma, evidence=f"{fit.evidence}; {said}", extra=extra)
 
