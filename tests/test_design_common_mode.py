@@ -190,7 +190,7 @@ def test_cli_common_mode_in_assumptions(capsys):
     res = json.loads(out)
     a = res["assumptions"]
     assert a["common_mode"]["value"] == "axis" and a["common_mode"]["source"] == "user"
-    assert a["flicker_model"]["value"] == "circular"
+    assert a["flicker_model"]["value"] == "kasdin"         # the default since issue 43 (design --flicker)
     assert res["common_mode"]["chosen"] == "axis"
     assert set(res["common_mode"]["frames"]) == {"output", "axis"}
     assert all(v > 0 for v in res["recommended"]["mounting_signs"])

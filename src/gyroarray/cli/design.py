@@ -77,6 +77,7 @@ def cmd_design(args) -> tuple[dict, str]:
                                 ("--objective", args.objective), ("--design-rho", args.design_rho),
                                 ("--far-per-h", args.far_per_h), ("--p-md", args.p_md),
                                 ("--mdb-max", args.mdb_max), ("--common-mode", args.common_mode),
+                                ("--rho-bi", args.rho_bi), ("--flicker", args.flicker),
                                 ("--horizon-s", args.horizon_s), ("--family", args.family),
                                 ("--alike", args.alike or None)) if v is not None]
     if rec_only:
@@ -179,6 +180,9 @@ def _design_noise(args):
         rhos = sorted(set(np.round(np.linspace(lo, hi, 5), 12).tolist() + ([0.0] if lo < 0 < hi else [])))
         g = GyroNoise(**{**g.with_rho(0.0).__dict__,
                          "sources": {**g.sources, "rho_arw": "user", "rho_rrw": "user"}})
+    if args.rho_bi is not None:                      # else the BI correlation follows the ARW ρ
+        g = GyroNoise(**{**g.__dict__, "rho_bi": float(args.rho_bi),
+                         "sources": {**g.sources, "rho_bi": "user"}})
     return g, rhos
 
 
@@ -308,7 +312,9 @@ def _design_space(args):
                         specific_force_m_s2=force, objective=args.objective,
                         design_rho=args.design_rho,
                         far_per_h=0.01 if args.far_per_h is None else args.far_per_h,
-                        p_md=0.001 if args.p_md is None else args.p_md, mdb_max=args.mdb_max)
+                        p_md=0.001 if args.p_md is None else args.p_md, mdb_max=args.mdb_max,
+                        **({} if args.flicker is None else {"flicker_model": args.flicker}))
+    src.setdefault("flicker_model", "user" if args.flicker is not None else "default")
     if args.mdb_max is not None and not failures:
         raise InputError("--mdb-max needs --failures K (K >= 1): the detection limit is about "
                          "isolating a failed gyro")
@@ -579,6 +585,7 @@ def _design_as_built(args) -> tuple[dict, str]:
                             ("--design-rho", args.design_rho), ("--far-per-h", args.far_per_h),
                             ("--p-md", args.p_md), ("--mdb-max", args.mdb_max), ("--check", args.check),
                             ("--common-mode", args.common_mode),
+                            ("--rho-bi", args.rho_bi), ("--flicker", args.flicker),
                             ("--seed", args.seed), ("--paper-tables", args.paper_tables or None),
                             ("--plot", args.plot)) if v is not None]
     if extra:
@@ -673,12 +680,21 @@ def _recommend_text(res: dict) -> str:
         lines.append(f"equivalent (ranks {', '.join(map(str, grp['members']))}): {grp['reason']}")
     if "check" in res:
         c = res["check"]
-        lines.append(f"Monte-Carlo check ({c['replicates']} paired runs): {c['inside_95']} of "
-                     f"{c['compared']} predictions inside the runs' 95 % CI")
+        lines.append(f"Monte-Carlo check ({c['replicates']} paired runs{', K chosen by --check auto' if c.get('auto') else ''}): "
+                     f"{c['inside_95']} of {c['compared']} predictions inside the runs' 95 % CI")
         for d in c["designs"]:
             t = d["rms_3axis_deg_s"]
             lines.append(f"  {d['label']}: predicted {t['predicted']:.4g}, simulated {t['monte_carlo']['value']:.4g} "
                          f"[{t['monte_carlo']['ci_low']:.4g}, {t['monte_carlo']['ci_high']:.4g}] deg/s")
+        if c.get("sizing"):
+            sz, po = c["sizing"], c["sizing"]["paired_objective_difference"]
+            lines.append(f"  check sizing: {sz['statement']}")
+            if po["ci_low"] is not None:
+                lines.append(f"  runs: paired difference {po['mean']:.4g} [{po['ci_low']:.4g}, {po['ci_high']:.4g}] "
+                             f"{sz['unit']} (predicted {po['predicted']:.4g}); sd over the {po['n']} runs "
+                             f"{po['sd_over_runs']:.4g} {sz['unit']}; resolved: {'yes' if po['resolved'] else 'no'}")
+        if c.get("flicker_mismatch"):
+            lines.append(f"  note: {c['flicker_mismatch']}")
     if "tracking_limit" in res:
         lines.append("tracking: " + res["tracking_limit"]["statement"])
     if G_SENSITIVITY in res:
@@ -736,6 +752,11 @@ def _format_paper_cells(cells) -> str:
     foot = (f"{bad} of {len(cells)} printed cells do not reproduce within one unit of their last "
             "printed digit (the paper has errata; computed values are gyroarray's).")
     return "Paper 003 Tables 1, 2 and the Section 3 optima beside gyroarray\n" + "\n".join([head, *body, foot])
+
+
+def _check_runs(text: str) -> int | str:
+    """``--check``: a number of paired runs (1 to its cap) or ``auto`` (the check sizes itself)."""
+    return "auto" if text.strip().lower() == "auto" else count("--check")(text)
 
 
 def add_parser(sub) -> None:
@@ -815,14 +836,27 @@ def add_parser(sub) -> None:
                         "it adds to every output with the same sign, so reversed gyros move it into the "
                         "parity space) or axis (it follows each gyro's sensing axis, so reversing buys "
                         "nothing); the decision is shown under both")
+    p.add_argument("--rho-bi", type=finite_float("--rho-bi"),
+                   metavar="R", help="--recommend: common correlation of the gyros' bias instability "
+                                     "(flicker) in the predictor (default: the ARW correlation, --rho "
+                                     "or each ρ of --rho-range)")
+    p.add_argument("--flicker", choices=("kasdin", "circular"),
+                   help="--recommend: the bias instability's (flicker) model of the ranking and the error "
+                        "budget: kasdin (default; 1/f noise from switch-on, Kasdin 1995) or circular "
+                        "(stationary 1/f as the simulator draws it, about half the angle at the horizon)")
     p.add_argument("--family", metavar="F,G,...",
                    help="--recommend: mounting families, a comma list of cone1, cone2, free, triads, faces "
                         "(default cone1,cone2: the cones); free/triads/faces are designed on the sphere "
                         "and listed against the GDOP floor beside the cones' ranking")
     p.add_argument("--estimators", metavar="A,B,...",
                    help="--recommend: estimators compared (default kf_array,kf_single,gls,ols,naive)")
-    p.add_argument("--check", type=count("--check"), metavar="K",
-                   help="--recommend: simulate the top designs K times (paired) beside the prediction")
+    p.add_argument("--check", type=_check_runs, metavar="K|auto",
+                   help="--recommend: simulate the recommendation, the runner-up and the mounting mirror K "
+                        "times (paired) beside the prediction, and say whether K runs can resolve the "
+                        "recommendation from the runner-up on the objective and how many would (K_needed: "
+                        "95 %% interval, 80 %% power, the paired difference's sd from a pilot of the first "
+                        "min(K, 20) runs); auto: K = K_needed, at least the 20-run pilot and at most 400 "
+                        "(past 400 only the pilot is run, and the output says so)")
     p.add_argument("--seed", type=nonneg_int("--seed"), metavar="S",
                    help="--recommend --check: root seed of the paired runs")
     p.add_argument("--out", type=Path, metavar="FILE.json",

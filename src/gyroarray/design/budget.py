@@ -43,7 +43,7 @@ from gyroarray.design.predict import (Moments, NoiseSources, Swing, cascade, det
 from gyroarray.effects.terms import (CorrelationTerm, DeterministicTerm, FlickerTerm, GaussMarkovTerm, Motion,
                                      SensorFilter, WalkTerm, WhiteTerm)
 
-__all__ = ["ErrorBudget", "error_budget", "linear_response"]
+__all__ = ["ErrorBudget", "error_budget", "linear_response", "undetected_fault"]
 
 
 @dataclass(frozen=True)
@@ -146,7 +146,8 @@ def _only(noise: NoiseSources, **kw) -> NoiseSources:
 
 
 def error_budget(sys, H, noise_model, *, n_samples: int, dt_s: float, settle_s: float = 2.0,
-                 motion: Motion | Swing | np.ndarray | None = None) -> ErrorBudget:
+                 motion: Motion | Swing | np.ndarray | None = None,
+                 bi_correlation: np.ndarray | None = None, flicker_model: str = "circular") -> ErrorBudget:
     """The error budget of a linear estimator on an array: each declared term's share.
 
     Parameters
@@ -172,6 +173,12 @@ def error_budget(sys, H, noise_model, *, n_samples: int, dt_s: float, settle_s: 
         every axis), the specific force at each gyro [m/s²] (default: level at rest, [0, 0, g0]),
         the temperature swing ΔT(t) [K] (default: not stated; a temperature term is then
         ignored). None: at rest, level, no temperature swing.
+    bi_correlation : ndarray (N, N), optional
+        Correlation of the gyros' flicker (bias instability) [-] (``design --rho-bi``); the
+        flicker covariance is B Bᵀ ∘ bi_correlation. None: independent (as simulated).
+    flicker_model : {"circular", "kasdin"}
+        The flicker model (:func:`gyroarray.design.moments.flicker_moments`): the simulator's
+        circular stationary 1/f (default), or Kasdin's 1/f from switch-on.
 
     Returns
     -------
@@ -225,7 +232,8 @@ def error_budget(sys, H, noise_model, *, n_samples: int, dt_s: float, settle_s: 
             m = error_moments(csys, _only(noise, Qb=c_walk * np.outer(s, s)), n, k0,
                               white=False, walk=True, gm=False)
         elif isinstance(t, FlickerTerm):
-            m = flicker_moments(csys, np.nan_to_num(t.b_rad_s), n, k0, dt)
+            m = flicker_moments(csys, np.nan_to_num(t.b_rad_s), n, k0, dt, model=flicker_model,
+                                corr=bi_correlation)
             flicker_total = m if flicker_total is None else flicker_total + m
         elif isinstance(t, GaussMarkovTerm):
             sig = np.nan_to_num(t.sigma_rad_s)
@@ -260,3 +268,45 @@ def error_budget(sys, H, noise_model, *, n_samples: int, dt_s: float, settle_s: 
     order = [eff.name for eff, _ in declared if eff.name in rows]
     return ErrorBudget(terms={k: rows[k] for k in order}, total=total, ignored=sorted(ignored),
                        modifiers=modifiers, tracking=tracking, horizon_s=n * dt, settle_s=float(settle_s))
+
+
+def undetected_fault(sys, n_gyros: int, gyro: int, step_rad_s: float, *, n_samples: int, dt_s: float,
+                     settle_s: float = 2.0, sensor=None) -> dict:
+    """The error of an undetected fault: a bias step on one gyro, present from t = 0 and never
+    isolated, through the (intact) estimator to the rate and the angle at the horizon.
+
+    Parameters
+    ----------
+    sys : LinearSystem
+        The estimator on every gyro (the fault is not detected, so no gyro is removed).
+    n_gyros : int
+        Gyros of the array (the estimator's inputs).
+    gyro : int
+        The faulty gyro, 1-based in the estimator's input order.
+    step_rad_s : float
+        The step's size [rad/s].
+    n_samples : int
+        Samples in the run; the horizon is n_samples·dt_s.
+    dt_s : float
+        Sample period [s].
+    settle_s : float
+        Start-up left out of the RMS window [s].
+    sensor : SensorBandwidth, optional
+        The gyros' own filter, cascaded before the estimator (a step passes it).
+
+    Returns
+    -------
+    dict
+        ``rms_deg_s`` (3-axis RMS of the rate error over the scored window [deg/s]),
+        ``angle_deg`` (3-axis angle error at the horizon [deg]), ``step_deg_s`` [deg/s], ``gyro``.
+    """
+    n = int(n_samples)
+    dt = float(dt_s)
+    k0 = settle_start(n, dt, settle_s)
+    if not 1 <= int(gyro) <= int(n_gyros):
+        raise ValueError(f"gyro {gyro} is not one of the {n_gyros} gyros")
+    z = np.zeros((n, int(n_gyros)))
+    z[:, int(gyro) - 1] = float(step_rad_s)
+    e = linear_response(cascade(sys, sensor), z)
+    return {**_signal_row(e, k0, dt), "step_deg_s": float(units.rad_s_to_deg_s(step_rad_s)),
+            "gyro": int(gyro)}

@@ -109,7 +109,8 @@ class ChannelResponse:
 def channel_response(sys, dt_s: float, n: int, k0: int, *, bi: bool = False,
                      gm_tau_s: float | None = None, motion: np.ndarray | None = None,
                      swing_hz: float | None = None,
-                     sensor: SensorBandwidth | None = None) -> ChannelResponse:
+                     sensor: SensorBandwidth | None = None,
+                     flicker_model: str = "circular") -> ChannelResponse:
     """Unit responses of a single-input channel filter (see :class:`ChannelResponse`).
 
     Parameters
@@ -131,6 +132,8 @@ def channel_response(sys, dt_s: float, n: int, k0: int, *, bi: bool = False,
         The gyros' own filter (one, as every gyro is alike), cascaded before the
         channel filter: a per-sample combination of alike filtered gyros is the
         filtered combination.
+    flicker_model : {"circular", "kasdin"}
+        The flicker model of the flicker response (:func:`gyroarray.design.moments.flicker_moments`).
     """
     est_sys = sys
     sys = cascade(sys, sensor)
@@ -144,7 +147,7 @@ def channel_response(sys, dt_s: float, n: int, k0: int, *, bi: bool = False,
     white = tri(error_moments(sys, unit, n, k0, white=True, walk=False, gm=False))
     walk = tri(error_moments(sys, replace_noise(unit, R=zero, Qb=one), n, k0, white=False,
                              walk=True, gm=False))
-    flick = tri(flicker_moments(sys, np.ones(1), n, k0, dt_s)) if bi else (0.0, 0.0, 0.0)
+    flick = tri(flicker_moments(sys, np.ones(1), n, k0, dt_s, model=flicker_model)) if bi else (0.0, 0.0, 0.0)
     gmr = (0.0, 0.0, 0.0)
     if gm_tau_s is not None and gm_tau_s > 0:
         gmr = tri(error_moments(sys, replace_noise(unit, R=zero, gm_sigma_rad_s=np.ones(1),

@@ -19,7 +19,7 @@ from gyroarray.core.gdop import correlation_matrix
 from gyroarray.design.predict import (AXES, channel_filter,
                                       channel_response, g_sensitivity_error, settle_start, swing_truth)
 from gyroarray.effects.model import NoiseModel
-from gyroarray.effects.names import ARW, G_SENSITIVITY, RRW
+from gyroarray.effects.names import ARW, BIAS_INSTABILITY, G_SENSITIVITY, RRW
 from gyroarray.design.gyro_noise import (GyroNoise, kept_covariances, kept_levels)
 from gyroarray.design.search_space import weight_kind, DesignSpace, design_tags, design_weights
 
@@ -62,7 +62,7 @@ def channel_levels(est: str, H: np.ndarray, g: GyroNoise, dt: float) -> Channels
     white = np.einsum("gai,ij,gaj->ga", M, R, M)
     walk = np.einsum("gai,ij,gaj->ga", M, Qb, M)
     m2 = np.sum(M * M, axis=2)
-    b2 = m2 * units.deg_h_to_rad_s(g.bi_deg_h) ** 2
+    b2 = np.einsum("gai,ij,gaj->ga", M, correlation_matrix(N, g.rho_bi_value), M) * units.deg_h_to_rad_s(g.bi_deg_h) ** 2
     gm = m2 * units.deg_h_to_rad_s(g.gm_sigma_deg_h) ** 2
     ratio, decoupled = None, True
     if est == "kf_array":
@@ -107,7 +107,8 @@ class _FilterBank:
             sys = channel_filter(kind, self.space.dt_s, bw, ratio)
             self._cache[key] = None if sys is None else channel_response(
                 sys, self.space.dt_s, self.n, self.k0, bi=self.bi, gm_tau_s=self.gm_tau,
-                motion=self.motion, swing_hz=self.swing_hz, sensor=self.space.sensor())
+                motion=self.motion, swing_hz=self.swing_hz, sensor=self.space.sensor(),
+                flicker_model=self.space.flicker_model)
         return self._cache[key]
 
 
@@ -331,7 +332,8 @@ def fixed_channels(est: str, H: np.ndarray, g_design: GyroNoise, g_true: GyroNoi
     if est == "kf_array":
         Qd = q * g_design.correlation(N, RRW, keep, signs)
         ratio = np.einsum("gai,ij,gaj->ga", M, Qd, M) / np.einsum("gai,ij,gaj->ga", M, Rd, M)
-    ch = Channels(white, walk, m2 * units.deg_h_to_rad_s(g_true.bi_deg_h) ** 2,
+    cb = g_true.correlation(N, BIAS_INSTABILITY, keep, signs)       # the flicker's correlation
+    ch = Channels(white, walk, np.einsum("gai,ij,gaj->ga", M, cb, M) * units.deg_h_to_rad_s(g_true.bi_deg_h) ** 2,
                    m2 * units.deg_h_to_rad_s(g_true.gm_sigma_deg_h) ** 2, ratio, True,
                    bias=np.max(np.abs(np.einsum("gan,gnb->gab", M, H) - np.eye(3)), axis=(1, 2)))
     ch.kf_single_ratio = q / s2                                     # q_b / r of one gyro
@@ -351,7 +353,9 @@ def _fixed_channels_per_gyro(est: str, H: np.ndarray, g_design: GyroNoise, g_tru
     ratio = None
     if est == "kf_array":
         ratio = np.einsum("gai,ij,gaj->ga", M, Qd, M) / np.einsum("gai,ij,gaj->ga", M, Rd, M)
-    ch = Channels(white, walk, np.einsum("gai,i->ga", M * M, b2), np.einsum("gai,i->ga", M * M, gm2),
+    sb = np.sqrt(b2)
+    cb = np.outer(sb, sb) * g_true.correlation(N, BIAS_INSTABILITY, keep, signs)   # flicker covariance
+    ch = Channels(white, walk, np.einsum("gai,ij,gaj->ga", M, cb, M), np.einsum("gai,i->ga", M * M, gm2),
                    ratio, True, bias=np.max(np.abs(np.einsum("gan,gnb->gab", M, H) - np.eye(3)), axis=(1, 2)))
     s2, q, _, _ = kept_levels(g_true, N, keep, dt)
     ch.kf_single_ratio = float(np.mean(q) / np.mean(s2))             # the typical gyro's q_b / r

@@ -9,11 +9,13 @@ import math
 from typing import Any
 
 import numpy as np
+from scipy import stats
 
 from gyroarray.analysis.replicates import mean_ci, replicate_rng, rms_ci
 from gyroarray.core import units
 from gyroarray.core.layout import Layout
 from gyroarray.design.predict import (AXES, settle_start, swing_truth)
+from gyroarray.effects.names import BIAS_INSTABILITY
 from gyroarray.design.robust import mirror_pattern
 from gyroarray.estimators import get_estimator
 from gyroarray.sim.effects import simulate_readings
@@ -24,6 +26,136 @@ from gyroarray.design.scoring import rescore_exact
 from gyroarray.design.screening import (Candidate, Decider)
 from gyroarray.design.search_space import DesignSpace
 from gyroarray.design.statements import design_label
+
+
+#: ``--check auto``: the paired runs of the pilot that sizes the check, and the most runs it picks.
+AUTO_PILOT = 20
+AUTO_CAP = 400
+
+#: The power at which a check is sized: K_needed runs resolve the predicted difference (the
+#: 95 % interval of the paired mean excludes 0) in 80 % of checks.
+SIZING_POWER = 0.8
+SIZING_LEVEL = 0.95
+
+
+def runs_needed(delta: float, sd: float, *, level: float = SIZING_LEVEL, power: float = SIZING_POWER,
+                most: int = 10 ** 9) -> int | None:
+    """Paired runs K that resolve a mean difference ``delta`` with per-run sd ``sd`` (same unit).
+
+    The smallest K >= 2 with (t_{(1+level)/2, K−1} + t_{power, K−1}) · sd / √K <= |delta|:
+    the Student-t interval (``level``) of the mean of K paired differences then excludes 0 in
+    a fraction ``power`` of checks (the normal-theory sample size, with t quantiles).
+
+    Parameters
+    ----------
+    delta : float
+        Predicted mean of the paired difference [metric unit].
+    sd : float
+        Standard deviation of one run's paired difference [metric unit].
+    level, power : float
+        Confidence level of the interval and the power [-].
+    most : int
+        Above this many: None (no finite check resolves it in practice).
+
+    Returns
+    -------
+    int or None
+    """
+    if not (math.isfinite(delta) and math.isfinite(sd)) or delta == 0.0:
+        return None
+    if sd <= 0.0:
+        return 2
+    za, zb = stats.norm.ppf(0.5 + level / 2), stats.norm.ppf(power)
+    k = max(2, math.ceil(((za + zb) * sd / abs(delta)) ** 2))
+    if k > most:
+        return None
+    while (stats.t.ppf(0.5 + level / 2, k - 1) + stats.t.ppf(power, k - 1)) * sd / math.sqrt(k) > abs(delta):
+        k += 1
+        if k > most:
+            return None
+    return k
+
+
+def _objective_metric(objective: str, arr: np.ndarray) -> np.ndarray:
+    """Each run's objective metric (R,): the 3-axis mean square of the rate error in the window
+    [(deg/s)²] (rate) or the 3-axis squared angle error at the horizon [deg²] (angle), from the
+    runs' stacks (R, 4, 3) [rad/s, rad]."""
+    if objective == "rate":
+        return units.rad_s_to_deg_s(1.0) ** 2 * np.sum(arr[:, 0, :] ** 2, axis=1)
+    return units.rad_to_deg(1.0) ** 2 * np.sum(arr[:, 1, :] ** 2, axis=1)
+
+
+def _predicted_metric(objective: str, d: dict) -> float:
+    """The predictor's mean of :func:`_objective_metric` for a design at its worst case."""
+    wc = d["worst_case"]
+    return float(wc["rms_3axis_deg_s"] ** 2 if objective == "rate" else wc["angle_deg"] ** 2)
+
+
+def check_sizing(objective: str, rec: dict, other: dict, pilot: np.ndarray, k: int, *,
+                 cap: int | None = None) -> dict:
+    """Whether K paired runs can resolve the recommendation from the runner-up, and how many would.
+
+    The mean of the paired difference (runner-up − recommendation) of the objective metric
+    (:func:`_objective_metric`) is the predictor's (each design at its worst case); its
+    per-run standard deviation is not: the two designs' errors share the runs' noise streams
+    through two different estimators (and after different failed gyros), a cross-covariance
+    the predictor does not hold, so it is estimated from a pilot, the first paired runs, with
+    its χ² 95 % interval. K_needed: :func:`runs_needed` (95 % interval, 80 % power).
+
+    Parameters
+    ----------
+    objective : {"rate", "angle"}
+    rec, other : dict
+        The recommendation and the runner-up (decision designs with ``worst_case``).
+    pilot : ndarray (P,)
+        The pilot runs' paired differences [(deg/s)² or deg²].
+    k : int
+        Runs of the check.
+    cap : int, optional
+        ``--check auto``'s largest K.
+
+    Returns
+    -------
+    dict
+        ``metric``, ``unit``, ``predicted_mean_difference``, ``sd_paired_difference`` {value,
+        ci_low, ci_high, unit, source}, ``k_needed`` (None: no finite K), ``k_needed_range``,
+        ``k``, ``resolvable`` (K >= K_needed), ``level``, ``power``, ``statement``.
+    """
+    unit = "(deg/s)^2" if objective == "rate" else "deg^2"
+    metric = ("3-axis mean square of the rate error in the window" if objective == "rate"
+              else "3-axis squared angle error at the horizon")
+    delta = _predicted_metric(objective, other) - _predicted_metric(objective, rec)
+    p = int(pilot.size)
+    sd = float(np.std(pilot, ddof=1)) if p >= 2 else math.nan
+    lo = hi = None
+    if p >= 2:
+        lo = float(sd * math.sqrt((p - 1) / stats.chi2.ppf(0.975, p - 1)))
+        hi = float(sd * math.sqrt((p - 1) / stats.chi2.ppf(0.025, p - 1)))
+    need = runs_needed(delta, sd) if p >= 2 else None
+    rng = [None if lo is None else runs_needed(delta, lo), None if hi is None else runs_needed(delta, hi)]
+    resolvable = bool(need is not None and k >= need)
+    src = (f"pilot: the first {p} paired runs of this check (the predictor does not hold the two "
+           "designs' cross-covariance); 95 % interval from chi-square with "
+           f"{p - 1} degrees of freedom")
+    if need is None:
+        says = (f"no finite check resolves them: predicted difference {delta:.4g} {unit}"
+                if p >= 2 else f"a pilot of {p} run cannot size the check")
+    elif resolvable:
+        says = (f"{k} paired runs can resolve the recommendation from the runner-up (K_needed {need}, "
+                f"95 % interval, {100 * SIZING_POWER:g} % power)")
+    else:
+        says = (f"{k} paired runs cannot resolve the recommendation from the runner-up; about {need} "
+                f"would (95 % interval, {100 * SIZING_POWER:g} % power; {rng[0]}–{rng[1]} over the sd's "
+                "95 % interval)")
+        if cap is not None and need > cap:
+            says += f"; even the cap of --check auto ({cap}) cannot"
+    if need is not None:
+        says += (f": predicted difference of the {metric} {delta:.4g} {unit} (runner-up − "
+                 f"recommendation), sd of one paired difference {sd:.4g} {unit} ({p}-run pilot)")
+    return {"metric": metric, "unit": unit, "predicted_mean_difference": delta,
+            "sd_paired_difference": {"value": sd, "ci_low": lo, "ci_high": hi, "unit": unit, "source": src},
+            "k_needed": need, "k_needed_range": rng, "k": int(k), "resolvable": resolvable,
+            "cap": cap, "level": SIZING_LEVEL, "power": SIZING_POWER, "statement": says}
 
 
 def _pick_for_check(designs: list[dict], top: int) -> list[dict]:
@@ -46,13 +178,16 @@ def _pick_for_check(designs: list[dict], top: int) -> list[dict]:
 
 
 def monte_carlo_check(designs: list[dict], g: GyroNoise, space: DesignSpace, *,
-                      replicates: int = 20, seed: int = 20260412, top: int = 4) -> dict:
+                      replicates: int | str = 20, seed: int = 20260412, top: int = 4) -> dict:
     """Simulate the top designs with common random numbers and set the runs beside the prediction.
 
     Every replicate r draws the gyro noise from the same seed for every design
     (paired: gyro k's streams are the same in each layout), through the
     simulator's own effects (:func:`gyroarray.sim.effects.simulate_readings`)
     and the real estimators; the rate truth is the design's motion.
+
+    ``replicates``: a number of runs, or "auto" (a decision's check sizes itself,
+    :func:`check_decision`; the single-ρ ranking runs :data:`AUTO_PILOT`).
 
     Returns
     -------
@@ -68,6 +203,8 @@ def monte_carlo_check(designs: list[dict], g: GyroNoise, space: DesignSpace, *,
         g = g.sized(max(max(space.ns), g.open_from))
     if designs and "worst_case" in designs[0]:
         return check_decision(designs, g, space, replicates=replicates, seed=seed)
+    if isinstance(replicates, str):     # "auto" sizes a decision's check; a single-ρ ranking: the pilot
+        replicates = AUTO_PILOT
     picked = _pick_for_check(designs, top)
     dt = space.dt_s
     k0, t, truth = _check_run(space)
@@ -180,7 +317,7 @@ def _row_signs(d: dict):
     return s if s is None or slots is None else [s[int(k) - 1] for k in slots]
 
 
-def check_decision(designs: list[dict], g: GyroNoise, space: DesignSpace, *, replicates: int = 20,
+def check_decision(designs: list[dict], g: GyroNoise, space: DesignSpace, *, replicates: int | str = 20,
                    seed: int = 20260412) -> dict:
     """Monte Carlo of the decision: the recommendation, the runner-up and the mounting mirror,
     each at its own worst case (true ρ, failed gyros), with the estimator as built.
@@ -191,14 +328,24 @@ def check_decision(designs: list[dict], g: GyroNoise, space: DesignSpace, *, rep
     so the difference of two designs' 3-axis mean squares is judged run by run (Student-t
     interval of the paired differences).
 
+    The check is sized (:func:`check_sizing`) from a pilot, its first min(K, :data:`AUTO_PILOT`)
+    runs: whether K runs can resolve the recommendation from the runner-up on the objective
+    metric, and how many would. ``replicates="auto"``: K is that number, at least the pilot and
+    at most :data:`AUTO_CAP`; where even the cap cannot resolve them only the pilot is run.
+
     Returns
     -------
     dict
         ``replicates``, ``seed``, ``designs`` (per design: ``role``, ``label``, ``at`` {rho,
         failed_gyros}, per axis the predicted and simulated ``rms_deg_s`` and ``angle_deg`` with
         95 % intervals, ``rms_3axis_deg_s``, ``inside_95`` of ``compared``), ``paired`` (the
-        recommendation against each other one), ``inside_95``, ``compared``.
+        recommendation against each other one), ``inside_95``, ``compared`` and, with a
+        runner-up, ``sizing`` (:func:`check_sizing`) with its ``k_needed``, ``resolvable`` and
+        ``sd_paired_difference`` {value, unit} also at the top level.
     """
+    auto = isinstance(replicates, str)
+    if auto and replicates != "auto":
+        raise ValueError(f"replicates: a whole number or 'auto', got {replicates!r}")
     rec = designs[0]
     other = [d for d in designs[1:] if (d["scheme"], d["n"]) != (rec["scheme"], rec["n"])] or designs[1:2]
     picked = [("recommended", rec)] + [("runner-up", d) for d in other[:1]]
@@ -221,13 +368,34 @@ def check_decision(designs: list[dict], g: GyroNoise, space: DesignSpace, *, rep
         model = with_sensor(g_true.noise_model(len(keep), keep, sg), space, g_sensitivity=False)
         setups.append((role, d, layout, model, est))
     per: list[list[np.ndarray]] = [[] for _ in setups]
-    for r in range(int(replicates)):
-        for j, (_, d, layout, model, est) in enumerate(setups):
-            z = simulate_readings(model, truth, layout, dt, replicate_rng(seed, r), time_s=t)
-            e = est.estimate(z) - truth
-            w = e[k0:]
-            per[j].append(np.stack([np.sqrt(np.mean(w ** 2, axis=0)), dt * e.sum(axis=0),
-                                    np.std(w, axis=0, ddof=1), np.mean(w, axis=0)]))
+
+    def simulate(runs) -> None:
+        for r in runs:
+            for j, (_, d, layout, model, est) in enumerate(setups):
+                z = simulate_readings(model, truth, layout, dt, replicate_rng(seed, r), time_s=t)
+                e = est.estimate(z) - truth
+                w = e[k0:]
+                per[j].append(np.stack([np.sqrt(np.mean(w ** 2, axis=0)), dt * e.sum(axis=0),
+                                        np.std(w, axis=0, ddof=1), np.mean(w, axis=0)]))
+    objective = rec.get("objective", "rate")
+    sized = bool(other) and picked[1][0] == "runner-up"
+
+    def differences() -> np.ndarray:
+        return (_objective_metric(objective, np.array(per[1]))
+                - _objective_metric(objective, np.array(per[0])))
+    n_pilot = AUTO_PILOT if auto else min(int(replicates), AUTO_PILOT)
+    simulate(range(n_pilot))
+    sizing = None
+    if auto:
+        replicates = n_pilot
+        if sized:
+            need = check_sizing(objective, rec, picked[1][1], differences(), n_pilot, cap=AUTO_CAP)["k_needed"]
+            if need is not None and need <= AUTO_CAP:
+                replicates = max(n_pilot, need)
+    if sized:
+        sizing = check_sizing(objective, rec, picked[1][1], differences(), int(replicates),
+                              cap=AUTO_CAP if auto else None)
+    simulate(range(n_pilot, int(replicates)))
     out_designs = []
     for j, (role, d, *_rest) in enumerate(setups):
         arr = np.array(per[j])                                        # (R, 4, 3)
@@ -263,7 +431,34 @@ def check_decision(designs: list[dict], g: GyroNoise, space: DesignSpace, *, rep
                        "resolved": None if st["ci_low"] is None else bool(st["ci_low"] > 0 or st["ci_high"] < 0),
                        "note": "paired: run r uses the same seed in both designs; Student-t interval "
                                "of the per-run differences"})
+    if sizing is not None:
+        diff_all = differences()
+        st = mean_ci(diff_all)
+        sizing["paired_objective_difference"] = {
+            **st, "unit": sizing["unit"], "predicted": sizing["predicted_mean_difference"],
+            "sd_over_runs": float(np.std(diff_all, ddof=1)) if diff_all.size > 1 else None,
+            "resolved": None if st["ci_low"] is None else bool(st["ci_low"] > 0 or st["ci_high"] < 0)}
+    extra: dict[str, Any] = {"auto": auto}
+    if auto:
+        extra["auto_rule"] = (f"K chosen from a pilot of {AUTO_PILOT} paired runs: the runs that resolve the "
+                              f"recommendation from the runner-up (95 % interval, {100 * SIZING_POWER:g} % "
+                              f"power), at least the pilot, at most {AUTO_CAP}; past the cap only the pilot "
+                              "is run")
+    if sizing is not None:
+        extra.update({"sizing": sizing, "k_needed": sizing["k_needed"], "resolvable": sizing["resolvable"],
+                      "sd_paired_difference": {"value": sizing["sd_paired_difference"]["value"],
+                                               "unit": sizing["unit"], "metric": sizing["metric"]}})
+    bi_levels = [float(g.bi_deg_h)] + [float(v) for v in (g.per_gyro or {}).get(BIAS_INSTABILITY, ())]
+    if max(bi_levels) > 0 and (space.flicker_model != "circular" or g.rho_bi is None or g.rho_bi != 0):
+        # the simulator's bias instability is the circular model, independent between gyros
+        extra["flicker_mismatch"] = (
+            f"the runs draw circular (stationary) flicker, independent between the gyros, while the prediction "
+            f"uses the {space.flicker_model} model with the bias instability's correlation "
+            f"{'following the ARW rho' if g.rho_bi is None else f'rho_bi {g.rho_bi:g}'}: the bias-instability "
+            "part of predicted and simulated differs by the models, not by the predictor (compare with "
+            "--flicker circular --rho-bi 0)")
     return {"replicates": int(replicates), "seed": int(seed), "designs": out_designs, "paired": paired,
+            **extra,
             "inside_95": sum(d["inside_95"] for d in out_designs),
             "compared": sum(d["compared"] for d in out_designs),
             "what": "each design at its own worst case (true rho, failed gyros), estimator built for "

@@ -13,7 +13,7 @@ import numpy as np
 from gyroarray.core.gdop import fault_tolerance, worst_gdop_over_rho
 from gyroarray.core.errors import InputError
 from gyroarray.core.layout import Layout
-from gyroarray.design.robust import (mounting_words, worst_over_interval)
+from gyroarray.design.robust import mounting_words
 from gyroarray.design.channels import (predicted_axes, g_sensitivity_terms, white_covariance)
 from gyroarray.design.details import add_details
 from gyroarray.design.gyro_noise import GyroNoise
@@ -40,9 +40,10 @@ def decision_dict(dec: Decider, c: Candidate, rhos_shown) -> dict:
     typ = score_case(dec, c, H, tuple(range(c.n)), rho_typ, c.rho_d)
     # the intact array at its worst ρ: the per-axis prediction (the old `predicted`)
     key = "rms_3axis_deg_s" if dec.objective == "rate" else "angle_deg"
-    _, r_int = worst_over_interval(lambda r: score_case(dec, c, H, tuple(range(c.n)), r, c.rho_d)[key],
-                                   dec.lo, dec.hi)
-    intact = score_case(dec, c, H, tuple(range(c.n)), r_int, c.rho_d)
+    # fixed weights: linear in ρ, so the intact array's worst ρ is an end of the range, exactly
+    intact = max((score_case(dec, c, H, tuple(range(c.n)), r, c.rho_d) for r in dec.ends()),
+                 key=lambda case: case[key])              # ties: the lower end
+    r_int = intact["rho"]
     m, ms, sumw2, sumf2, ch, resp = intact["_moments"]
     dt = space.dt_s
     pred = predicted_axes(ms, sumw2, sumf2, ch, resp, space)

@@ -11,12 +11,13 @@ import numpy as np
 from gyroarray.core import units
 from gyroarray.core.layout import Layout
 from gyroarray.effects.model import ModelEntry, NoiseModel
+from gyroarray.effects.names import BIAS_INSTABILITY
 from gyroarray.estimators import get_estimator
 from gyroarray.estimators.fdi import design_parity, minimum_detectable
 from gyroarray.estimators.noise import array_noise, model_terms
-from gyroarray.design.budget import error_budget
+from gyroarray.design.budget import error_budget, undetected_fault
 from gyroarray.design.channels import (estimator_kwargs, with_sensor)
-from gyroarray.design.gyro_noise import COMMON_MODES, GyroNoise
+from gyroarray.design.gyro_noise import COMMON_MODES, GyroNoise, predictor_noise
 from gyroarray.design.predict import AXES, predict
 from gyroarray.design.robust import kept_sets
 from gyroarray.design.search_space import sized_for
@@ -32,6 +33,12 @@ MDB_RHO_POINTS = 41
 #: then halved down to one grid point (the MDB is smooth in ρ with one peak; each point is one
 #: parity design: 6 + 6 of the 41 points instead of all).
 MDB_COARSE_STRIDE = 8
+
+#: The undetected fault of the error budget, as a share of the MDB [-]: a bias step at the MDB is
+#: missed with probability p_md, any smaller one more often, so the budget carries the largest step
+#: the detector may miss at its stated rate, the limit of the steps "just below the MDB" (the row is
+#: linear in the step: a smaller step scales it down in proportion).
+UNDETECTED_FAULT_SHARE = 1.0
 
 #: Gyros whose MDB lies within this share of the largest are tied as the worst [-].
 MDB_TIE_SHARE = 1e-9
@@ -123,9 +130,41 @@ def _error_budget(d: dict, dec: Decider, c: Candidate, H: np.ndarray, signs=None
     b = error_budget(est.linear_system(), Hk,
                      with_sensor(budget_model(dec.cond(wc["rho"]), keep, signs), dec.space),
                      n_samples=dec.space.n_samples, dt_s=dec.dt,
-                     settle_s=dec.space.settle_s, motion=motion)
-    return {"at": {"rho": wc["rho"], "failed_gyros": wc["failed_gyros"]}, **b.to_dict(),
-            "ignored_effects": ignored_effects(dec.g, dec.space, b.ignored)}
+                     settle_s=dec.space.settle_s, motion=motion,
+                     bi_correlation=dec.cond(wc["rho"]).correlation(len(keep), BIAS_INSTABILITY, keep, signs),
+                     flicker_model=dec.space.flicker_model)
+    out = {"at": {"rho": wc["rho"], "failed_gyros": wc["failed_gyros"]}, **b.to_dict(),
+           "ignored_effects": ignored_effects(dec.g, dec.space, b.ignored)}
+    if d.get("mdb_deg_s") is not None:
+        out["undetected_fault"] = _undetected_fault(d, dec, c, H, signs)
+    return out
+
+
+def _undetected_fault(d: dict, dec: Decider, c: Candidate, H: np.ndarray, signs=None) -> dict:
+    """The error budget's ``undetected_fault`` row: a bias step of :data:`UNDETECTED_FAULT_SHARE`
+    × the MDB on the MDB's worst gyro, present from t = 0 and never isolated, through the intact
+    array's estimator (built for the design ρ on every gyro) to the horizon
+    (:func:`gyroarray.design.budget.undetected_fault`)."""
+    wc = d["worst_case"]
+    keep = tuple(range(c.n))
+    Hk = H[0]
+    gd = dec.cond(c.rho_d if c.rho_d is not None else wc["rho"])
+    est = get_estimator(c.est)(**estimator_kwargs(c.est, c.bw, dec.g)).fit(
+        Layout(Hk), gd.noise_model(len(keep), keep, signs), dec.dt)
+    gyro = int(d["mdb_worst_gyro"])
+    step = UNDETECTED_FAULT_SHARE * float(d["mdb_deg_s"])
+    row = undetected_fault(est.linear_system(), c.n, gyro, units.deg_s_to_rad_s(step),
+                           n_samples=dec.space.n_samples, dt_s=dec.dt, settle_s=dec.space.settle_s,
+                           sensor=dec.space.sensor(c.n))
+    row["share_of_mdb"] = UNDETECTED_FAULT_SHARE
+    row["statement"] = (
+        f"undetected fault: a bias step of {step:.4g} deg/s ({UNDETECTED_FAULT_SHARE:g} × the MDB, the "
+        f"largest step the detector misses with probability {dec.space.p_md:g}; smaller ones more often) "
+        f"on gyro {gyro} (the MDB's worst), present from t = 0 and never isolated, through the intact "
+        f"array's estimator: {row['rms_deg_s']:.4g} deg/s 3-axis RMS over the window, "
+        f"{row['angle_deg']:.4g} deg at the {dec.space.n_samples * dec.dt:g} s horizon (not in the total: "
+        "the total is the fault-free worst case)")
+    return row
 
 
 def budget_model(g: GyroNoise, keep, signs=None):
@@ -205,6 +244,8 @@ def worst_as_built(d: dict, g_design: GyroNoise, g_true: GyroNoise, space, lo: f
                                                g_sensitivity=False), space.dt_s)
         for rt in ([lo] if hi <= lo else [lo, hi]):
             model = with_sensor(at(g_true, rt).noise_model(len(keep), keep, sg), space, g_sensitivity=False)
+            model = predictor_noise(at(g_true, rt), model, len(keep), keep, sg, space.dt_s,
+                                    space.flicker_model)    # the flicker correlated, the space's model
             p = predict(est, model, n_samples=space.n_samples, settle_s=space.settle_s, truth_rad_s=motion,
                         swing=None if motion is not None else space.swing)
             case: dict[str, Any] = {"rho": float(rt), "failed_gyros": [k + 1 for k in range(n) if k not in keep],

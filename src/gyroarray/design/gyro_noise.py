@@ -17,6 +17,8 @@ import numpy as np
 from gyroarray.core import units
 from gyroarray.core.gdop import correlation_matrix
 from gyroarray.core.errors import InputError
+from gyroarray.design.moments import check_flicker_model
+from gyroarray.design.noise_sources import noise_sources, replace_noise
 from gyroarray.design.predict import MODELLED
 from gyroarray.effects.model import ModelEntry, NoiseModel
 from gyroarray.effects.terms import (CorrelationTerm, FlickerTerm, GaussMarkovTerm, WalkTerm, WhiteTerm,
@@ -77,6 +79,12 @@ class GyroNoise:
         per-gyro entries, docs/model-format.md: the gyros it does not name take the all-gyros
         entries); ``per_gyro`` then holds its first gyros until :meth:`sized` lengthens it.
         None: alike gyros, or a per-gyro model whose gyro count fixes N.
+    rho_bi : float or None
+        Common correlation of the gyros' bias instability (flicker) [-] (``design --rho-bi``);
+        None: the ARW correlation (ρ, or the model's ARW matrix), whatever ρ the condition
+        takes (:meth:`with_rho` keeps it following). The predictor's flicker covariance is
+        B Bᵀ ∘ that correlation (:meth:`correlation` with ``which`` = bias_instability); the
+        simulator's flicker stays independent between gyros.
     """
 
     arw_deg_rt_h: float
@@ -94,6 +102,12 @@ class GyroNoise:
     corr_rrw: np.ndarray | None = field(default=None, compare=False, repr=False)
     model: Any = field(default=None, compare=False, repr=False)
     open_from: int | None = field(default=None, compare=False)
+    rho_bi: float | None = None
+
+    @property
+    def rho_bi_value(self) -> float:
+        """The bias instability's common correlation in effect [-] (:attr:`rho_bi`, else the ARW ρ)."""
+        return self.rho_arw if self.rho_bi is None else float(self.rho_bi)
 
     @property
     def n_gyros(self) -> int | None:
@@ -141,6 +155,8 @@ class GyroNoise:
             v = getattr(self, k)
             if not (math.isfinite(v) and -1.0 < v < 1.0):
                 raise InputError(f"{k} must be in (-1, 1), got {v!r}")
+        if self.rho_bi is not None and not (math.isfinite(self.rho_bi) and -1.0 < self.rho_bi < 1.0):
+            raise InputError(f"rho_bi must be in (-1, 1), got {self.rho_bi!r}")
         if self.common_mode not in COMMON_MODES:
             raise InputError(f"the common-mode frame must be one of {', '.join(COMMON_MODES)}, "
                              f"got {self.common_mode!r}")
@@ -157,8 +173,9 @@ class GyroNoise:
         ----------
         n : int
             Gyros kept.
-        which : {ARW, RRW}
-            The white noise (ARW) or the walk increments (RRW).
+        which : {ARW, RRW, BIAS_INSTABILITY}
+            The white noise (ARW), the walk increments (RRW) or the flicker (bias instability:
+            :attr:`rho_bi` equicorrelated, or, when None, the ARW correlation).
         keep : sequence of int, optional
             0-based gyros (rows of the array) kept (None: the first ``n``); a per-gyro model's matrix
             and ``signs`` are indexed by them.
@@ -315,7 +332,8 @@ class GyroNoise:
     def to_json_dict(self) -> dict:
         out: dict[str, Any] = {"arw_deg_rt_h": self.arw_deg_rt_h, "rrw_deg_h_rt_h": self.rrw_deg_h_rt_h,
                "bi_deg_h": self.bi_deg_h, "gm_sigma_deg_h": self.gm_sigma_deg_h,
-               "gm_tau_s": self.gm_tau_s, "rho_arw": self.rho_arw, "rho_rrw": self.rho_rrw}
+               "gm_tau_s": self.gm_tau_s, "rho_arw": self.rho_arw, "rho_rrw": self.rho_rrw,
+               "rho_bi": self.rho_bi_value}
         if self.per_gyro is not None:
             out["per_gyro"] = {k: [float(x) for x in v] for k, v in self.per_gyro.items()}
         return out
@@ -450,6 +468,10 @@ def kept_levels(g: GyroNoise, n: int, keep, dt: float):
 
 def _corr_of(g: GyroNoise, n: int, keep, which: str) -> np.ndarray:
     """The correlation of the kept gyros: the model's matrix when it has one, else equicorrelated."""
+    if which == BIAS_INSTABILITY:
+        if g.rho_bi is None:
+            return _corr_of(g, n, keep, ARW)                # default: follows the ARW correlation
+        return equicorrelation(n, float(g.rho_bi))
     mat = g.corr_arw if which == ARW else g.corr_rrw
     if mat is None:
         return equicorrelation(n, g.rho_arw if which == ARW else g.rho_rrw)
@@ -472,3 +494,34 @@ def equicorrelation(n: int, rho: float) -> np.ndarray:
     c = correlation_matrix(n, rho)
     c.setflags(write=False)
     return c
+
+
+def bi_covariance_correlation(g: GyroNoise, n: int, keep=None, signs=None) -> np.ndarray:
+    """The correlation of the kept gyros' flicker (bias instability) [-]: :meth:`GyroNoise.correlation`
+    with ``which`` = bias_instability (in the gyros' common-mode frame, ``signs`` the array's
+    mounting signs in row order)."""
+    return g.correlation(n, BIAS_INSTABILITY, keep, signs)
+
+
+def predictor_noise(g: GyroNoise, noise_model, n: int, keep, signs, dt: float,
+                    flicker_model: str = "circular"):
+    """The predictor's :class:`~gyroarray.design.noise_sources.NoiseSources` of ``noise_model``
+    on the kept gyros, with the flicker of ``g`` correlated (:func:`bi_covariance_correlation`)
+    and the flicker model ``flicker_model`` (:data:`gyroarray.design.moments.FLICKER_MODELS`).
+
+    Parameters
+    ----------
+    g : GyroNoise
+    noise_model : NoiseModel
+        The kept gyros' model (as simulated).
+    n : int
+        Gyros kept.
+    keep, signs
+        As :meth:`GyroNoise.correlation`.
+    dt : float
+        Sample period [s].
+    flicker_model : str
+    """
+    ns = noise_sources(noise_model, n, dt)
+    return replace_noise(ns, bi_corr=bi_covariance_correlation(g, n, keep, signs),
+                         flicker_model=check_flicker_model(flicker_model))

@@ -9,24 +9,49 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.fft as sfft
+from scipy import signal
 
 from gyroarray.core.errors import InputError
 from gyroarray.design.noise_sources import NoiseSources
 
 
-#: The flicker (bias instability) model of :func:`flicker_moments`, which the decision states.
-FLICKER_MODEL = "circular"
+#: The flicker (bias instability) models :func:`flicker_moments` knows (``design --flicker``).
+FLICKER_MODELS = ("circular", "kasdin")
 
-#: The flicker model in words, and what another model would give (the decision's assumptions).
-FLICKER_MODEL_WORDS = (
-    "circular (stationary) 1/f noise: sinusoids at the frequencies j/(M·dt), j = 1..M/2, M ≈ 2 × "
-    "the run's samples, each of variance B²/(π j) (one-sided S(f) = B²/(π f), the simulator's "
-    "core.physics.flicker_noise), as if the gyro had been running forever before switch-on; "
-    "no power below 1/(M·dt), so the angle it predicts is the most optimistic of the flicker "
-    "models: Kasdin's 1/f noise from switch-on (a fractional integration started at t = 0) "
-    "gives about twice the bias-instability angle at the horizon for the same Allan floor "
-    "(issue 43: 1.17 against 2.60 deg on the demo's array), sums of Gauss–Markov processes "
-    "1.5–3.6 times")
+#: The flicker model the design predictor uses unless told (``design --flicker``): Kasdin's
+#: 1/f noise from switch-on, the defensible one for the angle at a horizon from switch-on.
+FLICKER_MODEL = "kasdin"
+
+#: Each flicker model in words, and what the other gives (the decision's assumptions).
+FLICKER_WORDS = {
+    "circular": (
+        "circular (stationary) 1/f noise: sinusoids at the frequencies j/(M·dt), j = 1..M/2, M ≈ 2 × "
+        "the run's samples, each of variance B²/(π j) (one-sided S(f) = B²/(π f), the simulator's "
+        "core.physics.flicker_noise), as if the gyro had been running forever before switch-on; "
+        "no power below 1/(M·dt), so the angle it predicts is the most optimistic of the flicker "
+        "models: Kasdin's 1/f noise from switch-on (design --flicker kasdin) gives about twice the "
+        "bias-instability angle at the horizon for the same Allan floor (issue 43: 1.17 against "
+        "2.60 deg on the demo's array)"),
+    "kasdin": (
+        "Kasdin (1995) 1/f noise from switch-on: b_k = B Σ_{j=0..k} h_j w_{k−j}, w white of unit "
+        "variance, h_j = Γ(j + 1/2)/(Γ(1/2) j!) (the α = 1 fractional integration started at "
+        "k = 0); scaled like the circular model, one-sided S(f) ≈ B²/(π f) at low frequency "
+        "(innovation σ = B per sample), so the Allan floor is √(2 ln 2/π)·B ≈ 0.664 B; it has "
+        "power at every frequency down to 1/T, so it is the defensible one for the angle at a "
+        "horizon from switch-on; the circular (stationary) model (design --flicker circular, the "
+        "simulator's) gives about half the bias-instability angle at the horizon for the same "
+        "Allan floor (issue 43: 1.17 against 2.60 deg on the demo's array)"),
+}
+
+#: The default flicker model in words (kept for importers).
+FLICKER_MODEL_WORDS = FLICKER_WORDS[FLICKER_MODEL]
+
+
+def check_flicker_model(model: str) -> str:
+    """``model`` if it is one of :data:`FLICKER_MODELS` (else :class:`InputError`)."""
+    if model not in FLICKER_MODELS:
+        raise InputError(f"the flicker model must be one of {', '.join(FLICKER_MODELS)}, got {model!r}")
+    return str(model)
 
 
 def _mat_power(T: np.ndarray, m: int) -> np.ndarray:
@@ -212,16 +237,35 @@ def _sym(a):
     return 0.5 * (a + a.T)
 
 
-def flicker_moments(sys, bi_rad_s: np.ndarray, n: int, k0: int, dt_s: float) -> Moments:
-    """Second moments of the error from the simulator's flicker noise (module Notes).
+def flicker_moments(sys, bi_rad_s: np.ndarray, n: int, k0: int, dt_s: float, *,
+                    model: str = "circular", corr: np.ndarray | None = None) -> Moments:
+    """Second moments of the error from flicker (bias-instability) noise.
 
-    Each FFT frequency of the circular flicker process passes the filter's
-    steady-state response; the window sums follow the Fejér kernel.
+    Parameters
+    ----------
+    sys : LinearSystem
+        The estimator (its sensor filter cascaded), N inputs.
+    bi_rad_s : ndarray (N,)
+        Flicker coefficient B per gyro [rad/s].
+    n, k0 : int
+        Samples in the run; first scored sample.
+    dt_s : float
+        Sample period [s].
+    model : {"circular", "kasdin"}
+        ``circular``: the simulator's stationary flicker (each FFT frequency of the circular
+        process through the filter's steady-state response, the window sums following the
+        Fejér kernel); ``kasdin``: Kasdin's 1/f noise from switch-on (:func:`kasdin_moments`).
+    corr : ndarray (N, N), optional
+        Correlation of the gyros' flicker processes [-] (None: independent); the flicker
+        covariance is B Bᵀ ∘ corr.
     """
+    if check_flicker_model(model) == "kasdin":
+        return kasdin_moments(sys, bi_rad_s, n, k0, dt_s, corr=corr)
     bi = np.asarray(bi_rad_s, dtype=float)
     zero = np.zeros((3, 3))
     if not np.any(bi > 0):
         return Moments(zero, zero, zero, n - k0)
+    cov = _flicker_cov(bi, corr)
     M = sfft.next_fast_len(2 * n, real=True)
     j = np.arange(1, M // 2 + 1, dtype=float)
     # variance of each sinusoid per B²: the simulator's line j carries S(f_j)·Δf = 1/(π j)
@@ -239,8 +283,96 @@ def flicker_moments(sys, bi_rad_s: np.ndarray, n: int, k0: int, dt_s: float) -> 
     for lo in range(0, theta.size, 32768):                # bounded memory
         sl = slice(lo, lo + 32768)
         T = sys.response(theta[sl])                        # (t, 3, N)
-        g = np.einsum("tai,tbi,i->tab", T, np.conj(T), bi ** 2).real * v[sl, None, None]
+        g = np.einsum("tai,ij,tbj->tab", T, cov, np.conj(T)).real * v[sl, None, None]
         ms += g.sum(axis=0)
         sw += np.einsum("tab,t->ab", g, fw[sl])
         sf += np.einsum("tab,t->ab", g, ff[sl])
     return Moments(ms, sw, sf, n - k0)
+
+
+def _flicker_cov(bi: np.ndarray, corr: np.ndarray | None) -> np.ndarray:
+    """B Bᵀ ∘ corr (N, N) [rad²/s²] (corr None: diag B²)."""
+    return np.diag(bi ** 2) if corr is None else np.outer(bi, bi) * np.asarray(corr, dtype=float)
+
+
+def kasdin_coefficients(n: int) -> np.ndarray:
+    """h_0..h_{n−1} of Kasdin's α = 1 (1/f) fractional integration [-]:
+    h_0 = 1, h_j = h_{j−1}·(j − 1/2)/j = Γ(j + 1/2)/(Γ(1/2) j!)."""
+    j = np.arange(1, int(n), dtype=float)
+    return np.concatenate([[1.0], np.cumprod((j - 0.5) / j)])
+
+
+def kasdin_moments(sys, bi_rad_s: np.ndarray, n: int, k0: int, dt_s: float, *,
+                   corr: np.ndarray | None = None) -> Moments:
+    """Exact second moments of the error from Kasdin 1/f noise started at switch-on.
+
+    Gyro i's flicker is b_k = B_i Σ_{j=0..k} h_j w_{i,k−j} (k >= 0, :func:`kasdin_coefficients`),
+    with w white, unit variance, correlated between gyros by ``corr``: the one-sided spectrum at
+    low frequency is B²/(π f), as the circular model's, so both have the Allan floor
+    √(2 ln 2/π)·B (the scaling: innovation σ = B per sample).
+
+    Parameters
+    ----------
+    sys : LinearSystem
+        The estimator, N inputs (modal form λ, S, S⁻¹; started at x̂_{−1} = X0 z_0).
+    bi_rad_s : ndarray (N,)
+        B per gyro [rad/s].
+    n, k0 : int
+        Samples in the run; first scored sample.
+    dt_s : float
+        Sample period [s] (the moments are per sample; unused otherwise).
+    corr : ndarray (N, N), optional
+        Correlation of the gyros' innovations w [-] (None: independent).
+
+    Notes
+    -----
+    With y_m = h filtered by mode m (y_m[k] = λ_m y_m[k−1] + h_k from rest), an innovation at
+    sample i >= 1 reaches the error at k >= i as q_{k−i} = CS diag(y[k−i]) S⁻¹K; the one at
+    sample 0 also sets the start (x̂_{−1} = X0 b_0), r_k = CS diag([y_k, λ^{k+1}]) [S⁻¹K; S⁻¹X0].
+    Every second moment is then CS (Σ_l c_l y_l y_lᴴ ∘ P) (CS)ᴴ with P = S⁻¹K Cov S⁻¹Kᴴ, the
+    weights c_l counting the window samples each lag reaches: sums over the run, no simulation.
+    """
+    bi = np.asarray(bi_rad_s, dtype=float)
+    zero = np.zeros((3, 3))
+    if not np.any(bi > 0):
+        return Moments(zero, zero, zero, n - k0)
+    cov = _flicker_cov(bi, corr)
+    lam = np.asarray(sys.lam)
+    bk = sys.S_inv @ sys.K                                           # (D, N)
+    s0 = sys.S_inv @ sys.X0                                          # (D, N)
+    cs = sys.C @ sys.S                                               # (p, D)
+    cplx = np.iscomplexobj(lam) or np.iscomplexobj(bk) or np.iscomplexobj(cs)
+    h = kasdin_coefficients(n)
+    D = lam.size
+    y = np.empty((n, D), dtype=complex if cplx else float)
+    for m in range(D):
+        y[:, m] = signal.lfilter([1.0], [1.0, -lam[m]], h.astype(y.dtype))
+    k = np.arange(n)
+    pw = lam[None, :] ** (k[:, None] + 1)                            # λ^{k+1} (n, D)
+    u = np.hstack([y, pw])                                           # (n, 2D)
+    b2 = np.vstack([bk, s0])
+    P = bk @ cov @ bk.conj().T                                       # (D, D)
+    P2 = b2 @ cov @ b2.conj().T                                      # (2D, 2D)
+    cs2 = np.hstack([cs, cs])
+
+    def quad(c, A, Pm):                                              # c (A ∘ P) cᴴ, real part
+        return np.real(c @ (A * Pm) @ c.conj().T)
+
+    def gram(a, w=None):                                             # Σ_l w_l a_l a_lᴴ
+        return (a.T * (1.0 if w is None else w)) @ a.conj()
+    nw = n - k0
+    # mean square over the window: innovations i >= 1 reach sample k at lags l = 0..k−1
+    lags = np.arange(n - 1)
+    cnt = (n - np.maximum(k0, lags + 1)).astype(float)               # window samples past lag l
+    ms = quad(cs, gram(y[:n - 1], cnt), P) + quad(cs2, gram(u[k0:]), P2)
+
+    def sums(lo_k):                                                  # E[(Σ_{k>=lo_k} e)(...)ᵀ]
+        cy = np.vstack([np.zeros((1, D), dtype=y.dtype), np.cumsum(y, axis=0)])   # cy[m] = Σ_{l<m} y_l
+        i = np.arange(1, n)
+        hi_l = n - i                                                 # lags l < n − i
+        lo_l = np.maximum(lo_k - i, 0)                               # lags l >= max(lo_k, i) − i
+        ys = cy[hi_l] - cy[lo_l]                                     # (n−1, D)
+        return quad(cs, gram(ys), P) + quad(cs2, gram(u[lo_k:].sum(axis=0)[None, :]), P2)
+    sw = sums(k0)
+    sf = sw if k0 == 0 else sums(0)
+    return Moments(_sym(ms / nw), _sym(sw), _sym(sf), nw)

@@ -64,6 +64,12 @@ class NoiseSources:
     deterministic : tuple of (str, DeterministicTerm)
         The declared deterministic rate errors, by effect name, that :func:`predict`
         evaluates on the stated motion.
+    bi_corr : ndarray, shape (N, N), or None
+        Correlation of the gyros' flicker processes [-] (None: independent, as simulated);
+        the flicker covariance is B Bᵀ ∘ bi_corr (the design's ``--rho-bi``).
+    flicker_model : {"circular", "kasdin"}
+        The flicker model of the moments (:func:`gyroarray.design.moments.flicker_moments`):
+        ``circular`` (the simulator's, the default) or ``kasdin`` (1/f from switch-on).
     """
 
     R: np.ndarray
@@ -76,6 +82,8 @@ class NoiseSources:
     sensor: "SensorBandwidth | None" = None
     g_sensitivity_rad_s_per_m_s2: np.ndarray | None = None
     deterministic: tuple = ()
+    bi_corr: np.ndarray | None = None
+    flicker_model: str = "circular"
 
     @property
     def n_gyros(self) -> int:

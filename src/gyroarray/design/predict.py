@@ -292,7 +292,8 @@ def predict_system(sys, noise: NoiseSources, H: np.ndarray, *, n: int, settle_s:
            WalkTerm.source: error_moments(sys, noise, n, k0, white=False, walk=True, gm=False),
            GaussMarkovTerm.source: error_moments(sys, noise, n, k0, white=False, walk=False, gm=True)
            if np.any(noise.gm_sigma_rad_s > 0) else None,
-           FlickerTerm.source: flicker_moments(sys, noise.bi_rad_s, n, k0, dt)}
+           FlickerTerm.source: flicker_moments(sys, noise.bi_rad_s, n, k0, dt, model=noise.flicker_model,
+                                               corr=noise.bi_corr)}
     parts: dict[str, Moments] = {k: v for k, v in raw.items() if v is not None}
     total = parts[WhiteTerm.source]
     for key, m in parts.items():

@@ -14,7 +14,7 @@ from gyroarray.design.predict import (AXES, predict)
 from gyroarray.design.robust import kept_sets
 from gyroarray.estimators import get_estimator
 from gyroarray.design.channels import (prediction_axes, estimator_kwargs, with_sensor)
-from gyroarray.design.gyro_noise import GyroNoise
+from gyroarray.design.gyro_noise import GyroNoise, predictor_noise
 from gyroarray.design.screening import (Candidate, Decider, nominal_rho, predicted_at, candidate_axes,
                                         row_signs)
 from gyroarray.design.search_space import design_tags, CLOSED_FORM_WEIGHTS
@@ -84,7 +84,9 @@ def exact_predictions(dec: Decider, c: Candidate, H: np.ndarray, extra_rhos=()) 
             if (keep, float(rt)) in out:
                 continue
             model = with_sensor(dec.cond(rt).noise_model(len(keep), keep, sg), space, g_sensitivity=False)
-            out[(keep, float(rt))] = predict(est, model, n_samples=space.n_samples, settle_s=space.settle_s,
+            # the flicker correlated (--rho-bi) and of the space's model (--flicker)
+            noise = predictor_noise(dec.cond(rt), model, len(keep), keep, sg, dec.dt, space.flicker_model)
+            out[(keep, float(rt))] = predict(est, noise, n_samples=space.n_samples, settle_s=space.settle_s,
                                              truth_rad_s=motion, swing=None if motion is not None else space.swing)
     return out
 

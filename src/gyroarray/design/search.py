@@ -23,7 +23,7 @@ from gyroarray.design.channels import (predicted_axes, prediction_axes, add_moti
                                        channel_levels, combine_moments, estimator_kwargs, evaluate_channels,
                                        g_sensitivity_terms, white_covariance, channel_responses, single_ratio,
                                        channel_weights, with_sensor)
-from gyroarray.design.gyro_noise import GyroNoise
+from gyroarray.design.gyro_noise import GyroNoise, predictor_noise
 from gyroarray.design.search_space import (weight_kind, DesignSpace, alpha_grid, bandwidth_grid, sized_for)
 
 
@@ -139,7 +139,9 @@ def generic_design(scheme, n, est, alpha, bw, rho, space: DesignSpace, g: GyroNo
     model = gr.noise_model(n)
     e = get_estimator(est)(**estimator_kwargs(est, bw, g)).fit(layout, model, space.dt_s)
     motion = space.motion[:space.n_samples] if space.motion is not None else None
-    p = predict(e, with_sensor(model, space, g_sensitivity=False), n_samples=space.n_samples,
+    noise = predictor_noise(gr, with_sensor(model, space, g_sensitivity=False), n, None, None, space.dt_s,
+                            space.flicker_model)             # the flicker correlated, the space's model
+    p = predict(e, noise, n_samples=space.n_samples,
                 settle_s=space.settle_s, truth_rad_s=motion, swing=space.swing)
     rms2 = sum(units.deg_s_to_rad_s(v["rms_deg_s"]) ** 2 for v in p.axes.values())
     pred = prediction_axes(p)

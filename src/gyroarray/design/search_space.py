@@ -10,6 +10,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from gyroarray.design.moments import FLICKER_MODEL, check_flicker_model
 from gyroarray.design.predict import (SensorBandwidth, Swing)
 from gyroarray.core.sensor import bandwidth_sos
 from gyroarray.effects.model import ModelEntry
@@ -191,6 +192,10 @@ class DesignSpace:
         minimum detectable bias (with failures >= 1).
     mdb_max : float or None
         Largest minimum detectable bias a design may have [deg/s] (None: no limit).
+    flicker_model : {"circular", "kasdin"}
+        The bias instability's (flicker) model of the ranking and the error budget
+        (``design --flicker``, :data:`gyroarray.design.moments.FLICKER_MODELS`): Kasdin's 1/f
+        from switch-on (the default) or the simulator's circular stationary 1/f.
     """
 
     rate_hz: float = 100.0
@@ -213,8 +218,10 @@ class DesignSpace:
     far_per_h: float = 0.01
     p_md: float = 0.001
     mdb_max: float | None = None
+    flicker_model: str = FLICKER_MODEL
 
     def __post_init__(self):
+        check_flicker_model(self.flicker_model)
         if self.sensor_bandwidth is not None:
             fc, order = self.sensor_bandwidth
             bandwidth_sos(fc, order, self.dt_s)                     # order 1/2, 0 < fc < Nyquist

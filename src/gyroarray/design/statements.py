@@ -16,7 +16,7 @@ from gyroarray.core import units
 from gyroarray.design.predict import AXES
 from gyroarray.effects.names import ARW, BANDWIDTH, BIAS_INSTABILITY, CONSTANT_BIAS, CORRELATION, GAUSS_MARKOV, G_SENSITIVITY, MISALIGNMENT, QUANTIZATION, RRW, SCALE_FACTOR, SCALE_NONLINEARITY, TEMPERATURE_BIAS
 from gyroarray.design.gyro_noise import COMMON_MODE_WORDS, GyroNoise
-from gyroarray.design.moments import FLICKER_MODEL, FLICKER_MODEL_WORDS
+from gyroarray.design.moments import FLICKER_WORDS
 from gyroarray.design.search import generic_or_fast
 from gyroarray.design.search_space import (DesignSpace, EQUIVALENT_SHARE, OBJECTIVE_WORDS)
 
@@ -397,7 +397,13 @@ def assumptions(g: GyroNoise, space: DesignSpace, rhos, single: bool) -> dict:
         "biases": item("start at zero (calibrated at switch-on), as the simulator draws them",
                        "assumption"),
         "common_mode": item(g.common_mode, src.get("common_mode", "default"), COMMON_MODE_WORDS[g.common_mode]),
-        "flicker_model": item(FLICKER_MODEL, "assumption", FLICKER_MODEL_WORDS),
+        "flicker_model": item(space.flicker_model, s.get("flicker_model", "default"),
+                              FLICKER_WORDS[space.flicker_model]),
+        "rho_bi": item("the ARW correlation (ρ, or the model's ARW matrix), at every ρ of the range"
+                       if g.rho_bi is None else float(g.rho_bi), src.get("rho_bi", "default"),
+                       "common correlation of the gyros' bias instability (flicker) in the predictor "
+                       "(the ranking and the error budget; design --rho-bi); the Monte-Carlo check's "
+                       "simulated flicker is independent between gyros and circular"),
         "detection": item(detection_assumption(space), "user" if "user" in (s.get("far_per_h"), s.get("p_md"))
                           else "default"),
         "ignored_effects": item(ignored_effects(g, space), "model"),

@@ -245,6 +245,8 @@ def _budget(doc, r: dict, horizon: float):
           f"{_failed(at.get('failed_gyros'))} (its worst case); angle at the horizon "
           f"{b.get('horizon_s', horizon):g} s:")
     doc.table(["term", "RMS [deg/s]", "angle @T [deg]", "largest"], rows)
+    if b.get("undetected_fault"):
+        doc.p(b["undetected_fault"].get("statement", "undetected fault"), "note")
     ign = b.get("ignored_effects")
     if ign is not None:
         doc.p("Left out of the predictor: " + (", ".join(map(str, ign)) if ign else
