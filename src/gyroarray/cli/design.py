@@ -78,6 +78,8 @@ def cmd_design(args) -> tuple[dict, str]:
                                 ("--far-per-h", args.far_per_h), ("--p-md", args.p_md),
                                 ("--mdb-max", args.mdb_max), ("--common-mode", args.common_mode),
                                 ("--rho-bi", args.rho_bi), ("--flicker", args.flicker),
+                                ("--temperature-swing", args.temperature_swing),
+                                ("--temperature-period", args.temperature_period),
                                 ("--horizon-s", args.horizon_s), ("--family", args.family),
                                 ("--alike", args.alike or None)) if v is not None]
     if rec_only:
@@ -313,8 +315,12 @@ def _design_space(args):
                         design_rho=args.design_rho,
                         far_per_h=0.01 if args.far_per_h is None else args.far_per_h,
                         p_md=0.001 if args.p_md is None else args.p_md, mdb_max=args.mdb_max,
-                        **({} if args.flicker is None else {"flicker_model": args.flicker}))
+                        **({} if args.flicker is None else {"flicker_model": args.flicker}),
+                        temperature_swing_k=args.temperature_swing, temperature_period_s=args.temperature_period)
     src.setdefault("flicker_model", "user" if args.flicker is not None else "default")
+    src.setdefault("temperature", "user" if args.temperature_swing is not None else "default")
+    if args.temperature_period is not None and args.temperature_swing is None:
+        raise InputError("--temperature-period S needs --temperature-swing C (the swing's amplitude [K])")
     if args.mdb_max is not None and not failures:
         raise InputError("--mdb-max needs --failures K (K >= 1): the detection limit is about "
                          "isolating a failed gyro")
@@ -586,6 +592,8 @@ def _design_as_built(args) -> tuple[dict, str]:
                             ("--p-md", args.p_md), ("--mdb-max", args.mdb_max), ("--check", args.check),
                             ("--common-mode", args.common_mode),
                             ("--rho-bi", args.rho_bi), ("--flicker", args.flicker),
+                            ("--temperature-swing", args.temperature_swing),
+                            ("--temperature-period", args.temperature_period),
                             ("--seed", args.seed), ("--paper-tables", args.paper_tables or None),
                             ("--plot", args.plot)) if v is not None]
     if extra:
@@ -709,6 +717,8 @@ def _recommend_text(res: dict) -> str:
         lines += [f"  {cm['frames'][f]['statement']}" for f in cm["frames"]]
     if "flicker_model" in a:
         lines.append(f"flicker model: {a['flicker_model']['unit']}")
+    if "temperature" in a:
+        lines.append(f"temperature: {a['temperature']['value']}")
     if r.get("mdb_statement"):
         lines.append(f"detection: {r['mdb_statement']}")
     w, t, ru = r["worst_case"], r["typical"], res.get("runner_up")
@@ -840,6 +850,14 @@ def add_parser(sub) -> None:
                    metavar="R", help="--recommend: common correlation of the gyros' bias instability "
                                      "(flicker) in the predictor (default: the ARW correlation, --rho "
                                      "or each ρ of --rho-range)")
+    p.add_argument("--temperature-swing", type=float_in("--temperature-swing", -500.0, 500.0, unit="K"),
+                   metavar="C",
+                   help="--recommend: the temperature's departure from the calibration temperature [K]: "
+                        "the amplitude of a sinusoid with --temperature-period, else constant over the run; "
+                        "temperature terms of the model (temperature_bias) then enter the error budget "
+                        "(default: not stated, those terms listed as left out)")
+    p.add_argument("--temperature-period", type=float_in("--temperature-period", 0.0, 1e9, lo_open=True, unit="s"),
+                   metavar="S", help="--recommend: the period of the temperature swing [s] (with --temperature-swing)")
     p.add_argument("--flicker", choices=("kasdin", "circular"),
                    help="--recommend: the bias instability's (flicker) model of the ranking and the error "
                         "budget: kasdin (default; 1/f noise from switch-on, Kasdin 1995) or circular "

@@ -12,13 +12,14 @@ from gyroarray.core import units
 from gyroarray.core.layout import Layout
 from gyroarray.effects.model import ModelEntry, NoiseModel
 from gyroarray.effects.names import BIAS_INSTABILITY
+from gyroarray.effects.terms import Motion
 from gyroarray.estimators import get_estimator
 from gyroarray.estimators.fdi import design_parity, minimum_detectable
 from gyroarray.estimators.noise import array_noise, model_terms
 from gyroarray.design.budget import error_budget, undetected_fault
 from gyroarray.design.channels import (estimator_kwargs, with_sensor)
 from gyroarray.design.gyro_noise import COMMON_MODES, GyroNoise, predictor_noise
-from gyroarray.design.predict import AXES, predict
+from gyroarray.design.predict import AXES, Swing, predict, swing_truth
 from gyroarray.design.robust import kept_sets
 from gyroarray.design.search_space import sized_for
 from gyroarray.design.screening import (Candidate, Decider, candidate_axes, row_signs)
@@ -125,8 +126,14 @@ def _error_budget(d: dict, dec: Decider, c: Candidate, H: np.ndarray, signs=None
     gd = dec.cond(c.rho_d if c.rho_d is not None else wc["rho"])
     est = get_estimator(c.est)(**estimator_kwargs(c.est, c.bw, dec.g)).fit(
         Layout(Hk), gd.noise_model(len(keep), keep, signs), dec.dt)
-    motion = dec.space.swing if dec.space.swing is not None else (
+    motion: Swing | Motion | np.ndarray | None = dec.space.swing if dec.space.swing is not None else (
         None if dec.space.motion is None else np.asarray(dec.space.motion)[:dec.space.n_samples])
+    temp = dec.space.temperature_history()
+    if temp is not None:                   # the stated temperature swing beside the motion
+        n = dec.space.n_samples
+        omega = (swing_truth(motion, n, dec.dt) if isinstance(motion, Swing) else
+                 np.zeros((n, 3)) if motion is None else np.asarray(motion, dtype=float))
+        motion = Motion(omega_rad_s=omega, temp_swing_k=temp)
     b = error_budget(est.linear_system(), Hk,
                      with_sensor(budget_model(dec.cond(wc["rho"]), keep, signs), dec.space),
                      n_samples=dec.space.n_samples, dt_s=dec.dt,
@@ -173,9 +180,19 @@ def budget_model(g: GyroNoise, keep, signs=None):
     condition's correlation in place of the model's; the typical gyro's model for alike gyros.
     ``signs``: the mounting signs of the array's rows (the axis frame's correlation reads them)."""
     keep = list(keep)
-    if g.model is None or g.per_gyro is None:
+    if g.model is None:
         return g.noise_model(len(keep), keep, signs)
     from gyroarray.effects.terms import CorrelationTerm  # lazy: with the registry
+    if g.per_gyro is None:
+        # alike gyros: the typical gyro's noise, and the model's other all-gyros effects (a
+        # temperature coefficient, a plugin's term) beside it, so that their terms reach the budget
+        own = g.noise_model(len(keep), keep, signs)
+        have = {e.effect for e in own.entries}
+        corr = {eff.name for eff, t in model_terms(g.model, 1) if isinstance(t, CorrelationTerm)}
+        extra = tuple(e for e in g.model.entries if e.gyro is None and e.effect not in have | corr)
+        model = NoiseModel(own.entries + extra, description=g.model.description)
+        model.check(len(keep))
+        return model
     corr = {eff.name for eff, t in model_terms(g.model, cast(int, g.n_levels)) if isinstance(t, CorrelationTerm)}
     own = g.noise_model(len(keep), keep, signs)
     own_corr = [e for e in own.entries if e.gyro is None]               # the condition's correlation

@@ -210,7 +210,9 @@ class GyroNoise:
         """
         typical = cls._typical(model, source)
         if alike:
-            return typical
+            # the model kept beside the typical gyro: its deterministic all-gyros effects (a
+            # temperature coefficient, a plugin's term) reach the error budget (details.budget_model)
+            return replace(typical, model=model)
         return per_gyro_noise(model, typical, source)
 
     @classmethod

@@ -196,6 +196,12 @@ class DesignSpace:
         The bias instability's (flicker) model of the ranking and the error budget
         (``design --flicker``, :data:`gyroarray.design.moments.FLICKER_MODELS`): Kasdin's 1/f
         from switch-on (the default) or the simulator's circular stationary 1/f.
+    temperature_swing_k : float or None
+        The temperature's departure from the one the biases were calibrated at [K]
+        (``design --temperature-swing``): its amplitude with ``temperature_period_s``, a
+        constant departure without; None: not stated (temperature terms left out, listed).
+    temperature_period_s : float or None
+        Period of a sinusoidal temperature swing [s] (``design --temperature-period``).
     """
 
     rate_hz: float = 100.0
@@ -219,6 +225,8 @@ class DesignSpace:
     p_md: float = 0.001
     mdb_max: float | None = None
     flicker_model: str = FLICKER_MODEL
+    temperature_swing_k: float | None = None
+    temperature_period_s: float | None = None
 
     def __post_init__(self):
         check_flicker_model(self.flicker_model)
@@ -229,6 +237,28 @@ class DesignSpace:
     @property
     def dt_s(self) -> float:
         return 1.0 / self.rate_hz
+
+    def temperature_history(self) -> np.ndarray | None:
+        """ΔT(t) over the run [K] (n_samples,): C·sin(2π t / P) with a period P, else the
+        constant C; None when no temperature swing is stated."""
+        if self.temperature_swing_k is None:
+            return None
+        n = self.n_samples
+        if self.temperature_period_s is None:
+            return np.full(n, float(self.temperature_swing_k))
+        t = np.arange(n) * self.dt_s
+        return float(self.temperature_swing_k) * np.sin(2.0 * np.pi * t / float(self.temperature_period_s))
+
+    def temperature_statement(self) -> str:
+        """The stated temperature swing in words (the assumptions)."""
+        if self.temperature_swing_k is None:
+            return ("not stated: temperature terms are left out (listed as ignored); --temperature-swing C "
+                    "[K] (and --temperature-period S) evaluates them")
+        if self.temperature_period_s is None:
+            return (f"a constant departure of {self.temperature_swing_k:g} K from the calibration temperature "
+                    "over the run (--temperature-swing)")
+        return (f"ΔT(t) = {self.temperature_swing_k:g} K · sin(2π t / {self.temperature_period_s:g} s) about the "
+                "calibration temperature (--temperature-swing, --temperature-period)")
 
     def sensor(self, n_gyros: int = 1):
         """The gyros' own filter as :class:`gyroarray.design.predict.SensorBandwidth` (None: none)."""

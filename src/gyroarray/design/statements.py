@@ -404,6 +404,8 @@ def assumptions(g: GyroNoise, space: DesignSpace, rhos, single: bool) -> dict:
                        "common correlation of the gyros' bias instability (flicker) in the predictor "
                        "(the ranking and the error budget; design --rho-bi); the Monte-Carlo check's "
                        "simulated flicker is independent between gyros and circular"),
+        "temperature": item(space.temperature_statement(), s.get("temperature", "default"),
+                            "the temperature swing the temperature terms are evaluated on (the error budget)"),
         "detection": item(detection_assumption(space), "user" if "user" in (s.get("far_per_h"), s.get("p_md"))
                           else "default"),
         "ignored_effects": item(ignored_effects(g, space), "model"),
