@@ -164,9 +164,17 @@ def _design_noise(args):
                       sources={ARW: "user", RRW: "user" if args.rrw is not None else "default",
                                "bi": "user" if args.bi is not None else "default",
                                GAUSS_MARKOV: "default", "rho_arw": "default", "rho_rrw": "default"})
+    elif args.family is not None and not set(_families(args)) & {"cone1", "cone2"}:
+        # layouts designed by geometry alone (free/triads/faces): their GDOP and bound ratio do
+        # not depend on the noise of equal gyros; the accuracies are then a unit gyro's, said so
+        g = GyroNoise(arw_deg_rt_h=GEOMETRY_ARW_DEG_RT_H,
+                      sources={ARW: GEOMETRY_SOURCE, RRW: "default", "bi": "default",
+                               GAUSS_MARKOV: "default", "rho_arw": "default", "rho_rrw": "default"})
     else:
         raise InputError("gyroarray design --recommend: give the gyro noise: --model MODEL.toml (from "
-                         "gyroarray fit --out) or --arw N_DEG_RT_H [--rrw K] [--bi B]")
+                         "gyroarray fit --out) or --arw N_DEG_RT_H [--rrw K] [--bi B]"
+                         + (" (only --family free, triads or faces design by geometry without it)"
+                            if args.family is not None else ""))
     if args.rho is not None and args.rho_range is not None:
         raise InputError("gyroarray design: --rho and --rho-range exclude each other")
     g = GyroNoise(**{**g.in_frame(args.common_mode or "output").__dict__,
@@ -429,6 +437,12 @@ def _design_recommend(args) -> tuple[dict, str]:
     if space.failures:
         res["assumptions"]["detection"]["value"] = detection_assumption(space, res["recommended"])
     _add_bounds(res, args, space, rhos, g)
+    if GEOMETRY_SOURCE in g.sources.values():
+        res.setdefault("notes", []).append(
+            f"no gyro noise given: the layouts are designed and ranked by geometry alone (worst GDOP, bound "
+            f"ratio), which do not depend on the noise of equal gyros; every rate and angle error here is "
+            f"for a unit white noise of {GEOMETRY_ARW_DEG_RT_H:g} deg/√h and no walk (give --arw/--rrw or "
+            "--model for the gyros' own)")
     if args.check:
         res["check"] = monte_carlo_check(res["designs"], g, space, replicates=args.check,
                                          seed=20260412 if args.seed is None else args.seed)
@@ -436,6 +450,12 @@ def _design_recommend(args) -> tuple[dict, str]:
         write_json(args.out, res, args)
         res["written"] = str(args.out)
     return res, _recommend_text(res) + _layouts_text(res)
+
+
+#: The unit gyro ``design --recommend --family free|triads|faces`` takes when no noise is given
+#: [deg/√h]: the layouts' GDOP and bound ratio are the same for any equal gyros.
+GEOMETRY_ARW_DEG_RT_H = 1.0
+GEOMETRY_SOURCE = "unit gyro (no noise given: the layouts are designed by geometry alone)"
 
 
 #: The mounting families of ``design --recommend --family`` (gyroarray.design.sphere.FAMILIES).
