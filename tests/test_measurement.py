@@ -440,3 +440,13 @@ def test_site_refuses_impossible_latitude():
     with pytest.raises(ValueError):
         Site(2.0, 0.0)
     assert Site(deg_to_rad(90.0), 0.0).latitude_rad == math.pi / 2
+
+
+def test_a_measurement_without_a_source_file_writes(tmp_path):
+    """``source=""`` (a record built in memory, named nothing) is no file to protect: it writes
+    (before: ``Path('').with_name`` raised ValueError in the overwrite guard)."""
+    m = Measurement(time_s=np.arange(10) * 0.01, gyro_deg_s=np.ones((10, 3)), layout=Layout(np.eye(3)),
+                    sample_rate_hz=100.0, source="")
+    csv, toml = write_measurement(m, tmp_path / "x.csv")
+    assert csv.exists() and toml.exists()
+    assert np.array_equal(read_measurement(csv).gyro_deg_s, m.gyro_deg_s)

@@ -2283,7 +2283,7 @@ def write_measurement(m: Measurement, path, *, force: bool = True) -> tuple[Path
 
 
 def _refuse_overwriting_source(m: Measurement, targets) -> None:
-    if m.source is None:
+    if m.source is None or not Path(m.source).name:        # no file behind it ("" or a folder)
         return
     for target in targets:
         if any(same_path(target, p) for p in measurement_files(m.source)):
