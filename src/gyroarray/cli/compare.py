@@ -474,7 +474,7 @@ def _with_accelerometer(model, meas, args, notes: list, res: dict):
 
 def cmd_ladder(args):
     # deferred: the chain and the effect registry (numpy, numba) loads only when the command runs (a fast --help)
-    from gyroarray.chain.compare import LADDER_RULE, ModelComparison, split_measurement
+    from gyroarray.chain.compare import LADDER_RULE, ModelComparison, holdout_candidates, split_measurement
     from gyroarray.effects.model import NoiseModel
     if args.more and args.model_out is None:
         raise InputError("more records give the model's white levels across records: add --model-out NEW.toml")
@@ -524,18 +524,26 @@ def cmd_ladder(args):
         # held-out part for what it lacks, not because it does not transfer
         missing = [t for t in final.candidates if final.significant(t)]
         names = [t.effect if t.gyro is None else f"{t.effect}:{t.gyro}" for t in missing]
+        # the term it lacks is the one that lowers the held-out D most (each candidate fitted in on
+        # the fitted part, its model validated held out), not the fitted part's top candidate
+        rows = [] if va.consistent else holdout_candidates(comp, final, held.m, held_out=va,
+                                                           ref_smooth_s=args.ref_smooth)
+        by_d = _holdout_best_text(rows, va.discrepancy)
         if not va.consistent and not final.consistent:
             structure = (f"the model is not consistent on the part it was fitted on either (D = "
                          f"{final.discrepancy:.3g} there, {va.discrepancy:.3g} held out): its structure "
-                         f"lacks a term, not its transfer; missing, by the fitted part's significant "
-                         f"candidates: {', '.join(names) if names else 'none named (see where it fails)'}")
+                         f"lacks a term, not its transfer; the fitted part's significant candidates: "
+                         f"{', '.join(names) if names else 'none named (see where it fails)'}; {by_d}")
         elif not va.consistent:
             structure = (f"consistent on the fitted part (D = {final.discrepancy:.3g}) but not held out "
-                         f"(D = {va.discrepancy:.3g}): the model does not transfer")
+                         f"(D = {va.discrepancy:.3g}): the model does not transfer; {by_d}")
         else:
             structure = f"the model transfers (D = {final.discrepancy:.3g} fitted, {va.discrepancy:.3g} held out)"
+        best = next((r for r in rows if r["holdout_discrepancy"] < va.discrepancy), None)
         res["holdout"] = {"fraction": args.holdout, "discrepancy": va.discrepancy, "consistent": va.consistent,
                           "verdict": verdict, "structure": structure, "missing_terms": names,
+                          "by_candidate": rows,
+                          "best_candidate": None if best is None else {"effect": best["effect"], "gyro": best["gyro"]},
                           "candidates": va.to_json_dict()["candidates"][:10]}
         held_text = [f"held out ({args.holdout:g} of the record): {verdict}", f"  {structure}"]
     lines = [f"{comp.name}: the ladder"]
@@ -558,6 +566,28 @@ def cmd_ladder(args):
     lines += held_text
     lines.append(f"report: {args.out}")
     return res, "\n".join(lines)
+
+
+def _holdout_best_text(rows: list, d_held: float) -> str:
+    """``ladder --holdout``'s structure verdict: the candidate that lowers the held-out D most, with
+    every tried candidate's held-out D (:func:`gyroarray.chain.compare.holdout_candidates`)."""
+    if not rows:
+        return "no candidate to try on the held-out part"
+
+    def one(r) -> str:
+        name = r["effect"] if r["gyro"] is None else f"{r['effect']}:{r['gyro']}"
+        if not math.isfinite(r["holdout_discrepancy"]):
+            return f"{name} (not fitted: {r.get('why', 'no fit')})"
+        return f"{name} (held-out D {r['holdout_discrepancy']:.3g}, fitted {r['fitted_discrepancy']:.3g})"
+    tried = "; ".join(one(r) for r in rows)
+    best = rows[0]
+    if math.isfinite(best["holdout_discrepancy"]) and best["holdout_discrepancy"] < d_held:
+        name = best["effect"] if best["gyro"] is None else f"{best['effect']}:{best['gyro']}"
+        return (f"by the held-out D, the term it lacks is {name}: it lowers the held-out D most "
+                f"({d_held:.3g} -> {best['holdout_discrepancy']:.3g}); each candidate fitted in on the "
+                f"fitted part and validated held out: {tried}")
+    return (f"no candidate lowers the held-out D ({d_held:.3g}); each candidate fitted in on the fitted "
+            f"part and validated held out: {tried}")
 
 
 def _add_compare_args(p, *, out: bool):
