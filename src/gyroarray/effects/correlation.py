@@ -342,7 +342,7 @@ def fit_correlation(E, dt_s: float) -> list[EffectFit]:
     rho, s0 = _pair_correlations(cav, cov, coefs, G, pairs)
     out = [_family_correlation(fam, key, what, rho[fam], s0[fam], seen, pairs, big_n)
            for fam, key, what in ((0, "rho_arw", "ARW (short τ)"), (1, "rho_rrw", "RRW (long τ)"))]
-    out[0] = _held_in_band(out[0], cav, coefs, m, taus, n, pairs, rho[0])
+    out[0] = _held_in_band(out[0], cav, coefs, m, taus, n, pairs, rho[0], rho[1])
     return out
 
 
@@ -351,14 +351,16 @@ P_BAND = 1e-3
 
 
 def _held_in_band(fit: EffectFit, cav: np.ndarray, coefs: list, m: np.ndarray, taus: np.ndarray, n: int,
-                  pairs: list, r: np.ndarray) -> EffectFit:
+                  pairs: list, r: np.ndarray, r_walk: np.ndarray | None = None) -> EffectFit:
     """The ARW correlation refused when it does not hold across the band where it is read.
 
     ρ_arw is read from the cross Allan covariance at every octave through its N²/τ column: it is
     the white noise's correlation only where white noise makes the Allan variance. The check: per
     pair (i, k), at each octave τ where N²/τ is at least half of both gyros' ARW + RRW model, the
-    correlation of that octave alone, ρ_τ = σ²_ik(τ)/√(σ²_ii(τ)·σ²_kk(τ)), against the pair's ρ̂
-    with σ_τ = (1 − ρ̂²)/√ν_τ (Fisher; ν_τ the overlapping ADEV's equivalent degrees of freedom
+    correlation of that octave alone, ρ_τ = σ²_ik(τ)/√(σ²_ii(τ)·σ²_kk(τ)), against the model's
+    at that τ, ρ̂_τ = (ρ̂_arw √(N²_i N²_k)/τ + ρ̂_rrw √(K²_i K²_k) τ/3)/√(model_ii · model_kk) (the
+    walk's share there carries its own correlation ``r_walk``; without it, ρ̂_arw alone), with
+    σ_τ = (1 − ρ̂_τ²)/√ν_τ (Fisher; ν_τ the overlapping ADEV's equivalent degrees of freedom
     for white noise, Greenhall's sampled EDF): χ² = Σ ((ρ_τ − ρ̂)/σ_τ)² over pairs and τ, with
     Σ (T_pair − 1) degrees of freedom. A line common to the gyros (the MPU record's 46.8 Hz in
     all three residuals) makes ρ_τ near 1 at the τ it sits in and lower elsewhere: p < P_BAND
@@ -378,13 +380,19 @@ def _held_in_band(fit: EffectFit, cav: np.ndarray, coefs: list, m: np.ndarray, t
         if np.count_nonzero(band) < 2:
             continue
         rt = cav[band, i, k] / np.sqrt(cav[band, i, i] * cav[band, k, k])
-        st = (1.0 - r[p_] ** 2) / np.sqrt(np.maximum(nu[band], 1.0))
-        zt = (rt - r[p_]) / st
+        tb = taus[band]
+        rw = 0.0 if r_walk is None or not np.isfinite(r_walk[p_]) else float(np.clip(r_walk[p_], -1.0, 1.0))
+        mod = [coefs[j]["n"] / tb + coefs[j]["k"] * tb / 3.0 for j in (i, k)]
+        cross = (r[p_] * np.sqrt(coefs[i]["n"] * coefs[k]["n"]) / tb
+                 + rw * np.sqrt(coefs[i]["k"] * coefs[k]["k"]) * tb / 3.0)
+        rm = cross / np.sqrt(np.maximum(mod[0] * mod[1], 1e-300))        # the model's ρ at each τ
+        st = (1.0 - rm ** 2) / np.sqrt(np.maximum(nu[band], 1.0))
+        zt = (rt - rm) / st
         chi2 += float(zt @ zt)
         dof += int(band.sum()) - 1
         j = int(np.argmax(np.abs(zt)))
         if worst is None or abs(zt[j]) > worst[0]:
-            worst = (abs(zt[j]), i + 1, k + 1, float(taus[band][j]), float(rt[j]), float(r[p_]),
+            worst = (abs(zt[j]), i + 1, k + 1, float(taus[band][j]), float(rt[j]), float(rm[j]),
                      float(taus[band][0]), float(taus[band][-1]))
     if dof <= 0 or worst is None:
         return unchecked(fit, "fewer than 2 octaves where white noise makes both gyros' Allan variance")
@@ -397,4 +405,4 @@ def _held_in_band(fit: EffectFit, cav: np.ndarray, coefs: list, m: np.ndarray, t
     return ruled_out(fit, f"ρ_arw does not hold across the white band where it is read: octave by octave "
                           f"(τ {lo:.3g}–{hi:.3g} s) the gyros' correlation differs from one value by χ² = "
                           f"{chi2:.4g} for {dof} dof (p = {p:.2g}); gyros {gi} and {gk}: {rt:.3g} at "
-                          f"τ = {tau:.3g} s against {rp:.3g} over the band", **numbers)
+                          f"τ = {tau:.3g} s against the model's {rp:.3g} there", **numbers)
