@@ -56,3 +56,19 @@ def test_t_crb_across_the_extremes_of_the_options():
     # N's bound is 1/√(2n): ±1e-6 needs n = 5e11 samples, 5e5 s at 1 MHz
     o = run_cli(["plan", "--arw", 1, "--rate-hz", 1e6, "--precision", 1e-6, "--json"])
     assert o.json["gyros"][0]["terms"]["arw_deg_rt_h"]["t_crb_s"] == pytest.approx(5e5, rel=1e-3)
+
+
+def test_plan_gives_the_whittle_fits_length_beside_the_bound():
+    """Issue 45's Done-when: ``plan --arw 0.3 --rrw 41 --rate-hz 100 --precision 10%`` gives the
+    efficient estimator's length within 5 % of the closed form 200·N/K = 1.4634 h (the band-limited
+    Whittle fit: κ·T_CRB, κ = 1.027 the 5 % Tukey taper's variance inflation, Dahlhaus 1983) and
+    the Allan GLS's beside it."""
+    import json as _json
+    o = run_cli(["plan", "--arw", "0.3", "--rrw", "41", "--rate-hz", "100", "--precision", "10%", "--json"])
+    assert o.code == 0, o.err
+    row = _json.loads(o.out)["gyros"][0]["terms"]["rrw_deg_h_rt_h"]
+    closed_h = 200.0 * 0.3 / 41.0
+    assert row["whittle_kappa"] == pytest.approx(1.0268, abs=2e-3)
+    assert row["t_whittle_s"] == pytest.approx(row["whittle_kappa"] * row["t_crb_s"], rel=1e-12)
+    assert abs(row["t_whittle_s"] / 3600.0 / closed_h - 1.0) < 0.05, row
+    assert row["record_h"] > row["t_whittle_s"] / 3600.0          # the Allan GLS needs more

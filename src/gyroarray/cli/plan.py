@@ -192,6 +192,15 @@ def _crb_lengths(plan, precision: float, confidence: float) -> dict:
     return {t: crb_length(values, plan.rate_hz, t, min(rel, 1e300), max_s=MAX_PLAN_S) for t in values}
 
 
+def _whittle_kappa(rate_hz: float) -> float:
+    """The default taper's variance inflation κ [-] (analysis.whittle.TAPER) of an hour's record
+    at ``rate_hz`` (at most 2^20 samples; κ is 1.026 for any record longer than a few hundred)."""
+    # deferred: numpy loads only when the command runs
+    from gyroarray.analysis.whittle import TAPER, taper_inflation, tukey
+    m = int(min(max(3600.0 * rate_hz, 256), 2 ** 20))
+    return float(taper_inflation(tukey(m, TAPER)))
+
+
 def _plan_cases(args, sensor: str, cases, names):
     """The plan of each ``(gyro or axis, coef SI, relative 1σ of the model)``: JSON and text."""
     # deferred: the chain (numpy, scipy) loads only when the command runs
@@ -204,7 +213,7 @@ def _plan_cases(args, sensor: str, cases, names):
               "rate_hz": args.rate_hz, what: []}
     lines = [f"record length for ±{precision:.1%} relative half-width ({args.confidence:.1%} "
              f"two-sided) at {args.rate_hz:g} Hz (Allan GLS fit, allan's EDF; T_CRB: the "
-             f"Cramér–Rao bound, any unbiased estimator)"
+             f"Cramér–Rao bound, any unbiased estimator; the band-limited Whittle fit: κ·T_CRB)"
              + (", accelerometer:" if sensor == "acc" else ":")]
     for g, coef, fitted in cases:
         try:
@@ -217,6 +226,7 @@ def _plan_cases(args, sensor: str, cases, names):
         d = plan.to_json_dict()
         d[label] = g
         bound_s = _crb_lengths(plan, precision, args.confidence)
+        kappa = _whittle_kappa(plan.rate_hz)
         for t, t_crb in bound_s.items():
             row = d["terms"][names[t][0]]
             row["t_crb_s"] = t_crb
@@ -224,6 +234,10 @@ def _plan_cases(args, sensor: str, cases, names):
             gls_s = plan.duration_s.get(t)
             row["allan_efficiency_vs_crb"] = (None if t_crb is None or gls_s is None
                                               else t_crb / gls_s)
+            # the band-limited Whittle fit (allan's default where it applies): its variance is the
+            # taper's κ times the bound, and a relative σ falls as 1/√T, so it needs κ·T_CRB
+            row["t_whittle_s"] = None if t_crb is None else kappa * t_crb
+            row["whittle_kappa"] = kappa
         d["t_crb_method"] = _CRB_METHOD
         for t, rel in fitted.items():
             if names[t][0] in d["terms"]:
@@ -234,7 +248,10 @@ def _plan_cases(args, sensor: str, cases, names):
         for t in plan.coef:
             name, unit, conv = names[t]
             row = (f"  {name} = {conv(plan.coef[t]):.5g} {unit}: {_fmt_len(plan.duration_s[t])}; "
-                   f"the bound (T_CRB): {_fmt_len(bound_s[t])}")
+                   f"the bound (T_CRB): {_fmt_len(bound_s[t])}"
+                   + ("" if bound_s[t] is None else
+                      f"; the band-limited Whittle fit (allan --method whittle, κ = {kappa:.4g}): "
+                      f"{_fmt_len(kappa * bound_s[t])}"))
             if at_s is not None:
                 row += f"; a {args.at_h:g} h record gives ±{plan.at_precision[t]:.1%}"
             if t in fitted:
