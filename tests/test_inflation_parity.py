@@ -116,7 +116,11 @@ def test_densities_per_level_and_held_out_nis_still_part(rec):
     # of 25, 50 deg/s and the pauses: √((4·2 + 9·2 + 1)/5) = 2.32); its interval holds the truth
     # (without the pauses it would be √((4 + 9)/2) = 2.55, outside an interval about ±7 % wide)
     truth_f = math.sqrt((4 * 2 + 9 * 2 + 1) / 5)
+    assert res.density_factor_ci[0] <= truth_f <= res.density_factor_ci[1], (res.density_factor, res.density_factor_ci)
+    # the exported factor (the static filter times it consistent on the fitted motion windows)
+    # holds it too, and its held-out NIS is inside
     assert res.factor_ci[0] <= truth_f <= res.factor_ci[1], (res.factor_for_export, res.factor_ci)
+    assert res.nis_check("export").inside, res.nis_check("export")
 
 
 def test_model_static_density_is_the_trace_form(rec):

@@ -44,9 +44,12 @@ Method
    (c) the static N, K times ``factor_for_export``. A consistent filter has mean NIS 1 within
    1 ± z·√(2/n_eff + v) (χ²₁ mean of n_eff independent innovations; v the variance the
    estimated densities add, zero for the static values).
-7. ``factor_for_export`` = √(Σ_L w_L N_L²) / N_static, w_L the share of the fitted motion
-   windows at level L, at least 1 (a measured density below the static one is not exported;
-   noted).
+7. ``factor_for_export`` f: the factor on the static N and K that makes the plain white + walk
+   filter of step 6 consistent (mean NIS 1) on the fitted motion windows (:func:`nis_factor`;
+   what ``--inflate auto`` finds on a simulated record), at least 1. The motion-weighted
+   density √(Σ_L w_L N_L²) / N_static (w_L the share of the fitted motion windows at level L)
+   is reported beside it (``density_factor``): with the walk scaled too and the levels mixed,
+   the two differ (robot_localization's Husky, z: 25.0 against the NIS's 16.8).
 """
 
 from __future__ import annotations
@@ -182,11 +185,12 @@ class MeasuredInflation:
     nis : tuple of NisCheck
         measured, static, export.
     factor_for_export : float
-        Inflation factor for the export [-], ≥ 1.
+        Inflation factor for the export [-], ≥ 1: the one that makes a white + walk filter with
+        the static values times it consistent on the fitted motion windows (:func:`nis_factor`).
     factor_ci : tuple of float
         Its interval (before the clamp to 1) [-].
     axis_factor : tuple of float
-        Per axis, ≥ 1 [-].
+        Per axis, ≥ 1 [-] (NaN on an axis the reference does not observe).
     windows_t0_s : ndarray
         Start of each long window [s, reference time base].
     windows_level : ndarray
@@ -199,6 +203,11 @@ class MeasuredInflation:
         Body axes about which the reference never turns over the common span ("x", "y" for a
         planar reference: a ground robot's wheel odometry holds roll and pitch at 0) while the
         gyro does: there the "motion noise" is the body's own motion, not the gyro's noise.
+    density_factor : float
+        √(Σ_L w_L N_L²) / N_static, the motion-weighted measured density over the static one [-]
+        (w_L the share of the fitted motion windows at level L), reported beside the factor.
+    density_factor_ci : tuple of float
+        Its interval (parametric bootstrap of the level χ²s) [-].
     """
 
     levels: tuple[LevelDensity, ...]
@@ -218,6 +227,8 @@ class MeasuredInflation:
     windows_holdout: np.ndarray
     notes: tuple[str, ...] = field(default_factory=tuple)
     unobserved_axes: tuple[str, ...] = ()
+    density_factor: float = math.nan
+    density_factor_ci: tuple[float, float] = (math.nan, math.nan)
 
     def nis_check(self, label: str) -> NisCheck:
         """The NIS result of ``label`` (measured, static, export)."""
@@ -234,7 +245,8 @@ class MeasuredInflation:
                 "nis": [c.as_dict() for c in self.nis],
                 "factor_for_export": self.factor_for_export, "factor_ci": list(self.factor_ci),
                 "axis_factor": list(self.axis_factor), "notes": list(self.notes),
-                "unobserved_axes": list(self.unobserved_axes)}
+                "unobserved_axes": list(self.unobserved_axes),
+                "density_factor": self.density_factor, "density_factor_ci": list(self.density_factor_ci)}
 
 
 # ---------------------------------------------------------------------------------------------
@@ -710,6 +722,61 @@ def export_factor(pooled: np.ndarray, motion_levels: np.ndarray, n_levels: int, 
     return filled, wts, ok, raw, f_ci, max(1.0, raw)
 
 
+def nis_factor(e: np.ndarray, t0: np.ndarray, T: np.ndarray, n2: float, ref_R: np.ndarray, k2: float,
+               valid: np.ndarray, fitted: np.ndarray, cols, confidence: float) -> tuple:
+    """The factor f on the static N and K that makes a plain white + walk filter consistent on
+    the fitted motion windows: mean NIS = 1 there with R = f²N²/T + the reference's share and
+    Q = f²K²·Δt (:func:`kf_nis`), the factor ``--inflate auto`` finds on a simulated record.
+
+    Scaling R and Q by f² leaves the gain alone and divides the NIS by f², so without a
+    reference share f² is the static filter's mean NIS; with one, f is the root of a monotone
+    function (Brent). Its interval treats the n fitted innovations as a χ²_n/n mean.
+
+    Parameters
+    ----------
+    e : ndarray (windows, components)
+        Window means of the error [rad/s].
+    t0, T : ndarray (windows,)
+        Window starts and lengths [s].
+    n2, k2 : float
+        Static N² [rad²/s] and K² [rad²/s³].
+    ref_R : ndarray (windows,)
+        The reference's share of each window's variance [rad²/s²] (zeros for the parity).
+    valid, fitted : ndarray of bool (windows,)
+        Windows the filter uses; the fitted motion windows the mean is taken over.
+    cols : sequence of int
+        Components the mean is taken over (the observed axes).
+    confidence : float
+        Two-sided level of the interval [-].
+
+    Returns
+    -------
+    tuple
+        (f, (lo, hi)) [-], before any floor at 1; (nan, (nan, nan)) without fitted windows.
+    """
+    from scipy import optimize, stats                    # deferred: heavy
+    cols = list(cols)
+
+    def mean_nis(f: float) -> tuple[float, int]:
+        R = np.repeat((f * f * n2 / T + ref_R)[:, None], e.shape[1], axis=1)
+        hv = held_out_nis(kf_nis(e, t0, T, R, f * f * k2, valid)[:, cols], fitted)
+        return (float(hv.mean()) if hv.size else math.nan), int(hv.size)
+
+    m1, n_inn = mean_nis(1.0)
+    if not (n_inn and math.isfinite(m1) and m1 > 0):
+        return math.nan, (math.nan, math.nan)
+    if not np.any(ref_R > 0):
+        f = math.sqrt(m1)
+    else:
+        g = lambda lf: math.log(mean_nis(math.exp(lf))[0])                      # noqa: E731
+        lo, hi = -0.5 * math.log(1e6), 0.5 * math.log(1e8)
+        f = (math.exp(optimize.brentq(g, lo, hi, xtol=1e-10)) if g(lo) > 0 > g(hi)
+             else math.sqrt(m1))
+    a = 1.0 - confidence
+    q_lo, q_hi = stats.chi2.ppf(a / 2, n_inn) / n_inn, stats.chi2.ppf(1 - a / 2, n_inn) / n_inn
+    return f, (f * math.sqrt(q_lo), f * math.sqrt(q_hi))
+
+
 #: Largest reference increment about a body axis [rad] over the whole common span for that
 #: axis to count as not observed by the reference (a planar pose holds roll and pitch at exactly
 #: 0; a real 3-D reference turns by far more than this on any record).
@@ -933,12 +1000,23 @@ def measure_inflation(imu_time_s, gyro_rad_s, ref: Reference, *,
     nu_l = np.array([float(len(obs)) * lv.n_windows for lv in table])
     ef = export_factor(pooled, lev[fit_members[fit_members >= m0]], n_levels, nu_l, static_n, rng,
                        confidence)
-    filled, wts, ok, raw_factor, f_ci, factor = ef
+    filled, wts, ok, density_factor, density_ci, _ = ef
+    ref_R_all = refv * sigma2
+    fit_motion = np.zeros(nk, bool)
+    fit_motion[fit_members[fit_members >= m0]] = True
+    raw_factor, f_ci = nis_factor(e, win["t0"], T, static_n ** 2, ref_R_all, K ** 2, valid, fit_motion, obs,
+                                  confidence)
+    factor = max(1.0, raw_factor) if math.isfinite(raw_factor) else 1.0
+    notes.append(f"export factor ×{factor:.4g}: the one that makes a white + walk filter with the static N, K "
+                 f"times it consistent (mean NIS 1) on the fitted motion windows (as --inflate auto on a "
+                 f"simulated record); the motion-weighted measured density is ×{density_factor:.4g} the static "
+                 "one (reported beside)")
     if raw_factor < 1.0:
-        notes.append(f"the motion-weighted measured density is {raw_factor:.3g}× the static one, "
-                     "below 1: the export keeps the static values (factor 1)")
-    axis_factor = tuple(max(1.0, math.sqrt(max(float(np.sum(wts * nearest_filled(per_axis[:, a]))),
-                                               0.0)) / static_n) if a in obs else math.nan for a in range(3))
+        notes.append(f"the fitted windows' factor is {raw_factor:.3g}, below 1: the export keeps the static "
+                     "values (factor 1)")
+    axis_factor = tuple(max(1.0, nis_factor(e, win["t0"], T, static_n ** 2, ref_R_all, K ** 2, valid,
+                                            fit_motion, [a], confidence)[0])
+                        if a in obs else math.nan for a in range(3))
 
     # the held-out NIS check
     z = float(stats.norm.ppf(0.5 + confidence / 2))
@@ -984,6 +1062,7 @@ def measure_inflation(imu_time_s, gyro_rad_s, ref: Reference, *,
         time_offset_s=offset, window_s=float(np.median(T)), nis=tuple(checks),
         factor_for_export=float(factor), factor_ci=f_ci,
         axis_factor=axis_factor,  # type: ignore[arg-type]
+        density_factor=float(density_factor), density_factor_ci=density_ci,
         windows_t0_s=win["t0"], windows_level=lev, windows_holdout=hold,
         notes=(*ref.notes, *notes), unobserved_axes=unobserved)
 
@@ -1113,9 +1192,10 @@ def inflation_for_export(meas_path, reference_path, reference_topic: str,
     meas_c, st_c, ex_c = nis["measured"], nis["static"], nis["export"]
     header = [
         f"inflation: measured x{factor:.4g} on both numbers ({axis}), from {reference_path} topic "
-        f"{reference_topic} ({ref.msgtype}) against {meas_path}: the motion-weighted white "
-        f"density over the static N = {fmt_g(n_s)} rad/sqrt(s) (interval x{fmt_g(m.factor_ci[0])}-"
-        f"x{fmt_g(m.factor_ci[1])}, before the floor at 1)",
+        f"{reference_topic} ({ref.msgtype}) against {meas_path}: the factor on the static N = "
+        f"{fmt_g(n_s)} rad/sqrt(s) and K that makes a white + walk filter consistent (mean NIS 1) on the "
+        f"fitted motion windows (interval x{fmt_g(m.factor_ci[0])}-x{fmt_g(m.factor_ci[1])}, before the "
+        f"floor at 1; the motion-weighted white density is x{fmt_g(m.density_factor)} the static one)",
         "measured white density per motion level, windows of "
         f"{m.window_s:.3g} s: " + "; ".join(levels),
         f"reference attitude noise {fmt_g(m.sigma_ref_rad)} rad per pose (subtracted); time offset "

@@ -35,7 +35,9 @@ Method (:func:`measure_parity_inflation`)
    components is compared with 1 ± z·√(2/n_eff + v) (v the share of the densities' own
    uncertainty, 0 for static values), with (a) the measured densities, (b) the static N, K,
    (c) the static values × ``factor_for_export``.
-7. ``factor_for_export`` = √(Σ_L w_L N_L²)/N_static, w_L the share of the fitted windows from
+7. ``density_factor`` = √(Σ_L w_L N_L²)/N_static (reported; ``factor_for_export`` is the factor on
+   the static values that makes a white + walk filter consistent on the fitted motion windows,
+   :func:`gyroarray.chain.inflation.nis_factor`), w_L the share of the fitted windows from
    the start of the motion at level L (pauses within the motion included, as
    :mod:`gyroarray.chain.inflation`), at least 1.
 
@@ -55,6 +57,7 @@ import numpy as np
 from gyroarray.chain.inflation import (
     DEFAULT_LEVELS_RAD_S, GAP_FACTOR, LEVEL_SMOOTH_S, MIN_LEVEL_WINDOWS, MIN_WINDOWS, LevelDensity,
     NeighbourFit, NisCheck, assign_levels, export_factor, fmt_g, held_out_nis, holdout_by_level, kf_nis, level_table,
+    nis_factor,
     moving_mean, nis_check,
     source_level, walk_share)
 from gyroarray.analysis.motion import still_mask
@@ -93,12 +96,17 @@ class ParityInflation:
     nis : tuple of NisCheck
         measured, static, export.
     factor_for_export : float
-        [-], ≥ 1.
+        [-], ≥ 1: the factor on the static values that makes a white + walk filter consistent on
+        the fitted motion windows (:func:`gyroarray.chain.inflation.nis_factor`).
     factor_ci : tuple of float
         Its interval before the floor at 1 [-].
     windows_t0_s, windows_level, windows_holdout : ndarray
         Per window: start [s], level index, held out.
     notes : tuple of str
+    density_factor : float
+        The motion-weighted density over the static one [-], reported beside.
+    density_factor_ci : tuple of float
+        Its interval [-].
     """
 
     n_gyros: int
@@ -115,6 +123,8 @@ class ParityInflation:
     windows_level: np.ndarray
     windows_holdout: np.ndarray
     notes: tuple[str, ...] = field(default_factory=tuple)
+    density_factor: float = math.nan
+    density_factor_ci: tuple[float, float] = (math.nan, math.nan)
 
     def nis_check(self, label: str) -> NisCheck:
         """The NIS result of ``label`` (measured, static, export)."""
@@ -122,7 +132,8 @@ class ParityInflation:
 
     def as_dict(self) -> dict:
         """JSON-ready summary."""
-        return {"method": "parity", "n_gyros": self.n_gyros, "n_parity": self.n_parity,
+        return {"method": "parity", "density_factor": self.density_factor,
+                "density_factor_ci": list(self.density_factor_ci), "n_gyros": self.n_gyros, "n_parity": self.n_parity,
                 "levels": [lv.as_dict() for lv in self.levels],
                 "static_n_rad_rt_s": self.static_n_rad_rt_s, "static_source": self.static_source,
                 "static_k_rad_s_rt_s": self.static_k_rad_s_rt_s, "window_s": self.window_s,
@@ -310,11 +321,19 @@ def measure_parity_inflation(meas, *, levels=DEFAULT_LEVELS_RAD_S, window_s: flo
     # export factor: the motion-weighted density over the static one
     nu_l = np.array([float(d * lv.n_windows) for lv in table])
     # as inflation.py: the pauses in motion count
-    filled, wts, ok, raw, f_ci, factor = export_factor(
+    filled, wts, ok, density_factor, density_ci, _ = export_factor(
         pooled, lev[fit_members[fit_members >= m0]], n_levels, nu_l, static_n, rng, confidence)
+    fit_motion = np.zeros(nk, bool)
+    fit_motion[fit_members[fit_members >= m0]] = True
+    raw, f_ci = nis_factor(e, t0, T, static_n ** 2, np.zeros(nk), K ** 2, np.asarray(valid), fit_motion,
+                           range(d), confidence)
+    factor = max(1.0, raw) if math.isfinite(raw) else 1.0
+    notes.append(f"export factor ×{factor:.4g}: the one that makes a white + walk filter with the static values "
+                 f"times it consistent (mean NIS 1) on the fitted motion windows; the motion-weighted density "
+                 f"is ×{density_factor:.4g} the static one (reported beside)")
     if raw < 1.0:
-        notes.append(f"the motion-weighted density is {raw:.3g}× the static one, below 1: the "
-                     "export keeps the static values (factor 1)")
+        notes.append(f"the fitted windows' factor is {raw:.3g}, below 1: the export keeps the static values "
+                     "(factor 1)")
 
     # held-out NIS
     z = float(stats.norm.ppf(0.5 + confidence / 2))
@@ -348,6 +367,7 @@ def measure_parity_inflation(meas, *, levels=DEFAULT_LEVELS_RAD_S, window_s: flo
         n_gyros=N, n_parity=d, levels=tuple(table), static_n_rad_rt_s=float(static_n),
         static_source=static_source, static_k_rad_s_rt_s=float(K), window_s=float(w * med),
         nis=tuple(checks), factor_for_export=float(factor), factor_ci=f_ci,
+        density_factor=float(density_factor), density_factor_ci=density_ci,
         windows_t0_s=t0, windows_level=lev, windows_holdout=hold, notes=tuple(notes))
 
 
@@ -446,9 +466,11 @@ def parity_inflation_for_export(meas_path, model, static_n_rad_rt_s: float, axis
     mc, sc, ec = nis["measured"], nis["static"], nis["export"]
     header = [
         f"inflation: measured x{factor:.4g} on both numbers ({axis}), {frm}, in {meas_path}: the "
-        f"motion-weighted parity density over the static one {fmt_g(s)} rad/sqrt(s) (the model's "
-        f"sqrt(tr(V'RV)/{m.n_parity})) (interval x{fmt_g(m.factor_ci[0])}-x{fmt_g(m.factor_ci[1])}, "
-        "before the floor at 1); equal-noise assumption: the factor is common to every gyro",
+        f"factor on the static parity density {fmt_g(s)} rad/sqrt(s) (the model's sqrt(tr(V'RV)/"
+        f"{m.n_parity})) and walk that makes a white + walk filter consistent (mean NIS 1) on the fitted "
+        f"motion windows (interval x{fmt_g(m.factor_ci[0])}-x{fmt_g(m.factor_ci[1])}, before the floor at "
+        f"1; the motion-weighted density is x{fmt_g(m.density_factor)} the static one); equal-noise "
+        "assumption: the factor is common to every gyro",
         f"measured density per motion level (|fused rate|), windows of {m.window_s:.3g} s: "
         + "; ".join(levels),
         f"held-out check (last {holdout:.0%} of each motion level, {mc.n_eff} innovations), mean NIS of a "
