@@ -90,6 +90,7 @@ def _keys(model):
     return {(e.effect, e.gyro) for e in model}
 
 
+@pytest.mark.slow   # whole analyses of a ladder step (5 s idle, 10-14 s under load): make score
 def test_each_kept_step_is_the_lowest_d_of_its_improving_trials(lines_record):
     """Every analysis the ladder made is grouped by the step it was a trial of (its model is
     that step's model plus one effect); the kept one is, of those that improve, the lowest D

@@ -39,6 +39,7 @@ def halves():
     return split_measurement(replace(m, gyro_deg_s=y), 0.5)
 
 
+@pytest.mark.slow   # whole analyses of a ladder step (5 s idle, 10-14 s under load): make score
 def test_the_verdict_names_what_lowers_the_held_out_d_not_the_top_candidate(halves):
     first, rest = halves
     comp = ModelComparison(first, n_runs=5)
