@@ -185,10 +185,6 @@ NOT_CROSS_SPECTRAL = ("the reference's own errors bend the lines (an encoder's 2
 #: 5.0, are the less precise: not kept (keeping them saturated the gyro, D 157 -> 1262).
 CONSISTENT_Z = 1.959963984540054
 
-#: Retired by issue 44 item 2 (a disagreeing cross-spectral value is no longer kept, however
-#: many σ away); kept for callers of the old rule.
-KEEP_CROSS_Z = 3.0
-
 
 def _ppm(x: float) -> str:
     """A difference in ppm as read: whole ppm from 10 on."""
